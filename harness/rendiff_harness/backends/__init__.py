@@ -1,0 +1,1 @@
+"""One module per external renderer; see registry.py for the list."""

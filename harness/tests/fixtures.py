@@ -1,0 +1,86 @@
+"""Writes small resolved scenes for the harness's own tests, without the Rust core.
+
+The real ones come from `rendiff export`; these let each backend's conversion be
+tested in isolation, against closed-form answers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+
+def _normalize(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def write_scene(
+    directory: Path,
+    triangles: Sequence[Sequence[Sequence[float]]],
+    object_ids: Sequence[int] | None = None,
+    *,
+    eye: Sequence[float] = (0.0, 0.0, 5.0),
+    look_at: Sequence[float] = (0.0, 0.0, 0.0),
+    up: Sequence[float] = (0.0, 1.0, 0.0),
+    vfov_deg: float = 45.0,
+    width: int = 32,
+    height: int = 24,
+    near: float = 1e-3,
+    far: float | None = None,
+    requires: Sequence[str] = ("depth", "ids"),
+    name: str = "fixture",
+    materials: list[dict[str, Any]] | None = None,
+    lights: list[dict[str, Any]] | None = None,
+) -> Path:
+    """Write DIR/scene.json, triangles.f32, object_ids.u32 in the resolved format."""
+    directory.mkdir(parents=True, exist_ok=True)
+    tris = np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
+    n = tris.shape[0]
+    oids = np.zeros(n, dtype=np.uint32) if object_ids is None else np.asarray(object_ids, dtype=np.uint32)
+    e, la, u0 = (np.asarray(v, dtype=np.float64) for v in (eye, look_at, up))
+    f = _normalize(la - e)
+    r = _normalize(np.cross(f, u0))
+    u = np.cross(r, f)
+    tan_half = 1.0 if vfov_deg == 90.0 else math.tan(math.radians(vfov_deg) / 2.0)
+    n_obj = int(oids.max()) + 1 if n else 0
+    objects = []
+    for o in range(n_obj):
+        idx = np.nonzero(oids == o)[0]
+        objects.append({"name": f"object{o}", "material": 0, "first_prim": int(idx[0]) if idx.size else 0,
+                        "prim_count": int(idx.size)})
+    meta = {
+        "format": "rendiff-resolved/1",
+        "name": name,
+        "source": "fixture",
+        "requires": list(requires),
+        "camera": {
+            "eye": e.tolist(), "look_at": la.tolist(), "up": u0.tolist(),
+            "vfov_deg": vfov_deg, "tan_half_vfov": tan_half,
+            "width": width, "height": height,
+            "forward": f.tolist(), "right": r.tolist(), "up_ortho": u.tolist(),
+            "near": near, "far": far,
+        },
+        "triangle_count": n,
+        "objects": objects,
+        "materials": materials or [{"name": "grey", "albedo": [0.5, 0.5, 0.5], "emission": [0, 0, 0]}],
+        "lights": lights or [],
+        "files": {"triangles": "triangles.f32", "object_ids": "object_ids.u32"},
+    }
+    (directory / "scene.json").write_text(json.dumps(meta, indent=1))
+    tris.astype("<f4").tofile(directory / "triangles.f32")
+    oids.astype("<u4").tofile(directory / "object_ids.u32")
+    return directory
+
+
+def three_triangles(directory: Path) -> Path:
+    """The course lesson's three overlapping triangles at different depths."""
+    tris = [
+        [[-1.5, -1.0, 0.0], [0.5, -1.0, 0.0], [-0.5, 1.2, 0.0]],
+        [[-0.5, -1.2, -1.0], [1.5, -1.2, -1.0], [0.5, 1.0, -1.0]],
+        [[-1.0, -0.2, 1.0], [1.0, -0.2, 1.0], [0.0, 0.6, 1.0]],
+    ]
+    return write_scene(directory, tris, [0, 1, 2], name="three_triangles")

@@ -1,0 +1,262 @@
+//! The pinhole camera of DESIGN.md: pixel centers, row 0 at the top, planar depth.
+//!
+//! Both visibility loops get their pixel rays from [`Camera::pixel_ray`], the one
+//! place where a pixel becomes a ray, so they cannot disagree on it.
+
+use crate::scene::CameraSpec;
+use glam::DVec3;
+
+/// A resolved camera: orthonormal basis, field of view, image size, near/far.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    /// Center of projection.
+    pub eye: DVec3,
+    /// The point looked at (kept for exporters that want it).
+    pub look_at: DVec3,
+    /// The user's up vector (kept for exporters).
+    pub up: DVec3,
+    /// `f = normalize(look_at - eye)`.
+    pub forward: DVec3,
+    /// `r = normalize(f x up)`.
+    pub right: DVec3,
+    /// `u = r x f`.
+    pub up_ortho: DVec3,
+    /// Vertical field of view in degrees.
+    pub vfov_deg: f64,
+    /// tan(vfov/2), evaluated once (exactly 1 at 90 degrees) and shared with every backend.
+    pub tan_half_vfov: f64,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Nearest visible planar depth.
+    pub near: f64,
+    /// Farthest visible planar depth (+inf when unbounded).
+    pub far: f64,
+    /// `eye + right`, rounded once: the first tie-break perturbation direction.
+    pub tie_right: DVec3,
+    /// `eye + up_ortho`, rounded once: the second tie-break perturbation direction.
+    pub tie_up: DVec3,
+    aspect_tan: f64,
+}
+
+/// One pixel's ray, computed once and shared by the coverage predicate and the depth function.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelRay {
+    /// The image-plane point `P = eye + d`, rounded once.
+    pub p: DVec3,
+    /// `D = P - eye`, rounded: the direction every ray query uses.
+    pub dir: DVec3,
+    /// Componentwise `1/D` (infinite where a component is 0).
+    pub inv_dir: DVec3,
+    /// `D . forward`: turns a ray parameter into planar depth.
+    pub planar: f64,
+}
+
+/// tan(vfov/2) in degrees, exact at 90 degrees so that pixel centers of
+/// power-of-two images land on exact dyadic coordinates (the fill-rule scene relies on it).
+pub fn tan_half_deg(vfov: f64) -> f64 {
+    if vfov == 90.0 {
+        1.0
+    } else {
+        (vfov.to_radians() / 2.0).tan()
+    }
+}
+
+impl Camera {
+    /// Builds the camera from a validated spec; `scene_size` scales the default near plane.
+    /// Errors are (field, problem).
+    pub fn from_spec(spec: &CameraSpec, scene_size: f64) -> Result<Camera, (String, String)> {
+        let eye = DVec3::from(spec.eye);
+        let look_at = DVec3::from(spec.look_at);
+        let size = if scene_size > 0.0 && scene_size.is_finite() {
+            scene_size
+        } else {
+            (look_at - eye).length()
+        };
+        let near = spec.near.unwrap_or(1e-4 * size);
+        let far = spec.far.unwrap_or(f64::INFINITY);
+        if !(near > 0.0 && near.is_finite()) {
+            return Err(("camera.near".into(), format!("must be > 0, got {near}")));
+        }
+        if !(far > near) {
+            return Err((
+                "camera.far".into(),
+                format!("must be greater than near ({near}), got {far}"),
+            ));
+        }
+        Self::new(
+            eye,
+            look_at,
+            DVec3::from(spec.up),
+            spec.vfov,
+            spec.width,
+            spec.height,
+            near,
+            far,
+        )
+        .map_err(|p| ("camera".into(), p))
+    }
+
+    /// Builds a camera from its parts; checks the same conditions as scene validation.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        eye: DVec3,
+        look_at: DVec3,
+        up: DVec3,
+        vfov_deg: f64,
+        width: u32,
+        height: u32,
+        near: f64,
+        far: f64,
+    ) -> Result<Camera, String> {
+        if width == 0 || height == 0 {
+            return Err(format!(
+                "image size must be at least 1x1, got {width}x{height}"
+            ));
+        }
+        if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+            return Err(format!("vfov must be in (0, 180), got {vfov_deg}"));
+        }
+        let forward = (look_at - eye).normalize_or_zero();
+        let right = forward.cross(up).normalize_or_zero();
+        if forward == DVec3::ZERO || right == DVec3::ZERO || !right.is_finite() {
+            return Err(
+                "degenerate camera basis (look_at == eye, or up parallel to the view)".into(),
+            );
+        }
+        let up_ortho = right.cross(forward);
+        let tan_half_vfov = tan_half_deg(vfov_deg);
+        Ok(Camera {
+            eye,
+            look_at,
+            up,
+            forward,
+            right,
+            up_ortho,
+            vfov_deg,
+            tan_half_vfov,
+            width,
+            height,
+            near,
+            far,
+            tie_right: eye + right,
+            tie_up: eye + up_ortho,
+            aspect_tan: tan_half_vfov * (f64::from(width) / f64::from(height)),
+        })
+    }
+
+    /// Screen coordinates `(sx, sy)` of pixel `(x, y)`'s center (DESIGN.md formula).
+    #[inline]
+    pub fn screen(&self, x: u32, y: u32) -> (f64, f64) {
+        let sx = (2.0 * (f64::from(x) + 0.5) / f64::from(self.width) - 1.0) * self.aspect_tan;
+        let sy = (1.0 - 2.0 * (f64::from(y) + 0.5) / f64::from(self.height)) * self.tan_half_vfov;
+        (sx, sy)
+    }
+
+    /// Unnormalized direction `d = f + sx r + sy u`; `t` along it is planar depth.
+    #[inline]
+    pub fn direction(&self, x: u32, y: u32) -> DVec3 {
+        let (sx, sy) = self.screen(x, y);
+        self.forward + self.right * sx + self.up_ortho * sy
+    }
+
+    /// The pixel's ray. The single definition both loops use.
+    #[inline]
+    pub fn pixel_ray(&self, x: u32, y: u32) -> PixelRay {
+        let p = self.eye + self.direction(x, y);
+        let dir = p - self.eye;
+        PixelRay {
+            p,
+            dir,
+            inv_dir: DVec3::ONE / dir,
+            planar: dir.dot(self.forward),
+        }
+    }
+
+    /// Camera-space coordinates (along right, up, forward) of a world point.
+    #[inline]
+    pub fn to_camera(&self, v: DVec3) -> DVec3 {
+        let q = v - self.eye;
+        DVec3::new(q.dot(self.right), q.dot(self.up_ortho), q.dot(self.forward))
+    }
+
+    /// Continuous pixel coordinates of a camera-space point with z > 0
+    /// (pixel centers are at k + 0.5, y down).
+    #[inline]
+    pub fn camera_to_pixel(&self, c: DVec3) -> (f64, f64) {
+        let sx = c.x / c.z;
+        let sy = c.y / c.z;
+        let px = (sx / self.aspect_tan + 1.0) * 0.5 * f64::from(self.width);
+        let py = (1.0 - sy / self.tan_half_vfov) * 0.5 * f64::from(self.height);
+        (px, py)
+    }
+
+    /// Number of pixels.
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam() -> Camera {
+        Camera::new(
+            DVec3::new(0.0, 0.0, 5.0),
+            DVec3::ZERO,
+            DVec3::Y,
+            60.0,
+            64,
+            48,
+            1e-3,
+            f64::INFINITY,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn basis_is_right_handed_and_orthonormal() {
+        let c = cam();
+        assert_eq!(c.forward, DVec3::new(0.0, 0.0, -1.0));
+        assert_eq!(c.right, DVec3::X);
+        assert_eq!(c.up_ortho, DVec3::Y);
+    }
+
+    #[test]
+    fn pixel_centers_round_trip_through_projection() {
+        let c = cam();
+        for (x, y) in [(0, 0), (63, 47), (10, 30), (32, 24)] {
+            let ray = c.pixel_ray(x, y);
+            let world = c.eye + ray.dir * 3.7;
+            let (px, py) = c.camera_to_pixel(c.to_camera(world));
+            assert!((px - (f64::from(x) + 0.5)).abs() < 1e-9, "x {px}");
+            assert!((py - (f64::from(y) + 0.5)).abs() < 1e-9, "y {py}");
+            assert!((c.to_camera(world).z - 3.7).abs() < 1e-12, "planar depth");
+        }
+    }
+
+    #[test]
+    fn row_zero_is_the_top() {
+        let c = cam();
+        assert!(c.direction(0, 0).y > 0.0);
+        assert!(c.direction(0, 47).y < 0.0);
+        assert!(c.direction(0, 0).x < 0.0);
+    }
+
+    #[test]
+    fn ninety_degrees_is_exact() {
+        assert_eq!(tan_half_deg(90.0), 1.0);
+        assert!((tan_half_deg(60.0) - (30f64).to_radians().tan()).abs() == 0.0);
+    }
+
+    #[test]
+    fn degenerate_cameras_are_refused() {
+        let e = DVec3::new(0.0, 0.0, 5.0);
+        assert!(Camera::new(e, e, DVec3::Y, 60.0, 4, 4, 1e-3, 1.0).is_err());
+        assert!(Camera::new(e, DVec3::ZERO, DVec3::Z, 60.0, 4, 4, 1e-3, 1.0).is_err());
+        assert!(Camera::new(e, DVec3::ZERO, DVec3::Y, 180.0, 4, 4, 1e-3, 1.0).is_err());
+        assert!(Camera::new(e, DVec3::ZERO, DVec3::Y, 60.0, 0, 4, 1e-3, 1.0).is_err());
+    }
+}

@@ -1,0 +1,191 @@
+//! DESIGN.md's buffer files: one OpenEXR per render with `Z` (f32), `id.prim`
+//! and `id.object` (u32) and `N.x N.y N.z` (f32), written atomically, with the
+//! render's metadata (operation counts, timings) as text attributes.
+
+use crate::frame::Frame;
+use anyhow::{bail, Context, Result};
+use exr::prelude::*;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Prefix of rendiff's own EXR header attributes.
+pub const ATTR_PREFIX: &str = "rendiff:";
+
+/// Writes `bytes`-producing work to `path` through a temporary file in the same
+/// folder and a rename, so a reader never sees a half-written result.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create output folder", dir.display()))?;
+    let name = path
+        .file_name()
+        .with_context(|| format!("{}: not a file path", path.display()))?;
+    let tmp: PathBuf = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = write(&tmp).and_then(|_| {
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("{}: cannot move result into place", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Writes a frame's buffers to `path` (atomically), with `attrs` as `rendiff:*` text attributes.
+pub fn write_frame(path: &Path, frame: &Frame, attrs: &BTreeMap<String, String>) -> Result<()> {
+    let size = (frame.width as usize, frame.height as usize);
+    let n: Vec<Vec<f32>> = (0..3)
+        .map(|k| frame.normal.iter().map(|v| v[k]).collect())
+        .collect();
+    let channels = SmallVec::from_vec(vec![
+        AnyChannel::new("Z", FlatSamples::F32(frame.z.clone())),
+        AnyChannel::new("id.prim", FlatSamples::U32(frame.prim.clone())),
+        AnyChannel::new("id.object", FlatSamples::U32(frame.object.clone())),
+        AnyChannel::new("N.x", FlatSamples::F32(n[0].clone())),
+        AnyChannel::new("N.y", FlatSamples::F32(n[1].clone())),
+        AnyChannel::new("N.z", FlatSamples::F32(n[2].clone())),
+    ]);
+    let mut layer_attrs = LayerAttributes::default();
+    for (k, v) in attrs {
+        layer_attrs.other.insert(
+            Text::from(format!("{ATTR_PREFIX}{k}").as_str()),
+            AttributeValue::Text(Text::from(v.as_str())),
+        );
+    }
+    let layer = Layer::new(
+        size,
+        layer_attrs,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+    write_atomically(path, |tmp| {
+        image
+            .write()
+            .to_file(tmp)
+            .with_context(|| format!("{}: cannot write EXR", path.display()))
+    })
+}
+
+/// Buffers read back from an EXR (any backend's), exactly as stored.
+#[derive(Debug, Clone, Default)]
+pub struct Buffers {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// `Z` if present.
+    pub z: Option<Vec<f32>>,
+    /// `id.prim` if present, exact.
+    pub prim: Option<Vec<u32>>,
+    /// `id.object` if present, exact.
+    pub object: Option<Vec<u32>>,
+    /// `rendiff:*` text attributes, prefix removed.
+    pub attrs: BTreeMap<String, String>,
+}
+
+/// Reads the DESIGN.md channels of an EXR; IDs must be stored as uint.
+pub fn read_buffers(path: &Path) -> Result<Buffers> {
+    if !path.exists() {
+        bail!("{}: file not found", path.display());
+    }
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
+    let layer = &image.layer_data;
+    let mut out = Buffers {
+        width: layer.size.width(),
+        height: layer.size.height(),
+        ..Buffers::default()
+    };
+    for (k, v) in &layer.attributes.other {
+        let key = k.to_string();
+        if let (Some(stripped), AttributeValue::Text(t)) = (key.strip_prefix(ATTR_PREFIX), v) {
+            out.attrs.insert(stripped.to_string(), t.to_string());
+        }
+    }
+    for ch in &layer.channel_data.list {
+        let name = ch.name.to_string();
+        match (name.as_str(), &ch.sample_data) {
+            ("Z", FlatSamples::F32(v)) => out.z = Some(v.clone()),
+            ("Z", FlatSamples::F16(v)) => out.z = Some(v.iter().map(|x| x.to_f32()).collect()),
+            ("id.prim", FlatSamples::U32(v)) => out.prim = Some(v.clone()),
+            ("id.object", FlatSamples::U32(v)) => out.object = Some(v.clone()),
+            ("id.prim" | "id.object", _) => bail!(
+                "{}: channel {name} must be stored as uint to be compared exactly",
+                path.display()
+            ),
+            _ => {}
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::visibility::Counters;
+
+    #[test]
+    fn frame_round_trips_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.exr");
+        let frame = Frame {
+            width: 3,
+            height: 2,
+            z: vec![1.0, f32::INFINITY, 2.5, 1e-30, 3.0e30, 7.0],
+            prim: vec![0, u32::MAX, (1 << 24) + 1, 5, u32::MAX - 1, 2],
+            object: vec![0, u32::MAX, 1, 1, 2, 0],
+            normal: vec![[0.0, 0.0, 1.0]; 6],
+            coverage: None,
+            counters: Counters::default(),
+            renderer: "raster".into(),
+            seconds: 0.0,
+        };
+        let mut attrs = BTreeMap::new();
+        attrs.insert("renderer".to_string(), "raster".to_string());
+        write_frame(&path, &frame, &attrs).unwrap();
+        let b = read_buffers(&path).unwrap();
+        assert_eq!((b.width, b.height), (3, 2));
+        assert_eq!(b.prim.unwrap(), frame.prim);
+        assert_eq!(b.object.unwrap(), frame.object);
+        let z = b.z.unwrap();
+        assert!(z
+            .iter()
+            .zip(&frame.z)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert_eq!(b.attrs["renderer"], "raster");
+        let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(leftovers.len(), 1, "no temporary file left behind");
+    }
+
+    #[test]
+    fn failed_write_leaves_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.exr");
+        let r = write_atomically(&path, |tmp| {
+            std::fs::write(tmp, b"half")?;
+            bail!("simulated failure")
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let e = read_buffers(Path::new("/nonexistent/a.exr")).unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/a.exr"));
+    }
+}

@@ -1,0 +1,63 @@
+//! rendiff: a differential-testing harness for renderers.
+//!
+//! The core renders visibility two ways, [`raster`] (outer loop over
+//! triangles) and [`trace`] (outer loop over pixels), through one shared
+//! definition in [`visibility`], and writes DESIGN.md's buffers ([`exr_io`]).
+//! See ARCHITECTURE.md for who owns what.
+
+pub mod camera;
+pub mod exr_io;
+pub mod frame;
+pub mod predicate;
+pub mod preview;
+pub mod progress;
+pub mod raster;
+pub mod scene;
+pub mod trace;
+pub mod visibility;
+
+/// Depth comparison statistics (the `diff` command and tests).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DepthStats {
+    /// Pixels whose f32 bits differ (NaN/inf included).
+    pub bit_differences: usize,
+    /// Pixels where one side is a hit (finite) and the other is not.
+    pub mask_mismatches: usize,
+    /// Pixels where both sides hit.
+    pub common_hits: usize,
+    /// Largest absolute difference over common hits.
+    pub max_abs: f64,
+    /// Largest relative difference over common hits.
+    pub max_rel: f64,
+    /// Mean absolute difference over common hits.
+    pub mean_abs: f64,
+}
+
+/// Compares two depth buffers: exact bits, hit/miss masks, and error statistics.
+pub fn compare_depth(a: &[f32], b: &[f32]) -> DepthStats {
+    let mut s = DepthStats::default();
+    let mut sum = 0.0;
+    for (&x, &y) in a.iter().zip(b) {
+        if x.to_bits() != y.to_bits() {
+            s.bit_differences += 1;
+        }
+        match (x.is_finite(), y.is_finite()) {
+            (true, true) => {
+                let d = (f64::from(x) - f64::from(y)).abs();
+                s.common_hits += 1;
+                sum += d;
+                s.max_abs = s.max_abs.max(d);
+                let m = f64::from(x.abs().max(y.abs()));
+                if m > 0.0 {
+                    s.max_rel = s.max_rel.max(d / m);
+                }
+            }
+            (false, false) => {}
+            _ => s.mask_mismatches += 1,
+        }
+    }
+    if s.common_hits > 0 {
+        s.mean_abs = sum / s.common_hits as f64;
+    }
+    s
+}

@@ -1,0 +1,274 @@
+//! The `rendiff` command line: render scenes with either visibility loop, list
+//! scenes, export resolved scenes for external renderers, and diff buffers.
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use rendiff::exr_io::{read_buffers, write_frame};
+use rendiff::frame::Frame;
+use rendiff::progress::LazyProgress;
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::scene::Scene;
+use rendiff::trace::BvhQuality;
+use rendiff::{preview, raster, trace};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// rendiff: differential testing for renderers.
+///
+/// Renders a scene's visibility (depth, triangle and object IDs, normals) two
+/// ways, by rasterization (for each triangle, which pixels?) and by ray tracing
+/// (for each pixel, which triangle?), which must agree bit for bit, and
+/// compares buffers. Scenes are TOML files; see scenes/ and the README.
+#[derive(Parser)]
+#[command(name = "rendiff", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Renderer {
+    /// Outer loop over triangles, z-buffer, tiles in parallel.
+    Raster,
+    /// Outer loop over pixels, BVH (obvhs), rows in parallel.
+    Trace,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene's depth/ID/normal buffers to an EXR (plus PNG previews).
+    Render {
+        /// Scene file (TOML), e.g. scenes/three_triangles.toml.
+        scene: PathBuf,
+        /// Which visibility loop to use.
+        #[arg(long, value_enum)]
+        renderer: Renderer,
+        /// Output EXR; default out/<scene>.<renderer>.exr.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// BVH build quality for the tracer.
+        #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
+        bvh: BvhQuality,
+        /// Skip the PNG previews.
+        #[arg(long)]
+        no_preview: bool,
+        /// Never show a progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// List scenes in a folder with the features they require.
+    Scenes {
+        /// Folder to list.
+        #[arg(default_value = "scenes")]
+        dir: PathBuf,
+    },
+    /// Write the resolved scene (triangles, IDs, camera) for external renderers.
+    Export {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Output folder (scene.json, triangles.f32, object_ids.u32).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Compare two buffer EXRs: exact IDs, depth statistics. Exit 1 on any difference.
+    Diff {
+        /// Reference EXR.
+        a: PathBuf,
+        /// Test EXR.
+        b: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Render {
+            scene,
+            renderer,
+            output,
+            threads,
+            bvh,
+            no_preview,
+            quiet,
+        } => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start worker threads")?;
+            let resolved = load_scene(&scene)?;
+            let name = match renderer {
+                Renderer::Raster => "raster",
+                Renderer::Trace => "trace",
+            };
+            let out = output.unwrap_or_else(|| {
+                let stem = scene
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "scene".into());
+                Path::new("out").join(format!("{stem}.{name}.exr"))
+            });
+            let frame = pool.install(|| render(&resolved, renderer, bvh, quiet));
+            let mut attrs = BTreeMap::new();
+            attrs.insert("renderer".to_string(), name.to_string());
+            attrs.insert("scene".to_string(), scene.display().to_string());
+            attrs.insert("seconds".to_string(), format!("{:.6}", frame.seconds));
+            attrs.insert(
+                "threads".to_string(),
+                pool.current_num_threads().to_string(),
+            );
+            attrs.insert(
+                "counters".to_string(),
+                serde_json::to_string(&frame.counters)?,
+            );
+            write_frame(&out, &frame, &attrs)?;
+            if !no_preview {
+                preview::write_previews(&out, &frame)?;
+            }
+            let c = &frame.counters;
+            println!(
+                "{name}: {}x{} px, {} triangles, {:.3} s -> {}",
+                frame.width,
+                frame.height,
+                resolved.triangles.len(),
+                frame.seconds,
+                out.display()
+            );
+            println!(
+                "  coverage tests {}, covered {}, exact fallbacks {}, ties {}, triangle setups {}, BVH nodes visited {}",
+                c.coverage_tests, c.covered, c.exact_fallbacks, c.ties, c.triangle_setups, c.bvh_nodes_visited
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Scenes { dir } => {
+            let mut entries: Vec<PathBuf> = std::fs::read_dir(&dir)
+                .with_context(|| format!("{}: cannot list scenes", dir.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                .collect();
+            entries.sort();
+            let mut failed = false;
+            for p in entries {
+                match Scene::load(&p) {
+                    Ok(s) => {
+                        let req: Vec<&str> = s.requires.iter().map(String::as_str).collect();
+                        println!("{:<28} requires: {}", p.display(), req.join(", "));
+                        if !s.file.description.is_empty() {
+                            println!("{:<28}   {}", "", s.file.description);
+                        }
+                    }
+                    Err(e) => {
+                        failed = true;
+                        eprintln!("error: {e}");
+                    }
+                }
+            }
+            Ok(if failed {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+        Command::Export { scene, output } => {
+            let resolved = load_scene(&scene)?;
+            rendiff::scene::export::export(&resolved, &output)?;
+            println!(
+                "exported {} triangles to {}",
+                resolved.triangles.len(),
+                output.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Diff { a, b } => diff(&a, &b),
+    }
+}
+
+fn load_scene(path: &Path) -> Result<ResolvedScene> {
+    let scene = Scene::load(path)?;
+    Ok(ResolvedScene::resolve(&scene)?)
+}
+
+fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: bool) -> Frame {
+    let cam = &scene.camera;
+    match renderer {
+        Renderer::Raster => {
+            let tiles =
+                u64::from(cam.width.div_ceil(raster::TILE) * cam.height.div_ceil(raster::TILE));
+            let bar = LazyProgress::new(tiles, "raster tiles", !quiet);
+            let f = raster::render(scene, raster::RasterOptions::default(), &|n| bar.inc(n));
+            bar.finish();
+            f
+        }
+        Renderer::Trace => {
+            let bar = LazyProgress::new(u64::from(cam.height), "trace rows", !quiet);
+            let opts = trace::TraceOptions {
+                bvh,
+                count_coverage: false,
+            };
+            let f = trace::render(scene, opts, &|n| bar.inc(n));
+            bar.finish();
+            f
+        }
+    }
+}
+
+fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
+    let ba = read_buffers(a)?;
+    let bb = read_buffers(b)?;
+    if (ba.width, ba.height) != (bb.width, bb.height) {
+        println!(
+            "size differs: {}x{} vs {}x{}",
+            ba.width, ba.height, bb.width, bb.height
+        );
+        return Ok(ExitCode::from(1));
+    }
+    let mut differs = false;
+    for (name, x, y) in [
+        ("id.prim", &ba.prim, &bb.prim),
+        ("id.object", &ba.object, &bb.object),
+    ] {
+        match (x, y) {
+            (Some(x), Some(y)) => {
+                let n = x.iter().zip(y).filter(|(p, q)| p != q).count();
+                println!("{name}: {n} of {} pixels differ", x.len());
+                differs |= n > 0;
+            }
+            _ => {
+                println!("{name}: missing in one file");
+                differs = true;
+            }
+        }
+    }
+    match (&ba.z, &bb.z) {
+        (Some(x), Some(y)) => {
+            let s = rendiff::compare_depth(x, y);
+            println!(
+                "Z: {} bitwise differences, {} hit/miss mismatches, max abs {:.3e}, max rel {:.3e}, mean abs {:.3e} over {} common hits",
+                s.bit_differences, s.mask_mismatches, s.max_abs, s.max_rel, s.mean_abs, s.common_hits
+            );
+            differs |= s.bit_differences > 0;
+        }
+        _ => {
+            println!("Z: missing in one file");
+            differs = true;
+        }
+    }
+    Ok(if differs {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}

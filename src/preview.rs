@@ -1,0 +1,68 @@
+//! PNG previews for people: IDs in false color, depth through a color map.
+//! They are never compared; the EXR is the result.
+
+use crate::exr_io::write_atomically;
+use crate::frame::{Frame, BACKGROUND_ID};
+use anyhow::{Context, Result};
+use std::path::Path;
+
+/// A stable, well-spread color for an ID (background is black).
+pub fn id_color(id: u32) -> [u8; 3] {
+    if id == BACKGROUND_ID {
+        return [0, 0, 0];
+    }
+    let mut h = id.wrapping_add(1).wrapping_mul(0x9E37_79B9);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x85EB_CA6B);
+    h ^= h >> 13;
+    [
+        64 + (h & 0xBF) as u8,
+        64 + ((h >> 8) & 0xBF) as u8,
+        64 + ((h >> 16) & 0xBF) as u8,
+    ]
+}
+
+/// Depth mapped through viridis between the frame's nearest and farthest finite depth.
+pub fn depth_rgb(z: &[f32]) -> Vec<[u8; 3]> {
+    let finite = z.iter().copied().filter(|v| v.is_finite());
+    let lo = finite.clone().fold(f32::INFINITY, f32::min);
+    let hi = finite.fold(f32::NEG_INFINITY, f32::max);
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    z.iter()
+        .map(|&v| {
+            if v.is_finite() {
+                let c = colorous::VIRIDIS.eval_continuous(f64::from((v - lo) / span));
+                [c.r, c.g, c.b]
+            } else {
+                [0, 0, 0]
+            }
+        })
+        .collect()
+}
+
+fn save(path: &Path, w: u32, h: u32, px: Vec<[u8; 3]>) -> Result<()> {
+    let buf: Vec<u8> = px.into_iter().flatten().collect();
+    let img = image::RgbImage::from_raw(w, h, buf).context("preview buffer size")?;
+    write_atomically(path, |tmp| {
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .with_context(|| format!("{}: cannot write PNG", path.display()))
+    })
+}
+
+/// Writes `<stem>.ids.png` and `<stem>.depth.png` beside `exr_path`.
+pub fn write_previews(exr_path: &Path, frame: &Frame) -> Result<()> {
+    let stem = exr_path.with_extension("");
+    let sibling = |suffix: &str| {
+        let mut name = stem.clone().into_os_string();
+        name.push(suffix);
+        std::path::PathBuf::from(name)
+    };
+    let ids = frame.prim.iter().map(|&p| id_color(p)).collect();
+    save(&sibling(".ids.png"), frame.width, frame.height, ids)?;
+    save(
+        &sibling(".depth.png"),
+        frame.width,
+        frame.height,
+        depth_rgb(&frame.z),
+    )
+}

@@ -1,0 +1,255 @@
+//! Resolution: one world-space triangle list with global IDs, rounded to f32 once.
+//!
+//! Every renderer, internal or external, reads this list, so `prim_id`,
+//! `object_id` and vertex values mean the same thing everywhere.
+
+use super::generators::Tri64;
+use super::obj::{confined_path, load_obj};
+use super::{LightSpec, Scene, SceneError};
+use crate::camera::Camera;
+use glam::{DMat3, DVec3, Vec3};
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+/// A triangle as every renderer sees it: three f32 vertices.
+pub type Tri = [Vec3; 3];
+
+/// Per-object bookkeeping that maps ID ranges back to the scene file.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ObjectInfo {
+    /// Name from the scene file (untrusted text).
+    pub name: String,
+    /// Index into `materials`.
+    pub material: u32,
+    /// First `prim_id` of this object.
+    pub first_prim: u32,
+    /// Number of triangles.
+    pub prim_count: u32,
+}
+
+/// A resolved material (see DESIGN.md: albedo and emission).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Material {
+    /// Name from the scene file (untrusted text).
+    pub name: String,
+    /// Diffuse reflectance per channel.
+    pub albedo: [f64; 3],
+    /// Emitted radiance per channel.
+    pub emission: [f64; 3],
+}
+
+/// The scene after resolution: what renderers consume.
+#[derive(Debug, Clone)]
+pub struct ResolvedScene {
+    /// Display name (untrusted text).
+    pub name: String,
+    /// The scene file it came from.
+    pub source: PathBuf,
+    /// Features the scene requires.
+    pub requires: BTreeSet<String>,
+    /// The camera, with its basis and near/far resolved.
+    pub camera: Camera,
+    /// All triangles; index = `prim_id`.
+    pub triangles: Vec<Tri>,
+    /// `object_id` of each triangle.
+    pub object_ids: Vec<u32>,
+    /// True for exactly zero-area triangles, which are never visible.
+    pub degenerate: Vec<bool>,
+    /// Objects in ID order.
+    pub objects: Vec<ObjectInfo>,
+    /// Materials (a default grey is added when the scene has none).
+    pub materials: Vec<Material>,
+    /// Lights, as written.
+    pub lights: Vec<LightSpec>,
+}
+
+/// Exact test for a zero-area triangle: all three coordinate-plane projections
+/// have zero signed area (Shewchuk's exact orient2d), so no float tolerance is involved.
+pub fn is_degenerate(t: &Tri) -> bool {
+    let proj = |i: usize, j: usize| {
+        let c = |v: Vec3| robust::Coord {
+            x: f64::from(v[i]),
+            y: f64::from(v[j]),
+        };
+        robust::orient2d(c(t[0]), c(t[1]), c(t[2])) == 0.0
+    };
+    proj(0, 1) && proj(1, 2) && proj(2, 0)
+}
+
+fn transform_matrix(t: &super::Transform) -> (DMat3, DVec3) {
+    let [rx, ry, rz] = t.rotate.map(f64::to_radians);
+    let rot = DMat3::from_rotation_z(rz) * DMat3::from_rotation_y(ry) * DMat3::from_rotation_x(rx);
+    (
+        rot * DMat3::from_diagonal(DVec3::from(t.scale)),
+        DVec3::from(t.translate),
+    )
+}
+
+impl ResolvedScene {
+    /// Resolves a validated scene: loads meshes, runs generators, applies transforms,
+    /// rounds to f32, assigns IDs and builds the camera.
+    pub fn resolve(scene: &Scene) -> Result<ResolvedScene, SceneError> {
+        let path = &scene.path;
+        let mut materials: Vec<Material> = scene
+            .file
+            .materials
+            .iter()
+            .map(|m| Material {
+                name: m.name.clone(),
+                albedo: m.albedo,
+                emission: m.emission,
+            })
+            .collect();
+        if materials.is_empty() {
+            materials.push(Material {
+                name: "default".into(),
+                albedo: [0.8, 0.8, 0.8],
+                emission: [0.0; 3],
+            });
+        }
+        let mut triangles: Vec<Tri> = Vec::new();
+        let mut object_ids = Vec::new();
+        let mut degenerate = Vec::new();
+        let mut objects = Vec::new();
+        for (oi, o) in scene.file.objects.iter().enumerate() {
+            let field = format!("objects[{oi}]");
+            let (tris64, origin): (Vec<Tri64>, PathBuf) = match (&o.mesh, &o.shape) {
+                (Some(rel), _) => {
+                    let mesh_field = format!("{field}.mesh");
+                    let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
+                    (load_obj(&full, &mesh_field)?, full)
+                }
+                (None, Some(shape)) => (shape.triangles(), path.clone()),
+                (None, None) => unreachable!("validated: mesh or shape"),
+            };
+            let material = match &o.material {
+                Some(m) => materials.iter().position(|x| &x.name == m).unwrap_or(0) as u32,
+                None => 0,
+            };
+            let (m, tr) = transform_matrix(&o.transform);
+            let first = triangles.len();
+            for (ti, t) in tris64.iter().enumerate() {
+                let w = t.map(|v| (m * v + tr).as_vec3());
+                if w.iter().any(|v| !v.is_finite()) {
+                    return Err(SceneError::new(
+                        &origin,
+                        &field,
+                        format!("triangle {ti} is not finite after the transform (overflow to Inf or NaN)"),
+                    ));
+                }
+                let deg = is_degenerate(&w);
+                if deg && !o.allow_degenerate {
+                    return Err(SceneError::new(
+                        &origin,
+                        &field,
+                        format!(
+                            "triangle {ti} has zero area after rounding to f32; \
+                             set `allow_degenerate = true` on the object if this is intended"
+                        ),
+                    ));
+                }
+                triangles.push(w);
+                degenerate.push(deg);
+                object_ids.push(oi as u32);
+            }
+            if triangles.len() >= u32::MAX as usize {
+                return Err(SceneError::new(
+                    path,
+                    "objects",
+                    "more than 2^32-2 triangles",
+                ));
+            }
+            objects.push(ObjectInfo {
+                name: o.name.clone(),
+                material,
+                first_prim: first as u32,
+                prim_count: (triangles.len() - first) as u32,
+            });
+        }
+        let camera = Camera::from_spec(&scene.file.camera, scene_size(&triangles))
+            .map_err(|(field, problem)| SceneError::new(path, field, problem))?;
+        Ok(ResolvedScene {
+            name: scene.name.clone(),
+            source: path.clone(),
+            requires: scene.requires.clone(),
+            camera,
+            triangles,
+            object_ids,
+            degenerate,
+            objects,
+            materials,
+            lights: scene.file.lights.clone(),
+        })
+    }
+
+    /// Builds a scene directly from triangles (tests and generated scene families).
+    pub fn from_triangles(camera: Camera, triangles: Vec<Tri>) -> ResolvedScene {
+        let n = triangles.len();
+        let degenerate = triangles.iter().map(is_degenerate).collect();
+        ResolvedScene {
+            name: "generated".into(),
+            source: PathBuf::from("<generated>"),
+            requires: ["depth", "ids"].iter().map(|s| s.to_string()).collect(),
+            camera,
+            triangles,
+            object_ids: vec![0; n],
+            degenerate,
+            objects: vec![ObjectInfo {
+                name: "generated".into(),
+                material: 0,
+                first_prim: 0,
+                prim_count: n as u32,
+            }],
+            materials: vec![Material {
+                name: "default".into(),
+                albedo: [0.8; 3],
+                emission: [0.0; 3],
+            }],
+            lights: vec![],
+        }
+    }
+}
+
+/// Diagonal of the triangles' bounding box: the "scene size" that scales the default near plane.
+pub fn scene_size(tris: &[Tri]) -> f64 {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for t in tris {
+        for v in t {
+            lo = lo.min(v.as_dvec3());
+            hi = hi.max(v.as_dvec3());
+        }
+    }
+    if tris.is_empty() {
+        0.0
+    } else {
+        (hi - lo).length()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn degenerate_detection_is_exact() {
+        let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        assert!(is_degenerate(&[
+            v(0., 0., 0.),
+            v(1., 1., 1.),
+            v(2., 2., 2.)
+        ]));
+        assert!(is_degenerate(&[
+            v(1., 2., 3.),
+            v(1., 2., 3.),
+            v(4., 5., 6.)
+        ]));
+        // A sliver: collinear but for one ulp.
+        let y = f32::from_bits(2f32.to_bits() + 1);
+        assert!(!is_degenerate(&[
+            v(0., 0., 0.),
+            v(1., 1., 0.),
+            v(2., y, 0.)
+        ]));
+    }
+}

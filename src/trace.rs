@@ -1,0 +1,273 @@
+//! Ray tracing: the outer loop runs over pixels, the inner over the triangles a
+//! BVH (built by obvhs) says the pixel ray may hit.
+//!
+//! The BVH only prunes; every candidate is decided by [`crate::visibility`],
+//! exactly as in the rasterizer. Node boxes are recomputed here from the f32
+//! triangles and grown by [`grow_box`], so pruning is conservative: a box is
+//! skipped only when its nearest possible key is worse than the best hit.
+
+use crate::camera::{Camera, PixelRay};
+use crate::frame::Frame;
+use crate::scene::resolve::ResolvedScene;
+use crate::visibility::{
+    covers_lazy, grow_box, hit_key, slab, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
+};
+use glam::Vec3;
+use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// BVH build quality: obvhs presets (without spatial splits, which would
+/// give a triangle several partial boxes and break conservative pruning).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BvhQuality {
+    /// obvhs fastest_build.
+    Fastest,
+    /// obvhs fast_build.
+    Fast,
+    /// obvhs medium_build (default).
+    #[default]
+    Medium,
+    /// obvhs slow_build.
+    Slow,
+}
+
+impl BvhQuality {
+    fn params(self) -> BvhBuildParams {
+        let mut p = match self {
+            BvhQuality::Fastest => BvhBuildParams::fastest_build(),
+            BvhQuality::Fast => BvhBuildParams::fast_build(),
+            BvhQuality::Medium => BvhBuildParams::medium_build(),
+            BvhQuality::Slow => BvhBuildParams::slow_build(),
+        };
+        p.pre_split = false;
+        p
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    bounds: RayBox,
+    /// Leaf: index of the first prim in `prims`; inner: index of the first child.
+    first: u32,
+    /// Leaf: number of prims; inner: 0.
+    count: u32,
+}
+
+/// A BVH over the scene's non-degenerate triangles, with boxes grown for robust tests.
+pub struct TraceBvh {
+    nodes: Vec<Node>,
+    prims: Vec<u32>,
+    /// Seconds spent in obvhs's builder plus our refit.
+    pub build_seconds: f64,
+}
+
+impl TraceBvh {
+    /// Builds the BVH for this scene and camera (boxes are grown relative to the eye).
+    pub fn build(scene: &ResolvedScene, quality: BvhQuality) -> TraceBvh {
+        let start = Instant::now();
+        let cam = &scene.camera;
+        let ids: Vec<u32> = (0..scene.triangles.len() as u32)
+            .filter(|&i| !scene.degenerate[i as usize])
+            .collect();
+        if ids.is_empty() {
+            return TraceBvh {
+                nodes: Vec::new(),
+                prims: Vec::new(),
+                build_seconds: 0.0,
+            };
+        }
+        let tris: Vec<Triangle> = ids
+            .iter()
+            .map(|&i| {
+                let t = &scene.triangles[i as usize];
+                Triangle {
+                    v0: t[0].into(),
+                    v1: t[1].into(),
+                    v2: t[2].into(),
+                }
+            })
+            .collect();
+        let bvh = build_bvh2_from_tris(&tris, quality.params(), &mut Duration::default());
+        let prims: Vec<u32> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&k| ids[k as usize])
+            .collect();
+        // Refit every box from the f32 triangles (post-order), then grow it.
+        let n = bvh.nodes.len();
+        let mut lo = vec![Vec3::splat(f32::INFINITY); n];
+        let mut hi = vec![Vec3::splat(f32::NEG_INFINITY); n];
+        let mut order = Vec::with_capacity(n);
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            order.push(i);
+            let nd = &bvh.nodes[i];
+            if nd.prim_count == 0 {
+                stack.push(nd.first_index as usize);
+                stack.push(nd.first_index as usize + 1);
+            }
+        }
+        for &i in order.iter().rev() {
+            let nd = &bvh.nodes[i];
+            if nd.prim_count > 0 {
+                for k in nd.first_index..nd.first_index + nd.prim_count {
+                    let t = &scene.triangles[prims[k as usize] as usize];
+                    lo[i] = lo[i].min(t[0]).min(t[1]).min(t[2]);
+                    hi[i] = hi[i].max(t[0]).max(t[1]).max(t[2]);
+                }
+            } else {
+                let c = nd.first_index as usize;
+                lo[i] = lo[c].min(lo[c + 1]);
+                hi[i] = hi[c].max(hi[c + 1]);
+            }
+        }
+        let nodes = bvh
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(i, nd)| Node {
+                bounds: grow_box(cam.eye, lo[i], hi[i]),
+                first: nd.first_index,
+                count: nd.prim_count,
+            })
+            .collect();
+        TraceBvh {
+            nodes,
+            prims,
+            build_seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// Nearest hit key for one pixel ray, and optionally every covering triangle's facing.
+    pub fn trace(
+        &self,
+        scene: &ResolvedScene,
+        ray: &PixelRay,
+        c: &mut Counters,
+        mut coverage: Option<&mut [u16; 2]>,
+    ) -> u64 {
+        let cam: &Camera = &scene.camera;
+        let mut best = NO_HIT;
+        if self.nodes.is_empty() {
+            return best;
+        }
+        let count_all = coverage.is_some();
+        let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
+        c.bvh_nodes_visited += 1;
+        let (t0, t1) = slab(cam.eye, ray, &self.nodes[0].bounds);
+        if slab_misses(t0, t1) {
+            return best;
+        }
+        stack.push((0, t0));
+        while let Some((ni, tmin)) = stack.pop() {
+            if !count_all && lower_key(tmin, ray) > best {
+                continue;
+            }
+            let node = &self.nodes[ni as usize];
+            if node.count > 0 {
+                for k in node.first..node.first + node.count {
+                    let prim = self.prims[k as usize];
+                    let t = &scene.triangles[prim as usize];
+                    let facing = covers_lazy(cam, t, ray, c);
+                    if facing == 0 {
+                        continue;
+                    }
+                    if let Some(z) = TriDepth::new(cam, t).depth(cam, ray) {
+                        best = best.min(hit_key(z, prim));
+                        if let Some(cov) = coverage.as_deref_mut() {
+                            let slot = usize::from(facing > 0);
+                            cov[slot] = cov[slot].saturating_add(1);
+                        }
+                    }
+                }
+                continue;
+            }
+            let mut kids = [(node.first, 0.0f64, true); 2];
+            for (j, kid) in kids.iter_mut().enumerate() {
+                let id = node.first + j as u32;
+                c.bvh_nodes_visited += 1;
+                let (a, b) = slab(cam.eye, ray, &self.nodes[id as usize].bounds);
+                *kid = (id, a, slab_misses(a, b));
+            }
+            // Push the farther child first so the nearer one is popped first.
+            if kids[0].1 < kids[1].1 {
+                kids.swap(0, 1);
+            }
+            for (id, a, miss) in kids {
+                if !miss && (count_all || lower_key(a, ray) <= best) {
+                    stack.push((id, a));
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Smallest hit key any triangle inside a box entered at ray parameter `tmin` can have.
+#[inline]
+fn lower_key(tmin: f64, ray: &PixelRay) -> u64 {
+    let z = (tmin * ray.planar).max(0.0) as f32;
+    hit_key(z, 0)
+}
+
+/// Options for one trace render.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TraceOptions {
+    /// BVH build quality.
+    pub bvh: BvhQuality,
+    /// Count every covering triangle per pixel (front/back); disables pruning.
+    pub count_coverage: bool,
+}
+
+/// Renders depth and IDs by ray tracing. `progress` is called with rows finished.
+pub fn render(scene: &ResolvedScene, opts: TraceOptions, progress: &(dyn Fn(u64) + Sync)) -> Frame {
+    let start = Instant::now();
+    let cam = &scene.camera;
+    let bvh = TraceBvh::build(scene, opts.bvh);
+    let w = cam.width as usize;
+    let mut keys = vec![NO_HIT; cam.pixel_count()];
+    let mut cov = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
+    let counters: Counters = if opts.count_coverage {
+        keys.par_chunks_mut(w)
+            .zip(cov.par_chunks_mut(w))
+            .enumerate()
+            .map(|(y, (row, crow))| {
+                let mut c = Counters::default();
+                for (x, (k, cv)) in row.iter_mut().zip(crow.iter_mut()).enumerate() {
+                    let ray = cam.pixel_ray(x as u32, y as u32);
+                    *k = bvh.trace(scene, &ray, &mut c, Some(cv));
+                }
+                progress(1);
+                c
+            })
+            .reduce(Counters::default, sum)
+    } else {
+        keys.par_chunks_mut(w)
+            .enumerate()
+            .map(|(y, row)| {
+                let mut c = Counters::default();
+                for (x, k) in row.iter_mut().enumerate() {
+                    let ray = cam.pixel_ray(x as u32, y as u32);
+                    *k = bvh.trace(scene, &ray, &mut c, None);
+                }
+                progress(1);
+                c
+            })
+            .reduce(Counters::default, sum)
+    };
+    Frame::from_keys(
+        scene,
+        &keys,
+        opts.count_coverage.then_some(cov),
+        counters,
+        "trace",
+        start.elapsed().as_secs_f64(),
+    )
+}
+
+fn sum(mut a: Counters, b: Counters) -> Counters {
+    a += b;
+    a
+}
