@@ -1,0 +1,163 @@
+"""Command line: `python -m rendiff_harness {info,render,compare} ...`.
+
+The Rust core drives this as a subprocess, so the contract is machine-readable:
+one JSON line on stdout for results, messages on stderr, and exit codes
+0 = rendered, 2 = error (backend failed or unavailable, bad input),
+3 = skipped (the backend cannot model a feature the scene requires).
+Expected failures print one line naming the backend and the problem, never a
+traceback; a traceback means a bug in rendiff.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from . import exrbuf, registry, resolved
+from .errors import BackendError
+
+EXIT_OK, EXIT_ERROR, EXIT_SKIPPED = 0, 2, 3
+
+
+def _fail(message: str) -> int:
+    print(f"rendiff_harness: {message}", file=sys.stderr)
+    return EXIT_ERROR
+
+
+def _describe(backend: registry.Backend) -> dict[str, Any]:
+    reason = backend.unavailable_reason()
+    version: str | None = None
+    if reason is None:
+        try:
+            version = backend.version()
+        except BackendError as exc:
+            reason = str(exc)
+    return {
+        "name": backend.name,
+        "module": backend.module_name,
+        "version": version,
+        "features": sorted(backend.features),
+        "buffers": sorted(backend.buffers),
+        "available": reason is None,
+        "reason": reason,
+    }
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """List every registered backend with its version, capabilities and availability."""
+    rows = [_describe(b) for b in registry.all_backends()]
+    if args.json:
+        print(json.dumps({"backends": rows}))
+        return EXIT_OK
+    for row in rows:
+        status = "available" if row["available"] else f"UNAVAILABLE: {row['reason']}"
+        print(f"{row['name']}: {row['version'] or '-'}  [{status}]")
+        features = ", ".join(row["features"]) or "-"
+        buffers = ", ".join(row["buffers"]) or "-"
+        print(f"    features: {features}   buffers: {buffers}")
+    return EXIT_OK
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """Render one resolved scene with one backend into one buffer EXR."""
+    try:
+        backend = registry.get(args.backend)
+    except KeyError:
+        return _fail(f"unknown backend {args.backend!r}; known: {', '.join(registry.known_names())}")
+    try:
+        scene = resolved.load(args.scene)
+    except resolved.SceneError as exc:
+        return _fail(f"{backend.name}: cannot load scene: {exc}")
+    missing = registry.missing_features(backend, scene)
+    if missing:
+        print(
+            json.dumps(
+                {
+                    "backend": backend.name,
+                    "status": "skipped",
+                    "reason": f"missing features: {', '.join(missing)}",
+                    "missing": missing,
+                }
+            )
+        )
+        return EXIT_SKIPPED
+    reason = backend.unavailable_reason()
+    if reason is not None:
+        return _fail(f"{backend.name} unavailable: {reason}")
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        return _fail(f"{backend.name}: output folder {out.parent} does not exist")
+    own_workdir = args.workdir is None
+    workdir = Path(tempfile.mkdtemp(prefix=f"rendiff-{backend.name}-")) if own_workdir else Path(args.workdir)
+    try:
+        version = backend.version()
+        t0 = time.monotonic()
+        info = backend.render(scene, out, workdir, float(args.timeout))
+        elapsed = time.monotonic() - t0
+    except BackendError as exc:  # includes BackendUnavailable
+        msg = str(exc)
+        return _fail(msg if msg.startswith(f"{backend.name}:") else f"{backend.name}: {msg}")
+    except exrbuf.BufferError as exc:
+        return _fail(f"{backend.name}: {exc}")
+    finally:
+        if own_workdir:
+            shutil.rmtree(workdir, ignore_errors=True)
+    print(
+        json.dumps(
+            {"backend": backend.name, "status": "ok", "version": version, "time_s": elapsed, "info": info},
+            default=str,
+        )
+    )
+    return EXIT_OK
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Delegates to compare.py (owned by the comparison work); absent until it lands."""
+    try:
+        from .compare import main as compare_main
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__package__}.compare":
+            raise
+        return _fail("compare not available yet (rendiff_harness/compare.py is missing)")
+    return int(compare_main(list(args.rest)) or 0)
+
+
+HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "info": cmd_info,
+    "render": cmd_render,
+    "compare": cmd_compare,
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m rendiff_harness", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    p_info = sub.add_parser("info", help="list backends, versions, capabilities, availability")
+    p_info.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p_render = sub.add_parser("render", help="render a resolved scene into a buffer EXR")
+    p_render.add_argument("--backend", required=True, help="backend name, see `info`")
+    p_render.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
+    p_render.add_argument("--out", required=True, help="output EXR path (written atomically)")
+    p_render.add_argument(
+        "--timeout", type=float, default=600.0, help="seconds before the renderer is killed"
+    )
+    p_render.add_argument("--workdir", default=None, help="scratch folder (default: a temp folder, removed)")
+    p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
+    p_compare.add_argument("rest", nargs=argparse.REMAINDER)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return HANDLERS[args.cmd](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

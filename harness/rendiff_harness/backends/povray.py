@@ -1,0 +1,448 @@
+"""POV-Ray 3.7 backend: resolved scene -> SDL -> `povray` CLI -> 16-bit PNGs -> buffer EXR.
+
+Everything here follows /work/shared/notes/external-renderers.md ("POV-Ray 3.7"):
+
+* Security: Debian's POV-Ray ignores povray.conf I/O restrictions, so SDL is a
+  program with full file access. The SDL below is built only from numbers this
+  module formatted itself (`_num` for floats; Python ints from numpy index
+  arrays for indices and ID colours) and from fixed text; no string from
+  the scene (names, sources, materials) ever reaches it.
+* Exactness: antialiasing off (`-A`), one sample at each pixel center,
+  `File_Gamma=1.0` and 16-bit PNG so that k/65535 reads back as k.
+* IDs: one flat texture per face in a `mesh2`; id+1 = R + 65536*G.
+* Depth: a function pigment of planar depth, 32-bit fixed point over [0, R)
+  split into two 16-bit channels; R is chosen per scene from the largest
+  planar depth of any vertex, so every ramp stays inside [0, 1].
+* Near/far: POV-Ray's camera has no clip planes. The mesh is `clipped_by` the
+  half-spaces depth >= near and depth <= far, which removes the surface *and
+  shows what lies behind it*, as the Rust tracer's t-interval does. (Masking the
+  final hits instead would show background where the reference shows the next
+  surface.)
+
+Passes are table-driven (`_PASSES`), so a lit radiance pass can be added as one
+more entry (SDL builder + decoder) without touching the runner.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .. import exrbuf
+from ..errors import BackendError, BackendUnavailable
+from ..resolved import Camera, ResolvedScene
+
+NAME = "povray"
+FEATURES: frozenset[str] = frozenset({"depth", "ids"})
+BUFFERS: frozenset[str] = frozenset({"Z", "id"})
+
+BINARY = "povray"
+THREADS = 2
+DEPTH_MARGIN = 1.0 + 2.0**-6
+"""R = max vertex depth * DEPTH_MARGIN, so the high word stays below 65535 (a ramp value
+of exactly 1.0 is the edge where POV-Ray's wrap-around starts)."""
+_STDERR_TAIL = 2000
+_INSTALL_HINT = "install it with `apt-get install povray` (or run scripts/setup.sh as root)"
+
+
+# --------------------------------------------------------------------------- availability
+
+
+def _binary() -> str | None:
+    return shutil.which(BINARY)
+
+
+def unavailable_reason() -> str | None:
+    """None when usable, else what is missing and how to install it."""
+    if _binary() is None:
+        return f"`{BINARY}` not found on PATH; {_INSTALL_HINT}"
+    try:
+        import OpenImageIO  # noqa: F401  (decodes the PNGs)
+    except ImportError:
+        return "Python module OpenImageIO missing (decodes POV-Ray's PNGs); run `pip install openimageio==3.2.2.0`"
+    return None
+
+
+@lru_cache(maxsize=4)
+def _version_of(binary: str) -> str:
+    try:
+        proc = subprocess.run(
+            [binary, "--version"],
+            check=False,
+            capture_output=True,
+            text=True,
+            timeout=30,
+            env=_clean_env(Path("/tmp")),
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise BackendUnavailable(f"{NAME}: `{binary} --version` failed: {exc}") from exc
+    match = re.search(r"(?:POV-Ray|Version)\s+(\d+\.\d+[\w.]*)", proc.stdout + proc.stderr)
+    if not match:
+        raise BackendUnavailable(f"{NAME}: cannot parse the version from `{binary} --version`")
+    return f"POV-Ray {match.group(1)}"
+
+
+def version() -> str:
+    """E.g. 'POV-Ray 3.7.0.10.unofficial' (Debian's build calls itself unofficial)."""
+    binary = _binary()
+    if binary is None:
+        raise BackendUnavailable(f"{NAME}: `{BINARY}` not found on PATH; {_INSTALL_HINT}")
+    return _version_of(binary)
+
+
+# --------------------------------------------------------------------------- SDL from numbers only
+
+
+def _num(x: float) -> str:
+    """The only way a float enters SDL: finite, as Python's shortest round-trip repr.
+
+    `repr(float(x))` because numpy 2 scalars repr as `np.float64(...)`, and POV-Ray
+    rejects nan/inf but silently accepts overflow like 1e400.
+    """
+    value = float(x)
+    if not math.isfinite(value):
+        raise BackendError(f"{NAME}: refusing to write a non-finite number ({value!r}) into SDL")
+    return repr(value)
+
+
+def _vec(v: np.ndarray | tuple[float, float, float]) -> str:
+    return "<" + ",".join(_num(c) for c in v) + ">"
+
+
+def camera_sdl(cam: Camera) -> str:
+    """Pinhole through pixel centers with DESIGN.md's basis, used as-is (right-handed).
+
+    POV-Ray shoots direction + x0*right + y0*up with x0, y0 in [-0.5, 0.5] at pixel
+    centers; with |direction| = 0.5/tan(vfov/2) and right = r*W/H this is exactly
+    DESIGN.md's (sx, sy). Handedness only matters for POV's look_at/sky helpers,
+    which are not used: an explicit `right` pointing right keeps the image unmirrored.
+    """
+    direction = cam.forward * (0.5 / cam.tan_half_vfov)
+    right = cam.right * (cam.width / cam.height)
+    return (
+        f"camera {{ perspective location {_vec(cam.eye)} direction {_vec(direction)}"
+        f" up {_vec(cam.up_ortho)} right {_vec(right)} }}\n"
+    )
+
+
+def clip_sdl(cam: Camera) -> str:
+    """`clipped_by` keeping near <= depth <= far (see the module docstring)."""
+    e_dot_f = float(np.dot(cam.eye, cam.forward))
+    planes = [f"plane {{ {_vec(-cam.forward)}, {_num(-(cam.near + e_dot_f))} }}"]
+    if math.isfinite(cam.far):
+        planes.append(f"plane {{ {_vec(cam.forward)}, {_num(cam.far + e_dot_f)} }}")
+    if len(planes) == 1:
+        return f"clipped_by {{ {planes[0]} }}\n"
+    return "clipped_by { intersection { " + " ".join(planes) + " } }\n"
+
+
+def _unique_vertices(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bitwise-identical vertices shared once (smaller SDL, faster parse; same f32 values).
+
+    Returns (vertices (V, 3) f32, faces (N, 3) indices). Keys are the raw f32 bits, so
+    -0.0 and 0.0 stay distinct and nothing is merged that is not the very same vertex.
+    """
+    flat = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
+    if flat.shape[0] == 0:
+        return flat, np.zeros((0, 3), dtype=np.int64)
+    bits = flat.view(np.uint32).astype(np.uint64)
+    key_hi, key_lo = (bits[:, 0] << np.uint64(32)) | bits[:, 1], bits[:, 2]
+    order = np.lexsort((key_lo, key_hi))
+    kh, kl = key_hi[order], key_lo[order]
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = (kh[1:] != kh[:-1]) | (kl[1:] != kl[:-1])
+    inverse = np.empty(order.size, dtype=np.int64)
+    inverse[order] = np.cumsum(first) - 1
+    return flat[order[first]], inverse.reshape(-1, 3)
+
+
+def _vertex_block(verts: np.ndarray) -> str:
+    # float(np.float32) is exact in float64, and its repr round-trips, so POV-Ray's
+    # float32 mesh2 storage gets back the very same f32 vertex.
+    parts = [f"<{_num(x)},{_num(y)},{_num(z)}>" for x, y, z in verts.astype(np.float64).tolist()]
+    return f"vertex_vectors {{ {len(parts)},\n" + ",\n".join(parts) + "\n}\n"
+
+
+@dataclass(frozen=True)
+class MeshSdl:
+    """The scene's triangles as mesh2 pieces, formatted once and shared by every pass."""
+
+    vertex_block: str
+    faces: np.ndarray  # (N, 3) indices into the vertex block; row k is prim k
+    vertex_count: int
+
+
+def mesh_for(scene: ResolvedScene) -> MeshSdl:
+    verts, faces = _unique_vertices(scene.triangles)
+    return MeshSdl(_vertex_block(verts), faces, int(verts.shape[0]))
+
+
+def _face_block(faces: np.ndarray, with_texture: bool) -> str:
+    if with_texture:
+        parts = [f"<{a},{b},{c}>,{k}" for k, (a, b, c) in enumerate(faces.tolist())]
+    else:
+        parts = [f"<{a},{b},{c}>" for a, b, c in faces.tolist()]
+    return f"face_indices {{ {len(parts)},\n" + ",\n".join(parts) + "\n}\n"
+
+
+_PRELUDE = (
+    "#version 3.7;\n"
+    "global_settings { assumed_gamma 1.0 max_trace_level 1 }\n"
+    "background { rgb 0 }\n"
+    "default { finish { ambient 1 diffuse 0 } }\n"
+)
+
+
+def ids_sdl(scene: ResolvedScene, mesh: MeshSdl) -> str:
+    """One flat texture per face: colour (id+1) split into 16-bit R (low) and G (high)."""
+    n = mesh.faces.shape[0]
+    if n >= 0xFFFFFFFF:
+        raise BackendError(f"{NAME}: {n} triangles do not fit the 32-bit id encoding")
+    code = np.arange(1, n + 1, dtype=np.int64)
+    lows, highs = (code & 0xFFFF).tolist(), (code >> 16).tolist()
+    textures = [f"texture{{pigment{{rgb<{lo},{hi},0>/65535}}}}" for lo, hi in zip(lows, highs)]
+    return (
+        _PRELUDE
+        + camera_sdl(scene.camera)
+        + "mesh2 {\n"
+        + mesh.vertex_block
+        + f"texture_list {{ {n},\n"
+        + ",\n".join(textures)
+        + "\n}\n"
+        + _face_block(mesh.faces, with_texture=True)
+        + clip_sdl(scene.camera)
+        + "}\n"
+    )
+
+
+def depth_range(scene: ResolvedScene) -> float:
+    """R for the fixed-point depth: the largest vertex planar depth, with margin (>0)."""
+    cam = scene.camera
+    if scene.triangle_count == 0:
+        return 1.0
+    d = (scene.triangles.reshape(-1, 3).astype(np.float64) - cam.eye) @ cam.forward
+    dmax = float(d.max())
+    if math.isfinite(cam.far):
+        dmax = min(dmax, cam.far)  # clipped_by removes everything beyond far
+    return max(dmax, 1e-30) * DEPTH_MARGIN
+
+
+def depth_step(r: float) -> float:
+    """Resolution of the fixed-point depth (absolute): the compare step's tolerance floor."""
+    return r / 65536.0 / 65535.0
+
+
+def depth_sdl(scene: ResolvedScene, mesh: MeshSdl, r: float) -> str:
+    """Planar depth as 32-bit fixed point over [0, r): high word in R, low word in G."""
+    cam = scene.camera
+    ex, ey, ez = (_num(c) for c in cam.eye)
+    fx, fy, fz = (_num(c) for c in cam.forward)
+    return (
+        _PRELUDE
+        + camera_sdl(cam)
+        + f"#declare DF = function {{ (x-({ex}))*({fx})+(y-({ey}))*({fy})+(z-({ez}))*({fz}) }}\n"
+        + f"#declare QF = function {{ DF(x,y,z)/({_num(r)})*65536 }}\n"
+        + "#declare PH = pigment { function { floor(QF(x,y,z))/65535 } color_map {[0 rgb 0][1 rgb <2,0,0>]} }\n"
+        + "#declare PL = pigment { function { QF(x,y,z)-floor(QF(x,y,z)) } color_map {[0 rgb 0][1 rgb <0,2,0>]} }\n"
+        + "mesh2 {\n"
+        + mesh.vertex_block
+        + _face_block(mesh.faces, with_texture=False)
+        + "texture { pigment { average pigment_map {[1 PH][1 PL]} } }\n"
+        + clip_sdl(cam)
+        + "}\n"
+    )
+
+
+# --------------------------------------------------------------------------- running POV-Ray
+
+
+def _clean_env(workdir: Path) -> dict[str, str]:
+    """No POVINI, HOME in the scratch dir: POV-Ray loads ./povray.ini, $POVINI and ~/.povray."""
+    env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": str(workdir), "LC_ALL": "C"}
+    return env
+
+
+def povray_command(binary: str, width: int, height: int, sdl_name: str, png_name: str) -> list[str]:
+    """The command line from the notes; file names are relative to the scratch dir (cwd)."""
+    return [
+        binary,
+        "-D",
+        "-V",
+        "-GS",
+        "-GR",
+        "-GD",
+        "-A",
+        f"+WT{THREADS}",
+        f"+W{width}",
+        f"+H{height}",
+        "+FN16",
+        "File_Gamma=1.0",
+        f"+I{sdl_name}",
+        f"+O{png_name}",
+    ]
+
+
+def _run(
+    binary: str, scratch: Path, cam: Camera, stem: str, sdl: str, deadline: float, timeout_s: float
+) -> float:
+    """Write SDL, run POV-Ray with a hard deadline; returns the wall time of the process."""
+    sdl_name, png_name = f"{stem}.pov", f"{stem}.png"
+    (scratch / sdl_name).write_text(sdl)
+    cmd = povray_command(binary, cam.width, cam.height, sdl_name, png_name)
+    remaining = deadline - time.monotonic()
+    if remaining <= 0:
+        raise BackendError(f"{NAME}: timed out after {timeout_s:g} s (before the {stem} pass)")
+    t0 = time.monotonic()
+    proc = subprocess.Popen(
+        cmd,
+        cwd=scratch,
+        env=_clean_env(scratch),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        out, err = proc.communicate(timeout=remaining)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate()
+        raise BackendError(
+            f"{NAME}: timed out after {timeout_s:g} s (in the {stem} pass); scratch kept in {scratch}"
+        )
+    elapsed = time.monotonic() - t0
+    if proc.returncode != 0:
+        tail = (err + out).decode("utf-8", "replace")[-_STDERR_TAIL:]
+        raise BackendError(
+            f"{NAME}: {stem} pass exited with rc={proc.returncode}; scratch kept in {scratch}\n{tail}"
+        )
+    if not (scratch / png_name).is_file():
+        raise BackendError(f"{NAME}: {stem} pass wrote no {png_name}; scratch kept in {scratch}")
+    return elapsed
+
+
+def read_png16(path: Path, width: int, height: int) -> np.ndarray:
+    """(H, W, 3) uint16 exactly as stored (OIIO applies no gamma to integer reads)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise BackendError(f"{NAME}: cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        if spec.format != oiio.UINT16 or (spec.width, spec.height) != (width, height) or spec.nchannels < 3:
+            raise BackendError(
+                f"{NAME}: {path} is {spec.width}x{spec.height}x{spec.nchannels} {spec.format},"
+                f" expected {width}x{height} 16-bit RGB"
+            )
+        pix = inp.read_image(0, 0, 0, 3, oiio.UINT16)
+    finally:
+        inp.close()
+    if pix is None:
+        raise BackendError(f"{NAME}: cannot decode {path}")
+    return np.asarray(pix, dtype=np.uint16).reshape(height, width, 3)
+
+
+def decode_ids(png: np.ndarray, n_tris: int) -> np.ndarray:
+    """id+1 = R + 65536*G; 0 is background -> 0xFFFFFFFF."""
+    code = png[..., 0].astype(np.uint64) + (png[..., 1].astype(np.uint64) << 16)
+    if png[..., 2].any() or int(code.max(initial=0)) > n_tris:
+        raise BackendError(f"{NAME}: ID pass decoded a colour that is no triangle (conversion bug)")
+    prim = np.where(code == 0, np.uint64(exrbuf.BACKGROUND_ID), code - 1)
+    return prim.astype(np.uint32)
+
+
+def decode_depth(png: np.ndarray, r: float) -> np.ndarray:
+    """d = R*(hi + lo/65535)/65536 in float64 (not yet masked)."""
+    hi = png[..., 0].astype(np.float64)
+    lo = png[..., 1].astype(np.float64)
+    return r * (hi + lo / 65535.0) / 65536.0
+
+
+@dataclass(frozen=True)
+class _Pass:
+    """One POV-Ray run: how to write its SDL, and the PNG it leaves for decoding."""
+
+    stem: str
+    build: Callable[[ResolvedScene, MeshSdl, float], str]
+
+
+_PASSES: tuple[_Pass, ...] = (
+    _Pass("ids", lambda scene, mesh, r: ids_sdl(scene, mesh)),
+    _Pass("depth", depth_sdl),
+)
+
+
+def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float) -> dict[str, object]:
+    """Render IDs and depth; write `out_exr` atomically; return settings and sub-timings."""
+    binary = _binary()
+    if binary is None:
+        raise BackendUnavailable(f"{NAME}: `{BINARY}` not found on PATH; {_INSTALL_HINT}")
+    cam = scene.camera
+    h, w = cam.height, cam.width
+    deadline = time.monotonic() + timeout_s
+    info: dict[str, object] = {
+        "threads": THREADS,
+        "flags": povray_command(BINARY, w, h, "<scene>.pov", "<out>.png")[1:],
+        "near_far": "clipped_by planes",
+    }
+    n = scene.triangle_count
+    if n == 0:
+        prim = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+        z = np.full((h, w), np.inf, dtype=np.float32)
+        exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=prim, attrs={"backend": NAME})
+        info["note"] = "empty scene: POV-Ray not run"
+        return info
+
+    workdir.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix="povray-", dir=workdir))
+    t0 = time.monotonic()
+    mesh = mesh_for(scene)
+    r = depth_range(scene)
+    info.update(vertices=mesh.vertex_count, triangles=n, depth_range=r, depth_step=depth_step(r))
+    info["prepare_s"] = time.monotonic() - t0
+
+    pngs: dict[str, np.ndarray] = {}
+    passes: dict[str, dict[str, float]] = {}
+    for p in _PASSES:
+        t_sdl = time.monotonic()
+        sdl = p.build(scene, mesh, r)
+        sdl_s = time.monotonic() - t_sdl
+        run_s = _run(binary, scratch, cam, p.stem, sdl, deadline, timeout_s)
+        pngs[p.stem] = read_png16(scratch / f"{p.stem}.png", w, h)
+        passes[p.stem] = {"sdl_s": sdl_s, "povray_s": run_s, "sdl_bytes": float(len(sdl))}
+    info["passes"] = passes
+
+    prim = decode_ids(pngs["ids"], n)
+    hit = prim != exrbuf.BACKGROUND_ID
+    depth = decode_depth(pngs["depth"], r)
+    # Both passes trace the same mesh2, so their hit masks must agree; a depth-pass hit
+    # reads nonzero unless its depth is below one fixed-point step.
+    info["mask_disagree_px"] = int(np.count_nonzero(~hit & pngs["depth"][..., :2].any(axis=-1)))
+    z = np.where(hit, depth, np.inf).astype(np.float32)
+    obj = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+    obj[hit] = scene.object_ids[prim[hit]]
+    exrbuf.write_buffers(
+        out_exr,
+        Z=z,
+        prim=prim,
+        obj=obj,
+        attrs={"backend": NAME, "version": version(), "depth_range": r, "depth_step": depth_step(r)},
+    )
+    shutil.rmtree(scratch, ignore_errors=True)
+    return info

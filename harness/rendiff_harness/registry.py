@@ -1,0 +1,139 @@
+"""The backend registry: adding a renderer is one module in `backends/` plus one line here.
+
+A backend module provides (see backends/povray.py for a complete one):
+
+    NAME: str                                  # e.g. "povray"
+    FEATURES: frozenset[str]                   # scene features it can model ("depth", "ids", ...)
+    BUFFERS: frozenset[str]                    # subset of {"Z", "id", "N", "RGB"}
+    def version() -> str                       # may raise BackendUnavailable
+    def unavailable_reason() -> str | None     # None when usable, else what to install
+    def render(scene, out_exr, workdir, timeout_s) -> dict[str, object]   # raises BackendError
+
+Modules are imported lazily and one failing import never hides the others: an
+ImportError (a missing Python package, typically) turns that backend into an
+*unavailable* one whose reason says what is missing, so `info` and the report
+can still list it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+
+from .errors import BackendError, BackendUnavailable
+from .resolved import ResolvedScene
+
+BACKEND_MODULES = [
+    "povray",
+    "pyrender_backend",
+    "mitsuba_backend",
+]
+
+_REQUIRED = ("NAME", "FEATURES", "BUFFERS", "version", "unavailable_reason", "render")
+KNOWN_BUFFERS = frozenset({"Z", "id", "N", "RGB"})
+
+
+@dataclass(frozen=True)
+class Backend:
+    """A registry entry: the imported module, or why it could not be imported."""
+
+    module_name: str
+    module: ModuleType | None
+    import_error: str | None
+
+    @property
+    def name(self) -> str:
+        if self.module is not None:
+            return str(self.module.NAME)
+        return self.module_name.removesuffix("_backend")
+
+    @property
+    def features(self) -> frozenset[str]:
+        return frozenset(self.module.FEATURES) if self.module is not None else frozenset()
+
+    @property
+    def buffers(self) -> frozenset[str]:
+        return frozenset(self.module.BUFFERS) if self.module is not None else frozenset()
+
+    def unavailable_reason(self) -> str | None:
+        """None when the backend can render here, else an actionable reason."""
+        if self.module is None:
+            return self.import_error
+        try:
+            return self.module.unavailable_reason()
+        except Exception as exc:  # a broken probe must not take `info` down with it
+            return f"unavailable_reason() failed: {type(exc).__name__}: {exc}"
+
+    def version(self) -> str:
+        if self.module is None:
+            raise BackendUnavailable(f"{self.name}: {self.import_error}")
+        return str(self.module.version())
+
+    def render(
+        self, scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float
+    ) -> dict[str, object]:
+        if self.module is None:
+            raise BackendUnavailable(f"{self.name}: {self.import_error}")
+        return dict(self.module.render(scene, out_exr, workdir, timeout_s))
+
+
+def load(module_name: str) -> Backend:
+    """Import `backends/<module_name>.py`; import problems become an unavailable Backend."""
+    try:
+        module = importlib.import_module(f"{__package__}.backends.{module_name}")
+    except ImportError as exc:
+        qualified = f"{__package__}.backends.{module_name}"
+        missing = getattr(exc, "name", None)
+        if missing == qualified:
+            return Backend(module_name, None, f"backend module backends/{module_name}.py not found")
+        hint = f" (Python package {missing!r} missing; run scripts/setup.sh)" if missing else ""
+        return Backend(module_name, None, f"cannot import backend module {module_name!r}: {exc}{hint}")
+    absent = [attr for attr in _REQUIRED if not hasattr(module, attr)]
+    if absent:
+        return Backend(module_name, None, f"backend module {module_name!r} lacks {', '.join(absent)}")
+    extra = frozenset(module.BUFFERS) - KNOWN_BUFFERS
+    if extra:
+        return Backend(
+            module_name, None, f"backend module {module_name!r} declares unknown buffers {sorted(extra)}"
+        )
+    return Backend(module_name, module, None)
+
+
+def all_backends() -> list[Backend]:
+    return [load(m) for m in BACKEND_MODULES]
+
+
+def get(name: str) -> Backend:
+    """Look a backend up by its NAME (e.g. 'pyrender') or its module name; KeyError if unknown."""
+    for module_name in BACKEND_MODULES:
+        if name == module_name or name == module_name.removesuffix("_backend"):
+            return load(module_name)
+    for backend in all_backends():  # a module whose NAME differs from its file name
+        if backend.name == name:
+            return backend
+    raise KeyError(name)
+
+
+def known_names() -> list[str]:
+    return [b.name for b in all_backends()]
+
+
+def missing_features(backend: Backend | ModuleType, scene: ResolvedScene) -> list[str]:
+    """Scene requirements the backend cannot model (sorted); empty means it may run."""
+    features = backend.features if isinstance(backend, Backend) else frozenset(backend.FEATURES)
+    return sorted(scene.requires - features)
+
+
+__all__ = [
+    "BACKEND_MODULES",
+    "Backend",
+    "BackendError",
+    "BackendUnavailable",
+    "all_backends",
+    "get",
+    "known_names",
+    "load",
+    "missing_features",
+]

@@ -1,0 +1,206 @@
+"""Registry and CLI: lazy imports, capability checks, and the exit-code/JSON contract."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixtures
+from rendiff_harness import __main__ as cli
+from rendiff_harness import backends, exrbuf, registry, resolved
+
+HARNESS = Path(__file__).resolve().parents[1]
+needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
+
+
+def test_registry_lists_one_module_per_backend() -> None:
+    assert registry.BACKEND_MODULES[0] == "povray"
+    assert len(set(registry.BACKEND_MODULES)) == len(registry.BACKEND_MODULES)
+    pov = registry.load("povray")
+    assert pov.module is not None and pov.name == "povray"
+    assert pov.features == frozenset({"depth", "ids"}) and pov.buffers == frozenset({"Z", "id"})
+    assert registry.get("povray").module_name == "povray"
+
+
+def test_every_registered_module_loads_or_says_why() -> None:
+    for backend in registry.all_backends():
+        if backend.module is None:
+            assert backend.import_error, backend.module_name
+        else:
+            assert backend.buffers <= registry.KNOWN_BUFFERS
+
+
+def test_missing_module_is_unavailable_not_an_exception(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(registry, "BACKEND_MODULES", ["povray", "nosuch_backend"])
+    b = registry.load("nosuch_backend")
+    assert b.module is None and b.name == "nosuch"
+    assert "not found" in (b.unavailable_reason() or "")
+    assert registry.get("nosuch").module_name == "nosuch_backend"
+
+
+def _extra_backends_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, files: dict[str, str]) -> None:
+    for name, text in files.items():
+        (tmp_path / f"{name}.py").write_text(text)
+    monkeypatch.setattr(backends, "__path__", [*backends.__path__, str(tmp_path)])
+    for name in files:
+        monkeypatch.delitem(sys.modules, f"rendiff_harness.backends.{name}", raising=False)
+
+
+def test_import_error_of_a_dependency_becomes_the_reason(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _extra_backends_dir(tmp_path, monkeypatch, {"broken_backend": "import definitely_not_installed_pkg\n"})
+    b = registry.load("broken_backend")
+    reason = b.unavailable_reason() or ""
+    assert b.module is None and "definitely_not_installed_pkg" in reason and "setup.sh" in reason
+    with pytest.raises(registry.BackendUnavailable):
+        b.version()
+
+
+def test_incomplete_module_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _extra_backends_dir(tmp_path, monkeypatch, {"half_backend": "NAME = 'half'\n"})
+    b = registry.load("half_backend")
+    assert b.module is None and "lacks" in (b.unavailable_reason() or "")
+
+
+def test_missing_features(tmp_path: Path) -> None:
+    d = fixtures.write_scene(
+        tmp_path / "s", fixtures_quad(), requires=("ids", "lambert", "depth", "area_light")
+    )
+    scene = resolved.load(d)
+    pov = registry.load("povray")
+    assert registry.missing_features(pov, scene) == ["area_light", "lambert"]
+    assert registry.missing_features(pov.module, scene) == ["area_light", "lambert"]  # a module works too
+
+
+def fixtures_quad() -> list[list[list[float]]]:
+    return [[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]]
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def test_info_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["info", "--json"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["backends"]}
+    assert set(rows) >= {"povray"}
+    for row in rows.values():
+        assert set(row) == {"name", "module", "version", "features", "buffers", "available", "reason"}
+        assert row["available"] == (row["reason"] is None)
+
+
+def test_info_text(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["info"]) == 0
+    assert "povray" in capsys.readouterr().out
+
+
+def test_render_skips_missing_features(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    d = fixtures.write_scene(tmp_path / "s", fixtures_quad(), requires=("depth", "ids", "lambert"))
+    out = tmp_path / "o.exr"
+    assert cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(out)]) == 3
+    msg = json.loads(capsys.readouterr().out)
+    assert msg["status"] == "skipped" and "lambert" in msg["reason"] and msg["backend"] == "povray"
+    assert not out.exists()
+
+
+def test_render_unknown_backend(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    d = fixtures.three_triangles(tmp_path / "s")
+    assert cli.main(["render", "--backend", "nope", "--scene", str(d), "--out", str(tmp_path / "o.exr")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown backend 'nope'" in err and "povray" in err
+
+
+def test_render_bad_scene(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rc = cli.main(
+        ["render", "--backend", "povray", "--scene", str(tmp_path / "none"), "--out", str(tmp_path / "o.exr")]
+    )
+    assert rc == 2 and "scene.json: missing" in capsys.readouterr().err
+
+
+def test_render_unavailable_backend(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = fixtures.three_triangles(tmp_path / "s")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))
+    assert (
+        cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(tmp_path / "o.exr")]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "povray unavailable" in err and "apt-get install povray" in err and "Traceback" not in err
+
+
+def test_render_backend_error_exit_2_without_traceback(tmp_path: Path) -> None:
+    """Through `python -m`, a crashing renderer gives one stderr message and exit 2."""
+    d = fixtures.three_triangles(tmp_path / "s")
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "povray").write_text("#!/bin/sh\necho 'POV-Ray 3.7.0.10' >&2\necho 'Fatal: boom' >&2\nexit 1\n")
+    (fake / "povray").chmod(0o755)
+    env = {"PATH": f"{fake}:/usr/bin:/bin", "PYTHONPATH": str(HARNESS)}
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rendiff_harness",
+            "render",
+            "--backend",
+            "povray",
+            "--scene",
+            str(d),
+            "--out",
+            str(tmp_path / "o.exr"),
+            "--timeout",
+            "30",
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "povray:" in proc.stderr and "Fatal: boom" in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.stdout == ""
+    assert not (tmp_path / "o.exr").exists()
+
+
+@needs_povray
+def test_render_success_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    d = fixtures.three_triangles(tmp_path / "s")
+    out = tmp_path / "o.exr"
+    rc = cli.main(
+        [
+            "render",
+            "--backend",
+            "povray",
+            "--scene",
+            str(d),
+            "--out",
+            str(out),
+            "--workdir",
+            str(tmp_path / "w"),
+        ]
+    )
+    assert rc == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1
+    msg = json.loads(lines[0])
+    assert msg["backend"] == "povray" and msg["version"].startswith("POV-Ray 3.7")
+    assert msg["time_s"] > 0 and "passes" in msg["info"]
+    buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
+    assert (buf["id.prim"] != exrbuf.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
+
+
+def test_compare_is_wired(capsys: pytest.CaptureFixture[str]) -> None:
+    if (HARNESS / "rendiff_harness" / "compare.py").exists():
+        pytest.skip("compare.py exists; its own tests cover it")
+    assert cli.main(["compare", "a.exr", "b.exr"]) == 2
+    assert "compare not available yet" in capsys.readouterr().err
