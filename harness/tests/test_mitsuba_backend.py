@@ -1,0 +1,188 @@
+"""Mitsuba backend: conversions checked against closed forms and a float64 pixel-center ray cast."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import backend_cases as cases
+import numpy as np
+import pytest
+
+from rendiff_harness import exrbuf, resolved
+from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness.errors import BackendError, BackendUnavailable
+from rendiff_harness.resolved import ResolvedScene
+
+REASON = mb.unavailable_reason()
+needs_mitsuba = pytest.mark.skipif(REASON is not None, reason=f"mitsuba backend unavailable: {REASON}")
+BG = mb.BACKGROUND_ID
+SAFE_EDGE_PX = 0.01  # pixel centers farther than this from every edge must match exactly
+EDGE_PX = 1e-3  # measured: Embree's f32 edge tests flip centers within ~4e-5 px only
+REL_DEPTH = 1e-6  # measured max 3e-7 on these planes
+
+Rendered = tuple[ResolvedScene, dict[str, np.ndarray], dict[str, Any]]
+
+
+def _render(tmp_path: Path, build: Callable[[Path], Path]) -> Rendered:
+    scene = resolved.load(build(tmp_path / "scene"))
+    buffers, info = mb.render_arrays(scene)
+    return scene, buffers, info
+
+
+@needs_mitsuba
+def test_module_protocol() -> None:
+    assert mb.NAME == "mitsuba"
+    assert mb.FEATURES == {"depth", "ids"} and mb.BUFFERS == {"Z", "id", "N"}
+    assert mb.version().startswith("mitsuba 3.9.1") and mb.selected_variant() in mb.version()
+
+
+@needs_mitsuba
+@pytest.mark.parametrize("distance", [5.0, 123.25])
+def test_facing_plane_depth_is_its_distance(tmp_path: Path, distance: float) -> None:
+    _, buf, _ = _render(tmp_path, lambda d: cases.facing_quad(d, distance))
+    assert np.all(buf["prim"] != BG), "the quad fills the view"
+    rel = np.abs(buf["Z"].astype(np.float64) - distance) / distance
+    assert rel.max() <= REL_DEPTH, f"max relative error {rel.max():.3g}"
+
+
+@needs_mitsuba
+def test_tilted_plane_depth_matches_ray_plane_intersection(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.tilted_quad)
+    want = cases.plane_depth(scene, cases.TILTED_POINT, cases.TILTED_NORMAL)
+    assert np.all(buf["prim"] != BG)
+    # Steep enough that a sample 1e-3 px off the pixel center would break the tolerance:
+    # this pins the sampler to exact pixel centers (no jitter, no half-pixel shift).
+    assert 1e-3 * np.abs(np.diff(want, axis=1)).min() > REL_DEPTH * want.max()
+    rel = np.abs(buf["Z"].astype(np.float64) - want) / want
+    assert rel.max() <= REL_DEPTH, f"max relative error {rel.max():.3g}"
+    assert np.all(np.abs(buf["Z"] - want) <= mb.depth_tolerance(want))
+
+
+@needs_mitsuba
+def test_ids_match_float64_ray_cast_away_from_edges(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.three_triangles_two_objects)
+    ref = cases.cast(scene)
+    safe = ref.edge_dist > SAFE_EDGE_PX
+    assert safe.mean() > 0.9
+    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
+    assert np.array_equal(buf["obj"][safe], ref.obj[safe])
+    assert {int(v) for v in np.unique(ref.obj)} == {0, 1, BG}, "fixture must show both objects and background"
+    mismatch = buf["prim"] != ref.prim
+    assert np.all(ref.edge_dist[mismatch] <= EDGE_PX)
+
+
+@needs_mitsuba
+def test_depth_matches_ray_cast_where_ids_agree(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.three_triangles_two_objects)
+    ref = cases.cast(scene)
+    same = (buf["prim"] == ref.prim) & (ref.prim != BG)
+    rel = np.abs(buf["Z"][same].astype(np.float64) - ref.z[same]) / ref.z[same]
+    assert rel.max() <= REL_DEPTH
+
+
+@needs_mitsuba
+def test_background_maps_to_inf_all_ones_and_zero_normal(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.three_triangles_two_objects)
+    bg = cases.cast(scene).prim == BG
+    assert bg[0, 0] and bg.sum() > 100
+    assert np.all(np.isposinf(buf["Z"][bg]))
+    assert np.all(buf["prim"][bg] == BG) and np.all(buf["obj"][bg] == BG)
+    assert np.all(buf["N"][bg] == 0.0)
+    assert np.array_equal(np.isinf(buf["Z"]), buf["prim"] == BG)
+
+
+@needs_mitsuba
+def test_orientation_left_is_left_and_up_is_top(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.orientation_scene)
+    w, h = scene.camera.width, scene.camera.height
+    cols0 = np.nonzero(buf["prim"] == 0)[1]
+    rows1 = np.nonzero(buf["prim"] == 1)[0]
+    assert cols0.size and cols0.max() < w // 2, "a triangle at -x must land in the left columns"
+    assert rows1.size and rows1.max() < h // 2, "a triangle at +y must land in the top rows"
+
+
+@needs_mitsuba
+def test_back_facing_triangle_is_visible_with_its_winding_normal(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.back_facing)
+    ref = cases.cast(scene)
+    safe = ref.edge_dist > SAFE_EDGE_PX
+    assert np.count_nonzero(ref.prim == 0) > 20
+    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
+    hit = buf["prim"] == 0
+    assert np.allclose(buf["N"][hit], [0.0, 0.0, -1.0], atol=1e-6), "winding normal, not flipped"
+
+
+@needs_mitsuba
+def test_normals_are_face_normals(tmp_path: Path) -> None:
+    _, buf, _ = _render(tmp_path, cases.tilted_quad)
+    assert np.allclose(buf["N"].reshape(-1, 3), cases.TILTED_NORMAL, atol=1e-6)
+
+
+@needs_mitsuba
+def test_prim_ids_above_65535_decode(tmp_path: Path) -> None:
+    scene, buf, _ = _render(tmp_path, cases.high_ids)
+    ref = cases.cast(scene)
+    safe = ref.edge_dist > SAFE_EDGE_PX
+    assert {int(v) for v in np.unique(ref.prim)} == {*cases.HIGH_IDS, BG}
+    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
+    assert np.array_equal(buf["obj"][safe], ref.obj[safe])
+
+
+@needs_mitsuba
+def test_scene_near_plane_clips(tmp_path: Path) -> None:
+    _, buf, _ = _render(tmp_path, cases.near_clipped)
+    assert np.all((buf["prim"] == 2) | (buf["prim"] == 3))
+    assert np.abs(buf["Z"] - 1.0).max() <= REL_DEPTH
+
+
+@needs_mitsuba
+def test_empty_scene_is_all_background(tmp_path: Path) -> None:
+    _, buf, _ = _render(tmp_path, cases.empty_scene)
+    assert np.all(buf["prim"] == BG) and np.all(np.isposinf(buf["Z"]))
+
+
+def test_refuses_more_triangles_than_float32_holds(tmp_path: Path) -> None:
+    small = resolved.load(cases.back_facing(tmp_path / "s"))
+    huge = np.broadcast_to(small.triangles[:1], (2**24 + 1, 3, 3))  # no memory behind it
+    scene = ResolvedScene(**{**small.__dict__, "triangles": huge})
+    with pytest.raises(BackendError, match="2\\^24"):
+        mb.render_arrays(scene)
+
+
+def test_variant_defaults_to_scalar_rgb(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(mb.VARIANT_ENV, raising=False)
+    assert mb.selected_variant() == "scalar_rgb"
+
+
+def test_llvm_variant_needs_an_llvm_path(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv(mb.VARIANT_ENV, "llvm_ad_rgb")
+    monkeypatch.delenv(mb.LLVM_PATH_ENV, raising=False)
+    with pytest.raises(BackendUnavailable, match="DRJIT_LIBLLVM_PATH"):
+        mb.selected_variant()
+    monkeypatch.setenv(mb.LLVM_PATH_ENV, str(tmp_path / "missing.so"))
+    with pytest.raises(BackendUnavailable, match="libllvm19"):
+        mb.selected_variant()
+
+
+def test_unknown_variant_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(mb.VARIANT_ENV, "cuda_ad_rgb")
+    with pytest.raises(BackendUnavailable, match="not supported"):
+        mb.selected_variant()
+
+
+@needs_mitsuba
+def test_render_writes_exr(tmp_path: Path) -> None:
+    scene = resolved.load(cases.three_triangles_two_objects(tmp_path / "s"))
+    out = tmp_path / "out.exr"
+    info = mb.render(scene, out, tmp_path, timeout_s=60.0)
+    got = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object", "N"])
+    attrs = exrbuf.read_attrs(out)
+    assert attrs["variant"] == mb.selected_variant() and attrs["near_clip"] == scene.camera.near
+    buf, _ = mb.render_arrays(scene)
+    assert np.array_equal(got["id.prim"], buf["prim"]) and np.array_equal(got["id.object"], buf["obj"])
+    assert np.array_equal(got["Z"], buf["Z"]) and np.array_equal(got["N"], buf["N"])
+    assert "RGB" not in got
+    timings = info["timings_s"]
+    assert isinstance(timings, dict) and set(timings) >= {"build", "render", "write"}
