@@ -79,7 +79,7 @@ impl Camera {
         if !(near > 0.0 && near.is_finite()) {
             return Err(("camera.near".into(), format!("must be > 0, got {near}")));
         }
-        if !(far > near) {
+        if far.partial_cmp(&near) != Some(std::cmp::Ordering::Greater) {
             return Err((
                 "camera.far".into(),
                 format!("must be greater than near ({near}), got {far}"),

@@ -38,6 +38,19 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
     result
 }
 
+/// The standard attributes of a core render: renderer, scene, timing, counters.
+pub fn frame_attrs(frame: &Frame, scene: &str) -> BTreeMap<String, String> {
+    let mut attrs = BTreeMap::new();
+    attrs.insert("renderer".to_string(), frame.renderer.clone());
+    attrs.insert("scene".to_string(), scene.to_string());
+    attrs.insert("seconds".to_string(), format!("{:.6}", frame.seconds));
+    attrs.insert(
+        "counters".to_string(),
+        serde_json::to_string(&frame.counters).unwrap_or_default(),
+    );
+    attrs
+}
+
 /// Writes a frame's buffers to `path` (atomically), with `attrs` as `rendiff:*` text attributes.
 pub fn write_frame(path: &Path, frame: &Frame, attrs: &BTreeMap<String, String>) -> Result<()> {
     let size = (frame.width as usize, frame.height as usize);

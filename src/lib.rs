@@ -5,7 +5,10 @@
 //! definition in [`visibility`], and writes DESIGN.md's buffers ([`exr_io`]).
 //! See ARCHITECTURE.md for who owns what.
 
+pub mod backends;
+pub mod bench;
 pub mod camera;
+pub mod check;
 pub mod exr_io;
 pub mod frame;
 pub mod predicate;

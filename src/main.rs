@@ -3,14 +3,13 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rendiff::exr_io::{read_buffers, write_frame};
+use rendiff::exr_io::{frame_attrs, read_buffers, write_frame};
 use rendiff::frame::Frame;
 use rendiff::progress::LazyProgress;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use rendiff::trace::BvhQuality;
 use rendiff::{preview, raster, trace};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -74,6 +73,53 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Run every scene on every backend and compare against the core's raster output.
+    ///
+    /// Backends: the core's raster (reference) and trace loops, Embree (default
+    /// and robust), and the Python harness's POV-Ray, pyrender and Mitsuba 3.
+    /// Writes RUN/manifest.json, the buffers, diff images and RUN/results.json.
+    /// Exit 1 if any comparison fails or errors.
+    Check {
+        /// Scene files or folders.
+        #[arg(default_value = "scenes")]
+        scenes: Vec<PathBuf>,
+        /// Run folder.
+        #[arg(short, long, default_value = "reports/runs/latest")]
+        output: PathBuf,
+        /// Only these backends, comma-separated (the raster reference always runs).
+        #[arg(long, value_delimiter = ',')]
+        only: Option<Vec<String>>,
+        /// Seconds before an external renderer is killed.
+        #[arg(long, default_value_t = 600)]
+        timeout: u64,
+        /// Known divergences with their bounds.
+        #[arg(long, default_value = "tests/expectations.toml")]
+        expectations: PathBuf,
+        /// Print only the summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Time raster and trace on one scene (median of runs after a warm-up) and write JSON.
+    Bench {
+        /// Scene file (TOML).
+        #[arg(default_value = "scenes/million.toml")]
+        scene: PathBuf,
+        /// Resolution override, e.g. 1920x1080.
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
+        /// Thread counts, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        threads: Vec<usize>,
+        /// Timed runs per configuration.
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
+        /// BVH build quality.
+        #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
+        bvh: BvhQuality,
+        /// Output JSON file.
+        #[arg(short, long, default_value = "reports/bench/core.json")]
+        output: PathBuf,
+    },
     /// Compare two buffer EXRs: exact IDs, depth statistics. Exit 1 on any difference.
     Diff {
         /// Reference EXR.
@@ -122,17 +168,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Path::new("out").join(format!("{stem}.{name}.exr"))
             });
             let frame = pool.install(|| render(&resolved, renderer, bvh, quiet));
-            let mut attrs = BTreeMap::new();
-            attrs.insert("renderer".to_string(), name.to_string());
-            attrs.insert("scene".to_string(), scene.display().to_string());
-            attrs.insert("seconds".to_string(), format!("{:.6}", frame.seconds));
+            let mut attrs = frame_attrs(&frame, &scene.display().to_string());
             attrs.insert(
                 "threads".to_string(),
                 pool.current_num_threads().to_string(),
-            );
-            attrs.insert(
-                "counters".to_string(),
-                serde_json::to_string(&frame.counters)?,
             );
             write_frame(&out, &frame, &attrs)?;
             if !no_preview {
@@ -193,7 +232,76 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Diff { a, b } => diff(&a, &b),
+        Command::Bench {
+            scene,
+            size,
+            threads,
+            runs,
+            bvh,
+            output,
+        } => {
+            let resolved = load_scene(&scene)?;
+            let opts = rendiff::bench::BenchOptions {
+                size,
+                threads,
+                runs: runs.max(1),
+                bvh,
+            };
+            let record = rendiff::bench::run(&resolved, &scene.display().to_string(), &opts)?;
+            let text = serde_json::to_string_pretty(&record)?;
+            rendiff::exr_io::write_atomically(&output, |tmp| {
+                std::fs::write(tmp, &text)?;
+                Ok(())
+            })?;
+            println!("{text}");
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Check {
+            scenes,
+            output,
+            only,
+            timeout,
+            expectations,
+            quiet,
+        } => {
+            let opts = rendiff::check::CheckOptions {
+                scenes: rendiff::check::collect_scenes(&scenes)?,
+                run_dir: output.clone(),
+                root: std::env::current_dir()?,
+                only,
+                timeout: std::time::Duration::from_secs(timeout),
+                expectations,
+                quiet,
+            };
+            let outcome = rendiff::check::run(&opts)?;
+            let (table, tally) = rendiff::check::summary(&outcome.results);
+            println!("{table}");
+            println!(
+                "check: {} ok, {} failing, {} skipped -> {}",
+                tally.ok,
+                tally.failed,
+                tally.skipped,
+                output.join("results.json").display()
+            );
+            Ok(if tally.failed > 0 {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
     }
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let p = |v: &str| v.parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
+    let (w, h) = (p(w)?, p(h)?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size must be 1..=16384 per side, got {s}"));
+    }
+    Ok((w, h))
 }
 
 fn load_scene(path: &Path) -> Result<ResolvedScene> {

@@ -30,8 +30,8 @@ pub struct PixelRect {
 }
 
 /// Conservative pixel bounding box of the part of a triangle at planar depth
-/// >= near (Sutherland-Hodgman clip against the near plane, then projection),
-/// grown by one pixel against rounding. `None` when nothing can be visible.
+/// at least `near` (Sutherland-Hodgman clip against the near plane, then
+/// projection), grown by one pixel against rounding. `None` when nothing can be visible.
 pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
     let zmin = cam.near * (1.0 - 1e-6);
     let pts: Vec<DVec3> = t.iter().map(|v| cam.to_camera(v.as_dvec3())).collect();
@@ -74,7 +74,7 @@ pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
         ymax = ymax.max(py);
     }
     // Pixel k's center is k + 0.5; keep a one-pixel margin for rounding.
-    let lo = |v: f64, n: u32| ((v - 1.5).floor().max(0.0) as f64).min(f64::from(n)) as u32;
+    let lo = |v: f64, n: u32| (v - 1.5).floor().max(0.0).min(f64::from(n)) as u32;
     let hi = |v: f64, n: u32| (v + 0.5).ceil().min(f64::from(n) - 1.0);
     let (x1, y1) = (hi(xmax, cam.width), hi(ymax, cam.height));
     if x1 < 0.0 || y1 < 0.0 {

@@ -224,8 +224,25 @@ pub struct TraceOptions {
 /// Renders depth and IDs by ray tracing. `progress` is called with rows finished.
 pub fn render(scene: &ResolvedScene, opts: TraceOptions, progress: &(dyn Fn(u64) + Sync)) -> Frame {
     let start = Instant::now();
-    let cam = &scene.camera;
     let bvh = TraceBvh::build(scene, opts.bvh);
+    let mut frame = render_with_bvh(scene, &bvh, opts.count_coverage, progress);
+    frame.seconds = start.elapsed().as_secs_f64();
+    frame
+}
+
+/// Traces every pixel through an already built BVH (benchmarks time the two phases apart).
+pub fn render_with_bvh(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    count_coverage: bool,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Frame {
+    let start = Instant::now();
+    let opts = TraceOptions {
+        count_coverage,
+        ..TraceOptions::default()
+    };
+    let cam = &scene.camera;
     let w = cam.width as usize;
     let mut keys = vec![NO_HIT; cam.pixel_count()];
     let mut cov = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];

@@ -118,5 +118,5 @@ fn triangle_crossing_the_eye_plane_is_clipped_not_lost() {
     let scene = ResolvedScene::from_triangles(cam, vec![t]);
     let (r, tr) = both(&scene, false);
     assert_identical("crossing", &r, &tr);
-    assert!(r.prim.iter().any(|&p| p == 0));
+    assert!(r.prim.contains(&0));
 }

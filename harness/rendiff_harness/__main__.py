@@ -155,6 +155,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["compare"]:
+        # compare.py owns its own options; argparse.REMAINDER would reject "--run".
+        return cmd_compare(argparse.Namespace(rest=argv[1:]))
     args = build_parser().parse_args(argv)
     return HANDLERS[args.cmd](args)
 

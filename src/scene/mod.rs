@@ -331,7 +331,8 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
         f[0] * c.up[1] - f[1] * c.up[0],
     ];
     let clen = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
-    if !(ulen > 0.0) || !(clen > 1e-9 * flen * ulen) {
+    let parallel = ulen.is_nan() || ulen <= 0.0 || clen.is_nan() || clen <= 1e-9 * flen * ulen;
+    if parallel {
         return Err(SceneError::new(
             path,
             "camera.up",

@@ -1,0 +1,706 @@
+"""`python -m rendiff_harness compare --run RUN [--expectations FILE]`: buffers -> results.json.
+
+Reads RUN/manifest.json (docs/run-format.md, written by `rendiff check`), compares every
+backend's buffers with the reference's (`reference`, normally "raster") for the `id` and
+`Z` buffers, writes RUN/results.json atomically and RUN/scenes/<scene>/diff/*.png, and
+prints a compact table. The Rust side decides pass/fail from results.json, so this exits
+0 whenever it could write results; 2 when the manifest (or the expectations file, or
+results.json itself) cannot be read/written, with one line naming the file.
+
+What is compared (DESIGN.md "Comparing"):
+
+* `id`: id.prim read exactly as u32. A mismatch is a pixel whose prim differs
+  (background 0xFFFFFFFF is a value). Each mismatch is *edge* when the pixel center lies
+  within the backend's edge tolerance (tolerance.py) of an edge of the reference's or
+  the test's triangle (classify.py), else *interior*. An ID naming no triangle, and an
+  id.object that differs where id.prim agrees, are interior mismatches.
+* `Z`: the hit/miss masks (finite vs not) must agree exactly: a mask mismatch at a pixel
+  that is an ID edge mismatch counts as edge, elsewhere as interior. Depth is compared
+  where both sides hit the same prim, against the backend's tolerance model
+  (tolerance.py); pixels beyond it are interior mismatches.
+* status: expectations.py turns (edge, interior) counts and the matching expectation
+  into pass / fail / expected_fail / unexpected_pass. Skipped and error renders are
+  copied through; a missing reference makes every entry of its scene an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import sys
+import tempfile
+import time
+import traceback
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import classify, diffimages, exrbuf, expectations, resolved, tolerance
+
+MANIFEST_FORMAT = "rendiff-manifest/1"
+RESULTS_FORMAT = "rendiff-results/1"
+BUFFERS = ("id", "Z")
+BACKGROUND_ID = exrbuf.BACKGROUND_ID
+EXAMPLES = 3  # example pixels quoted in a failure's reason
+EXIT_OK, EXIT_ERROR = 0, 2
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
+
+
+class ManifestError(Exception):
+    """manifest.json cannot be used at all; the message names the file."""
+
+
+class EntryError(Exception):
+    """One scene/backend cannot be compared; becomes `error` entries with this reason."""
+
+
+# --------------------------------------------------------------------------- manifest
+
+
+def load_manifest(run: Path) -> dict[str, Any]:
+    """Read and structurally validate RUN/manifest.json; ManifestError names the file."""
+    path = run / "manifest.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ManifestError(f"{path}: missing (run `rendiff check` first)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ManifestError(f"{path}: unreadable: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise ManifestError(f"{path}: not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ManifestError(f"{path}: must be a JSON object")
+    if data.get("format") != MANIFEST_FORMAT:
+        raise ManifestError(f"{path}: format is {data.get('format')!r}, expected {MANIFEST_FORMAT!r}")
+    reference = data.get("reference", "raster")
+    if not isinstance(reference, str) or not reference:
+        raise ManifestError(f"{path}: 'reference' must be a backend name, got {reference!r}")
+    scenes = data.get("scenes")
+    if not isinstance(scenes, list):
+        raise ManifestError(f"{path}: 'scenes' must be a list")
+    for i, sc in enumerate(scenes):
+        if not isinstance(sc, dict) or not isinstance(sc.get("scene"), str) or not sc["scene"]:
+            raise ManifestError(f"{path}: scenes[{i}] must be an object with a 'scene' name")
+        renders = sc.get("renders", [])
+        if not isinstance(renders, list):
+            raise ManifestError(f"{path}: scenes[{i}] ({sc['scene']}): 'renders' must be a list")
+        for j, r in enumerate(renders):
+            if not isinstance(r, dict) or not isinstance(r.get("backend"), str) or not r["backend"]:
+                raise ManifestError(
+                    f"{path}: scenes[{i}] ({sc['scene']}).renders[{j}] must be an object with a 'backend' name"
+                )
+            if r.get("status") not in ("ok", "skipped", "error"):
+                raise ManifestError(
+                    f"{path}: scenes[{i}] ({sc['scene']}).renders[{j}] ({r['backend']}): "
+                    f"status must be ok, skipped or error, got {r.get('status')!r}"
+                )
+    return data
+
+
+def run_path(run: Path, rel: Any, what: str) -> Path:
+    """A manifest path (relative to RUN, never escaping it) as a real path; EntryError if bad."""
+    if not isinstance(rel, str) or not rel:
+        raise EntryError(f"{what}: no path in manifest.json")
+    p = Path(rel)
+    if p.is_absolute() or ".." in p.parts:
+        raise EntryError(f"{what}: path {rel!r} in manifest.json must be relative to the run folder")
+    return run / p
+
+
+# --------------------------------------------------------------------------- entries
+
+
+def _finite(x: float) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any]) -> dict[str, Any]:
+    """A results.json entry with every field present and the render's time/version/command.
+
+    Counts start at 0; `blank_if_not_compared` nulls them when the entry ends skipped/error.
+    """
+    t = render.get("time_s")
+    return {
+        "scene": scene,
+        "backend": backend,
+        "buffer": buffer,
+        "status": "error",
+        "reason": "",
+        "pixels": 0,
+        "edge_mismatches": 0,
+        "interior_mismatches": 0,
+        "mask_mismatches": 0,
+        "max_abs_error": 0.0,
+        "mean_abs_error": 0.0,
+        "max_rel_error": 0.0,
+        "compared_pixels": 0,
+        "tolerance": "",
+        "bound": None,
+        "time_s": _finite(t) if isinstance(t, (int, float)) and not isinstance(t, bool) else None,
+        "version": render.get("version") if isinstance(render.get("version"), str) else None,
+        "command": render.get("command") if isinstance(render.get("command"), str) else None,
+        "images": {},
+    }
+
+
+NUMERIC_FIELDS = (
+    "pixels", "edge_mismatches", "interior_mismatches", "mask_mismatches",
+    "max_abs_error", "mean_abs_error", "max_rel_error", "compared_pixels",
+)
+
+
+def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
+    """Skipped and error entries carry null counts: "not compared", never "0 mismatches"."""
+    if entry["status"] in ("skipped", "error"):
+        for k in NUMERIC_FIELDS:
+            entry[k] = None
+    return entry
+
+
+def status_entries(scene: str, render: Mapping[str, Any], status: str, reason: str) -> list[dict[str, Any]]:
+    out = []
+    for buf in BUFFERS:
+        e = base_entry(scene, str(render.get("backend", "?")), buf, render)
+        e["status"] = status
+        e["reason"] = reason
+        out.append(e)
+    return out
+
+
+def _render_reason(render: Mapping[str, Any]) -> str:
+    if render.get("status") == "skipped":
+        return str(render.get("reason") or "skipped (no reason given)")
+    return str(render.get("message") or render.get("reason") or "error (no message given)")
+
+
+# --------------------------------------------------------------------------- reference data
+
+
+@dataclass
+class Reference:
+    scene: resolved.ResolvedScene
+    buffers: dict[str, np.ndarray]
+    shape: tuple[int, int]
+    _normals: np.ndarray | None = field(default=None, repr=False)
+
+    def unit_normals(self) -> np.ndarray:
+        """(N, 3) float64 unit normals of every triangle (zero for degenerate ones)."""
+        if self._normals is None:
+            t = self.scene.triangles.astype(np.float64)
+            n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+            length = np.linalg.norm(n, axis=1)
+            with np.errstate(all="ignore"):
+                self._normals = np.where(length[:, None] > 0, n / np.where(length > 0, length, 1.0)[:, None], 0.0)
+        return self._normals
+
+    def ray_cos(self, rows: np.ndarray, cols: np.ndarray, prims: np.ndarray) -> np.ndarray:
+        """|cos| between the pixel rays and the triangles' normals, (K,) float64 in [0, 1]."""
+        cam = self.scene.camera
+        w, h = cam.width, cam.height
+        sx = (2.0 * (cols + 0.5) / w - 1.0) * cam.tan_half_vfov * (w / h)
+        sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
+        d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
+        n = self.unit_normals()[prims.astype(np.int64)]
+        return np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
+
+
+def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) -> Reference:
+    """Resolved scene + reference buffers for one scene; EntryError with the reason otherwise."""
+    name = scene_entry["scene"]
+    refs = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference]
+    if not refs:
+        raise EntryError(f"reference {reference} has no render for scene {name} in manifest.json")
+    ref = refs[0]
+    if ref.get("status") != "ok":
+        raise EntryError(f"reference {reference} {ref.get('status')}: {_render_reason(ref)}")
+    try:
+        scene = resolved.load(run_path(run, scene_entry.get("resolved"), "resolved scene"))
+    except EntryError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - SceneError or a malformed scene.json
+        raise EntryError(f"cannot load the resolved scene: {type(exc).__name__}: {exc}") from None
+    exr = run_path(run, ref.get("exr"), f"reference {reference} EXR")
+    try:
+        buffers = exrbuf.read_buffers(exr)
+    except exrbuf.BufferError as exc:
+        raise EntryError(f"reference {reference} unreadable: {exc}") from None
+    cam = scene.camera
+    shape = (cam.height, cam.width)
+    for key, arr in buffers.items():
+        if arr.shape[:2] != shape:
+            raise EntryError(
+                f"reference {reference} {exr}: {key} is {arr.shape[1]}x{arr.shape[0]}, "
+                f"the scene's camera is {cam.width}x{cam.height}"
+            )
+    return Reference(scene, buffers, shape)
+
+
+# --------------------------------------------------------------------------- ID comparison
+
+
+@dataclass
+class IdResult:
+    edge: int
+    interior: int
+    edge_mask: np.ndarray  # (H, W) bool
+    interior_mask: np.ndarray  # (H, W) bool
+    tolerance: str
+    details: list[str]
+
+
+def compare_ids(ref: Reference, test: Mapping[str, np.ndarray], model: tolerance.Model) -> IdResult:
+    rp, tp = ref.buffers["id.prim"], test["id.prim"]
+    h, w = rp.shape
+    mism = rp != tp
+    idx = np.flatnonzero(mism)
+    rows, cols = idx // w, idx % w
+    r_ids, t_ids = rp.ravel()[idx], tp.ravel()[idx]
+    dist = classify.mismatch_edge_distance(ref.scene, r_ids, t_ids, rows, cols)
+    n = ref.scene.triangle_count
+    invalid = (t_ids != BACKGROUND_ID) & (t_ids.astype(np.uint64) >= np.uint64(n))
+    is_edge = (dist <= model.edge_px) & ~invalid
+    edge_mask = np.zeros((h, w), dtype=bool)
+    interior_mask = np.zeros((h, w), dtype=bool)
+    edge_mask.ravel()[idx[is_edge]] = True
+    interior_mask.ravel()[idx[~is_edge]] = True
+    details: list[str] = []
+    tol_text = model.edge_text()
+    if invalid.any():
+        details.append(f"{int(invalid.sum())} pixels carry IDs naming no triangle (scene has {n})")
+    bad = np.nonzero(~is_edge)[0][:EXAMPLES]
+    if bad.size:
+        ex = ", ".join(
+            f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])} d={_dist(dist[k])}" for k in bad
+        )
+        details.append(f"interior e.g. {ex}")
+    # id.object must follow id.prim: where the prims agree the objects must too.
+    if "id.object" in ref.buffers and "id.object" in test:
+        obj_bad = ~mism & (ref.buffers["id.object"] != test["id.object"])
+        if obj_bad.any():
+            interior_mask |= obj_bad
+            oi = np.flatnonzero(obj_bad)
+            y, x = oi[0] // w, oi[0] % w
+            details.append(
+                f"{oi.size} pixels with the same id.prim but a different id.object, e.g. ({x},{y}) "
+                f"ref {_id(ref.buffers['id.object'][y, x])} test {_id(test['id.object'][y, x])}"
+            )
+        tol_text += "; id.object must match wherever id.prim does"
+    else:
+        tol_text += "; id.object not compared (missing on one side)"
+    return IdResult(
+        int(edge_mask.sum()), int(interior_mask.sum()), edge_mask, interior_mask, tol_text, details
+    )
+
+
+def _id(v: Any) -> str:
+    v = int(v)
+    return "bg" if v == BACKGROUND_ID else str(v)
+
+
+def _dist(d: float) -> str:
+    return "inf" if not math.isfinite(d) else f"{d:.3g}px"
+
+
+# --------------------------------------------------------------------------- depth comparison
+
+
+@dataclass
+class DepthResult:
+    edge: int
+    interior: int
+    mask: int
+    compared: int
+    max_abs: float
+    mean_abs: float
+    max_rel: float
+    tolerance: str
+    details: list[str]
+
+
+def compare_depth(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    model: tolerance.Model,
+    render: Mapping[str, Any],
+    attrs: Mapping[str, Any],
+    id_edge_mask: np.ndarray | None,
+) -> DepthResult:
+    zr = ref.buffers["Z"].astype(np.float64)
+    zt = test["Z"].astype(np.float64)
+    h, w = zr.shape
+    hr, ht = np.isfinite(zr), np.isfinite(zt)
+    mask_mm = hr != ht
+    edge_mask = mask_mm & id_edge_mask if id_edge_mask is not None else np.zeros_like(mask_mm)
+    interior_mask = mask_mm & ~edge_mask
+    details: list[str] = []
+    notes: list[str] = []
+
+    have_ref_ids = "id.prim" in ref.buffers
+    if have_ref_ids and "id.prim" in test:
+        rp = ref.buffers["id.prim"]
+        same = hr & ht & (rp == test["id.prim"]) & (rp != BACKGROUND_ID)
+        same &= rp.astype(np.uint64) < np.uint64(ref.scene.triangle_count)
+        scope = "where both hit the same prim"
+    else:
+        same = hr & ht
+        scope = "where both hit (no id.prim on the test side: prims not checked)"
+        if have_ref_ids:
+            rp = ref.buffers["id.prim"]
+            same &= (rp != BACKGROUND_ID) & (rp.astype(np.uint64) < np.uint64(ref.scene.triangle_count))
+    idx = np.flatnonzero(same)
+    rows, cols = idx // w, idx % w
+    z_ref = zr.ravel()[idx]
+    z_test = zt.ravel()[idx]
+    if have_ref_ids:
+        cos = ref.ray_cos(rows, cols, ref.buffers["id.prim"].ravel()[idx])
+    else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
+        cos = np.zeros(idx.size)
+        notes.append("reference has no id.prim: grazing factor at its cap")
+    pixel_size = 2.0 * ref.scene.camera.tan_half_vfov / ref.scene.camera.height
+    ctx = tolerance.DepthContext(
+        z_ref=z_ref, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size
+    )
+    tol, tol_text = model.depth(ctx)
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), z_ref.shape)
+    err = np.abs(z_test - z_ref)
+    beyond = ~(err <= tol)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(z_ref != 0.0, err / np.abs(z_ref), np.where(err == 0.0, 0.0, np.inf))
+    interior_mask.ravel()[idx[beyond]] = True
+
+    if mask_mm.any():
+        mi = np.flatnonzero(interior_mask & mask_mm)[:EXAMPLES]
+        if mi.size:
+            ex = ", ".join(f"({k % w},{k // w}) ref {zr.ravel()[k]:.7g} test {zt.ravel()[k]:.7g}" for k in mi)
+            details.append(f"hit/miss mask mismatches e.g. {ex}")
+    bi = np.nonzero(beyond)[0]
+    if bi.size:
+        worst = bi[np.argsort(-(err[bi] / np.maximum(tol[bi], 1e-300)))[:EXAMPLES]]
+        ex = ", ".join(
+            f"({cols[k]},{rows[k]}) ref {z_ref[k]:.9g} test {z_test[k]:.9g} |d| {err[k]:.3g} > tol {tol[k]:.3g}"
+            for k in worst
+        )
+        details.append(f"{bi.size} depths beyond tolerance, worst {ex}")
+    text = f"{tol_text}; compared {scope}; hit/miss masks exact (mismatches at ID edge mismatches count as edge)"
+    if notes:
+        text += "; " + "; ".join(notes)
+    return DepthResult(
+        edge=int(edge_mask.sum()),
+        interior=int(interior_mask.sum()),
+        mask=int(mask_mm.sum()),
+        compared=int(idx.size),
+        max_abs=float(err.max()) if idx.size else 0.0,
+        mean_abs=float(err.mean()) if idx.size else 0.0,
+        max_rel=float(rel.max()) if idx.size else 0.0,
+        tolerance=text,
+        details=details,
+    )
+
+
+def _info(render: Mapping[str, Any]) -> Mapping[str, Any]:
+    info = render.get("info")
+    return info if isinstance(info, dict) else {}
+
+
+# --------------------------------------------------------------------------- one backend
+
+
+def _declared_buffers(render: Mapping[str, Any]) -> set[str] | None:
+    b = render.get("buffers")
+    if isinstance(b, list) and all(isinstance(x, str) for x in b):
+        return set(b)
+    return None
+
+
+def _apply_verdict(entry: dict[str, Any], exps: expectations.Expectations, details: list[str]) -> None:
+    exp = exps.lookup(entry["scene"], entry["backend"], entry["buffer"])
+    counts = {k: int(entry[k]) for k in expectations.COUNT_KEYS}
+    verdict = expectations.evaluate(counts, exp)
+    entry["status"] = verdict.status
+    if exp is not None:
+        entry["bound"] = exp.bound_json()
+    parts = [verdict.reason] if verdict.reason else []
+    if verdict.status in ("fail", "expected_fail", "unexpected_pass"):
+        parts += details
+    entry["reason"] = "; ".join(parts)
+
+
+def _add_reason(entry: dict[str, Any], note: str) -> None:
+    entry["reason"] = f"{entry['reason']}; {note}" if entry["reason"] else note
+
+
+def compare_backend(
+    run: Path,
+    scene_name: str,
+    render: Mapping[str, Any],
+    ref: Reference,
+    exps: expectations.Expectations,
+    images: bool,
+) -> list[dict[str, Any]]:
+    """Both entries (id, Z) for one ok render of one backend."""
+    backend = render["backend"]
+    model = tolerance.model_for(backend)
+    exr = run_path(run, render.get("exr"), f"{backend} EXR")
+    try:
+        test = exrbuf.read_buffers(exr)
+    except exrbuf.BufferError as exc:
+        raise EntryError(f"{backend} buffers unreadable: {exc}") from None
+    try:
+        attrs: Mapping[str, Any] = exrbuf.read_attrs(exr)
+    except exrbuf.BufferError:
+        attrs = {}
+    for key, arr in test.items():
+        if arr.shape[:2] != ref.shape:
+            raise EntryError(
+                f"{exr}: {key} is {arr.shape[1]}x{arr.shape[0]}, the reference is {ref.shape[1]}x{ref.shape[0]}"
+            )
+    declared = _declared_buffers(render)
+    pixels = ref.shape[0] * ref.shape[1]
+    diff_dir = None
+    if images and _SAFE_NAME.match(scene_name) and _SAFE_NAME.match(backend):
+        diff_dir = run / "scenes" / scene_name / "diff"
+    out: list[dict[str, Any]] = []
+
+    # ---- id
+    e_id = base_entry(scene_name, backend, "id", render)
+    e_id["pixels"] = pixels
+    id_res: IdResult | None = None
+    if "id.prim" not in test:
+        e_id["status"] = "skipped" if declared is None or "id" not in declared else "error"
+        e_id["reason"] = (
+            f"{backend} does not produce id" if e_id["status"] == "skipped"
+            else f"{exr}: manifest lists buffer id but the EXR has no id.prim channel"
+        )
+    elif "id.prim" not in ref.buffers:
+        e_id["reason"] = "reference has no id.prim channel"
+    else:
+        id_res = compare_ids(ref, test, model)
+        e_id["edge_mismatches"] = id_res.edge
+        e_id["interior_mismatches"] = id_res.interior
+        e_id["tolerance"] = id_res.tolerance
+        _apply_verdict(e_id, exps, id_res.details)
+        if not model.known:
+            _add_reason(e_id, f"no precision model for {backend} in tolerance.py: compared exactly")
+        if diff_dir is not None:
+            path = diff_dir / f"{backend}.id.png"
+            try:
+                diffimages.write_id_diff(
+                    path, ref.buffers["id.prim"], test["id.prim"], id_res.edge_mask, id_res.interior_mask
+                )
+                e_id["images"] = {"heat": path.relative_to(run).as_posix()}
+            except diffimages.DiffImageError as exc:
+                _add_reason(e_id, f"diff image not written: {exc}")
+    out.append(e_id)
+
+    # ---- Z
+    e_z = base_entry(scene_name, backend, "Z", render)
+    e_z["pixels"] = pixels
+    if "Z" not in test:
+        e_z["status"] = "skipped" if declared is None or "Z" not in declared else "error"
+        e_z["reason"] = (
+            f"{backend} does not produce Z" if e_z["status"] == "skipped"
+            else f"{exr}: manifest lists buffer Z but the EXR has no Z channel"
+        )
+    elif "Z" not in ref.buffers:
+        e_z["reason"] = "reference has no Z channel"
+    else:
+        try:
+            z_res = compare_depth(
+                ref, test, model, render, attrs, id_res.edge_mask if id_res is not None else None
+            )
+        except tolerance.ToleranceError as exc:
+            e_z["reason"] = str(exc)
+            z_res = None
+        if z_res is not None:
+            e_z["edge_mismatches"] = z_res.edge
+            e_z["interior_mismatches"] = z_res.interior
+            e_z["mask_mismatches"] = z_res.mask
+            e_z["compared_pixels"] = z_res.compared
+            e_z["max_abs_error"] = _finite(z_res.max_abs)
+            e_z["mean_abs_error"] = _finite(z_res.mean_abs)
+            e_z["max_rel_error"] = _finite(z_res.max_rel)
+            e_z["tolerance"] = z_res.tolerance
+            _apply_verdict(e_z, exps, z_res.details)
+            if diff_dir is not None:
+                path = diff_dir / f"{backend}.Z.png"
+                try:
+                    diffimages.write_depth_diff(path, ref.buffers["Z"], test["Z"], z_res.max_abs)
+                    e_z["images"] = {"heat": path.relative_to(run).as_posix()}
+                except diffimages.DiffImageError as exc:
+                    _add_reason(e_z, f"diff image not written: {exc}")
+    out.append(e_z)
+    return out
+
+
+# --------------------------------------------------------------------------- one scene
+
+
+def compare_scene(
+    run: Path,
+    scene_entry: Mapping[str, Any],
+    reference: str,
+    exps: expectations.Expectations,
+    images: bool = True,
+) -> list[dict[str, Any]]:
+    name = scene_entry["scene"]
+    renders = [r for r in scene_entry.get("renders", []) if r.get("backend") != reference]
+    try:
+        ref = load_reference(run, scene_entry, reference)
+    except EntryError as exc:
+        out = []
+        for r in renders:
+            own = "" if r.get("status") == "ok" else f" ({r['backend']} itself {r.get('status')}: {_render_reason(r)})"
+            out += status_entries(name, r, "error", f"{exc}{own}")
+        return [blank_if_not_compared(e) for e in out]
+    results: list[dict[str, Any]] = []
+    for r in renders:
+        status = r.get("status")
+        if status in ("skipped", "error"):
+            results += status_entries(name, r, status, _render_reason(r))
+            continue
+        try:
+            results += compare_backend(run, name, r, ref, exps, images)
+        except EntryError as exc:
+            results += status_entries(name, r, "error", str(exc))
+        except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
+            traceback.print_exc(file=sys.stderr)
+            results += status_entries(
+                name, r, "error", f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}"
+            )
+    return [blank_if_not_compared(e) for e in results]
+
+
+# --------------------------------------------------------------------------- output
+
+
+def write_results(run: Path, doc: Mapping[str, Any]) -> Path:
+    """Write RUN/results.json atomically (temp file in RUN + os.replace)."""
+    path = run / "results.json"
+    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    fd, tmp = tempfile.mkstemp(prefix=".results.", suffix=".json.tmp", dir=run)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def format_table(results: Sequence[Mapping[str, Any]]) -> str:
+    """A compact, fixed-width table: one row per entry, then a count per status."""
+    header = ("scene", "backend", "buf", "status", "edge", "interior", "mask", "max_rel", "reason")
+    rows = []
+    for r in results:
+        compared = r["status"] not in ("skipped", "error")
+        rel = r.get("max_rel_error")
+        rows.append(
+            (
+                str(r["scene"]),
+                str(r["backend"]),
+                str(r["buffer"]),
+                str(r["status"]),
+                str(r["edge_mismatches"]) if compared else "-",
+                str(r["interior_mismatches"]) if compared else "-",
+                str(r["mask_mismatches"]) if compared and r["buffer"] == "Z" else "-",
+                f"{rel:.2g}" if compared and r["buffer"] == "Z" and rel is not None else "-",
+                _short(str(r.get("reason", ""))),
+            )
+        )
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(8)]
+    lines = []
+    for row in [header, *rows]:
+        cells = [row[i].ljust(widths[i]) if i < 4 else row[i].rjust(widths[i]) for i in range(8)]
+        lines.append("  ".join(cells + [row[8]]).rstrip())
+    counts: dict[str, int] = {}
+    for r in results:
+        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no entries"
+    lines.append(f"{len(results)} entries: {summary}")
+    return "\n".join(lines)
+
+
+def _short(text: str, limit: int = 90) -> str:
+    text = text.replace("\n", " ")
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m rendiff_harness compare",
+        description="Compare a check run's buffers with the reference; write RUN/results.json.",
+    )
+    p.add_argument("--run", required=True, help="run folder holding manifest.json (written by `rendiff check`)")
+    p.add_argument(
+        "--expectations", default=None, help="expectations TOML (e.g. tests/expectations.toml); default: none"
+    )
+    p.add_argument("--no-images", action="store_true", help="do not write diff PNGs")
+    return p
+
+
+def run_compare(run: Path, expectations_path: str | Path | None, images: bool = True) -> dict[str, Any]:
+    """Compare everything in RUN and write results.json; returns the results document.
+
+    Raises ManifestError / expectations.ExpectationsError for unusable inputs.
+    """
+    manifest = load_manifest(run)
+    exps = expectations.load(expectations_path)
+    reference = manifest.get("reference", "raster")
+    results: list[dict[str, Any]] = []
+    for sc in manifest["scenes"]:
+        results += compare_scene(run, sc, reference, exps, images)
+    unused = exps.unused()
+    doc = {
+        "format": RESULTS_FORMAT,
+        "reference": reference,
+        "expectations": str(expectations_path) if expectations_path is not None else None,
+        "unused_expectations": [
+            {"entry": e.index, "scene": e.scene, "backend": e.backend, "buffer": e.buffer} for e in unused
+        ],
+        "results": results,
+    }
+    write_results(run, doc)
+    return doc
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args_in = list(sys.argv[1:] if argv is None else argv)
+    if args_in[:1] == ["--"]:  # `python -m rendiff_harness compare -- --run RUN`
+        args_in = args_in[1:]
+    args = build_parser().parse_args(args_in)
+    run = Path(args.run)
+    t0 = time.monotonic()
+    if not run.is_dir():
+        print(f"rendiff_harness compare: {run}: run folder does not exist", file=sys.stderr)
+        return EXIT_ERROR
+    try:
+        doc = run_compare(run, args.expectations, images=not args.no_images)
+    except (ManifestError, expectations.ExpectationsError) as exc:
+        print(f"rendiff_harness compare: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except OSError as exc:
+        print(f"rendiff_harness compare: {run / 'results.json'}: cannot write: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    print(format_table(doc["results"]))
+    unused = doc["unused_expectations"]
+    if unused:
+        listed = ", ".join(f"{u['entry']} ({u['scene']}/{u['backend']}/{u['buffer']})" for u in unused)
+        print(f"note: expectations matched by no compared result: {listed}", file=sys.stderr)
+    print(f"results: {run / 'results.json'} ({time.monotonic() - t0:.1f} s)")
+    return EXIT_OK

@@ -1,0 +1,253 @@
+"""Per-backend precision models: how far a renderer may legitimately differ from the reference.
+
+Two numbers per backend, both derived from what the renderer computes in
+(/work/shared/notes/external-renderers.md, DESIGN.md "Comparing"):
+
+* `edge_px`: an ID mismatch is an *edge* mismatch when the pixel center lies within
+  this many pixels of an edge of one of the triangles involved (classify.py). Inside
+  that band the renderer's own rounding may put the center on either side.
+* `depth(ctx)`: the allowed |Z_test - Z_reference| per compared pixel, plus a sentence
+  saying how it was derived (it goes into results.json as `tolerance`).
+
+Depth is compared only where both sides see the same triangle, so `ctx.cos` (|cos| of
+the angle between the pixel ray and that triangle's normal) is known. A ray-plane
+intersection whose plane is perturbed by a relative eps moves t by about
+eps * t / |cos|: at grazing angles the same vertex rounding costs more depth. Every
+relative model below therefore scales with 1/|cos|, capped at MAX_REL (1e-3) so that a
+triangle seen exactly edge-on does not make the tolerance infinite.
+
+Backends without a model here are compared exactly (`edge_px = 0`, depth tolerance 0),
+and the tolerance text says so: a new backend fails loudly until its model is written.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+MAX_REL = 1e-3
+"""Cap on every relative depth tolerance (reached only within ~1/1000 of edge-on)."""
+
+
+class ToleranceError(Exception):
+    """A tolerance cannot be derived (e.g. the render lacks the parameters it depends on)."""
+
+
+@dataclass(frozen=True)
+class DepthContext:
+    """What a depth model may look at, for the K compared pixels."""
+
+    z_ref: np.ndarray  # (K,) float64 reference planar depth (finite, > 0 for visible hits)
+    cos: np.ndarray  # (K,) float64 |cos| between the pixel ray and the triangle normal, in [0, 1]
+    info: Mapping[str, Any]  # the render's `info` from manifest.json
+    attrs: Mapping[str, Any]  # the test EXR's rendiff attributes (exrbuf.read_attrs)
+    pixel_size: float = 0.0  # side of one pixel on the image plane at distance 1 (2 tan(vfov/2) / H)
+
+
+DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
+
+
+@dataclass(frozen=True)
+class Model:
+    backend: str
+    edge_px: float
+    edge_reason: str
+    depth: DepthModel
+    known: bool = True  # False: a strict fallback for a backend without a model
+
+    def edge_text(self) -> str:
+        return f"edge: pixel center within {self.edge_px:.3g} px of a triangle edge ({self.edge_reason})"
+
+
+def _param(ctx: DepthContext, key: str) -> float | None:
+    """A float parameter from the EXR attributes (they travel with the pixels), else from info."""
+    for source in (ctx.attrs, ctx.info):
+        value = source.get(key)
+        if isinstance(value, bool):
+            continue
+        if isinstance(value, (int, float)) and math.isfinite(float(value)):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                f = float(value)
+            except ValueError:
+                continue
+            if math.isfinite(f):
+                return f
+    return None
+
+
+def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
+    """|z| * min(rel / |cos|, MAX_REL), without dividing by zero."""
+    return np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
+
+
+# --------------------------------------------------------------------------- models
+
+
+def exact_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """The rendiff loops share one depth function (DESIGN.md): equal inputs give equal bits."""
+    return np.zeros_like(ctx.z_ref), "exact: Z must be bit-identical (one shared depth function)"
+
+
+POVRAY_REL = 1e-6
+
+
+def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """POV-Ray: 32-bit fixed point over [0, R) plus f32-vertex / grazing-angle error.
+
+    The depth pass encodes planar depth as 32-bit fixed point split over two 16-bit PNG
+    channels; one step is R / (65536 * 65535) ~ R / 2^32 (`depth_step`, written by the
+    backend into info and the EXR attributes). Measured max error: 7.5e-9 on `polygon`
+    and 5.9e-7 on `mesh2`, where vertices are float32 and POV-Ray's intersection code
+    works on them (notes). The relative part 1e-6 / |cos| (~8 f32 ulps, scaled by the
+    grazing factor, capped at 1e-3) covers that, plus the final f32 rounding of both Z.
+    When `depth_step` is missing it is derived as R / 2^32 with R = `depth_range` if
+    present, else from the reference's largest depth times the backend's margin 1+2^-6.
+    """
+    step = _param(ctx, "depth_step")
+    source = "depth_step from the render"
+    if step is None:
+        r = _param(ctx, "depth_range")
+        source = "R/2^32 with R = depth_range from the render"
+        if r is None:
+            zmax = float(np.max(np.abs(ctx.z_ref))) if ctx.z_ref.size else 1.0
+            r = zmax * (1.0 + 2.0**-6)
+            source = "R/2^32 with R estimated from the reference's largest depth (render gave no depth_step)"
+        step = r / 65536.0 / 65535.0
+    tol = step + relative_grazing(ctx, POVRAY_REL)
+    text = (
+        f"povray: |dZ| <= depth_step ({step:.3g}, {source}; 32-bit fixed point) "
+        f"+ Z*min({POVRAY_REL:g}/|cos|, {MAX_REL:g}) (f32 mesh2 vertices, grazing angle)"
+    )
+    return tol, text
+
+
+def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """pyrender: the backend's own 24-bit depth-buffer model at the GL planes it chose.
+
+    GL stores window depth in 24 bits; its resolution at depth z is
+    z^2 (f-n)/(f n) 2^-24 for GL planes n, f. The backend picks n, f per scene and writes
+    them as `znear`/`zfar` (info and EXR attributes); its `depth_tolerance(z, n, f)`
+    (4 steps + 1 f32 ulp, measured) is used as is. Without the planes the tolerance is
+    unknown (the scene's own near would be far too loose), so the comparison errors.
+    """
+    znear, zfar = _param(ctx, "znear"), _param(ctx, "zfar")
+    if znear is None or zfar is None or not (0.0 < znear < zfar):
+        raise ToleranceError(
+            "pyrender render gives no valid GL planes (znear/zfar in its info or EXR attributes "
+            f"rendiff:znear/rendiff:zfar; got znear={znear}, zfar={zfar}): depth tolerance unknown"
+        )
+    try:
+        from .backends.pyrender_backend import depth_tolerance
+    except ImportError as exc:  # pragma: no cover - the module imports only numpy at top level
+        raise ToleranceError(f"cannot import pyrender_backend.depth_tolerance: {exc}") from None
+    tol = np.asarray(depth_tolerance(ctx.z_ref, znear, zfar), dtype=np.float64)
+    # Slope term: llvmpipe snaps vertices to a 1/256 px grid (GL subpixel precision), which
+    # moves the triangle's plane sideways by up to sqrt(2)/256 px. Depth then changes by the
+    # plane's screen-space slope times that shift; on a plane z(sx) with unit normal n,
+    # |dz/dsx| = z |n.r| / |n.d| <= z / |cos| per image-plane unit, i.e. z * pixel_size / |cos|
+    # per pixel. Capped like the other grazing-angle models.
+    snap = np.sqrt(2.0) / 256.0
+    slope = np.abs(ctx.z_ref) * np.minimum(
+        ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL
+    )
+    tol = tol + slope
+    text = (
+        f"pyrender: |dZ| <= pyrender_backend.depth_tolerance(z, znear={znear:.6g}, zfar={zfar:.6g}) "
+        "(4 steps of the 24-bit GL depth buffer z^2(f-n)/(f n)2^-24 + 1 f32 ulp) "
+        f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping)"
+    )
+    return tol, text
+
+
+MITSUBA_REL = 1e-5
+
+
+def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """Mitsuba 3 (scalar_rgb / llvm): float32 ray tracing.
+
+    Rays start on the near plane in f32, the intersection is f32 and the depth AOV is
+    converted back to planar depth (Z = t/|d| + near). Measured relative error <= 6e-7
+    facing the camera; the f32 ray-triangle t loses more at grazing angles (Embree,
+    same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3.
+    """
+    tol = relative_grazing(ctx, MITSUBA_REL)
+    return tol, f"mitsuba: |dZ| <= Z*min({MITSUBA_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing)"
+
+
+EMBREE_REL = 1e-5
+
+
+def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """Embree 3: float32 watertight/Moeller intersection.
+
+    Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
+    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3.
+    """
+    tol = relative_grazing(ctx, EMBREE_REL)
+    return tol, f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing)"
+
+
+# llvmpipe snaps vertices to a 1/256 px grid (8 subpixel bits); rounding to nearest moves
+# each coordinate by <= 2^-9 px, so a vertex moves by <= sqrt(2) * 2^-9 px. A point of an
+# edge is a convex combination of its endpoints, so the edge moves by no more than that.
+# Pixel centers (k + 0.5) lie on the grid, so the fixed-point edge function itself is exact:
+# only centers within this distance of the true edge can change side.
+PYRENDER_EDGE_PX = math.sqrt(2.0) * 2.0**-9  # 2.76e-3 px; measured max 2.1e-3 px
+
+MODELS: dict[str, Model] = {
+    "trace": Model(
+        "trace", 0.0, "the rendiff tracer shares the coverage predicate with raster: must be identical",
+        exact_depth,
+    ),
+    "raster": Model(
+        "raster", 0.0, "the rendiff rasterizer shares the coverage predicate with trace: must be identical",
+        exact_depth,
+    ),
+    "povray": Model(
+        "povray",
+        1e-3,
+        "POV-Ray mesh2 stores f32 vertices and picks its own tie winners for centers on edges; "
+        "measured differences lie within ~1e-6 of an edge",
+        povray_depth,
+    ),
+    "pyrender": Model(
+        "pyrender",
+        PYRENDER_EDGE_PX,
+        "GL fixed-point rasterization: llvmpipe snaps vertices to 1/256 px, moving an edge by "
+        "<= sqrt(2)*2^-9 px; measured max 2.1e-3 px",
+        pyrender_depth,
+    ),
+    "mitsuba": Model(
+        "mitsuba", 1e-4, "float32 ray-triangle tests decide centers within f32 rounding of an edge",
+        mitsuba_depth,
+    ),
+    "embree": Model(
+        "embree", 1e-4, "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
+        embree_depth,
+    ),
+    "embree_robust": Model(
+        "embree_robust",
+        1e-4,
+        "float32 watertight ray-triangle tests (ROBUST): measured ID differences within 1e-4 of shared edges",
+        embree_depth,
+    ),
+}
+
+
+def model_for(backend: str) -> Model:
+    """The precision model of `backend`; unknown backends get a strict, exact one."""
+    model = MODELS.get(backend)
+    if model is not None:
+        return model
+
+    def strict(ctx: DepthContext) -> tuple[np.ndarray, str]:
+        tol, _ = exact_depth(ctx)
+        return tol, f"exact: no precision model for backend {backend!r} in tolerance.py"
+
+    return Model(backend, 0.0, f"no precision model for backend {backend!r} in tolerance.py", strict, known=False)

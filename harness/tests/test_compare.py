@@ -1,0 +1,500 @@
+"""compare.py end to end on tiny runs: a float64 ray cast as the reference, fake backends derived from it."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import backend_cases as cases
+import numpy as np
+import pytest
+from fixtures import write_scene
+
+from rendiff_harness import compare, diffimages, exrbuf, resolved, tolerance
+from rendiff_harness.__main__ import main as harness_main
+
+BG = exrbuf.BACKGROUND_ID
+
+# Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
+# px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
+# which projects to px = 16.5: every center of column 16 lies exactly on it.
+# prims 0, 1: left quad (object 0); 2, 3: right quad (object 1); 4: a triangle in front (z = 1).
+X = 0.15625
+TRIS = [
+    [[-3, -3, 0], [X, -3, 0], [X, 3, 0]],
+    [[-3, -3, 0], [X, 3, 0], [-3, 3, 0]],
+    [[X, -3, 0], [3, -3, 0], [3, 3, 0]],
+    [[X, -3, 0], [3, 3, 0], [X, 3, 0]],
+    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
+]
+OIDS = [0, 0, 1, 1, 2]
+EDGE_PX = (16, 8)  # (x, y): on the shared edge, ref prim 0
+INTERIOR_PX = (15, 17)  # inside prim 4, 2.15 px from its edges, 1 px from prim 2
+PLAIN_PX = (10, 20)  # inside prim 0 or 1, away from column 16
+
+
+def _ref(scene_dir: Path) -> tuple[resolved.ResolvedScene, dict[str, np.ndarray]]:
+    scene = resolved.load(scene_dir)
+    ref = cases.cast(scene)
+    return scene, {"Z": ref.z.astype(np.float32), "prim": ref.prim, "obj": ref.obj}
+
+
+def _write_exr(path: Path, bufs: dict[str, np.ndarray], attrs: dict[str, Any] | None = None) -> str:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    exrbuf.write_buffers(path, Z=bufs.get("Z"), prim=bufs.get("prim"), obj=bufs.get("obj"), attrs=attrs)
+    return path.as_posix()
+
+
+def _ok(backend: str, exr: str, **kw: Any) -> dict[str, Any]:
+    r = {"backend": backend, "status": "ok", "exr": exr, "time_s": 0.5, "version": f"{backend} 1.0",
+         "command": f"render {backend}", "buffers": ["Z", "id"], "info": {}}
+    r.update(kw)
+    return r
+
+
+def _copy(b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {k: v.copy() for k, v in b.items()}
+
+
+def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
+    """A run with scene 'quads' (reference + fake backends) and scene 'noref' (reference EXR missing)."""
+    run = tmp_path / "run"
+    sdir = write_scene(run / "scenes/quads/resolved", TRIS, OIDS, vfov_deg=90.0, width=32, height=32, name="quads")
+    scene, ref = _ref(sdir)
+    assert ref["prim"][EDGE_PX[1], EDGE_PX[0]] == 0
+    assert ref["prim"][INTERIOR_PX[1], INTERIOR_PX[0]] == 4
+    assert ref["prim"][PLAIN_PX[1], PLAIN_PX[0]] in (0, 1)
+    rel = lambda p: p.relative_to(run).as_posix()  # noqa: E731
+    s = run / "scenes/quads"
+    renders = [_ok("raster", rel(Path(_write_exr(s / "raster.exr", ref))))]
+
+    renders.append(_ok("trace", rel(Path(_write_exr(s / "trace.exr", ref)))))
+
+    pov = _copy(ref)
+    pov["prim"][EDGE_PX[1], EDGE_PX[0]] = 3  # the right quad's triangle across the edge
+    pov["obj"][EDGE_PX[1], EDGE_PX[0]] = 1
+    pov["prim"][INTERIOR_PX[1], INTERIOR_PX[0]] = 2
+    pov["obj"][INTERIOR_PX[1], INTERIOR_PX[0]] = 1
+    pov["Z"][INTERIOR_PX[1], INTERIOR_PX[0]] = 5.0
+    renders.append(_ok("povray", rel(Path(_write_exr(s / "povray.exr", pov, {"depth_step": 1e-9}))),
+                       info={"depth_step": 1e-9}))
+
+    mit = _copy(ref)
+    hit = np.isfinite(mit["Z"])
+    mit["Z"][hit] *= np.float32(1 + 2e-6)  # within 1e-5/|cos|
+    x, y = PLAIN_PX
+    mit["Z"][y, x] = ref["Z"][y, x] * np.float32(1 + 1e-4)  # beyond
+    mit["Z"][y + 1, x] = np.inf  # interior mask mismatch (ID kept)
+    ex, ey = EDGE_PX
+    mit["prim"][ey, ex] = BG  # ID edge mismatch + Z mask mismatch at it -> Z edge
+    mit["obj"][ey, ex] = BG
+    mit["Z"][ey, ex] = np.inf
+    renders.append(_ok("mitsuba", rel(Path(_write_exr(s / "mitsuba.exr", mit)))))
+
+    pyr = _copy(ref)
+    pyr["Z"][hit] = np.nextafter(pyr["Z"][hit], np.float32(np.inf))  # 1 f32 ulp: inside the 24-bit model
+    renders.append(_ok("pyrender", rel(Path(_write_exr(s / "pyrender.exr", pyr, {"znear": 3.0, "zfar": 8.0})))))
+
+    odd = _copy(ref)
+    odd["Z"][hit] *= np.float32(1 + 1e-6)  # an unknown backend is compared exactly
+    renders.append(_ok("newthing", rel(Path(_write_exr(s / "newthing.exr", odd)))))
+
+    renders.append({"backend": "embree", "status": "skipped", "reason": "missing features: lambert"})
+    renders.append({"backend": "embree_robust", "status": "error", "message": "timed out after 600 s",
+                    "time_s": 600.0, "command": "rendiff render --backend embree_robust"})
+
+    sdir2 = write_scene(run / "scenes/noref/resolved", TRIS[:1], vfov_deg=90.0, width=8, height=8, name="noref")
+    _, ref2 = _ref(sdir2)
+    t2 = rel(Path(_write_exr(run / "scenes/noref/povray.exr", ref2)))
+    renders2 = [
+        _ok("raster", "scenes/noref/raster.exr"),  # never written
+        _ok("povray", t2),
+        {"backend": "pyrender", "status": "skipped", "reason": "missing features: two_sided"},
+    ]
+    manifest = {
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "created": "2026-11-22T10:00:00Z",
+        "rendiff_version": "0.1.0",
+        "scenes": [
+            {"scene": "quads", "scene_file": "scenes/quads.toml", "resolved": "scenes/quads/resolved",
+             "requires": ["depth", "ids"], "renders": renders},
+            {"scene": "noref", "scene_file": "scenes/noref.toml", "resolved": "scenes/noref/resolved",
+             "requires": ["depth", "ids"], "renders": renders2},
+        ],
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    return run, ref
+
+
+def _strict_json(path: Path) -> dict[str, Any]:
+    def no_const(name: str) -> None:
+        raise AssertionError(f"non-JSON constant {name} in {path}")
+
+    return json.loads(path.read_text(), parse_constant=no_const)
+
+
+def _index(doc: dict[str, Any]) -> dict[tuple[str, str, str], dict[str, Any]]:
+    return {(r["scene"], r["backend"], r["buffer"]): r for r in doc["results"]}
+
+
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[tuple[str, str, str], dict[str, Any]], str]:
+    tmp = tmp_path_factory.mktemp("cmp")
+    run, _ = build_run(tmp)
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        rc = compare.main(["--run", str(run)])
+    assert rc == 0
+    return run, _index(_strict_json(run / "results.json")), out.getvalue()
+
+
+def test_results_cover_every_backend_and_buffer(compared: Any) -> None:
+    run, res, _ = compared
+    doc = _strict_json(run / "results.json")
+    assert doc["format"] == "rendiff-results/1" and doc["reference"] == "raster"
+    backends = {"trace", "povray", "mitsuba", "pyrender", "newthing", "embree", "embree_robust"}
+    assert {(b, buf) for (s, b, buf) in res if s == "quads"} == {(b, f) for b in backends for f in ("id", "Z")}
+    assert all(r["backend"] != "raster" for r in res.values())
+    assert not list(run.glob(".results.*"))  # the temp file was renamed
+
+
+def test_identical_backend_passes(compared: Any) -> None:
+    _, res, _ = compared
+    for buf in ("id", "Z"):
+        r = res[("quads", "trace", buf)]
+        assert r["status"] == "pass", r
+        assert (r["edge_mismatches"], r["interior_mismatches"], r["mask_mismatches"]) == (0, 0, 0)
+        assert r["pixels"] == 32 * 32
+        assert (r["time_s"], r["version"], r["command"]) == (0.5, "trace 1.0", "render trace")
+    assert res[("quads", "trace", "Z")]["max_abs_error"] == 0.0
+    assert res[("quads", "trace", "Z")]["compared_pixels"] > 300
+
+
+def test_edge_and_interior_id_mismatches(compared: Any) -> None:
+    _, res, _ = compared
+    r = res[("quads", "povray", "id")]
+    assert (r["edge_mismatches"], r["interior_mismatches"]) == (1, 1)
+    assert r["status"] == "fail"
+    assert "(15,17) ref 4 test 2" in r["reason"]
+    assert "1e-03 px" in r["tolerance"] or "0.001 px" in r["tolerance"]
+    z = res[("quads", "povray", "Z")]
+    assert z["status"] == "pass", z  # differing prims are not depth-compared; masks agree
+    assert "depth_step (1e-09" in z["tolerance"]
+
+
+def test_depth_tolerance_and_mask_mismatches(compared: Any) -> None:
+    _, res, _ = compared
+    r = res[("quads", "mitsuba", "id")]
+    assert (r["edge_mismatches"], r["interior_mismatches"], r["status"]) == (1, 0, "fail")
+    z = res[("quads", "mitsuba", "Z")]
+    assert z["mask_mismatches"] == 2
+    assert z["edge_mismatches"] == 1  # the mask mismatch at the ID edge mismatch
+    assert z["interior_mismatches"] == 2  # one depth beyond 1e-5/|cos|, one mask mismatch
+    assert z["status"] == "fail"
+    assert z["max_rel_error"] == pytest.approx(1e-4, rel=0.05)
+    assert 1e-6 < z["mean_abs_error"] < z["max_abs_error"]
+    assert "beyond tolerance" in z["reason"] and "mask" in z["reason"]
+
+
+def test_pyrender_uses_the_backend_depth_model(compared: Any) -> None:
+    _, res, _ = compared
+    z = res[("quads", "pyrender", "Z")]
+    assert z["status"] == "pass", z
+    assert z["max_abs_error"] > 0
+    assert "znear=3" in z["tolerance"] and "zfar=8" in z["tolerance"]
+
+
+def test_unknown_backend_is_compared_exactly(compared: Any) -> None:
+    _, res, _ = compared
+    z = res[("quads", "newthing", "Z")]
+    assert z["status"] == "fail" and z["interior_mismatches"] > 300
+    assert "no precision model" in z["tolerance"]
+    assert res[("quads", "newthing", "id")]["status"] == "pass"
+
+
+def test_skipped_and_error_pass_through(compared: Any) -> None:
+    _, res, _ = compared
+    for buf in ("id", "Z"):
+        s = res[("quads", "embree", buf)]
+        assert (s["status"], s["reason"]) == ("skipped", "missing features: lambert")
+        e = res[("quads", "embree_robust", buf)]
+        assert (e["status"], e["reason"]) == ("error", "timed out after 600 s")
+        assert e["time_s"] == 600.0 and e["command"] == "rendiff render --backend embree_robust"
+        assert e["images"] == {}
+        for r in (s, e):  # not compared: null, never "0 mismatches"
+            assert all(r[k] is None for k in compare.NUMERIC_FIELDS)
+
+
+def test_missing_reference_makes_every_entry_an_error(compared: Any) -> None:
+    _, res, _ = compared
+    entries = [r for (s, _, _), r in res.items() if s == "noref"]
+    assert len(entries) == 4
+    for r in entries:
+        assert r["status"] == "error"
+        assert "reference raster unreadable" in r["reason"] and "raster.exr" in r["reason"]
+    assert "pyrender itself skipped: missing features: two_sided" in res[("noref", "pyrender", "id")]["reason"]
+
+
+def test_diff_images(compared: Any) -> None:
+    import OpenImageIO as oiio
+
+    run, res, _ = compared
+    r = res[("quads", "povray", "id")]
+    assert r["images"] == {"heat": "scenes/quads/diff/povray.id.png"}
+    px = oiio.ImageBuf(str(run / r["images"]["heat"])).get_pixels(oiio.UINT8)
+    assert px.shape == (32, 32, 3)
+    x, y = EDGE_PX
+    assert tuple(px[y, x]) == (255, 191, 0)  # edge: amber
+    x, y = INTERIOR_PX
+    assert tuple(px[y, x]) == (255, 0, 255)  # interior: magenta
+    x, y = PLAIN_PX
+    assert tuple(px[y, x]) == (56, 56, 56)  # same id: dark gray
+    assert tuple(px[0, 0]) == (0, 0, 0)  # background in both
+    z = res[("quads", "mitsuba", "Z")]
+    zpx = oiio.ImageBuf(str(run / z["images"]["heat"])).get_pixels(oiio.UINT8)
+    x, y = PLAIN_PX
+    assert tuple(zpx[y + 1, x]) == (0, 255, 255)  # mask mismatch: cyan
+    assert tuple(zpx[y, x]) == (248, 254, 95)  # the largest error: the bright end of inferno
+    assert tuple(zpx[0, 0]) == (0, 0, 0)
+
+
+def test_table_on_stdout(compared: Any) -> None:
+    _, _, out = compared
+    lines = out.splitlines()
+    assert lines[0].split()[:4] == ["scene", "backend", "buf", "status"]
+    assert any(ln.split()[:4] == ["quads", "povray", "id", "fail"] for ln in lines)
+    assert any("entries:" in ln for ln in lines)
+    assert "results.json" in lines[-1]
+
+
+def _run_with(tmp_path: Path, toml: str) -> dict[tuple[str, str, str], dict[str, Any]]:
+    run, _ = build_run(tmp_path)
+    exp = tmp_path / "exp.toml"
+    exp.write_text(toml)
+    assert compare.main(["--run", str(run), "--expectations", str(exp), "--no-images"]) == 0
+    return _index(_strict_json(run / "results.json"))
+
+
+def test_expectations_pass_unexpected_pass_expected_fail_fail(tmp_path: Path) -> None:
+    toml = """
+[[expect]]
+scene = "quads"
+backend = "povray"
+buffer = "id"
+edge_mismatches = [1, 1]
+interior_mismatches = [1, 1]
+reason = "recorded povray divergence"
+
+[[expect]]
+scene = "*"
+backend = "mitsuba"
+buffer = "id"
+edge_mismatches = [2, 10]
+reason = "mitsuba ties"
+
+[[expect]]
+scene = "quads"
+backend = "mitsuba"
+buffer = "Z"
+status = "expected_fail"
+reason = "mitsuba depth bug"
+
+[[expect]]
+scene = "quads"
+backend = "trace"
+buffer = "id"
+status = "expected_fail"
+reason = "was broken"
+
+[[expect]]
+scene = "quads"
+backend = "newthing"
+buffer = "Z"
+edge_mismatches = [0, 3]
+reason = "too tight"
+
+[[expect]]
+scene = "gone"
+backend = "povray"
+buffer = "id"
+edge_mismatches = [0, 3]
+reason = "stale"
+"""
+    res = _run_with(tmp_path, toml)
+    p = res[("quads", "povray", "id")]
+    assert p["status"] == "pass" and "recorded povray divergence" in p["reason"]
+    assert p["bound"] == {"edge_mismatches": [1, 1], "interior_mismatches": [1, 1]}
+    m = res[("quads", "mitsuba", "id")]
+    assert m["status"] == "unexpected_pass" and "tighten" in m["reason"]
+    assert res[("quads", "mitsuba", "Z")]["status"] == "expected_fail"
+    assert res[("quads", "trace", "id")]["status"] == "unexpected_pass"
+    n = res[("quads", "newthing", "Z")]
+    assert n["status"] == "fail" and "interior_mismatches" in n["reason"]
+    assert res[("quads", "trace", "Z")]["bound"] is None
+    doc = _strict_json(tmp_path / "run" / "results.json")
+    assert doc["unused_expectations"] == [{"entry": 6, "scene": "gone", "backend": "povray", "buffer": "id"}]
+
+
+def test_malformed_expectations_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run, _ = build_run(tmp_path)
+    exp = tmp_path / "bad.toml"
+    exp.write_text('[[expect]]\nscene = "quads"\nbackend = "povray"\nbuffer = "id"\nreason = "r"\n'
+                   "edge_mismatches = [4, 1]\n")
+    assert compare.main(["--run", str(run), "--expectations", str(exp)]) == 2
+    err = capsys.readouterr().err
+    assert str(exp) in err and "entry 1" in err and "'edge_mismatches'" in err
+    assert not (run / "results.json").exists()
+
+
+@pytest.mark.parametrize("content", [None, "{not json", '{"format": "other"}', '{"format": "rendiff-manifest/1"}'])
+def test_unreadable_manifest_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str | None) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    if content is not None:
+        (run / "manifest.json").write_text(content)
+    assert compare.main(["--run", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert str(run / "manifest.json") in err
+    assert err.count("\n") == 1  # one line, no traceback
+
+
+def test_missing_run_folder_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert compare.main(["--run", str(tmp_path / "nope")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_image_failure_keeps_the_numbers(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(path: Any, *a: Any, **k: Any) -> None:
+        raise diffimages.DiffImageError(f"{path}: disk full")
+
+    monkeypatch.setattr(diffimages, "write_id_diff", boom)
+    run, _ = build_run(tmp_path)
+    assert compare.main(["--run", str(run)]) == 0
+    r = _index(_strict_json(run / "results.json"))[("quads", "povray", "id")]
+    assert (r["edge_mismatches"], r["interior_mismatches"], r["status"]) == (1, 1, "fail")
+    assert "diff image not written" in r["reason"] and "disk full" in r["reason"]
+    assert r["images"] == {}
+
+
+def test_pyrender_without_planes_is_an_error(tmp_path: Path) -> None:
+    run, ref = build_run(tmp_path)
+    manifest = json.loads((run / "manifest.json").read_text())
+    _write_exr(run / "scenes/quads/pyrender.exr", ref)  # no znear/zfar attributes, none in info either
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    res = _index(_strict_json(run / "results.json"))
+    assert res[("quads", "pyrender", "Z")]["status"] == "error"
+    assert "znear" in res[("quads", "pyrender", "Z")]["reason"]
+    assert res[("quads", "pyrender", "id")]["status"] == "pass"
+
+
+def test_planes_from_info_when_attrs_lack_them(tmp_path: Path) -> None:
+    run, ref = build_run(tmp_path)
+    _write_exr(run / "scenes/quads/pyrender.exr", ref)
+    manifest = json.loads((run / "manifest.json").read_text())
+    for r in manifest["scenes"][0]["renders"]:
+        if r["backend"] == "pyrender":
+            r["info"] = {"znear": 3.0, "zfar": 8.0}
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    assert _index(_strict_json(run / "results.json"))[("quads", "pyrender", "Z")]["status"] == "pass"
+
+
+def test_missing_channel_and_bad_paths(tmp_path: Path) -> None:
+    run, ref = build_run(tmp_path)
+    exrbuf.write_buffers(run / "scenes/quads/povray.exr", prim=ref["prim"], obj=ref["obj"])  # no Z
+    manifest = json.loads((run / "manifest.json").read_text())
+    renders = manifest["scenes"][0]["renders"]
+    for r in renders:
+        if r["backend"] == "povray":
+            r["buffers"] = ["id"]
+        if r["backend"] == "mitsuba":
+            r["exr"] = "../../etc/passwd"
+        if r["backend"] == "trace":
+            r["exr"] = "scenes/quads/none.exr"
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    res = _index(_strict_json(run / "results.json"))
+    assert res[("quads", "povray", "Z")]["status"] == "skipped"
+    assert res[("quads", "povray", "id")]["status"] == "pass"
+    assert res[("quads", "mitsuba", "id")]["status"] == "error"
+    assert "relative to the run folder" in res[("quads", "mitsuba", "id")]["reason"]
+    assert res[("quads", "trace", "Z")]["status"] == "error"
+    assert "none.exr" in res[("quads", "trace", "Z")]["reason"]
+
+
+def test_object_id_mismatch_is_interior(tmp_path: Path) -> None:
+    run, ref = build_run(tmp_path)
+    bad = _copy(ref)
+    x, y = PLAIN_PX
+    bad["obj"][y, x] = 7
+    _write_exr(run / "scenes/quads/trace.exr", bad)
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    r = _index(_strict_json(run / "results.json"))[("quads", "trace", "id")]
+    assert (r["edge_mismatches"], r["interior_mismatches"], r["status"]) == (0, 1, "fail")
+    assert "id.object" in r["reason"]
+
+
+def test_invalid_test_id_is_interior_even_on_an_edge(tmp_path: Path) -> None:
+    run, ref = build_run(tmp_path)
+    bad = _copy(ref)
+    x, y = EDGE_PX
+    bad["prim"][y, x] = 99  # names no triangle (the scene has 5)
+    _write_exr(run / "scenes/quads/povray.exr", bad, {"depth_step": 1e-9})
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    r = _index(_strict_json(run / "results.json"))[("quads", "povray", "id")]
+    assert (r["edge_mismatches"], r["interior_mismatches"]) == (0, 1)
+    assert "naming no triangle" in r["reason"]
+
+
+def test_harness_cli_dispatches_compare(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run, _ = build_run(tmp_path)
+    assert harness_main(["compare", "--", "--run", str(run), "--no-images"]) == 0
+    assert (run / "results.json").is_file()
+    assert "entries:" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------- tolerance models
+
+
+def _ctx(z: float, cos: float, info: dict[str, Any] | None = None, attrs: dict[str, Any] | None = None
+         ) -> tolerance.DepthContext:
+    return tolerance.DepthContext(np.array([z]), np.array([cos]), info or {}, attrs or {})
+
+
+def test_relative_models_scale_with_grazing_angle_and_cap() -> None:
+    m = tolerance.model_for("mitsuba")
+    facing, _ = m.depth(_ctx(10.0, 1.0))
+    grazing, _ = m.depth(_ctx(10.0, 0.1))
+    edge_on, _ = m.depth(_ctx(10.0, 0.0))
+    assert facing[0] == pytest.approx(1e-4)
+    assert grazing[0] == pytest.approx(1e-3)
+    assert edge_on[0] == pytest.approx(10.0 * tolerance.MAX_REL)
+    assert tolerance.model_for("embree").depth(_ctx(10.0, 0.5))[0][0] == pytest.approx(2e-4)
+
+
+def test_povray_depth_step_sources() -> None:
+    m = tolerance.model_for("povray")
+    tol, text = m.depth(_ctx(2.0, 1.0, attrs={"depth_step": 1e-7}))
+    assert tol[0] == pytest.approx(1e-7 + 2e-6) and "from the render" in text
+    tol, text = m.depth(_ctx(2.0, 1.0, info={"depth_range": 65536.0 * 65535.0}))
+    assert tol[0] == pytest.approx(1.0 + 2e-6) and "depth_range" in text
+    tol, text = m.depth(_ctx(2.0, 1.0))
+    assert tol[0] == pytest.approx(2.0 * (1 + 2**-6) / 2**32 + 2e-6, rel=1e-3) and "estimated" in text
+
+
+def test_edge_tolerances() -> None:
+    assert tolerance.model_for("trace").edge_px == 0.0
+    assert tolerance.model_for("povray").edge_px == 1e-3
+    assert tolerance.model_for("pyrender").edge_px == pytest.approx(math.sqrt(2) / 512)
+    assert tolerance.model_for("mitsuba").edge_px == 1e-4
+    assert tolerance.model_for("embree_robust").edge_px == 1e-4
+    unknown = tolerance.model_for("zzz")
+    assert unknown.edge_px == 0.0 and not unknown.known
+    assert unknown.depth(_ctx(1.0, 1.0))[0][0] == 0.0

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The test command (README): installs what is missing, then runs every test.
+#   1. scripts/setup.sh  (apt packages + .venv, quick when already done)
+#   2. the Python harness's own tests (backend conversions, comparison)
+#   3. cargo test: unit tests, raster==trace, watertightness, bad input, and the
+#      cross-renderer conformance suite (one test per scene x backend x buffer).
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+scripts/setup.sh
+echo "==> Python harness tests"
+(cd harness && ../.venv/bin/python -m pytest -q tests)
+echo "==> cargo test"
+cargo test --all-targets "$@"

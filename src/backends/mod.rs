@@ -1,0 +1,3 @@
+//! In-process external backends (called from Rust): Embree through its C API.
+
+pub mod embree;

@@ -1,0 +1,113 @@
+//! The run's machine-readable records (docs/run-format.md): what was rendered
+//! (manifest.json, written here) and how it compared (results.json, written by
+//! the Python comparison and read back here).
+
+use serde::{Deserialize, Serialize};
+
+/// Format tag of manifest.json.
+pub const MANIFEST_FORMAT: &str = "rendiff-manifest/1";
+
+/// manifest.json.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Format tag.
+    pub format: String,
+    /// Backend every other one is compared against.
+    pub reference: String,
+    /// When the run started (seconds since the Unix epoch).
+    pub created_unix: u64,
+    /// rendiff's version.
+    pub rendiff_version: String,
+    /// One entry per scene.
+    pub scenes: Vec<SceneRuns>,
+}
+
+/// All renders of one scene.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SceneRuns {
+    /// Scene file stem (the folder name under scenes/).
+    pub scene: String,
+    /// The scene file.
+    pub scene_file: String,
+    /// Resolved scene folder, relative to the run.
+    pub resolved: String,
+    /// Features the scene requires.
+    pub requires: Vec<String>,
+    /// One entry per backend.
+    pub renders: Vec<RenderRecord>,
+}
+
+/// One backend's render of one scene.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RenderRecord {
+    /// Backend name.
+    pub backend: String,
+    /// ok | skipped | error.
+    pub status: String,
+    /// Why it was skipped.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub reason: String,
+    /// What went wrong.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub message: String,
+    /// Buffer file, relative to the run.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub exr: String,
+    /// Seconds the render took (including process start for external ones).
+    #[serde(default)]
+    pub time_s: f64,
+    /// Backend version string.
+    #[serde(default)]
+    pub version: String,
+    /// Command that reproduces this render.
+    #[serde(default)]
+    pub command: String,
+    /// Buffers it produced.
+    #[serde(default)]
+    pub buffers: Vec<String>,
+    /// Backend-specific details (settings, precision, operation counts).
+    #[serde(default)]
+    pub info: serde_json::Value,
+}
+
+/// results.json.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Results {
+    /// Format tag.
+    pub format: String,
+    /// Reference backend.
+    pub reference: String,
+    /// One entry per (scene, backend, buffer).
+    pub results: Vec<ResultEntry>,
+}
+
+/// One comparison verdict.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ResultEntry {
+    /// Scene stem.
+    pub scene: String,
+    /// Backend compared with the reference.
+    pub backend: String,
+    /// `id` or `Z`.
+    pub buffer: String,
+    /// pass | fail | skipped | error | expected_fail | unexpected_pass.
+    pub status: String,
+    /// Why (skip reason, error message, failure summary, expectation reason).
+    #[serde(default)]
+    pub reason: String,
+    /// Everything else (counts, errors, tolerance, images, command).
+    #[serde(flatten)]
+    pub details: serde_json::Map<String, serde_json::Value>,
+}
+
+impl ResultEntry {
+    /// True for verdicts that must turn a run red.
+    pub fn is_failure(&self) -> bool {
+        matches!(self.status.as_str(), "fail" | "error" | "unexpected_pass")
+    }
+
+    /// `scene::backend::buffer`, the name a test or a report row uses.
+    pub fn key(&self) -> String {
+        format!("{}::{}::{}", self.scene, self.backend, self.buffer)
+    }
+}

@@ -1,0 +1,587 @@
+//! `rendiff check`: every scene on every backend, then the comparison.
+//!
+//! Core loops and Embree render in process; Python and CLI renderers run as
+//! subprocesses of the harness (`python -m rendiff_harness render`), each with
+//! a timeout, so one crashing or hanging renderer is reported as an error and
+//! the others still run. The Python side then compares every buffer with the
+//! reference (OpenImageIO + numpy) and writes results.json.
+
+pub mod manifest;
+pub mod process;
+
+use crate::backends::embree::{self, EmbreeError, EmbreeMode};
+use crate::exr_io::{frame_attrs, write_frame};
+use crate::frame::Frame;
+use crate::raster::{self, RasterOptions};
+use crate::scene::export::export;
+use crate::scene::resolve::ResolvedScene;
+use crate::scene::Scene;
+use crate::trace::{self, TraceOptions};
+use anyhow::{bail, Context, Result};
+use manifest::{Manifest, RenderRecord, Results, SceneRuns, MANIFEST_FORMAT};
+use process::{run_with_timeout, shell_line};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// The backend every other one is compared against.
+pub const REFERENCE: &str = "raster";
+
+/// Scene features the core's visibility loops model.
+pub const CORE_FEATURES: &[&str] = &["depth", "ids", "normals"];
+
+/// Options of one check run.
+#[derive(Debug, Clone)]
+pub struct CheckOptions {
+    /// Scene files to run.
+    pub scenes: Vec<PathBuf>,
+    /// Output folder (manifest, buffers, results).
+    pub run_dir: PathBuf,
+    /// Repository root: where `harness/` and `.venv/` live.
+    pub root: PathBuf,
+    /// Only these backends (the reference always runs).
+    pub only: Option<Vec<String>>,
+    /// Time limit per external render.
+    pub timeout: Duration,
+    /// Expectations file (known divergences with bounds).
+    pub expectations: PathBuf,
+    /// Print nothing but errors.
+    pub quiet: bool,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone)]
+pub struct CheckOutcome {
+    /// What was rendered.
+    pub manifest: Manifest,
+    /// How it compared.
+    pub results: Results,
+}
+
+/// The Python interpreter of the project's venv (override with `RENDIFF_PYTHON`).
+pub fn python(root: &Path) -> PathBuf {
+    std::env::var_os("RENDIFF_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join(".venv/bin/python"))
+}
+
+fn harness_command(root: &Path) -> Command {
+    let mut cmd = Command::new(python(root));
+    cmd.current_dir(root)
+        .env("PYTHONPATH", root.join("harness"))
+        .args(["-m", "rendiff_harness"]);
+    cmd
+}
+
+/// One external backend as the harness describes it (`info --json`).
+#[derive(Debug, Clone, serde::Deserialize)]
+struct HarnessBackend {
+    name: String,
+    version: Option<String>,
+    features: Vec<String>,
+    buffers: Vec<String>,
+    available: bool,
+    reason: Option<String>,
+}
+
+/// Asks the Python harness which backends it has. An error here means the harness
+/// itself is not installed; the message says how to fix it.
+fn harness_backends(root: &Path, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
+    let py = python(root);
+    if !py.exists() {
+        return Err(format!(
+            "Python harness not installed ({} is missing): run scripts/setup.sh",
+            py.display()
+        ));
+    }
+    let mut cmd = harness_command(root);
+    cmd.args(["info", "--json"]);
+    let o = run_with_timeout(cmd, Duration::from_secs(120), scratch)
+        .map_err(|e| format!("cannot run the Python harness: {e:#}"))?;
+    if o.code != Some(0) {
+        return Err(format!(
+            "the Python harness failed to start (exit {:?}): {}; run scripts/setup.sh",
+            o.code,
+            o.stderr_tail(5)
+        ));
+    }
+    #[derive(serde::Deserialize)]
+    struct Info {
+        backends: Vec<HarnessBackend>,
+    }
+    let info: Info = serde_json::from_str(o.stdout.trim())
+        .map_err(|e| format!("unreadable `info --json` output from the harness: {e}"))?;
+    Ok(info.backends)
+}
+
+fn missing(requires: &[String], features: &[&str]) -> Vec<String> {
+    requires
+        .iter()
+        .filter(|r| !features.contains(&r.as_str()))
+        .cloned()
+        .collect()
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into())
+}
+
+fn wanted(opts: &CheckOptions, name: &str) -> bool {
+    name == REFERENCE
+        || opts
+            .only
+            .as_ref()
+            .is_none_or(|o| o.iter().any(|x| x == name))
+}
+
+/// Renders a core loop or Embree in process; a panic becomes an error record.
+fn in_process(
+    name: &str,
+    scene: &ResolvedScene,
+    exr: &Path,
+    rel_exr: &str,
+    command: String,
+    version: String,
+    render: impl FnOnce() -> Result<Frame, EmbreeError> + std::panic::UnwindSafe,
+) -> RenderRecord {
+    let mut rec = RenderRecord {
+        backend: name.into(),
+        command,
+        version,
+        ..RenderRecord::default()
+    };
+    let start = Instant::now();
+    match std::panic::catch_unwind(render) {
+        Ok(Ok(frame)) => {
+            rec.time_s = start.elapsed().as_secs_f64();
+            match write_frame(exr, &frame, &frame_attrs(&frame, &scene.name)) {
+                Ok(()) => {
+                    rec.status = "ok".into();
+                    rec.exr = rel_exr.into();
+                    rec.buffers = vec!["Z".into(), "id".into(), "N".into()];
+                    rec.info = serde_json::json!({
+                        "counters": frame.counters,
+                        "render_seconds": frame.seconds,
+                    });
+                }
+                Err(e) => {
+                    rec.status = "error".into();
+                    rec.message = format!("{e:#}");
+                }
+            }
+        }
+        Ok(Err(EmbreeError::Unavailable(why))) => {
+            rec.status = "skipped".into();
+            rec.reason = why;
+        }
+        Ok(Err(e)) => {
+            rec.status = "error".into();
+            rec.message = e.to_string();
+            rec.time_s = start.elapsed().as_secs_f64();
+        }
+        Err(_) => {
+            rec.status = "error".into();
+            rec.message = format!("{name} panicked (a bug in rendiff)");
+            rec.time_s = start.elapsed().as_secs_f64();
+        }
+    }
+    rec
+}
+
+fn say(opts: &CheckOptions, line: String) {
+    if !opts.quiet {
+        eprintln!("{line}");
+    }
+}
+
+fn describe(rec: &RenderRecord) -> String {
+    match rec.status.as_str() {
+        "ok" => format!("ok ({:.2} s)", rec.time_s),
+        "skipped" => format!("skipped: {}", rec.reason),
+        _ => format!("ERROR: {}", rec.message),
+    }
+}
+
+/// Runs every scene on every backend, then the comparison; writes manifest.json and results.json.
+pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
+    if opts.scenes.is_empty() {
+        bail!("no scenes to check");
+    }
+    let run_dir = &opts.run_dir;
+    std::fs::create_dir_all(run_dir)
+        .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
+    let scratch = run_dir.join("scratch");
+    let externals = harness_backends(&opts.root, &scratch.join("info"));
+    if let Err(e) = &externals {
+        say(opts, format!("warning: {e}"));
+    }
+    let exe = "rendiff";
+    let version = format!("rendiff {}", env!("CARGO_PKG_VERSION"));
+    let mut scenes = Vec::new();
+    for (si, scene_path) in opts.scenes.iter().enumerate() {
+        let name = stem(scene_path);
+        let rel_dir = format!("scenes/{name}");
+        let dir = run_dir.join(&rel_dir);
+        let mut runs = SceneRuns {
+            scene: name.clone(),
+            scene_file: scene_path.display().to_string(),
+            resolved: format!("{rel_dir}/resolved"),
+            requires: Vec::new(),
+            renders: Vec::new(),
+        };
+        say(
+            opts,
+            format!(
+                "[{}/{}] {}",
+                si + 1,
+                opts.scenes.len(),
+                scene_path.display()
+            ),
+        );
+        let resolved = Scene::load(scene_path)
+            .map_err(anyhow::Error::from)
+            .and_then(|s| ResolvedScene::resolve(&s).map_err(anyhow::Error::from))
+            .and_then(|r| export(&r, &dir.join("resolved")).map(|_| r));
+        let scene = match resolved {
+            Ok(s) => s,
+            Err(e) => {
+                say(opts, format!("  scene ERROR: {e:#}"));
+                runs.renders.push(RenderRecord {
+                    backend: REFERENCE.into(),
+                    status: "error".into(),
+                    message: format!("cannot load scene: {e:#}"),
+                    ..RenderRecord::default()
+                });
+                scenes.push(runs);
+                continue;
+            }
+        };
+        runs.requires = scene.requires.iter().cloned().collect();
+        let core_missing = missing(&runs.requires, CORE_FEATURES);
+        let scene_arg = scene_path.display().to_string();
+        for name in ["raster", "trace"] {
+            if !wanted(opts, name) {
+                continue;
+            }
+            let rel_exr = format!("{rel_dir}/{name}.exr");
+            let exr = run_dir.join(&rel_exr);
+            let command = shell_line([
+                exe,
+                "render",
+                &scene_arg,
+                "--renderer",
+                name,
+                "-o",
+                &exr.display().to_string(),
+            ]);
+            let rec = if !core_missing.is_empty() {
+                RenderRecord {
+                    backend: name.into(),
+                    status: "skipped".into(),
+                    reason: format!("missing features: {}", core_missing.join(", ")),
+                    ..RenderRecord::default()
+                }
+            } else {
+                let sc = &scene;
+                in_process(
+                    name,
+                    sc,
+                    &exr,
+                    &rel_exr,
+                    command,
+                    version.clone(),
+                    move || {
+                        Ok(if name == "raster" {
+                            raster::render(sc, RasterOptions::default(), &|_| {})
+                        } else {
+                            trace::render(sc, TraceOptions::default(), &|_| {})
+                        })
+                    },
+                )
+            };
+            say(opts, format!("  {:<14} {}", name, describe(&rec)));
+            runs.renders.push(rec);
+        }
+        for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+            let name = mode.name();
+            if !wanted(opts, name) {
+                continue;
+            }
+            let rel_exr = format!("{rel_dir}/{name}.exr");
+            let exr = run_dir.join(&rel_exr);
+            let emissing = missing(&runs.requires, CORE_FEATURES);
+            let rec = if !emissing.is_empty() {
+                RenderRecord {
+                    backend: name.into(),
+                    status: "skipped".into(),
+                    reason: format!("missing features: {}", emissing.join(", ")),
+                    ..RenderRecord::default()
+                }
+            } else {
+                let command = shell_line([exe, "check", "--only", name, &scene_arg]);
+                let v = embree::version().unwrap_or_else(|e| e.to_string());
+                let sc = &scene;
+                in_process(name, sc, &exr, &rel_exr, command, v, move || {
+                    embree::render(sc, mode)
+                })
+            };
+            say(opts, format!("  {:<14} {}", name, describe(&rec)));
+            runs.renders.push(rec);
+        }
+        match &externals {
+            Err(e) => runs.renders.push(RenderRecord {
+                backend: "harness".into(),
+                status: "error".into(),
+                message: e.clone(),
+                ..RenderRecord::default()
+            }),
+            Ok(list) => {
+                for b in list {
+                    if !wanted(opts, &b.name) {
+                        continue;
+                    }
+                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch);
+                    say(opts, format!("  {:<14} {}", b.name, describe(&rec)));
+                    runs.renders.push(rec);
+                }
+            }
+        }
+        scenes.push(runs);
+    }
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        reference: REFERENCE.into(),
+        created_unix: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
+        rendiff_version: env!("CARGO_PKG_VERSION").into(),
+        scenes,
+    };
+    crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {
+        std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
+        Ok(())
+    })?;
+    let results = compare(opts, &scratch)?;
+    Ok(CheckOutcome { manifest, results })
+}
+
+fn external(
+    opts: &CheckOptions,
+    b: &HarnessBackend,
+    runs: &SceneRuns,
+    dir: &Path,
+    rel_dir: &str,
+    scratch: &Path,
+) -> RenderRecord {
+    let mut rec = RenderRecord {
+        backend: b.name.clone(),
+        version: b.version.clone().unwrap_or_default(),
+        buffers: b.buffers.clone(),
+        ..RenderRecord::default()
+    };
+    let features: Vec<&str> = b.features.iter().map(String::as_str).collect();
+    let miss = missing(&runs.requires, &features);
+    if !miss.is_empty() {
+        rec.status = "skipped".into();
+        rec.reason = format!("missing features: {}", miss.join(", "));
+        return rec;
+    }
+    if !b.available {
+        rec.status = "error".into();
+        rec.message = format!(
+            "{} unavailable: {}",
+            b.name,
+            b.reason.clone().unwrap_or_default()
+        );
+        return rec;
+    }
+    let rel_exr = format!("{rel_dir}/{}.exr", b.name);
+    let exr = opts.run_dir.join(&rel_exr);
+    let resolved = dir.join("resolved");
+    let secs = opts.timeout.as_secs_f64();
+    let args: Vec<String> = vec![
+        "render".into(),
+        "--backend".into(),
+        b.name.clone(),
+        "--scene".into(),
+        resolved.display().to_string(),
+        "--out".into(),
+        exr.display().to_string(),
+        "--timeout".into(),
+        format!("{secs}"),
+    ];
+    let mut words = vec![
+        python(&opts.root).display().to_string(),
+        "-m".into(),
+        "rendiff_harness".into(),
+    ];
+    words.extend(args.iter().cloned());
+    rec.command = format!(
+        "PYTHONPATH={} {}",
+        process::shell_quote(&opts.root.join("harness").display().to_string()),
+        shell_line(&words)
+    );
+    let mut cmd = harness_command(&opts.root);
+    cmd.args(&args);
+    // The harness enforces the timeout on its own subprocesses; this one also
+    // covers in-process renderers (pyrender, Mitsuba) that hang.
+    let limit = opts.timeout + Duration::from_secs(30);
+    let work = scratch.join(format!("{}-{}", runs.scene, b.name));
+    match run_with_timeout(cmd, limit, &work) {
+        Err(e) => {
+            rec.status = "error".into();
+            rec.message = format!("{e:#}");
+        }
+        Ok(o) => {
+            rec.time_s = o.seconds;
+            if o.timed_out {
+                rec.status = "error".into();
+                rec.message = format!(
+                    "timed out after {:.0} s and was killed",
+                    limit.as_secs_f64()
+                );
+            } else if o.code == Some(0) {
+                let last = o
+                    .stdout
+                    .lines()
+                    .rev()
+                    .find(|l| l.trim_start().starts_with('{'));
+                let parsed: Option<serde_json::Value> =
+                    last.and_then(|l| serde_json::from_str(l).ok());
+                if exr.exists() {
+                    rec.status = "ok".into();
+                    rec.exr = rel_exr;
+                    if let Some(v) = parsed {
+                        if let Some(ver) = v.get("version").and_then(|x| x.as_str()) {
+                            rec.version = ver.to_string();
+                        }
+                        rec.info = v.get("info").cloned().unwrap_or_default();
+                    }
+                } else {
+                    rec.status = "error".into();
+                    rec.message = "reported success but wrote no buffer file".into();
+                }
+            } else if o.code == Some(3) {
+                rec.status = "skipped".into();
+                rec.reason = o.stderr_tail(3);
+                if rec.reason.is_empty() {
+                    rec.reason = o.stdout.trim().to_string();
+                }
+            } else {
+                rec.status = "error".into();
+                let how = o
+                    .code
+                    .map(|c| format!("exit {c}"))
+                    .unwrap_or_else(|| "killed by a signal".into());
+                rec.message = format!("{} failed ({how}): {}", b.name, o.stderr_tail(6));
+            }
+        }
+    }
+    // Never take a partial output for a result.
+    if rec.status != "ok" {
+        let _ = std::fs::remove_file(&exr);
+    }
+    rec
+}
+
+fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
+    let results_path = opts.run_dir.join("results.json");
+    let _ = std::fs::remove_file(&results_path);
+    let mut cmd = harness_command(&opts.root);
+    cmd.arg("compare")
+        .arg("--run")
+        .arg(&opts.run_dir)
+        .arg("--expectations")
+        .arg(&opts.expectations);
+    let o = run_with_timeout(cmd, Duration::from_secs(1800), &scratch.join("compare"))
+        .context("cannot run the comparison (python -m rendiff_harness compare)")?;
+    if !opts.quiet {
+        eprint!("{}", o.stdout);
+    }
+    if o.timed_out || o.code != Some(0) {
+        bail!(
+            "the comparison failed (exit {:?}): {}\nrun scripts/setup.sh if the Python harness is missing",
+            o.code,
+            o.stderr_tail(12)
+        );
+    }
+    let text = std::fs::read_to_string(&results_path)
+        .with_context(|| format!("{}: comparison wrote no results", results_path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: unreadable", results_path.display()))
+}
+
+/// Scene files named on the command line: files as they are, folders expanded to their `*.toml`.
+pub fn collect_scenes(args: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for a in args {
+        if a.is_dir() {
+            let mut v: Vec<PathBuf> = std::fs::read_dir(a)
+                .with_context(|| format!("{}: cannot list", a.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                .collect();
+            v.sort();
+            out.extend(v);
+        } else {
+            out.push(a.clone());
+        }
+    }
+    Ok(out)
+}
+
+/// Counts of verdicts, for the closing line and exit code.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    /// Verdicts that passed (pass and expected_fail).
+    pub ok: usize,
+    /// fail, error and unexpected_pass.
+    pub failed: usize,
+    /// skipped.
+    pub skipped: usize,
+}
+
+/// A fixed-width table of every verdict, failures first, and the tally.
+pub fn summary(results: &Results) -> (String, Tally) {
+    let mut rows: Vec<&manifest::ResultEntry> = results.results.iter().collect();
+    rows.sort_by_key(|r| (!r.is_failure(), r.status != "skipped", r.key()));
+    let mut t = Tally::default();
+    let mut s = format!(
+        "{:<18} {:<14} {:<3} {:<16} {:>6} {:>9}  {}\n",
+        "scene", "backend", "buf", "status", "edge", "interior", "note"
+    );
+    for r in rows {
+        if r.is_failure() {
+            t.failed += 1;
+        } else if r.status == "skipped" {
+            t.skipped += 1;
+        } else {
+            t.ok += 1;
+        }
+        let n = |k: &str| {
+            r.details
+                .get(k)
+                .and_then(|v| v.as_u64())
+                .map(|v| v.to_string())
+                .unwrap_or_else(|| "-".into())
+        };
+        let mut note: String = r.reason.lines().next().unwrap_or("").to_string();
+        if note.len() > 90 {
+            note.truncate(87);
+            note.push_str("...");
+        }
+        s.push_str(&format!(
+            "{:<18} {:<14} {:<3} {:<16} {:>6} {:>9}  {}\n",
+            r.scene,
+            r.backend,
+            r.buffer,
+            r.status,
+            n("edge_mismatches"),
+            n("interior_mismatches"),
+            note
+        ));
+    }
+    (s, t)
+}

@@ -1,0 +1,73 @@
+//! Cross-renderer conformance: every scene in scenes/ on every backend (core
+//! trace, Embree default and robust, POV-Ray, pyrender, Mitsuba 3), compared
+//! with the core's raster output. One test per (scene, backend, buffer), so a
+//! failure names exactly what broke; skipped combinations show as ignored with
+//! their reason in the name, never as passes.
+//!
+//! Known divergences live in tests/expectations.toml with a reason and a
+//! two-sided bound; doing better than a bound fails as an unexpected pass.
+
+use libtest_mimic::{Arguments, Failed, Trial};
+use rendiff::check::{self, CheckOptions};
+use std::path::PathBuf;
+use std::time::Duration;
+
+fn main() {
+    let args = Arguments::from_args();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let run_dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("conformance-run");
+    let _ = std::fs::remove_dir_all(&run_dir);
+    let trials = if args.list {
+        // Listing must not render anything.
+        vec![Trial::test("conformance::all", || Ok(()))]
+    } else {
+        let opts = CheckOptions {
+            scenes: check::collect_scenes(&[root.join("scenes")]).expect("scenes/ is readable"),
+            run_dir: run_dir.clone(),
+            root: root.clone(),
+            only: None,
+            timeout: Duration::from_secs(600),
+            expectations: root.join("tests/expectations.toml"),
+            quiet: false,
+        };
+        match check::run(&opts) {
+            Err(e) => {
+                let msg = format!("{e:#}");
+                vec![Trial::test("conformance::harness", move || {
+                    Err(Failed::from(msg))
+                })]
+            }
+            Ok(outcome) => {
+                eprintln!("{}", check::summary(&outcome.results).0);
+                eprintln!("run folder: {}", run_dir.display());
+                outcome
+                    .results
+                    .results
+                    .into_iter()
+                    .map(|r| {
+                        let skipped = r.status == "skipped";
+                        let name = if skipped {
+                            format!("{} (skipped: {})", r.key(), r.reason)
+                        } else {
+                            r.key()
+                        };
+                        Trial::test(name, move || {
+                            if r.is_failure() {
+                                Err(Failed::from(format!(
+                                    "{}: {}\n{}",
+                                    r.status,
+                                    r.reason,
+                                    serde_json::to_string_pretty(&r.details).unwrap_or_default()
+                                )))
+                            } else {
+                                Ok(())
+                            }
+                        })
+                        .with_ignored_flag(skipped)
+                    })
+                    .collect()
+            }
+        }
+    };
+    libtest_mimic::run(&args, trials).exit();
+}
