@@ -428,7 +428,7 @@ fn external(
     cmd.args(&args);
     // The harness enforces the timeout on its own subprocesses; this one also
     // covers in-process renderers (pyrender, Mitsuba) that hang.
-    let limit = opts.timeout + Duration::from_secs(30);
+    let limit = opts.timeout + opts.timeout.min(Duration::from_secs(30));
     let work = scratch.join(format!("{}-{}", runs.scene, b.name));
     match run_with_timeout(cmd, limit, &work) {
         Err(e) => {
