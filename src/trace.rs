@@ -146,7 +146,19 @@ impl TraceBvh {
         scene: &ResolvedScene,
         ray: &PixelRay,
         c: &mut Counters,
+        coverage: Option<&mut [u16; 2]>,
+    ) -> u64 {
+        self.trace_with(scene, ray, c, coverage, &mut Vec::with_capacity(64))
+    }
+
+    /// [`TraceBvh::trace`] with a caller-owned traversal stack, reused across pixels.
+    pub fn trace_with(
+        &self,
+        scene: &ResolvedScene,
+        ray: &PixelRay,
+        c: &mut Counters,
         mut coverage: Option<&mut [u16; 2]>,
+        stack: &mut Vec<(u32, f64)>,
     ) -> u64 {
         let cam: &Camera = &scene.camera;
         let mut best = NO_HIT;
@@ -154,7 +166,7 @@ impl TraceBvh {
             return best;
         }
         let count_all = coverage.is_some();
-        let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
+        stack.clear();
         c.bvh_nodes_visited += 1;
         let (t0, t1) = slab(cam.eye, ray, &self.nodes[0].bounds);
         if slab_misses(t0, t1) {
@@ -252,9 +264,10 @@ pub fn render_with_bvh(
             .enumerate()
             .map(|(y, (row, crow))| {
                 let mut c = Counters::default();
+                let mut stack = Vec::with_capacity(64);
                 for (x, (k, cv)) in row.iter_mut().zip(crow.iter_mut()).enumerate() {
                     let ray = cam.pixel_ray(x as u32, y as u32);
-                    *k = bvh.trace(scene, &ray, &mut c, Some(cv));
+                    *k = bvh.trace_with(scene, &ray, &mut c, Some(cv), &mut stack);
                 }
                 progress(1);
                 c
@@ -265,9 +278,10 @@ pub fn render_with_bvh(
             .enumerate()
             .map(|(y, row)| {
                 let mut c = Counters::default();
+                let mut stack = Vec::with_capacity(64);
                 for (x, k) in row.iter_mut().enumerate() {
                     let ray = cam.pixel_ray(x as u32, y as u32);
-                    *k = bvh.trace(scene, &ray, &mut c, None);
+                    *k = bvh.trace_with(scene, &ray, &mut c, None, &mut stack);
                 }
                 progress(1);
                 c
