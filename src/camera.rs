@@ -161,6 +161,15 @@ impl Camera {
         self.forward + self.right * sx + self.up_ortho * sy
     }
 
+    /// Direction through a continuous image point (`fx` in [0, W), `fy` in [0, H), y down);
+    /// pixel centers are at k + 0.5. Used for box-filtered Monte Carlo radiance.
+    #[inline]
+    pub fn direction_at(&self, fx: f64, fy: f64) -> DVec3 {
+        let sx = (2.0 * fx / f64::from(self.width) - 1.0) * self.aspect_tan;
+        let sy = (1.0 - 2.0 * fy / f64::from(self.height)) * self.tan_half_vfov;
+        self.forward + self.right * sx + self.up_ortho * sy
+    }
+
     /// The pixel's ray. The single definition both loops use.
     #[inline]
     pub fn pixel_ray(&self, x: u32, y: u32) -> PixelRay {

@@ -53,20 +53,48 @@ pub fn frame_attrs(frame: &Frame, scene: &str) -> BTreeMap<String, String> {
 
 /// Writes a frame's buffers to `path` (atomically), with `attrs` as `rendiff:*` text attributes.
 pub fn write_frame(path: &Path, frame: &Frame, attrs: &BTreeMap<String, String>) -> Result<()> {
+    write_frame_with(path, frame, None, attrs)
+}
+
+/// Like [`write_frame`], plus radiance channels `R G B` (and `var.R var.G var.B`
+/// for Monte Carlo) and their `spp`/`integrator` attributes when given.
+pub fn write_frame_with(
+    path: &Path,
+    frame: &Frame,
+    radiance: Option<&crate::shade::Radiance>,
+    attrs: &BTreeMap<String, String>,
+) -> Result<()> {
     let size = (frame.width as usize, frame.height as usize);
     let n: Vec<Vec<f32>> = (0..3)
         .map(|k| frame.normal.iter().map(|v| v[k]).collect())
         .collect();
-    let channels = SmallVec::from_vec(vec![
+    let mut list = vec![
         AnyChannel::new("Z", FlatSamples::F32(frame.z.clone())),
         AnyChannel::new("id.prim", FlatSamples::U32(frame.prim.clone())),
         AnyChannel::new("id.object", FlatSamples::U32(frame.object.clone())),
         AnyChannel::new("N.x", FlatSamples::F32(n[0].clone())),
         AnyChannel::new("N.y", FlatSamples::F32(n[1].clone())),
         AnyChannel::new("N.z", FlatSamples::F32(n[2].clone())),
-    ]);
+    ];
+    let mut attrs = attrs.clone();
+    if let Some(r) = radiance {
+        let split = |v: &[[f32; 3]], k: usize| v.iter().map(|p| p[k]).collect::<Vec<f32>>();
+        for (k, name) in ["R", "G", "B"].iter().enumerate() {
+            list.push(AnyChannel::new(*name, FlatSamples::F32(split(&r.rgb, k))));
+            if let Some(var) = &r.var {
+                list.push(AnyChannel::new(
+                    format!("var.{name}").as_str(),
+                    FlatSamples::F32(split(var, k)),
+                ));
+            }
+        }
+        attrs.insert("spp".into(), r.spp.to_string());
+        attrs.insert("integrator".into(), r.integrator.to_string());
+        attrs.insert("shade_seconds".into(), format!("{:.6}", r.seconds));
+    }
+    let channels = SmallVec::from_vec(list);
     let mut layer_attrs = LayerAttributes::default();
-    for (k, v) in attrs {
+    for (k, v) in &attrs {
         layer_attrs.other.insert(
             Text::from(format!("{ATTR_PREFIX}{k}").as_str()),
             AttributeValue::Text(Text::from(v.as_str())),

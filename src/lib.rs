@@ -16,6 +16,7 @@ pub mod preview;
 pub mod progress;
 pub mod raster;
 pub mod scene;
+pub mod shade;
 pub mod trace;
 pub mod visibility;
 

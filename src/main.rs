@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rendiff::exr_io::{frame_attrs, read_buffers, write_frame};
+use rendiff::exr_io::{frame_attrs, read_buffers, write_frame_with};
 use rendiff::frame::Frame;
 use rendiff::progress::LazyProgress;
 use rendiff::scene::resolve::ResolvedScene;
@@ -58,6 +58,15 @@ enum Command {
         /// Never show a progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Samples per pixel for path tracing (default: the scene's integrator.spp).
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Random seed for path tracing.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Deliberately wrong shading, for testing the statistical gate's power.
+        #[arg(long, value_enum, hide = true)]
+        inject_bias: Option<rendiff::shade::Bias>,
     },
     /// List scenes in a folder with the features they require.
     Scenes {
@@ -150,6 +159,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             bvh,
             no_preview,
             quiet,
+            spp,
+            seed,
+            inject_bias,
         } => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
@@ -173,9 +185,33 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 "threads".to_string(),
                 pool.current_num_threads().to_string(),
             );
-            write_frame(&out, &frame, &attrs)?;
+            let radiance = rendiff::shade::needs_shading(&resolved).then(|| {
+                pool.install(|| {
+                    let bvh = trace::TraceBvh::build(&resolved, bvh);
+                    let opts = rendiff::shade::ShadeOptions {
+                        spp: spp.unwrap_or(resolved.integrator.spp),
+                        seed,
+                        bias: inject_bias,
+                    };
+                    rendiff::shade::shade(&resolved, &frame, &bvh, opts)
+                })
+            });
+            if let Some(r) = &radiance {
+                attrs.insert("seed".to_string(), seed.to_string());
+                if let Some(b) = inject_bias {
+                    attrs.insert("injected_bias".to_string(), format!("{b:?}"));
+                }
+                println!(
+                    "  radiance: {} ({} spp) in {:.3} s",
+                    r.integrator, r.spp, r.seconds
+                );
+            }
+            write_frame_with(&out, &frame, radiance.as_ref(), &attrs)?;
             if !no_preview {
                 preview::write_previews(&out, &frame)?;
+                if let Some(r) = &radiance {
+                    preview::write_radiance_preview(&out, frame.width, frame.height, &r.rgb)?;
+                }
             }
             let c = &frame.counters;
             println!(

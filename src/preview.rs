@@ -49,6 +49,25 @@ fn save(path: &Path, w: u32, h: u32, px: Vec<[u8; 3]>) -> Result<()> {
     })
 }
 
+/// Linear radiance to 8-bit sRGB (display transfer, clipped), for people only.
+pub fn srgb8(v: f32) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Writes `<stem>.rgb.png`: radiance through the sRGB transfer.
+pub fn write_radiance_preview(exr_path: &Path, w: u32, h: u32, rgb: &[[f32; 3]]) -> Result<()> {
+    let mut name = exr_path.with_extension("").into_os_string();
+    name.push(".rgb.png");
+    let px = rgb.iter().map(|p| p.map(srgb8)).collect();
+    save(Path::new(&name), w, h, px)
+}
+
 /// Writes `<stem>.ids.png` and `<stem>.depth.png` beside `exr_path`.
 pub fn write_previews(exr_path: &Path, frame: &Frame) -> Result<()> {
     let stem = exr_path.with_extension("");

@@ -302,3 +302,113 @@ fn sum(mut a: Counters, b: Counters) -> Counters {
     a += b;
     a
 }
+
+/// A closest hit of a general ray (shading queries, not the visibility predicate).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayHit {
+    /// Triangle id.
+    pub prim: u32,
+    /// Ray parameter of the hit.
+    pub t: f64,
+}
+
+/// Möller–Trumbore in f64, both sides, `t` in `(tmin, tmax)`.
+#[inline]
+fn intersect64(
+    t: &crate::scene::resolve::Tri,
+    o: glam::DVec3,
+    d: glam::DVec3,
+    tmin: f64,
+    tmax: f64,
+) -> Option<f64> {
+    let [a, b, c] = t.map(|v| v.as_dvec3());
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = o - a;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let tt = e2.dot(q) * inv;
+    (tt > tmin && tt < tmax).then_some(tt)
+}
+
+impl TraceBvh {
+    /// Closest hit of `o + t d` with `t` in `(tmin, tmax)`; used by shading (shadow and path rays).
+    pub fn closest(
+        &self,
+        scene: &ResolvedScene,
+        o: glam::DVec3,
+        d: glam::DVec3,
+        tmin: f64,
+        tmax: f64,
+    ) -> Option<RayHit> {
+        self.query(scene, o, d, tmin, tmax, false)
+    }
+
+    /// True when anything lies on `o + t d` for `t` in `(tmin, tmax)`.
+    pub fn occluded(
+        &self,
+        scene: &ResolvedScene,
+        o: glam::DVec3,
+        d: glam::DVec3,
+        tmin: f64,
+        tmax: f64,
+    ) -> bool {
+        self.query(scene, o, d, tmin, tmax, true).is_some()
+    }
+
+    fn query(
+        &self,
+        scene: &ResolvedScene,
+        o: glam::DVec3,
+        d: glam::DVec3,
+        tmin: f64,
+        mut tmax: f64,
+        any: bool,
+    ) -> Option<RayHit> {
+        use crate::visibility::slab_od;
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let inv = glam::DVec3::ONE / d;
+        let mut best: Option<RayHit> = None;
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.push(0);
+        while let Some(ni) = stack.pop() {
+            let node = &self.nodes[ni as usize];
+            let (a, b) = slab_od(o, d, inv, &node.bounds);
+            if slab_misses(a, b) || a > tmax || b < tmin {
+                continue;
+            }
+            if node.count > 0 {
+                for k in node.first..node.first + node.count {
+                    let prim = self.prims[k as usize];
+                    if let Some(t) = intersect64(&scene.triangles[prim as usize], o, d, tmin, tmax)
+                    {
+                        best = Some(RayHit { prim, t });
+                        if any {
+                            return best;
+                        }
+                        tmax = t;
+                    }
+                }
+            } else {
+                stack.push(node.first);
+                stack.push(node.first + 1);
+            }
+        }
+        best
+    }
+}

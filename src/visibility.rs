@@ -154,18 +154,24 @@ pub fn grow_box(eye: DVec3, lo: Vec3, hi: Vec3) -> RayBox {
 /// Monotone in the box, so nested boxes give nested intervals.
 #[inline]
 pub fn slab(eye: DVec3, ray: &PixelRay, b: &RayBox) -> (f64, f64) {
+    slab_od(eye, ray.dir, ray.inv_dir, b)
+}
+
+/// Slab test for any ray `origin + t dir` (shadow and path rays).
+#[inline]
+pub fn slab_od(origin: DVec3, dir: DVec3, inv_dir: DVec3, b: &RayBox) -> (f64, f64) {
     let mut tmin = f64::NEG_INFINITY;
     let mut tmax = f64::INFINITY;
     for k in 0..3 {
-        let d = ray.dir[k];
+        let d = dir[k];
         if d == 0.0 {
-            if eye[k] < b.lo[k] || eye[k] > b.hi[k] {
+            if origin[k] < b.lo[k] || origin[k] > b.hi[k] {
                 return (f64::INFINITY, f64::NEG_INFINITY);
             }
             continue;
         }
-        let t0 = (b.lo[k] - eye[k]) * ray.inv_dir[k];
-        let t1 = (b.hi[k] - eye[k]) * ray.inv_dir[k];
+        let t0 = (b.lo[k] - origin[k]) * inv_dir[k];
+        let t1 = (b.hi[k] - origin[k]) * inv_dir[k];
         let (a, bb) = if d > 0.0 { (t0, t1) } else { (t1, t0) };
         tmin = tmin.max(a);
         tmax = tmax.min(bb);

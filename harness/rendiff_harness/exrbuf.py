@@ -2,7 +2,9 @@
 
 Layout: one single-part scanline EXR per (scene, renderer) with channels
 `Z` (f32 planar depth, +inf = background), `id.prim` / `id.object` (u32,
-0xFFFFFFFF = background), optional `N.x N.y N.z` and `R G B` (f32).
+0xFFFFFFFF = background), optional `N.x N.y N.z` and `R G B` (f32), and for Monte Carlo
+radiance `var.R var.G var.B` (f32: the variance of each pixel's mean estimate,
+docs/radiance.md).
 
 Why this module writes EXR itself instead of through OpenImageIO
 -----------------------------------------------------------------
@@ -39,8 +41,12 @@ ATTR_PREFIX = "rendiff:"
 what `write_buffers` was given, never the EXR/OIIO standard attributes, and so
 that no key can collide with a standard attribute that OIIO renames on read."""
 
-BUFFER_KEYS = ("Z", "id.prim", "id.object", "N", "RGB")
-_GROUPS: dict[str, tuple[str, ...]] = {"N": ("N.x", "N.y", "N.z"), "RGB": ("R", "G", "B")}
+BUFFER_KEYS = ("Z", "id.prim", "id.object", "N", "RGB", "var")
+_GROUPS: dict[str, tuple[str, ...]] = {
+    "N": ("N.x", "N.y", "N.z"),
+    "RGB": ("R", "G", "B"),
+    "var": ("var.R", "var.G", "var.B"),
+}
 _UINT_CHANNELS = frozenset({"id.prim", "id.object"})
 
 _EXR_MAGIC = 20000630
@@ -86,6 +92,7 @@ def _collect_channels(
     obj: object | None,
     N: object | None,
     RGB: object | None,
+    var: object | None = None,
 ) -> dict[str, tuple[int, np.ndarray]]:
     """Map EXR channel name -> (pixel type, (H, W) '<u4' words), checking shapes agree."""
     chans: dict[str, tuple[int, np.ndarray]] = {}
@@ -95,7 +102,7 @@ def _collect_channels(
         chans["id.prim"] = (_PIXEL_UINT, _as_plane(path, "prim", prim, "uint"))
     if obj is not None:
         chans["id.object"] = (_PIXEL_UINT, _as_plane(path, "obj", obj, "uint"))
-    for key, value in (("N", N), ("RGB", RGB)):
+    for key, value in (("N", N), ("RGB", RGB), ("var", var)):
         if value is None:
             continue
         arr = np.asarray(value)
@@ -104,7 +111,7 @@ def _collect_channels(
         for i, cname in enumerate(_GROUPS[key]):
             chans[cname] = (_PIXEL_FLOAT, _as_plane(path, cname, arr[:, :, i], "float"))
     if not chans:
-        raise BufferError(f"{path}: no buffer given (pass at least one of Z, prim, obj, N, RGB)")
+        raise BufferError(f"{path}: no buffer given (pass at least one of Z, prim, obj, N, RGB, var)")
     shapes = {c: p.shape for c, (_, p) in chans.items()}
     if len(set(shapes.values())) != 1:
         raise BufferError(f"{path}: buffers differ in size: {shapes}")
@@ -227,17 +234,19 @@ def write_buffers(
     obj: object | None = None,
     N: object | None = None,
     RGB: object | None = None,
+    var: object | None = None,
     attrs: Mapping[str, AttrValue] | None = None,
     compression: str = "zip",
 ) -> None:
     """Write the given buffers to `path` atomically (temp file in the same folder + os.replace).
 
-    Z, N, RGB are stored as f32; prim/obj as exact u32 (`id.prim`, `id.object`).
+    Z, N, RGB, var are stored as f32; prim/obj as exact u32 (`id.prim`, `id.object`).
+    `var` ((H, W, 3)) becomes channels var.R var.G var.B.
     A failure at any point leaves no file at `path` (an existing file stays as it was)
     and no temp file behind, so a crashed backend can never be mistaken for a result.
     """
     path = Path(path)
-    chans = _collect_channels(path, Z, prim, obj, N, RGB)
+    chans = _collect_channels(path, Z, prim, obj, N, RGB, var)
     blob = _encode(path, chans, dict(attrs or {}), compression)
     directory = path.parent if str(path.parent) else Path(".")
     try:
@@ -286,9 +295,9 @@ def _open(path: Path):  # type: ignore[no-untyped-def]
 
 
 def read_buffers(path: str | Path, require: Iterable[str] = ()) -> dict[str, np.ndarray]:
-    """Read every known buffer in `path`; keys among 'Z', 'id.prim', 'id.object', 'N', 'RGB'.
+    """Read every known buffer in `path`; keys among 'Z', 'id.prim', 'id.object', 'N', 'RGB', 'var'.
 
-    Z/N/RGB come back as float32 ((H, W) or (H, W, 3)), IDs as exact uint32 (H, W).
+    Z/N/RGB/var come back as float32 ((H, W) or (H, W, 3)), IDs as exact uint32 (H, W).
     `require` lists keys that must be present; a missing one raises BufferError.
     A u32 ID channel stored as anything but uint is refused: it cannot be exact.
     """

@@ -70,10 +70,57 @@ class ResolvedScene:
     objects: list[dict[str, Any]] = field(default_factory=list)
     materials: list[dict[str, Any]] = field(default_factory=list)
     lights: list[dict[str, Any]] = field(default_factory=list)
+    integrator: dict[str, Any] = field(default_factory=dict)  # {"max_depth": int, "spp": int} (path tracing)
 
     @property
     def triangle_count(self) -> int:
         return int(self.triangles.shape[0])
+
+    def prim_materials(self) -> np.ndarray:
+        """(N,) int64: the material index of every triangle (objects[object_id].material).
+
+        An object without a material entry, or a material index outside `materials`,
+        raises SceneError: shading would otherwise silently pick a wrong albedo.
+        """
+        mats = np.zeros(len(self.objects), dtype=np.int64)
+        for i, obj in enumerate(self.objects):
+            m = obj.get("material") if isinstance(obj, dict) else None
+            if isinstance(m, bool) or not isinstance(m, int) or not 0 <= m < len(self.materials):
+                raise SceneError(
+                    f"{self.directory}/scene.json: objects[{i}].material is {m!r}, "
+                    f"not an index into {len(self.materials)} materials"
+                )
+            mats[i] = m
+        if self.triangle_count and (not self.objects or int(self.object_ids.max()) >= len(self.objects)):
+            raise SceneError(f"{self.directory}: object_ids.u32 names objects beyond the {len(self.objects)} listed")
+        return mats[self.object_ids.astype(np.int64)] if self.triangle_count else np.zeros(0, dtype=np.int64)
+
+    def material_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(albedo (M, 3), emission (M, 3)) float64 of every material (missing keys are 0)."""
+        alb = np.zeros((len(self.materials), 3))
+        emi = np.zeros((len(self.materials), 3))
+        for i, m in enumerate(self.materials):
+            for arr, key in ((alb, "albedo"), (emi, "emission")):
+                v = m.get(key, [0.0, 0.0, 0.0]) if isinstance(m, dict) else None
+                try:
+                    arr[i] = np.asarray(v, dtype=np.float64).reshape(3)
+                except (TypeError, ValueError):
+                    raise SceneError(f"{self.directory}/scene.json: materials[{i}].{key} must be 3 numbers") from None
+                if not np.all(np.isfinite(arr[i])) or np.any(arr[i] < 0):
+                    raise SceneError(f"{self.directory}/scene.json: materials[{i}].{key} must be finite and >= 0")
+        return alb, emi
+
+    @property
+    def spp(self) -> int:
+        """Samples per pixel the scene asks for (integrator.spp, default 64)."""
+        v = self.integrator.get("spp", 64)
+        return int(v) if isinstance(v, int) and not isinstance(v, bool) and v > 0 else 64
+
+    @property
+    def max_depth(self) -> int:
+        """Longest path in vertices, Mitsuba's convention (-1 = unlimited; default -1)."""
+        v = self.integrator.get("max_depth", -1)
+        return int(v) if isinstance(v, int) and not isinstance(v, bool) else -1
 
 
 def _vec(meta: dict[str, Any], key: str, where: Path) -> np.ndarray:
@@ -140,4 +187,5 @@ def load(directory: str | Path) -> ResolvedScene:
         objects=list(meta.get("objects", [])),
         materials=list(meta.get("materials", [])),
         lights=list(meta.get("lights", [])),
+        integrator=dict(meta["integrator"]) if isinstance(meta.get("integrator"), dict) else {},
     )

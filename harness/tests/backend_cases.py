@@ -298,3 +298,51 @@ def near_clipped(directory: Path) -> Path:
     tris = _quad(np.array([0.0, 0.0, 4.95]), np.array([0.01, 0, 0]), np.array([0, 0.01, 0]))
     tris += _quad(np.array([0.0, 0.0, 4.0]), np.array([5.0, 0, 0]), np.array([0, 5.0, 0]))
     return _write(directory, tris, [0, 0, 1, 1], width=32, height=24, near=0.1, name="near_clipped")
+
+
+# --------------------------------------------------------------------------- lit scenes
+
+LIT_ALBEDO = (0.8, 0.5, 0.25)
+
+
+def lit_plane(
+    directory: Path,
+    lights: list[dict[str, Any]],
+    *,
+    requires: tuple[str, ...] = ("depth", "ids", "lambert", "point_light", "shadowless", "two_sided"),
+    albedo: tuple[float, float, float] = LIT_ALBEDO,
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    width: int = 64,
+    height: int = 48,
+    flip: bool = False,
+) -> Path:
+    """A large quad in the plane z = 0 (normal +z, or -z when `flip`) seen from (0.4, -0.3, 4) off-axis.
+
+    Every pixel sees the plane, so the closed-form radiance is known at every pixel center.
+    """
+    tris = _quad(np.array([0.0, 0.0, 0.0]), np.array([20.0, 0.0, 0.0]), np.array([0.0, 20.0, 0.0]))
+    if flip:
+        tris = [t[[0, 2, 1]] for t in tris]
+    mats = [{"name": "m", "albedo": list(albedo), "emission": list(emission)}]
+    return _write(
+        directory,
+        tris,
+        eye=(0.4, -0.3, 4.0),
+        look_at=(0.0, 0.2, 0.0),
+        width=width,
+        height=height,
+        requires=requires,
+        materials=mats,
+        lights=lights,
+        name="lit_plane",
+    )
+
+
+def closed_form_plane(scene: ResolvedScene, flip: bool = False) -> np.ndarray:
+    """(H, W, 3) float64 contract radiance on `lit_plane` at the pixel centers, from the exact plane depth."""
+    from rendiff_harness import lighting
+
+    n = np.array([0.0, 0.0, -1.0 if flip else 1.0])
+    z = plane_depth(scene, np.zeros(3), n)
+    prim = np.zeros(z.shape, dtype=np.uint32)  # any prim of the plane: same normal and material
+    return lighting.local_radiance(scene, prim, z)

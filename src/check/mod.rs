@@ -10,12 +10,13 @@ pub mod manifest;
 pub mod process;
 
 use crate::backends::embree::{self, EmbreeError, EmbreeMode};
-use crate::exr_io::{frame_attrs, write_frame};
+use crate::exr_io::{frame_attrs, write_frame_with};
 use crate::frame::Frame;
 use crate::raster::{self, RasterOptions};
 use crate::scene::export::export;
 use crate::scene::resolve::ResolvedScene;
 use crate::scene::Scene;
+use crate::shade::{self, Radiance, ShadeOptions};
 use crate::trace::{self, TraceOptions};
 use anyhow::{bail, Context, Result};
 use manifest::{Manifest, RenderRecord, Results, SceneRuns, MANIFEST_FORMAT};
@@ -28,7 +29,27 @@ use std::time::{Duration, Instant};
 pub const REFERENCE: &str = "raster";
 
 /// Scene features the core's visibility loops model.
-pub const CORE_FEATURES: &[&str] = &["depth", "ids", "normals"];
+pub const CORE_FEATURES: &[&str] = &[
+    "depth",
+    "ids",
+    "normals",
+    "emission",
+    "lambert",
+    "point_light",
+    "directional_light",
+    "shadows",
+    "shadowless",
+    "area_light",
+    "global_illumination",
+    "two_sided",
+    "one_sided",
+];
+
+/// Scene features Embree's visibility queries model.
+pub const EMBREE_FEATURES: &[&str] = &["depth", "ids", "normals"];
+
+/// Seed of the core's path tracer in check runs (recorded in the buffers).
+pub const CHECK_SEED: u64 = 1;
 
 /// Options of one check run.
 #[derive(Debug, Clone)]
@@ -144,7 +165,7 @@ fn in_process(
     rel_exr: &str,
     command: String,
     version: String,
-    render: impl FnOnce() -> Result<Frame, EmbreeError> + std::panic::UnwindSafe,
+    render: impl FnOnce() -> Result<(Frame, Option<Radiance>), EmbreeError> + std::panic::UnwindSafe,
 ) -> RenderRecord {
     let mut rec = RenderRecord {
         backend: name.into(),
@@ -154,16 +175,26 @@ fn in_process(
     };
     let start = Instant::now();
     match std::panic::catch_unwind(render) {
-        Ok(Ok(frame)) => {
+        Ok(Ok((frame, radiance))) => {
             rec.time_s = start.elapsed().as_secs_f64();
-            match write_frame(exr, &frame, &frame_attrs(&frame, &scene.name)) {
+            let mut attrs = frame_attrs(&frame, &scene.name);
+            if radiance.is_some() {
+                attrs.insert("seed".into(), CHECK_SEED.to_string());
+            }
+            match write_frame_with(exr, &frame, radiance.as_ref(), &attrs) {
                 Ok(()) => {
                     rec.status = "ok".into();
                     rec.exr = rel_exr.into();
                     rec.buffers = vec!["Z".into(), "id".into(), "N".into()];
+                    if radiance.is_some() {
+                        rec.buffers.push("RGB".into());
+                    }
                     rec.info = serde_json::json!({
                         "counters": frame.counters,
                         "render_seconds": frame.seconds,
+                        "shade_seconds": radiance.as_ref().map(|r| r.seconds),
+                        "spp": radiance.as_ref().map(|r| r.spp),
+                        "integrator": radiance.as_ref().map(|r| r.integrator),
                     });
                 }
                 Err(e) => {
@@ -293,11 +324,21 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     command,
                     version.clone(),
                     move || {
-                        Ok(if name == "raster" {
+                        let frame = if name == "raster" {
                             raster::render(sc, RasterOptions::default(), &|_| {})
                         } else {
                             trace::render(sc, TraceOptions::default(), &|_| {})
-                        })
+                        };
+                        let radiance = shade::needs_shading(sc).then(|| {
+                            let bvh = trace::TraceBvh::build(sc, trace::BvhQuality::Medium);
+                            let opts = ShadeOptions {
+                                spp: sc.integrator.spp,
+                                seed: CHECK_SEED,
+                                bias: None,
+                            };
+                            shade::shade(sc, &frame, &bvh, opts)
+                        });
+                        Ok((frame, radiance))
                     },
                 )
             };
@@ -311,7 +352,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
             }
             let rel_exr = format!("{rel_dir}/{name}.exr");
             let exr = run_dir.join(&rel_exr);
-            let emissing = missing(&runs.requires, CORE_FEATURES);
+            let emissing = missing(&runs.requires, EMBREE_FEATURES);
             let rec = if !emissing.is_empty() {
                 RenderRecord {
                     backend: name.into(),
@@ -324,7 +365,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
                 let sc = &scene;
                 in_process(name, sc, &exr, &rel_exr, command, v, move || {
-                    embree::render(sc, mode)
+                    embree::render(sc, mode).map(|f| (f, None))
                 })
             };
             say(opts, format!("  {:<14} {}", name, describe(&rec)));

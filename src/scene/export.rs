@@ -32,6 +32,7 @@ pub fn metadata(scene: &ResolvedScene) -> serde_json::Value {
         "objects": scene.objects,
         "materials": scene.materials,
         "lights": scene.lights,
+        "integrator": scene.integrator,
         "files": {"triangles": "triangles.f32", "object_ids": "object_ids.u32"},
     })
 }

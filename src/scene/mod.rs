@@ -68,7 +68,8 @@ pub const KNOWN_FEATURES: &[&str] = &[
     "area_light",
     "global_illumination",
     "two_sided",
-    "backface_culling",
+    "one_sided",
+    "shadowless",
 ];
 
 /// The whole scene file as written by a user.
@@ -92,6 +93,38 @@ pub struct SceneFile {
     /// Lights (used only when the scene requires shading).
     #[serde(default)]
     pub lights: Vec<LightSpec>,
+    /// Monte Carlo settings (used only with `global_illumination`).
+    #[serde(default)]
+    pub integrator: IntegratorSpec,
+}
+
+/// Path-tracing settings every backend follows (docs/radiance.md).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct IntegratorSpec {
+    /// Longest path in vertices, Mitsuba's convention: 1 = emitters seen directly,
+    /// 2 = direct lighting, -1 = unlimited.
+    #[serde(default = "default_max_depth")]
+    pub max_depth: i32,
+    /// Default samples per pixel.
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+}
+
+fn default_max_depth() -> i32 {
+    -1
+}
+fn default_spp() -> u32 {
+    64
+}
+
+impl Default for IntegratorSpec {
+    fn default() -> Self {
+        Self {
+            max_depth: default_max_depth(),
+            spp: default_spp(),
+        }
+    }
 }
 
 /// Pinhole camera as DESIGN.md defines it.
@@ -247,6 +280,77 @@ impl Scene {
     }
 }
 
+/// A shaded scene states both polarities of sidedness and shadowing, so that
+/// "a backend runs a scene only if it models every required feature" is enough
+/// (a renderer that always shadows cannot claim a shadowless scene); and every
+/// light in the file is covered by a required feature.
+fn validate_feature_pairs(
+    path: &Path,
+    s: &SceneFile,
+    requires: &BTreeSet<String>,
+) -> Result<(), SceneError> {
+    let has = |f: &str| requires.contains(f);
+    let shaded = has("lambert") || has("emission") || has("global_illumination");
+    if shaded && has("one_sided") == has("two_sided") {
+        return Err(SceneError::new(
+            path,
+            "requires",
+            "a shaded scene must require exactly one of \"one_sided\" and \"two_sided\"",
+        ));
+    }
+    let lit = has("point_light") || has("directional_light");
+    if lit && has("shadows") == has("shadowless") {
+        return Err(SceneError::new(
+            path,
+            "requires",
+            "a scene with lights must require exactly one of \"shadows\" and \"shadowless\"",
+        ));
+    }
+    if (has("point_light") || has("directional_light") || has("area_light")) && !has("lambert") {
+        return Err(SceneError::new(
+            path,
+            "requires",
+            "lights need a surface model: add \"lambert\"",
+        ));
+    }
+    if has("area_light") && !has("global_illumination") {
+        return Err(SceneError::new(
+            path,
+            "requires",
+            "area lights are rendered by path tracing: add \"global_illumination\"",
+        ));
+    }
+    for (i, l) in s.lights.iter().enumerate() {
+        let need = match l {
+            LightSpec::Point { .. } => "point_light",
+            LightSpec::Directional { .. } => "directional_light",
+        };
+        if !has(need) {
+            return Err(SceneError::new(
+                path,
+                format!("lights[{i}]"),
+                format!("the scene has a {need} but does not require \"{need}\""),
+            ));
+        }
+    }
+    let i = &s.integrator;
+    if i.max_depth == 0 || i.max_depth < -1 {
+        return Err(SceneError::new(
+            path,
+            "integrator.max_depth",
+            format!("must be -1 (unlimited) or >= 1, got {}", i.max_depth),
+        ));
+    }
+    if i.spp == 0 {
+        return Err(SceneError::new(
+            path,
+            "integrator.spp",
+            "must be at least 1",
+        ));
+    }
+    Ok(())
+}
+
 fn finite3(path: &Path, field: &str, v: &[f64; 3]) -> Result<(), SceneError> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -277,6 +381,7 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
         }
         requires.insert(r.clone());
     }
+    validate_feature_pairs(path, s, &requires)?;
     let c = &s.camera;
     finite3(path, "camera.eye", &c.eye)?;
     finite3(path, "camera.look_at", &c.look_at)?;

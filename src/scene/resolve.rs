@@ -61,6 +61,8 @@ pub struct ResolvedScene {
     pub materials: Vec<Material>,
     /// Lights, as written.
     pub lights: Vec<LightSpec>,
+    /// Monte Carlo settings.
+    pub integrator: super::IntegratorSpec,
 }
 
 /// Exact test for a zero-area triangle: all three coordinate-plane projections
@@ -179,6 +181,7 @@ impl ResolvedScene {
             objects,
             materials,
             lights: scene.file.lights.clone(),
+            integrator: scene.file.integrator,
         })
     }
 
@@ -206,6 +209,7 @@ impl ResolvedScene {
                 emission: [0.0; 3],
             }],
             lights: vec![],
+            integrator: super::IntegratorSpec::default(),
         }
     }
 }

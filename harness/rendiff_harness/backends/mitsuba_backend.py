@@ -18,7 +18,52 @@ Conventions and their translation (external-renderers notes, re-verified by the 
 * Normals: `geo_normal` is Mitsuba's face normal normalize((b - a) x (c - a)), in world
   space, not flipped toward the viewer.
 * No culling: ray intersection is two-sided; the `diffuse` BSDF is wrapped in `twosided`
-  anyway so a later shading pass sees both sides alike.
+  anyway (the AOV pass does no shading).
+
+Radiance (docs/radiance.md), rendered in separate passes after the AOV pass
+---------------------------------------------------------------------------
+Shapes: one `mi.Mesh` per material (the objects' materials, `lighting.group_by_material`),
+so that the AOV pass keeps its one global-prim-id mesh while radiance passes carry
+per-material BSDFs and emitters. Unit mapping, exactly as built (`radiance_shapes`,
+`light_dicts`), every value an `rgb` spectrum used as is by the RGB variants:
+
+* albedo rho -> `diffuse` with `reflectance` rho, which evaluates rho/pi * cos (so no
+  conversion). `one_sided`: plain `diffuse` (Mitsuba's diffuse is black seen from the
+  back, exactly the contract's one-sided rule); `two_sided`: wrapped in `twosided`.
+* emission Le -> an `area` emitter with `radiance` Le on the material's mesh. Mitsuba's
+  area emitter is one-sided (front = (b-a)x(c-a), counter-clockwise seen from the
+  front: the contract's front). With `two_sided`, a second mesh of the same triangles,
+  flipped (winding reversed) and moved back along their normals by
+  TWO_SIDED_EMITTER_OFFSET_REL (1e-5) x scene size, carries a second `area` emitter and
+  the same BSDF: from the front a ray meets the original (which emits forward), from
+  the back it meets the copy (which emits backward). The copy cannot coincide exactly:
+  two coincident surfaces at equal t are hit in an arbitrary order, and half the
+  emission would be lost. The offset moves the back side's emission by 1e-5 of the
+  scene: far below Monte Carlo noise, and the AOV pass (depth, IDs) does not see it.
+* point light (I, W/sr) -> `point` with `intensity` I: L = rho/pi I cos/r^2.
+* directional light (E, travelling along dir) -> `directional` with `irradiance` E
+  and `direction` dir normalized: L = rho/pi E max(0, n.(-dir)).
+* Mitsuba always traces shadow rays: `shadows` yes, `shadowless` no.
+
+Integrators:
+
+* Local shading (no `global_illumination`): deterministic, the same pixel-center
+  sensor as the AOV pass (`stratified`, 1 spp, no jitter, box filter). `direct`
+  samples one emitter per sample *at random* when there are several, so each light is
+  rendered in its own pass (`direct`, emitter_samples 1, bsdf_samples 0: a single delta
+  light is then sampled with probability 1) and the passes are summed in float64;
+  directly seen emission comes from one more pass with `path`, max_depth 1 and the area
+  emitters (no light reaches other surfaces from emitters in local shading: the contract
+  has no area lights there). Attributes: rendiff:integrator = "direct", rendiff:spp = 1.
+* `global_illumination`: `path` (max_depth from the scene's integrator.max_depth,
+  Mitsuba's own convention; Russian roulette from depth 5: unbiased), `independent`
+  sampler, box filter (the pixel's box integral), every emitter and light in one scene.
+  N spp are rendered as K = VARIANCE_PASSES (8) independent passes of N/K spp with
+  seeds seed*K + k; R,G,B is the mean of the K pass means and var.R/G/B is their sample
+  variance / K (the variance of that mean, docs/radiance.md). Attributes: rendiff:spp
+  (N actually rendered), rendiff:seed, rendiff:integrator = "path", rendiff:passes = K,
+  rendiff:var_samples = K (the variance is estimated from K values: the statistical
+  comparison uses K - 1 degrees of freedom for it).
 """
 
 from __future__ import annotations
@@ -38,8 +83,18 @@ from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
 
 NAME = "mitsuba"
-FEATURES = frozenset({"depth", "ids"})
-BUFFERS = frozenset({"Z", "id", "N"})
+FEATURES = frozenset(
+    {
+        "depth", "ids",
+        "emission", "lambert", "point_light", "directional_light", "shadows",
+        "area_light", "global_illumination", "two_sided", "one_sided",
+    }
+)
+BUFFERS = frozenset({"Z", "id", "N", "RGB"})
+SHADING_FEATURES = frozenset({"lambert", "emission", "global_illumination"})
+VARIANCE_PASSES = 8
+TWO_SIDED_EMITTER_OFFSET_REL = 1e-5
+DEFAULT_SEED = 0
 
 BACKGROUND_ID = 0xFFFFFFFF
 MAX_TRIANGLES = 1 << 24  # prim_index travels through a float32 film channel
@@ -287,23 +342,213 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
     return buffers, info
 
 
-def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float) -> dict[str, object]:
-    """Render `scene` into `out_exr` (Z, id.prim, id.object, N); returns settings and timings.
+# --------------------------------------------------------------------------- radiance
 
-    In-process (the caller enforces `timeout_s`); `workdir` is unused.
+
+def is_shaded(scene: ResolvedScene) -> bool:
+    return bool(scene.requires & SHADING_FEATURES)
+
+
+def _rgb(value: np.ndarray) -> dict[str, Any]:
+    return {"type": "rgb", "value": [float(v) for v in value]}
+
+
+def _bsdf(mi: ModuleType, albedo: np.ndarray, two_sided: bool) -> Any:
+    diffuse = {"type": "diffuse", "reflectance": _rgb(albedo)}
+    return mi.load_dict({"type": "twosided", "bsdf": diffuse} if two_sided else diffuse)
+
+
+def _tri_mesh(mi: ModuleType, name: str, tris: np.ndarray, bsdf: Any, emitter: Any | None) -> Any:
+    n = int(tris.shape[0])
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    if emitter is not None:
+        props["emitter"] = emitter
+    mesh = mi.Mesh(name, 3 * n, n, props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = _to_buffer(
+        params["vertex_positions"], np.ascontiguousarray(tris, dtype=np.float32).ravel()
+    )
+    params["faces"] = _to_buffer(params["faces"], np.arange(3 * n, dtype=np.uint32))
+    params.update()
+    return mesh
+
+
+def radiance_shapes(mi: ModuleType, scene: ResolvedScene, emitters: bool) -> dict[str, Any]:
+    """Per-material meshes (keys sorted = material order), plus flipped emitter copies when two-sided."""
+    from .. import lighting
+
+    two_sided = "two_sided" in scene.requires
+    albedo, emission = scene.material_arrays()
+    emit = emitters and "emission" in scene.requires
+    offset = TWO_SIDED_EMITTER_OFFSET_REL * lighting.scene_size(scene)
+    normals = lighting.face_normals(scene.triangles)
+    shapes: dict[str, Any] = {}
+    for m, prims in lighting.group_by_material(scene):
+        tris = scene.triangles[prims]
+        le = emission[m]
+        glows = emit and bool(np.any(le > 0))
+        emitter = mi.load_dict({"type": "area", "radiance": _rgb(le)}) if glows else None
+        shapes[f"mat{m:07d}"] = _tri_mesh(mi, f"mat{m}", tris, _bsdf(mi, albedo[m], two_sided), emitter)
+        if glows and two_sided:
+            keep = np.any(normals[prims] != 0, axis=1)  # degenerate triangles emit nothing anyway
+            back = tris[keep][:, [0, 2, 1]].astype(np.float64) - offset * normals[prims][keep][:, None, :]
+            if back.shape[0]:
+                shapes[f"mat{m:07d}back"] = _tri_mesh(
+                    mi,
+                    f"mat{m}back",
+                    back.astype(np.float32),
+                    _bsdf(mi, albedo[m], True),
+                    mi.load_dict({"type": "area", "radiance": _rgb(le)}),
+                )
+    return shapes
+
+
+def light_dicts(scene: ResolvedScene) -> list[dict[str, Any]]:
+    """Mitsuba emitter dicts of the scene's point and directional lights, in scene order."""
+    from .. import lighting
+
+    points, dirs = lighting.lights_of(scene)
+    out: list[dict[str, Any]] = []
+    for pos, intensity in points:
+        out.append({"type": "point", "position": [float(v) for v in pos], "intensity": _rgb(intensity)})
+    for direction, irradiance in dirs:
+        out.append(
+            {"type": "directional", "direction": [float(v) for v in direction], "irradiance": _rgb(irradiance)}
+        )
+    return out
+
+
+def _radiance_scene(
+    mi: ModuleType,
+    scene: ResolvedScene,
+    near: float,
+    far: float,
+    integrator: dict[str, Any],
+    sampler: dict[str, Any],
+    shapes: dict[str, Any],
+    lights: list[dict[str, Any]],
+) -> Any:
+    sensor = sensor_dict(mi, scene.camera, near, far)
+    sensor["sampler"] = sampler
+    desc: dict[str, Any] = {"type": "scene", "integrator": integrator, "sensor": sensor}
+    desc.update(shapes)
+    for i, light in enumerate(lights):
+        desc[f"light{i:07d}"] = light
+    try:
+        return mi.load_dict(desc)
+    except Exception as exc:  # noqa: BLE001
+        raise BackendError(f"mitsuba rejected the radiance scene: {type(exc).__name__}: {exc}") from None
+
+
+def _render_rgb(mi: ModuleType, mi_scene: Any, spp: int, seed: int) -> np.ndarray:
+    try:
+        image = np.array(mi.render(mi_scene, spp=spp, seed=seed), dtype=np.float64)
+    except Exception as exc:  # noqa: BLE001
+        raise BackendError(f"mitsuba failed to render radiance: {type(exc).__name__}: {exc}") from None
+    return image[:, :, :3]
+
+
+def render_radiance(
+    scene: ResolvedScene, spp: int | None = None, seed: int | None = None, passes: int = VARIANCE_PASSES
+) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
+    """(RGB (H, W, 3) float64, variance of the mean or None, info) as the module docstring says."""
+    mi = _import_mitsuba()
+    near, far = clip_range(scene)
+    t0 = time.perf_counter()
+    info: dict[str, Any] = {}
+    if "global_illumination" in scene.requires:
+        n_req = int(spp) if spp is not None else scene.spp
+        if n_req < 2:
+            raise BackendError(f"mitsuba path tracing needs at least 2 spp to estimate a variance, got {n_req}")
+        k = max(2, min(int(passes), n_req))
+        per = -(-n_req // k)  # ceil: never fewer samples than asked
+        base_seed = DEFAULT_SEED if seed is None else int(seed)
+        integ = {"type": "path", "max_depth": int(scene.max_depth), "hide_emitters": False}
+        mi_scene = _radiance_scene(
+            mi, scene, near, far, integ, {"type": "independent", "sample_count": per},
+            radiance_shapes(mi, scene, emitters=True), light_dicts(scene),
+        )
+        t1 = time.perf_counter()
+        seeds = [(base_seed * k + i) % 2**32 for i in range(k)]
+        means = np.stack([_render_rgb(mi, mi_scene, per, sd) for sd in seeds])
+        rgb = means.mean(axis=0)
+        var = means.var(axis=0, ddof=1) / k
+        info.update(
+            integrator="path", spp=per * k, spp_requested=n_req, passes=k, spp_per_pass=per, seed=base_seed,
+            pass_seeds=seeds, max_depth=int(scene.max_depth), sampler="independent", rfilter="box",
+            var_samples=k,
+        )
+        info["timings_s"] = {"build": t1 - t0, "render": time.perf_counter() - t1}
+        return rgb, var, info
+    # Local shading: deterministic pixel centers; one pass per light + one for emission.
+    sampler = {"type": "stratified", "sample_count": 1, "jitter": False}
+    rgb = np.zeros((scene.camera.height, scene.camera.width, 3))
+    n_passes = 0
+    shapes_plain = None
+    if "lambert" in scene.requires:
+        for light in light_dicts(scene):
+            if shapes_plain is None:
+                shapes_plain = radiance_shapes(mi, scene, emitters=False)
+            integ = {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0, "hide_emitters": False}
+            rgb += _render_rgb(mi, _radiance_scene(mi, scene, near, far, integ, sampler, shapes_plain, [light]), 1, 0)
+            n_passes += 1
+    if "emission" in scene.requires:
+        _, emission = scene.material_arrays()
+        if np.any(emission > 0):
+            integ = {"type": "path", "max_depth": 1, "hide_emitters": False}
+            shapes = radiance_shapes(mi, scene, emitters=True)
+            rgb += _render_rgb(mi, _radiance_scene(mi, scene, near, far, integ, sampler, shapes, []), 1, 0)
+            n_passes += 1
+    info.update(
+        integrator="direct", spp=1, passes=n_passes,
+        sampler="stratified, 1 spp, no jitter (pixel centers)", rfilter="box",
+        pass_kinds="one `direct` pass per light (emitter_samples 1, bsdf_samples 0) + one `path` max_depth 1 pass for emission",
+    )
+    info["timings_s"] = {"render": time.perf_counter() - t0}
+    return rgb, None, info
+
+
+def render(
+    scene: ResolvedScene,
+    out_exr: Path,
+    workdir: Path,
+    timeout_s: float,
+    *,
+    spp: int | None = None,
+    seed: int | None = None,
+) -> dict[str, object]:
+    """Render `scene` into `out_exr` (Z, id.prim, id.object, N; R,G,B [+ var.*] when shaded).
+
+    In-process (the caller enforces `timeout_s`); `workdir` is unused. `spp` / `seed`
+    matter only for `global_illumination` (default: the scene's integrator.spp, seed 0).
     """
     from .. import exrbuf
 
     buffers, info = render_arrays(scene)
-    t0 = time.perf_counter()
     attrs: dict[str, str | float | int] = {
         "backend": NAME,
         "variant": str(info["variant"]),
         "near_clip": float(info["near_clip"]),
         "far_clip": float(info["far_clip"]),
     }
+    rgb = var = None
+    if is_shaded(scene):
+        rgb, var, rinfo = render_radiance(scene, spp=spp, seed=seed)
+        rgb = rgb.astype(np.float32)
+        var = None if var is None else var.astype(np.float32)
+        info["radiance"] = rinfo
+        attrs["integrator"] = str(rinfo["integrator"])
+        attrs["spp"] = int(rinfo["spp"])
+        attrs["rgb_encoding"] = "float32"
+        if var is not None:
+            attrs["seed"] = int(rinfo["seed"]) if int(rinfo["seed"]) < 2**31 else str(rinfo["seed"])
+            attrs["passes"] = int(rinfo["passes"])
+            attrs["var_samples"] = int(rinfo["var_samples"])
+    t0 = time.perf_counter()
     exrbuf.write_buffers(
-        out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], N=buffers["N"], attrs=attrs
+        out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], N=buffers["N"], RGB=rgb, var=var,
+        attrs=attrs,
     )
     info["timings_s"]["write"] = time.perf_counter() - t0
     return info

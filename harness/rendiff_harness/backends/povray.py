@@ -19,8 +19,45 @@ Everything here follows /work/shared/notes/external-renderers.md ("POV-Ray 3.7")
   final hits instead would show background where the reference shows the next
   surface.)
 
-Passes are table-driven (`_PASSES`), so a lit radiance pass can be added as one
-more entry (SDL builder + decoder) without touching the runner.
+Passes are table-driven (`_PASSES`) for IDs and depth; shaded scenes add the
+radiance passes below.
+
+Radiance (docs/radiance.md; notes "POV-Ray 3.7 / Radiance", re-measured by the tests)
+--------------------------------------------------------------------------------------
+Unit mapping, exactly as emitted:
+
+* `global_settings { assumed_gamma 1.0 ambient_light 0 }`, every material
+  `finish { ambient 0 emission 0 diffuse 1 specular 0 phong 0 brilliance 1 reflection 0 }`
+  and `pigment { rgb albedo }`. POV-Ray then computes
+  L = pigment * light colour * diffuse * |cos| * attenuation, with **no 1/pi**, and with
+  the normal turned toward the viewer (two-sided only: no `one_sided`).
+* Point light (I, W/sr): `light_source { p, rgb I/(pi * 2 fd^2 * S) fade_distance fd
+  fade_power 2 }`. POV-Ray's attenuation is 2/(1 + (d/fd)^2), so the colour times it is
+  I/(pi S) * 1/(d^2 + fd^2): I/(pi S d^2) to a relative error (fd/d)^2. fd is chosen
+  per scene as FADE_REL (1e-4) times the smallest distance from the light to any visible
+  hit point, so that error is <= 1e-8.
+* Directional light (E, W/m^2, travelling along dir): `light_source { c - R dir,
+  rgb E/(pi S) parallel point_at c }` with c the scene's bounding-box center and R two
+  scene sizes (a parallel light still casts shadows only from objects in front of its
+  location, so it is placed outside the scene). No fade.
+* `shadowless` on every light when the scene requires `shadowless`; else POV-Ray's
+  own shadow rays (which ignore occluders within its own small tolerance of the
+  surface: contact shadows may differ on a line of pixels; the comparison classifies
+  those as shadow edges).
+* Emission (Le): a separate pass with `pigment { rgb Le/S_e } finish { ambient 0
+  emission 1 diffuse 0 }` and no lights (POV-Ray's `emission` multiplies the pigment,
+  which in the lit pass must be the albedo; a separate pass keeps both exact, albedo 0
+  included). POV-Ray emits on both sides, as `two_sided` asks.
+* Exposure: both passes write 16-bit PNG with File_Gamma=1.0, which is exact: code k
+  reads back as k/65535. L = S * k/65535 (lit) + S_e * k_e/65535 (emission), in float64.
+  S (S_e) is the largest value of `lighting.upper_bound` (shadowless, |cos|, at the hit
+  points of this backend's own ID and depth passes) times EXPOSURE_MARGIN (1+2^-6), so
+  nothing clips and the quantization step S/65535 is as small as the image allows. A
+  pass whose hit pixels reach code 65535 anyway (a bound that failed) is rendered again
+  with 4x the scale (at most 3 times; recorded in info). The EXR attributes carry
+  `rgb_scale`, `emission_scale` and `rgb_encoding = "png16-linear"`; the comparison's
+  tolerance is (S + S_e)/65535/2 absolute (half a code of each pass) plus a relative
+  term for POV-Ray's float32 colour arithmetic (tolerance.py).
 """
 
 from __future__ import annotations
@@ -45,8 +82,21 @@ from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
 
 NAME = "povray"
-FEATURES: frozenset[str] = frozenset({"depth", "ids"})
-BUFFERS: frozenset[str] = frozenset({"Z", "id"})
+FEATURES: frozenset[str] = frozenset(
+    {
+        "depth", "ids",
+        "emission", "lambert", "point_light", "directional_light",
+        "shadows", "shadowless", "two_sided",
+    }
+)
+BUFFERS: frozenset[str] = frozenset({"Z", "id", "RGB"})
+SHADING_FEATURES = frozenset({"lambert", "emission"})
+EXPOSURE_MARGIN = 1.0 + 2.0**-6
+"""Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""
+FADE_REL = 1e-4
+"""fade_distance = FADE_REL * (smallest light-to-hit distance): relative 1/d^2 error <= FADE_REL^2."""
+MAX_RESCALES = 3
+PNG16_MAX = 65535
 
 BINARY = "povray"
 THREADS = 2
@@ -374,6 +424,99 @@ def decode_depth(png: np.ndarray, r: float) -> np.ndarray:
     return r * (hi + lo / 65535.0) / 65536.0
 
 
+# --------------------------------------------------------------------------- radiance passes
+
+_LIT_FINISH = "finish { ambient 0 emission 0 diffuse 1 specular 0 phong 0 brilliance 1 reflection 0 }"
+_EMIT_FINISH = "finish { ambient 0 emission 1 diffuse 0 specular 0 phong 0 reflection 0 }"
+_RADIANCE_PRELUDE = (
+    "#version 3.7;\n"
+    "global_settings { assumed_gamma 1.0 ambient_light 0 max_trace_level 1 }\n"
+    "background { rgb 0 }\n"
+)
+
+
+def is_shaded(scene: ResolvedScene) -> bool:
+    return bool(scene.requires & SHADING_FEATURES)
+
+
+def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, finish: str) -> str:
+    """mesh2 with one texture per material (colours (M, 3), already scaled) and faces tagged by material."""
+    mats = scene.prim_materials()
+    textures = [f"texture{{pigment{{rgb{_vec(c)}}}{finish}}}" for c in colours]
+    faces = [f"<{a},{b},{c}>,{int(m)}" for (a, b, c), m in zip(mesh.faces.tolist(), mats.tolist())]
+    return (
+        "mesh2 {\n"
+        + mesh.vertex_block
+        + f"texture_list {{ {len(textures)},\n"
+        + ",\n".join(textures)
+        + "\n}\n"
+        + f"face_indices {{ {len(faces)},\n"
+        + ",\n".join(faces)
+        + "\n}\n"
+        + clip_sdl(scene.camera)
+        + "}\n"
+    )
+
+
+def fade_distance(scene: ResolvedScene, position: np.ndarray, points: np.ndarray) -> float:
+    """FADE_REL x the smallest distance from `position` to the visible hit points (> 0)."""
+    from .. import lighting
+
+    if points.size:
+        dmin = float(np.sqrt(((points - position[None, :]) ** 2).sum(axis=1)).min())
+    else:
+        dmin = 0.0
+    if not dmin > 0.0:
+        dmin = lighting.scene_size(scene)
+    return FADE_REL * dmin
+
+
+def lights_sdl(scene: ResolvedScene, scale: float, hit_points: np.ndarray) -> tuple[str, list[dict[str, float]]]:
+    """light_source blocks for the lit pass (see the module docstring), and their fade distances."""
+    from .. import lighting
+
+    shadowless = " shadowless" if "shadowless" in scene.requires else ""
+    points, dirs = lighting.lights_of(scene)
+    parts: list[str] = []
+    fades: list[dict[str, float]] = []
+    for pos, intensity in points:
+        fd = fade_distance(scene, pos, hit_points)
+        colour = intensity / (math.pi * 2.0 * fd * fd * scale)
+        parts.append(
+            f"light_source {{ {_vec(pos)}, rgb {_vec(colour)} fade_distance {_num(fd)} fade_power 2{shadowless} }}"
+        )
+        fades.append({"fade_distance": fd})
+    if dirs:
+        verts = scene.triangles.reshape(-1, 3).astype(np.float64)
+        center = 0.5 * (verts.max(axis=0) + verts.min(axis=0)) if verts.size else np.zeros(3)
+        reach = 2.0 * lighting.scene_size(scene) + 1.0
+        for direction, irradiance in dirs:
+            colour = irradiance / (math.pi * scale)
+            loc = center - reach * direction
+            parts.append(
+                f"light_source {{ {_vec(loc)}, rgb {_vec(colour)} parallel point_at {_vec(center)}{shadowless} }}"
+            )
+    return "\n".join(parts) + "\n", fades
+
+
+def lit_sdl(scene: ResolvedScene, mesh: MeshSdl, scale: float, hit_points: np.ndarray) -> tuple[str, list[dict[str, float]]]:
+    albedo, _ = scene.material_arrays()
+    lights, fades = lights_sdl(scene, scale, hit_points)
+    sdl = _RADIANCE_PRELUDE + camera_sdl(scene.camera) + lights + _material_mesh(scene, mesh, albedo, _LIT_FINISH)
+    return sdl, fades
+
+
+def emission_sdl(scene: ResolvedScene, mesh: MeshSdl, scale: float) -> str:
+    _, emission = scene.material_arrays()
+    return _RADIANCE_PRELUDE + camera_sdl(scene.camera) + _material_mesh(scene, mesh, emission / scale, _EMIT_FINISH)
+
+
+def exposure(bound: np.ndarray) -> float:
+    """Scale S for a pass whose values are bounded by `bound` (0 when the pass is all black)."""
+    m = float(np.max(bound, initial=0.0))
+    return m * EXPOSURE_MARGIN if m > 0.0 and math.isfinite(m) else 0.0
+
+
 @dataclass(frozen=True)
 class _Pass:
     """One POV-Ray run: how to write its SDL, and the PNG it leaves for decoding."""
@@ -405,7 +548,8 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
     if n == 0:
         prim = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
         z = np.full((h, w), np.inf, dtype=np.float32)
-        exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=prim, attrs={"backend": NAME})
+        rgb = np.zeros((h, w, 3), dtype=np.float32) if is_shaded(scene) else None
+        exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=prim, RGB=rgb, attrs={"backend": NAME})
         info["note"] = "empty scene: POV-Ray not run"
         return info
 
@@ -437,12 +581,77 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
     z = np.where(hit, depth, np.inf).astype(np.float32)
     obj = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
     obj[hit] = scene.object_ids[prim[hit]]
-    exrbuf.write_buffers(
-        out_exr,
-        Z=z,
-        prim=prim,
-        obj=obj,
-        attrs={"backend": NAME, "version": version(), "depth_range": r, "depth_step": depth_step(r)},
-    )
+    attrs: dict[str, str | float | int] = {
+        "backend": NAME, "version": version(), "depth_range": r, "depth_step": depth_step(r),
+    }
+    rgb = None
+    if is_shaded(scene):
+        rgb, shade_info = _radiance(binary, scratch, scene, mesh, prim, np.where(hit, depth, np.inf), deadline, timeout_s)
+        info["radiance"] = shade_info
+        passes.update(shade_info.pop("passes"))
+        attrs.update(
+            rgb_scale=float(shade_info["rgb_scale"]),
+            emission_scale=float(shade_info["emission_scale"]),
+            rgb_encoding="png16-linear",
+            integrator="direct",
+            spp=1,
+        )
+    exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=obj, RGB=rgb, attrs=attrs)
     shutil.rmtree(scratch, ignore_errors=True)
     return info
+
+
+def _radiance(
+    binary: str,
+    scratch: Path,
+    scene: ResolvedScene,
+    mesh: MeshSdl,
+    prim: np.ndarray,
+    z: np.ndarray,
+    deadline: float,
+    timeout_s: float,
+) -> tuple[np.ndarray, dict[str, object]]:
+    """Lit and emission passes -> (H, W, 3) float32 radiance and what was done."""
+    from .. import lighting
+
+    cam = scene.camera
+    h, w = cam.height, cam.width
+    hit = prim != exrbuf.BACKGROUND_ID
+    points = lighting.hit_points(scene, z)[hit]
+    rgb = np.zeros((h, w, 3))
+    passes: dict[str, dict[str, float]] = {}
+    info: dict[str, object] = {"rgb_scale": 0.0, "emission_scale": 0.0, "rescaled": 0}
+    plans: list[tuple[str, float]] = []
+    if "lambert" in scene.requires and scene.lights:
+        plans.append(("lit", exposure(lighting.upper_bound(scene, prim, z, emission=False))))
+    if "emission" in scene.requires:
+        plans.append(("emission", exposure(lighting.upper_bound(scene, prim, z, lights=False))))
+    for stem, scale in plans:
+        if scale == 0.0:
+            continue  # every visible value is exactly 0: nothing to render
+        for attempt in range(MAX_RESCALES + 1):
+            t_sdl = time.monotonic()
+            if stem == "lit":
+                sdl, fades = lit_sdl(scene, mesh, scale, points)
+                info["fade"] = fades
+            else:
+                sdl = emission_sdl(scene, mesh, scale)
+            sdl_s = time.monotonic() - t_sdl
+            run_s = _run(binary, scratch, cam, stem, sdl, deadline, timeout_s)
+            png = read_png16(scratch / f"{stem}.png", w, h)
+            passes[stem] = {"sdl_s": sdl_s, "povray_s": run_s, "sdl_bytes": float(len(sdl)), "scale": scale}
+            if not np.any(png[hit] == PNG16_MAX):
+                break
+            if attempt == MAX_RESCALES:
+                raise BackendError(
+                    f"{NAME}: {stem} pass still clips at scale {scale:.6g} after {MAX_RESCALES} rescales "
+                    "(the exposure bound is wrong: a bug)"
+                )
+            scale *= 4.0
+            info["rescaled"] = int(info["rescaled"]) + 1  # type: ignore[call-overload]
+        rgb += png.astype(np.float64) * (scale / PNG16_MAX)
+        info["rgb_scale" if stem == "lit" else "emission_scale"] = scale
+    info["passes"] = passes
+    info["quantization_step"] = (float(info["rgb_scale"]) + float(info["emission_scale"])) / PNG16_MAX  # type: ignore[arg-type]
+    rgb[~hit] = 0.0
+    return rgb.astype(np.float32), info

@@ -1,0 +1,392 @@
+//! The report's pictures of one scene, written as PNG files beside its pages:
+//! every backend's radiance (when its EXR has R,G,B), depth on one color scale
+//! shared by all backends of the scene (so colors compare across images), IDs
+//! in false color, and the diff maps. The harness's diff maps (ID mismatches
+//! colored edge vs interior, depth-error heat) are copied so the report folder
+//! stands alone; where the harness wrote none, simpler ones are drawn here.
+//! A broken or missing EXR becomes a note on the page, never a failed report.
+
+use super::data::{page_stem, run_relative, SceneData};
+use super::stats::{object_mismatches, Histogram, ObjectMismatches};
+use crate::exr_io::{read_buffers, Buffers};
+use crate::frame::BACKGROUND_ID;
+use crate::preview::id_color;
+use anyhow::{Context, Result};
+use std::path::Path;
+
+/// What a picture shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Linear R,G,B, clamped to [0, 1] and sRGB-encoded.
+    Radiance,
+    /// Planar depth through viridis on the scene's shared range.
+    Depth,
+    /// id.prim in false color.
+    Ids,
+    /// ID mismatches against the reference (edge vs interior when the harness classified them).
+    IdDiff,
+    /// |ΔZ| heat map against the reference.
+    DepthDiff,
+    /// Any other diff image the comparison listed for an entry.
+    OtherDiff,
+}
+
+impl Kind {
+    /// Short label used in captions and the flip menus.
+    pub fn label(self) -> &'static str {
+        match self {
+            Kind::Radiance => "radiance",
+            Kind::Depth => "depth",
+            Kind::Ids => "ids",
+            Kind::IdDiff => "id diff",
+            Kind::DepthDiff => "Z diff",
+            Kind::OtherDiff => "diff",
+        }
+    }
+
+    /// True for comparisons against the reference.
+    pub fn is_diff(self) -> bool {
+        matches!(self, Kind::IdDiff | Kind::DepthDiff | Kind::OtherDiff)
+    }
+}
+
+/// One picture in the report folder.
+#[derive(Debug, Clone)]
+pub struct Picture {
+    /// Backend it belongs to.
+    pub backend: String,
+    /// What it shows.
+    pub kind: Kind,
+    /// Path relative to the report folder (safe characters only).
+    pub file: String,
+    /// Caption text (plain, escaped by the page).
+    pub caption: String,
+}
+
+/// Everything drawn or measured for one scene.
+#[derive(Debug, Clone, Default)]
+pub struct SceneImages {
+    /// Pictures in backend order, then kind order.
+    pub pictures: Vec<Picture>,
+    /// The shared depth range (lo, hi) and where it came from.
+    pub depth_range: Option<(f32, f32, String)>,
+    /// Pixels clamped to the shared range, per backend (only nonzero ones).
+    pub clamped: Vec<(String, u64)>,
+    /// Depth error histogram per non-reference backend with Z.
+    pub histograms: Vec<(String, Histogram)>,
+    /// ID mismatches per object, per non-reference backend with IDs.
+    pub objects: Vec<(String, ObjectMismatches)>,
+    /// Problems met while drawing (unreadable EXRs, size mismatches...).
+    pub notes: Vec<String>,
+}
+
+struct Loaded {
+    backend: String,
+    buffers: Buffers,
+    rgb: Option<Vec<[f32; 3]>>,
+}
+
+/// Reads R,G,B from an EXR if it has all three (radiance is optional per scene).
+pub fn read_rgb(path: &Path) -> Result<Option<Vec<[f32; 3]>>> {
+    use exr::prelude::*;
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
+    let has = |n: &str| {
+        meta.headers
+            .first()
+            .is_some_and(|h| h.channels.list.iter().any(|c| c.name.to_string() == n))
+    };
+    if !(has("R") && has("G") && has("B")) {
+        return Ok(None);
+    }
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .with_context(|| format!("{}: cannot read R,G,B", path.display()))?;
+    let layer = &image.layer_data;
+    let n = layer.size.width() * layer.size.height();
+    let mut out = vec![[0f32; 3]; n];
+    for ch in &layer.channel_data.list {
+        let k = match ch.name.to_string().as_str() {
+            "R" => 0,
+            "G" => 1,
+            "B" => 2,
+            _ => continue,
+        };
+        let vals: Vec<f32> = match &ch.sample_data {
+            FlatSamples::F32(v) => v.clone(),
+            FlatSamples::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
+            FlatSamples::U32(v) => v.iter().map(|&x| x as f32).collect(),
+        };
+        for (o, v) in out.iter_mut().zip(vals) {
+            o[k] = v;
+        }
+    }
+    Ok(Some(out))
+}
+
+fn save_png(path: &Path, w: usize, h: usize, px: &[[u8; 3]]) -> Result<()> {
+    let buf: Vec<u8> = px.iter().flatten().copied().collect();
+    let img = image::RgbImage::from_raw(w as u32, h as u32, buf).context("image size")?;
+    img.save_with_format(path, image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot write PNG", path.display()))
+}
+
+fn srgb(v: f32) -> u8 {
+    let v = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+    let e = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (e * 255.0).round() as u8
+}
+
+fn finite_range(z: &[f32]) -> Option<(f32, f32)> {
+    let mut it = z.iter().copied().filter(|v| v.is_finite());
+    let first = it.next()?;
+    Some(it.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v))))
+}
+
+/// Depth colors on a fixed range; returns the colors and how many pixels were clamped.
+pub fn depth_colors(z: &[f32], lo: f32, hi: f32) -> (Vec<[u8; 3]>, u64) {
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut clamped = 0;
+    let px = z
+        .iter()
+        .map(|&v| {
+            if !v.is_finite() {
+                return [0, 0, 0];
+            }
+            if v < lo || v > hi {
+                clamped += 1;
+            }
+            let t = f64::from(((v - lo) / span).clamp(0.0, 1.0));
+            let c = colorous::VIRIDIS.eval_continuous(t);
+            [c.r, c.g, c.b]
+        })
+        .collect();
+    (px, clamped)
+}
+
+/// Fallback ID map when the harness wrote none: no edge/interior classes, just where IDs differ.
+fn id_diff_colors(r: &[u32], t: &[u32]) -> Vec<[u8; 3]> {
+    r.iter()
+        .zip(t)
+        .map(|(&a, &b)| match (a == b, a == BACKGROUND_ID) {
+            (true, true) => [0, 0, 0],
+            (true, false) => [56, 56, 56],
+            (false, _) => [255, 48, 48],
+        })
+        .collect()
+}
+
+/// Fallback |ΔZ| map (same look as the harness's): inferno scaled by the largest
+/// error, cyan where only one side hits, black where neither does.
+fn depth_diff_colors(r: &[f32], t: &[f32]) -> Vec<[u8; 3]> {
+    let max = r
+        .iter()
+        .zip(t)
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .map(|(a, b)| (f64::from(*a) - f64::from(*b)).abs())
+        .fold(0.0, f64::max);
+    let s = if max > 0.0 { max } else { 1.0 };
+    r.iter()
+        .zip(t)
+        .map(|(&a, &b)| match (a.is_finite(), b.is_finite()) {
+            (false, false) => [0, 0, 0],
+            (true, true) => {
+                let c = colorous::INFERNO
+                    .eval_continuous(((f64::from(a) - f64::from(b)).abs() / s).clamp(0.0, 1.0));
+                [c.r, c.g, c.b]
+            }
+            _ => [0, 255, 255],
+        })
+        .collect()
+}
+
+/// Draws and measures everything for one scene into `report_dir/img/<page>/`.
+pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) -> SceneImages {
+    let mut out = SceneImages::default();
+    let rel_dir = format!("img/{}", scene.page);
+    let dir = report_dir.join(&rel_dir);
+    if let Err(e) = std::fs::create_dir_all(&dir) {
+        out.notes.push(format!("{}: cannot create: {e}", dir.display()));
+        return out;
+    }
+    let mut loaded: Vec<Loaded> = Vec::new();
+    for backend in scene.backends() {
+        let Some(rec) = scene.render(&backend) else {
+            continue;
+        };
+        if rec.status != "ok" || rec.exr.is_empty() {
+            continue;
+        }
+        let Some(path) = run_relative(run, &rec.exr) else {
+            out.notes.push(format!(
+                "{backend}: buffer path {:?} leaves the run folder; not shown",
+                rec.exr
+            ));
+            continue;
+        };
+        match read_buffers(&path) {
+            Err(e) => out.notes.push(format!("{backend}: {e:#}")),
+            Ok(buffers) => {
+                let rgb = read_rgb(&path).unwrap_or_else(|e| {
+                    out.notes.push(format!("{backend}: {e:#}"));
+                    None
+                });
+                loaded.push(Loaded {
+                    backend,
+                    buffers,
+                    rgb,
+                });
+            }
+        }
+    }
+    let reference_buf = loaded
+        .iter()
+        .find(|l| l.backend == reference)
+        .map(|l| &l.buffers);
+    // One depth scale for the scene: the reference's range (so one wild backend
+    // cannot flatten everyone else's colors), else the union of all.
+    let range = reference_buf
+        .and_then(|b| b.z.as_deref())
+        .and_then(finite_range)
+        .map(|(lo, hi)| (lo, hi, format!("the reference ({reference})")))
+        .or_else(|| {
+            loaded
+                .iter()
+                .filter_map(|l| l.buffers.z.as_deref().and_then(finite_range))
+                .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
+                .map(|(lo, hi)| (lo, hi, "all backends".to_string()))
+        });
+    out.depth_range = range.clone();
+    let mut add = |out: &mut SceneImages, backend: &str, kind: Kind, name: &str, caption: String, px: Option<&[[u8; 3]]>, size: (usize, usize)| {
+        let file = format!("{rel_dir}/{}.{name}.png", page_stem(backend));
+        if let Some(px) = px {
+            if let Err(e) = save_png(&report_dir.join(&file), size.0, size.1, px) {
+                out.notes.push(format!("{backend}: {e:#}"));
+                return;
+            }
+        }
+        out.pictures.push(Picture {
+            backend: backend.to_string(),
+            kind,
+            file,
+            caption,
+        });
+    };
+    for l in &loaded {
+        let b = &l.buffers;
+        let size = (b.width, b.height);
+        if let Some(rgb) = &l.rgb {
+            let px: Vec<[u8; 3]> = rgb.iter().map(|c| [srgb(c[0]), srgb(c[1]), srgb(c[2])]).collect();
+            add(&mut out, &l.backend, Kind::Radiance, "radiance", format!("{} radiance", l.backend), Some(&px), size);
+        }
+        if let (Some(z), Some((lo, hi, _))) = (&b.z, &range) {
+            let (px, clamped) = depth_colors(z, *lo, *hi);
+            if clamped > 0 {
+                out.clamped.push((l.backend.clone(), clamped));
+            }
+            add(&mut out, &l.backend, Kind::Depth, "depth", format!("{} depth", l.backend), Some(&px), size);
+        }
+        if let Some(p) = &b.prim {
+            let px: Vec<[u8; 3]> = p.iter().map(|&id| id_color(id)).collect();
+            add(&mut out, &l.backend, Kind::Ids, "ids", format!("{} ids", l.backend), Some(&px), size);
+        }
+        if l.backend == reference {
+            continue;
+        }
+        let Some(r) = reference_buf else { continue };
+        if (r.width, r.height) != size {
+            out.notes.push(format!(
+                "{}: {}x{} px, the reference is {}x{}: not diffed here",
+                l.backend, b.width, b.height, r.width, r.height
+            ));
+            continue;
+        }
+        // Diff images the comparison wrote, copied; fallbacks for id and Z.
+        let mut have = (false, false);
+        for e in scene.results.iter().filter(|e| e.backend == l.backend) {
+            let Some(imgs) = e.details.get("images").and_then(|v| v.as_object()) else {
+                continue;
+            };
+            for (key, v) in imgs {
+                let Some(src) = v.as_str().and_then(|s| run_relative(run, s)) else {
+                    continue;
+                };
+                let kind = match (e.buffer.as_str(), key.as_str()) {
+                    ("id", "heat") => Kind::IdDiff,
+                    ("Z", "heat") => Kind::DepthDiff,
+                    _ => Kind::OtherDiff,
+                };
+                let name = format!("{}.{}.diff", page_stem(&e.buffer), page_stem(key));
+                let file = format!("{rel_dir}/{}.{name}.png", page_stem(&l.backend));
+                match std::fs::copy(&src, report_dir.join(&file)) {
+                    Err(err) => out.notes.push(format!(
+                        "{}: diff image {} not copied: {err}",
+                        l.backend,
+                        src.display()
+                    )),
+                    Ok(_) => {
+                        have.0 |= kind == Kind::IdDiff;
+                        have.1 |= kind == Kind::DepthDiff;
+                        let caption = match kind {
+                            Kind::IdDiff => format!("{} id mismatches", l.backend),
+                            Kind::DepthDiff => format!("{} |ΔZ|", l.backend),
+                            _ => format!("{} {} {}", l.backend, e.buffer, key),
+                        };
+                        add(&mut out, &l.backend, kind, &name, caption, None, size);
+                    }
+                }
+            }
+        }
+        if let (false, Some(rp), Some(tp)) = (have.0, &r.prim, &b.prim) {
+            let px = id_diff_colors(rp, tp);
+            add(&mut out, &l.backend, Kind::IdDiff, "id.unclassified.diff", format!("{} id mismatches (unclassified)", l.backend), Some(&px), size);
+        }
+        if let (false, Some(rz), Some(tz)) = (have.1, &r.z, &b.z) {
+            let px = depth_diff_colors(rz, tz);
+            add(&mut out, &l.backend, Kind::DepthDiff, "Z.own.diff", format!("{} |ΔZ|", l.backend), Some(&px), size);
+        }
+        if let (Some(rz), Some(tz)) = (&r.z, &b.z) {
+            out.histograms.push((l.backend.clone(), Histogram::of_depth(rz, tz)));
+        }
+        if let (Some(rp), Some(tp)) = (&r.prim, &b.prim) {
+            let objects = scene.resolved.as_ref().map_or(0, |s| s.objects.len());
+            out.objects.push((
+                l.backend.clone(),
+                object_mismatches(rp, r.object.as_deref(), tp, b.object.as_deref(), objects),
+            ));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_colors_share_a_range_and_count_clamps() {
+        let (px, clamped) = depth_colors(&[1.0, 2.0, 3.0, f32::INFINITY], 1.0, 2.0);
+        assert_eq!(clamped, 1);
+        assert_eq!(px[1], px[2], "above the range clamps to the top color");
+        assert_eq!(px[3], [0, 0, 0]);
+        assert_ne!(px[0], px[1]);
+    }
+
+    #[test]
+    fn srgb_encodes_and_clamps() {
+        assert_eq!(srgb(0.0), 0);
+        assert_eq!(srgb(1.0), 255);
+        assert_eq!(srgb(7.0), 255);
+        assert_eq!(srgb(f32::NAN), 0);
+        assert_eq!(srgb(0.214), 128);
+    }
+}

@@ -1,0 +1,266 @@
+//! The report's index page: what failed first, then the whole scene × backend ×
+//! buffer matrix, render times, depth-error distributions and versions, each
+//! linking to the scene pages that explain it.
+
+use super::data::{num, status_rank, RunData, SceneData};
+use super::html::{badge, command_block, escape, page, url};
+use super::images::{Kind, SceneImages};
+use super::stats::Histogram;
+use super::svg;
+use crate::check::manifest::ResultEntry;
+use crate::check::process::shell_line;
+use std::collections::BTreeMap;
+use std::fmt::Write;
+
+/// A UTC timestamp for people, from seconds since the epoch (no date crate needed).
+pub fn utc(secs: u64) -> String {
+    let days = (secs / 86_400) as i64;
+    let rem = secs % 86_400;
+    // Howard Hinnant's civil_from_days.
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+/// A count or "-" when not compared.
+pub fn count(e: &ResultEntry, key: &str) -> String {
+    num(e, key).map_or_else(|| "-".into(), |v| format!("{v}"))
+}
+
+/// The command that reruns a whole run (from the repository root).
+pub fn run_command(data: &RunData) -> String {
+    let mut words: Vec<String> = vec!["rendiff".into(), "check".into()];
+    for s in &data.scenes {
+        if let Some(r) = &s.runs {
+            words.push(r.scene_file.clone());
+        }
+    }
+    words.push("-o".into());
+    words.push(data.dir.display().to_string());
+    if let Some(e) = expectations_arg(data) {
+        words.push("--expectations".into());
+        words.push(e);
+    }
+    shell_line(words)
+}
+
+/// The expectations file the comparison used, when it is not check's default.
+pub fn expectations_arg(data: &RunData) -> Option<String> {
+    data.expectations
+        .clone()
+        .filter(|e| e != "tests/expectations.toml")
+}
+
+fn tally(data: &RunData) -> BTreeMap<String, usize> {
+    let mut t = BTreeMap::new();
+    for s in &data.scenes {
+        for e in &s.results {
+            *t.entry(e.status.clone()).or_insert(0) += 1;
+        }
+    }
+    t
+}
+
+fn scene_link(s: &SceneData, anchor: &str) -> String {
+    format!(
+        "<a href=\"{}\">{}</a>",
+        url(&format!("{}.html{anchor}", s.page)),
+        escape(&s.name)
+    )
+}
+
+/// Renders index.html. `images` holds each scene's pictures (same order as `data.scenes`).
+pub fn render(data: &RunData, images: &[SceneImages]) -> String {
+    let mut b = String::new();
+    let m = &data.manifest;
+    let _ = write!(
+        b,
+        "<h1>rendiff report</h1><p>Run folder <code>{}</code>, created {}, rendiff {}; reference backend <b>{}</b>. \
+         Each scene is rendered by every backend and compared with the reference, buffer by buffer.</p>",
+        escape(&data.dir.display().to_string()),
+        escape(&utc(m.created_unix)),
+        escape(&m.rendiff_version),
+        escape(&m.reference)
+    );
+    if let Some(p) = &data.results_problem {
+        let _ = write!(b, "<p class=\"note\">No verdicts: {}</p>", escape(p));
+    }
+    let t = tally(data);
+    b.push_str("<p>");
+    for (status, n) in &t {
+        let _ = write!(b, "{} {n} &nbsp; ", badge(status, ""));
+    }
+    b.push_str("</p>");
+
+    // ---- failures first
+    let mut attention: Vec<(&SceneData, &ResultEntry)> = data
+        .scenes
+        .iter()
+        .flat_map(|s| s.results.iter().map(move |e| (s, e)))
+        .filter(|(_, e)| e.status != "pass")
+        .collect();
+    attention.sort_by_key(|(s, e)| (status_rank(&e.status), s.name.clone(), e.backend.clone(), e.buffer.clone()));
+    b.push_str("<h2 id=\"attention\">Needs attention</h2>");
+    if attention.is_empty() && data.results.is_some() {
+        b.push_str("<p>Every comparison passed.</p>");
+    } else {
+        b.push_str("<table><tr><th>status</th><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>interior</th><th>why</th></tr>");
+        for (s, e) in attention {
+            let _ = write!(
+                b,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"reason\">{}</td></tr>",
+                badge(&e.status, &e.reason),
+                scene_link(s, &format!("#b-{}", super::data::page_stem(&e.backend))),
+                escape(&e.backend),
+                escape(&e.buffer),
+                count(e, "edge_mismatches"),
+                count(e, "interior_mismatches"),
+                escape(&e.reason)
+            );
+        }
+        b.push_str("</table>");
+    }
+
+    // ---- matrix
+    let backends = data.backends();
+    let buffers = data.buffers();
+    let mut order: Vec<usize> = (0..data.scenes.len()).collect();
+    order.sort_by_key(|&i| (data.scenes[i].worst_rank(), data.scenes[i].name.clone()));
+    let _ = write!(
+        b,
+        "<h2 id=\"matrix\">Scene × backend × buffer</h2><p class=\"muted\">Scenes with failures first. Hover a badge for its reason; the reference column shows its render. Buffers: {}.</p><table class=\"matrix\"><tr><th>scene</th>",
+        escape(&buffers.join(", "))
+    );
+    for be in &backends {
+        let _ = write!(b, "<th>{}</th>", escape(be));
+    }
+    b.push_str("</tr>");
+    for &i in &order {
+        let s = &data.scenes[i];
+        let _ = write!(b, "<tr><td class=\"scene\">{}</td>", scene_link(s, ""));
+        for be in &backends {
+            b.push_str("<td>");
+            let entries: Vec<&ResultEntry> = s.results.iter().filter(|e| &e.backend == be).collect();
+            if entries.is_empty() {
+                match s.render(be) {
+                    Some(r) => {
+                        let why = if r.status == "ok" { format!("{:.3} s", r.time_s) } else { format!("{}{}", r.reason, r.message) };
+                        let _ = write!(b, "{}", badge(&r.status, &why));
+                    }
+                    None => b.push_str("<span class=\"muted\">—</span>"),
+                }
+            }
+            for e in entries {
+                let _ = write!(
+                    b,
+                    "<a href=\"{}\">{}:&nbsp;{}</a><br>",
+                    url(&format!("{}.html#b-{}", s.page, super::data::page_stem(be))),
+                    escape(&e.buffer),
+                    badge(&e.status, &e.reason)
+                );
+            }
+            b.push_str("</td>");
+        }
+        b.push_str("</tr>");
+    }
+    b.push_str("</table>");
+
+    // ---- scenes with thumbnails
+    b.push_str("<h2 id=\"scenes\">Scenes</h2><div class=\"grid\">");
+    for &i in &order {
+        let s = &data.scenes[i];
+        let _ = write!(b, "<figure><a href=\"{}\">", url(&format!("{}.html", s.page)));
+        let thumbs: Vec<_> = images[i]
+            .pictures
+            .iter()
+            .filter(|p| p.backend == m.reference && matches!(p.kind, Kind::Ids | Kind::Depth | Kind::Radiance))
+            .collect();
+        if let Some(p) = thumbs.first() {
+            let _ = write!(b, "<img src=\"{}\" alt=\"{}\">", url(&p.file), escape(&p.caption));
+        }
+        let display = s.resolved.as_ref().map(|r| r.name.as_str()).unwrap_or("");
+        let _ = write!(b, "</a><figcaption>{} {}", scene_link(s, ""), if display.is_empty() || display == s.name { String::new() } else { format!("(“{}”)", escape(display)) });
+        let failing = s.results.iter().filter(|e| status_rank(&e.status) == 0).count();
+        if failing > 0 {
+            let _ = write!(b, " {}", badge("fail", &format!("{failing} failing verdicts")));
+        }
+        b.push_str("</figcaption></figure>");
+    }
+    b.push_str("</div>");
+
+    // ---- plots
+    let color = |be: &str| svg::backend_color(backends.iter().position(|x| x == be).unwrap_or(0));
+    let groups: Vec<(String, Vec<svg::Bar>)> = order
+        .iter()
+        .map(|&i| {
+            let s = &data.scenes[i];
+            let bars = s
+                .backends()
+                .into_iter()
+                .map(|be| {
+                    let t = s.render(&be).filter(|r| r.time_s > 0.0).map(|r| r.time_s);
+                    let c = color(&be);
+                    (be, c, t)
+                })
+                .collect();
+            (s.name.clone(), bars)
+        })
+        .collect();
+    let _ = write!(b, "<h2 id=\"times\">Render times per scene</h2><p class=\"muted\">Wall-clock seconds as recorded by check (external renderers include process start and their conversion).</p>{}", svg::time_bars(&groups));
+    let mut agg: Vec<(String, String, Histogram)> = Vec::new();
+    for imgs in images {
+        for (be, h) in &imgs.histograms {
+            match agg.iter_mut().find(|a| &a.0 == be) {
+                Some(a) => a.2.merge(h),
+                None => agg.push((be.clone(), color(be), h.clone())),
+            }
+        }
+    }
+    let _ = write!(b, "<h2 id=\"errors\">Depth errors per backend, all scenes</h2>{}", svg::histograms(&agg));
+
+    // ---- versions
+    b.push_str("<h2 id=\"versions\">Backend versions</h2><table><tr><th>backend</th><th>version</th></tr>");
+    let mut versions: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+    for s in &data.scenes {
+        for r in s.runs.iter().flat_map(|r| r.renders.iter()) {
+            let v = versions.entry(r.backend.as_str()).or_default();
+            if !r.version.is_empty() && !v.contains(&r.version.as_str()) {
+                v.push(r.version.as_str());
+            }
+        }
+    }
+    for (be, v) in versions {
+        let _ = write!(b, "<tr><td>{}</td><td>{}</td></tr>", escape(be), escape(&v.join("; ")));
+    }
+    b.push_str("</table>");
+    let _ = write!(
+        b,
+        "<h2 id=\"rerun\">Rerun</h2><p>From the repository root (after <code>scripts/setup.sh</code>); each scene page has the command for one scene and one backend.</p>{}",
+        command_block(&run_command(data))
+    );
+    page("rendiff report", &b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utc_formats_known_instants() {
+        assert_eq!(utc(0), "1970-01-01T00:00:00Z");
+        assert_eq!(utc(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(utc(1_795_340_886), "2026-11-22T09:48:06Z");
+    }
+}

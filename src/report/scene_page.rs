@@ -1,0 +1,250 @@
+//! One page per scene: the verdicts with every number and the reason for each
+//! classification, every backend's pictures side by side with a flip viewer,
+//! where the mismatches fall (per object), the depth-error distribution, times,
+//! versions and the exact commands that reproduce each result.
+
+use super::data::{num, page_stem, status_rank, text, RunData, SceneData};
+use super::html::{badge, command_block, escape, page, url};
+use super::images::{Kind, SceneImages};
+use super::overview::{count, expectations_arg};
+use super::svg;
+use crate::check::manifest::ResultEntry;
+use crate::check::process::shell_line;
+use std::fmt::Write;
+
+fn err(e: &ResultEntry, key: &str) -> String {
+    num(e, key).map_or_else(|| "-".into(), |v| if v == 0.0 { "0".into() } else { format!("{v:.3e}") })
+}
+
+/// The command that reruns one backend on one scene and compares it again.
+pub fn verdict_command(data: &RunData, scene: &SceneData, backend: &str) -> Option<String> {
+    let file = &scene.runs.as_ref()?.scene_file;
+    let mut words = vec![
+        "rendiff".to_string(),
+        "check".into(),
+        file.clone(),
+        "--only".into(),
+        backend.to_string(),
+        "-o".into(),
+        data.dir.display().to_string(),
+    ];
+    if let Some(e) = expectations_arg(data) {
+        words.push("--expectations".into());
+        words.push(e);
+    }
+    Some(shell_line(words))
+}
+
+fn bound_text(e: &ResultEntry) -> String {
+    match e.details.get("bound") {
+        Some(serde_json::Value::Object(m)) => m
+            .iter()
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        _ => String::new(),
+    }
+}
+
+fn legend() -> &'static str {
+    "<p class=\"legend\">ID mismatch maps: <span class=\"sw\" style=\"background:#383838\"></span>same ID \
+     <span class=\"sw\" style=\"background:#ffbf00\"></span>edge mismatch (center within the backend's rounding distance of an edge) \
+     <span class=\"sw\" style=\"background:#ff00ff\"></span>interior mismatch (a bug) \
+     <span class=\"sw\" style=\"background:#ff3030\"></span>mismatch, unclassified (the comparison drew no map) \
+     <span class=\"sw\" style=\"background:#000\"></span>background in both. \
+     Z maps: <span class=\"sw\" style=\"background:linear-gradient(90deg,#000004,#bc3754,#fcffa4)\"></span>|ΔZ| from 0 to the largest error \
+     <span class=\"sw\" style=\"background:#00ffff\"></span>hit on one side only.</p>"
+}
+
+/// Renders `<page>.html` for one scene.
+pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
+    let mut b = String::new();
+    let reference = &data.manifest.reference;
+    let _ = write!(b, "<p><a href=\"index.html\">← overview</a></p><h1>Scene {}</h1>", escape(&scene.name));
+    b.push_str("<table>");
+    if let Some(r) = &scene.runs {
+        let _ = write!(b, "<tr><th>scene file</th><td><code>{}</code></td></tr><tr><th>requires</th><td>{}</td></tr>", escape(&r.scene_file), escape(&r.requires.join(", ")));
+    }
+    if let Some(r) = &scene.resolved {
+        let _ = write!(
+            b,
+            "<tr><th>name</th><td>{}</td></tr><tr><th>image</th><td>{} × {} px, {} triangles, {} objects</td></tr>",
+            escape(&r.name), r.width, r.height, r.triangle_count, r.objects.len()
+        );
+    }
+    let _ = write!(b, "<tr><th>reference</th><td>{}</td></tr></table>", escape(reference));
+    if let Some(p) = &data.results_problem {
+        let _ = write!(b, "<p class=\"note\">No verdicts: {}</p>", escape(p));
+    }
+
+    // ---- verdicts
+    let mut rows: Vec<&ResultEntry> = scene.results.iter().collect();
+    rows.sort_by_key(|e| (status_rank(&e.status), e.backend.clone(), e.buffer.clone()));
+    b.push_str("<h2 id=\"verdicts\">Verdicts</h2><p class=\"muted\">Failures first. Edge: mismatches within the backend's rounding distance of a triangle edge; interior: the rest (bugs); mask: hit on one side only. Errors are |Z_test − Z_ref| where both hit the same triangle.</p>");
+    b.push_str("<table><tr><th>backend</th><th>buffer</th><th>status</th><th>edge</th><th>interior</th><th>mask</th><th>compared px</th><th>max |ΔZ|</th><th>mean |ΔZ|</th><th>max rel</th><th>bound</th><th>why</th></tr>");
+    for e in &rows {
+        let tol = text(e, "tolerance");
+        let _ = write!(
+            b,
+            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}</td></tr>",
+            url(&page_stem(&e.backend)),
+            escape(&e.backend),
+            escape(&e.buffer),
+            badge(&e.status, &e.reason),
+            count(e, "edge_mismatches"),
+            count(e, "interior_mismatches"),
+            count(e, "mask_mismatches"),
+            count(e, "compared_pixels"),
+            err(e, "max_abs_error"),
+            err(e, "mean_abs_error"),
+            err(e, "max_rel_error"),
+            escape(&bound_text(e)),
+            escape(&e.reason),
+            if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) }
+        );
+    }
+    b.push_str("</table>");
+
+    // ---- pictures
+    b.push_str("<h2 id=\"images\">Images</h2>");
+    if let Some((lo, hi, from)) = &imgs.depth_range {
+        let _ = write!(b, "<p>Depth uses one color scale for every backend of this scene: the range of {}. {}</p>", escape(from), svg::depth_bar(*lo, *hi));
+        for (be, n) in &imgs.clamped {
+            let _ = write!(b, "<p class=\"note\">{}: {n} px outside that range, drawn at its ends.</p>", escape(be));
+        }
+    }
+    b.push_str(legend());
+    if imgs.pictures.len() >= 2 {
+        b.push_str("<div class=\"flip\"><div class=\"flip-stage\">");
+        let first = &imgs.pictures[0];
+        let second = imgs
+            .pictures
+            .iter()
+            .find(|p| p.backend != first.backend && p.kind == first.kind)
+            .unwrap_or(&imgs.pictures[1]);
+        let _ = write!(b, "<img class=\"flip-view\" src=\"{}\" alt=\"flip view\"></div><div class=\"flip-controls\"><b class=\"flip-label\"></b><br><span class=\"flip-pos muted\"></span>", url(&first.file));
+        for (side, chosen) in [("a", first), ("b", second)] {
+            let _ = write!(b, "<label>{} <select class=\"flip-{side}\">", side.to_uppercase());
+            for p in &imgs.pictures {
+                let _ = write!(
+                    b,
+                    "<option value=\"{}\"{}>{}</option>",
+                    url(&p.file),
+                    if std::ptr::eq(p, chosen) { " selected" } else { "" },
+                    escape(&p.caption)
+                );
+            }
+            b.push_str("</select></label>");
+        }
+        b.push_str("<label><input type=\"checkbox\" class=\"flip-hover\" checked> hover shows B</label><p class=\"muted\">Click the image to flip between A and B; the buttons under each picture below pick A or B.</p></div></div>");
+    }
+    let backends = scene.backends();
+    for be in &backends {
+        let pics: Vec<_> = imgs.pictures.iter().filter(|p| &p.backend == be).collect();
+        if pics.is_empty() {
+            continue;
+        }
+        let _ = write!(b, "<h3>{}{}</h3><div class=\"grid\">", escape(be), if be == reference { " (reference)" } else { "" });
+        for p in pics {
+            let src = url(&p.file);
+            let _ = write!(
+                b,
+                "<figure><img src=\"{src}\" alt=\"{c}\" title=\"{c}\"><figcaption>{c}<button data-flip=\"a\" data-src=\"{src}\">A</button><button data-flip=\"b\" data-src=\"{src}\">B</button></figcaption></figure>",
+                c = escape(&p.caption)
+            );
+        }
+        b.push_str("</div>");
+    }
+    if !imgs.pictures.iter().any(|p| p.kind == Kind::Radiance) {
+        b.push_str("<p class=\"muted\">No radiance: no backend wrote R,G,B for this scene.</p>");
+    }
+
+    // ---- where
+    if let Some(r) = &scene.resolved {
+        if !imgs.objects.is_empty() && !r.objects.is_empty() {
+            b.push_str("<h2 id=\"where\">ID mismatches per object</h2><p class=\"muted\">Pixels whose id.prim differs from the reference, by the object the reference sees there (the backend's object where the reference sees background).</p><table><tr><th>object</th><th>name</th><th>material</th><th>prims</th>");
+            for (be, _) in &imgs.objects {
+                let _ = write!(b, "<th>{}</th>", escape(be));
+            }
+            b.push_str("</tr>");
+            for (i, o) in r.objects.iter().enumerate() {
+                let mat = o.material.and_then(|m| r.materials.get(m)).map(String::as_str).unwrap_or("");
+                let _ = write!(
+                    b,
+                    "<tr><td class=\"num\">{i}</td><td>{}</td><td>{}</td><td>{}..{}</td>",
+                    escape(&o.name),
+                    escape(mat),
+                    o.first_prim,
+                    o.first_prim + o.prim_count
+                );
+                for (_, m) in &imgs.objects {
+                    let _ = write!(b, "<td class=\"num\">{}</td>", m.by_object.get(i).copied().unwrap_or(0));
+                }
+                b.push_str("</tr>");
+            }
+            b.push_str("<tr><th colspan=\"4\">total</th>");
+            for (_, m) in &imgs.objects {
+                let _ = write!(b, "<th class=\"num\">{}</th>", m.total);
+            }
+            b.push_str("</tr></table>");
+        }
+    }
+
+    // ---- plots
+    let all = data.backends();
+    let color = |be: &str| svg::backend_color(all.iter().position(|x| x == be).unwrap_or(0));
+    let series: Vec<_> = imgs.histograms.iter().map(|(be, h)| (be.clone(), color(be), h.clone())).collect();
+    let _ = write!(b, "<h2 id=\"errors\">Depth errors</h2>{}", svg::histograms(&series));
+    let bars = backends
+        .iter()
+        .map(|be| (be.clone(), color(be), scene.render(be).filter(|r| r.time_s > 0.0).map(|r| r.time_s)))
+        .collect();
+    let _ = write!(b, "<h2 id=\"times\">Render times</h2>{}", svg::time_bars(&[(scene.name.clone(), bars)]));
+
+    // ---- per backend: versions, times, commands
+    b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">Commands run from the repository root. The render command reproduces the buffer; the check command reproduces the verdict (the reference always renders too).</p>");
+    for be in &backends {
+        let _ = write!(b, "<h3 id=\"b-{}\">{}</h3>", escape(&page_stem(be)), escape(be));
+        match scene.render(be) {
+            Some(r) => {
+                let _ = write!(
+                    b,
+                    "<p>{} version <b>{}</b>, {}</p>",
+                    badge(&r.status, &format!("{}{}", r.reason, r.message)),
+                    escape(if r.version.is_empty() { "?" } else { &r.version }),
+                    if r.time_s > 0.0 { escape(&svg::format_seconds(r.time_s)) } else { "no time recorded".into() }
+                );
+                if !r.reason.is_empty() || !r.message.is_empty() {
+                    let _ = write!(b, "<p class=\"reason\">{}</p>", escape(&format!("{}{}", r.reason, r.message)));
+                }
+                if !r.command.is_empty() {
+                    let _ = write!(b, "render: {}", command_block(&r.command));
+                }
+                if !r.info.is_null() {
+                    let info = serde_json::to_string_pretty(&r.info).unwrap_or_default();
+                    let _ = write!(b, "<details><summary>backend info</summary><pre>{}</pre></details>", escape(&info));
+                }
+            }
+            None => b.push_str("<p class=\"muted\">not in manifest.json</p>"),
+        }
+        for e in scene.results.iter().filter(|e| &e.backend == be) {
+            let cmd = text(e, "command");
+            if !cmd.is_empty() && scene.render(be).is_none_or(|r| r.command != cmd) {
+                let _ = write!(b, "{} render: {}", escape(&e.buffer), command_block(cmd));
+            }
+        }
+        if be != reference {
+            if let Some(cmd) = verdict_command(data, scene, be) {
+                let _ = write!(b, "verdict: {}", command_block(&cmd));
+            }
+        }
+    }
+    if !imgs.notes.is_empty() {
+        b.push_str("<h2>Report notes</h2><ul>");
+        for n in &imgs.notes {
+            let _ = write!(b, "<li>{}</li>", escape(n));
+        }
+        b.push_str("</ul>");
+    }
+    page(&format!("rendiff: {}", scene.name), &b)
+}

@@ -1,0 +1,132 @@
+//! Shading: radiance for scenes that ask for it, and only then
+//! (docs/radiance.md is the contract every backend follows).
+//!
+//! Local shading (`lambert` with point/directional lights, `emission`) is
+//! deterministic and uses the visibility buffers of the render (pixel centers).
+//! `global_illumination` is path tracing of the pixel's box-filtered integral
+//! with next-event estimation, MIS and Russian roulette, and it reports the
+//! variance of each pixel's mean so that comparisons can be statistical.
+
+pub mod direct;
+pub mod lights;
+pub mod path;
+
+use crate::frame::Frame;
+use crate::scene::resolve::ResolvedScene;
+use crate::trace::TraceBvh;
+use glam::DVec3;
+
+/// Deliberate errors, so the statistical gate's detection power can be tested.
+/// Never used by a normal render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Bias {
+    /// Every albedo 2% too high.
+    Albedo2Percent,
+    /// The receiver's cosine left out of direct lighting.
+    MissingCosine,
+    /// Paths one vertex shorter than the scene's max_depth (or 6 when unlimited).
+    OneBounceFewer,
+    /// Light intensities off by a factor pi.
+    LightTimesPi,
+}
+
+/// How to shade.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadeOptions {
+    /// Samples per pixel for path tracing (ignored by local shading).
+    pub spp: u32,
+    /// Seed of the random sequence (per pixel streams derive from it).
+    pub seed: u64,
+    /// A deliberate error, for detection-power tests only.
+    pub bias: Option<Bias>,
+}
+
+/// Radiance buffers of one render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Radiance {
+    /// Linear RGB radiance per pixel.
+    pub rgb: Vec<[f32; 3]>,
+    /// Variance of each pixel's mean estimate (Monte Carlo only).
+    pub var: Option<Vec<[f32; 3]>>,
+    /// Samples per pixel (1 for local shading).
+    pub spp: u32,
+    /// `direct` or `path`.
+    pub integrator: &'static str,
+    /// Seconds spent shading.
+    pub seconds: f64,
+}
+
+/// True when the scene asks for radiance at all.
+pub fn needs_shading(scene: &ResolvedScene) -> bool {
+    ["lambert", "emission", "global_illumination"]
+        .iter()
+        .any(|f| scene.requires.contains(*f))
+}
+
+/// Shades a frame whose visibility is already computed; `bvh` serves shadow and path rays.
+pub fn shade(scene: &ResolvedScene, frame: &Frame, bvh: &TraceBvh, opts: ShadeOptions) -> Radiance {
+    let start = std::time::Instant::now();
+    let mut r = if scene.requires.contains("global_illumination") {
+        path::render(scene, bvh, opts)
+    } else {
+        direct::render(scene, frame, bvh, opts)
+    };
+    r.seconds = start.elapsed().as_secs_f64();
+    r
+}
+
+/// Surface data at a hit: what every shading model needs.
+#[derive(Debug, Clone, Copy)]
+pub struct Surface {
+    /// Hit point.
+    pub x: DVec3,
+    /// Unit geometric normal, turned toward the viewer when two-sided.
+    pub n: DVec3,
+    /// True when the viewer sees the triangle's front (counter-clockwise) side.
+    pub front: bool,
+    /// Diffuse albedo.
+    pub albedo: DVec3,
+    /// Emitted radiance toward the viewer (0 on a one-sided emitter's back).
+    pub emission: DVec3,
+}
+
+/// Evaluates the surface of `prim` hit at `x` by a ray travelling along `d`.
+pub fn surface(
+    scene: &ResolvedScene,
+    prim: u32,
+    x: DVec3,
+    d: DVec3,
+    bias: Option<Bias>,
+) -> Surface {
+    let t = &scene.triangles[prim as usize];
+    let [a, b, c] = t.map(|v| v.as_dvec3());
+    let ng = (b - a).cross(c - a).normalize_or_zero();
+    let front = ng.dot(d) < 0.0;
+    let two_sided = scene.requires.contains("two_sided");
+    let n = if front || !two_sided { ng } else { -ng };
+    let obj = &scene.objects[scene.object_ids[prim as usize] as usize];
+    let m = &scene.materials[obj.material as usize];
+    let mut albedo = DVec3::from(m.albedo);
+    if bias == Some(Bias::Albedo2Percent) {
+        albedo *= 1.02;
+    }
+    let visible_side = front || two_sided;
+    let emission = if visible_side && scene.requires.contains("emission") {
+        DVec3::from(m.emission)
+    } else {
+        DVec3::ZERO
+    };
+    Surface {
+        x,
+        n,
+        front,
+        albedo: if visible_side { albedo } else { DVec3::ZERO },
+        emission,
+    }
+}
+
+/// Offset for rays leaving a surface: 1e-7 of the scene's extent plus the point's magnitude.
+pub fn ray_epsilon(scene_size: f64, x: DVec3) -> f64 {
+    1e-7 * scene_size.max(1.0) + 1e-9 * x.abs().max_element()
+}
