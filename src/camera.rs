@@ -33,6 +33,8 @@ pub struct Camera {
     pub near: f64,
     /// Farthest visible planar depth (+inf when unbounded).
     pub far: f64,
+    /// How coverage signs are decided (exact unless a benchmark asks otherwise).
+    pub precision: crate::predicate::Precision,
     /// `eye + right`, rounded once: the first tie-break perturbation direction.
     pub tie_right: DVec3,
     /// `eye + up_ortho`, rounded once: the second tie-break perturbation direction.
@@ -140,6 +142,7 @@ impl Camera {
             height,
             near,
             far,
+            precision: crate::predicate::Precision::Exact,
             tie_right: eye + right,
             tie_up: eye + up_ortho,
             aspect_tan: tan_half_vfov * (f64::from(width) / f64::from(height)),

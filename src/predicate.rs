@@ -45,6 +45,21 @@ impl EdgePlane {
     /// `qd = q - eye` has been rounded from the point `q`. Counts exact fallbacks.
     #[inline]
     pub fn sign(&self, eye: DVec3, q: DVec3, qd: DVec3, fallbacks: &mut u64) -> i8 {
+        self.sign_with(eye, q, qd, Precision::Exact, fallbacks)
+    }
+
+    /// [`EdgePlane::sign`] at a chosen precision: `FloatOnly` trusts the f64 value
+    /// even inside the error bound (a speed/accuracy knob for benchmarks; the
+    /// sign may then be wrong or zero where the exact one is not).
+    #[inline]
+    pub fn sign_with(
+        &self,
+        eye: DVec3,
+        q: DVec3,
+        qd: DVec3,
+        precision: Precision,
+        fallbacks: &mut u64,
+    ) -> i8 {
         let det = qd.x * self.n.x + qd.y * self.n.y + qd.z * self.n.z;
         let bound = O3D_ERRBOUND_A
             * (qd.x.abs() * self.perm.x + qd.y.abs() * self.perm.y + qd.z.abs() * self.perm.z);
@@ -52,11 +67,24 @@ impl EdgePlane {
             1
         } else if -det > bound {
             -1
+        } else if precision == Precision::FloatOnly {
+            (det > 0.0) as i8 - (det < 0.0) as i8
         } else {
             *fallbacks += 1;
             exact_sign(self.a, self.b, q, eye)
         }
     }
+}
+
+/// How orientation signs are decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// Filter, then exact arithmetic when the filter cannot decide (always right).
+    #[default]
+    Exact,
+    /// The f64 value only (faster on ties, wrong near edges): for measuring the trade.
+    FloatOnly,
 }
 
 /// Exact sign of `orient3d(a, b, c, d)` = det[a-d, b-d, c-d], via adaptive

@@ -51,24 +51,32 @@ impl std::ops::AddAssign for Counters {
 /// Returns 0 only for an edge whose plane is undefined (eye, a and b collinear).
 #[inline]
 pub fn edge_sign(cam: &Camera, e: &EdgePlane, ray: &PixelRay, c: &mut Counters) -> i8 {
-    let s = e.sign(cam.eye, ray.p, ray.dir, &mut c.exact_fallbacks);
-    if s != 0 {
-        return s;
-    }
-    c.ties += 1;
-    let s = e.sign(
+    let s = e.sign_with(
         cam.eye,
-        cam.tie_right,
-        cam.tie_right - cam.eye,
+        ray.p,
+        ray.dir,
+        cam.precision,
         &mut c.exact_fallbacks,
     );
     if s != 0 {
         return s;
     }
-    -e.sign(
+    c.ties += 1;
+    let s = e.sign_with(
+        cam.eye,
+        cam.tie_right,
+        cam.tie_right - cam.eye,
+        cam.precision,
+        &mut c.exact_fallbacks,
+    );
+    if s != 0 {
+        return s;
+    }
+    -e.sign_with(
         cam.eye,
         cam.tie_up,
         cam.tie_up - cam.eye,
+        cam.precision,
         &mut c.exact_fallbacks,
     )
 }

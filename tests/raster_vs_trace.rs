@@ -103,3 +103,15 @@ proptest! {
         prop_assert_eq!(r.coverage, t.coverage, "coverage counts differ");
     }
 }
+
+#[test]
+fn float_only_predicates_still_agree_between_loops_but_skip_exact_work() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/pixel_grid.toml");
+    let mut scene = load(&path);
+    let (exact, _) = both(&scene, false);
+    scene.camera.precision = rendiff::predicate::Precision::FloatOnly;
+    let (r, t) = both(&scene, false);
+    assert_identical("pixel_grid float-only", &r, &t);
+    assert_eq!(r.counters.exact_fallbacks, 0);
+    assert!(exact.counters.exact_fallbacks > 0);
+}
