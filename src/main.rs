@@ -107,6 +107,18 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes.
+        #[arg(long, default_value = "tests/references")]
+        references: PathBuf,
+        /// Seed of the core's path tracer.
+        #[arg(long, default_value_t = rendiff::check::CHECK_SEED)]
+        seed: u64,
+        /// Samples per pixel of the core's path tracer (default: each scene's integrator.spp).
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Deliberately wrong core shading, for testing the statistical gate's power.
+        #[arg(long, value_enum, hide = true)]
+        inject_bias: Option<rendiff::shade::Bias>,
     },
     /// Time raster and trace on one scene (median of runs after a warm-up) and write JSON.
     Bench {
@@ -135,6 +147,35 @@ enum Command {
         a: PathBuf,
         /// Test EXR.
         b: PathBuf,
+    },
+    /// Write a check run's static HTML report to RUN/report/ (check does this too).
+    Report {
+        /// Run folder (holds manifest.json and results.json).
+        #[arg(default_value = "reports/runs/latest")]
+        run: PathBuf,
+    },
+    /// Compare a run's verdicts with a blessed baseline; exit 1 on any regression.
+    ///
+    /// Writes a markdown summary (for a PR comment) to stdout and RUN/gate.md.
+    Gate {
+        /// Run folder (holds results.json).
+        #[arg(default_value = "reports/runs/latest")]
+        run: PathBuf,
+        /// Baseline file written by `rendiff bless`.
+        #[arg(long, default_value = "reports/baseline.json")]
+        baseline: PathBuf,
+    },
+    /// Make a run's verdicts and numbers the new baseline (the only way thresholds change).
+    Bless {
+        /// Run folder (holds manifest.json and results.json).
+        #[arg(default_value = "reports/runs/latest")]
+        run: PathBuf,
+        /// Baseline file to (re)write, atomically.
+        #[arg(long, default_value = "reports/baseline.json")]
+        baseline: PathBuf,
+        /// Accept failing verdicts into the baseline instead of refusing.
+        #[arg(long)]
+        allow_failures: bool,
     },
 }
 
@@ -268,6 +309,38 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Diff { a, b } => diff(&a, &b),
+        Command::Report { run } => {
+            let index = rendiff::report::write(&run)?;
+            println!("report: {}", index.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Gate { run, baseline } => {
+            let (summary, passed) = rendiff::gate::gate(&baseline, &run)?;
+            print!("{summary}");
+            Ok(if passed {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            })
+        }
+        Command::Bless {
+            run,
+            baseline,
+            allow_failures,
+        } => {
+            let opts = rendiff::gate::BlessOptions {
+                command: rendiff::check::process::shell_line(std::env::args()),
+                allow_failures,
+            };
+            let b = rendiff::gate::bless(&run, &baseline, &opts)?;
+            println!(
+                "blessed {} entries from {} into {}",
+                b.entries.len(),
+                run.display(),
+                baseline.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Bench {
             scene,
             size,
@@ -299,6 +372,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             timeout,
             expectations,
             quiet,
+            references,
+            seed,
+            spp,
+            inject_bias,
         } => {
             let opts = rendiff::check::CheckOptions {
                 scenes: rendiff::check::collect_scenes(&scenes)?,
@@ -308,8 +385,23 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 timeout: std::time::Duration::from_secs(timeout),
                 expectations,
                 quiet,
+                references: Some(references),
+                core: rendiff::check::CoreShading {
+                    seed,
+                    spp,
+                    bias: inject_bias,
+                },
             };
-            let outcome = rendiff::check::run(&opts)?;
+            let outcome = match rendiff::check::run(&opts) {
+                Ok(o) => o,
+                Err(e) => {
+                    // Still show what rendered, if anything did.
+                    if output.join("manifest.json").exists() {
+                        write_report(&output);
+                    }
+                    return Err(e);
+                }
+            };
             let (table, tally) = rendiff::check::summary(&outcome.results);
             println!("{table}");
             println!(
@@ -319,12 +411,21 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 tally.skipped,
                 output.join("results.json").display()
             );
+            write_report(&output);
             Ok(if tally.failed > 0 {
                 ExitCode::from(1)
             } else {
                 ExitCode::SUCCESS
             })
         }
+    }
+}
+
+/// Every check run gets its report; a report problem is a warning, never a changed verdict.
+fn write_report(run: &Path) {
+    match rendiff::report::write(run) {
+        Ok(index) => println!("report: {}", index.display()),
+        Err(e) => eprintln!("warning: report not written: {e:#}"),
     }
 }
 

@@ -29,6 +29,8 @@ fn main() {
             timeout: Duration::from_secs(600),
             expectations: root.join("tests/expectations.toml"),
             quiet: false,
+            references: Some(root.join("tests/references")),
+            core: check::CoreShading::default(),
         };
         match check::run(&opts) {
             Err(e) => {

@@ -1,4 +1,4 @@
-"""Command line: `python -m rendiff_harness {info,render,compare} ...`.
+"""Command line: `python -m rendiff_harness {info,render,compare,reference} ...`.
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -99,7 +99,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     try:
         version = backend.version()
         t0 = time.monotonic()
-        info = backend.render(scene, out, workdir, float(args.timeout))
+        options = {k: v for k, v in (("spp", args.spp), ("seed", args.seed)) if v is not None}
+        info = backend.render(scene, out, workdir, float(args.timeout), **options)
         elapsed = time.monotonic() - t0
     except BackendError as exc:  # includes BackendUnavailable
         msg = str(exc)
@@ -129,10 +130,18 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return int(compare_main(list(args.rest)) or 0)
 
 
+def cmd_reference(args: argparse.Namespace) -> int:
+    """Delegates to references.py (cached Mitsuba references), which owns its options."""
+    from .references import main as reference_main
+
+    return int(reference_main(list(args.rest)) or 0)
+
+
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "info": cmd_info,
     "render": cmd_render,
     "compare": cmd_compare,
+    "reference": cmd_reference,
 }
 
 
@@ -149,8 +158,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--timeout", type=float, default=600.0, help="seconds before the renderer is killed"
     )
     p_render.add_argument("--workdir", default=None, help="scratch folder (default: a temp folder, removed)")
+    p_render.add_argument(
+        "--spp", type=int, default=None,
+        help="samples per pixel for path-traced scenes (default: the scene's integrator.spp); "
+        "ignored by backends without Monte Carlo",
+    )
+    p_render.add_argument("--seed", type=int, default=None, help="random seed for path-traced scenes (default 0)")
     p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
+    p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)
+    p_ref.add_argument("rest", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -159,6 +176,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv[:1] == ["compare"]:
         # compare.py owns its own options; argparse.REMAINDER would reject "--run".
         return cmd_compare(argparse.Namespace(rest=argv[1:]))
+    if argv[:1] == ["reference"]:
+        return cmd_reference(argparse.Namespace(rest=argv[1:]))
     args = build_parser().parse_args(argv)
     return HANDLERS[args.cmd](args)
 

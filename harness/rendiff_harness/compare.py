@@ -18,6 +18,19 @@ What is compared (DESIGN.md "Comparing"):
   that is an ID edge mismatch counts as edge, elsewhere as interior. Depth is compared
   where both sides hit the same prim, against the backend's tolerance model
   (tolerance.py); pixels beyond it are interior mismatches.
+* `RGB` (scenes that require `lambert`, `emission` or `global_illumination` only):
+  radiance.py. Deterministic renders (no var.* channels): |a - b| <= abs + rel |b| with
+  the test backend's precision (tolerance.rgb_model); failing pixels at ID edge
+  mismatches or on ambiguous shadow rays are edge, the rest interior. Monte Carlo renders
+  (var.* channels): Welch t per pixel-channel and a 3x3 cluster test, Sidak-corrected at
+  family-wise alpha 0.01; every failure is interior. Extra fields on RGB entries:
+  `mode`, `failing_pixels`, `min_p`, `alpha`, `cluster_failures`, `flip_mean` (FLIP, for
+  people only), `flip_note`.
+* cached references (`--references DIR`, references.py): every scene whose reference
+  render has RGB and that requires `global_illumination` is also compared with
+  DIR/<scene>.exr (a high-spp Mitsuba render whose provenance must match the resolved
+  scene), as backend `mitsuba_ref`, buffer `RGB`. A missing, stale or corrupt cached
+  reference is an `error` entry that says how to regenerate it.
 * status: expectations.py turns (edge, interior) counts and the matching expectation
   into pass / fail / expected_fail / unexpected_pass. Skipped and error renders are
   copied through; a missing reference makes every entry of its scene an error.
@@ -41,11 +54,15 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, diffimages, exrbuf, expectations, resolved, tolerance
+from . import classify, diffimages, exrbuf, expectations, lighting, radiance, resolved, tolerance
 
 MANIFEST_FORMAT = "rendiff-manifest/1"
 RESULTS_FORMAT = "rendiff-results/1"
 BUFFERS = ("id", "Z")
+SHADED_BUFFERS = ("id", "Z", "RGB")
+SHADING_FEATURES = frozenset({"lambert", "emission", "global_illumination"})
+CACHED_REFERENCE_BACKEND = "mitsuba_ref"
+RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean")
 BACKGROUND_ID = exrbuf.BACKGROUND_ID
 EXAMPLES = 3  # example pixels quoted in a failure's reason
 EXIT_OK, EXIT_ERROR = 0, 2
@@ -161,12 +178,38 @@ def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
     if entry["status"] in ("skipped", "error"):
         for k in NUMERIC_FIELDS:
             entry[k] = None
+        if entry["buffer"] == "RGB":
+            for k in RGB_FIELDS:
+                entry[k] = None
     return entry
 
 
-def status_entries(scene: str, render: Mapping[str, Any], status: str, reason: str) -> list[dict[str, Any]]:
+def is_shaded(requires: Any) -> bool:
+    """A scene whose buffers include radiance (docs/radiance.md)."""
+    return isinstance(requires, (list, tuple, set, frozenset)) and bool(SHADING_FEATURES & set(requires))
+
+
+def buffers_for(scene_entry: Mapping[str, Any]) -> tuple[str, ...]:
+    return SHADED_BUFFERS if is_shaded(scene_entry.get("requires")) else BUFFERS
+
+
+def rgb_entry(scene: str, backend: str, render: Mapping[str, Any]) -> dict[str, Any]:
+    e = base_entry(scene, backend, "RGB", render)
+    e.update(mode=None, failing_pixels=0, min_p=None, alpha=None, cluster_failures=None, flip_mean=None, flip_note="")
+    return e
+
+
+def status_entries(
+    scene: str, render: Mapping[str, Any], status: str, reason: str, buffers: Sequence[str] = BUFFERS
+) -> list[dict[str, Any]]:
     out = []
-    for buf in BUFFERS:
+    for buf in buffers:
+        if buf == "RGB":
+            e = rgb_entry(scene, str(render.get("backend", "?")), render)
+            e["status"] = status
+            e["reason"] = reason
+            out.append(e)
+            continue
         e = base_entry(scene, str(render.get("backend", "?")), buf, render)
         e["status"] = status
         e["reason"] = reason
@@ -189,6 +232,8 @@ class Reference:
     buffers: dict[str, np.ndarray]
     shape: tuple[int, int]
     _normals: np.ndarray | None = field(default=None, repr=False)
+    attrs: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
 
     def unit_normals(self) -> np.ndarray:
         """(N, 3) float64 unit normals of every triangle (zero for degenerate ones)."""
@@ -231,6 +276,10 @@ def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) ->
         buffers = exrbuf.read_buffers(exr)
     except exrbuf.BufferError as exc:
         raise EntryError(f"reference {reference} unreadable: {exc}") from None
+    try:
+        attrs = dict(exrbuf.read_attrs(exr))
+    except exrbuf.BufferError:
+        attrs = {}
     cam = scene.camera
     shape = (cam.height, cam.width)
     for key, arr in buffers.items():
@@ -239,7 +288,7 @@ def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) ->
                 f"reference {reference} {exr}: {key} is {arr.shape[1]}x{arr.shape[0]}, "
                 f"the scene's camera is {cam.width}x{cam.height}"
             )
-    return Reference(scene, buffers, shape)
+    return Reference(scene, buffers, shape, attrs=attrs, path=exr)
 
 
 # --------------------------------------------------------------------------- ID comparison
@@ -444,7 +493,7 @@ def compare_backend(
     exps: expectations.Expectations,
     images: bool,
 ) -> list[dict[str, Any]]:
-    """Both entries (id, Z) for one ok render of one backend."""
+    """The entries (id, Z, and RGB for shaded scenes) for one ok render of one backend."""
     backend = render["backend"]
     model = tolerance.model_for(backend)
     exr = run_path(run, render.get("exr"), f"{backend} EXR")
@@ -536,7 +585,110 @@ def compare_backend(
                 except diffimages.DiffImageError as exc:
                     _add_reason(e_z, f"diff image not written: {exc}")
     out.append(e_z)
+
+    # ---- RGB
+    if is_shaded(ref.scene.requires):
+        e_rgb = rgb_entry(scene_name, backend, render)
+        e_rgb["pixels"] = pixels
+        if "RGB" not in test:
+            e_rgb["status"] = "skipped" if declared is None or "RGB" not in declared else "error"
+            e_rgb["reason"] = (
+                f"{backend} does not produce RGB" if e_rgb["status"] == "skipped"
+                else f"{exr}: manifest lists buffer RGB but the EXR has no R,G,B channels"
+            )
+        elif "RGB" not in ref.buffers:
+            e_rgb["reason"] = "reference has no R,G,B channels (the scene requires shading)"
+        else:
+            try:
+                res = compare_rgb(ref, test, attrs, backend, render, id_res.edge_mask if id_res is not None else None)
+            except (tolerance.ToleranceError, radiance.RadianceError) as exc:
+                e_rgb["reason"] = str(exc)
+                res = None
+            if res is not None:
+                fill_rgb_entry(e_rgb, res, ref.buffers["RGB"], test["RGB"])
+                _apply_verdict(e_rgb, exps, res.details)
+                for note in res.notes:
+                    _add_reason(e_rgb, note)
+                _rgb_image(e_rgb, run, diff_dir, backend, res)
+        out.append(e_rgb)
     return out
+
+
+def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:
+    return radiance.degrees_of_freedom({**(info or {}), **attrs})
+
+
+def compare_rgb(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    attrs: Mapping[str, Any],
+    backend: str,
+    render: Mapping[str, Any],
+    id_edge_mask: np.ndarray | None,
+) -> radiance.RgbResult:
+    """Deterministic or statistical comparison of R,G,B (radiance.py decides by the var channels)."""
+    a, b = test["RGB"], ref.buffers["RGB"]
+    var_a, var_b = test.get("var"), ref.buffers.get("var")
+    if var_a is not None or var_b is not None:
+        test_attrs = {**_info(render), **attrs}
+        res = radiance.compare_statistical(
+            b, var_b, _side_dof(ref.attrs) if var_b is not None else math.inf,
+            a, var_a, _side_dof(attrs, _info(render)) if var_a is not None else math.inf,
+            ref_n=radiance.samples_per_pixel(ref.attrs), test_n=radiance.samples_per_pixel(test_attrs),
+        )
+        if var_a is None or var_b is None:
+            side = backend if var_a is None else "the reference"
+            res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
+        return res
+    model = tolerance.rgb_model(backend, b, attrs, _info(render))
+    shadow_edges = None
+    scene = ref.scene
+    if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
+        eps = radiance.SHADOW_EDGE_REL * lighting.scene_size(scene)
+
+        def shadow_edges(rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
+            return lighting.shadow_ambiguity(scene, ref.buffers["id.prim"], ref.buffers["Z"], rows, cols, eps)
+
+    text = model.text
+    if shadow_edges is not None:
+        text += (
+            f"; failing pixels at ID edge mismatches, or whose shadow ray passes within "
+            f"{radiance.SHADOW_EDGE_REL:g} x scene size of an occluder edge or end, count as edge"
+        )
+    else:
+        text += "; failing pixels at ID edge mismatches count as edge"
+    return radiance.compare_deterministic(b, a, model.abs_tol, model.rel, text, id_edge_mask, shadow_edges)
+
+
+def fill_rgb_entry(e: dict[str, Any], res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> None:
+    e["mode"] = res.mode
+    e["edge_mismatches"] = res.edge
+    e["interior_mismatches"] = res.interior
+    e["failing_pixels"] = res.failing_pixels
+    e["compared_pixels"] = res.pixels
+    e["max_abs_error"] = _finite(res.max_abs)
+    e["mean_abs_error"] = _finite(res.mean_abs)
+    e["max_rel_error"] = _finite(res.max_rel)
+    e["tolerance"] = res.tolerance
+    e["min_p"] = None if res.min_p is None else float(res.min_p)
+    e["alpha"] = res.alpha
+    e["cluster_failures"] = res.cluster_failures
+    flip, note = radiance.flip_mean(ref_rgb, test_rgb)
+    e["flip_mean"] = flip
+    e["flip_note"] = note
+
+
+def _rgb_image(
+    e: dict[str, Any], run: Path, diff_dir: Path | None, backend: str, res: radiance.RgbResult
+) -> None:
+    if diff_dir is None:
+        return
+    path = diff_dir / f"{backend}.RGB.png"
+    try:
+        diffimages.write_rgb_diff(path, res.score, res.edge_mask, res.fail_mask & ~res.edge_mask)
+        e["images"] = {"heat": path.relative_to(run).as_posix()}
+    except diffimages.DiffImageError as exc:
+        _add_reason(e, f"diff image not written: {exc}")
 
 
 # --------------------------------------------------------------------------- one scene
@@ -548,33 +700,73 @@ def compare_scene(
     reference: str,
     exps: expectations.Expectations,
     images: bool = True,
+    references_dir: Path | None = None,
 ) -> list[dict[str, Any]]:
     name = scene_entry["scene"]
     renders = [r for r in scene_entry.get("renders", []) if r.get("backend") != reference]
+    bufs = buffers_for(scene_entry)
     try:
         ref = load_reference(run, scene_entry, reference)
     except EntryError as exc:
         out = []
         for r in renders:
             own = "" if r.get("status") == "ok" else f" ({r['backend']} itself {r.get('status')}: {_render_reason(r)})"
-            out += status_entries(name, r, "error", f"{exc}{own}")
+            out += status_entries(name, r, "error", f"{exc}{own}", bufs)
         return [blank_if_not_compared(e) for e in out]
+    if is_shaded(ref.scene.requires):
+        bufs = SHADED_BUFFERS
     results: list[dict[str, Any]] = []
     for r in renders:
         status = r.get("status")
         if status in ("skipped", "error"):
-            results += status_entries(name, r, status, _render_reason(r))
+            results += status_entries(name, r, status, _render_reason(r), bufs)
             continue
         try:
             results += compare_backend(run, name, r, ref, exps, images)
         except EntryError as exc:
-            results += status_entries(name, r, "error", str(exc))
+            results += status_entries(name, r, "error", str(exc), bufs)
         except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
             traceback.print_exc(file=sys.stderr)
             results += status_entries(
-                name, r, "error", f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}"
+                name, r, "error", f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}", bufs
             )
+    if references_dir is not None and "global_illumination" in ref.scene.requires:
+        results.append(compare_cached_reference(run, name, ref, references_dir, exps, images))
     return [blank_if_not_compared(e) for e in results]
+
+
+def compare_cached_reference(
+    run: Path, name: str, ref: Reference, references_dir: Path, exps: expectations.Expectations, images: bool
+) -> dict[str, Any]:
+    """The reference render's RGB against the cached Mitsuba reference DIR/<name>.exr (references.py)."""
+    from . import references
+
+    exr = references_dir / f"{name}.exr"
+    render = {"backend": CACHED_REFERENCE_BACKEND, "command": references.regenerate_command(ref.scene.directory, exr)}
+    e = rgb_entry(name, CACHED_REFERENCE_BACKEND, render)
+    e["pixels"] = ref.shape[0] * ref.shape[1]
+    try:
+        cached = references.load(exr, ref.scene)
+    except references.ReferenceError as exc:
+        e["reason"] = str(exc)
+        return e
+    e["version"] = cached.provenance.get("renderer")
+    if "RGB" not in ref.buffers:
+        e["reason"] = "reference has no R,G,B channels (the scene requires shading)"
+        return e
+    test = {"RGB": cached.rgb, "var": cached.var}
+    try:
+        res = compare_rgb(ref, test, cached.attrs, CACHED_REFERENCE_BACKEND, render, None)
+    except (tolerance.ToleranceError, radiance.RadianceError) as exc:
+        e["reason"] = str(exc)
+        return e
+    fill_rgb_entry(e, res, ref.buffers["RGB"], cached.rgb)
+    _apply_verdict(e, exps, res.details)
+    for note in res.notes:
+        _add_reason(e, note)
+    diff_dir = run / "scenes" / name / "diff" if images and _SAFE_NAME.match(name) else None
+    _rgb_image(e, run, diff_dir, CACHED_REFERENCE_BACKEND, res)
+    return e
 
 
 # --------------------------------------------------------------------------- output
@@ -607,6 +799,8 @@ def format_table(results: Sequence[Mapping[str, Any]]) -> str:
     for r in results:
         compared = r["status"] not in ("skipped", "error")
         rel = r.get("max_rel_error")
+        if r["buffer"] == "RGB" and r.get("mode") == "statistical":
+            rel = None  # the means' relative difference is noise here; min_p is in results.json
         rows.append(
             (
                 str(r["scene"]),
@@ -616,7 +810,7 @@ def format_table(results: Sequence[Mapping[str, Any]]) -> str:
                 str(r["edge_mismatches"]) if compared else "-",
                 str(r["interior_mismatches"]) if compared else "-",
                 str(r["mask_mismatches"]) if compared and r["buffer"] == "Z" else "-",
-                f"{rel:.2g}" if compared and r["buffer"] == "Z" and rel is not None else "-",
+                f"{rel:.2g}" if compared and r["buffer"] in ("Z", "RGB") and rel is not None else "-",
                 _short(str(r.get("reason", ""))),
             )
         )
@@ -651,10 +845,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--expectations", default=None, help="expectations TOML (e.g. tests/expectations.toml); default: none"
     )
     p.add_argument("--no-images", action="store_true", help="do not write diff PNGs")
+    p.add_argument(
+        "--references",
+        default=None,
+        help="folder of cached Mitsuba references (<scene>.exr + <scene>.json, e.g. tests/references): "
+        "global-illumination scenes are also compared with them, as backend mitsuba_ref",
+    )
     return p
 
 
-def run_compare(run: Path, expectations_path: str | Path | None, images: bool = True) -> dict[str, Any]:
+def run_compare(
+    run: Path,
+    expectations_path: str | Path | None,
+    images: bool = True,
+    references_dir: str | Path | None = None,
+) -> dict[str, Any]:
     """Compare everything in RUN and write results.json; returns the results document.
 
     Raises ManifestError / expectations.ExpectationsError for unusable inputs.
@@ -662,9 +867,10 @@ def run_compare(run: Path, expectations_path: str | Path | None, images: bool = 
     manifest = load_manifest(run)
     exps = expectations.load(expectations_path)
     reference = manifest.get("reference", "raster")
+    refs = Path(references_dir) if references_dir is not None else None
     results: list[dict[str, Any]] = []
     for sc in manifest["scenes"]:
-        results += compare_scene(run, sc, reference, exps, images)
+        results += compare_scene(run, sc, reference, exps, images, refs)
     unused = exps.unused()
     doc = {
         "format": RESULTS_FORMAT,
@@ -690,7 +896,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"rendiff_harness compare: {run}: run folder does not exist", file=sys.stderr)
         return EXIT_ERROR
     try:
-        doc = run_compare(run, args.expectations, images=not args.no_images)
+        doc = run_compare(run, args.expectations, images=not args.no_images, references_dir=args.references)
     except (ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness compare: {exc}", file=sys.stderr)
         return EXIT_ERROR

@@ -2,6 +2,9 @@
 
 * `<backend>.id.png`: the ID-mismatch map. Background in both: black; same ID: dark
   gray; edge mismatch: amber; interior mismatch: magenta.
+* `<backend>.RGB.png`: per pixel the largest channel's |a - b| / tolerance (deterministic)
+  or |z| / critical z (Monte Carlo) through `inferno`, 1 = at the limit (clipped above);
+  failing edge pixels amber, failing interior pixels magenta.
 * `<backend>.Z.png`: |Z_test - Z_ref| over pixels both sides hit, through the
   `inferno` map, normalized so that the largest error over the depth-compared pixels
   (same prim on both sides: the entry's max_abs_error) is 1 (clipped above); background
@@ -130,6 +133,22 @@ def write_depth_diff(
         rgb = _color_map_named(np.clip(err / s, 0.0, 1.0), "inferno")
         rgb[~hr & ~ht] = 0.0
         rgb[hr != ht] = MASK_MISMATCH_COLOR
+        _write_png(path, rgb)
+    except DiffImageError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        raise DiffImageError(f"{path}: {type(exc).__name__}: {exc}") from exc
+    return path
+
+
+def write_rgb_diff(path: str | Path, score: np.ndarray, edge: np.ndarray, interior: np.ndarray) -> Path:
+    """Write the radiance heat map: `score` (H, W) 1 = at the tolerance; failing pixels colored."""
+    path = Path(path)
+    try:
+        sc = np.nan_to_num(np.asarray(score, dtype=np.float64), nan=1.0, posinf=1.0)
+        rgb = _color_map_named(np.clip(sc, 0.0, 1.0), "inferno")
+        rgb[edge] = ID_COLORS[EDGE]
+        rgb[interior] = ID_COLORS[INTERIOR]
         _write_png(path, rgb)
     except DiffImageError:
         raise

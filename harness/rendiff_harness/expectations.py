@@ -9,7 +9,7 @@ Format (TOML, read with tomllib):
     [[expect]]
     scene = "pixel_grid"            # a scene name, or "*" for every scene
     backend = "povray"              # a backend name
-    buffer = "id"                   # "id" or "Z"
+    buffer = "id"                   # "id", "Z" or "RGB"
     edge_mismatches = [0, 120]      # two-sided bound [lo, hi] on the count (default [0, 0])
     interior_mismatches = [0, 0]    # likewise (default [0, 0])
     status = "expected_fail"        # optional: a known failure (default: a bound to pass within)
@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-BUFFERS = ("id", "Z")
+BUFFERS = ("id", "Z", "RGB")
 COUNT_KEYS = ("edge_mismatches", "interior_mismatches")
 ENTRY_KEYS = frozenset({"scene", "backend", "buffer", "status", "reason", *COUNT_KEYS})
 TOP_KEYS = frozenset({"expect"})

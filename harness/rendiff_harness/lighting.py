@@ -32,8 +32,14 @@ import numpy as np
 from .resolved import ResolvedScene
 
 INV_PI = 1.0 / math.pi
-SHADOW_OFFSET_REL = 1e-4
-"""Shadow-ray origin offset along n, relative to the scene size (docs/radiance.md)."""
+SHADOW_OFFSET_SIZE = 1e-7
+SHADOW_OFFSET_POS = 1e-9
+"""Shadow-ray origin offset along n: 1e-7 x max(scene size, 1) + 1e-9 x |x| (docs/radiance.md)."""
+
+
+def shadow_offset(scene: ResolvedScene, x: np.ndarray) -> np.ndarray:
+    """(K,) the contract's shadow-ray offset along n at the points x (K, 3)."""
+    return SHADOW_OFFSET_SIZE * max(scene_size(scene), 1.0) + SHADOW_OFFSET_POS * np.linalg.norm(x, axis=-1)
 
 
 def face_normals(tris: np.ndarray) -> np.ndarray:
@@ -139,8 +145,8 @@ def local_radiance(
     value = np.zeros((x.shape[0], 3))
     if emission and ("emission" in req or upper_bound):
         value += np.where(visible[:, None], le, 0.0)
-    points, dirs = lights_of(scene) if lights else ([], [])
-    offset = SHADOW_OFFSET_REL * scene_size(scene)
+    points, dirs = lights_of(scene) if lights and (upper_bound or "lambert" in req) else ([], [])
+    offset = shadow_offset(scene, x)[:, None]
     for pos, intensity in points:
         to_l = pos[None, :] - x
         r2 = np.einsum("ij,ij->i", to_l, to_l)
@@ -216,26 +222,6 @@ def visible_to(
     return vis
 
 
-def _segment_segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    """Distances between segments p1-q1 and p2-q2 (broadcast over leading axes), float64 (Ericson 5.1.9)."""
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a = np.einsum("...i,...i->...", d1, d1)
-    e = np.einsum("...i,...i->...", d2, d2)
-    f = np.einsum("...i,...i->...", d2, r)
-    c = np.einsum("...i,...i->...", d1, r)
-    b = np.einsum("...i,...i->...", d1, d2)
-    denom = a * e - b * b
-    with np.errstate(all="ignore"):
-        s = np.where(denom > 1e-300 * np.maximum(a * e, 1e-300), np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
-        t = np.where(e > 0, (b * s + f) / np.where(e > 0, e, 1.0), 0.0)
-        s = np.where(t < 0, np.where(a > 0, np.clip(-c / np.where(a > 0, a, 1.0), 0.0, 1.0), 0.0), s)
-        s = np.where(t > 1, np.where(a > 0, np.clip((b - c) / np.where(a > 0, a, 1.0), 0.0, 1.0), 0.0), s)
-        t = np.clip(t, 0.0, 1.0)
-    c1 = p1 + s[..., None] * d1
-    c2 = p2 + t[..., None] * d2
-    return np.linalg.norm(c1 - c2, axis=-1)
-
-
 def shadow_ambiguity(
     scene: ResolvedScene,
     prim: np.ndarray,
@@ -245,15 +231,19 @@ def shadow_ambiguity(
     eps: float,
     max_work: float = 2e8,
 ) -> np.ndarray | None:
-    """(K,) bool: pixel (rows[k], cols[k])'s shadow ray to some light is within `eps` of flipping.
+    """(K,) bool: pixel (rows[k], cols[k])'s shadow ray to some light is within ~`eps` of flipping.
 
     For every light, the segment from the hit point x (the reference's) to the light
     (or 4 scene sizes along -direction) is ambiguous when
-      (a) it passes within `eps` of any triangle edge (an occluder's silhouette), away
-          from its ends: the segment shortened by `eps` at both ends is tested, or
+      (a) moving it sideways by `eps` (8 directions perpendicular to it, 45 degrees
+          apart: any edge within 0.92 eps is crossed) changes whether a triangle blocks
+          it: it passes an occluder's silhouette (internal edges of a surface do not
+          count: the shifted rays are blocked by the neighbouring triangle), or
       (b) a triangle other than the pixel's own crosses it within `eps` of either end
           (contact shadows: each renderer offsets its shadow rays differently).
-    Brute force over all triangles: returns None when K * triangles * lights exceeds
+    Triangles coplanar with the pixel's own (the receiver's surface: within `eps` of its
+    plane, normals parallel) cannot block a ray leaving that plane and are ignored.
+    Brute force over all triangles: returns None when 9 K * triangles * lights exceeds
     `max_work` (the caller then classifies nothing as a shadow edge and says so).
     """
     k = rows.size
@@ -261,7 +251,7 @@ def shadow_ambiguity(
     if k == 0 or not scene.lights or scene.triangle_count == 0:
         return out
     n_tri = scene.triangle_count
-    if float(k) * n_tri * len(scene.lights) > max_work:
+    if 9.0 * k * n_tri * len(scene.lights) > max_work:
         return None
     pr = prim[rows, cols]
     zz = z[rows, cols].astype(np.float64)
@@ -269,34 +259,45 @@ def shadow_ambiguity(
     if not ok.any():
         return out
     d = scene.camera.pixel_directions()[rows, cols]
-    x = scene.camera.eye[None, :] + zz[:, None] * d
+    x = scene.camera.eye[None, :] + np.where(ok, zz, 0.0)[:, None] * d
     tris = scene.triangles.astype(np.float64)
     points, dirs = lights_of(scene)
     far = 4.0 * scene_size(scene) + float(np.abs(tris).max(initial=0.0))
     ends = [np.broadcast_to(p, x.shape) for p, _ in points] + [x - far * dd[None, :] for dd, _ in dirs]
-    edges_a = np.concatenate([tris[:, 0], tris[:, 1], tris[:, 2]])  # (3M, 3)
-    edges_b = np.concatenate([tris[:, 1], tris[:, 2], tris[:, 0]])
-    own = pr.astype(np.int64)
-    step = max(1, int(4e6 // max(1, 3 * n_tri)))
+    own = np.where(ok, pr, 0).astype(np.int64)
+    normals = face_normals(tris)
+    n_own = normals[own]  # (K, 3)
+    step = max(1, int(4e6 // max(1, n_tri)))
+    angles = np.arange(8) * (np.pi / 4.0)
     for end in ends:
         seg = end - x
         length = np.linalg.norm(seg, axis=1)
         with np.errstate(all="ignore"):
             u = np.where(length[:, None] > 0, seg / np.where(length > 0, length, 1.0)[:, None], 0.0)
-        short = length > 2 * eps
-        p0 = x + eps * u
-        p1 = end - eps * u
+        helper = np.where(np.abs(u[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+        t1 = np.cross(u, helper)
+        t1 /= np.maximum(np.linalg.norm(t1, axis=1), 1e-300)[:, None]
+        t2 = np.cross(u, t1)
         for s0 in range(0, k, step):
             sl = slice(s0, s0 + step)
-            dist = _segment_segment_distance(
-                p0[sl, None, :], p1[sl, None, :], edges_a[None, :, :], edges_b[None, :, :]
+            xs, es = x[sl], end[sl]
+            # (K', M): triangle m lies in pixel k's receiver plane, or is the pixel's own
+            blockers = ~(
+                (np.abs(n_own[sl] @ normals.T) > 1.0 - 1e-9)
+                & (np.abs(np.einsum("kj,mj->km", n_own[sl], tris[:, 0]) - np.einsum("kj,kj->k", n_own[sl], xs)[:, None]) < eps)
             )
-            near_edge = (dist < eps).any(axis=1) & short[sl]
-            s, inside = _segment_hits(x[sl], end[sl], tris)
+            blockers[np.arange(xs.shape[0]), own[sl]] = False
+            s, inside = _segment_hits(xs, es, tris)
+            crossing = inside & (s > 0) & (s < 1) & blockers
+            base = crossing.any(axis=1)
             along = s * length[sl, None]
-            close = inside & (s > 0) & (s < 1) & ((along < eps) | (along > length[sl, None] - eps))
-            close[np.arange(close.shape[0]), own[sl]] = False
-            out[sl] |= ok[sl] & (near_edge | close.any(axis=1))
+            close = (crossing & ((along < eps) | (along > length[sl, None] - eps))).any(axis=1)
+            flips = np.zeros(xs.shape[0], dtype=bool)
+            for a in angles:
+                shift = eps * (np.cos(a) * t1[sl] + np.sin(a) * t2[sl])
+                s2, in2 = _segment_hits(xs + shift, es + shift, tris)
+                flips |= (in2 & (s2 > 0) & (s2 < 1) & blockers).any(axis=1) != base
+            out[sl] |= ok[sl] & (close | flips)
     return out
 
 

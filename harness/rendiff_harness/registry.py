@@ -8,6 +8,7 @@ A backend module provides (see backends/povray.py for a complete one):
     def version() -> str                       # may raise BackendUnavailable
     def unavailable_reason() -> str | None     # None when usable, else what to install
     def render(scene, out_exr, workdir, timeout_s) -> dict[str, object]   # raises BackendError
+    # optional keyword-only `spp`, `seed` (Monte Carlo backends); passed only when given
 
 Modules are imported lazily and one failing import never hides the others: an
 ImportError (a missing Python package, typically) turns that backend into an
@@ -18,6 +19,7 @@ can still list it.
 from __future__ import annotations
 
 import importlib
+import inspect
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -72,11 +74,15 @@ class Backend:
         return str(self.module.version())
 
     def render(
-        self, scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float
+        self, scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, **options: object
     ) -> dict[str, object]:
+        """Render; `options` (spp, seed) reach the module only if its render() accepts them."""
         if self.module is None:
             raise BackendUnavailable(f"{self.name}: {self.import_error}")
-        return dict(self.module.render(scene, out_exr, workdir, timeout_s))
+        params = inspect.signature(self.module.render).parameters
+        accepts_all = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+        passed = {k: v for k, v in options.items() if v is not None and (accepts_all or k in params)}
+        return dict(self.module.render(scene, out_exr, workdir, timeout_s, **passed))
 
 
 def load(module_name: str) -> Backend:

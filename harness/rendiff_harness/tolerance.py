@@ -251,3 +251,130 @@ def model_for(backend: str) -> Model:
         return tol, f"exact: no precision model for backend {backend!r} in tolerance.py"
 
     return Model(backend, 0.0, f"no precision model for backend {backend!r} in tolerance.py", strict, known=False)
+
+
+# --------------------------------------------------------------------------- radiance (RGB)
+
+
+@dataclass(frozen=True)
+class RgbTolerance:
+    """Deterministic RGB tolerance: |a - b| <= abs_tol(b) + rel * |b| per channel."""
+
+    abs_tol: np.ndarray | float  # scalar or (H, W, 3), evaluated at the reference values
+    rel: float
+    text: str
+
+
+POVRAY_RGB_REL = 1e-5
+PYRENDER_RGB_REL = 1e-5
+PYRENDER_CODE_SLACK = 0.01
+MITSUBA_RGB_REL = 5e-5
+MITSUBA_RGB_ABS_REL_TO_MAX = 1e-6
+F32_RGB_REL = 4 * 2.0**-24
+
+
+def _scale(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:
+    ctx = DepthContext(z_ref=np.zeros(0), cos=np.zeros(0), info=info, attrs=attrs)
+    v = _param(ctx, key)
+    if v is None:
+        radiance = info.get("radiance") if isinstance(info, Mapping) else None
+        if isinstance(radiance, Mapping):
+            v = _param(DepthContext(np.zeros(0), np.zeros(0), radiance, {}), key)
+    return v
+
+
+def povray_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    """POV-Ray: two 16-bit linear passes, L = S k/65535 + S_e k_e/65535 (backends/povray.py).
+
+    Each pass rounds to the nearest code (measured: max 0.502 codes on a point-lit plane,
+    the excess being POV-Ray's float32 colour arithmetic), so abs = (S + S_e)/65535/2;
+    rel 1e-5 covers the float32 arithmetic (measured 3e-8) and both sides' f32 storage.
+    """
+    s = _scale(attrs, info, "rgb_scale")
+    se = _scale(attrs, info, "emission_scale")
+    if s is None or se is None:
+        raise ToleranceError(
+            "povray render gives no exposure scales (rendiff:rgb_scale / rendiff:emission_scale): RGB tolerance unknown"
+        )
+    abs_tol = (s + se) / 65535.0 / 2.0
+    text = (
+        f"povray: |dL| <= (S {s:.6g} + S_e {se:.6g})/65535/2 = {abs_tol:.3g} (half a code of each 16-bit linear pass) "
+        f"+ {POVRAY_RGB_REL:g}*|L| (float32 colour arithmetic)"
+    )
+    return RgbTolerance(abs_tol, POVRAY_RGB_REL, text)
+
+
+def pyrender_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    """pyrender: 8-bit (L/S)^(1/2.2) from rendiff's Lambert shader (backends/pyrender_backend.py).
+
+    GL rounds to the nearest code (measured: max 0.49997 codes), so at the reference value
+    b, with c = 255 (b/S)^(1/2.2), the decoded value may be off by
+    S (((c + 0.5 + 0.01)/255)^2.2 - (c/255)^2.2): half a code through the inverse transfer
+    (the larger, upper side), plus 0.01 code for the shader's float32 arithmetic at a
+    rounding boundary; plus rel 1e-5.
+    """
+    s = _scale(attrs, info, "rgb_scale")
+    if s is None:
+        raise ToleranceError("pyrender render gives no exposure scale (rendiff:rgb_scale): RGB tolerance unknown")
+    gamma = 2.2
+    b = np.clip(np.abs(np.asarray(ref, dtype=np.float64)) / s if s > 0 else np.zeros_like(ref), 0.0, 1.0)
+    c = 255.0 * b ** (1.0 / gamma)
+    hi = np.minimum((c + 0.5 + PYRENDER_CODE_SLACK) / 255.0, 1.0)
+    abs_tol = s * (hi**gamma - (c / 255.0) ** gamma)
+    text = (
+        f"pyrender: |dL| <= S*(((c+0.5+{PYRENDER_CODE_SLACK:g})/255)^2.2 - (c/255)^2.2), c = 255 (L/S)^(1/2.2), "
+        f"S {s:.6g} (half an 8-bit code through the inverse gamma-2.2 transfer at the reference's value; "
+        f"+{PYRENDER_CODE_SLACK:g} code for float32 shading) + {PYRENDER_RGB_REL:g}*|L|"
+    )
+    return RgbTolerance(abs_tol, PYRENDER_RGB_REL, text)
+
+
+def mitsuba_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    """Mitsuba `direct` at pixel centers, float32 throughout.
+
+    Measured against the float64 closed form on a lit plane: 5e-8 relative (directional)
+    and up to 1e-5 (point lights: f32 hit position, r^2 and cos). rel 5e-5, plus
+    1e-6 x the image's largest value for cancellation in cos at grazing light.
+    """
+    top = float(np.max(np.abs(ref), initial=0.0)) if np.size(ref) else 0.0
+    abs_tol = MITSUBA_RGB_ABS_REL_TO_MAX * top
+    text = (
+        f"mitsuba: |dL| <= {MITSUBA_RGB_ABS_REL_TO_MAX:g}*max|L| ({abs_tol:.3g}) + {MITSUBA_RGB_REL:g}*|L| "
+        "(float32 ray tracing and shading; measured <= 1e-5 relative)"
+    )
+    return RgbTolerance(abs_tol, MITSUBA_RGB_REL, text)
+
+
+def exact_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    return RgbTolerance(0.0, 0.0, "exact: the rendiff loops share visibility and shading code")
+
+
+def f32_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    return RgbTolerance(0.0, F32_RGB_REL, f"float32: |dL| <= {F32_RGB_REL:.3g}*|L| (4 ulps)")
+
+
+RGB_MODELS: dict[str, Callable[[np.ndarray, Mapping[str, Any], Mapping[str, Any]], RgbTolerance]] = {
+    "raster": exact_rgb,
+    "trace": exact_rgb,
+    "povray": povray_rgb,
+    "pyrender": pyrender_rgb,
+    "mitsuba": mitsuba_rgb,
+}
+
+
+def rgb_model(
+    backend: str, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]
+) -> RgbTolerance:
+    """Deterministic RGB tolerance of `backend` at the reference values `ref` (H, W, 3).
+
+    Unknown backends: f32 output at 4 ulps when the EXR says rgb_encoding = float32, else
+    exact, and the text says there is no model (so a new backend fails loudly).
+    """
+    model = RGB_MODELS.get(backend)
+    if model is not None:
+        return model(ref, attrs, info)
+    enc = attrs.get("rgb_encoding") if isinstance(attrs, Mapping) else None
+    if enc == "float32":
+        t = f32_rgb(ref, attrs, info)
+        return RgbTolerance(t.abs_tol, t.rel, t.text + f" (no RGB model for {backend!r}; its EXR says float32)")
+    return RgbTolerance(0.0, 0.0, f"exact: no RGB precision model for backend {backend!r} in tolerance.py")

@@ -339,10 +339,127 @@ def lit_plane(
 
 
 def closed_form_plane(scene: ResolvedScene, flip: bool = False) -> np.ndarray:
-    """(H, W, 3) float64 contract radiance on `lit_plane` at the pixel centers, from the exact plane depth."""
-    from rendiff_harness import lighting
+    """(H, W, 3) float64 contract radiance on `lit_plane` at the pixel centers, written out by hand.
 
-    n = np.array([0.0, 0.0, -1.0 if flip else 1.0])
-    z = plane_depth(scene, np.zeros(3), n)
-    prim = np.zeros(z.shape, dtype=np.uint32)  # any prim of the plane: same normal and material
-    return lighting.local_radiance(scene, prim, z)
+    x = eye + z d with z the exact plane depth; the viewer is above the plane (z > 0), so
+    the geometric normal n = (0, 0, +-1) faces it unless `flip`:
+      two_sided: n turned toward the viewer, emission and shading on both sides;
+      one_sided: a back-facing plane is black.
+    L = Le + sum_point rho/pi I max(0, n.w)/r^2 + sum_dir rho/pi E max(0, -n.dir)   (no occluders)
+    """
+    n_geo = np.array([0.0, 0.0, -1.0 if flip else 1.0])
+    z = plane_depth(scene, np.zeros(3), n_geo)
+    x = scene.camera.eye[None, None, :] + z[..., None] * scene.camera.pixel_directions()
+    facing = not flip  # the eye is at z > 0
+    two_sided = "two_sided" in scene.requires
+    if not facing and not two_sided:
+        return np.zeros(z.shape + (3,))
+    n = np.array([0.0, 0.0, 1.0])  # turned toward the viewer
+    mat = scene.materials[0]
+    rho = np.asarray(mat["albedo"], float)
+    out = np.zeros(z.shape + (3,))
+    if "emission" in scene.requires:
+        out += np.asarray(mat["emission"], float)
+    for light in scene.lights:
+        if light["kind"] == "point":
+            to_l = np.asarray(light["position"], float) - x
+            r2 = (to_l**2).sum(axis=-1)
+            cos = np.maximum((to_l @ n) / np.sqrt(r2), 0.0)
+            out += rho / np.pi * np.asarray(light["intensity"], float) * (cos / r2)[..., None]
+        else:
+            d = np.asarray(light["direction"], float)
+            d = d / np.linalg.norm(d)
+            cos = max(0.0, float(-(n @ d)))
+            out += rho / np.pi * np.asarray(light["irradiance"], float) * cos
+    return out
+
+
+def furnace(directory: Path, albedo: float = 0.5, emission: float = 1.0, width: int = 24, height: int = 24) -> Path:
+    """A closed room, every inward wall with albedo rho and emission Le: L = Le / (1 - rho) everywhere."""
+    import json
+
+    tris = _box((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0), inward=True)
+    path = _write(
+        directory, tris, eye=(0.1, 0.2, 0.3), look_at=(0.5, -0.3, -1.0), vfov_deg=70.0, width=width, height=height,
+        requires=("depth", "ids", "emission", "lambert", "area_light", "global_illumination", "one_sided"),
+        materials=[{"name": "wall", "albedo": [albedo] * 3, "emission": [emission] * 3}], name="furnace",
+    )
+    meta = json.loads((path / "scene.json").read_text())
+    meta["integrator"] = {"max_depth": -1, "spp": 64}
+    (path / "scene.json").write_text(json.dumps(meta, indent=1))
+    return path
+
+
+def _quad_n(center: Any, normal: Any, u: Any, half_u: float, half_v: float) -> list[np.ndarray]:
+    """Two triangles of a rectangle facing `normal` (counter-clockwise seen from that side)."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    uu = np.asarray(u, float) / np.linalg.norm(u)
+    return _quad(np.asarray(center, float), uu * half_u, np.cross(n, uu) * half_v)
+
+
+def _box(lo: Any, hi: Any, yaw_deg: float = 0.0, at: Any = (0.0, 0.0, 0.0), inward: bool = False) -> list[np.ndarray]:
+    """12 triangles of an axis-aligned box [lo, hi], turned by yaw about +y and moved to `at`."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    s = -1.0 if inward else 1.0
+    faces = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            u = np.zeros(3)
+            u[(axis + 1) % 3] = 1.0
+            v_axis = (axis + 2) % 3
+            faces += _quad_n(c + n * h[axis], s * n, u, h[(axis + 1) % 3], h[v_axis])
+    a = np.radians(yaw_deg)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    return [t @ rot.T + np.asarray(at, float) for t in faces]
+
+
+CORNELL_REQUIRES = (
+    "depth", "ids", "emission", "lambert", "area_light", "global_illumination", "one_sided",
+)
+
+
+def cornell(
+    directory: Path,
+    width: int = 64,
+    height: int = 64,
+    requires: tuple[str, ...] = CORNELL_REQUIRES,
+    lights: list[dict[str, Any]] | None = None,
+    emission: tuple[float, float, float] = (17.0, 12.0, 4.0),
+) -> Path:
+    """A Cornell-like box (scenes/cornell_box.toml's layout): inward room, red/green walls,
+    two blocks, a one-sided ceiling light facing down. Objects: room 0, left 1, right 2,
+    tall 3, short 4, light 5; materials white 0, red 1, green 2, light 3."""
+    objs: list[tuple[list[np.ndarray], int]] = [
+        (_box((-1.0, 0.0, -1.0), (1.0, 2.0, 3.5), inward=True), 0),
+        (_quad_n((-0.999, 1.0, 1.25), (1, 0, 0), (0, 0, 1), 2.25, 1.0), 1),
+        (_quad_n((0.999, 1.0, 1.25), (-1, 0, 0), (0, 0, 1), 2.25, 1.0), 2),
+        (_box((-0.3, 0.0, -0.3), (0.3, 1.2, 0.3), 17.0, (-0.35, 0.0, -0.3)), 0),
+        (_box((-0.3, 0.0, -0.3), (0.3, 0.6, 0.3), -18.0, (0.35, 0.0, 0.35)), 0),
+        (_quad_n((0.0, 1.98, 0.0), (0, -1, 0), (1, 0, 0), 0.25, 0.2), 3),
+    ]
+    tris, oids = [], []
+    for k, (faces, _) in enumerate(objs):
+        tris += faces
+        oids += [k] * len(faces)
+    materials = [
+        {"name": "white", "albedo": [0.73, 0.73, 0.73], "emission": [0, 0, 0]},
+        {"name": "red", "albedo": [0.63, 0.065, 0.05], "emission": [0, 0, 0]},
+        {"name": "green", "albedo": [0.14, 0.45, 0.091], "emission": [0, 0, 0]},
+        {"name": "light", "albedo": [0.78, 0.78, 0.78], "emission": list(emission)},
+    ]
+    path = _write(
+        directory, tris, oids, eye=(0.0, 1.0, 3.3), look_at=(0.0, 1.0, 0.0), vfov_deg=40.0,
+        width=width, height=height, requires=requires, materials=materials, lights=lights, name="cornell",
+    )
+    # fixtures.write_scene gives every object material 0: set the real ones.
+    import json
+
+    meta = json.loads((path / "scene.json").read_text())
+    for k, (_, m) in enumerate(objs):
+        meta["objects"][k]["material"] = m
+    meta["integrator"] = {"max_depth": -1, "spp": 64}
+    (path / "scene.json").write_text(json.dumps(meta, indent=1))
+    return path

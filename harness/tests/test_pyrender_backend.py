@@ -31,7 +31,10 @@ def _render(tmp_path: Path, build: Callable[[Path], Path]) -> Rendered:
 
 def test_module_protocol() -> None:
     assert pb.NAME == "pyrender"
-    assert pb.FEATURES == {"depth", "ids"} and pb.BUFFERS == {"Z", "id"}
+    assert pb.FEATURES == {
+        "depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadowless", "two_sided"
+    }
+    assert pb.BUFFERS == {"Z", "id", "RGB"}
     assert "pyrender 0.1.45" in pb.version() and "llvmpipe" in pb.version()
 
 

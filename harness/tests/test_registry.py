@@ -24,7 +24,10 @@ def test_registry_lists_one_module_per_backend() -> None:
     assert len(set(registry.BACKEND_MODULES)) == len(registry.BACKEND_MODULES)
     pov = registry.load("povray")
     assert pov.module is not None and pov.name == "povray"
-    assert pov.features == frozenset({"depth", "ids"}) and pov.buffers == frozenset({"Z", "id"})
+    assert pov.features == frozenset(
+        {"depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadows", "shadowless", "two_sided"}
+    )
+    assert pov.buffers == frozenset({"Z", "id", "RGB"})
     assert registry.get("povray").module_name == "povray"
 
 
@@ -71,12 +74,12 @@ def test_incomplete_module_is_refused(tmp_path: Path, monkeypatch: pytest.Monkey
 
 def test_missing_features(tmp_path: Path) -> None:
     d = fixtures.write_scene(
-        tmp_path / "s", fixtures_quad(), requires=("ids", "lambert", "depth", "area_light")
+        tmp_path / "s", fixtures_quad(), requires=("ids", "one_sided", "lambert", "depth", "area_light")
     )
     scene = resolved.load(d)
     pov = registry.load("povray")
-    assert registry.missing_features(pov, scene) == ["area_light", "lambert"]
-    assert registry.missing_features(pov.module, scene) == ["area_light", "lambert"]  # a module works too
+    assert registry.missing_features(pov, scene) == ["area_light", "one_sided"]
+    assert registry.missing_features(pov.module, scene) == ["area_light", "one_sided"]  # a module works too
 
 
 def fixtures_quad() -> list[list[list[float]]]:
@@ -101,11 +104,11 @@ def test_info_text(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_render_skips_missing_features(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    d = fixtures.write_scene(tmp_path / "s", fixtures_quad(), requires=("depth", "ids", "lambert"))
+    d = fixtures.write_scene(tmp_path / "s", fixtures_quad(), requires=("depth", "ids", "global_illumination"))
     out = tmp_path / "o.exr"
     assert cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(out)]) == 3
     msg = json.loads(capsys.readouterr().out)
-    assert msg["status"] == "skipped" and "lambert" in msg["reason"] and msg["backend"] == "povray"
+    assert msg["status"] == "skipped" and "global_illumination" in msg["reason"] and msg["backend"] == "povray"
     assert not out.exists()
 
 

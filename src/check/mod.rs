@@ -68,6 +68,31 @@ pub struct CheckOptions {
     pub expectations: PathBuf,
     /// Print nothing but errors.
     pub quiet: bool,
+    /// Cached Monte Carlo references (Mitsuba), compared with the core's path tracer.
+    pub references: Option<PathBuf>,
+    /// The core's path-tracing settings.
+    pub core: CoreShading,
+}
+
+/// How the core shades in a check run (the reference for radiance).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoreShading {
+    /// Seed of the path tracer.
+    pub seed: u64,
+    /// Samples per pixel; default: the scene's `integrator.spp`.
+    pub spp: Option<u32>,
+    /// A deliberate error, for testing the statistical gate's power.
+    pub bias: Option<crate::shade::Bias>,
+}
+
+impl Default for CoreShading {
+    fn default() -> Self {
+        Self {
+            seed: CHECK_SEED,
+            spp: None,
+            bias: None,
+        }
+    }
 }
 
 /// What a run produced.
@@ -165,6 +190,7 @@ fn in_process(
     rel_exr: &str,
     command: String,
     version: String,
+    seed: u64,
     render: impl FnOnce() -> Result<(Frame, Option<Radiance>), EmbreeError> + std::panic::UnwindSafe,
 ) -> RenderRecord {
     let mut rec = RenderRecord {
@@ -179,7 +205,7 @@ fn in_process(
             rec.time_s = start.elapsed().as_secs_f64();
             let mut attrs = frame_attrs(&frame, &scene.name);
             if radiance.is_some() {
-                attrs.insert("seed".into(), CHECK_SEED.to_string());
+                attrs.insert("seed".into(), seed.to_string());
             }
             match write_frame_with(exr, &frame, radiance.as_ref(), &attrs) {
                 Ok(()) => {
@@ -316,6 +342,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                 }
             } else {
                 let sc = &scene;
+                let core = opts.core;
                 in_process(
                     name,
                     sc,
@@ -323,6 +350,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     &rel_exr,
                     command,
                     version.clone(),
+                    opts.core.seed,
                     move || {
                         let frame = if name == "raster" {
                             raster::render(sc, RasterOptions::default(), &|_| {})
@@ -331,12 +359,12 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                         };
                         let radiance = shade::needs_shading(sc).then(|| {
                             let bvh = trace::TraceBvh::build(sc, trace::BvhQuality::Medium);
-                            let opts = ShadeOptions {
-                                spp: sc.integrator.spp,
-                                seed: CHECK_SEED,
-                                bias: None,
+                            let shading = ShadeOptions {
+                                spp: core.spp.unwrap_or(sc.integrator.spp),
+                                seed: core.seed,
+                                bias: core.bias,
                             };
-                            shade::shade(sc, &frame, &bvh, opts)
+                            shade::shade(sc, &frame, &bvh, shading)
                         });
                         Ok((frame, radiance))
                     },
@@ -364,7 +392,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                 let command = shell_line([exe, "check", "--only", name, &scene_arg]);
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
                 let sc = &scene;
-                in_process(name, sc, &exr, &rel_exr, command, v, move || {
+                in_process(name, sc, &exr, &rel_exr, command, v, 0, move || {
                     embree::render(sc, mode).map(|f| (f, None))
                 })
             };
@@ -537,6 +565,9 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
         .arg(&opts.run_dir)
         .arg("--expectations")
         .arg(&opts.expectations);
+    if let Some(r) = &opts.references {
+        cmd.arg("--references").arg(r);
+    }
     let o = run_with_timeout(cmd, Duration::from_secs(1800), &scratch.join("compare"))
         .context("cannot run the comparison (python -m rendiff_harness compare)")?;
     if !opts.quiet {

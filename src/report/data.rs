@@ -271,11 +271,16 @@ impl RunData {
 }
 
 fn load_resolved(dir: &Path) -> Option<ResolvedInfo> {
-    let v: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("scene.json")).ok()?).ok()?;
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("scene.json")).ok()?).ok()?;
     let u = |x: &Value, k: &str| x.get(k).and_then(Value::as_u64).unwrap_or(0);
     let cam = v.get("camera").cloned().unwrap_or(Value::Null);
     Some(ResolvedInfo {
-        name: v.get("name").and_then(Value::as_str).unwrap_or("").to_string(),
+        name: v
+            .get("name")
+            .and_then(Value::as_str)
+            .unwrap_or("")
+            .to_string(),
         width: u(&cam, "width"),
         height: u(&cam, "height"),
         triangle_count: u(&v, "triangle_count"),
@@ -288,7 +293,10 @@ fn load_resolved(dir: &Path) -> Option<ResolvedInfo> {
                         name: o.get("name").and_then(Value::as_str).unwrap_or("").into(),
                         first_prim: u(o, "first_prim"),
                         prim_count: u(o, "prim_count"),
-                        material: o.get("material").and_then(Value::as_u64).map(|m| m as usize),
+                        material: o
+                            .get("material")
+                            .and_then(Value::as_u64)
+                            .map(|m| m as usize),
                     })
                     .collect()
             })
@@ -320,7 +328,13 @@ mod tests {
         let a = page_stem("<script>alert(1)</script>");
         let b = page_stem("<script>alert(2)</script>");
         assert_ne!(a, b);
-        for p in [&a, &b, &page_stem("index"), &page_stem(""), &page_stem("../x")] {
+        for p in [
+            &a,
+            &b,
+            &page_stem("index"),
+            &page_stem(""),
+            &page_stem("../x"),
+        ] {
             assert!(p
                 .bytes()
                 .all(|c| c.is_ascii_alphanumeric() || c == b'_' || c == b'-'));
@@ -331,7 +345,10 @@ mod tests {
     #[test]
     fn run_paths_never_leave_the_run() {
         let run = Path::new("/r");
-        assert_eq!(run_relative(run, "scenes/a/b.exr"), Some(PathBuf::from("/r/scenes/a/b.exr")));
+        assert_eq!(
+            run_relative(run, "scenes/a/b.exr"),
+            Some(PathBuf::from("/r/scenes/a/b.exr"))
+        );
         assert_eq!(run_relative(run, "../x"), None);
         assert_eq!(run_relative(run, "/etc/passwd"), None);
         assert_eq!(run_relative(run, ""), None);

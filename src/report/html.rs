@@ -101,7 +101,7 @@ td.num{text-align:right;font-variant-numeric:tabular-nums}
 .matrix td{text-align:center;white-space:nowrap}.matrix td.scene{text-align:left}
 .reason{font-size:12px;color:#444;max-width:60em;word-break:break-word}
 pre.cmd{background:#f2f2f2;border:1px solid #ddd;padding:4px 6px;margin:2px 0;white-space:pre-wrap;word-break:break-all;font-size:12px}
-.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(220px,1fr));gap:10px}
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(170px,1fr));gap:10px}
 figure{margin:0;background:#fff;border:1px solid #ddd;padding:6px}
 figure img,.flip-view{image-rendering:pixelated;width:100%;height:auto;display:block;background:#000}
 figcaption{font-size:12px;margin-top:4px}

@@ -27,6 +27,8 @@ pub enum Kind {
     IdDiff,
     /// |ΔZ| heat map against the reference.
     DepthDiff,
+    /// Radiance error against the reference, in units of its tolerance.
+    RadianceDiff,
     /// Any other diff image the comparison listed for an entry.
     OtherDiff,
 }
@@ -40,13 +42,17 @@ impl Kind {
             Kind::Ids => "ids",
             Kind::IdDiff => "id diff",
             Kind::DepthDiff => "Z diff",
+            Kind::RadianceDiff => "RGB diff",
             Kind::OtherDiff => "diff",
         }
     }
 
     /// True for comparisons against the reference.
     pub fn is_diff(self) -> bool {
-        matches!(self, Kind::IdDiff | Kind::DepthDiff | Kind::OtherDiff)
+        matches!(
+            self,
+            Kind::IdDiff | Kind::DepthDiff | Kind::RadianceDiff | Kind::OtherDiff
+        )
     }
 }
 
@@ -137,7 +143,11 @@ fn save_png(path: &Path, w: usize, h: usize, px: &[[u8; 3]]) -> Result<()> {
 }
 
 fn srgb(v: f32) -> u8 {
-    let v = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let e = if v <= 0.003_130_8 {
         12.92 * v
     } else {
@@ -215,7 +225,8 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
     let rel_dir = format!("img/{}", scene.page);
     let dir = report_dir.join(&rel_dir);
     if let Err(e) = std::fs::create_dir_all(&dir) {
-        out.notes.push(format!("{}: cannot create: {e}", dir.display()));
+        out.notes
+            .push(format!("{}: cannot create: {e}", dir.display()));
         return out;
     }
     let mut loaded: Vec<Loaded> = Vec::new();
@@ -265,8 +276,22 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
                 .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
                 .map(|(lo, hi)| (lo, hi, "all backends".to_string()))
         });
+    // Pad the range a little, so last-bit differences are not "outside" it and
+    // a flat scene (one depth) still gets a scale.
+    let range = range.map(|(lo, hi, from)| {
+        let pad = ((hi - lo) * 0.02)
+            .max(hi.abs().max(lo.abs()) * 1e-3)
+            .max(f32::MIN_POSITIVE);
+        (lo - pad, hi + pad, from)
+    });
     out.depth_range = range.clone();
-    let mut add = |out: &mut SceneImages, backend: &str, kind: Kind, name: &str, caption: String, px: Option<&[[u8; 3]]>, size: (usize, usize)| {
+    let add = |out: &mut SceneImages,
+               backend: &str,
+               kind: Kind,
+               name: &str,
+               caption: String,
+               px: Option<&[[u8; 3]]>,
+               size: (usize, usize)| {
         let file = format!("{rel_dir}/{}.{name}.png", page_stem(backend));
         if let Some(px) = px {
             if let Err(e) = save_png(&report_dir.join(&file), size.0, size.1, px) {
@@ -285,19 +310,46 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
         let b = &l.buffers;
         let size = (b.width, b.height);
         if let Some(rgb) = &l.rgb {
-            let px: Vec<[u8; 3]> = rgb.iter().map(|c| [srgb(c[0]), srgb(c[1]), srgb(c[2])]).collect();
-            add(&mut out, &l.backend, Kind::Radiance, "radiance", format!("{} radiance", l.backend), Some(&px), size);
+            let px: Vec<[u8; 3]> = rgb
+                .iter()
+                .map(|c| [srgb(c[0]), srgb(c[1]), srgb(c[2])])
+                .collect();
+            add(
+                &mut out,
+                &l.backend,
+                Kind::Radiance,
+                "radiance",
+                format!("{} radiance", l.backend),
+                Some(&px),
+                size,
+            );
         }
         if let (Some(z), Some((lo, hi, _))) = (&b.z, &range) {
             let (px, clamped) = depth_colors(z, *lo, *hi);
             if clamped > 0 {
                 out.clamped.push((l.backend.clone(), clamped));
             }
-            add(&mut out, &l.backend, Kind::Depth, "depth", format!("{} depth", l.backend), Some(&px), size);
+            add(
+                &mut out,
+                &l.backend,
+                Kind::Depth,
+                "depth",
+                format!("{} depth", l.backend),
+                Some(&px),
+                size,
+            );
         }
         if let Some(p) = &b.prim {
             let px: Vec<[u8; 3]> = p.iter().map(|&id| id_color(id)).collect();
-            add(&mut out, &l.backend, Kind::Ids, "ids", format!("{} ids", l.backend), Some(&px), size);
+            add(
+                &mut out,
+                &l.backend,
+                Kind::Ids,
+                "ids",
+                format!("{} ids", l.backend),
+                Some(&px),
+                size,
+            );
         }
         if l.backend == reference {
             continue;
@@ -323,6 +375,7 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
                 let kind = match (e.buffer.as_str(), key.as_str()) {
                     ("id", "heat") => Kind::IdDiff,
                     ("Z", "heat") => Kind::DepthDiff,
+                    ("RGB", "heat") => Kind::RadianceDiff,
                     _ => Kind::OtherDiff,
                 };
                 let name = format!("{}.{}.diff", page_stem(&e.buffer), page_stem(key));
@@ -339,6 +392,7 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
                         let caption = match kind {
                             Kind::IdDiff => format!("{} id mismatches", l.backend),
                             Kind::DepthDiff => format!("{} |ΔZ|", l.backend),
+                            Kind::RadianceDiff => format!("{} RGB error", l.backend),
                             _ => format!("{} {} {}", l.backend, e.buffer, key),
                         };
                         add(&mut out, &l.backend, kind, &name, caption, None, size);
@@ -348,14 +402,31 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
         }
         if let (false, Some(rp), Some(tp)) = (have.0, &r.prim, &b.prim) {
             let px = id_diff_colors(rp, tp);
-            add(&mut out, &l.backend, Kind::IdDiff, "id.unclassified.diff", format!("{} id mismatches (unclassified)", l.backend), Some(&px), size);
+            add(
+                &mut out,
+                &l.backend,
+                Kind::IdDiff,
+                "id.unclassified.diff",
+                format!("{} id mismatches (unclassified)", l.backend),
+                Some(&px),
+                size,
+            );
         }
         if let (false, Some(rz), Some(tz)) = (have.1, &r.z, &b.z) {
             let px = depth_diff_colors(rz, tz);
-            add(&mut out, &l.backend, Kind::DepthDiff, "Z.own.diff", format!("{} |ΔZ|", l.backend), Some(&px), size);
+            add(
+                &mut out,
+                &l.backend,
+                Kind::DepthDiff,
+                "Z.own.diff",
+                format!("{} |ΔZ|", l.backend),
+                Some(&px),
+                size,
+            );
         }
         if let (Some(rz), Some(tz)) = (&r.z, &b.z) {
-            out.histograms.push((l.backend.clone(), Histogram::of_depth(rz, tz)));
+            out.histograms
+                .push((l.backend.clone(), Histogram::of_depth(rz, tz)));
         }
         if let (Some(rp), Some(tp)) = (&r.prim, &b.prim) {
             let objects = scene.resolved.as_ref().map_or(0, |s| s.objects.len());
@@ -387,6 +458,6 @@ mod tests {
         assert_eq!(srgb(1.0), 255);
         assert_eq!(srgb(7.0), 255);
         assert_eq!(srgb(f32::NAN), 0);
-        assert_eq!(srgb(0.214), 128);
+        assert_eq!(srgb(0.5), 188);
     }
 }

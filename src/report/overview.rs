@@ -111,7 +111,14 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         .flat_map(|s| s.results.iter().map(move |e| (s, e)))
         .filter(|(_, e)| e.status != "pass")
         .collect();
-    attention.sort_by_key(|(s, e)| (status_rank(&e.status), s.name.clone(), e.backend.clone(), e.buffer.clone()));
+    attention.sort_by_key(|(s, e)| {
+        (
+            status_rank(&e.status),
+            s.name.clone(),
+            e.backend.clone(),
+            e.buffer.clone(),
+        )
+    });
     b.push_str("<h2 id=\"attention\">Needs attention</h2>");
     if attention.is_empty() && data.results.is_some() {
         b.push_str("<p>Every comparison passed.</p>");
@@ -152,20 +159,34 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         let _ = write!(b, "<tr><td class=\"scene\">{}</td>", scene_link(s, ""));
         for be in &backends {
             b.push_str("<td>");
-            let entries: Vec<&ResultEntry> = s.results.iter().filter(|e| &e.backend == be).collect();
+            let entries: Vec<&ResultEntry> =
+                s.results.iter().filter(|e| &e.backend == be).collect();
             if entries.is_empty() {
                 match s.render(be) {
                     Some(r) => {
-                        let why = if r.status == "ok" { format!("{:.3} s", r.time_s) } else { format!("{}{}", r.reason, r.message) };
+                        let why = if r.status == "ok" {
+                            format!("{:.3} s", r.time_s)
+                        } else {
+                            format!("{}{}", r.reason, r.message)
+                        };
                         let _ = write!(b, "{}", badge(&r.status, &why));
                     }
                     None => b.push_str("<span class=\"muted\">—</span>"),
                 }
             }
             for e in entries {
+                let mut counts = String::new();
+                for (k, short) in [
+                    ("edge_mismatches", "edge"),
+                    ("interior_mismatches", "interior"),
+                ] {
+                    if let Some(n) = num(e, k).filter(|n| *n > 0.0) {
+                        let _ = write!(counts, " <span class=\"muted\">{n} {short}</span>");
+                    }
+                }
                 let _ = write!(
                     b,
-                    "<a href=\"{}\">{}:&nbsp;{}</a><br>",
+                    "<a href=\"{}\">{}:&nbsp;{}</a>{counts}<br>",
                     url(&format!("{}.html#b-{}", s.page, super::data::page_stem(be))),
                     escape(&e.buffer),
                     badge(&e.status, &e.reason)
@@ -181,20 +202,50 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     b.push_str("<h2 id=\"scenes\">Scenes</h2><div class=\"grid\">");
     for &i in &order {
         let s = &data.scenes[i];
-        let _ = write!(b, "<figure><a href=\"{}\">", url(&format!("{}.html", s.page)));
-        let thumbs: Vec<_> = images[i]
-            .pictures
+        let _ = write!(
+            b,
+            "<figure><a href=\"{}\">",
+            url(&format!("{}.html", s.page))
+        );
+        // The reference's radiance if any, else its IDs (they show the triangles), else depth.
+        let thumb = [Kind::Radiance, Kind::Ids, Kind::Depth]
             .iter()
-            .filter(|p| p.backend == m.reference && matches!(p.kind, Kind::Ids | Kind::Depth | Kind::Radiance))
-            .collect();
-        if let Some(p) = thumbs.first() {
-            let _ = write!(b, "<img src=\"{}\" alt=\"{}\">", url(&p.file), escape(&p.caption));
+            .find_map(|k| {
+                images[i]
+                    .pictures
+                    .iter()
+                    .find(|p| p.backend == m.reference && p.kind == *k)
+            });
+        if let Some(p) = thumb {
+            let _ = write!(
+                b,
+                "<img src=\"{}\" alt=\"{}\">",
+                url(&p.file),
+                escape(&p.caption)
+            );
         }
         let display = s.resolved.as_ref().map(|r| r.name.as_str()).unwrap_or("");
-        let _ = write!(b, "</a><figcaption>{} {}", scene_link(s, ""), if display.is_empty() || display == s.name { String::new() } else { format!("(“{}”)", escape(display)) });
-        let failing = s.results.iter().filter(|e| status_rank(&e.status) == 0).count();
+        let _ = write!(
+            b,
+            "</a><figcaption>{} {}",
+            scene_link(s, ""),
+            if display.is_empty() || display == s.name {
+                String::new()
+            } else {
+                format!("(“{}”)", escape(display))
+            }
+        );
+        let failing = s
+            .results
+            .iter()
+            .filter(|e| status_rank(&e.status) == 0)
+            .count();
         if failing > 0 {
-            let _ = write!(b, " {}", badge("fail", &format!("{failing} failing verdicts")));
+            let _ = write!(
+                b,
+                " {}",
+                badge("fail", &format!("{failing} failing verdicts"))
+            );
         }
         b.push_str("</figcaption></figure>");
     }
@@ -228,10 +279,16 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
             }
         }
     }
-    let _ = write!(b, "<h2 id=\"errors\">Depth errors per backend, all scenes</h2>{}", svg::histograms(&agg));
+    let _ = write!(
+        b,
+        "<h2 id=\"errors\">Depth errors per backend, all scenes</h2>{}",
+        svg::histograms(&agg)
+    );
 
     // ---- versions
-    b.push_str("<h2 id=\"versions\">Backend versions</h2><table><tr><th>backend</th><th>version</th></tr>");
+    b.push_str(
+        "<h2 id=\"versions\">Backend versions</h2><table><tr><th>backend</th><th>version</th></tr>",
+    );
     let mut versions: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
     for s in &data.scenes {
         for r in s.runs.iter().flat_map(|r| r.renders.iter()) {
@@ -242,7 +299,12 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         }
     }
     for (be, v) in versions {
-        let _ = write!(b, "<tr><td>{}</td><td>{}</td></tr>", escape(be), escape(&v.join("; ")));
+        let _ = write!(
+            b,
+            "<tr><td>{}</td><td>{}</td></tr>",
+            escape(be),
+            escape(&v.join("; "))
+        );
     }
     b.push_str("</table>");
     let _ = write!(

@@ -13,7 +13,16 @@ use crate::check::process::shell_line;
 use std::fmt::Write;
 
 fn err(e: &ResultEntry, key: &str) -> String {
-    num(e, key).map_or_else(|| "-".into(), |v| if v == 0.0 { "0".into() } else { format!("{v:.3e}") })
+    num(e, key).map_or_else(
+        || "-".into(),
+        |v| {
+            if v == 0.0 {
+                "0".into()
+            } else {
+                format!("{v:.3e}")
+            }
+        },
+    )
 }
 
 /// The command that reruns one backend on one scene and compares it again.
@@ -46,6 +55,49 @@ fn bound_text(e: &ResultEntry) -> String {
     }
 }
 
+/// Fields of a verdict that have no column (e.g. radiance's mode, p-value, FLIP),
+/// so nothing the comparison recorded is hidden from the reviewer.
+fn extra_fields(e: &ResultEntry) -> String {
+    const SHOWN: &[&str] = &[
+        "scene",
+        "backend",
+        "buffer",
+        "status",
+        "reason",
+        "pixels",
+        "edge_mismatches",
+        "interior_mismatches",
+        "mask_mismatches",
+        "max_abs_error",
+        "mean_abs_error",
+        "max_rel_error",
+        "compared_pixels",
+        "tolerance",
+        "bound",
+        "time_s",
+        "version",
+        "command",
+        "images",
+    ];
+    let rows: Vec<String> = e
+        .details
+        .iter()
+        .filter(|(k, v)| !SHOWN.contains(&k.as_str()) && !v.is_null() && v.as_str() != Some(""))
+        .map(|(k, v)| {
+            let v = v.as_str().map_or_else(|| v.to_string(), String::from);
+            format!("{}: {}", escape(k), escape(&v))
+        })
+        .collect();
+    if rows.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<details><summary>more</summary>{}</details>",
+            rows.join("<br>")
+        )
+    }
+}
+
 fn legend() -> &'static str {
     "<p class=\"legend\">ID mismatch maps: <span class=\"sw\" style=\"background:#383838\"></span>same ID \
      <span class=\"sw\" style=\"background:#ffbf00\"></span>edge mismatch (center within the backend's rounding distance of an edge) \
@@ -53,14 +105,19 @@ fn legend() -> &'static str {
      <span class=\"sw\" style=\"background:#ff3030\"></span>mismatch, unclassified (the comparison drew no map) \
      <span class=\"sw\" style=\"background:#000\"></span>background in both. \
      Z maps: <span class=\"sw\" style=\"background:linear-gradient(90deg,#000004,#bc3754,#fcffa4)\"></span>|ΔZ| from 0 to the largest error \
-     <span class=\"sw\" style=\"background:#00ffff\"></span>hit on one side only.</p>"
+     <span class=\"sw\" style=\"background:#00ffff\"></span>hit on one side only. \
+     RGB maps: largest channel error in units of the tolerance (1 = at the limit, inferno), failing pixels amber (edge) or magenta (interior).</p>"
 }
 
 /// Renders `<page>.html` for one scene.
 pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     let mut b = String::new();
     let reference = &data.manifest.reference;
-    let _ = write!(b, "<p><a href=\"index.html\">← overview</a></p><h1>Scene {}</h1>", escape(&scene.name));
+    let _ = write!(
+        b,
+        "<p><a href=\"index.html\">← overview</a></p><h1>Scene {}</h1>",
+        escape(&scene.name)
+    );
     b.push_str("<table>");
     if let Some(r) = &scene.runs {
         let _ = write!(b, "<tr><th>scene file</th><td><code>{}</code></td></tr><tr><th>requires</th><td>{}</td></tr>", escape(&r.scene_file), escape(&r.requires.join(", ")));
@@ -72,7 +129,11 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             escape(&r.name), r.width, r.height, r.triangle_count, r.objects.len()
         );
     }
-    let _ = write!(b, "<tr><th>reference</th><td>{}</td></tr></table>", escape(reference));
+    let _ = write!(
+        b,
+        "<tr><th>reference</th><td>{}</td></tr></table>",
+        escape(reference)
+    );
     if let Some(p) = &data.results_problem {
         let _ = write!(b, "<p class=\"note\">No verdicts: {}</p>", escape(p));
     }
@@ -86,7 +147,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
         let tol = text(e, "tolerance");
         let _ = write!(
             b,
-            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}</td></tr>",
+            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}</td></tr>",
             url(&page_stem(&e.backend)),
             escape(&e.backend),
             escape(&e.buffer),
@@ -100,7 +161,8 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             err(e, "max_rel_error"),
             escape(&bound_text(e)),
             escape(&e.reason),
-            if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) }
+            if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) },
+            extra_fields(e),
         );
     }
     b.push_str("</table>");
@@ -110,7 +172,11 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     if let Some((lo, hi, from)) = &imgs.depth_range {
         let _ = write!(b, "<p>Depth uses one color scale for every backend of this scene: the range of {}. {}</p>", escape(from), svg::depth_bar(*lo, *hi));
         for (be, n) in &imgs.clamped {
-            let _ = write!(b, "<p class=\"note\">{}: {n} px outside that range, drawn at its ends.</p>", escape(be));
+            let _ = write!(
+                b,
+                "<p class=\"note\">{}: {n} px outside that range, drawn at its ends.</p>",
+                escape(be)
+            );
         }
     }
     b.push_str(legend());
@@ -124,13 +190,21 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             .unwrap_or(&imgs.pictures[1]);
         let _ = write!(b, "<img class=\"flip-view\" src=\"{}\" alt=\"flip view\"></div><div class=\"flip-controls\"><b class=\"flip-label\"></b><br><span class=\"flip-pos muted\"></span>", url(&first.file));
         for (side, chosen) in [("a", first), ("b", second)] {
-            let _ = write!(b, "<label>{} <select class=\"flip-{side}\">", side.to_uppercase());
+            let _ = write!(
+                b,
+                "<label>{} <select class=\"flip-{side}\">",
+                side.to_uppercase()
+            );
             for p in &imgs.pictures {
                 let _ = write!(
                     b,
                     "<option value=\"{}\"{}>{}</option>",
                     url(&p.file),
-                    if std::ptr::eq(p, chosen) { " selected" } else { "" },
+                    if std::ptr::eq(p, chosen) {
+                        " selected"
+                    } else {
+                        ""
+                    },
                     escape(&p.caption)
                 );
             }
@@ -144,7 +218,12 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
         if pics.is_empty() {
             continue;
         }
-        let _ = write!(b, "<h3>{}{}</h3><div class=\"grid\">", escape(be), if be == reference { " (reference)" } else { "" });
+        let _ = write!(
+            b,
+            "<h3>{}{}</h3><div class=\"grid\">",
+            escape(be),
+            if be == reference { " (reference)" } else { "" }
+        );
         for p in pics {
             let src = url(&p.file);
             let _ = write!(
@@ -168,7 +247,11 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             }
             b.push_str("</tr>");
             for (i, o) in r.objects.iter().enumerate() {
-                let mat = o.material.and_then(|m| r.materials.get(m)).map(String::as_str).unwrap_or("");
+                let mat = o
+                    .material
+                    .and_then(|m| r.materials.get(m))
+                    .map(String::as_str)
+                    .unwrap_or("");
                 let _ = write!(
                     b,
                     "<tr><td class=\"num\">{i}</td><td>{}</td><td>{}</td><td>{}..{}</td>",
@@ -178,7 +261,11 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
                     o.first_prim + o.prim_count
                 );
                 for (_, m) in &imgs.objects {
-                    let _ = write!(b, "<td class=\"num\">{}</td>", m.by_object.get(i).copied().unwrap_or(0));
+                    let _ = write!(
+                        b,
+                        "<td class=\"num\">{}</td>",
+                        m.by_object.get(i).copied().unwrap_or(0)
+                    );
                 }
                 b.push_str("</tr>");
             }
@@ -193,36 +280,78 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     // ---- plots
     let all = data.backends();
     let color = |be: &str| svg::backend_color(all.iter().position(|x| x == be).unwrap_or(0));
-    let series: Vec<_> = imgs.histograms.iter().map(|(be, h)| (be.clone(), color(be), h.clone())).collect();
-    let _ = write!(b, "<h2 id=\"errors\">Depth errors</h2>{}", svg::histograms(&series));
+    let series: Vec<_> = imgs
+        .histograms
+        .iter()
+        .map(|(be, h)| (be.clone(), color(be), h.clone()))
+        .collect();
+    let _ = write!(
+        b,
+        "<h2 id=\"errors\">Depth errors</h2>{}",
+        svg::histograms(&series)
+    );
     let bars = backends
         .iter()
-        .map(|be| (be.clone(), color(be), scene.render(be).filter(|r| r.time_s > 0.0).map(|r| r.time_s)))
+        .map(|be| {
+            (
+                be.clone(),
+                color(be),
+                scene
+                    .render(be)
+                    .filter(|r| r.time_s > 0.0)
+                    .map(|r| r.time_s),
+            )
+        })
         .collect();
-    let _ = write!(b, "<h2 id=\"times\">Render times</h2>{}", svg::time_bars(&[(scene.name.clone(), bars)]));
+    let _ = write!(
+        b,
+        "<h2 id=\"times\">Render times</h2>{}",
+        svg::time_bars(&[(scene.name.clone(), bars)])
+    );
 
     // ---- per backend: versions, times, commands
     b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">Commands run from the repository root. The render command reproduces the buffer; the check command reproduces the verdict (the reference always renders too).</p>");
     for be in &backends {
-        let _ = write!(b, "<h3 id=\"b-{}\">{}</h3>", escape(&page_stem(be)), escape(be));
+        let _ = write!(
+            b,
+            "<h3 id=\"b-{}\">{}</h3>",
+            escape(&page_stem(be)),
+            escape(be)
+        );
         match scene.render(be) {
             Some(r) => {
                 let _ = write!(
                     b,
                     "<p>{} version <b>{}</b>, {}</p>",
                     badge(&r.status, &format!("{}{}", r.reason, r.message)),
-                    escape(if r.version.is_empty() { "?" } else { &r.version }),
-                    if r.time_s > 0.0 { escape(&svg::format_seconds(r.time_s)) } else { "no time recorded".into() }
+                    escape(if r.version.is_empty() {
+                        "?"
+                    } else {
+                        &r.version
+                    }),
+                    if r.time_s > 0.0 {
+                        escape(&svg::format_seconds(r.time_s))
+                    } else {
+                        "no time recorded".into()
+                    }
                 );
                 if !r.reason.is_empty() || !r.message.is_empty() {
-                    let _ = write!(b, "<p class=\"reason\">{}</p>", escape(&format!("{}{}", r.reason, r.message)));
+                    let _ = write!(
+                        b,
+                        "<p class=\"reason\">{}</p>",
+                        escape(&format!("{}{}", r.reason, r.message))
+                    );
                 }
                 if !r.command.is_empty() {
                     let _ = write!(b, "render: {}", command_block(&r.command));
                 }
                 if !r.info.is_null() {
                     let info = serde_json::to_string_pretty(&r.info).unwrap_or_default();
-                    let _ = write!(b, "<details><summary>backend info</summary><pre>{}</pre></details>", escape(&info));
+                    let _ = write!(
+                        b,
+                        "<details><summary>backend info</summary><pre>{}</pre></details>",
+                        escape(&info)
+                    );
                 }
             }
             None => b.push_str("<p class=\"muted\">not in manifest.json</p>"),

@@ -26,16 +26,25 @@ pub fn time_bars(groups: &[(String, Vec<Bar>)]) -> String {
     if times.is_empty() {
         return "<p class=\"muted\">no render times recorded</p>".into();
     }
-    let lo = times.iter().copied().fold(f64::INFINITY, f64::min).max(1e-6);
+    let lo = times
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-6);
     let hi = times.iter().copied().fold(0.0, f64::max);
-    let (e0, e1) = (lo.log10().floor() as i32, (hi.log10().ceil() as i32).max(lo.log10().floor() as i32 + 1));
+    let (e0, e1) = (
+        lo.log10().floor() as i32,
+        (hi.log10().ceil() as i32).max(lo.log10().floor() as i32 + 1),
+    );
     let (label_w, plot_w, bar_h, gap) = (230.0, 480.0, 13.0, 8.0);
-    let x = |t: f64| label_w + (t.max(10f64.powi(e0)).log10() - f64::from(e0)) / f64::from(e1 - e0) * plot_w;
+    let x = |t: f64| {
+        label_w + (t.max(10f64.powi(e0)).log10() - f64::from(e0)) / f64::from(e1 - e0) * plot_w
+    };
     let rows: usize = groups.iter().map(|g| g.1.len() + 1).sum();
     let height = 30.0 + rows as f64 * (bar_h + 2.0) + groups.len() as f64 * gap;
     let width = label_w + plot_w + 90.0;
     let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" role=\"img\" aria-label=\"render times\" font-size=\"11\" font-family=\"sans-serif\">"
+        "<svg width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" role=\"img\" aria-label=\"render times\" font-size=\"11\" font-family=\"sans-serif\">"
     );
     for e in e0..=e1 {
         let xe = x(10f64.powi(e));
@@ -95,6 +104,7 @@ pub fn time_bars(groups: &[(String, Vec<Bar>)]) -> String {
 
 fn seconds_label(e: i32) -> String {
     match e {
+        -4 => "0.1 ms".into(),
         -3 => "1 ms".into(),
         -2 => "10 ms".into(),
         -1 => "100 ms".into(),
@@ -127,16 +137,22 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
     // Show whole decades around the used bins.
     let pd = PER_DECADE as usize;
+    // At least four decades, so the axis reads as a scale even for tiny spreads.
     let (first, last) = match used {
-        Some((a, b)) => (a / pd * pd, (b / pd + 1) * pd - 1),
+        Some((a, b)) => {
+            let decades = super::stats::BINS / pd;
+            let d1 = (b / pd).max(a / pd + 3).min(decades - 1);
+            let d0 = (a / pd).min(d1.saturating_sub(3));
+            (d0 * pd, (d1 + 1) * pd - 1)
+        }
         None => (0, 0),
     };
     let nb = if used.is_some() { last - first + 1 } else { 0 };
     // Columns: "= 0", "< 1e-12", the used bins, ">= 1e4", "hit/miss".
     let cols = nb + 4;
-    let (label_w, col_w, row_h) = (130.0, 16.0, 46.0);
+    let (label_w, col_w, row_h) = (150.0, 24.0, 46.0);
     let width = label_w + cols as f64 * col_w + 20.0;
-    let height = 20.0 + series.len() as f64 * row_h + 34.0;
+    let height = 20.0 + series.len() as f64 * row_h + 20.0;
     let max = series
         .iter()
         .flat_map(|s| {
@@ -150,15 +166,15 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         .max(1);
     let scale = |c: u64| ((1.0 + c as f64).ln() / (1.0 + max as f64).ln()) * (row_h - 10.0);
     let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" role=\"img\" aria-label=\"depth error histograms\" font-size=\"11\" font-family=\"sans-serif\">"
+        "<svg width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" role=\"img\" aria-label=\"depth error histograms\" font-size=\"11\" font-family=\"sans-serif\">"
     );
     let col_x = |k: usize| label_w + k as f64 * col_w;
     for (r, (backend, color, h)) in series.iter().enumerate() {
         let base = 20.0 + (r + 1) as f64 * row_h - 4.0;
         let _ = write!(
             s,
-            "<text x=\"4\" y=\"{:.1}\">{}</text><line x1=\"{label_w}\" y1=\"{base:.1}\" x2=\"{:.1}\" y2=\"{base:.1}\" stroke=\"#999\"/>",
-            base - 4.0,
+            "<text x=\"4\" y=\"{:.1}\" font-weight=\"bold\">{}</text><line x1=\"{label_w}\" y1=\"{base:.1}\" x2=\"{:.1}\" y2=\"{base:.1}\" stroke=\"#999\"/>",
+            base - 20.0,
             escape(backend),
             col_x(cols)
         );
@@ -170,7 +186,11 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
             let b = first + k;
             cells.push((
                 h.bins[b],
-                format!("{:.2e} ≤ |ΔZ| < {:.2e}", Histogram::bin_lo(b), Histogram::bin_lo(b + 1)),
+                format!(
+                    "{:.2e} ≤ |ΔZ| < {:.2e}",
+                    Histogram::bin_lo(b),
+                    Histogram::bin_lo(b + 1)
+                ),
                 color.as_str(),
             ));
         }
@@ -194,7 +214,7 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         let _ = write!(
             s,
             "<text x=\"4\" y=\"{:.1}\" fill=\"#666\">{total} common hits</text>",
-            base - 18.0
+            base - 6.0
         );
     }
     let axis = 20.0 + series.len() as f64 * row_h + 12.0;
@@ -220,10 +240,8 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
     label(&mut s, nb + 3, "h/m");
     let _ = write!(
         s,
-        "<text x=\"{label_w}\" y=\"{:.1}\" fill=\"#666\">|Z_test − Z_ref| over pixels both hit (log bins, {PER_DECADE} per decade; bar height ∝ log(1+count)); h/m: hit/miss mismatches</text>",
-        axis + 16.0
+        "</svg><p class=\"muted\">|Z_test − Z_ref| over pixels both hit, log bins ({PER_DECADE} per decade, labels at their lower edges); gray: exactly 0; bar height ∝ log(1 + pixels), hover a bar for its count; “<”, “>”: below 1e{LO_EXP} and above 1e{HI_EXP}; h/m: hit on one side only.</p>"
     );
-    s.push_str("</svg>");
     s
 }
 
@@ -242,7 +260,7 @@ pub fn depth_bar(lo: f32, hi: f32) -> String {
         );
     }
     format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"360\" height=\"40\" viewBox=\"0 0 360 40\" role=\"img\" aria-label=\"depth scale\" font-size=\"11\" font-family=\"sans-serif\"><defs><linearGradient id=\"viridis\">{stops}</linearGradient></defs><rect x=\"10\" y=\"4\" width=\"340\" height=\"14\" fill=\"url(#viridis)\"/><text x=\"10\" y=\"32\">{}</text><text x=\"350\" y=\"32\" text-anchor=\"end\">{}</text><text x=\"180\" y=\"32\" text-anchor=\"middle\">planar depth Z (background: black)</text></svg>",
+        "<svg width=\"360\" height=\"40\" viewBox=\"0 0 360 40\" role=\"img\" aria-label=\"depth scale\" font-size=\"11\" font-family=\"sans-serif\"><defs><linearGradient id=\"viridis\">{stops}</linearGradient></defs><rect x=\"10\" y=\"4\" width=\"340\" height=\"14\" fill=\"url(#viridis)\"/><text x=\"10\" y=\"32\">{}</text><text x=\"350\" y=\"32\" text-anchor=\"end\">{}</text><text x=\"180\" y=\"32\" text-anchor=\"middle\">planar depth Z (background: black)</text></svg>",
         escape(&format!("{lo:.6}")),
         escape(&format!("{hi:.6}"))
     )

@@ -36,6 +36,8 @@ pub struct LightSet {
     total: f64,
     /// Selection probability divided by area, per prim (0 for non-emitters).
     pdf_area: std::collections::HashMap<u32, f64>,
+    /// 1, or pi under `Bias::LightTimesPi`.
+    pub emission_scale: f64,
 }
 
 fn emission_of(scene: &ResolvedScene, prim: u32) -> DVec3 {
@@ -57,7 +59,10 @@ impl LightSet {
         } else {
             1.0
         };
-        let mut set = LightSet::default();
+        let mut set = LightSet {
+            emission_scale: k,
+            ..LightSet::default()
+        };
         for l in &scene.lights {
             match *l {
                 LightSpec::Point {
@@ -127,8 +132,8 @@ impl LightSet {
         Some((prim, p, n, self.pdf_area(prim)))
     }
 
-    /// Emitted radiance of `prim` (its material's emission).
+    /// Emitted radiance of `prim` (its material's emission, times the bias factor).
     pub fn emission(&self, scene: &ResolvedScene, prim: u32) -> DVec3 {
-        emission_of(scene, prim)
+        emission_of(scene, prim) * self.emission_scale
     }
 }

@@ -27,7 +27,7 @@ pub enum Bias {
     MissingCosine,
     /// Paths one vertex shorter than the scene's max_depth (or 6 when unlimited).
     OneBounceFewer,
-    /// Light intensities off by a factor pi.
+    /// Light intensities and emitted radiance (area lights) off by a factor pi.
     LightTimesPi,
 }
 

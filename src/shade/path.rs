@@ -89,7 +89,7 @@ fn radiance(
                     power(pb, pl)
                 }
             };
-            l += beta * s.emission * w;
+            l += beta * s.emission * lights.emission_scale * w;
         }
         if (max_depth != -1 && depth >= max_depth) || s.albedo == DVec3::ZERO {
             break;

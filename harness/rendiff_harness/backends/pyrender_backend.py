@@ -23,6 +23,34 @@ Conventions and their translation (docs/external-renderers notes, re-measured he
   edge may therefore differ from the rendiff loops; the comparison classifies those as edge
   mismatches. llvmpipe also snaps vertices to 1/256 px, so centers within
   EDGE_TOLERANCE_PX (1/256 px) of an edge can flip.
+
+Radiance: a Lambert fragment shader of our own, loaded through pyrender's shader cache
+---------------------------------------------------------------------------------------
+pyrender's own `mesh.frag` is a metallic-roughness model (F0 = 0.04, Smith G, GGX D at
+roughness 1): 2.6-6% off Lambert at metallic 0 / roughness 1, and its point-light
+shadows are not implemented. Comparing the contract's L against that would test
+nothing but the difference of the two models, so the lit pass replaces pyrender's
+program cache (`renderer._renderer._program_cache`, pyrender 0.1.45 is pinned) with one
+reading `pyrender_shaders/mesh.vert` and `mesh.frag`, which compute exactly
+docs/radiance.md's local shading from the uniforms pyrender binds itself:
+
+* albedo rho -> `MetallicRoughnessMaterial.baseColorFactor` (rgb, alpha 1);
+* emission Le -> `emissiveFactor` = Le / S;
+* point light (I) -> `PointLight(color = I, intensity = 1/S)` at its position; the
+  shader adds rho/pi * color*intensity * max(0, n.w)/r^2 (no range attenuation);
+* directional light (E, along dir) -> `DirectionalLight(color = E, intensity = 1/S)`
+  whose pose's -z axis is dir normalized; the shader adds rho/pi * E/S * max(0, -n.dir);
+* n is the flat face normal (b-a)x(c-a), normalized in float64 and given as vertex
+  normals of unshared vertices, turned toward the camera in the shader (`two_sided`);
+  culling is off (SKIP_CULL_FACES). pyrender shades no shadows: `shadowless` only.
+* output (L/S)^(1/2.2) clamped to [0, 1], written by GL as 8-bit unorm; decoded as
+  L = S * (k/255)^2.2 in float64. S is the largest value of `lighting.upper_bound` at
+  the hit points of this backend's own ID and depth pass, times EXPOSURE_MARGIN (1.02),
+  so the brightest pixel is about code 252; a pass that reaches 255 on a hit pixel is
+  rendered again with 4x the scale. Attributes: rgb_scale = S, rgb_encoding =
+  "png8-gamma2.2" (8-bit, gamma 2.2), so the comparison's tolerance is half a code value
+  through the inverse transfer at the reference's value (tolerance.py).
+* pyrender binds at most MAX_N_LIGHTS (4) lights of each kind; more are refused.
 """
 
 from __future__ import annotations
@@ -43,8 +71,17 @@ from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
 
 NAME = "pyrender"
-FEATURES = frozenset({"depth", "ids"})
-BUFFERS = frozenset({"Z", "id"})
+FEATURES = frozenset(
+    {"depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadowless", "two_sided"}
+)
+BUFFERS = frozenset({"Z", "id", "RGB"})
+SHADING_FEATURES = frozenset({"lambert", "emission"})
+SHADER_DIR = Path(__file__).with_name("pyrender_shaders")
+RGB_GAMMA = 2.2
+RGB_CODES = 255
+EXPOSURE_MARGIN = 1.02
+MAX_RESCALES = 3
+MAX_LIGHTS_PER_KIND = 4  # pyrender.constants.MAX_N_LIGHTS
 
 BACKGROUND_ID = 0xFFFFFFFF
 DEPTH_BITS = 24
@@ -431,6 +468,126 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
     return buffers, info
 
 
+# --------------------------------------------------------------------------- radiance
+
+
+def is_shaded(scene: ResolvedScene) -> bool:
+    return bool(scene.requires & SHADING_FEATURES)
+
+
+def decode_rgb8(color: np.ndarray, scale: float) -> np.ndarray:
+    """L = S (k/255)^2.2 per channel, float64 (the inverse of the shader's encoding)."""
+    return scale * (color[..., :3].astype(np.float64) / RGB_CODES) ** RGB_GAMMA
+
+
+def encode_rgb8(value: np.ndarray, scale: float) -> np.ndarray:
+    """The shader's encoding in float64, rounded to the nearest code (for tests and tolerances)."""
+    return np.rint(RGB_CODES * np.clip(np.asarray(value, float) / scale, 0.0, 1.0) ** (1.0 / RGB_GAMMA))
+
+
+def _light_pose(direction: np.ndarray) -> np.ndarray:
+    """A rotation whose -z axis is `direction` (pyrender's directional lights shine along -z)."""
+    z = -direction / np.linalg.norm(direction)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2] = x, y, z
+    return pose
+
+
+def _lit_scene(pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, scale: float) -> Any:
+    from .. import lighting
+
+    cam = scene.camera
+    pscene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.0, 0.0, 0.0])
+    albedo, emission = scene.material_arrays()
+    use_emission = "emission" in scene.requires
+    normals = lighting.face_normals(scene.triangles)
+    for m, prims in lighting.group_by_material(scene):
+        positions = np.ascontiguousarray(scene.triangles[prims].reshape(-1, 3), dtype=np.float32)
+        vnormals = np.ascontiguousarray(np.repeat(normals[prims], 3, axis=0), dtype=np.float32)
+        le = emission[m] / scale if use_emission else np.zeros(3)
+        material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=[*(float(v) for v in albedo[m]), 1.0],
+            emissiveFactor=[float(v) for v in le],
+            metallicFactor=0.0,
+            roughnessFactor=1.0,
+            doubleSided=True,
+        )
+        prim = pyrender.Primitive(positions=positions, normals=vnormals, material=material, mode=GL.GL_TRIANGLES)
+        pscene.add(pyrender.Mesh([prim]))
+    if "lambert" in scene.requires:
+        points, dirs = lighting.lights_of(scene)
+        if len(points) > MAX_LIGHTS_PER_KIND or len(dirs) > MAX_LIGHTS_PER_KIND:
+            raise BackendError(
+                f"pyrender binds at most {MAX_LIGHTS_PER_KIND} point and {MAX_LIGHTS_PER_KIND} directional "
+                f"lights; the scene has {len(points)} and {len(dirs)}"
+            )
+        for pos, intensity in points:
+            pose = np.eye(4)
+            pose[:3, 3] = pos
+            pscene.add(pyrender.PointLight(color=intensity.astype(np.float32), intensity=1.0 / scale), pose=pose)
+        for direction, irradiance in dirs:
+            light = pyrender.DirectionalLight(color=irradiance.astype(np.float32), intensity=1.0 / scale)
+            pscene.add(light, pose=_light_pose(direction))
+    camera = pyrender.PerspectiveCamera(yfov=yfov(cam), znear=near, zfar=far, aspectRatio=cam.width / cam.height)
+    pscene.add(camera, pose=camera_pose(cam))
+    return pscene
+
+
+def _draw_lit(pyrender: ModuleType, pscene: Any, width: int, height: int) -> np.ndarray:
+    """RGB8 of the lit pass, rows top first, drawn with rendiff's Lambert shaders."""
+    from pyrender.shader_program import ShaderProgramCache
+
+    try:
+        renderer = pyrender.OffscreenRenderer(width, height)
+    except Exception as exc:  # noqa: BLE001
+        raise BackendError(f"cannot create an OSMesa context: {type(exc).__name__}: {exc}") from None
+    try:
+        renderer._renderer._program_cache = ShaderProgramCache(shader_dir=str(SHADER_DIR))
+        color, _ = renderer.render(pscene, flags=pyrender.RenderFlags.SKIP_CULL_FACES)
+    except Exception as exc:  # noqa: BLE001
+        raise BackendError(f"pyrender failed to render the lit pass: {type(exc).__name__}: {exc}") from None
+    finally:
+        renderer.delete()
+    return np.ascontiguousarray(color[..., :3])
+
+
+def render_radiance(
+    scene: ResolvedScene, prim: np.ndarray, z: np.ndarray, near: float, far: float
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """(RGB (H, W, 3) float64 decoded, info) for a shaded scene; `prim`/`z` from this backend's ID pass."""
+    from .. import lighting
+
+    pyrender, GL = _import_gl()
+    cam = scene.camera
+    hit = prim != BACKGROUND_ID
+    bound = lighting.upper_bound(scene, prim, z.astype(np.float64))
+    top = float(bound.max(initial=0.0))
+    info: dict[str, Any] = {"rgb_scale": 0.0, "rescaled": 0, "encoding": "8-bit, (L/S)^(1/2.2)"}
+    if not top > 0.0:
+        return np.zeros((cam.height, cam.width, 3)), info
+    scale = top * EXPOSURE_MARGIN
+    t0 = time.perf_counter()
+    for attempt in range(MAX_RESCALES + 1):
+        color = _draw_lit(pyrender, _lit_scene(pyrender, GL, scene, near, far, scale), cam.width, cam.height)
+        if color.shape[:2] != (cam.height, cam.width):
+            raise BackendError(f"pyrender's lit pass returned {color.shape[1]}x{color.shape[0]}")
+        if not np.any(color[hit] == RGB_CODES):
+            break
+        if attempt == MAX_RESCALES:
+            raise BackendError(f"pyrender's lit pass still clips at scale {scale:.6g}: the exposure bound is wrong")
+        scale *= 4.0
+        info["rescaled"] += 1
+    rgb = decode_rgb8(color, scale)
+    rgb[~hit] = 0.0
+    info.update(rgb_scale=scale, max_code=int(color[hit].max(initial=0)), seconds=time.perf_counter() - t0,
+                shaders=str(SHADER_DIR.name))
+    return rgb, info
+
+
 def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float) -> dict[str, object]:
     """Render `scene` into `out_exr` (Z, id.prim, id.object); returns settings and timings.
 
@@ -448,6 +605,14 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
         "zfar": float(info["zfar"]),
         "depth_bits": DEPTH_BITS,
     }
-    exrbuf.write_buffers(out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], attrs=attrs)
+    rgb = None
+    if is_shaded(scene):
+        rgb64, rinfo = render_radiance(scene, buffers["prim"], buffers["Z"], float(info["znear"]), float(info["zfar"]))
+        rgb = rgb64.astype(np.float32)
+        info["radiance"] = rinfo
+        attrs.update(
+            rgb_scale=float(rinfo["rgb_scale"]), rgb_encoding="png8-gamma2.2", integrator="direct", spp=1
+        )
+    exrbuf.write_buffers(out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], RGB=rgb, attrs=attrs)
     info["timings_s"]["write"] = time.perf_counter() - t0
     return info

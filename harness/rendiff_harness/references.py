@@ -1,0 +1,306 @@
+"""Cached Mitsuba references for Monte Carlo scenes: generate once, verify on every load.
+
+A path-traced scene has no closed form, so the core's path tracer is compared with a
+high-spp Mitsuba `path` render (backends/mitsuba_backend.py, `global_illumination`:
+R,G,B + var.R/G/B, K independent passes). Rendering that at every check would cost
+minutes, so it is cached in tests/references/<scene>.exr with its provenance beside it
+in <scene>.json:
+
+    python -m rendiff_harness reference --scene RESOLVED_DIR --spp N --seed S \\
+        --out tests/references/<scene>.exr
+
+(RESOLVED_DIR from `rendiff export scenes/<scene>.toml -o RESOLVED_DIR`, or a check run's
+RUN/scenes/<scene>/resolved.)
+
+Provenance (<scene>.json, format "rendiff-reference/1"): mitsuba / drjit versions, the
+variant, integrator and max_depth, spp (total and per pass), passes, seed, the exact
+command (and the `rendiff export` that made its resolved scene), the resolved scene's
+hash, the EXR's own sha256, size and creation time.
+
+Scene hash (`scene_hash`): sha256 over, in this order, for each of scene.json,
+triangles.f32 and object_ids.u32: the file name, a NUL byte, the content length as 8
+little-endian bytes, the content. scene.json enters in canonical form: parsed, with its
+`source` key removed (the path the scene was exported from, which differs between
+checkouts and run folders but changes no pixel), re-serialized with sorted keys and no
+whitespace. Everything that changes the rendered image (camera, triangles, ids,
+materials, lights, integrator, requires) changes the hash.
+
+`load` refuses, with one ReferenceError whose message says how to regenerate:
+a missing EXR or JSON ("missing"), an unreadable or inconsistent pair ("corrupt":
+unparsable JSON, wrong format, EXR checksum differing from the JSON's, unreadable EXR,
+missing R,G,B or var channels), and a reference of another scene ("reference is stale:
+regenerate with <command>": the hash or the image size differs).
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import shlex
+import struct
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import exrbuf, resolved
+
+FORMAT = "rendiff-reference/1"
+DEFAULT_SPP = 4096
+DEFAULT_SEED = 0
+HASHED_FILES = ("scene.json", "triangles.f32", "object_ids.u32")
+
+
+class ReferenceError(Exception):
+    """A cached reference that cannot be used; the message names the file and the fix."""
+
+
+@dataclass
+class CachedReference:
+    rgb: np.ndarray  # (H, W, 3) float32
+    var: np.ndarray  # (H, W, 3) float32: variance of each pixel's mean
+    attrs: dict[str, Any]  # the EXR's rendiff:* attributes
+    provenance: dict[str, Any]  # <scene>.json
+    path: Path
+
+
+def _canonical_scene_json(data: bytes, where: Path) -> bytes:
+    try:
+        meta = json.loads(data)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ReferenceError(f"{where}: not valid JSON: {exc}") from None
+    if isinstance(meta, dict):
+        meta.pop("source", None)
+    return json.dumps(meta, sort_keys=True, separators=(",", ":")).encode("utf-8")
+
+
+def scene_hash(scene_dir: str | Path) -> str:
+    """sha256 of a resolved scene folder, as the module docstring defines it."""
+    scene_dir = Path(scene_dir)
+    h = hashlib.sha256()
+    for name in HASHED_FILES:
+        path = scene_dir / name
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise ReferenceError(f"{path}: cannot read the resolved scene: {exc.strerror or exc}") from None
+        if name == "scene.json":
+            data = _canonical_scene_json(data, path)
+        h.update(name.encode("ascii") + b"\0" + struct.pack("<Q", len(data)) + data)
+    return h.hexdigest()
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def provenance_path(exr: str | Path) -> Path:
+    return Path(exr).with_suffix(".json")
+
+
+def command_line(scene_dir: str | Path, out: str | Path, spp: int, seed: int) -> str:
+    """The command that (re)generates a reference, as a copy-pasteable shell line."""
+    return " ".join(
+        shlex.quote(a)
+        for a in (
+            "python", "-m", "rendiff_harness", "reference",
+            "--scene", str(scene_dir), "--spp", str(spp), "--seed", str(seed), "--out", str(out),
+        )
+    )
+
+
+def regenerate_command(scene_dir: str | Path, exr: str | Path) -> str:
+    """The command for `exr` from `scene_dir`, keeping the spp/seed of the existing provenance if readable."""
+    spp, seed = DEFAULT_SPP, DEFAULT_SEED
+    try:
+        prov = json.loads(provenance_path(exr).read_text(encoding="utf-8"))
+        if isinstance(prov, dict):
+            if isinstance(prov.get("spp_requested"), int) and prov["spp_requested"] > 1:
+                spp = int(prov["spp_requested"])
+            if isinstance(prov.get("seed"), int) and prov["seed"] >= 0:
+                seed = int(prov["seed"])
+    except (OSError, ValueError):
+        pass
+    return command_line(scene_dir, exr, spp, seed)
+
+
+# --------------------------------------------------------------------------- generate
+
+
+def _write_json_atomically(path: Path, doc: dict[str, Any]) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def generate(
+    scene_dir: str | Path, out: str | Path, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED
+) -> dict[str, Any]:
+    """Render the reference with Mitsuba `path` and write <out> (EXR) and its <.json>; returns the provenance."""
+    from .backends import mitsuba_backend as mb
+
+    scene_dir, out = Path(scene_dir), Path(out)
+    scene = resolved.load(scene_dir)
+    if "global_illumination" not in scene.requires:
+        raise ReferenceError(
+            f"{scene_dir}: the scene does not require global_illumination; cached references are for "
+            "path-traced scenes (local shading is compared deterministically)"
+        )
+    missing = sorted(scene.requires - mb.FEATURES)
+    if missing:
+        raise ReferenceError(f"{scene_dir}: mitsuba cannot model {', '.join(missing)}")
+    if not out.parent.is_dir():
+        raise ReferenceError(f"{out.parent}: output folder does not exist")
+    digest = scene_hash(scene_dir)
+    t0 = time.monotonic()
+    rgb, var, info = mb.render_radiance(scene, spp=spp, seed=seed)
+    seconds = time.monotonic() - t0
+    assert var is not None
+    version = mb.version()
+    attrs: dict[str, str | float | int] = {
+        "backend": "mitsuba_ref",
+        "integrator": "path",
+        "spp": int(info["spp"]),
+        "seed": int(seed),
+        "passes": int(info["passes"]),
+        "var_samples": int(info["var_samples"]),
+        "scene_hash": digest,
+        "renderer": version,
+        "rgb_encoding": "float32",
+    }
+    exrbuf.write_buffers(out, RGB=rgb.astype(np.float32), var=var.astype(np.float32), attrs=attrs)
+    import drjit
+    import mitsuba
+
+    prov: dict[str, Any] = {
+        "format": FORMAT,
+        "scene": scene.name,
+        "source": scene.source,
+        "scene_hash": digest,
+        "hash_method": "sha256 over scene.json (canonical, without 'source'), triangles.f32, object_ids.u32: "
+        "name NUL len(u64 le) bytes each",
+        "renderer": version,
+        "mitsuba": getattr(mitsuba, "__version__", "?"),
+        "drjit": getattr(drjit, "__version__", "?"),
+        "variant": mitsuba.variant(),
+        "integrator": "path",
+        "max_depth": int(info["max_depth"]),
+        "spp": int(info["spp"]),
+        "spp_requested": int(spp),
+        "spp_per_pass": int(info["spp_per_pass"]),
+        "passes": int(info["passes"]),
+        "seed": int(seed),
+        "width": scene.camera.width,
+        "height": scene.camera.height,
+        "command": command_line(scene_dir, out, spp, seed),
+        "export_command": (
+            f"rendiff export {shlex.quote(scene.source)} -o {shlex.quote(str(scene_dir))}"
+            if scene.source.endswith(".toml") else None
+        ),
+        "python": sys.version.split()[0],
+        "created": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "render_seconds": round(seconds, 3),
+        "exr_sha256": file_sha256(out),
+    }
+    _write_json_atomically(provenance_path(out), prov)
+    for path in (out, provenance_path(out)):  # files meant for the repository: readable by all
+        os.chmod(path, 0o644)
+    return prov
+
+
+# --------------------------------------------------------------------------- load
+
+
+def load(exr: str | Path, scene: resolved.ResolvedScene) -> CachedReference:
+    """Load and verify the cached reference for `scene` (module docstring); ReferenceError otherwise."""
+    exr = Path(exr)
+    js = provenance_path(exr)
+    fix = regenerate_command(scene.directory, exr)
+    if not exr.is_file():
+        raise ReferenceError(f"{exr}: cached reference missing: generate it with {fix}")
+    if not js.is_file():
+        raise ReferenceError(f"{js}: provenance of the cached reference missing: regenerate with {fix}")
+    try:
+        prov = json.loads(js.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ReferenceError(f"{js}: cached reference corrupt (provenance unreadable: {exc}): regenerate with {fix}") from None
+    if not isinstance(prov, dict) or prov.get("format") != FORMAT:
+        got = prov.get("format") if isinstance(prov, dict) else type(prov).__name__
+        raise ReferenceError(f"{js}: cached reference corrupt (format {got!r}, expected {FORMAT!r}): regenerate with {fix}")
+    want_sum = prov.get("exr_sha256")
+    if not isinstance(want_sum, str) or file_sha256(exr) != want_sum:
+        raise ReferenceError(
+            f"{exr}: cached reference corrupt (its sha256 differs from {js.name}'s exr_sha256): regenerate with {fix}"
+        )
+    digest = scene_hash(scene.directory)
+    if prov.get("scene_hash") != digest:
+        raise ReferenceError(
+            f"{exr}: reference is stale: regenerate with {fix} (it was made for scene hash "
+            f"{str(prov.get('scene_hash'))[:12]}..., the resolved scene {scene.directory} hashes to {digest[:12]}...)"
+        )
+    try:
+        bufs = exrbuf.read_buffers(exr, require=("RGB", "var"))
+        attrs = dict(exrbuf.read_attrs(exr))
+    except exrbuf.BufferError as exc:
+        raise ReferenceError(f"{exr}: cached reference corrupt ({exc}): regenerate with {fix}") from None
+    shape = (scene.camera.height, scene.camera.width)
+    if bufs["RGB"].shape[:2] != shape:
+        raise ReferenceError(
+            f"{exr}: reference is stale: regenerate with {fix} (it is {bufs['RGB'].shape[1]}x{bufs['RGB'].shape[0]}, "
+            f"the scene {shape[1]}x{shape[0]})"
+        )
+    if attrs.get("scene_hash") not in (None, digest):
+        raise ReferenceError(f"{exr}: reference is stale: regenerate with {fix} (its EXR attribute scene_hash differs)")
+    if not (np.all(np.isfinite(bufs["RGB"])) and np.all(np.isfinite(bufs["var"])) and np.all(bufs["var"] >= 0)):
+        raise ReferenceError(f"{exr}: cached reference corrupt (non-finite or negative values): regenerate with {fix}")
+    return CachedReference(bufs["RGB"], bufs["var"], attrs, prov, exr)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def main(argv: list[str]) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(
+        prog="python -m rendiff_harness reference",
+        description="Render a high-spp Mitsuba path-traced reference (R,G,B + var) with provenance.",
+    )
+    p.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
+    p.add_argument("--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel (default {DEFAULT_SPP})")
+    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed (default {DEFAULT_SEED})")
+    p.add_argument("--out", required=True, help="output EXR (tests/references/<scene>.exr); <out>.json is written beside it")
+    args = p.parse_args(argv)
+    if args.spp < 2 or args.seed < 0:
+        print("rendiff_harness reference: --spp must be >= 2 and --seed >= 0", file=sys.stderr)
+        return 2
+    from .errors import BackendError
+
+    try:
+        prov = generate(args.scene, args.out, args.spp, args.seed)
+    except (ReferenceError, resolved.SceneError, BackendError, exrbuf.BufferError) as exc:
+        print(f"rendiff_harness reference: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps({"status": "ok", "out": str(args.out), "provenance": str(provenance_path(args.out)),
+                      "spp": prov["spp"], "seconds": prov["render_seconds"], "renderer": prov["renderer"]}))
+    return 0
