@@ -120,8 +120,16 @@ enum Command {
         #[arg(long, value_enum, hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
     },
-    /// Time raster and trace on one scene (median of runs after a warm-up) and write JSON.
+    /// Benchmarks: speed against accuracy (knobs), against other renderers (peers),
+    /// raster vs trace by triangle size (crossover), numerical extremes (stability).
+    ///
+    /// Without a subcommand: raster and trace on one scene (median of runs after a
+    /// warm-up), as JSON. Each subcommand writes JSON, HTML and SVG to reports/bench/.
+    #[command(args_conflicts_with_subcommands = true)]
     Bench {
+        /// What to benchmark (default: raster and trace on SCENE).
+        #[command(subcommand)]
+        what: Option<rendiff::bench::cli::BenchCommand>,
         /// Scene file (TOML).
         #[arg(default_value = "scenes/million.toml")]
         scene: PathBuf,
@@ -342,6 +350,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Bench {
+            what: Some(what), ..
+        } => {
+            rendiff::bench::cli::run(what)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Bench {
+            what: None,
             scene,
             size,
             threads,

@@ -1,14 +1,13 @@
-//! `rendiff bench`: raster and trace timed on one scene, per thread count,
-//! as medians after a warm-up, with throughput and operation counts, as JSON.
-//! Measurements, never assertions: tests do not time anything.
+//! `rendiff bench [SCENE]` (no subcommand): raster and trace timed on one
+//! scene, per thread count, as medians after a warm-up, with throughput and
+//! operation counts, as JSON. Kept as the quick single-scene measurement; the
+//! subcommands (knobs, peers, crossover, stability) build on the same helpers.
 
-use crate::camera::Camera;
 use crate::raster::{self, RasterOptions};
 use crate::scene::resolve::ResolvedScene;
 use crate::trace::{self, BvhQuality, TraceBvh};
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
-use std::time::Instant;
 
 /// What to measure.
 #[derive(Debug, Clone)]
@@ -23,36 +22,17 @@ pub struct BenchOptions {
     pub bvh: BvhQuality,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
-fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, Vec<f64>, T) {
-    let mut last = f(); // warm-up
-    let mut times = Vec::with_capacity(runs);
-    for _ in 0..runs {
-        let t = Instant::now();
-        last = f();
-        times.push(t.elapsed().as_secs_f64());
-    }
-    (median(times.clone()), times, last)
+fn timed<T>(runs: usize, f: impl FnMut() -> T) -> (f64, Vec<f64>, T) {
+    let t = super::timed(runs, f);
+    (t.median_s, t.runs_s, t.last)
 }
 
 /// Runs the benchmark and returns its JSON record.
 pub fn run(scene: &ResolvedScene, label: &str, opts: &BenchOptions) -> Result<Value> {
+    let environment = super::environment();
     let mut scene = scene.clone();
     if let Some((w, h)) = opts.size {
-        let c = &scene.camera;
-        let far = c.far;
-        let near = c.near;
-        scene.camera = Camera::new(c.eye, c.look_at, c.up, c.vfov_deg, w, h, near, far)
-            .map_err(anyhow::Error::msg)?;
+        scene = super::resized(&scene, w, h)?;
     }
     let cam = &scene.camera;
     let pixels = cam.pixel_count() as f64;
@@ -95,8 +75,9 @@ pub fn run(scene: &ResolvedScene, label: &str, opts: &BenchOptions) -> Result<Va
             }));
         });
     }
-    Ok(json!({
+    let mut record = json!({
         "benchmark": "core-visibility",
+        "environment": environment,
         "scene": label,
         "width": cam.width, "height": cam.height,
         "triangles": scene.triangles.len(),
@@ -105,5 +86,7 @@ pub fn run(scene: &ResolvedScene, label: &str, opts: &BenchOptions) -> Result<Va
         "cpu": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         "rendiff_version": env!("CARGO_PKG_VERSION"),
         "results": rows,
-    }))
+    });
+    super::finish_environment(&mut record);
+    Ok(record)
 }

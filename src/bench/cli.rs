@@ -1,0 +1,243 @@
+//! The `rendiff bench` subcommands' options (clap), kept in the library so
+//! that `main.rs` only names them, and their dispatch: each subcommand runs,
+//! writes `OUT/<name>.json`, `OUT/<name>.html` and its SVGs, and prints where.
+
+use super::crossover::{self, CrossoverOptions};
+use super::knobs::{self, KnobsOptions, SceneSpec};
+use super::peers::{self, PeersOptions};
+use super::stability::{self, StabilityOptions};
+use super::{Common, Output};
+use anyhow::Result;
+use std::path::PathBuf;
+
+/// Options every subcommand takes.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CommonArgs {
+    /// Tiny configuration (small images, one run, no external renderers): checks the
+    /// benchmark runs; its numbers mean nothing.
+    #[arg(long)]
+    pub quick: bool,
+    /// Timed runs per configuration, after one warm-up (default 3; 1 with --quick).
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// Output folder for JSON, HTML and SVG.
+    #[arg(short, long, default_value = "reports/bench")]
+    pub output: PathBuf,
+    /// Seconds before an external renderer is killed.
+    #[arg(long, default_value_t = 600)]
+    pub timeout: u64,
+}
+
+impl CommonArgs {
+    fn common(&self) -> Result<Common> {
+        Ok(Common {
+            runs: self.runs.unwrap_or(if self.quick { 1 } else { 3 }).max(1),
+            quick: self.quick,
+            out_dir: self.output.clone(),
+            root: std::env::current_dir()?,
+            timeout_s: self.timeout,
+        })
+    }
+}
+
+/// `rendiff bench <what>`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum BenchCommand {
+    /// Every speed/accuracy knob against one reference: time-vs-error table and plot with the Pareto front.
+    Knobs {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Visibility scenes, PATH or PATH@WxH (default: million@960x540 and pixel_grid; --quick: icosphere@64x48).
+        #[arg(long = "scene")]
+        scenes: Vec<SceneSpec>,
+        /// Resolution factors of the first scene's size.
+        #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2")]
+        scales: Vec<f64>,
+        /// Global-illumination scene for the spp knobs.
+        #[arg(long, default_value = "scenes/cornell_gi.toml")]
+        gi_scene: PathBuf,
+        /// Its cached reference EXR.
+        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
+        reference: PathBuf,
+        /// Core path tracer spp settings.
+        #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256")]
+        spp: Vec<u32>,
+        /// Mitsuba spp settings (at least 2 each).
+        #[arg(long, value_delimiter = ',', default_value = "4,16,64,256")]
+        mitsuba_spp: Vec<u32>,
+        /// Seed of both path tracers (the reference used 0, so not 0).
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Worker threads (default: all CPUs).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Skip external renderers (Mitsuba).
+        #[arg(long)]
+        no_external: bool,
+    },
+    /// The core next to Embree, pyrender and Mitsuba on identical work, as ratios.
+    Peers {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Throughput scene, PATH or PATH@WxH (--quick: icosphere@64x48).
+        #[arg(long, default_value = "scenes/million.toml@1920x1080")]
+        scene: SceneSpec,
+        /// Thread counts for trace and raster throughput.
+        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        threads: Vec<usize>,
+        /// Global-illumination scene for the equal-time comparison.
+        #[arg(long, default_value = "scenes/cornell_gi.toml")]
+        gi_scene: PathBuf,
+        /// Its cached reference EXR.
+        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
+        reference: PathBuf,
+        /// Mitsuba's spp at equal time (the core's spp is chosen to match its time).
+        #[arg(long, default_value_t = 64)]
+        mitsuba_spp: u32,
+        /// Seed of both path tracers.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Skip external renderers (pyrender, Mitsuba).
+        #[arg(long)]
+        no_external: bool,
+    },
+    /// Raster vs trace time and operation counts as a screen-filling grid goes from 2 to millions of triangles.
+    Crossover {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Square image size in pixels (--quick: 64).
+        #[arg(long, default_value_t = 512)]
+        size: u32,
+        /// Grid subdivisions per side (2 nx^2 triangles) (--quick: 1,4,16).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "1,2,4,8,16,32,64,128,256,512,1024,2048"
+        )]
+        nx: Vec<u32>,
+        /// Worker threads (default: all CPUs).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Scene families at numerical extremes through `rendiff check`: where each renderer breaks, and how.
+    Stability {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Only these backends, comma-separated (--quick: raster,trace,embree,embree_robust).
+        #[arg(long, value_delimiter = ',')]
+        only: Option<Vec<String>>,
+    },
+}
+
+/// Runs one subcommand and writes its outputs.
+pub fn run(cmd: BenchCommand) -> Result<()> {
+    let (stem, common, out): (&str, Common, Output) = match cmd {
+        BenchCommand::Knobs {
+            common,
+            scenes,
+            scales,
+            gi_scene,
+            reference,
+            spp,
+            mitsuba_spp,
+            seed,
+            threads,
+            no_external,
+        } => {
+            let c = common.common()?;
+            let quick = c.quick;
+            let scenes = if !scenes.is_empty() {
+                scenes
+            } else if quick {
+                vec!["scenes/icosphere.toml@64x48"
+                    .parse()
+                    .map_err(anyhow::Error::msg)?]
+            } else {
+                vec![
+                    "scenes/million.toml@960x540"
+                        .parse()
+                        .map_err(anyhow::Error::msg)?,
+                    "scenes/pixel_grid.toml"
+                        .parse()
+                        .map_err(anyhow::Error::msg)?,
+                ]
+            };
+            let opts = KnobsOptions {
+                common: c.clone(),
+                scenes,
+                resolution_scales: if quick { vec![0.5, 1.0] } else { scales },
+                gi_scene,
+                reference,
+                core_spp: if quick { vec![1, 4] } else { spp },
+                mitsuba_spp,
+                seed,
+                threads: threads.unwrap_or_else(super::cpus).max(1),
+                no_external: no_external || quick,
+            };
+            ("knobs", c, knobs::run(&opts)?)
+        }
+        BenchCommand::Peers {
+            common,
+            scene,
+            threads,
+            gi_scene,
+            reference,
+            mitsuba_spp,
+            seed,
+            no_external,
+        } => {
+            let c = common.common()?;
+            let quick = c.quick;
+            let opts = PeersOptions {
+                common: c.clone(),
+                scene: if quick {
+                    "scenes/icosphere.toml@64x48"
+                        .parse()
+                        .map_err(anyhow::Error::msg)?
+                } else {
+                    scene
+                },
+                threads: if quick { vec![1] } else { threads },
+                gi_scene,
+                reference,
+                mitsuba_spp,
+                seed,
+                no_external: no_external || quick,
+            };
+            ("peers", c, peers::run(&opts)?)
+        }
+        BenchCommand::Crossover {
+            common,
+            size,
+            nx,
+            threads,
+        } => {
+            let c = common.common()?;
+            let quick = c.quick;
+            let opts = CrossoverOptions {
+                common: c.clone(),
+                size: if quick { 64 } else { size.max(1) },
+                nx: if quick { vec![1, 4, 16] } else { nx },
+                threads: threads.unwrap_or_else(super::cpus).max(1),
+            };
+            ("crossover", c, crossover::run(&opts)?)
+        }
+        BenchCommand::Stability { common, only } => {
+            let c = common.common()?;
+            let opts = StabilityOptions {
+                common: c.clone(),
+                only,
+            };
+            ("stability", c, stability::run(&opts)?)
+        }
+    };
+    let written = super::write_outputs(&common.out_dir, stem, &out.record, &out.html, &out.svgs)?;
+    for p in written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

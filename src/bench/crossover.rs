@@ -1,0 +1,348 @@
+//! `rendiff bench crossover`: where ray tracing starts to beat rasterization.
+//!
+//! A screen-filling grid of `2·nx²` triangles, from two triangles covering
+//! the whole image to millions smaller than a pixel, rendered by both loops at
+//! one resolution. The raster's cost grows with triangle setups and bounding-box
+//! coverage tests; the tracer's with BVH nodes visited and (once) its build.
+//! Times and operation counts are recorded per size, the crossover sizes are
+//! interpolated (with and without the BVH build), and raster == trace is
+//! checked at every size.
+
+use super::page::{num, Page};
+use super::plot::{lines, Series};
+use super::{measure, visibility_error, Common};
+use crate::camera::Camera;
+use crate::scene::generators::grid;
+use crate::scene::resolve::ResolvedScene;
+use crate::trace::BvhQuality;
+use anyhow::Result;
+use glam::DVec3;
+use serde_json::{json, Value};
+
+/// What `bench crossover` measures.
+#[derive(Debug, Clone)]
+pub struct CrossoverOptions {
+    /// Shared options.
+    pub common: Common,
+    /// Image size (square images keep the grid exactly screen-filling).
+    pub size: u32,
+    /// Grid subdivisions per side.
+    pub nx: Vec<u32>,
+    /// Worker threads.
+    pub threads: usize,
+}
+
+/// The grid at z = 0 seen from (0, 0, 1) with a 90° field of view, covering
+/// the whole image whatever `nx`. `aligned`: exactly [-1, 1]², so grid lines,
+/// diagonals and (at nx = size) vertices pass through pixel centers: every
+/// such center is a tie for the exact predicate. Otherwise the grid overhangs
+/// the image by small non-dyadic margins and ties are rare: the generic case.
+pub fn grid_scene(nx: u32, size: u32, aligned: bool) -> Result<ResolvedScene> {
+    let cam = Camera::new(
+        DVec3::new(0.0, 0.0, 1.0),
+        DVec3::ZERO,
+        DVec3::Y,
+        90.0,
+        size,
+        size,
+        1e-3,
+        f64::INFINITY,
+    )
+    .map_err(anyhow::Error::msg)?;
+    let (min, max) = if aligned {
+        ([-1.0, -1.0], [1.0, 1.0])
+    } else {
+        ([-1.012_34, -1.017_1], [1.023_45, 1.008_9])
+    };
+    let tris = grid(min, max, nx, nx)
+        .iter()
+        .map(|t| t.map(|v| v.as_vec3()))
+        .collect();
+    Ok(ResolvedScene::from_triangles(cam, tris))
+}
+
+/// Where `a - b` changes sign between consecutive rows, interpolated in log-log space.
+pub fn crossings(xs: &[f64], a: &[f64], b: &[f64]) -> Vec<f64> {
+    let mut out = Vec::new();
+    for i in 1..xs.len() {
+        let d0 = a[i - 1].ln() - b[i - 1].ln();
+        let d1 = a[i].ln() - b[i].ln();
+        if d0.is_finite() && d1.is_finite() && d0 * d1 < 0.0 {
+            let t = d0 / (d0 - d1);
+            out.push((xs[i - 1].ln() + t * (xs[i].ln() - xs[i - 1].ln())).exp());
+        }
+    }
+    out
+}
+
+/// Times both loops on one grid and records their operation counts.
+fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
+    let r = measure::raster(scene, runs);
+    let t = measure::trace(scene, BvhQuality::Medium, runs);
+    let tris = scene.triangles.len() as f64;
+    let px = f64::from(size) * f64::from(size);
+    json!({
+        "nx": nx,
+        "triangles": tris,
+        "pixels_per_triangle": px / tris,
+        "raster_s": r.median_s,
+        "trace_s": t.trace.median_s,
+        "bvh_build_s": t.build.median_s,
+        "trace_total_s": t.total_s(),
+        "raster_runs_s": r.runs_s,
+        "trace_runs_s": t.trace.runs_s,
+        "raster_counters": r.last.counters,
+        "trace_counters": t.trace.last.counters,
+        "raster_equals_trace": visibility_error(&r.last, &t.trace.last).identical(),
+    })
+}
+
+/// Runs the sweep and returns the JSON record, the page and the SVGs.
+pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
+    let environment = super::environment();
+    let pool = super::pool(opts.threads)?;
+    let runs = opts.common.runs;
+    let sweep = |aligned: bool| -> Result<Vec<Value>> {
+        let mut rows = Vec::new();
+        for &nx in &opts.nx {
+            let scene = grid_scene(nx, opts.size, aligned)?;
+            eprintln!(
+                "crossover: nx {nx} ({} triangles){}",
+                scene.triangles.len(),
+                if aligned { ", pixel-aligned" } else { "" }
+            );
+            rows.push(pool.install(|| row(&scene, nx, opts.size, runs)));
+        }
+        Ok(rows)
+    };
+    let rows = sweep(false)?;
+    let aligned_rows = sweep(true)?;
+    let col = |k: &str| -> Vec<f64> {
+        rows.iter()
+            .map(|r| r[k].as_f64().unwrap_or(f64::NAN))
+            .collect()
+    };
+    let tris = col("triangles");
+    let with_build = crossings(&tris, &col("raster_s"), &col("trace_total_s"));
+    let trace_only = crossings(&tris, &col("raster_s"), &col("trace_s"));
+    let mut record = json!({
+        "benchmark": "crossover",
+        "environment": environment,
+        "config": {
+            "scene": "grid at z=0 seen from (0,0,1), vfov 90, overhanging the image by small non-dyadic margins: screen-filling at every nx, few ties",
+            "size": [opts.size, opts.size], "nx": opts.nx, "threads": opts.threads,
+            "runs": runs, "quick": opts.common.quick, "bvh": "medium",
+            "timing": "median of `runs` timed runs after one untimed warm-up",
+        },
+        "rows": rows,
+        "aligned_rows": aligned_rows,
+        "aligned": "the same sweep on a grid exactly over [-1,1]^2: edges, diagonals and (at nx = size) vertices through pixel centers, so the exact predicate's ties and fallbacks dominate",
+        "crossover_triangles": {
+            "raster_vs_trace_with_build": with_build,
+            "raster_vs_trace_without_build": trace_only,
+        },
+        "raster_equals_trace_everywhere": rows.iter().chain(&aligned_rows).all(|r| r["raster_equals_trace"] == json!(true)),
+    });
+    super::finish_environment(&mut record);
+    let marks: Vec<(f64, String)> = with_build
+        .iter()
+        .map(|x| (*x, "crossover (build incl.)".to_string()))
+        .chain(
+            trace_only
+                .iter()
+                .map(|x| (*x, "crossover (trace only)".to_string())),
+        )
+        .collect();
+    let series = |name: &str, k: &str, dashed: bool| Series {
+        name: name.into(),
+        points: tris.iter().copied().zip(col(k)).collect(),
+        dashed,
+    };
+    let aligned_series = |name: &str, k: &str| Series {
+        name: name.into(),
+        points: record["aligned_rows"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|r| {
+                (
+                    r["triangles"].as_f64().unwrap_or(f64::NAN),
+                    r[k].as_f64().unwrap_or(f64::NAN),
+                )
+            })
+            .collect(),
+        dashed: true,
+    };
+    let times = lines(
+        &format!("time vs triangle count ({0}x{0})", opts.size),
+        "triangles (screen-filling grid)",
+        "seconds",
+        &[
+            series("raster", "raster_s", false),
+            series("trace + BVH build", "trace_total_s", false),
+            series("trace only", "trace_s", true),
+            series("BVH build", "bvh_build_s", true),
+            aligned_series("raster, pixel-aligned grid", "raster_s"),
+            aligned_series("trace only, pixel-aligned grid", "trace_s"),
+        ],
+        &marks,
+    );
+    let counter = |name: &str, side: &str, k: &str, dashed: bool| Series {
+        name: name.into(),
+        points: rows
+            .iter()
+            .map(|r| {
+                (
+                    r["triangles"].as_f64().unwrap_or(f64::NAN),
+                    r[side][k].as_f64().unwrap_or(f64::NAN),
+                )
+            })
+            .collect(),
+        dashed,
+    };
+    let ops = lines(
+        "operation counts vs triangle count",
+        "triangles (screen-filling grid)",
+        "operations per frame",
+        &[
+            counter(
+                "raster coverage tests",
+                "raster_counters",
+                "coverage_tests",
+                false,
+            ),
+            counter(
+                "raster triangle setups",
+                "raster_counters",
+                "triangle_setups",
+                false,
+            ),
+            counter(
+                "trace coverage tests",
+                "trace_counters",
+                "coverage_tests",
+                true,
+            ),
+            counter(
+                "trace BVH nodes visited",
+                "trace_counters",
+                "bvh_nodes_visited",
+                true,
+            ),
+        ],
+        &marks,
+    );
+    let svgs = vec![
+        ("times".to_string(), times),
+        ("operations".to_string(), ops),
+    ];
+    let html = page(&record, &svgs);
+    Ok(super::Output { record, html, svgs })
+}
+
+fn page(record: &Value, svgs: &[(String, String)]) -> String {
+    let mut p = Page::new("rendiff bench crossover: raster vs trace as triangles shrink");
+    p.para(&format!(
+        "{}. Times are medians after a warm-up. Crossover (interpolated, triangles): with the BVH build {}; tracing alone {}. Raster == trace at every size: {}.",
+        super::page::compact(&record["config"]["scene"]),
+        list(&record["crossover_triangles"]["raster_vs_trace_with_build"]),
+        list(&record["crossover_triangles"]["raster_vs_trace_without_build"]),
+        record["raster_equals_trace_everywhere"]
+    ))
+    .command("rendiff bench crossover");
+    for (name, svg) in svgs {
+        p.svg(svg, Some(&format!("crossover-{name}.svg")));
+    }
+    p.heading("generic grid (few ties)");
+    table(&mut p, &record["rows"]);
+    p.heading("pixel-aligned grid (ties everywhere)");
+    p.para(&super::page::compact(&record["aligned"]));
+    table(&mut p, &record["aligned_rows"]);
+    p.environment(&record["environment"]);
+    p.finish()
+}
+
+fn table(p: &mut Page, rows: &Value) {
+    let rows: Vec<Vec<String>> = rows
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|r| {
+            let f = |k: &str| r[k].as_f64();
+            let c = |side: &str, k: &str| super::page::compact(&r[side][k]);
+            vec![
+                super::page::compact(&r["nx"]),
+                super::page::compact(&r["triangles"]),
+                num(f("pixels_per_triangle"), 3),
+                num(f("raster_s"), 4),
+                num(f("trace_s"), 4),
+                num(f("bvh_build_s"), 4),
+                c("raster_counters", "triangle_setups"),
+                c("raster_counters", "coverage_tests"),
+                c("trace_counters", "coverage_tests"),
+                c("trace_counters", "bvh_nodes_visited"),
+                format!(
+                    "{} / {}",
+                    c("raster_counters", "exact_fallbacks"),
+                    c("trace_counters", "exact_fallbacks")
+                ),
+                super::page::compact(&r["raster_equals_trace"]),
+            ]
+        })
+        .collect();
+    p.table(
+        &[
+            "nx",
+            "triangles",
+            "px/triangle",
+            "raster s",
+            "trace s",
+            "BVH build s",
+            "raster setups",
+            "raster coverage tests",
+            "trace coverage tests",
+            "BVH nodes visited",
+            "exact fallbacks raster / trace",
+            "raster == trace",
+        ],
+        &rows,
+    );
+}
+
+fn list(v: &Value) -> String {
+    let xs: Vec<String> = v
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|x| num(x.as_f64(), 3))
+        .collect();
+    if xs.is_empty() {
+        "none in the measured range".into()
+    } else {
+        xs.join(", ")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crossings_interpolate_in_log_space() {
+        let x = [1.0, 100.0, 10000.0];
+        let a = [1.0, 10.0, 100.0];
+        let b = [10.0, 10.0 * 10f64.sqrt(), 10.0];
+        let c = crossings(&x, &a, &b);
+        assert_eq!(c.len(), 1);
+        assert!(c[0] > 100.0 && c[0] < 10000.0);
+        assert!(crossings(&x, &a, &a.map(|v| v * 2.0)).is_empty());
+    }
+
+    #[test]
+    fn grid_fills_the_image() {
+        let s = grid_scene(2, 8, false).unwrap();
+        assert_eq!(s.triangles.len(), 8);
+        let f = crate::raster::render(&s, Default::default(), &|_| {});
+        assert!(f.prim.iter().all(|&p| p != u32::MAX));
+    }
+}

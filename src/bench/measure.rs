@@ -1,0 +1,115 @@
+//! Timed renders shared by the benchmarks: the core's raster, its trace with
+//! the BVH build timed apart from tracing, and Embree with its own split
+//! (device, build, trace). One place, so every benchmark times the same phases
+//! the same way (warm-up, then the median of `runs`).
+
+use super::{timed, Timed};
+use crate::backends::embree::{self, EmbreeError, EmbreeMode, EmbreeQuery};
+use crate::frame::Frame;
+use crate::raster::{self, RasterOptions};
+use crate::scene::resolve::ResolvedScene;
+use crate::trace::{self, BvhQuality, TraceBvh};
+use serde_json::{json, Value};
+
+/// The core rasterizer, timed whole (binning included: it has no separate build).
+pub fn raster(scene: &ResolvedScene, runs: usize) -> Timed<Frame> {
+    timed(runs, || {
+        raster::render(scene, RasterOptions::default(), &|_| {})
+    })
+}
+
+/// The core tracer: BVH build and tracing timed apart.
+pub struct TraceTimes {
+    /// BVH build (obvhs plus refit), timed.
+    pub build: Timed<TraceBvh>,
+    /// Tracing every pixel through the built BVH, timed.
+    pub trace: Timed<Frame>,
+}
+
+impl TraceTimes {
+    /// Build plus trace: what a caller waits for when it needs one frame.
+    pub fn total_s(&self) -> f64 {
+        self.build.median_s + self.trace.median_s
+    }
+
+    /// The split as JSON.
+    pub fn json(&self) -> Value {
+        json!({
+            "build": self.build.json(),
+            "trace": self.trace.json(),
+            "total_s": self.total_s(),
+            "counters": self.trace.last.counters,
+        })
+    }
+}
+
+/// Times the tracer with BVH quality `q`.
+pub fn trace(scene: &ResolvedScene, q: BvhQuality, runs: usize) -> TraceTimes {
+    let build = timed(runs, || TraceBvh::build(scene, q));
+    let trace = trace_with(scene, &build.last, runs);
+    TraceTimes { build, trace }
+}
+
+/// Times tracing through an existing BVH.
+pub fn trace_with(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Timed<Frame> {
+    timed(runs, || trace::render_with_bvh(scene, bvh, false, &|_| {}))
+}
+
+/// Embree's phases, medians over the timed runs.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct EmbreeStats {
+    /// Device creation.
+    pub device_s: f64,
+    /// Buffer setup and BVH build.
+    pub build_s: f64,
+    /// Tracing every pixel ray.
+    pub trace_s: f64,
+    /// Median of build + trace per run.
+    pub build_plus_trace_s: f64,
+    /// Rays handed to Embree per frame.
+    pub rays: u64,
+    /// Timed runs behind the medians.
+    pub runs: usize,
+}
+
+/// Runs Embree once untimed, then `runs` times, on rayon's current pool
+/// (Embree's device gets the same thread count).
+pub fn embree(
+    scene: &ResolvedScene,
+    mode: EmbreeMode,
+    query: EmbreeQuery,
+    runs: usize,
+) -> Result<(Frame, EmbreeStats), EmbreeError> {
+    let (mut frame, _) = embree::render_timed(scene, mode, query)?;
+    let (mut dev, mut build, mut tr, mut both) = (vec![], vec![], vec![], vec![]);
+    let mut rays = 0;
+    for _ in 0..runs.max(1) {
+        let (f, t) = embree::render_timed(scene, mode, query)?;
+        dev.push(t.device_seconds);
+        build.push(t.build_seconds);
+        tr.push(t.trace_seconds);
+        both.push(t.build_seconds + t.trace_seconds);
+        rays = t.rays;
+        frame = f;
+    }
+    Ok((
+        frame,
+        EmbreeStats {
+            device_s: super::median(&dev),
+            build_s: super::median(&build),
+            trace_s: super::median(&tr),
+            build_plus_trace_s: super::median(&both),
+            rays,
+            runs: runs.max(1),
+        },
+    ))
+}
+
+/// A short name for an Embree configuration.
+pub fn embree_name(mode: EmbreeMode, query: EmbreeQuery) -> String {
+    let q = match query {
+        EmbreeQuery::Single => "single",
+        EmbreeQuery::Packet8 => "packet8",
+    };
+    format!("{} {q}", mode.name())
+}

@@ -1,0 +1,317 @@
+//! `rendiff bench`: speed measured against accuracy (DESIGN.md "Speed versus
+//! accuracy"), in one run per question, written as JSON plus an HTML page with
+//! SVG plots under `reports/bench/`.
+//!
+//! - [`core_loops`]: raster and trace on one scene per thread count (the plain `rendiff bench`).
+//! - [`knobs`]: every knob that trades time for error, against one reference, with the Pareto front.
+//! - [`peers`]: the core against Embree, pyrender and Mitsuba on identical work, as ratios.
+//! - [`crossover`]: raster against trace as triangles shrink from a few large to millions of tiny.
+//! - [`stability`]: scene families pushed to numerical extremes through `rendiff check`.
+//!
+//! Everything here is a measurement, never an assertion: tests only check that
+//! the benchmarks run and write well-formed output. Timings are medians of
+//! several runs after a warm-up, and each record carries the machine's load
+//! average before and after, because a busy machine skews every number.
+
+pub mod cli;
+pub mod core_loops;
+pub mod crossover;
+pub mod harness;
+pub mod knobs;
+pub mod measure;
+pub mod page;
+pub mod pareto;
+pub mod peers;
+pub mod plot;
+pub mod radiance;
+pub mod spp;
+pub mod stability;
+
+pub use core_loops::{run, BenchOptions};
+
+use crate::frame::Frame;
+use crate::scene::resolve::ResolvedScene;
+use anyhow::{Context, Result};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options every subcommand shares.
+#[derive(Debug, Clone)]
+pub struct Common {
+    /// Timed runs per configuration (after one warm-up).
+    pub runs: usize,
+    /// Tiny configuration (small images, few settings): for smoke tests, not for numbers.
+    pub quick: bool,
+    /// Output folder for JSON, HTML and SVG.
+    pub out_dir: PathBuf,
+    /// Repository root (scenes, references, the Python harness's venv).
+    pub root: PathBuf,
+    /// Seconds before an external renderer subprocess is killed.
+    pub timeout_s: u64,
+}
+
+/// Median of a sample (the mean of the two middle values for an even count).
+pub fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+/// A timed measurement: median and every run, plus the last run's result.
+#[derive(Debug, Clone)]
+pub struct Timed<T> {
+    /// Median wall-clock seconds.
+    pub median_s: f64,
+    /// Every timed run, in order.
+    pub runs_s: Vec<f64>,
+    /// What the last run returned (results are deterministic, so any run would do).
+    pub last: T,
+}
+
+impl<T> Timed<T> {
+    /// Median and runs as JSON, for the records.
+    pub fn json(&self) -> Value {
+        json!({"median_s": self.median_s, "runs_s": self.runs_s})
+    }
+}
+
+/// Runs `f` once untimed (caches, page faults, lazy initialisation), then
+/// `runs` times timed; the median is robust to one disturbed run.
+pub fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> Timed<T> {
+    let mut last = f();
+    let mut times = Vec::with_capacity(runs.max(1));
+    for _ in 0..runs.max(1) {
+        let t = Instant::now();
+        last = f();
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Timed {
+        median_s: median(&times),
+        runs_s: times,
+        last,
+    }
+}
+
+/// The scene with its camera at another resolution (same eye, field of view, near and far).
+pub fn resized(scene: &ResolvedScene, w: u32, h: u32) -> Result<ResolvedScene> {
+    let mut s = scene.clone();
+    let c = &scene.camera;
+    let precision = c.precision;
+    s.camera = crate::camera::Camera::new(c.eye, c.look_at, c.up, c.vfov_deg, w, h, c.near, c.far)
+        .map_err(anyhow::Error::msg)?;
+    s.camera.precision = precision;
+    Ok(s)
+}
+
+/// Loads and resolves a scene file.
+pub fn load_scene(path: &Path) -> Result<ResolvedScene> {
+    let scene = crate::scene::Scene::load(path)?;
+    Ok(ResolvedScene::resolve(&scene)?)
+}
+
+/// A rayon pool of exactly `threads` workers, so thread counts are what the record says.
+pub fn pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("cannot start worker threads")
+}
+
+/// Logical CPUs available to this process.
+pub fn cpus() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+}
+
+/// The 1, 5 and 15 minute load averages (Linux), or None elsewhere: a number
+/// above the idle level means other work competed with the benchmark.
+pub fn load_average() -> Option<[f64; 3]> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut it = text.split_whitespace().map(|w| w.parse::<f64>().ok());
+    Some([it.next()??, it.next()??, it.next()??])
+}
+
+fn cpu_model() -> Option<String> {
+    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    text.lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split_once(':'))
+        .map(|(_, v)| v.trim().to_string())
+}
+
+/// Where and when a benchmark ran: what a reader needs to trust or discount its numbers.
+pub fn environment() -> Value {
+    json!({
+        "cpus": cpus(),
+        "cpu_model": cpu_model(),
+        "load_average_before": load_average(),
+        "rendiff_version": env!("CARGO_PKG_VERSION"),
+        "build": if cfg!(debug_assertions) { "debug assertions on (not for numbers)" } else { "release" },
+        "unix_time": std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
+    })
+}
+
+/// Closes a record: the load average after the run, next to the one before.
+pub fn finish_environment(record: &mut Value) {
+    if let Some(env) = record.get_mut("environment") {
+        env["load_average_after"] = json!(load_average());
+    }
+}
+
+/// A scratch folder removed when dropped (the `tempfile` crate is a test-only
+/// dependency, and benchmark scratch needs nothing more than this).
+#[derive(Debug)]
+pub struct Scratch(PathBuf);
+
+impl Scratch {
+    /// Creates a fresh, empty folder under the system's temporary directory.
+    pub fn new(what: &str) -> Result<Scratch> {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static NEXT: AtomicU64 = AtomicU64::new(0);
+        let dir = std::env::temp_dir().join(format!(
+            "rendiff-bench-{what}-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create scratch folder", dir.display()))?;
+        Ok(Scratch(dir))
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// How a visibility render differs from a reference render of the same camera.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct VisError {
+    /// Pixels whose `id.prim` differs.
+    pub id_mismatches: usize,
+    /// Pixels that are a hit on one side only.
+    pub mask_mismatches: usize,
+    /// Pixels whose `Z` bits differ.
+    pub z_bit_differences: usize,
+    /// Largest relative depth difference over pixels both hit.
+    pub max_z_rel: f64,
+    /// Pixels compared.
+    pub pixels: usize,
+}
+
+impl VisError {
+    /// True when both buffers are identical bit for bit.
+    pub fn identical(&self) -> bool {
+        self.id_mismatches == 0 && self.z_bit_differences == 0
+    }
+}
+
+/// Compares `test` with `reference` (same size): IDs exactly, depth bit for bit and relatively.
+pub fn visibility_error(reference: &Frame, test: &Frame) -> VisError {
+    let d = crate::compare_depth(&reference.z, &test.z);
+    VisError {
+        id_mismatches: reference
+            .prim
+            .iter()
+            .zip(&test.prim)
+            .filter(|(a, b)| a != b)
+            .count(),
+        mask_mismatches: d.mask_mismatches,
+        z_bit_differences: d.bit_differences,
+        max_z_rel: d.max_rel,
+        pixels: reference.prim.len(),
+    }
+}
+
+/// What one benchmark produces: the JSON record, its HTML page and its plots
+/// as (name, SVG) pairs (also written as standalone files).
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// The machine-readable record.
+    pub record: Value,
+    /// The page for people.
+    pub html: String,
+    /// Plots, by file-name suffix.
+    pub svgs: Vec<(String, String)>,
+}
+
+/// Writes `STEM.json`, `STEM.html` and each `(name, svg)` as a standalone
+/// file, atomically, then refreshes the folder's index page.
+pub fn write_outputs(
+    dir: &Path,
+    stem: &str,
+    record: &Value,
+    html: &str,
+    svgs: &[(String, String)],
+) -> Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
+    let mut put = |name: String, bytes: Vec<u8>| -> Result<()> {
+        let path = dir.join(name);
+        crate::exr_io::write_atomically(&path, |tmp| {
+            std::fs::write(tmp, &bytes)?;
+            Ok(())
+        })?;
+        written.push(path);
+        Ok(())
+    };
+    put(
+        format!("{stem}.json"),
+        serde_json::to_vec_pretty(record)?
+            .into_iter()
+            .chain([b'\n'])
+            .collect(),
+    )?;
+    put(format!("{stem}.html"), html.as_bytes().to_vec())?;
+    for (name, svg) in svgs {
+        put(
+            format!("{stem}-{name}.svg"),
+            plot::standalone(svg).into_bytes(),
+        )?;
+    }
+    page::write_index(dir)?;
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_and_even_samples() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&[]).is_nan());
+    }
+
+    #[test]
+    fn timed_warms_up_then_counts_runs() {
+        let mut calls = 0;
+        let t = timed(3, || {
+            calls += 1;
+            calls
+        });
+        assert_eq!(calls, 4);
+        assert_eq!(t.runs_s.len(), 3);
+        assert_eq!(t.last, 4);
+    }
+}

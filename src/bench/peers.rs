@@ -1,0 +1,497 @@
+//! `rendiff bench peers`: the core next to established renderers on identical
+//! work, in one run, as ratios.
+//!
+//! - Trace throughput: core trace vs Embree single-ray and 8-ray packets on the
+//!   same primary rays (Embree traces the core's own pixel rays), per thread
+//!   count; BVH builds are excluded from Mrays/s and recorded beside it.
+//! - Raster: core raster vs pyrender (OpenGL on Mesa llvmpipe), depth + IDs;
+//!   pyrender's time is its own per-pass sub-timing (scene upload, draw and
+//!   read-back; Python start-up excluded), and a one-triangle render's
+//!   subprocess time is recorded as the start-up it excludes.
+//! - Path tracing at equal time: Mitsuba at a fixed spp, the core at the spp
+//!   that takes as long; both errors against the cached reference.
+
+use super::harness::{number_at, Harness};
+use super::knobs::SceneSpec;
+use super::page::{num, Page};
+use super::spp::{core_path, mitsuba_path};
+use super::{measure, radiance, visibility_error, Common};
+use crate::backends::embree::{EmbreeMode, EmbreeQuery};
+use crate::camera::Camera;
+use crate::exr_io::read_buffers;
+use crate::report::svg::{backend_color, time_bars, Bar};
+use crate::scene::resolve::ResolvedScene;
+use crate::trace::BvhQuality;
+use anyhow::Result;
+use glam::{DVec3, Vec3};
+use serde_json::{json, Value};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// What `bench peers` measures.
+#[derive(Debug, Clone)]
+pub struct PeersOptions {
+    /// Shared options.
+    pub common: Common,
+    /// Throughput scene (default: million at 1920x1080).
+    pub scene: SceneSpec,
+    /// Thread counts for the trace and raster throughput.
+    pub threads: Vec<usize>,
+    /// Global-illumination scene for the equal-time comparison.
+    pub gi_scene: PathBuf,
+    /// Its cached reference.
+    pub reference: PathBuf,
+    /// Mitsuba's spp in the equal-time comparison.
+    pub mitsuba_spp: u32,
+    /// Seed of both path tracers (not the reference's).
+    pub seed: u64,
+    /// Skip external renderers (pyrender, Mitsuba), recording why.
+    pub no_external: bool,
+}
+
+/// Runs the comparisons and returns the JSON record, the page and the SVGs.
+pub fn run(opts: &PeersOptions) -> Result<super::Output> {
+    let environment = super::environment();
+    let scene = opts.scene.load()?;
+    let cam = &scene.camera;
+    let pixels = cam.pixel_count() as f64;
+    let runs = opts.common.runs;
+    eprintln!(
+        "peers: {} at {}x{} ({} triangles)",
+        opts.scene.path.display(),
+        cam.width,
+        cam.height,
+        scene.triangles.len()
+    );
+    let mut per_threads = Vec::new();
+    for &threads in &opts.threads {
+        let pool = super::pool(threads)?;
+        let row = pool.install(|| -> Value {
+            let core = measure::trace(&scene, BvhQuality::Medium, runs);
+            let raster = measure::raster(&scene, runs);
+            let core_mrays = pixels / core.trace.median_s / 1e6;
+            let mut embree = serde_json::Map::new();
+            let mut skipped = Vec::new();
+            for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+                for query in [EmbreeQuery::Single, EmbreeQuery::Packet8] {
+                    let name = measure::embree_name(mode, query);
+                    match measure::embree(&scene, mode, query, runs) {
+                        Ok((f, st)) => {
+                            let mrays = st.rays as f64 / st.trace_s / 1e6;
+                            embree.insert(
+                                name,
+                                json!({"timing": st, "mrays_per_s": mrays,
+                                       "core_over_embree": core_mrays / mrays,
+                                       "vs_core_raster": visibility_error(&raster.last, &f)}),
+                            );
+                        }
+                        Err(e) => skipped.push(json!({"what": name, "reason": e.to_string()})),
+                    }
+                }
+            }
+            let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
+            json!({
+                "threads": threads,
+                "core_trace": {"mrays_per_s": core_mrays, "timing": core.json(),
+                               "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()},
+                "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,
+                                "counters": raster.last.counters},
+                "embree": embree,
+                "ratios": {
+                    "core_trace_over_embree_single": ratio("embree single"),
+                    "core_trace_over_embree_packet8": ratio("embree packet8"),
+                    "core_trace_over_embree_robust_single": ratio("embree_robust single"),
+                },
+                "skipped": skipped,
+            })
+        });
+        per_threads.push(row);
+    }
+    let externals = if opts.no_external {
+        Err("external renderers off (--quick or --no-external)".to_string())
+    } else {
+        Ok(())
+    };
+    let scratch = super::Scratch::new("peers")?;
+    let harness = externals.and_then(|_| {
+        Harness::find(
+            &opts.common.root,
+            Duration::from_secs(opts.common.timeout_s),
+            scratch.path(),
+        )
+    });
+    let all_threads = super::cpus();
+    let core_raster_all = super::pool(all_threads)?.install(|| measure::raster(&scene, runs));
+    let pyrender = match &harness {
+        Ok(h) => pyrender(h, &scene, &core_raster_all, runs),
+        Err(why) => json!({"skipped": why}),
+    };
+    let equal_time = match &harness {
+        Ok(h) => super::pool(all_threads)?
+            .install(|| equal_time(h, opts, runs))
+            .unwrap_or_else(|e| json!({"skipped": format!("{e:#}")})),
+        Err(why) => json!({"skipped": why}),
+    };
+    let mut record = json!({
+        "benchmark": "peers",
+        "environment": environment,
+        "config": {
+            "scene": opts.scene.path, "width": cam.width, "height": cam.height,
+            "triangles": scene.triangles.len(), "threads": opts.threads, "runs": runs,
+            "quick": opts.common.quick, "gi_scene": opts.gi_scene, "reference": opts.reference,
+            "mitsuba_spp": opts.mitsuba_spp, "seed": opts.seed,
+            "timing": "median of `runs` timed runs after one untimed warm-up",
+            "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32)",
+        },
+        "trace_throughput": per_threads,
+        "raster_vs_pyrender": pyrender,
+        "path_tracing_equal_time": equal_time,
+    });
+    record["goals"] = goals(&record);
+    super::finish_environment(&mut record);
+    let svg = bars(&record);
+    let html = page(&record, &svg);
+    Ok(super::Output {
+        record,
+        html,
+        svgs: vec![("times".into(), svg)],
+    })
+}
+
+/// The measured goals (never asserted): core trace vs Embree single-ray, core raster vs llvmpipe.
+fn goals(record: &Value) -> Value {
+    let t = record["trace_throughput"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let single: Vec<Value> = t
+        .iter()
+        .map(|r| json!({"threads": r["threads"], "core_trace_over_embree_single": r["ratios"]["core_trace_over_embree_single"]}))
+        .collect();
+    json!({
+        "core_trace_vs_embree_single_ray": single,
+        "core_raster_vs_llvmpipe_speedup": record["raster_vs_pyrender"]["speedup_core_over_pyrender_pass"],
+        "equal_time_error_ratio_mitsuba_over_core": record["path_tracing_equal_time"]["rmse_ratio_mitsuba_over_core"],
+    })
+}
+
+fn pyrender(
+    h: &Harness,
+    scene: &ResolvedScene,
+    core: &super::Timed<crate::frame::Frame>,
+    runs: usize,
+) -> Value {
+    let dir = h.scratch.join("pyrender");
+    let resolved = match h.export(scene, &dir) {
+        Ok(r) => r,
+        Err(why) => return json!({"skipped": why}),
+    };
+    let out = dir.join("pyrender.exr");
+    let (mut pass, mut total, mut harness_s, mut wall) = (vec![], vec![], vec![], vec![]);
+    let mut info = Value::Null;
+    for k in 0..=runs.max(1) {
+        let r = match h.render("pyrender", &resolved, &out, None, None) {
+            Ok(r) => r,
+            Err(why) => return json!({"skipped": why}),
+        };
+        if k > 0 {
+            pass.push(
+                r.info["depth_passes"][0]["seconds"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+            );
+            total.push(number_at(&r.info, &["timings_s", "render"]).unwrap_or(f64::NAN));
+            harness_s.push(r.time_s.unwrap_or(f64::NAN));
+            wall.push(r.wall_s);
+        }
+        info = r.info;
+    }
+    // Start-up the sub-timings exclude: the same call on one triangle at the same size.
+    let tiny = one_triangle(scene);
+    let startup = h
+        .export(&tiny, &dir.join("tiny"))
+        .and_then(|r| h.render("pyrender", &r, &dir.join("tiny.exr"), None, None))
+        .map(|r| json!({"subprocess_wall_s": r.wall_s, "harness_time_s": r.time_s}))
+        .unwrap_or_else(|why| json!({"skipped": why}));
+    let agreement = read_buffers(&out).ok().and_then(|b| b.prim).map(|p| {
+        p.iter()
+            .zip(&core.last.prim)
+            .filter(|(a, b)| a != b)
+            .count()
+    });
+    let pass_s = super::median(&pass);
+    json!({
+        "core_raster": {"threads": super::cpus(), "timing": core.json()},
+        "pyrender": {
+            "pass_s_median": pass_s, "pass_runs_s": pass,
+            "render_s_median": super::median(&total),
+            "harness_time_s_median": super::median(&harness_s),
+            "subprocess_wall_s_median": super::median(&wall),
+            "passes": info["depth_passes"].as_array().map(|a| a.len()),
+            "gl_renderer": info["gl_renderer"], "platform": info["platform"],
+            "threads": "llvmpipe's own (LP_NUM_THREADS unset: one per CPU)",
+            "timing": "first depth+ID pass from its info (scene upload, draw, read-back); a second pass with refined planes, when it runs, is in render_s",
+        },
+        "one_triangle_startup": startup,
+        "id_mismatches_vs_core_raster": agreement,
+        "speedup_core_over_pyrender_pass": pass_s / core.median_s,
+        "speedup_core_over_pyrender_render": super::median(&total) / core.median_s,
+    })
+}
+
+/// One small triangle in front of the same camera: a render whose time is nearly all fixed cost.
+fn one_triangle(scene: &ResolvedScene) -> ResolvedScene {
+    let c: &Camera = &scene.camera;
+    let p = c.eye + c.forward * 2.0;
+    let v = |d: DVec3| (p + d * 0.1).as_vec3();
+    let tri: [Vec3; 3] = [
+        v(-c.right - c.up_ortho),
+        v(c.right - c.up_ortho),
+        v(c.up_ortho),
+    ];
+    ResolvedScene::from_triangles(c.clone(), vec![tri])
+}
+
+fn equal_time(h: &Harness, opts: &PeersOptions, runs: usize) -> Result<Value> {
+    let scene = super::load_scene(&opts.gi_scene)?;
+    let reference = radiance::read_rgb(&opts.reference)?;
+    let resolved = h
+        .export(&scene, &h.scratch.join("gi"))
+        .map_err(anyhow::Error::msg)?;
+    let m = mitsuba_path(h, &resolved, &reference, opts.mitsuba_spp, opts.seed, runs)
+        .map_err(anyhow::Error::msg)?;
+    // Calibrate the core's seconds per spp, then match Mitsuba's time.
+    let calib_spp = 16;
+    let (calib, _) = core_path(&scene, &reference, calib_spp, opts.seed, runs)?;
+    let per_spp = calib.median_s / f64::from(calib_spp);
+    let spp = ((m.time_s / per_spp).round() as u32).max(1);
+    let (t, e) = core_path(&scene, &reference, spp, opts.seed, runs)?;
+    Ok(json!({
+        "mitsuba": {"spp": opts.mitsuba_spp, "time_s": m.time_s, "error": m.error, "details": m.details},
+        "core": {"spp": spp, "time_s": t.median_s, "timing": t.json(), "error": e,
+                 "calibration": {"spp": calib_spp, "time_s": calib.median_s}},
+        "time_ratio_core_over_mitsuba": t.median_s / m.time_s,
+        "spp_ratio_core_over_mitsuba": f64::from(spp) / f64::from(opts.mitsuba_spp),
+        "rmse_ratio_mitsuba_over_core": m.error.rmse / e.rmse,
+        "threads": format!("core: {} rayon workers; Mitsuba scalar_rgb: its own pool (one per CPU)", super::cpus()),
+    }))
+}
+
+fn bars(record: &Value) -> String {
+    let mut groups: Vec<(String, Vec<Bar>)> = Vec::new();
+    for r in record["trace_throughput"].as_array().into_iter().flatten() {
+        let mut b: Vec<Bar> = vec![(
+            "core trace".into(),
+            backend_color(0),
+            r["core_trace"]["timing"]["trace"]["median_s"].as_f64(),
+        )];
+        for (i, (k, v)) in r["embree"].as_object().into_iter().flatten().enumerate() {
+            b.push((
+                k.clone(),
+                backend_color(i + 1),
+                v["timing"]["trace_s"].as_f64(),
+            ));
+        }
+        b.push((
+            "core raster".into(),
+            backend_color(6),
+            r["core_raster"]["timing"]["median_s"].as_f64(),
+        ));
+        groups.push((
+            format!(
+                "{} thread(s), tracing / raster",
+                super::page::compact(&r["threads"])
+            ),
+            b,
+        ));
+    }
+    let p = &record["raster_vs_pyrender"];
+    if p["pyrender"].is_object() {
+        groups.push((
+            "all CPUs, depth + IDs".into(),
+            vec![
+                (
+                    "core raster".into(),
+                    backend_color(6),
+                    p["core_raster"]["timing"]["median_s"].as_f64(),
+                ),
+                (
+                    "pyrender pass".into(),
+                    backend_color(7),
+                    p["pyrender"]["pass_s_median"].as_f64(),
+                ),
+            ],
+        ));
+    }
+    let e = &record["path_tracing_equal_time"];
+    if e["core"].is_object() {
+        groups.push((
+            "path tracing, equal time".into(),
+            vec![
+                (
+                    format!("core {} spp", e["core"]["spp"]),
+                    backend_color(0),
+                    e["core"]["time_s"].as_f64(),
+                ),
+                (
+                    format!("mitsuba {} spp", e["mitsuba"]["spp"]),
+                    backend_color(8),
+                    e["mitsuba"]["time_s"].as_f64(),
+                ),
+            ],
+        ));
+    }
+    time_bars(&groups)
+}
+
+fn page(record: &Value, svg: &str) -> String {
+    let mut p = Page::new("rendiff bench peers: the core next to Embree, pyrender and Mitsuba");
+    let c = &record["config"];
+    p.para(&format!(
+        "Scene {} at {}x{} ({} triangles). Times are medians after a warm-up. Ratios above 1 mean the core is faster (throughput) or more accurate (error).",
+        super::page::compact(&c["scene"]),
+        c["width"],
+        c["height"],
+        c["triangles"]
+    ))
+    .command("rendiff bench peers");
+    p.svg(svg, Some("peers-times.svg"));
+    p.heading("trace throughput (Mrays/s, primary rays, BVH builds excluded)");
+    let mut rows = Vec::new();
+    for r in record["trace_throughput"].as_array().into_iter().flatten() {
+        let th = super::page::compact(&r["threads"]);
+        rows.push(vec![
+            th.clone(),
+            "core trace".into(),
+            num(r["core_trace"]["mrays_per_s"].as_f64(), 4),
+            "1".into(),
+            num(r["core_trace"]["timing"]["build"]["median_s"].as_f64(), 3),
+            format!(
+                "raster == trace: {}",
+                r["core_trace"]["raster_equals_trace"]
+            ),
+        ]);
+        for (k, v) in r["embree"].as_object().into_iter().flatten() {
+            rows.push(vec![
+                th.clone(),
+                k.clone(),
+                num(v["mrays_per_s"].as_f64(), 4),
+                num(v["core_over_embree"].as_f64(), 3),
+                num(v["timing"]["build_s"].as_f64(), 3),
+                format!(
+                    "ID mismatches vs core {}, hit/miss {}, max Z rel {}",
+                    v["vs_core_raster"]["id_mismatches"],
+                    v["vs_core_raster"]["mask_mismatches"],
+                    num(v["vs_core_raster"]["max_z_rel"].as_f64(), 3)
+                ),
+            ]);
+        }
+        for s in r["skipped"].as_array().into_iter().flatten() {
+            p.note(&format!(
+                "{}: {}",
+                super::page::compact(&s["what"]),
+                super::page::compact(&s["reason"])
+            ));
+        }
+    }
+    p.table(
+        &[
+            "threads",
+            "renderer",
+            "Mrays/s",
+            "core / this",
+            "BVH build s",
+            "agreement",
+        ],
+        &rows,
+    );
+    p.heading("raster: core vs pyrender (llvmpipe), depth + IDs");
+    let pr = &record["raster_vs_pyrender"];
+    if let Some(why) = pr["skipped"].as_str() {
+        p.note(&format!("not measured: {why}"));
+    } else {
+        p.table(
+            &["what", "seconds", "note"],
+            &[
+                vec![
+                    "core raster (all CPUs)".into(),
+                    num(pr["core_raster"]["timing"]["median_s"].as_f64(), 4),
+                    String::new(),
+                ],
+                vec![
+                    "pyrender, one pass".into(),
+                    num(pr["pyrender"]["pass_s_median"].as_f64(), 4),
+                    super::page::compact(&pr["pyrender"]["timing"]),
+                ],
+                vec![
+                    "pyrender, render (all passes)".into(),
+                    num(pr["pyrender"]["render_s_median"].as_f64(), 4),
+                    format!("passes: {}", pr["pyrender"]["passes"]),
+                ],
+                vec![
+                    "pyrender subprocess".into(),
+                    num(pr["pyrender"]["subprocess_wall_s_median"].as_f64(), 4),
+                    "Python start-up, imports, export read, EXR write included".into(),
+                ],
+                vec![
+                    "one-triangle subprocess".into(),
+                    num(pr["one_triangle_startup"]["subprocess_wall_s"].as_f64(), 4),
+                    "fixed cost excluded from the pass time".into(),
+                ],
+                vec![
+                    "speed-up core / pyrender pass".into(),
+                    num(pr["speedup_core_over_pyrender_pass"].as_f64(), 3),
+                    String::new(),
+                ],
+                vec![
+                    "ID mismatches vs core".into(),
+                    super::page::compact(&pr["id_mismatches_vs_core_raster"]),
+                    "edges: different fill rules, not classified here".into(),
+                ],
+            ],
+        );
+    }
+    p.heading("path tracing at equal time (vs the cached reference)");
+    let e = &record["path_tracing_equal_time"];
+    if let Some(why) = e["skipped"].as_str() {
+        p.note(&format!("not measured: {why}"));
+    } else {
+        p.table(
+            &["renderer", "spp", "time s", "RMSE", "relative RMSE"],
+            &[
+                vec![
+                    "mitsuba".into(),
+                    super::page::compact(&e["mitsuba"]["spp"]),
+                    num(e["mitsuba"]["time_s"].as_f64(), 4),
+                    num(e["mitsuba"]["error"]["rmse"].as_f64(), 4),
+                    num(e["mitsuba"]["error"]["relative_rmse"].as_f64(), 4),
+                ],
+                vec![
+                    "core".into(),
+                    super::page::compact(&e["core"]["spp"]),
+                    num(e["core"]["time_s"].as_f64(), 4),
+                    num(e["core"]["error"]["rmse"].as_f64(), 4),
+                    num(e["core"]["error"]["relative_rmse"].as_f64(), 4),
+                ],
+            ],
+        );
+        p.para(&format!(
+            "RMSE ratio Mitsuba / core at equal time: {}; time ratio core / Mitsuba: {}; {}.",
+            num(e["rmse_ratio_mitsuba_over_core"].as_f64(), 3),
+            num(e["time_ratio_core_over_mitsuba"].as_f64(), 3),
+            super::page::compact(&e["threads"])
+        ));
+    }
+    p.heading("goals (measured, never asserted)");
+    p.table(
+        &["goal", "value"],
+        &record["goals"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(k, v)| vec![k.clone(), super::page::compact(v)])
+            .collect::<Vec<_>>(),
+    );
+    p.environment(&record["environment"]);
+    p.finish()
+}

@@ -1,0 +1,139 @@
+//! Smoke tests of `rendiff bench`: each subcommand runs on its tiny `--quick`
+//! configuration and writes well-formed output (JSON, an HTML page with an
+//! inline SVG, standalone SVG files). Speed is never asserted here: the
+//! numbers of a quick run mean nothing; only the shape of the output does.
+
+use rendiff::bench::pareto;
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+/// Runs `rendiff bench <what> --quick -o DIR` from the repository root and returns the JSON record.
+fn bench(what: &str, dir: &Path) -> Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["bench", what, "--quick", "-o"])
+        .arg(dir)
+        .output()
+        .expect("rendiff runs");
+    assert!(
+        out.status.success(),
+        "bench {what} failed: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json = std::fs::read_to_string(dir.join(format!("{what}.json"))).expect("JSON written");
+    let record: Value = serde_json::from_str(&json).expect("well-formed JSON");
+    assert_eq!(record["benchmark"], what);
+    let env = &record["environment"];
+    assert!(env["cpus"].as_u64().is_some_and(|n| n >= 1));
+    assert!(env.get("load_average_before").is_some() && env.get("load_average_after").is_some());
+    let html = std::fs::read_to_string(dir.join(format!("{what}.html"))).expect("HTML written");
+    assert!(
+        html.starts_with("<!DOCTYPE html>") && html.contains("<svg"),
+        "{what}.html has no plot"
+    );
+    let svgs: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "svg")
+                && p.file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .starts_with(&format!("{what}-"))
+        })
+        .collect();
+    assert!(!svgs.is_empty(), "no standalone SVG for {what}");
+    for p in svgs {
+        let s = std::fs::read_to_string(&p).unwrap();
+        assert!(
+            s.starts_with("<?xml")
+                && s.contains("xmlns=\"http://www.w3.org/2000/svg\"")
+                && s.trim_end().ends_with("</svg>"),
+            "{}: not a standalone SVG",
+            p.display()
+        );
+    }
+    assert!(dir.join("index.html").exists());
+    record
+}
+
+#[test]
+fn knobs_writes_groups_with_a_non_dominated_pareto_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("knobs", dir.path());
+    let groups = record["groups"].as_array().expect("groups");
+    assert!(groups.len() >= 2, "visibility and radiance groups");
+    for g in groups {
+        let points = g["points"].as_array().expect("points");
+        assert!(!points.is_empty(), "{}: no points", g["id"]);
+        let xy: Vec<(f64, f64)> = points
+            .iter()
+            .map(|p| {
+                let t = p["time_s"].as_f64().expect("time_s");
+                assert!(t > 0.0 && t.is_finite());
+                (t, p["error"].as_f64().unwrap_or(f64::NAN))
+            })
+            .collect();
+        // Recompute the front from the numbers alone; it must match the marks.
+        let front = pareto::front(&xy);
+        assert!(!front.is_empty(), "{}: empty Pareto front", g["id"]);
+        for (i, p) in points.iter().enumerate() {
+            assert_eq!(
+                p["pareto"].as_bool(),
+                Some(front.contains(&i)),
+                "{}: point {i}",
+                g["id"]
+            );
+        }
+        for &i in &front {
+            assert!(
+                !xy.iter().any(|&q| pareto::dominates(q, xy[i])),
+                "{}: Pareto point {i} is dominated",
+                g["id"]
+            );
+        }
+    }
+    // Raster and trace are the same computation: the record says so.
+    assert_eq!(groups[0]["facts"]["raster_equals_trace_every_bvh"], true);
+}
+
+#[test]
+fn peers_writes_throughput_ratios() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("peers", dir.path());
+    let rows = record["trace_throughput"].as_array().expect("rows");
+    assert!(!rows.is_empty());
+    assert!(rows[0]["core_trace"]["mrays_per_s"]
+        .as_f64()
+        .is_some_and(|x| x > 0.0));
+    assert!(record.get("goals").is_some());
+}
+
+#[test]
+fn crossover_writes_rows_with_operation_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("crossover", dir.path());
+    let rows = record["rows"].as_array().expect("rows");
+    assert!(rows.len() >= 2);
+    for r in rows {
+        assert!(r["raster_counters"]["triangle_setups"].as_u64().is_some());
+        assert!(r["trace_counters"]["bvh_nodes_visited"].as_u64().is_some());
+    }
+    assert_eq!(record["raster_equals_trace_everywhere"], true);
+}
+
+#[test]
+fn stability_writes_a_break_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("stability", dir.path());
+    // Without the Python harness the check cannot compare; the record then says why.
+    if record.get("error").is_none() {
+        let rows = record["breaks"].as_array().expect("breaks");
+        assert!(!rows.is_empty());
+        assert!(rows
+            .iter()
+            .all(|r| r["family"].is_string() && r["backend"].is_string()));
+    }
+}
