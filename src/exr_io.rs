@@ -174,6 +174,72 @@ pub fn read_buffers(path: &Path) -> Result<Buffers> {
     Ok(out)
 }
 
+/// An RGB image with optional per-pixel variance of the mean.
+#[derive(Debug, Clone)]
+pub struct RgbImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Linear radiance per pixel.
+    pub rgb: Vec<[f32; 3]>,
+    /// Variance of each pixel's mean (`var.R/G/B`), when stored.
+    pub var: Option<Vec<[f32; 3]>>,
+}
+
+/// Reads `R,G,B` and, if present, `var.R,var.G,var.B` from an EXR; `None` when
+/// the file has no radiance (visibility-only scenes). The one reader of these
+/// channels, shared by the report and the benchmarks.
+pub fn read_radiance(path: &Path) -> Result<Option<RgbImage>> {
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
+    let layer = &image.layer_data;
+    let n = layer.size.width() * layer.size.height();
+    let mut rgb = vec![[0f32; 3]; n];
+    let mut var = vec![[0f32; 3]; n];
+    let (mut seen_rgb, mut seen_var) = (0, 0);
+    for ch in &layer.channel_data.list {
+        let name = ch.name.to_string();
+        let (target, k) = match name.as_str() {
+            "R" => (&mut rgb, 0),
+            "G" => (&mut rgb, 1),
+            "B" => (&mut rgb, 2),
+            "var.R" => (&mut var, 0),
+            "var.G" => (&mut var, 1),
+            "var.B" => (&mut var, 2),
+            _ => continue,
+        };
+        if name.starts_with("var.") {
+            seen_var += 1;
+        } else {
+            seen_rgb += 1;
+        }
+        let vals: Vec<f32> = match &ch.sample_data {
+            FlatSamples::F32(v) => v.clone(),
+            FlatSamples::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
+            FlatSamples::U32(v) => v.iter().map(|&x| x as f32).collect(),
+        };
+        for (o, v) in target.iter_mut().zip(vals) {
+            o[k] = v;
+        }
+    }
+    if seen_rgb != 3 {
+        return Ok(None);
+    }
+    Ok(Some(RgbImage {
+        width: layer.size.width(),
+        height: layer.size.height(),
+        rgb,
+        var: (seen_var == 3).then_some(var),
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -210,6 +276,40 @@ mod tests {
         assert_eq!(b.attrs["renderer"], "raster");
         let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(leftovers.len(), 1, "no temporary file left behind");
+    }
+
+    #[test]
+    fn radiance_round_trips_and_is_absent_without_shading() {
+        let dir = tempfile::tempdir().unwrap();
+        let frame = Frame {
+            width: 2,
+            height: 1,
+            z: vec![1.0, 2.0],
+            prim: vec![0, 1],
+            object: vec![0, 0],
+            normal: vec![[0.0, 0.0, 1.0]; 2],
+            coverage: None,
+            counters: Counters::default(),
+            renderer: "raster".into(),
+            seconds: 0.0,
+        };
+        let plain = dir.path().join("plain.exr");
+        write_frame(&plain, &frame, &BTreeMap::new()).unwrap();
+        assert!(read_radiance(&plain).unwrap().is_none());
+        let r = crate::shade::Radiance {
+            rgb: vec![[0.25, 1e-8, 3.5], [7.0, 0.0, 1.0]],
+            var: Some(vec![[1e-3, 2e-3, 3e-3], [0.0, 0.5, 0.25]]),
+            spp: 4,
+            integrator: "path",
+            seconds: 0.0,
+        };
+        let shaded = dir.path().join("shaded.exr");
+        write_frame_with(&shaded, &frame, Some(&r), &BTreeMap::new()).unwrap();
+        let img = read_radiance(&shaded).unwrap().unwrap();
+        assert_eq!((img.width, img.height), (2, 1));
+        assert_eq!(img.rgb, r.rgb);
+        assert_eq!(img.var, r.var);
+        assert_eq!(read_buffers(&shaded).unwrap().attrs["spp"], "4");
     }
 
     #[test]

@@ -3,72 +3,15 @@
 //! pixels and channels, plus the reference's own noise, below which no error
 //! can be resolved. Used by the spp knobs and the equal-time comparison.
 
-use anyhow::{bail, Context, Result};
-use exr::prelude::*;
+use anyhow::{bail, Result};
 use std::path::Path;
 
-/// An RGB image with optional per-pixel variance of the mean.
-#[derive(Debug, Clone)]
-pub struct RgbImage {
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-    /// Linear radiance per pixel.
-    pub rgb: Vec<[f32; 3]>,
-    /// Variance of each pixel's mean (`var.R/G/B`), when stored.
-    pub var: Option<Vec<[f32; 3]>>,
-}
+pub use crate::exr_io::RgbImage;
 
-/// Reads `R,G,B` and, if present, `var.R,var.G,var.B` from an EXR.
+/// Reads `R,G,B` (and `var.*` when stored) from an EXR; an error when there is no radiance.
 pub fn read_rgb(path: &Path) -> Result<RgbImage> {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let layer = &image.layer_data;
-    let n = layer.size.width() * layer.size.height();
-    let mut rgb = vec![[0f32; 3]; n];
-    let mut var = vec![[0f32; 3]; n];
-    let (mut seen_rgb, mut seen_var) = (0, 0);
-    for ch in &layer.channel_data.list {
-        let name = ch.name.to_string();
-        let (target, k) = match name.as_str() {
-            "R" => (&mut rgb, 0),
-            "G" => (&mut rgb, 1),
-            "B" => (&mut rgb, 2),
-            "var.R" => (&mut var, 0),
-            "var.G" => (&mut var, 1),
-            "var.B" => (&mut var, 2),
-            _ => continue,
-        };
-        if name.starts_with("var.") {
-            seen_var += 1;
-        } else {
-            seen_rgb += 1;
-        }
-        let vals: Vec<f32> = match &ch.sample_data {
-            FlatSamples::F32(v) => v.clone(),
-            FlatSamples::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
-            FlatSamples::U32(v) => v.iter().map(|&x| x as f32).collect(),
-        };
-        for (o, v) in target.iter_mut().zip(vals) {
-            o[k] = v;
-        }
-    }
-    if seen_rgb != 3 {
-        bail!("{}: no R,G,B channels", path.display());
-    }
-    Ok(RgbImage {
-        width: layer.size.width(),
-        height: layer.size.height(),
-        rgb,
-        var: (seen_var == 3).then_some(var),
-    })
+    crate::exr_io::read_radiance(path)?
+        .ok_or_else(|| anyhow::anyhow!("{}: no R,G,B channels", path.display()))
 }
 
 /// How far a render is from the reference.

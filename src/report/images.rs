@@ -94,45 +94,7 @@ struct Loaded {
 
 /// Reads R,G,B from an EXR if it has all three (radiance is optional per scene).
 pub fn read_rgb(path: &Path) -> Result<Option<Vec<[f32; 3]>>> {
-    use exr::prelude::*;
-    let meta = exr::meta::MetaData::read_from_file(path, false)
-        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let has = |n: &str| {
-        meta.headers
-            .first()
-            .is_some_and(|h| h.channels.list.iter().any(|c| c.name.to_string() == n))
-    };
-    if !(has("R") && has("G") && has("B")) {
-        return Ok(None);
-    }
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .with_context(|| format!("{}: cannot read R,G,B", path.display()))?;
-    let layer = &image.layer_data;
-    let n = layer.size.width() * layer.size.height();
-    let mut out = vec![[0f32; 3]; n];
-    for ch in &layer.channel_data.list {
-        let k = match ch.name.to_string().as_str() {
-            "R" => 0,
-            "G" => 1,
-            "B" => 2,
-            _ => continue,
-        };
-        let vals: Vec<f32> = match &ch.sample_data {
-            FlatSamples::F32(v) => v.clone(),
-            FlatSamples::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
-            FlatSamples::U32(v) => v.iter().map(|&x| x as f32).collect(),
-        };
-        for (o, v) in out.iter_mut().zip(vals) {
-            o[k] = v;
-        }
-    }
-    Ok(Some(out))
+    Ok(crate::exr_io::read_radiance(path)?.map(|img| img.rgb))
 }
 
 fn save_png(path: &Path, w: usize, h: usize, px: &[[u8; 3]]) -> Result<()> {
