@@ -140,18 +140,8 @@ impl TraceBvh {
         }
     }
 
-    /// Nearest hit key for one pixel ray, and optionally every covering triangle's facing.
-    pub fn trace(
-        &self,
-        scene: &ResolvedScene,
-        ray: &PixelRay,
-        c: &mut Counters,
-        coverage: Option<&mut [u16; 2]>,
-    ) -> u64 {
-        self.trace_with(scene, ray, c, coverage, &mut Vec::with_capacity(64))
-    }
-
-    /// [`TraceBvh::trace`] with a caller-owned traversal stack, reused across pixels.
+    /// Nearest hit key for one pixel ray (and optionally every covering triangle's
+    /// facing), with a caller-owned traversal stack reused across pixels.
     pub fn trace_with(
         &self,
         scene: &ResolvedScene,
