@@ -114,23 +114,6 @@ impl TriEdges {
     }
 }
 
-/// Coverage computed edge by edge with early exit (the tracer's inner loop).
-/// Same planes, same order, same answer as [`TriEdges::covers`].
-#[inline]
-pub fn covers_lazy(cam: &Camera, t: &Tri, ray: &PixelRay, c: &mut Counters) -> i8 {
-    c.coverage_tests += 1;
-    let [a, b, cc] = t.map(|v| v.as_dvec3());
-    let s0 = edge_sign(cam, &EdgePlane::new(cam.eye, a, b), ray, c);
-    if s0 == 0 || edge_sign(cam, &EdgePlane::new(cam.eye, b, cc), ray, c) != s0 {
-        return 0;
-    }
-    if edge_sign(cam, &EdgePlane::new(cam.eye, cc, a), ray, c) != s0 {
-        return 0;
-    }
-    c.covered += 1;
-    s0
-}
-
 /// Relative margin by which boxes grow, per axis, proportional to their distance
 /// from the eye: it absorbs the rounding of the ray direction `D = P - eye`, so
 /// a box the exact pixel ray passes through is never reported as missed.

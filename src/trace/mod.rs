@@ -6,14 +6,18 @@
 //! triangles and grown by [`grow_box`], so pruning is conservative: a box is
 //! skipped only when its nearest possible key is worse than the best hit.
 
+mod primary;
+
 use crate::camera::{Camera, PixelRay};
 use crate::frame::Frame;
+use crate::predicate::EdgePlane;
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{
-    covers_lazy, grow_box, hit_key, slab, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
+    edge_sign, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
 };
 use glam::Vec3;
 use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
+use primary::{LeafTri, Node32, Ray32};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -57,8 +61,13 @@ struct Node {
 
 /// A BVH over the scene's non-degenerate triangles, with boxes grown for robust tests.
 pub struct TraceBvh {
+    /// World-space f64 boxes, for shading's general rays.
     nodes: Vec<Node>,
     prims: Vec<u32>,
+    /// The same tree as eye-relative f32 boxes, for pixel rays ([`primary`]).
+    nodes32: Vec<Node32>,
+    /// Per-prim edge data in `prims` order, for pixel rays.
+    leaves: Vec<LeafTri>,
     /// Seconds spent in obvhs's builder plus our refit.
     pub build_seconds: f64,
 }
@@ -75,6 +84,8 @@ impl TraceBvh {
             return TraceBvh {
                 nodes: Vec::new(),
                 prims: Vec::new(),
+                nodes32: Vec::new(),
+                leaves: Vec::new(),
                 build_seconds: 0.0,
             };
         }
@@ -123,7 +134,7 @@ impl TraceBvh {
                 hi[i] = hi[c].max(hi[c + 1]);
             }
         }
-        let nodes = bvh
+        let nodes: Vec<Node> = bvh
             .nodes
             .iter()
             .enumerate()
@@ -133,33 +144,48 @@ impl TraceBvh {
                 count: nd.prim_count,
             })
             .collect();
+        let nodes32 = nodes
+            .iter()
+            .map(|n| Node32::new(cam.eye, &n.bounds, n.first, n.count))
+            .collect();
+        let leaves = prims
+            .par_iter()
+            .map(|&p| LeafTri::new(cam.eye, &scene.triangles[p as usize], p))
+            .collect();
         TraceBvh {
             nodes,
             prims,
+            nodes32,
+            leaves,
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }
 
     /// Nearest hit key for one pixel ray (and optionally every covering triangle's
     /// facing), with a caller-owned traversal stack reused across pixels.
+    ///
+    /// Traversal and the first try at each edge sign run in f32 ([`primary`]);
+    /// every sign the f32 filter cannot vouch for, and every depth, is decided by
+    /// [`crate::visibility`] exactly as the rasterizer decides it.
     pub fn trace_with(
         &self,
         scene: &ResolvedScene,
         ray: &PixelRay,
         c: &mut Counters,
         mut coverage: Option<&mut [u16; 2]>,
-        stack: &mut Vec<(u32, f64)>,
+        stack: &mut Vec<(u32, f32)>,
     ) -> u64 {
         let cam: &Camera = &scene.camera;
         let mut best = NO_HIT;
-        if self.nodes.is_empty() {
+        if self.nodes32.is_empty() {
             return best;
         }
+        let r = Ray32::new(ray);
         let count_all = coverage.is_some();
         stack.clear();
         c.bvh_nodes_visited += 1;
-        let (t0, t1) = slab(cam.eye, ray, &self.nodes[0].bounds);
-        if slab_misses(t0, t1) {
+        let (t0, _, miss) = self.nodes32[0].slab(&r.inv);
+        if miss {
             return best;
         }
         stack.push((0, t0));
@@ -167,17 +193,17 @@ impl TraceBvh {
             if !count_all && lower_key(tmin, ray) > best {
                 continue;
             }
-            let node = &self.nodes[ni as usize];
+            let node = &self.nodes32[ni as usize];
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
-                    let prim = self.prims[k as usize];
-                    let t = &scene.triangles[prim as usize];
-                    let facing = covers_lazy(cam, t, ray, c);
+                    let leaf = &self.leaves[k as usize];
+                    let t = &scene.triangles[leaf.prim as usize];
+                    let facing = covers(cam, leaf, t, ray, &r, c);
                     if facing == 0 {
                         continue;
                     }
                     if let Some(z) = TriDepth::new(cam, t).depth(cam, ray) {
-                        best = best.min(hit_key(z, prim));
+                        best = best.min(hit_key(z, leaf.prim));
                         if let Some(cov) = coverage.as_deref_mut() {
                             let slot = usize::from(facing > 0);
                             cov[slot] = cov[slot].saturating_add(1);
@@ -186,12 +212,12 @@ impl TraceBvh {
                 }
                 continue;
             }
-            let mut kids = [(node.first, 0.0f64, true); 2];
+            let mut kids = [(node.first, 0.0f32, true); 2];
             for (j, kid) in kids.iter_mut().enumerate() {
                 let id = node.first + j as u32;
                 c.bvh_nodes_visited += 1;
-                let (a, b) = slab(cam.eye, ray, &self.nodes[id as usize].bounds);
-                *kid = (id, a, slab_misses(a, b));
+                let (a, _, miss) = self.nodes32[id as usize].slab(&r.inv);
+                *kid = (id, a, miss);
             }
             // Push the farther child first so the nearer one is popped first.
             if kids[0].1 < kids[1].1 {
@@ -207,10 +233,47 @@ impl TraceBvh {
     }
 }
 
-/// Smallest hit key any triangle inside a box entered at ray parameter `tmin` can have.
+/// Coverage of one candidate, edge by edge with early exit, in the same order
+/// as [`crate::visibility::TriEdges::covers`]: each sign from the f32 filter when it
+/// is sure, else from [`edge_sign`] (f64 filter, exact arithmetic, tie rule).
+/// The triangle is only read when the filter gives up.
 #[inline]
-fn lower_key(tmin: f64, ray: &PixelRay) -> u64 {
-    let z = (tmin * ray.planar).max(0.0) as f32;
+fn covers(
+    cam: &Camera,
+    leaf: &LeafTri,
+    t: &crate::scene::resolve::Tri,
+    ray: &PixelRay,
+    r: &Ray32,
+    c: &mut Counters,
+) -> i8 {
+    c.coverage_tests += 1;
+    let mut s0 = 0;
+    for k in 0..3 {
+        let mut s = leaf.edge_sign32(k, r);
+        if s == 0 {
+            let (p, q) = (t[k].as_dvec3(), t[(k + 1) % 3].as_dvec3());
+            s = edge_sign(cam, &EdgePlane::new(cam.eye, p, q), ray, c);
+        }
+        if k == 0 {
+            if s == 0 {
+                return 0;
+            }
+            s0 = s;
+        } else if s != s0 {
+            return 0;
+        }
+    }
+    c.covered += 1;
+    s0
+}
+
+/// Smallest hit key any triangle inside a box entered at ray parameter `tmin`
+/// (from the f32 slab test) can have. The f32 entry may exceed the exact f64
+/// entry by a few f32 roundings, so it is lowered by 2^-20 first.
+#[inline]
+fn lower_key(tmin: f32, ray: &PixelRay) -> u64 {
+    let t = f64::from(tmin) * (1.0 - 1.0 / (1u64 << 20) as f64);
+    let z = (t * ray.planar).max(0.0) as f32;
     hit_key(z, 0)
 }
 

@@ -1,0 +1,285 @@
+//! The primary-ray kernel: the same visibility answers as the f64 path, found
+//! with less work.
+//!
+//! Two things make the f64 traversal slow: 56-byte f64 node boxes tested in
+//! world space, and three edge planes set up per candidate triangle. For pixel
+//! rays every quantity can instead be taken relative to the eye once per render:
+//!
+//! - node boxes become eye-relative f32 boxes, rounded outward and grown by
+//!   2^-21 of their extent from the eye, so the f32 copy of a pixel ray never
+//!   misses a box the exact ray enters (see [`Node32::new`]);
+//! - each triangle's three edge normals `(a - eye) x (b - eye)` are stored in
+//!   f32 in BVH order, with a per-edge error bound. An edge sign is taken from
+//!   the f32 dot product only when it clears that bound, i.e. only when it is
+//!   certainly the exact sign; otherwise the edge goes to
+//!   [`crate::visibility::edge_sign`] (f64 filter, exact arithmetic, tie rule),
+//!   so coverage, depth and the operation counts are unchanged bit for bit.
+
+use crate::camera::PixelRay;
+use crate::predicate::EdgePlane;
+use crate::scene::resolve::Tri;
+use crate::visibility::RayBox;
+use glam::DVec3;
+
+/// Unit roundoff of f32.
+const U32: f64 = 1.0 / (1u64 << 24) as f64;
+
+/// Relative growth of eye-relative boxes: 8x the f32 rounding of the ray
+/// direction (a point of the f32 ray is within `U32 * |coordinate|` of the
+/// exact ray's point at the same parameter, per axis).
+const BOX_GROWTH: f64 = 8.0 * U32;
+
+/// Smallest half-width of a grown box, so that no bound is exactly 0 and
+/// `0 * inf` never arises for an axis-parallel ray.
+const MIN_GROWTH: f64 = 1e-35;
+
+/// Coefficient of the f32 edge filter. The f32 determinant differs from the
+/// exact one by at most about `5 U32 |D| |perm|` (rounding of the normal, of
+/// the direction, and a 3-term dot product), so `8 U32` leaves room for the
+/// bound's own rounding.
+const EDGE_FILTER: f64 = 8.0 * U32;
+
+/// Relative slack on f32 slab parameters (each is a product of two rounded values).
+const SLAB_SLACK: f32 = 1.0 / (1u32 << 20) as f32;
+
+/// Largest f32 not above `x`.
+#[inline]
+fn round_down(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) > x {
+        f.next_down()
+    } else {
+        f
+    }
+}
+
+/// Smallest f32 not below `x`.
+#[inline]
+fn round_up(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) < x {
+        f.next_up()
+    } else {
+        f
+    }
+}
+
+/// A BVH node as the primary kernel sees it: an eye-relative f32 box.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Node32 {
+    /// Lower corner minus the eye, rounded down.
+    lo: [f32; 3],
+    /// Upper corner minus the eye, rounded up.
+    hi: [f32; 3],
+    /// Leaf: index of the first prim; inner: index of the first child.
+    pub first: u32,
+    /// Leaf: number of prims; inner: 0.
+    pub count: u32,
+}
+
+impl Node32 {
+    /// Converts a (world-space, already grown) f64 box. Per axis the box grows
+    /// by [`BOX_GROWTH`] times its largest distance from the eye, which covers
+    /// the f32 rounding of the ray direction, then rounds outward.
+    pub fn new(eye: DVec3, b: &RayBox, first: u32, count: u32) -> Node32 {
+        let mut lo = [0f32; 3];
+        let mut hi = [0f32; 3];
+        for k in 0..3 {
+            let l = b.lo[k] - eye[k];
+            let h = b.hi[k] - eye[k];
+            let g = (l.abs().max(h.abs()) * BOX_GROWTH).max(MIN_GROWTH);
+            lo[k] = round_down(l - g);
+            hi[k] = round_up(h + g);
+        }
+        Node32 {
+            lo,
+            hi,
+            first,
+            count,
+        }
+    }
+
+    /// Slab interval of the f32 ray, and whether it certainly misses.
+    /// A NaN product (only `0 * inf` on an axis the box does not straddle) is
+    /// ignored by `min`/`max`, which can only widen the interval.
+    #[inline]
+    pub fn slab(&self, inv: &[f32; 3]) -> (f32, f32, bool) {
+        let mut tmin = f32::NEG_INFINITY;
+        let mut tmax = f32::INFINITY;
+        for ((lo, hi), inv) in self.lo.iter().zip(&self.hi).zip(inv) {
+            let t0 = lo * inv;
+            let t1 = hi * inv;
+            tmin = tmin.max(t0.min(t1));
+            tmax = tmax.min(t0.max(t1));
+        }
+        let tol = (tmin.abs().min(f32::MAX) + tmax.abs().min(f32::MAX)) * SLAB_SLACK;
+        (tmin, tmax, tmin > tmax + tol || tmax < -tol)
+    }
+}
+
+/// A triangle as the primary kernel sees it: its edge normals in f32, with
+/// the bound that makes an f32 sign trustworthy, stored in BVH order.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LeafTri {
+    /// `(a - eye) x (b - eye)` for the edges a->b, b->c, c->a, rounded to f32.
+    n: [[f32; 3]; 3],
+    /// [`EDGE_FILTER`] times the edge's permanent norm, rounded up; +inf when
+    /// the edge must always take the f64 path (f32 range trouble).
+    beta: [f32; 3],
+    /// The triangle's id in the scene.
+    pub prim: u32,
+}
+
+impl LeafTri {
+    /// Sets up a triangle's edges relative to the eye.
+    pub fn new(eye: DVec3, t: &Tri, prim: u32) -> LeafTri {
+        let [a, b, c] = t.map(|v| v.as_dvec3());
+        let mut n = [[0f32; 3]; 3];
+        let mut beta = [f32::INFINITY; 3];
+        for (k, (p, q)) in [(a, b), (b, c), (c, a)].into_iter().enumerate() {
+            let e = EdgePlane::new(eye, p, q);
+            n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
+            let pn = e.perm.length() * (1.0 + 1e-12);
+            // Normals in f32's normal range only: subnormal rounding is absolute, not relative.
+            if pn.is_finite() && (1e-20..=1e30).contains(&pn) {
+                beta[k] = round_up(pn * EDGE_FILTER);
+            }
+        }
+        LeafTri { n, beta, prim }
+    }
+
+    /// The f32 sign of edge `k`, or 0 when the filter cannot vouch for it.
+    #[inline]
+    pub fn edge_sign32(&self, k: usize, r: &Ray32) -> i8 {
+        let n = &self.n[k];
+        let det = n[0] * r.dir[0] + n[1] * r.dir[1] + n[2] * r.dir[2];
+        let bound = self.beta[k] * r.dir_norm;
+        if det > bound {
+            1
+        } else if -det > bound {
+            -1
+        } else {
+            0
+        }
+    }
+}
+
+/// A pixel ray's direction rounded to f32, with what the kernel needs per ray.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Ray32 {
+    /// `D` rounded to nearest.
+    pub dir: [f32; 3],
+    /// `1 / D` per component (infinite where D is 0).
+    pub inv: [f32; 3],
+    /// `|D|`, rounded up with slack for its own rounding.
+    pub dir_norm: f32,
+}
+
+impl Ray32 {
+    /// Rounds a pixel ray to f32.
+    #[inline]
+    pub fn new(ray: &PixelRay) -> Ray32 {
+        let dir = [ray.dir.x as f32, ray.dir.y as f32, ray.dir.z as f32];
+        Ray32 {
+            dir,
+            inv: dir.map(|d| 1.0 / d),
+            dir_norm: round_up(ray.dir.length() * (1.0 + 1e-6)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::exact_sign;
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    #[test]
+    fn rounding_is_directed() {
+        for x in [0.1, -0.1, 1e-40, -3.3e38, 1.0 / 3.0] {
+            assert!(f64::from(round_down(x)) <= x && f64::from(round_up(x)) >= x);
+        }
+    }
+
+    /// The f32 filter never claims a sign the exact predicate disagrees with,
+    /// at any scale or offset, and decides the clear cases.
+    #[test]
+    fn edge_filter_sign_is_exact_when_given() {
+        let mut s = 11u64;
+        let (mut decided, mut clear) = (0, 0);
+        for i in 0..40000 {
+            let mag = 10f64.powi((i % 13) - 6);
+            let off = if i % 3 == 0 { 1e6 } else { 0.0 };
+            let eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * mag + off;
+            let v = |s: &mut u64| (eye + DVec3::new(lcg(s), lcg(s), lcg(s)) * mag).as_vec3();
+            let t: Tri = [v(&mut s), v(&mut s), v(&mut s)];
+            // Directions: random, or nearly inside an edge plane.
+            let [a, b, _] = t.map(|p| p.as_dvec3());
+            let dir = if i % 2 == 0 {
+                ((a - eye) * lcg(&mut s) + (b - eye) * lcg(&mut s)).normalize()
+                    + DVec3::splat(lcg(&mut s) * 1e-7)
+            } else {
+                DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))
+            };
+            let p = eye + dir;
+            let ray = PixelRay {
+                p,
+                dir: p - eye,
+                inv_dir: DVec3::ONE / (p - eye),
+                planar: 1.0,
+            };
+            let leaf = LeafTri::new(eye, &t, 0);
+            let r = Ray32::new(&ray);
+            let s32 = leaf.edge_sign32(0, &r);
+            if s32 != 0 {
+                assert_eq!(s32, exact_sign(a, b, p, eye), "case {i}");
+            }
+            // Random directions near the origin are clear cases the filter must take.
+            if i % 2 == 1 && off == 0.0 {
+                clear += 1;
+                decided += usize::from(s32 != 0);
+            }
+        }
+        assert!(
+            decided * 100 >= clear * 99,
+            "filter decided {decided} of {clear} clear cases"
+        );
+    }
+
+    /// An f32 node box is never missed by a ray whose exact line crosses the f64 box.
+    #[test]
+    fn node_box_contains_exact_ray_points() {
+        let mut s = 5u64;
+        for i in 0..20000 {
+            let mag = 10f64.powi((i % 11) - 5);
+            let eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 1e4;
+            let c = eye + DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * mag * 10.0;
+            let h = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)).abs() * mag;
+            // Grown as the tracer grows its f64 boxes (this absorbs the rounding of `p`).
+            let g = DVec3::splat((c - eye).length() * 1e-12);
+            let b = RayBox {
+                lo: c - h - g,
+                hi: c + h + g,
+            };
+            // A ray from the eye through a point inside (or on the surface of) the box.
+            let target =
+                c + h * DVec3::new(lcg(&mut s).signum(), lcg(&mut s).signum(), lcg(&mut s));
+            let d = (target - eye) / (target - eye).length();
+            let p = eye + d;
+            let ray = PixelRay {
+                p,
+                dir: p - eye,
+                inv_dir: DVec3::ONE / (p - eye),
+                planar: 1.0,
+            };
+            let (_, _, miss) = Node32::new(eye, &b, 0, 0).slab(&Ray32::new(&ray).inv);
+            assert!(!miss, "case {i}: box {b:?} missed");
+        }
+    }
+}
