@@ -52,6 +52,9 @@ enum Command {
         /// BVH build quality for the tracer.
         #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
         bvh: BvhQuality,
+        /// How the tracer's pixel rays walk the BVH (same buffers either way).
+        #[arg(long, value_enum, default_value_t = trace::TraceKernel::Packets)]
+        kernel: trace::TraceKernel,
         /// Skip the PNG previews.
         #[arg(long)]
         no_preview: bool,
@@ -206,6 +209,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             output,
             threads,
             bvh,
+            kernel,
             no_preview,
             quiet,
             spp,
@@ -228,7 +232,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     .unwrap_or_else(|| "scene".into());
                 Path::new("out").join(format!("{stem}.{name}.exr"))
             });
-            let frame = pool.install(|| render(&resolved, renderer, bvh, quiet));
+            let frame = pool.install(|| render(&resolved, renderer, bvh, kernel, quiet));
             let mut attrs = frame_attrs(&frame, &scene.display().to_string());
             attrs.insert(
                 "threads".to_string(),
@@ -461,7 +465,13 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
     Ok(ResolvedScene::resolve(&scene)?)
 }
 
-fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: bool) -> Frame {
+fn render(
+    scene: &ResolvedScene,
+    renderer: Renderer,
+    bvh: BvhQuality,
+    kernel: trace::TraceKernel,
+    quiet: bool,
+) -> Frame {
     let cam = &scene.camera;
     match renderer {
         Renderer::Raster => {
@@ -477,6 +487,7 @@ fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: boo
             let opts = trace::TraceOptions {
                 bvh,
                 count_coverage: false,
+                kernel,
             };
             let f = trace::render(scene, opts, &|n| bar.inc(n));
             bar.finish();

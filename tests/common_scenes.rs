@@ -43,6 +43,18 @@ pub fn both(scene: &ResolvedScene, count_coverage: bool) -> (Frame, Frame) {
     (r, t)
 }
 
+/// Traces with a chosen kernel (packets or single rays), without coverage counts.
+pub fn trace_kernel(scene: &ResolvedScene, kernel: trace::TraceKernel) -> Frame {
+    trace::render(
+        scene,
+        TraceOptions {
+            kernel,
+            ..TraceOptions::default()
+        },
+        &|_| {},
+    )
+}
+
 /// Panics with the first differing pixel if `id.prim` or `Z` differ in any bit.
 pub fn assert_identical(what: &str, r: &Frame, t: &Frame) {
     for i in 0..r.prim.len() {

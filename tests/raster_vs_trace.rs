@@ -6,6 +6,7 @@ mod common_scenes;
 use common_scenes::*;
 use proptest::prelude::*;
 use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::TraceKernel;
 
 #[test]
 fn every_scene_renders_identically_in_both_loops() {
@@ -18,6 +19,8 @@ fn every_scene_renders_identically_in_both_loops() {
         let scene = load(&path);
         let (r, t) = both(&scene, false);
         assert_identical(&path.display().to_string(), &r, &t);
+        let single = trace_kernel(&scene, TraceKernel::SingleRays);
+        assert_identical(&format!("{} (single rays)", path.display()), &r, &single);
         let hits = r.prim.iter().filter(|&&p| p != u32::MAX).count();
         assert!(hits > 0, "{}: nothing visible", path.display());
     }
@@ -100,7 +103,10 @@ proptest! {
         let scene = build(&pieces);
         let (r, t) = both(&scene, true);
         assert_identical("random scene", &r, &t);
-        prop_assert_eq!(r.coverage, t.coverage, "coverage counts differ");
+        prop_assert_eq!(&r.coverage, &t.coverage, "coverage counts differ");
+        // Without coverage counts the tracer prunes, in 4x2 packets and in single rays.
+        assert_identical("random scene (packets)", &r, &trace_kernel(&scene, TraceKernel::Packets));
+        assert_identical("random scene (single rays)", &r, &trace_kernel(&scene, TraceKernel::SingleRays));
     }
 }
 

@@ -49,7 +49,7 @@ pub fn run(scene: &ResolvedScene, label: &str, opts: &BenchOptions) -> Result<Va
             });
             let (build_s, build_all, bvh) = timed(opts.runs, || TraceBvh::build(&scene, opts.bvh));
             let (trace_s, trace_all, tf) = timed(opts.runs, || {
-                trace::render_with_bvh(&scene, &bvh, false, &|_| {})
+                trace::render_with_bvh(&scene, &bvh, trace::TraceOptions::default(), &|_| {})
             });
             let identical = rf.prim == tf.prim
                 && rf

@@ -52,7 +52,9 @@ pub fn trace(scene: &ResolvedScene, q: BvhQuality, runs: usize) -> TraceTimes {
 
 /// Times tracing through an existing BVH.
 pub fn trace_with(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Timed<Frame> {
-    timed(runs, || trace::render_with_bvh(scene, bvh, false, &|_| {}))
+    timed(runs, || {
+        trace::render_with_bvh(scene, bvh, trace::TraceOptions::default(), &|_| {})
+    })
 }
 
 /// Embree's phases, medians over the timed runs.

@@ -6,6 +6,7 @@
 //! triangles and grown by [`grow_box`], so pruning is conservative: a box is
 //! skipped only when its nearest possible key is worse than the best hit.
 
+mod packet;
 mod primary;
 
 use crate::camera::{Camera, PixelRay};
@@ -277,20 +278,35 @@ fn lower_key(tmin: f32, ray: &PixelRay) -> u64 {
     hit_key(z, 0)
 }
 
+/// How pixel rays walk the BVH. Both give the same buffers; they differ in speed
+/// (and in the traversal counters), which the benchmarks compare.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TraceKernel {
+    /// 4x2-pixel packets walk the tree together (the default).
+    #[default]
+    Packets,
+    /// One ray at a time.
+    SingleRays,
+}
+
 /// Options for one trace render.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct TraceOptions {
-    /// BVH build quality.
+    /// BVH build quality (ignored by [`render_with_bvh`], which is handed a tree).
     pub bvh: BvhQuality,
-    /// Count every covering triangle per pixel (front/back); disables pruning.
+    /// Count every covering triangle per pixel (front/back); disables pruning
+    /// and uses single rays.
     pub count_coverage: bool,
+    /// Packets or single rays.
+    pub kernel: TraceKernel,
 }
 
 /// Renders depth and IDs by ray tracing. `progress` is called with rows finished.
 pub fn render(scene: &ResolvedScene, opts: TraceOptions, progress: &(dyn Fn(u64) + Sync)) -> Frame {
     let start = Instant::now();
     let bvh = TraceBvh::build(scene, opts.bvh);
-    let mut frame = render_with_bvh(scene, &bvh, opts.count_coverage, progress);
+    let mut frame = render_with_bvh(scene, &bvh, opts, progress);
     frame.seconds = start.elapsed().as_secs_f64();
     frame
 }
@@ -299,14 +315,10 @@ pub fn render(scene: &ResolvedScene, opts: TraceOptions, progress: &(dyn Fn(u64)
 pub fn render_with_bvh(
     scene: &ResolvedScene,
     bvh: &TraceBvh,
-    count_coverage: bool,
+    opts: TraceOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
-    let opts = TraceOptions {
-        count_coverage,
-        ..TraceOptions::default()
-    };
     let cam = &scene.camera;
     let w = cam.width as usize;
     let mut keys = vec![NO_HIT; cam.pixel_count()];
@@ -326,7 +338,7 @@ pub fn render_with_bvh(
                 c
             })
             .reduce(Counters::default, sum)
-    } else {
+    } else if opts.kernel == TraceKernel::SingleRays {
         keys.par_chunks_mut(w)
             .enumerate()
             .map(|(y, row)| {
@@ -337,6 +349,28 @@ pub fn render_with_bvh(
                     *k = bvh.trace_with(scene, &ray, &mut c, None, &mut stack);
                 }
                 progress(1);
+                c
+            })
+            .reduce(Counters::default, sum)
+    } else {
+        // Bands of PH rows, packets of PW x PH pixels.
+        keys.par_chunks_mut(w * packet::PH)
+            .enumerate()
+            .map(|(band, rows)| {
+                let mut c = Counters::default();
+                let mut stack = Vec::with_capacity(64);
+                let y0 = band * packet::PH;
+                for x0 in (0..w).step_by(packet::PW) {
+                    let mut pk = packet::Packet::new(cam, x0, y0);
+                    bvh.trace_packet(scene, &mut pk, &mut c, &mut stack);
+                    for (i, &k) in pk.best.iter().enumerate() {
+                        let (x, dy) = (x0 + i % packet::PW, i / packet::PW);
+                        if x < w && dy * w < rows.len() {
+                            rows[dy * w + x] = k;
+                        }
+                    }
+                }
+                progress((rows.len() / w) as u64);
                 c
             })
             .reduce(Counters::default, sum)

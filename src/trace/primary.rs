@@ -9,7 +9,8 @@
 //!   2^-21 of their extent from the eye, so the f32 copy of a pixel ray never
 //!   misses a box the exact ray enters (see [`Node32::new`]);
 //! - each triangle's three edge normals `(a - eye) x (b - eye)` are stored in
-//!   f32 in BVH order, with a per-edge error bound. An edge sign is taken from
+//!   f32 in BVH order, with a per-edge error bound (mostly relative to the
+//!   normal's own length, so short, distant edges do not widen it). An edge sign is taken from
 //!   the f32 dot product only when it clears that bound, i.e. only when it is
 //!   certainly the exact sign; otherwise the edge goes to
 //!   [`crate::visibility::edge_sign`] (f64 filter, exact arithmetic, tie rule),
@@ -33,11 +34,16 @@ const BOX_GROWTH: f64 = 8.0 * U32;
 /// `0 * inf` never arises for an axis-parallel ray.
 const MIN_GROWTH: f64 = 1e-35;
 
-/// Coefficient of the f32 edge filter. The f32 determinant differs from the
-/// exact one by at most about `5 U32 |D| |perm|` (rounding of the normal, of
-/// the direction, and a 3-term dot product), so `8 U32` leaves room for the
-/// bound's own rounding.
+/// Coefficient of the f32 edge filter on `|n| |D|`. The f32 determinant
+/// differs from the f64 one by at most about `5 U32 |n| |D|` (rounding of the
+/// normal and of the direction to f32, and a 3-term f32 dot product), so
+/// `8 U32` leaves room for the bound's own rounding.
 const EDGE_FILTER: f64 = 8.0 * U32;
+
+/// Coefficient on `|perm| |D|` for the error of the f64 normal itself
+/// (`(a - eye) x (b - eye)` cancels when the edge is short next to its
+/// distance from the eye; Shewchuk's bound is about `7 u64` on the same scale).
+const EDGE_FILTER_F64: f64 = 16.0 / (1u64 << 53) as f64;
 
 /// Relative slack on f32 slab parameters (each is a product of two rounded values).
 const SLAB_SLACK: f32 = 1.0 / (1u32 << 20) as f32;
@@ -112,8 +118,26 @@ impl Node32 {
             tmin = tmin.max(t0.min(t1));
             tmax = tmax.min(t0.max(t1));
         }
+        (tmin, tmax, Node32::misses(tmin, tmax))
+    }
+
+    /// True when an f32 slab interval is empty, or behind the eye, beyond its rounding.
+    #[inline]
+    pub fn misses(tmin: f32, tmax: f32) -> bool {
         let tol = (tmin.abs().min(f32::MAX) + tmax.abs().min(f32::MAX)) * SLAB_SLACK;
-        (tmin, tmax, tmin > tmax + tol || tmax < -tol)
+        tmin > tmax + tol || tmax < -tol
+    }
+
+    /// The box's eye-relative extent on axis `k`.
+    #[inline]
+    pub fn bounds(&self, k: usize) -> (f32, f32) {
+        (self.lo[k], self.hi[k])
+    }
+
+    /// The box center's projection on a direction (orders children near to far).
+    #[inline]
+    pub fn center_along(&self, d: &[f32; 3]) -> f32 {
+        (0..3).map(|k| (self.lo[k] + self.hi[k]) * d[k]).sum()
     }
 }
 
@@ -123,8 +147,9 @@ impl Node32 {
 pub(crate) struct LeafTri {
     /// `(a - eye) x (b - eye)` for the edges a->b, b->c, c->a, rounded to f32.
     n: [[f32; 3]; 3],
-    /// [`EDGE_FILTER`] times the edge's permanent norm, rounded up; +inf when
-    /// the edge must always take the f64 path (f32 range trouble).
+    /// The filter bound per unit `|D|`: [`EDGE_FILTER`] `|n|` plus
+    /// [`EDGE_FILTER_F64`] `|perm|`, rounded up; +inf when the edge must always
+    /// take the f64 path (a normal outside f32's normal range).
     beta: [f32; 3],
     /// The triangle's id in the scene.
     pub prim: u32,
@@ -139,13 +164,21 @@ impl LeafTri {
         for (k, (p, q)) in [(a, b), (b, c), (c, a)].into_iter().enumerate() {
             let e = EdgePlane::new(eye, p, q);
             n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
-            let pn = e.perm.length() * (1.0 + 1e-12);
+            let nn = e.n.length();
+            let pn = e.perm.length();
             // Normals in f32's normal range only: subnormal rounding is absolute, not relative.
-            if pn.is_finite() && (1e-20..=1e30).contains(&pn) {
-                beta[k] = round_up(pn * EDGE_FILTER);
+            if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
+                let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * (1.0 + 1e-9);
+                beta[k] = round_up(b);
             }
         }
         LeafTri { n, beta, prim }
+    }
+
+    /// Edge `k`'s f32 normal and filter bound coefficient.
+    #[inline]
+    pub fn edge(&self, k: usize) -> (&[f32; 3], f32) {
+        (&self.n[k], self.beta[k])
     }
 
     /// The f32 sign of edge `k`, or 0 when the filter cannot vouch for it.
@@ -215,15 +248,25 @@ mod tests {
         let (mut decided, mut clear) = (0, 0);
         for i in 0..40000 {
             let mag = 10f64.powi((i % 13) - 6);
-            let off = if i % 3 == 0 { 1e6 } else { 0.0 };
-            let eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * mag + off;
-            let v = |s: &mut u64| (eye + DVec3::new(lcg(s), lcg(s), lcg(s)) * mag).as_vec3();
-            let t: Tri = [v(&mut s), v(&mut s), v(&mut s)];
+            let off = if i % 7 == 0 { 1e6 } else { 0.0 };
+            let mut eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * mag + off;
+            // Triangles from eye-sized down to 1e-5 of their distance (short, distant edges).
+            let spread = [1.0, 1e-3, 1e-5][(i as usize / 2) % 3];
+            let mut center = eye + DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * mag;
+            if i % 11 == 0 {
+                // A small triangle near the origin seen from 1e12 away: its f64 edge
+                // normals cancel almost completely.
+                center = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 1e-3;
+                eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 1e12;
+            }
+            let m = if i % 11 == 0 { 1e-3 } else { mag };
+            let v = |s: &mut u64| center + DVec3::new(lcg(s), lcg(s), lcg(s)) * m * spread;
+            let t: Tri = [v(&mut s), v(&mut s), v(&mut s)].map(|p| p.as_vec3());
             // Directions: random, or nearly inside an edge plane.
             let [a, b, _] = t.map(|p| p.as_dvec3());
             let dir = if i % 2 == 0 {
                 ((a - eye) * lcg(&mut s) + (b - eye) * lcg(&mut s)).normalize()
-                    + DVec3::splat(lcg(&mut s) * 1e-7)
+                    + DVec3::splat(lcg(&mut s) * [1e-5, 1e-7, 1e-9][(i as usize / 6) % 3])
             } else {
                 DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))
             };
@@ -241,7 +284,7 @@ mod tests {
                 assert_eq!(s32, exact_sign(a, b, p, eye), "case {i}");
             }
             // Random directions near the origin are clear cases the filter must take.
-            if i % 2 == 1 && off == 0.0 {
+            if i % 2 == 1 && off == 0.0 && i % 11 != 0 {
                 clear += 1;
                 decided += usize::from(s32 != 0);
             }

@@ -1,0 +1,206 @@
+//! Packet traversal: 4x2 neighbouring pixel rays walk the tree together.
+//!
+//! Pixel rays are coherent, so a packet pays for one node fetch and one
+//! 8-lane slab test where single rays pay for eight. Each lane keeps its own
+//! mask bit, nearest key and pruning bound, and a lane is tested against a
+//! triangle only where the single-ray traversal could have reached it, so every
+//! lane's answer is the single-ray answer: the nearest key over all covering
+//! candidates, with the same exact coverage and depth functions.
+
+use super::primary::{LeafTri, Node32, Ray32};
+use super::{covers, TraceBvh};
+use crate::camera::{Camera, PixelRay};
+use crate::scene::resolve::ResolvedScene;
+use crate::visibility::{hit_key, key_depth, Counters, TriDepth, NO_HIT};
+
+/// Packet width in pixels.
+pub(crate) const PW: usize = 4;
+/// Packet height in pixels.
+pub(crate) const PH: usize = 2;
+/// Rays per packet.
+const LANES: usize = PW * PH;
+
+/// Eight pixel rays and their per-lane traversal state (structure of arrays
+/// where the slab and edge tests run across lanes).
+pub(crate) struct Packet {
+    /// The exact rays (fallback signs and depth).
+    rays: [PixelRay; LANES],
+    /// The f32 rays (fallback path's first try).
+    r32: [Ray32; LANES],
+    /// `D` per axis, per lane.
+    dir: [[f32; LANES]; 3],
+    /// `1 / D` per axis, per lane.
+    inv: [[f32; LANES]; 3],
+    /// `|D|` rounded up, per lane.
+    dir_norm: [f32; LANES],
+    /// Lower bound on planar depth per unit of f32 slab parameter, per lane.
+    zscale: [f32; LANES],
+    /// Nearest key so far, per lane.
+    pub best: [u64; LANES],
+    /// Depth of `best` (+inf when none), for pruning.
+    best_z: [f32; LANES],
+    /// Lanes inside the image.
+    active: u8,
+}
+
+impl Packet {
+    /// The packet whose top-left pixel is `(x0, y0)`; lanes outside the image are inactive.
+    pub fn new(cam: &Camera, x0: usize, y0: usize) -> Packet {
+        let mut active = 0u8;
+        let mut rays = [cam.pixel_ray(x0 as u32, y0 as u32); LANES];
+        for (i, ray) in rays.iter_mut().enumerate() {
+            let (x, y) = (x0 + i % PW, y0 + i / PW);
+            if x < cam.width as usize && y < cam.height as usize {
+                *ray = cam.pixel_ray(x as u32, y as u32);
+                active |= 1 << i;
+            }
+        }
+        let r32 = rays.map(|r| Ray32::new(&r));
+        let mut dir = [[0f32; LANES]; 3];
+        let mut inv = [[0f32; LANES]; 3];
+        for (i, r) in r32.iter().enumerate() {
+            for k in 0..3 {
+                dir[k][i] = r.dir[k];
+                inv[k][i] = r.inv[k];
+            }
+        }
+        // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key, in f32.
+        let zscale = rays.map(|r| {
+            let z = r.planar * (1.0 - 1.0 / (1u64 << 19) as f64);
+            let f = z as f32;
+            if f64::from(f) > z {
+                f.next_down()
+            } else {
+                f
+            }
+        });
+        Packet {
+            rays,
+            r32,
+            dir,
+            inv,
+            dir_norm: r32.map(|r| r.dir_norm),
+            zscale,
+            best: [NO_HIT; LANES],
+            best_z: [f32::INFINITY; LANES],
+            active,
+        }
+    }
+
+    /// Lanes whose ray may reach something in the box that beats their best.
+    #[inline]
+    fn node_mask(&self, node: &Node32) -> u8 {
+        let mut tmin = [f32::NEG_INFINITY; LANES];
+        let mut tmax = [f32::INFINITY; LANES];
+        for k in 0..3 {
+            let (lo, hi) = node.bounds(k);
+            for i in 0..LANES {
+                let t0 = lo * self.inv[k][i];
+                let t1 = hi * self.inv[k][i];
+                tmin[i] = tmin[i].max(t0.min(t1));
+                tmax[i] = tmax[i].min(t0.max(t1));
+            }
+        }
+        let mut m = 0u8;
+        for i in 0..LANES {
+            let live =
+                !Node32::misses(tmin[i], tmax[i]) && tmin[i] * self.zscale[i] <= self.best_z[i];
+            m |= u8::from(live) << i;
+        }
+        m
+    }
+
+    /// Tests one triangle against the lanes in `m`, updating their nearest keys.
+    #[inline]
+    fn leaf(
+        &mut self,
+        cam: &Camera,
+        scene: &ResolvedScene,
+        leaf: &LeafTri,
+        m: u8,
+        c: &mut Counters,
+    ) {
+        // f32 signs of the three edges for all lanes at once.
+        let mut sign = [[0i8; LANES]; 3];
+        for (k, row) in sign.iter_mut().enumerate() {
+            let (n, beta) = leaf.edge(k);
+            for (i, s) in row.iter_mut().enumerate() {
+                let det = n[0] * self.dir[0][i] + n[1] * self.dir[1][i] + n[2] * self.dir[2][i];
+                let bound = beta * self.dir_norm[i];
+                *s = i8::from(det > bound) - i8::from(-det > bound);
+            }
+        }
+        let t = &scene.triangles[leaf.prim as usize];
+        let mut depth: Option<TriDepth> = None;
+        let mut lanes = m;
+        while lanes != 0 {
+            let i = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            let (s0, s1, s2) = (sign[0][i], sign[1][i], sign[2][i]);
+            let facing = if s0 != 0 && s1 != 0 && s2 != 0 {
+                // All three decided in f32: the single-ray test would reach the same verdict
+                // without touching any other counter.
+                c.coverage_tests += 1;
+                if s0 == s1 && s1 == s2 {
+                    c.covered += 1;
+                    s0
+                } else {
+                    0
+                }
+            } else {
+                covers(cam, leaf, t, &self.rays[i], &self.r32[i], c)
+            };
+            if facing == 0 {
+                continue;
+            }
+            let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
+            if let Some(z) = d.depth(cam, &self.rays[i]) {
+                let k = hit_key(z, leaf.prim);
+                if k < self.best[i] {
+                    self.best[i] = k;
+                    self.best_z[i] = key_depth(k);
+                }
+            }
+        }
+    }
+}
+
+impl TraceBvh {
+    /// Traces a packet to completion; the nearest keys are left in `pk.best`.
+    pub(crate) fn trace_packet(
+        &self,
+        scene: &ResolvedScene,
+        pk: &mut Packet,
+        c: &mut Counters,
+        stack: &mut Vec<(u32, u8)>,
+    ) {
+        let cam = &scene.camera;
+        if self.nodes32.is_empty() || pk.active == 0 {
+            return;
+        }
+        // Near-to-far child order along the packet's mean direction.
+        let mean = [0, 1, 2].map(|k| pk.dir[k].iter().sum::<f32>());
+        stack.clear();
+        stack.push((0, pk.active));
+        while let Some((ni, mask)) = stack.pop() {
+            let node = &self.nodes32[ni as usize];
+            c.bvh_nodes_visited += u64::from(mask.count_ones());
+            let m = pk.node_mask(node) & mask;
+            if m == 0 {
+                continue;
+            }
+            if node.count > 0 {
+                for k in node.first..node.first + node.count {
+                    pk.leaf(cam, scene, &self.leaves[k as usize], m, c);
+                }
+                continue;
+            }
+            let (a, b) = (node.first, node.first + 1);
+            let da = self.nodes32[a as usize].center_along(&mean);
+            let db = self.nodes32[b as usize].center_along(&mean);
+            let (near, far) = if da <= db { (a, b) } else { (b, a) };
+            stack.push((far, m));
+            stack.push((near, m));
+        }
+    }
+}
