@@ -390,11 +390,13 @@ def compare_case(
 
 def _check_maps(case: Case, base: resolved.ResolvedScene, variant: resolved.ResolvedScene) -> str | None:
     if case.prim_map.size != variant.triangle_count:
-        return f"prim_map has {case.prim_map.size} entries, the variant {case.variant} has {variant.triangle_count} triangles"
+        n = variant.triangle_count
+        return f"prim_map has {case.prim_map.size} entries, the variant {case.variant} has {n} triangles"
     if case.prim_map.size and int(case.prim_map.max()) >= base.triangle_count:
         return f"prim_map names prim {int(case.prim_map.max())}, the base {case.base} has {base.triangle_count}"
     if case.object_map.size != len(variant.objects):
-        return f"object_map has {case.object_map.size} entries, the variant {case.variant} has {len(variant.objects)} objects"
+        n = len(variant.objects)
+        return f"object_map has {case.object_map.size} entries, the variant {case.variant} has {n} objects"
     if case.object_map.size and int(case.object_map.max()) >= len(base.objects):
         return f"object_map names object {int(case.object_map.max())}, the base {case.base} has {len(base.objects)}"
     return None

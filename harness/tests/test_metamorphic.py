@@ -220,3 +220,14 @@ def test_bad_spec_exits_2_naming_the_file(tmp_path: Path, capsys: pytest.Capture
     err = capsys.readouterr().err
     assert str(spec) in err and "power of two" in err
     assert not (r.root / "metamorphic.json").exists()
+
+
+def test_a_map_that_does_not_fit_the_variant_is_an_error(run: Run) -> None:
+    base = run.scene("base", [BIG, FRONT], [0, 1])
+    run.scene("split", [*_halves(BIG), FRONT], [0, 0, 1])
+    run.render("base", "embree", base)
+    run.render("split", "embree", base)  # wrong size of map below, whatever the buffers
+    run.case("split", "split", [0, 1], [0, 1])
+    res = run.compare()
+    e = res[("split", "embree", "id")]
+    assert e["status"] == "error" and "prim_map has 2 entries" in e["reason"] and "3 triangles" in e["reason"]
