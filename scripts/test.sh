@@ -3,7 +3,8 @@
 #   1. scripts/setup.sh  (apt packages + .venv, quick when already done)
 #   2. the Python harness's own tests (backend conversions, comparison)
 #   3. cargo test: unit tests, raster==trace, watertightness, bad input, and the
-#      cross-renderer conformance suite (one test per scene x backend x buffer).
+#      cross-renderer conformance suite (one test per scene x backend x buffer), and
+#      the metamorphic relations on every backend (docs/metamorphic.md).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 scripts/setup.sh

@@ -4,6 +4,7 @@
 //! equality. Translating scene and camera together is not exact: the
 //! image-plane point `P = eye + d` is rounded at the eye's magnitude, so IDs may
 //! change only at centers within 1e-6 px of an edge and depth by 1e-6 relative.
+//! The same relations on every backend: tests/metamorphic_backends.rs.
 
 mod common_scenes;
 

@@ -1,4 +1,4 @@
-"""Command line: `python -m rendiff_harness {info,render,compare,reference} ...`.
+"""Command line: `python -m rendiff_harness {info,render,compare,reference,metamorphic} ...`.
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -137,11 +137,19 @@ def cmd_reference(args: argparse.Namespace) -> int:
     return int(reference_main(list(args.rest)) or 0)
 
 
+def cmd_metamorphic(args: argparse.Namespace) -> int:
+    """Delegates to metamorphic.py (relations per backend), which owns its options."""
+    from .metamorphic import main as metamorphic_main
+
+    return int(metamorphic_main(list(args.rest)) or 0)
+
+
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "info": cmd_info,
     "render": cmd_render,
     "compare": cmd_compare,
     "reference": cmd_reference,
+    "metamorphic": cmd_metamorphic,
 }
 
 
@@ -168,6 +176,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
     p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)
     p_ref.add_argument("rest", nargs=argparse.REMAINDER)
+    p_meta = sub.add_parser(
+        "metamorphic", help="compare variant renders with base renders per backend (see metamorphic.py)",
+        add_help=False,
+    )
+    p_meta.add_argument("rest", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -178,6 +191,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return cmd_compare(argparse.Namespace(rest=argv[1:]))
     if argv[:1] == ["reference"]:
         return cmd_reference(argparse.Namespace(rest=argv[1:]))
+    if argv[:1] == ["metamorphic"]:
+        return cmd_metamorphic(argparse.Namespace(rest=argv[1:]))
     args = build_parser().parse_args(argv)
     return HANDLERS[args.cmd](args)
 

@@ -47,7 +47,7 @@ import sys
 import tempfile
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -304,14 +304,28 @@ class IdResult:
     details: list[str]
 
 
-def compare_ids(ref: Reference, test: Mapping[str, np.ndarray], model: tolerance.Model) -> IdResult:
+EdgeDistance = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(ref ids, test ids, rows, cols) of the mismatched pixels -> pixel distance to an edge involved."""
+
+
+def compare_ids(
+    ref: Reference, test: Mapping[str, np.ndarray], model: tolerance.Model, edge_distance: EdgeDistance | None = None
+) -> IdResult:
+    """Exact id.prim / id.object comparison, each mismatch classified edge or interior.
+
+    `edge_distance` defaults to classify.mismatch_edge_distance on the reference's scene;
+    the metamorphic comparison (metamorphic.py) passes one that also looks at the variant's scene.
+    """
     rp, tp = ref.buffers["id.prim"], test["id.prim"]
     h, w = rp.shape
     mism = rp != tp
     idx = np.flatnonzero(mism)
     rows, cols = idx // w, idx % w
     r_ids, t_ids = rp.ravel()[idx], tp.ravel()[idx]
-    dist = classify.mismatch_edge_distance(ref.scene, r_ids, t_ids, rows, cols)
+    if edge_distance is None:
+        dist = classify.mismatch_edge_distance(ref.scene, r_ids, t_ids, rows, cols)
+    else:
+        dist = edge_distance(r_ids, t_ids, rows, cols)
     n = ref.scene.triangle_count
     invalid = (t_ids != BACKGROUND_ID) & (t_ids.astype(np.uint64) >= np.uint64(n))
     is_edge = (dist <= model.edge_px) & ~invalid
@@ -772,9 +786,9 @@ def compare_cached_reference(
 # --------------------------------------------------------------------------- output
 
 
-def write_results(run: Path, doc: Mapping[str, Any]) -> Path:
-    """Write RUN/results.json atomically (temp file in RUN + os.replace)."""
-    path = run / "results.json"
+def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json") -> Path:
+    """Write RUN/<name> (default results.json) atomically (temp file in RUN + os.replace)."""
+    path = run / name
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     fd, tmp = tempfile.mkstemp(prefix=".results.", suffix=".json.tmp", dir=run)
     try:
