@@ -50,11 +50,23 @@ pub fn trace(scene: &ResolvedScene, q: BvhQuality, runs: usize) -> TraceTimes {
     TraceTimes { build, trace }
 }
 
-/// Times tracing through an existing BVH.
+/// Times tracing through an existing BVH (the default kernel: packets).
 pub fn trace_with(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Timed<Frame> {
-    timed(runs, || {
-        trace::render_with_bvh(scene, bvh, trace::TraceOptions::default(), &|_| {})
-    })
+    trace_kernel(scene, bvh, trace::TraceKernel::Packets, runs)
+}
+
+/// Times tracing through an existing BVH with a chosen kernel.
+pub fn trace_kernel(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    kernel: trace::TraceKernel,
+    runs: usize,
+) -> Timed<Frame> {
+    let opts = trace::TraceOptions {
+        kernel,
+        ..trace::TraceOptions::default()
+    };
+    timed(runs, || trace::render_with_bvh(scene, bvh, opts, &|_| {}))
 }
 
 /// Embree's phases, medians over the timed runs.

@@ -21,7 +21,7 @@ use crate::camera::Camera;
 use crate::exr_io::read_buffers;
 use crate::report::svg::{backend_color, time_bars, Bar};
 use crate::scene::resolve::ResolvedScene;
-use crate::trace::BvhQuality;
+use crate::trace::{BvhQuality, TraceKernel};
 use anyhow::Result;
 use glam::{DVec3, Vec3};
 use serde_json::{json, Value};
@@ -68,8 +68,10 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
         let pool = super::pool(threads)?;
         let row = pool.install(|| -> Value {
             let core = measure::trace(&scene, BvhQuality::Medium, runs);
+            let single = measure::trace_kernel(&scene, &core.build.last, TraceKernel::SingleRays, runs);
             let raster = measure::raster(&scene, runs);
             let core_mrays = pixels / core.trace.median_s / 1e6;
+            let single_mrays = pixels / single.median_s / 1e6;
             let mut embree = serde_json::Map::new();
             let mut skipped = Vec::new();
             for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
@@ -82,6 +84,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
                                 name,
                                 json!({"timing": st, "mrays_per_s": mrays,
                                        "core_over_embree": core_mrays / mrays,
+                                       "core_single_rays_over_embree": single_mrays / mrays,
                                        "vs_core_raster": visibility_error(&raster.last, &f)}),
                             );
                         }
@@ -90,10 +93,14 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
                 }
             }
             let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
+            let ratio1 =
+                |k: &str| embree.get(k).and_then(|v| v["core_single_rays_over_embree"].as_f64());
             json!({
                 "threads": threads,
-                "core_trace": {"mrays_per_s": core_mrays, "timing": core.json(),
+                "core_trace": {"kernel": "packets (4x4)", "mrays_per_s": core_mrays, "timing": core.json(),
                                "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()},
+                "core_trace_single_rays": {"mrays_per_s": single_mrays, "timing": {"median_s": single.median_s, "runs_s": single.runs_s},
+                               "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},
                 "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,
                                 "counters": raster.last.counters},
                 "embree": embree,
@@ -101,6 +108,8 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
                     "core_trace_over_embree_single": ratio("embree single"),
                     "core_trace_over_embree_packet8": ratio("embree packet8"),
                     "core_trace_over_embree_robust_single": ratio("embree_robust single"),
+                    "core_single_rays_over_embree_single": ratio1("embree single"),
+                    "core_single_rays_over_embree_packet8": ratio1("embree packet8"),
                 },
                 "skipped": skipped,
             })

@@ -48,6 +48,26 @@ const EDGE_FILTER_F64: f64 = 16.0 / (1u64 << 53) as f64;
 /// Relative slack on f32 slab parameters (each is a product of two rounded values).
 const SLAB_SLACK: f32 = 1.0 / (1u32 << 20) as f32;
 
+/// `min` for operands that are never NaN (one `minss`, unlike `f32::min`).
+#[inline(always)]
+pub(crate) fn min(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `max` for operands that are never NaN.
+#[inline(always)]
+pub(crate) fn max(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
 /// Largest f32 not above `x`.
 #[inline]
 fn round_down(x: f64) -> f32 {
@@ -96,6 +116,13 @@ impl Node32 {
             let g = (l.abs().max(h.abs()) * BOX_GROWTH).max(MIN_GROWTH);
             lo[k] = round_down(l - g);
             hi[k] = round_up(h + g);
+            // Never 0, so `bound * (1/0)` is +-inf and never NaN.
+            if lo[k] == 0.0 {
+                lo[k] = -f32::MIN_POSITIVE;
+            }
+            if hi[k] == 0.0 {
+                hi[k] = f32::MIN_POSITIVE;
+            }
         }
         Node32 {
             lo,
@@ -106,8 +133,8 @@ impl Node32 {
     }
 
     /// Slab interval of the f32 ray, and whether it certainly misses.
-    /// A NaN product (only `0 * inf` on an axis the box does not straddle) is
-    /// ignored by `min`/`max`, which can only widen the interval.
+    /// Bounds are never 0 and `1/D` is never NaN, so no product is NaN and
+    /// plain comparisons (which compile to single min/max instructions) suffice.
     #[inline]
     pub fn slab(&self, inv: &[f32; 3]) -> (f32, f32, bool) {
         let mut tmin = f32::NEG_INFINITY;
@@ -115,17 +142,18 @@ impl Node32 {
         for ((lo, hi), inv) in self.lo.iter().zip(&self.hi).zip(inv) {
             let t0 = lo * inv;
             let t1 = hi * inv;
-            tmin = tmin.max(t0.min(t1));
-            tmax = tmax.min(t0.max(t1));
+            tmin = max(tmin, min(t0, t1));
+            tmax = min(tmax, max(t0, t1));
         }
         (tmin, tmax, Node32::misses(tmin, tmax))
     }
 
-    /// True when an f32 slab interval is empty, or behind the eye, beyond its rounding.
+    /// True when an f32 slab interval is empty, or behind the eye, beyond its
+    /// rounding (branch-free, so the packet kernel's lanes vectorize).
     #[inline]
     pub fn misses(tmin: f32, tmax: f32) -> bool {
-        let tol = (tmin.abs().min(f32::MAX) + tmax.abs().min(f32::MAX)) * SLAB_SLACK;
-        tmin > tmax + tol || tmax < -tol
+        let tol = (min(tmin.abs(), f32::MAX) + min(tmax.abs(), f32::MAX)) * SLAB_SLACK;
+        (tmin > tmax + tol) | (tmax < -tol)
     }
 
     /// The box's eye-relative extent on axis `k`.
