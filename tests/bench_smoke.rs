@@ -97,6 +97,31 @@ fn knobs_writes_groups_with_a_non_dominated_pareto_front() {
     }
     // Raster and trace are the same computation: the record says so.
     assert_eq!(groups[0]["facts"]["raster_equals_trace_every_bvh"], true);
+    // Direct lighting: the core's supersampling converges to its own K×K reference,
+    // and the external renderers' settings are recorded as not measured, with why.
+    let direct = groups
+        .iter()
+        .find(|g| {
+            g["id"]
+                .as_str()
+                .is_some_and(|id| id.starts_with("radiance-direct-"))
+        })
+        .expect("a direct-lighting group");
+    let errors: Vec<f64> = direct["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["knob"] == "core supersampling")
+        .filter_map(|p| p["error"].as_f64())
+        .collect();
+    assert!(
+        errors.len() >= 2 && errors.windows(2).all(|w| w[1] < w[0]) && errors[0] > 0.0,
+        "{errors:?}"
+    );
+    assert!(direct["facts"]["reference_floor_rmse"].as_f64().is_some());
+    assert!(direct["skipped"][0]["reason"]
+        .as_str()
+        .is_some_and(|r| r.contains("external renderers off")));
 }
 
 #[test]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -65,12 +66,25 @@ def cmd_info(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+SETTINGS = ("aa_method", "aa_threshold", "aa_depth", "quality", "max_depth")
+"""Backend-specific speed/quality settings: passed only when given, refused by a backend without them."""
+
+
+def _settings(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: getattr(args, k) for k in SETTINGS if getattr(args, k, None) is not None}
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     """Render one resolved scene with one backend into one buffer EXR."""
     try:
         backend = registry.get(args.backend)
     except KeyError:
         return _fail(f"unknown backend {args.backend!r}; known: {', '.join(registry.known_names())}")
+    if args.variant is not None:
+        if backend.name != "mitsuba":
+            return _fail(f"{backend.name}: --variant is not a setting of this backend (Mitsuba only)")
+        # The backend's own selection mechanism, read when mitsuba is first imported (below).
+        os.environ["RENDIFF_MITSUBA_VARIANT"] = args.variant
     try:
         scene = resolved.load(args.scene)
     except resolved.SceneError as exc:
@@ -94,13 +108,18 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         return _fail(f"{backend.name}: output folder {out.parent} does not exist")
+    settings = _settings(args)
+    refused = sorted(k for k in settings if not backend.accepts(k))
+    if refused:
+        flags = ", ".join("--" + k.replace("_", "-") for k in refused)
+        return _fail(f"{backend.name}: {flags} is not a setting of this backend (see `render --help`)")
     own_workdir = args.workdir is None
     workdir = Path(tempfile.mkdtemp(prefix=f"rendiff-{backend.name}-")) if own_workdir else Path(args.workdir)
     try:
         version = backend.version()
         t0 = time.monotonic()
         options = {k: v for k, v in (("spp", args.spp), ("seed", args.seed)) if v is not None}
-        info = backend.render(scene, out, workdir, float(args.timeout), **options)
+        info = backend.render(scene, out, workdir, float(args.timeout), **options, **settings)
         elapsed = time.monotonic() - t0
     except BackendError as exc:  # includes BackendUnavailable
         msg = str(exc)
@@ -153,6 +172,31 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
 }
 
 
+def _bounded(kind: Callable[[str], Any], lo: float, hi: float) -> Callable[[str], Any]:
+    """argparse type: a number of `kind` in [lo, hi], else a clear error naming the range."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {kind.__name__}, got {text!r}") from None
+        if not (lo <= value <= hi):  # also rejects nan
+            raise argparse.ArgumentTypeError(f"must be in {lo:g}..{hi:g}, got {text!r}")
+        return value
+
+    return parse
+
+
+def _max_depth(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value == 0 or value < -1:
+        raise argparse.ArgumentTypeError(f"must be -1 (unlimited) or >= 1, got {text!r}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m rendiff_harness", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -172,6 +216,24 @@ def build_parser() -> argparse.ArgumentParser:
         "ignored by backends without Monte Carlo",
     )
     p_render.add_argument("--seed", type=int, default=None, help="random seed for path-traced scenes (default 0)")
+    q = p_render.add_argument_group(
+        "quality settings (speed/accuracy knobs; defaults keep the conformance contract; "
+        "a backend refuses a setting it does not have)"
+    )
+    q.add_argument("--aa-method", type=_bounded(int, 1, 2), default=None,
+                   help="POV-Ray antialiasing method (+AM1 adaptive, +AM2 recursive) for the radiance passes only; "
+                   "IDs and depth are never antialiased (default: off, one sample at the pixel center)")
+    q.add_argument("--aa-threshold", type=_bounded(float, 0.0, 3.0), default=None,
+                   help="POV-Ray antialiasing threshold +A (0..3, default 0.3; needs --aa-method)")
+    q.add_argument("--aa-depth", type=_bounded(int, 1, 9), default=None,
+                   help="POV-Ray antialiasing depth +R (1..9, default 3; needs --aa-method)")
+    q.add_argument("--quality", type=_bounded(int, 0, 11), default=None,
+                   help="POV-Ray quality level +Q for the radiance passes (0..11, default POV-Ray's 9)")
+    q.add_argument("--max-depth", type=_max_depth, default=None,
+                   help="Mitsuba path length limit for path-traced scenes (-1 = unlimited, or >= 1; "
+                   "default: the scene's integrator.max_depth)")
+    q.add_argument("--variant", choices=("scalar_rgb", "llvm_ad_rgb"), default=None,
+                   help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19)")
     p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
     p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)

@@ -9,6 +9,8 @@ A backend module provides (see backends/povray.py for a complete one):
     def unavailable_reason() -> str | None     # None when usable, else what to install
     def render(scene, out_exr, workdir, timeout_s) -> dict[str, object]   # raises BackendError
     # optional keyword-only `spp`, `seed` (Monte Carlo backends); passed only when given
+    # optional keyword-only quality settings (`aa_method`, `quality`, `max_depth`, ...): the
+    # CLI refuses one that the backend's render() does not take (`Backend.accepts`)
 
 Modules are imported lazily and one failing import never hides the others: an
 ImportError (a missing Python package, typically) turns that backend into an
@@ -72,6 +74,13 @@ class Backend:
         if self.module is None:
             raise BackendUnavailable(f"{self.name}: {self.import_error}")
         return str(self.module.version())
+
+    def accepts(self, option: str) -> bool:
+        """True when the module's render() takes the keyword `option` (a quality setting, spp, seed)."""
+        if self.module is None:
+            return False
+        params = inspect.signature(self.module.render).parameters
+        return option in params or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
 
     def render(
         self, scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, **options: object

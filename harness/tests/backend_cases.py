@@ -338,6 +338,31 @@ def lit_plane(
     )
 
 
+def occluded_plane(directory: Path, shadows: str, width: int = 64, height: int = 48) -> Path:
+    """lit_plane plus a small square (prims 2-3) at height 1 between the plane and a point light at height 2.
+
+    `shadows` is "shadows" or "shadowless"; with shadows the square casts a visible shadow.
+    """
+    import json
+
+    d = lit_plane(
+        directory,
+        [{"kind": "point", "position": [0.1, 0.05, 2.0], "intensity": [4.0, 3.0, 2.0]}],
+        requires=("depth", "ids", "lambert", "point_light", shadows, "two_sided"),
+        width=width,
+        height=height,
+    )
+    tris = np.fromfile(d / "triangles.f32", dtype="<f4").reshape(-1, 3, 3)
+    sq = np.array(_quad(np.array([0.0, 0.0, 1.0]), np.array([0.25, 0, 0]), np.array([0, 0.25, 0])))
+    np.concatenate([tris, sq.astype(np.float32)]).astype("<f4").tofile(d / "triangles.f32")
+    np.array([0, 0, 1, 1], dtype="<u4").tofile(d / "object_ids.u32")
+    meta = json.loads((d / "scene.json").read_text())
+    meta["triangle_count"] = 4
+    meta["objects"].append({"name": "occluder", "material": 0, "first_prim": 2, "prim_count": 2})
+    (d / "scene.json").write_text(json.dumps(meta))
+    return d
+
+
 def closed_form_plane(scene: ResolvedScene, flip: bool = False) -> np.ndarray:
     """(H, W, 3) float64 contract radiance on `lit_plane` at the pixel centers, written out by hand.
 

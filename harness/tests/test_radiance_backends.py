@@ -246,25 +246,7 @@ def test_pyrender_refuses_more_lights_than_it_binds(tmp_path: Path) -> None:
 
 
 def _occluded(tmp_path: Path, shadows: str) -> resolved.ResolvedScene:
-    """lit_plane plus a small square (prims 2-3) at height 1 between the plane and a point light at height 2."""
-    import json
-
-    d = cases.lit_plane(
-        tmp_path / f"occ_{shadows}",
-        [{"kind": "point", "position": [0.1, 0.05, 2.0], "intensity": [4.0, 3.0, 2.0]}],
-        requires=("depth", "ids", "lambert", "point_light", shadows, "two_sided"),
-        width=64,
-        height=48,
-    )
-    tris = np.fromfile(d / "triangles.f32", dtype="<f4").reshape(-1, 3, 3)
-    sq = np.array(cases._quad(np.array([0.0, 0.0, 1.0]), np.array([0.25, 0, 0]), np.array([0, 0.25, 0])))
-    np.concatenate([tris, sq.astype(np.float32)]).astype("<f4").tofile(d / "triangles.f32")
-    np.array([0, 0, 1, 1], dtype="<u4").tofile(d / "object_ids.u32")
-    meta = json.loads((d / "scene.json").read_text())
-    meta["triangle_count"] = 4
-    meta["objects"].append({"name": "occluder", "material": 0, "first_prim": 2, "prim_count": 2})
-    (d / "scene.json").write_text(json.dumps(meta))
-    return resolved.load(d)
+    return resolved.load(cases.occluded_plane(tmp_path / f"occ_{shadows}", shadows))
 
 
 def _check_occluded(backend: str, scene: resolved.ResolvedScene, bufs: dict, attrs: dict, info: dict) -> None:

@@ -40,42 +40,68 @@ impl CommonArgs {
     }
 }
 
+/// `rendiff bench knobs`'s options (boxed in [`BenchCommand`]: they outnumber the others').
+#[derive(Debug, Clone, clap::Args)]
+pub struct KnobsArgs {
+    /// Options every subcommand takes.
+    #[command(flatten)]
+    pub common: CommonArgs,
+    /// Visibility scenes, PATH or PATH@WxH (default: million@960x540 and pixel_grid; --quick: icosphere@64x48).
+    #[arg(long = "scene")]
+    pub scenes: Vec<SceneSpec>,
+    /// Resolution factors of the first scene's size.
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2")]
+    pub scales: Vec<f64>,
+    /// Global-illumination scene for the spp knobs.
+    #[arg(long, default_value = "scenes/cornell_gi.toml")]
+    pub gi_scene: PathBuf,
+    /// Its cached reference EXR.
+    #[arg(long, default_value = "tests/references/cornell_gi.exr")]
+    pub reference: PathBuf,
+    /// Core path tracer spp settings.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256")]
+    pub spp: Vec<u32>,
+    /// Mitsuba spp settings (at least 2 each).
+    #[arg(long, value_delimiter = ',', default_value = "4,16,64,256")]
+    pub mitsuba_spp: Vec<u32>,
+    /// Mitsuba's spp for its max_depth and variant knobs.
+    #[arg(long, default_value_t = 64)]
+    pub mitsuba_knob_spp: u32,
+    /// Mitsuba max_depth settings (-1 = unlimited, or >= 1; the reference uses -1).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "2,3,5",
+        allow_hyphen_values = true
+    )]
+    pub mitsuba_max_depth: Vec<i32>,
+    /// Mitsuba variants beside the default scalar_rgb (llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19).
+    #[arg(long, value_delimiter = ',', default_value = "llvm_ad_rgb",
+          value_parser = ["scalar_rgb", "llvm_ad_rgb"])]
+    pub mitsuba_variant: Vec<String>,
+    /// Locally shaded scenes for the direct-lighting knobs (POV-Ray antialiasing and quality, pyrender, core supersampling), PATH or PATH@WxH
+    /// (default: directional_shadows@320x240 and two_lights_shadowless@320x240; --quick: directional_shadows@32x24).
+    #[arg(long = "direct-scene")]
+    pub direct_scenes: Vec<SceneSpec>,
+    /// Direct-lighting reference: K×K pixel-center samples per pixel, box-filtered (a power of two; --quick: 4).
+    #[arg(long, default_value_t = 16)]
+    pub supersample: u32,
+    /// Seed of both path tracers (the reference used 0, so not 0).
+    #[arg(long, default_value_t = 1000)]
+    pub seed: u64,
+    /// Worker threads (default: all CPUs).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Skip external renderers (POV-Ray, pyrender, Mitsuba).
+    #[arg(long)]
+    pub no_external: bool,
+}
+
 /// `rendiff bench <what>`.
 #[derive(Debug, Clone, clap::Subcommand)]
 pub enum BenchCommand {
     /// Every speed/accuracy knob against one reference: time-vs-error table and plot with the Pareto front.
-    Knobs {
-        /// Options every subcommand takes.
-        #[command(flatten)]
-        common: CommonArgs,
-        /// Visibility scenes, PATH or PATH@WxH (default: million@960x540 and pixel_grid; --quick: icosphere@64x48).
-        #[arg(long = "scene")]
-        scenes: Vec<SceneSpec>,
-        /// Resolution factors of the first scene's size.
-        #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2")]
-        scales: Vec<f64>,
-        /// Global-illumination scene for the spp knobs.
-        #[arg(long, default_value = "scenes/cornell_gi.toml")]
-        gi_scene: PathBuf,
-        /// Its cached reference EXR.
-        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
-        reference: PathBuf,
-        /// Core path tracer spp settings.
-        #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256")]
-        spp: Vec<u32>,
-        /// Mitsuba spp settings (at least 2 each).
-        #[arg(long, value_delimiter = ',', default_value = "4,16,64,256")]
-        mitsuba_spp: Vec<u32>,
-        /// Seed of both path tracers (the reference used 0, so not 0).
-        #[arg(long, default_value_t = 1000)]
-        seed: u64,
-        /// Worker threads (default: all CPUs).
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Skip external renderers (Mitsuba).
-        #[arg(long)]
-        no_external: bool,
-    },
+    Knobs(Box<KnobsArgs>),
     /// The core next to Embree, pyrender and Mitsuba on identical work, as ratios.
     Peers {
         /// Options every subcommand takes.
@@ -136,20 +162,45 @@ pub enum BenchCommand {
 /// Runs one subcommand and writes its outputs.
 pub fn run(cmd: BenchCommand) -> Result<()> {
     let (stem, common, out): (&str, Common, Output) = match cmd {
-        BenchCommand::Knobs {
-            common,
-            scenes,
-            scales,
-            gi_scene,
-            reference,
-            spp,
-            mitsuba_spp,
-            seed,
-            threads,
-            no_external,
-        } => {
+        BenchCommand::Knobs(args) => {
+            let KnobsArgs {
+                common,
+                scenes,
+                scales,
+                gi_scene,
+                reference,
+                spp,
+                mitsuba_spp,
+                mitsuba_knob_spp,
+                mitsuba_max_depth,
+                mitsuba_variant,
+                direct_scenes,
+                supersample,
+                seed,
+                threads,
+                no_external,
+            } = *args;
             let c = common.common()?;
             let quick = c.quick;
+            if let Some(d) = mitsuba_max_depth.iter().find(|&&d| d == 0 || d < -1) {
+                anyhow::bail!("--mitsuba-max-depth: {d} is neither -1 (unlimited) nor >= 1");
+            }
+            let direct_scenes = if !direct_scenes.is_empty() {
+                direct_scenes
+            } else if quick {
+                vec!["scenes/directional_shadows.toml@32x24"
+                    .parse()
+                    .map_err(anyhow::Error::msg)?]
+            } else {
+                vec![
+                    "scenes/directional_shadows.toml@320x240"
+                        .parse()
+                        .map_err(anyhow::Error::msg)?,
+                    "scenes/two_lights_shadowless.toml@320x240"
+                        .parse()
+                        .map_err(anyhow::Error::msg)?,
+                ]
+            };
             let scenes = if !scenes.is_empty() {
                 scenes
             } else if quick {
@@ -174,6 +225,11 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 reference,
                 core_spp: if quick { vec![1, 4] } else { spp },
                 mitsuba_spp,
+                mitsuba_knob_spp,
+                mitsuba_max_depth,
+                mitsuba_variants: mitsuba_variant,
+                direct_scenes,
+                supersample: if quick { 4 } else { supersample },
                 seed,
                 threads: threads.unwrap_or_else(super::cpus).max(1),
                 no_external: no_external || quick,

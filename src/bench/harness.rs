@@ -68,6 +68,22 @@ impl Harness {
         spp: Option<u32>,
         seed: Option<u64>,
     ) -> Result<HarnessRun, String> {
+        self.render_with(backend, resolved, out, spp, seed, &[])
+    }
+
+    /// Like [`Harness::render`], plus the backend's own quality settings as
+    /// `render` options (e.g. `--aa-method 2`), which the harness validates and
+    /// refuses for a backend without them. A skipped render (the backend cannot
+    /// model the scene, exit 3) is an error carrying the harness's reason.
+    pub fn render_with(
+        &self,
+        backend: &str,
+        resolved: &Path,
+        out: &Path,
+        spp: Option<u32>,
+        seed: Option<u64>,
+        settings: &[String],
+    ) -> Result<HarnessRun, String> {
         let mut cmd = Command::new(crate::check::python(&self.root));
         cmd.current_dir(&self.root)
             .env("PYTHONPATH", self.root.join("harness"))
@@ -84,11 +100,18 @@ impl Harness {
         if let Some(s) = seed {
             cmd.arg("--seed").arg(s.to_string());
         }
+        cmd.args(settings);
         let limit = self.timeout + Duration::from_secs(30);
         let o = run_with_timeout(cmd, limit, &self.scratch.join(backend))
             .map_err(|e| format!("{backend}: cannot run the harness: {e:#}"))?;
         if o.timed_out {
             return Err(format!("{backend}: timed out after {} s", limit.as_secs()));
+        }
+        if o.code == Some(3) {
+            let reason = last_json_line(&o.stdout)
+                .and_then(|v| v.get("reason").and_then(Value::as_str).map(String::from))
+                .unwrap_or_else(|| "no reason given".into());
+            return Err(format!("{backend}: skipped: {reason}"));
         }
         if o.code != Some(0) {
             return Err(format!(
@@ -112,6 +135,15 @@ impl Harness {
             version: v.get("version").and_then(Value::as_str).map(String::from),
         })
     }
+}
+
+/// The last line of `stdout` that parses as a JSON object (the harness's result line).
+fn last_json_line(stdout: &str) -> Option<Value> {
+    stdout
+        .lines()
+        .rev()
+        .filter(|l| l.trim_start().starts_with('{'))
+        .find_map(|l| serde_json::from_str(l).ok())
 }
 
 /// Reads a number at a JSON path like `["radiance", "timings_s", "render"]`.

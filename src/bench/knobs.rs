@@ -9,9 +9,15 @@
 //!   hit/miss mismatches are recorded beside it.
 //! - Resolution (first scene): time and time per pixel at scaled sizes. A
 //!   smaller image is not a wrong one, so it has no error and no Pareto rank.
+//! - Direct lighting (per locally shaded scene; reference: the core's local
+//!   shading supersampled K×K per pixel, box-filtered): the core's
+//!   supersampling, POV-Ray's antialiasing and quality level, pyrender (no
+//!   setting to vary; its missing MSAA is recorded as measured), error = RMSE
+//!   (measured in [`super::direct`]).
 //! - Radiance (a global-illumination scene; reference: the cached high-spp
 //!   Mitsuba render): the core path tracer's spp and Mitsuba's own spp,
-//!   error = RMSE over pixels and channels (measured in [`super::spp`]).
+//!   max_depth and variant, error = RMSE over pixels and channels (measured
+//!   in [`super::spp`]).
 
 use super::page::{num, Page};
 use super::plot::{scatter, ScatterPoint};
@@ -103,6 +109,16 @@ pub struct KnobsOptions {
     pub core_spp: Vec<u32>,
     /// Mitsuba spp settings (empty: skipped).
     pub mitsuba_spp: Vec<u32>,
+    /// Mitsuba's spp for its max_depth and variant knobs.
+    pub mitsuba_knob_spp: u32,
+    /// Mitsuba max_depth settings (-1 = unlimited, or >= 1).
+    pub mitsuba_max_depth: Vec<i32>,
+    /// Mitsuba variants (`scalar_rgb`, `llvm_ad_rgb`).
+    pub mitsuba_variants: Vec<String>,
+    /// Locally shaded scenes for the direct-lighting knobs.
+    pub direct_scenes: Vec<SceneSpec>,
+    /// Their reference's samples per pixel side (a power of two).
+    pub supersample: u32,
     /// Seed of both path tracers: not the reference's (0), so no samples are shared with it.
     pub seed: u64,
     /// Worker threads (the core's rayon pool and Embree's device).
@@ -219,6 +235,12 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
             "reference": opts.reference,
             "core_spp": opts.core_spp,
             "mitsuba_spp": opts.mitsuba_spp,
+            "mitsuba_knob_spp": opts.mitsuba_knob_spp,
+            "mitsuba_max_depth": opts.mitsuba_max_depth,
+            "mitsuba_variants": opts.mitsuba_variants,
+            "direct_scenes": opts.direct_scenes.iter().map(|s| json!({"path": s.path, "size": s.size})).collect::<Vec<_>>(),
+            "supersample": opts.supersample,
+            "drjit_libllvm_path": std::env::var("DRJIT_LIBLLVM_PATH").ok(),
             "seed": opts.seed,
             "timing": "median of `runs` timed runs after one untimed warm-up",
         },
@@ -243,6 +265,22 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
             eprintln!("knobs: resolution on {}", spec.path.display());
             resolution = pool.install(|| resolution_table(&scene, opts))?;
         }
+    }
+    let settings = super::direct::settings();
+    for spec in &opts.direct_scenes {
+        let d = super::direct::DirectOptions {
+            spec,
+            supersample: opts.supersample,
+            settings: &settings,
+            no_external: opts.no_external,
+            runs: opts.common.runs,
+            root: &opts.common.root,
+            timeout_s: opts.common.timeout_s,
+        };
+        let g = pool
+            .install(|| super::direct::direct_group(&d))
+            .with_context(|| format!("{}: direct-lighting knobs", spec.path.display()))?;
+        groups.push(g);
     }
     eprintln!("knobs: radiance on {}", opts.gi_scene.display());
     let g = pool.install(|| super::spp::radiance_group(opts))?;
@@ -493,6 +531,9 @@ fn page(record: &Value, groups: &[Group], resolution: &Value, svgs: &[(String, S
 fn point_note(pt: &Point) -> String {
     let d = &pt.details;
     let mut notes = Vec::new();
+    if let Some(n) = d["note"].as_str().filter(|n| !n.is_empty()) {
+        notes.push(n.to_string());
+    }
     for key in ["vs_raster", "vs_exact_raster"] {
         if let Some(v) = d.get(key) {
             notes.push(format!(
@@ -512,6 +553,9 @@ fn point_note(pt: &Point) -> String {
             num(Some(b), 3),
             num(d["timing"]["trace_s"].as_f64(), 3)
         ));
+    }
+    if let Some(e) = d["vs_contract_rmse"].as_f64() {
+        notes.push(format!("RMSE vs pixel-center contract {}", num(Some(e), 3)));
     }
     if let Some(e) = d["error"]["relative_rmse"].as_f64() {
         notes.push(format!("relative RMSE {}", num(Some(e), 3)));

@@ -3,7 +3,8 @@
 //! SVG plots under `reports/bench/`.
 //!
 //! - [`core_loops`]: raster and trace on one scene per thread count (the plain `rendiff bench`).
-//! - [`knobs`]: every knob that trades time for error, against one reference, with the Pareto front.
+//! - [`knobs`]: every knob that trades time for error, against one reference, with the Pareto front
+//!   (the renderers' own quality settings in [`direct`] and [`spp`]).
 //! - [`peers`]: the core against Embree, pyrender and Mitsuba on identical work, as ratios.
 //! - [`crossover`]: raster against trace as triangles shrink from a few large to millions of tiny.
 //! - [`stability`]: scene families pushed to numerical extremes through `rendiff check`.
@@ -16,6 +17,7 @@
 pub mod cli;
 pub mod core_loops;
 pub mod crossover;
+pub mod direct;
 pub mod harness;
 pub mod knobs;
 pub mod measure;

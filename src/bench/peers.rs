@@ -14,7 +14,7 @@
 use super::harness::{number_at, Harness};
 use super::knobs::SceneSpec;
 use super::page::{num, Page};
-use super::spp::{core_path, mitsuba_path};
+use super::spp::{core_path, mitsuba_path, MitsubaRun};
 use super::{measure, radiance, visibility_error, Common};
 use crate::backends::embree::{EmbreeMode, EmbreeQuery};
 use crate::camera::Camera;
@@ -267,8 +267,13 @@ fn equal_time(h: &Harness, opts: &PeersOptions, runs: usize) -> Result<Value> {
     let resolved = h
         .export(&scene, &h.scratch.join("gi"))
         .map_err(anyhow::Error::msg)?;
-    let m = mitsuba_path(h, &resolved, &reference, opts.mitsuba_spp, opts.seed, runs)
-        .map_err(anyhow::Error::msg)?;
+    let run = MitsubaRun {
+        spp: opts.mitsuba_spp,
+        seed: opts.seed,
+        settings: &[],
+        name: "mitsuba-equal-time",
+    };
+    let m = mitsuba_path(h, &resolved, &reference, &run, runs).map_err(anyhow::Error::msg)?;
     // Calibrate the core's seconds per spp, then match Mitsuba's time.
     let calib_spp = 16;
     let (calib, _) = core_path(&scene, &reference, calib_spp, opts.seed, runs)?;

@@ -1,6 +1,8 @@
 //! The samples-per-pixel knobs of `bench knobs` and the path tracers shared
 //! with `bench peers`: the core path tracer and Mitsuba (through the harness),
-//! each timed and compared with the cached Monte Carlo reference. Separate
+//! each timed and compared with the cached Monte Carlo reference. Mitsuba's
+//! own settings (path length `max_depth`, variant scalar vs LLVM) are knobs
+//! here too, at one spp. Separate
 //! from the visibility knobs because its reference, error metric and external
 //! renderer differ.
 
@@ -67,11 +69,14 @@ pub fn radiance_group(opts: &KnobsOptions) -> Result<Group> {
     {
         g.facts["reference_noise_rmse"] = json!(e);
     }
-    if opts.mitsuba_spp.is_empty() {
+    if opts.mitsuba_spp.is_empty()
+        && opts.mitsuba_max_depth.is_empty()
+        && opts.mitsuba_variants.is_empty()
+    {
         return Ok(g);
     }
     if opts.no_external {
-        g.skipped.push(json!({"knob": "mitsuba spp", "reason": "external renderers off (--quick or --no-external)"}));
+        g.skipped.push(json!({"knob": "mitsuba settings", "reason": "external renderers off (--quick or --no-external)"}));
         return Ok(g);
     }
     let scratch = super::Scratch::new("knobs")?;
@@ -83,7 +88,7 @@ pub fn radiance_group(opts: &KnobsOptions) -> Result<Group> {
         Ok(h) => h,
         Err(why) => {
             g.skipped
-                .push(json!({"knob": "mitsuba spp", "reason": why}));
+                .push(json!({"knob": "mitsuba settings", "reason": why}));
             return Ok(g);
         }
     };
@@ -91,32 +96,61 @@ pub fn radiance_group(opts: &KnobsOptions) -> Result<Group> {
         Ok(r) => r,
         Err(why) => {
             g.skipped
-                .push(json!({"knob": "mitsuba spp", "reason": why}));
+                .push(json!({"knob": "mitsuba settings", "reason": why}));
             return Ok(g);
         }
     };
-    for &spp in &opts.mitsuba_spp {
-        match mitsuba_path(
-            &harness,
-            &resolved,
-            &reference,
+    let mut configs: Vec<(&str, String, u32, Vec<String>)> = opts
+        .mitsuba_spp
+        .iter()
+        .map(|&spp| ("mitsuba spp", format!("mitsuba {spp} spp"), spp, Vec::new()))
+        .collect();
+    let spp = opts.mitsuba_knob_spp;
+    for d in &opts.mitsuba_max_depth {
+        configs.push((
+            "mitsuba max_depth",
+            format!("mitsuba {spp} spp, max_depth {d}"),
             spp,
-            opts.seed,
-            opts.common.runs,
-        ) {
-            Ok(m) => g.points.push(point(
-                "mitsuba spp",
-                &format!("mitsuba {spp} spp"),
-                m.time_s,
-                Some(m.error.rmse),
-                m.details,
-            )),
-            Err(why) => g
-                .skipped
-                .push(json!({"knob": format!("mitsuba {spp} spp"), "reason": why})),
+            vec!["--max-depth".into(), d.to_string()],
+        ));
+    }
+    for v in &opts.mitsuba_variants {
+        configs.push((
+            "mitsuba variant",
+            format!("mitsuba {spp} spp, {v}"),
+            spp,
+            vec!["--variant".into(), v.clone()],
+        ));
+    }
+    for (i, (knob, label, spp, args)) in configs.into_iter().enumerate() {
+        eprintln!("knobs: {label}");
+        let run = MitsubaRun {
+            spp,
+            seed: opts.seed,
+            settings: &args,
+            name: &format!("mitsuba-{i}"),
+        };
+        match mitsuba_path(&harness, &resolved, &reference, &run, opts.common.runs) {
+            Ok(m) => g
+                .points
+                .push(point(knob, &label, m.time_s, Some(m.error.rmse), m.details)),
+            Err(why) => g.skipped.push(json!({"knob": label, "reason": why})),
         }
     }
     Ok(g)
+}
+
+/// One Mitsuba configuration: spp, seed, the harness's quality options and a file name.
+#[derive(Debug, Clone, Copy)]
+pub struct MitsubaRun<'a> {
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Seed (not the reference's).
+    pub seed: u64,
+    /// Extra `render` options (`--max-depth`, `--variant`).
+    pub settings: &'a [String],
+    /// Output file stem in the scratch folder.
+    pub name: &'a str,
 }
 
 /// Times the core path tracer at `spp` (BVH build + shading) and its error.
@@ -156,17 +190,24 @@ pub fn mitsuba_path(
     harness: &Harness,
     resolved: &Path,
     reference: &RgbImage,
-    spp: u32,
-    seed: u64,
+    run: &MitsubaRun,
     runs: usize,
 ) -> Result<MitsubaPoint, String> {
-    let out = harness.scratch.join(format!("mitsuba-{spp}.exr"));
+    let (spp, seed) = (run.spp, run.seed);
+    let out = harness.scratch.join(format!("{}.exr", run.name));
     let mut times = Vec::new();
     let mut harness_s = Vec::new();
     let mut wall = Vec::new();
     let mut last = None;
     for k in 0..=runs.max(1) {
-        let r = harness.render("mitsuba", resolved, &out, Some(spp), Some(seed))?;
+        let r = harness.render_with(
+            "mitsuba",
+            resolved,
+            &out,
+            Some(spp),
+            Some(seed),
+            run.settings,
+        )?;
         let build = number_at(&r.info, &["radiance", "timings_s", "build"]).unwrap_or(0.0);
         let render = number_at(&r.info, &["radiance", "timings_s", "render"])
             .ok_or("mitsuba reported no radiance timings")?;
@@ -189,11 +230,12 @@ pub fn mitsuba_path(
             "timing": {"median_s": time_s, "runs_s": times,
                        "harness_time_s_median": super::median(&harness_s),
                        "subprocess_wall_s_median": super::median(&wall)},
-            "error": error, "spp": spp, "seed": seed,
+            "error": error, "spp": spp, "seed": seed, "harness_options": run.settings,
             "version": last.version,
             "radiance_info": last.info.get("radiance").map(|r| json!({
                 "spp": r.get("spp"), "passes": r.get("passes"), "spp_per_pass": r.get("spp_per_pass"),
                 "integrator": r.get("integrator"), "sampler": r.get("sampler"), "timings_s": r.get("timings_s"),
+                "max_depth": r.get("max_depth"),
             })),
             "variant": last.info.get("variant"),
         }),

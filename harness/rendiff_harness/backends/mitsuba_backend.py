@@ -455,9 +455,22 @@ def _render_rgb(mi: ModuleType, mi_scene: Any, spp: int, seed: int) -> np.ndarra
 
 
 def render_radiance(
-    scene: ResolvedScene, spp: int | None = None, seed: int | None = None, passes: int = VARIANCE_PASSES
+    scene: ResolvedScene,
+    spp: int | None = None,
+    seed: int | None = None,
+    passes: int = VARIANCE_PASSES,
+    max_depth: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
-    """(RGB (H, W, 3) float64, variance of the mean or None, info) as the module docstring says."""
+    """(RGB (H, W, 3) float64, variance of the mean or None, info) as the module docstring says.
+
+    `max_depth` overrides the scene's path length limit (a speed/accuracy knob: shorter
+    paths are faster and biased dark); it applies to `global_illumination` only.
+    """
+    if max_depth is not None and "global_illumination" not in scene.requires:
+        raise BackendError("mitsuba: max_depth applies to path-traced (global_illumination) scenes only")
+    if max_depth is not None and (max_depth == 0 or max_depth < -1):
+        raise BackendError(f"mitsuba: max_depth must be -1 (unlimited) or >= 1, got {max_depth}")
+    depth = int(scene.max_depth) if max_depth is None else int(max_depth)
     mi = _import_mitsuba()
     near, far = clip_range(scene)
     t0 = time.perf_counter()
@@ -469,7 +482,7 @@ def render_radiance(
         k = max(2, min(int(passes), n_req))
         per = -(-n_req // k)  # ceil: never fewer samples than asked
         base_seed = DEFAULT_SEED if seed is None else int(seed)
-        integ = {"type": "path", "max_depth": int(scene.max_depth), "hide_emitters": False}
+        integ = {"type": "path", "max_depth": depth, "hide_emitters": False}
         mi_scene = _radiance_scene(
             mi, scene, near, far, integ, {"type": "independent", "sample_count": per},
             radiance_shapes(mi, scene, emitters=True), light_dicts(scene),
@@ -481,7 +494,8 @@ def render_radiance(
         var = means.var(axis=0, ddof=1) / k
         info.update(
             integrator="path", spp=per * k, spp_requested=n_req, passes=k, spp_per_pass=per, seed=base_seed,
-            pass_seeds=seeds, max_depth=int(scene.max_depth), sampler="independent", rfilter="box",
+            pass_seeds=seeds, max_depth=depth, scene_max_depth=int(scene.max_depth), sampler="independent",
+            rfilter="box",
             var_samples=k,
         )
         info["timings_s"] = {"build": t1 - t0, "render": time.perf_counter() - t1}
@@ -522,13 +536,18 @@ def render(
     *,
     spp: int | None = None,
     seed: int | None = None,
+    max_depth: int | None = None,
 ) -> dict[str, object]:
     """Render `scene` into `out_exr` (Z, id.prim, id.object, N; R,G,B [+ var.*] when shaded).
 
     In-process (the caller enforces `timeout_s`); `workdir` is unused. `spp` / `seed`
-    matter only for `global_illumination` (default: the scene's integrator.spp, seed 0).
+    matter only for `global_illumination` (default: the scene's integrator.spp, seed 0);
+    `max_depth` (default: the scene's) only there too, and is refused elsewhere.
     """
     from .. import exrbuf
+
+    if max_depth is not None and "global_illumination" not in scene.requires:
+        raise BackendError("mitsuba: max_depth applies to path-traced (global_illumination) scenes only")
 
     buffers, info = render_arrays(scene)
     attrs: dict[str, str | float | int] = {
@@ -539,7 +558,7 @@ def render(
     }
     rgb = var = None
     if is_shaded(scene):
-        rgb, var, rinfo = render_radiance(scene, spp=spp, seed=seed)
+        rgb, var, rinfo = render_radiance(scene, spp=spp, seed=seed, max_depth=max_depth)
         rgb = rgb.astype(np.float32)
         var = None if var is None else var.astype(np.float32)
         info["radiance"] = rinfo
@@ -550,6 +569,7 @@ def render(
             attrs["seed"] = int(rinfo["seed"]) if int(rinfo["seed"]) < 2**31 else str(rinfo["seed"])
             attrs["passes"] = int(rinfo["passes"])
             attrs["var_samples"] = int(rinfo["var_samples"])
+            attrs["max_depth"] = int(rinfo["max_depth"])
     t0 = time.perf_counter()
     exrbuf.write_buffers(
         out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], N=buffers["N"], RGB=rgb, var=var,

@@ -43,8 +43,7 @@ Unit mapping, exactly as emitted:
 * `shadowless` on every light when the scene requires `shadowless`; else POV-Ray's
   own shadow rays (which ignore occluders within its own small tolerance of the
   surface: contact shadows may differ on a line of pixels; the comparison classifies
-  those as shadow edges).
-* Emission (Le): a separate pass with `pigment { rgb Le/S_e } finish { ambient 0
+  those as shadow edges).* Emission (Le): a separate pass with `pigment { rgb Le/S_e } finish { ambient 0
   emission 1 diffuse 0 }` and no lights (POV-Ray's `emission` multiplies the pigment,
   which in the lit pass must be the albedo; a separate pass keeps both exact, albedo 0
   included). POV-Ray emits on both sides, as `two_sided` asks.
@@ -58,6 +57,21 @@ Unit mapping, exactly as emitted:
   `rgb_scale`, `emission_scale` and `rgb_encoding = "png16-linear"`; the comparison's
   tolerance is (S + S_e)/65535/2 absolute (half a code of each pass) plus a relative
   term for POV-Ray's float32 colour arithmetic (tolerance.py).
+
+Quality settings (speed/accuracy knobs; `rendiff bench knobs`)
+--------------------------------------------------------------
+`Settings` carries POV-Ray's own antialiasing (+AM method, +A threshold, +R depth, jitter
+always off: -J) and quality level (+Q). They reach the **radiance passes only**: the ID
+and depth passes always run with `-A` and the default quality, because an ID is not
+averageable (an antialiased ID pixel would be a blend of colours that decodes to no
+triangle, or to the wrong one) and a blended fixed-point depth decodes to no surface.
+Quality below 6 would also disable the function pigment that encodes depth. The
+defaults (AA off, +Q default 9) are the conformance contract: one sample at the pixel
+center. With AA on, a pixel is an average over its area, so background pixels partly
+covered by geometry keep their value (not zeroed by the center-sample hit mask), the
+clipping check covers every pixel, and the EXR records `antialias` and `quality`.
+The AA threshold compares colours of the exposure-scaled PNG (values in [0, 1], about
+1 at the brightest visible pixel), so it is relative to the image's brightest value.
 """
 
 from __future__ import annotations
@@ -324,7 +338,67 @@ def _clean_env(workdir: Path) -> dict[str, str]:
     return env
 
 
-def povray_command(binary: str, width: int, height: int, sdl_name: str, png_name: str) -> list[str]:
+AA_METHODS = (1, 2)
+"""+AM1: supersample pixels that differ from a neighbour by more than the threshold; +AM2: recursive adaptive."""
+AA_THRESHOLD_RANGE = (0.0, 3.0)
+AA_DEPTH_RANGE = (1, 9)
+QUALITY_RANGE = (0, 11)
+DEFAULT_AA_THRESHOLD = 0.3  # POV-Ray's own defaults when antialiasing is on
+DEFAULT_AA_DEPTH = 3
+
+
+@dataclass(frozen=True)
+class Settings:
+    """POV-Ray's speed/quality settings for the radiance passes (module docstring, "Quality settings").
+
+    The default is the conformance contract: no antialiasing, POV-Ray's default quality.
+    """
+
+    aa_method: int | None = None
+    aa_threshold: float | None = None
+    aa_depth: int | None = None
+    quality: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.aa_method is None and (self.aa_threshold is not None or self.aa_depth is not None):
+            raise BackendError(f"{NAME}: an antialiasing threshold or depth needs an antialiasing method (1 or 2)")
+        if self.aa_method is not None and self.aa_method not in AA_METHODS:
+            raise BackendError(f"{NAME}: antialiasing method must be 1 or 2, got {self.aa_method!r}")
+        lo, hi = AA_THRESHOLD_RANGE
+        if self.aa_threshold is not None and not (lo <= self.aa_threshold <= hi):
+            raise BackendError(f"{NAME}: antialiasing threshold must be in [{lo:g}, {hi:g}], got {self.aa_threshold!r}")
+        for what, value, (a, b) in (("antialiasing depth", self.aa_depth, AA_DEPTH_RANGE),
+                                    ("quality", self.quality, QUALITY_RANGE)):
+            if value is not None and not (isinstance(value, int) and a <= value <= b):
+                raise BackendError(f"{NAME}: {what} must be an integer in {a}..{b}, got {value!r}")
+
+    @property
+    def antialiased(self) -> bool:
+        return self.aa_method is not None
+
+    def flags(self) -> list[str]:
+        """Command-line flags for a radiance pass (numbers formatted here, never from the scene)."""
+        if self.aa_method is None:
+            out = ["-A"]
+        else:
+            threshold = DEFAULT_AA_THRESHOLD if self.aa_threshold is None else self.aa_threshold
+            depth = DEFAULT_AA_DEPTH if self.aa_depth is None else self.aa_depth
+            out = [f"+A{_num(threshold)}", f"+AM{int(self.aa_method)}", f"+R{int(depth)}", "-J"]
+        if self.quality is not None:
+            out.append(f"+Q{int(self.quality)}")
+        return out
+
+    def label(self) -> str:
+        return " ".join(self.flags())
+
+
+EXACT = Settings()
+"""The settings of every ID and depth pass, and the default of the radiance passes."""
+
+
+def povray_command(
+    binary: str, width: int, height: int, sdl_name: str, png_name: str, settings: Settings = EXACT
+) -> list[str]:
     """The command line from the notes; file names are relative to the scratch dir (cwd)."""
     return [
         binary,
@@ -333,7 +407,7 @@ def povray_command(binary: str, width: int, height: int, sdl_name: str, png_name
         "-GS",
         "-GR",
         "-GD",
-        "-A",
+        *settings.flags(),
         f"+WT{THREADS}",
         f"+W{width}",
         f"+H{height}",
@@ -345,12 +419,19 @@ def povray_command(binary: str, width: int, height: int, sdl_name: str, png_name
 
 
 def _run(
-    binary: str, scratch: Path, cam: Camera, stem: str, sdl: str, deadline: float, timeout_s: float
+    binary: str,
+    scratch: Path,
+    cam: Camera,
+    stem: str,
+    sdl: str,
+    deadline: float,
+    timeout_s: float,
+    settings: Settings = EXACT,
 ) -> float:
     """Write SDL, run POV-Ray with a hard deadline; returns the wall time of the process."""
     sdl_name, png_name = f"{stem}.pov", f"{stem}.png"
     (scratch / sdl_name).write_text(sdl)
-    cmd = povray_command(binary, cam.width, cam.height, sdl_name, png_name)
+    cmd = povray_command(binary, cam.width, cam.height, sdl_name, png_name, settings)
     remaining = deadline - time.monotonic()
     if remaining <= 0:
         raise BackendError(f"{NAME}: timed out after {timeout_s:g} s (before the {stem} pass)")
@@ -531,8 +612,22 @@ _PASSES: tuple[_Pass, ...] = (
 )
 
 
-def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float) -> dict[str, object]:
-    """Render IDs and depth; write `out_exr` atomically; return settings and sub-timings."""
+def render(
+    scene: ResolvedScene,
+    out_exr: Path,
+    workdir: Path,
+    timeout_s: float,
+    *,
+    aa_method: int | None = None,
+    aa_threshold: float | None = None,
+    aa_depth: int | None = None,
+    quality: int | None = None,
+) -> dict[str, object]:
+    """Render IDs and depth (and radiance when shaded); write `out_exr` atomically; return settings and sub-timings.
+
+    The keyword settings (module docstring, "Quality settings") reach the radiance passes only.
+    """
+    settings = Settings(aa_method, aa_threshold, aa_depth, quality)
     binary = _binary()
     if binary is None:
         raise BackendUnavailable(f"{NAME}: `{BINARY}` not found on PATH; {_INSTALL_HINT}")
@@ -543,6 +638,7 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
         "threads": THREADS,
         "flags": povray_command(BINARY, w, h, "<scene>.pov", "<out>.png")[1:],
         "near_far": "clipped_by planes",
+        "radiance_flags": settings.flags(),
     }
     n = scene.triangle_count
     if n == 0:
@@ -586,7 +682,9 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
     }
     rgb = None
     if is_shaded(scene):
-        rgb, shade_info = _radiance(binary, scratch, scene, mesh, prim, np.where(hit, depth, np.inf), deadline, timeout_s)
+        rgb, shade_info = _radiance(
+            binary, scratch, scene, mesh, prim, np.where(hit, depth, np.inf), deadline, timeout_s, settings
+        )
         info["radiance"] = shade_info
         passes.update(shade_info.pop("passes"))
         attrs.update(
@@ -596,6 +694,8 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
             integrator="direct",
             spp=1,
         )
+        if settings != EXACT:
+            attrs.update(radiance_flags=settings.label())
     exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=obj, RGB=rgb, attrs=attrs)
     shutil.rmtree(scratch, ignore_errors=True)
     return info
@@ -610,14 +710,20 @@ def _radiance(
     z: np.ndarray,
     deadline: float,
     timeout_s: float,
+    settings: Settings = EXACT,
 ) -> tuple[np.ndarray, dict[str, object]]:
-    """Lit and emission passes -> (H, W, 3) float32 radiance and what was done."""
+    """Lit and emission passes -> (H, W, 3) float32 radiance and what was done.
+
+    With antialiasing a pixel averages its area, so partly covered background pixels keep
+    their value and the clipping check covers every pixel, not only center-sample hits.
+    """
     from .. import lighting
 
     cam = scene.camera
     h, w = cam.height, cam.width
     hit = prim != exrbuf.BACKGROUND_ID
     points = lighting.hit_points(scene, z)[hit]
+    checked = np.ones_like(hit) if settings.antialiased else hit
     rgb = np.zeros((h, w, 3))
     passes: dict[str, dict[str, float]] = {}
     info: dict[str, object] = {"rgb_scale": 0.0, "emission_scale": 0.0, "rescaled": 0}
@@ -637,10 +743,10 @@ def _radiance(
             else:
                 sdl = emission_sdl(scene, mesh, scale)
             sdl_s = time.monotonic() - t_sdl
-            run_s = _run(binary, scratch, cam, stem, sdl, deadline, timeout_s)
+            run_s = _run(binary, scratch, cam, stem, sdl, deadline, timeout_s, settings)
             png = read_png16(scratch / f"{stem}.png", w, h)
             passes[stem] = {"sdl_s": sdl_s, "povray_s": run_s, "sdl_bytes": float(len(sdl)), "scale": scale}
-            if not np.any(png[hit] == PNG16_MAX):
+            if not np.any(png[checked] == PNG16_MAX):
                 break
             if attempt == MAX_RESCALES:
                 raise BackendError(
@@ -653,5 +759,7 @@ def _radiance(
         info["rgb_scale" if stem == "lit" else "emission_scale"] = scale
     info["passes"] = passes
     info["quantization_step"] = (float(info["rgb_scale"]) + float(info["emission_scale"])) / PNG16_MAX  # type: ignore[arg-type]
-    rgb[~hit] = 0.0
+    if not settings.antialiased:
+        rgb[~hit] = 0.0
+    info["flags"] = settings.flags()
     return rgb.astype(np.float32), info

@@ -2,9 +2,11 @@
 
 Conventions and their translation (docs/external-renderers notes, re-measured here):
 
-* Headless through OSMesa only. OSMesa has no framebuffer objects, so pyrender draws into
-  the single-sampled default buffer and its `glEnable(GL_MULTISAMPLE)` is a no-op. (On EGL
-  pyrender renders into a 4x MSAA FBO that blends IDs.) `render` checks `GL_SAMPLES == 0`.
+* Headless through OSMesa only. pyrender's OSMesa platform declares no framebuffer objects,
+  so pyrender draws into the single-sampled default buffer and its `glEnable(GL_MULTISAMPLE)`
+  is a no-op. (On EGL pyrender renders into a 4x MSAA FBO that blends IDs.) `render` checks
+  `GL_SAMPLES == 0`. pyrender has no sample-count setting, so MSAA is no speed/accuracy knob
+  here: `msaa_support()` measures why (recorded in the info dict and by `bench knobs`).
 * Camera: OpenGL `look_at` pose (columns right, up, -forward, eye) with
   `PerspectiveCamera(yfov = 2 atan(tan_half_vfov), aspectRatio = W/H)` puts GL's pixel
   centers on DESIGN.md's pixel centers. pyrender flips its read-back so row 0 is the top.
@@ -162,6 +164,34 @@ def _probe() -> tuple[str | None, str]:
     finally:
         renderer.delete()
     return None, desc
+
+
+@lru_cache(maxsize=1)
+def msaa_support() -> dict[str, Any]:
+    """Whether pyrender can antialias here, measured: its sample count is no setting at all.
+
+    pyrender has no MSAA option: with framebuffer support (EGL, pyglet) it always draws into
+    a hard-coded 4x multisampled FBO; on OSMesa `OSMesaPlatform.supports_framebuffers()` is
+    False, so it draws into the single-sampled default buffer (GL_SAMPLES 0) and its
+    `glEnable(GL_MULTISAMPLE)` does nothing, although llvmpipe itself offers
+    GL_MAX_SAMPLES multisampled renderbuffers. Measured from a 1x1 context.
+    """
+    import inspect
+
+    pyrender, GL = _import_gl()
+    params = [*inspect.signature(pyrender.OffscreenRenderer).parameters,
+              *inspect.signature(pyrender.OffscreenRenderer.render).parameters]
+    renderer = pyrender.OffscreenRenderer(1, 1)
+    try:
+        renderer._platform.make_current()
+        return {
+            "pyrender_sample_parameters": sorted({p for p in params if "sampl" in p.lower()}),
+            "pyrender_uses_msaa_fbo": bool(renderer._platform.supports_framebuffers()),
+            "gl_samples_default_buffer": int(GL.glGetIntegerv(GL.GL_SAMPLES)),
+            "gl_max_samples": int(GL.glGetIntegerv(GL.GL_MAX_SAMPLES)),
+        }
+    finally:
+        renderer.delete()
 
 
 def _gl_string(GL: ModuleType, name: int) -> str:
@@ -448,6 +478,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
         "platform": "osmesa",
         "gl_renderer": _probe()[1],
         "gl_samples": 0,  # checked in every pass
+        "msaa": msaa_support(),
         "flags": "FLAT|SKIP_CULL_FACES",
         "znear": near,
         "zfar": far,
