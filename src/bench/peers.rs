@@ -97,7 +97,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
                 |k: &str| embree.get(k).and_then(|v| v["core_single_rays_over_embree"].as_f64());
             json!({
                 "threads": threads,
-                "core_trace": {"kernel": "packets (4x4)", "mrays_per_s": core_mrays, "timing": core.json(),
+                "core_trace": {"kernel": "packets (8x4)", "mrays_per_s": core_mrays, "timing": core.json(),
                                "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()},
                 "core_trace_single_rays": {"mrays_per_s": single_mrays, "timing": {"median_s": single.median_s, "runs_s": single.runs_s},
                                "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},

@@ -283,7 +283,7 @@ fn lower_key(tmin: f32, ray: &PixelRay) -> u64 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TraceKernel {
-    /// 4x4-pixel packets walk the tree together (the default).
+    /// 8x4-pixel packets walk the tree together (the default).
     #[default]
     Packets,
     /// One ray at a time.
