@@ -121,3 +121,37 @@ fn float_only_predicates_still_agree_between_loops_but_skip_exact_work() {
     assert_eq!(r.counters.exact_fallbacks, 0);
     assert!(exact.counters.exact_fallbacks > 0);
 }
+
+/// Image sizes that are not multiples of the 8x4 packet: border lanes are
+/// masked off and every pixel still gets the single-ray answer.
+#[test]
+fn packets_handle_partial_tiles_at_the_image_border() {
+    let text = std::fs::read_to_string("scenes/icosphere.toml").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (w, h) in [(37, 23), (1, 1), (9, 5), (5, 3)] {
+        let sized: String = text
+            .lines()
+            .map(|l| {
+                if l.starts_with("width") {
+                    format!("width = {w}")
+                } else if l.starts_with("height") {
+                    format!("height = {h}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        let path = dir.path().join(format!("ico_{w}x{h}.toml"));
+        std::fs::write(&path, sized).unwrap();
+        let scene = load(&path);
+        assert_eq!((scene.camera.width, scene.camera.height), (w, h));
+        let (r, t) = both(&scene, false);
+        assert_identical(&format!("{w}x{h}"), &r, &t);
+        assert_identical(
+            &format!("{w}x{h} single rays"),
+            &r,
+            &trace_kernel(&scene, TraceKernel::SingleRays),
+        );
+    }
+}
