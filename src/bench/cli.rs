@@ -143,7 +143,7 @@ pub enum BenchCommand {
         /// Its cached reference EXR (with var.R/G/B).
         #[arg(long, default_value = "tests/references/cornell_gi.exr")]
         reference: PathBuf,
-        /// Samples per pixel settings, at least 2 each (--quick: 4,16).
+        /// Samples per pixel settings, at least 2 each (--quick: 4,8).
         #[arg(long, value_delimiter = ',', default_value = "16,64,256")]
         spp: Vec<u32>,
         /// Independent seeds per setting (--quick: 8).
@@ -152,7 +152,7 @@ pub enum BenchCommand {
         /// First seed.
         #[arg(long, default_value_t = 1000)]
         seed: u64,
-        /// Disjoint seed blocks on which the quick calibration test's false-alarm rate is measured (--quick: 4).
+        /// Disjoint seed blocks on which the quick calibration test's false-alarm rate is measured (--quick: 1).
         #[arg(long, default_value_t = 64)]
         test_blocks: u64,
         /// A second, independent reference EXR of the scene (another seed), to check the
@@ -283,10 +283,10 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 common: c.clone(),
                 scene,
                 reference,
-                spp: if quick { vec![4, 16] } else { spp },
+                spp: if quick { vec![4, 8] } else { spp },
                 seeds: if quick { 8 } else { seeds },
                 seed,
-                test_blocks: if quick { 4 } else { test_blocks },
+                test_blocks: if quick { 1 } else { test_blocks },
                 check_reference,
                 threads: threads.unwrap_or_else(super::cpus).max(1),
             };

@@ -234,10 +234,7 @@ pub fn calibration(stack: &SeedStack, weight_var: &[[f32; 3]]) -> Result<Calibra
         );
     }
     let cells = stack.cells();
-    let floor = median_positive(weight_var);
-    if !(floor > 0.0) {
-        bail!("the weights' variance is zero everywhere: no weights for the balanced ratio");
-    }
+    let floor = weight_floor(weight_var);
     let balanced: Vec<(f64, f64)> = cells
         .iter()
         .zip(weight_var)
@@ -314,15 +311,20 @@ pub fn calibration(stack: &SeedStack, weight_var: &[[f32; 3]]) -> Result<Calibra
     })
 }
 
-/// The median of the positive values (NaN when none): the balanced weights' floor.
-fn median_positive(v: &[[f32; 3]]) -> f64 {
+/// The balanced weights' floor: the median of the positive values, or 1 when
+/// none is positive (every weight then equal).
+fn weight_floor(v: &[[f32; 3]]) -> f64 {
     let mut positive: Vec<f64> = v
         .iter()
         .flatten()
         .map(|&x| f64::from(x))
         .filter(|x| *x > 0.0)
         .collect();
-    quantiles(&mut positive, &[0.5])[0]
+    if positive.is_empty() {
+        1.0
+    } else {
+        quantiles(&mut positive, &[0.5])[0]
+    }
 }
 
 /// Kish's effective sample size of weights: (Σw)² / Σw².
@@ -381,7 +383,7 @@ pub struct Split {
     /// few means the absolute-scale split rests on few independent numbers.
     pub reference_variance_effective_pixels: f64,
     /// Σ w (M − r)² / Σ w (v̄/K + var_r) with the balanced ratio's fixed weights
-    /// w = 1/(var_r + median var_r), v̄ the mean predicted variance: 1 when unbiased
+    /// w = 1/(var_r + median of positive var_r) (equal weights if none is positive), v̄ the mean predicted variance: 1 when unbiased
     /// and both variances are right, above 1 by bias² / noise. Fixed weights and sums
     /// (not a mean of per-cell ratios, which noisy variances push above 1) keep it
     /// exact in expectation; the weights stop a few light-edge pixels from deciding it.
@@ -411,7 +413,7 @@ pub fn split(stack: &SeedStack, reference: Reference) -> Result<Split> {
     let mut bias2 = Vec::with_capacity(stack.pixels);
     let mut balanced = Vec::with_capacity(stack.pixels);
     let mut z = vec![[f64::NAN; 3]; stack.pixels];
-    let floor = median_positive(reference.var);
+    let floor = weight_floor(reference.var);
     for (p, cell) in cells.iter().enumerate() {
         let (mut e, mut b, mut wd2, mut wn) = (0.0, 0.0, 0.0, 0.0);
         for (ch, c) in cell.iter().enumerate() {
@@ -619,6 +621,7 @@ mod tests {
         .unwrap();
         assert!((s.bias2.mean + 1e-4).abs() < 4.0 * s.bias2.se, "{s:?}");
         assert!((s.variance_empirical / s.variance_predicted - 1.0).abs() < 0.1);
+        assert!(s.residual_over_noise.z < 3.3, "{:?}", s.residual_over_noise);
         // Off by 0.05 everywhere: bias² = 0.0025.
         let off = vec![[1.05f32; 3]; n];
         let s = split(
@@ -632,6 +635,11 @@ mod tests {
         .unwrap();
         assert!((s.bias2.mean - 0.0025).abs() < 4.0 * s.bias2.se, "{s:?}");
         assert!(s.bias2.ci95[0] > 0.0);
+        assert!(
+            s.residual_over_noise.ci95[0] > 1.0,
+            "{:?}",
+            s.residual_over_noise
+        );
         assert!(s.neighbour_correlation.abs() < 0.2);
         assert!(split(
             &st,
