@@ -221,6 +221,9 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
     if opts.seeds < 2 {
         bail!("--seeds must be at least 2, got {}", opts.seeds);
     }
+    if let Some(spp) = opts.spp.iter().find(|&&n| n < 2) {
+        bail!("spp {spp}: a variance estimate needs at least 2 samples per pixel");
+    }
     let scene = super::load_scene(&opts.scene)?;
     if !scene.requires.contains("global_illumination") {
         bail!(
@@ -257,9 +260,6 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
     let mut verdicts = Vec::new();
     let mut parts: Vec<(u32, Split)> = Vec::new();
     for &spp in &opts.spp {
-        if spp < 2 {
-            bail!("spp {spp}: a variance estimate needs at least 2 samples per pixel");
-        }
         eprintln!("variance: {spp} spp x {} seeds", opts.seeds);
         let (c, s, seconds) = pool.install(|| setting(&scene, &bvh, refr, spp, opts))?;
         verdicts.push(verdict(spp, &c, &s));
@@ -367,7 +367,7 @@ fn page(record: &Value, plot: &str) -> String {
         p.para(v.as_str().unwrap_or(""));
     }
     let f = |v: &Value, k: usize| num(v.as_f64(), k);
-    let ci = |v: &Value| format!("{}-{}", f(&v[0], 4), f(&v[1], 4));
+    let ci = |v: &Value| format!("{} to {}", f(&v[0], 4), f(&v[1], 4));
     let settings = record["settings"].as_array().cloned().unwrap_or_default();
     p.heading("Calibration: empirical / predicted variance of the mean");
     let rows: Vec<Vec<String>> = settings
