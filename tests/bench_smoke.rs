@@ -162,3 +162,29 @@ fn stability_writes_a_break_table() {
             .all(|r| r["family"].is_string() && r["backend"].is_string()));
     }
 }
+
+#[test]
+fn variance_writes_calibration_split_and_the_quick_tests_power() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("variance", dir.path());
+    let rows = record["settings"].as_array().expect("settings");
+    assert!(!rows.is_empty());
+    for r in rows {
+        let c = &r["calibration"];
+        for k in ["pooled", "balanced"] {
+            let ci = &c[k]["ci95"];
+            assert!(
+                ci[0].as_f64().unwrap() <= c[k]["ratio"].as_f64().unwrap()
+                    && c[k]["ratio"].as_f64().unwrap() <= ci[1].as_f64().unwrap(),
+                "{k}: the interval holds the estimate"
+            );
+        }
+        let s = &r["split"];
+        assert!(s["rmse_single_render"].as_f64().is_some_and(|x| x > 0.0));
+        assert!(s["bias2"]["mean"].as_f64().is_some_and(f64::is_finite));
+    }
+    // The injected halving and doubling are far outside the test's threshold.
+    let power = record["quick_test"]["power"].as_array().expect("power");
+    assert_eq!(power.len(), 2);
+    assert!(power.iter().all(|p| p["rejected"] == true));
+}

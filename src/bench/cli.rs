@@ -6,6 +6,7 @@ use super::crossover::{self, CrossoverOptions};
 use super::knobs::{self, KnobsOptions, SceneSpec};
 use super::peers::{self, PeersOptions};
 use super::stability::{self, StabilityOptions};
+use super::variance::{self, VarianceOptions};
 use super::{Common, Output};
 use anyhow::Result;
 use std::path::PathBuf;
@@ -157,6 +158,37 @@ pub enum BenchCommand {
         #[arg(long, value_delimiter = ',')]
         only: Option<Vec<String>>,
     },
+    /// Whether the core path tracer's variance-of-the-mean estimate is calibrated (many seeds), and its bias vs the reference.
+    Variance {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Global-illumination scene.
+        #[arg(long, default_value = "scenes/cornell_gi.toml")]
+        scene: PathBuf,
+        /// Its cached reference EXR (with var.R/G/B).
+        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
+        reference: PathBuf,
+        /// Samples per pixel settings, at least 2 each (--quick: 4,8).
+        #[arg(long, value_delimiter = ',', default_value = "16,64,256")]
+        spp: Vec<u32>,
+        /// Independent seeds per setting (--quick: 8).
+        #[arg(long, default_value_t = 64)]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Disjoint seed blocks on which the quick calibration test's false-alarm rate is measured (--quick: 1).
+        #[arg(long, default_value_t = 64)]
+        test_blocks: u64,
+        /// A second, independent reference EXR of the scene (another seed), to check the
+        /// reference's stated variance.
+        #[arg(long)]
+        check_reference: Option<PathBuf>,
+        /// Worker threads (default: all CPUs).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
 }
 
 /// Runs one subcommand and writes its outputs.
@@ -289,6 +321,32 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 only,
             };
             ("stability", c, stability::run(&opts)?)
+        }
+        BenchCommand::Variance {
+            common,
+            scene,
+            reference,
+            spp,
+            seeds,
+            seed,
+            test_blocks,
+            check_reference,
+            threads,
+        } => {
+            let c = common.common()?;
+            let quick = c.quick;
+            let opts = VarianceOptions {
+                common: c.clone(),
+                scene,
+                reference,
+                spp: if quick { vec![4, 8] } else { spp },
+                seeds: if quick { 8 } else { seeds },
+                seed,
+                test_blocks: if quick { 1 } else { test_blocks },
+                check_reference,
+                threads: threads.unwrap_or_else(super::cpus).max(1),
+            };
+            ("variance", c, variance::run(&opts)?)
         }
     };
     let written = super::write_outputs(&common.out_dir, stem, &out.record, &out.html, &out.svgs)?;

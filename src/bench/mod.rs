@@ -8,6 +8,7 @@
 //! - [`peers`]: the core against Embree, pyrender and Mitsuba on identical work, as ratios.
 //! - [`crossover`]: raster against trace as triangles shrink from a few large to millions of tiny.
 //! - [`stability`]: scene families pushed to numerical extremes through `rendiff check`.
+//! - [`variance`]: whether the path tracer's variance-of-the-mean estimate is calibrated, and its bias.
 //!
 //! Everything here is a measurement, never an assertion: tests only check that
 //! the benchmarks run and write well-formed output. Timings are medians of
@@ -28,6 +29,8 @@ pub mod plot;
 pub mod radiance;
 pub mod spp;
 pub mod stability;
+pub mod variance;
+pub mod variance_stats;
 
 pub use core_loops::{run, BenchOptions};
 

@@ -26,6 +26,10 @@ pub const PAGES: &[(&str, &str)] = &[
         "where each renderer breaks on numerical extremes",
     ),
     ("core", "raster and trace on one scene per thread count"),
+    (
+        "variance",
+        "is the path tracer's variance estimate calibrated; bias against the reference",
+    ),
 ];
 
 /// A page under construction: markup made only from escaped text and our own SVG.

@@ -29,6 +29,11 @@ pub enum Bias {
     OneBounceFewer,
     /// Light intensities and emitted radiance (area lights) off by a factor pi.
     LightTimesPi,
+    /// Path tracing only: the reported variance of each pixel's mean halved (the
+    /// mean is untouched), so a calibration test's power can be checked.
+    VarianceHalved,
+    /// Path tracing only: the reported variance of each pixel's mean doubled.
+    VarianceDoubled,
 }
 
 /// How to shade.

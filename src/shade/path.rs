@@ -168,6 +168,11 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
             (max_depth - 1).max(1)
         };
     }
+    let var_scale = match opts.bias {
+        Some(Bias::VarianceHalved) => 0.5,
+        Some(Bias::VarianceDoubled) => 2.0,
+        _ => 1.0,
+    };
     let n = opts.spp.max(1);
     let w = cam.width as usize;
     let out: Vec<([f32; 3], [f32; 3])> = (0..cam.pixel_count())
@@ -196,7 +201,7 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
             let nf = f64::from(n);
             let mean = sum / nf;
             let var = if n > 1 {
-                ((sum2 - sum * sum / nf) / (nf - 1.0)).max(DVec3::ZERO) / nf
+                ((sum2 - sum * sum / nf) / (nf - 1.0)).max(DVec3::ZERO) / nf * var_scale
             } else {
                 DVec3::ZERO
             };
