@@ -198,7 +198,7 @@ impl TraceBvh {
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
                     let leaf = &self.leaves[k as usize];
-                    let t = &scene.triangles[leaf.prim as usize];
+                    let t = &leaf.tri;
                     let facing = covers(cam, leaf, t, ray, &r, c);
                     if facing == 0 {
                         continue;

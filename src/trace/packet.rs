@@ -117,14 +117,7 @@ impl Packet {
 
     /// Tests one triangle against the lanes in `m`, updating their nearest keys.
     #[inline(always)]
-    fn leaf(
-        &mut self,
-        cam: &Camera,
-        scene: &ResolvedScene,
-        leaf: &LeafTri,
-        m: Mask,
-        c: &mut Counters,
-    ) {
+    fn leaf(&mut self, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
         // f32 signs of the three edges for all lanes at once.
         let mut sign = [[0i8; LANES]; 3];
         for (k, row) in sign.iter_mut().enumerate() {
@@ -135,7 +128,7 @@ impl Packet {
                 *s = i8::from(det > bound) - i8::from(-det > bound);
             }
         }
-        let t = &scene.triangles[leaf.prim as usize];
+        let t = &leaf.tri;
         let mut depth: Option<TriDepth> = None;
         let mut lanes = m;
         while lanes != 0 {
@@ -228,7 +221,7 @@ impl TraceBvh {
             }
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
-                    pk.leaf(cam, scene, &self.leaves[k as usize], m, c);
+                    pk.leaf(cam, &self.leaves[k as usize], m, c);
                 }
                 continue;
             }

@@ -181,6 +181,9 @@ pub(crate) struct LeafTri {
     beta: [f32; 3],
     /// The triangle's id in the scene.
     pub prim: u32,
+    /// Its vertices (a copy in BVH order: the exact fallback and the depth
+    /// read them from the cache line just fetched, not from the scene).
+    pub tri: Tri,
 }
 
 impl LeafTri {
@@ -200,7 +203,12 @@ impl LeafTri {
                 beta[k] = round_up(b);
             }
         }
-        LeafTri { n, beta, prim }
+        LeafTri {
+            n,
+            beta,
+            prim,
+            tri: *t,
+        }
     }
 
     /// Edge `k`'s f32 normal and filter bound coefficient.
