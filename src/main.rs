@@ -32,6 +32,10 @@ enum Renderer {
     Raster,
     /// Outer loop over pixels, BVH (obvhs), rows in parallel.
     Trace,
+    /// Embree's rtcIntersect1 per pixel center, default scene flags (visibility only).
+    Embree,
+    /// Embree with RTC_SCENE_FLAG_ROBUST (visibility only).
+    EmbreeRobust,
 }
 
 #[derive(Subcommand)]
@@ -220,7 +224,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let name = match renderer {
                 Renderer::Raster => "raster",
                 Renderer::Trace => "trace",
+                Renderer::Embree => "embree",
+                Renderer::EmbreeRobust => "embree_robust",
             };
+            let embree_mode = match renderer {
+                Renderer::Embree => Some(rendiff::backends::embree::EmbreeMode::Default),
+                Renderer::EmbreeRobust => Some(rendiff::backends::embree::EmbreeMode::Robust),
+                _ => None,
+            };
+            if let Some(mode) = embree_mode {
+                return render_embree(&resolved, mode, &scene, output, &pool, no_preview);
+            }
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()
@@ -406,6 +420,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     spp,
                     bias: inject_bias,
                 },
+                isolate: None,
             };
             let outcome = match rendiff::check::run(&opts) {
                 Ok(o) => o,
@@ -461,6 +476,68 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
     Ok(ResolvedScene::resolve(&scene)?)
 }
 
+/// `rendiff render --renderer embree|embree-robust`: visibility only. A scene
+/// that needs shading, or a missing Embree library, exits with code 3 (skipped,
+/// the harness's convention) and says why, so `check` can run it as a child.
+fn render_embree(
+    scene: &ResolvedScene,
+    mode: rendiff::backends::embree::EmbreeMode,
+    scene_path: &Path,
+    output: Option<PathBuf>,
+    pool: &rayon::ThreadPool,
+    no_preview: bool,
+) -> Result<ExitCode> {
+    use rendiff::backends::embree::{self, EmbreeError};
+    let missing: Vec<&str> = scene
+        .requires
+        .iter()
+        .map(String::as_str)
+        .filter(|r| !rendiff::check::EMBREE_FEATURES.contains(r))
+        .collect();
+    if !missing.is_empty() {
+        eprintln!(
+            "{}: skipped: missing features: {}",
+            mode.name(),
+            missing.join(", ")
+        );
+        return Ok(ExitCode::from(3));
+    }
+    let frame = match pool.install(|| embree::render(scene, mode)) {
+        Ok(f) => f,
+        Err(EmbreeError::Unavailable(why)) => {
+            eprintln!("{}: skipped: {why}", mode.name());
+            return Ok(ExitCode::from(3));
+        }
+        Err(e) => anyhow::bail!("{}: {e}", mode.name()),
+    };
+    let out = output.unwrap_or_else(|| {
+        let stem = scene_path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into());
+        Path::new("out").join(format!("{stem}.{}.exr", mode.name()))
+    });
+    let mut attrs = frame_attrs(&frame, &scene_path.display().to_string());
+    attrs.insert(
+        "threads".to_string(),
+        pool.current_num_threads().to_string(),
+    );
+    write_frame_with(&out, &frame, None, &attrs)?;
+    if !no_preview {
+        preview::write_previews(&out, &frame)?;
+    }
+    println!(
+        "{}: {}x{} px, {} triangles, {:.3} s -> {}",
+        mode.name(),
+        frame.width,
+        frame.height,
+        scene.triangles.len(),
+        frame.seconds,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: bool) -> Frame {
     let cam = &scene.camera;
     match renderer {
@@ -481,6 +558,9 @@ fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: boo
             let f = trace::render(scene, opts, &|n| bar.inc(n));
             bar.finish();
             f
+        }
+        Renderer::Embree | Renderer::EmbreeRobust => {
+            unreachable!("Embree renders go through render_embree")
         }
     }
 }

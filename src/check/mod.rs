@@ -6,6 +6,7 @@
 //! the others still run. The Python side then compares every buffer with the
 //! reference (OpenImageIO + numpy) and writes results.json.
 
+pub mod isolated;
 pub mod manifest;
 pub mod process;
 
@@ -72,6 +73,10 @@ pub struct CheckOptions {
     pub references: Option<PathBuf>,
     /// The core's path-tracing settings.
     pub core: CoreShading,
+    /// Render the core loops and Embree in child processes of this rendiff
+    /// binary (`rendiff render`), so that each render's peak memory is its own
+    /// (`max_rss_bytes`); `None`: in process, as usual.
+    pub isolate: Option<PathBuf>,
 }
 
 /// How the core shades in a check run (the reference for radiance).
@@ -341,6 +346,16 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", core_missing.join(", ")),
                     ..RenderRecord::default()
                 }
+            } else if let Some(bin) = &opts.isolate {
+                let job = isolated::Job {
+                    bin,
+                    backend: name,
+                    scene: scene_path,
+                    exr: &exr,
+                    rel_exr: &rel_exr,
+                    scratch: &scratch,
+                };
+                isolated::render(opts, &job, version.clone())
             } else {
                 let sc = &scene;
                 let core = opts.core;
@@ -389,6 +404,20 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", emissing.join(", ")),
                     ..RenderRecord::default()
                 }
+            } else if let Some(bin) = &opts.isolate {
+                let job = isolated::Job {
+                    bin,
+                    backend: name,
+                    scene: scene_path,
+                    exr: &exr,
+                    rel_exr: &rel_exr,
+                    scratch: &scratch,
+                };
+                isolated::render(
+                    opts,
+                    &job,
+                    embree::version().unwrap_or_else(|e| e.to_string()),
+                )
             } else {
                 let command = shell_line([exe, "check", "--only", name, &scene_arg]);
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
@@ -507,6 +536,7 @@ fn external(
         }
         Ok(o) => {
             rec.time_s = o.seconds;
+            rec.max_rss_bytes = o.max_rss_bytes;
             if o.timed_out {
                 rec.status = "error".into();
                 rec.message = format!(
