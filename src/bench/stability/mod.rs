@@ -259,7 +259,12 @@ fn judge_all(fams: &[Family], scene_dir: &Path, runs: &Runs) -> Value {
             rows.insert(0, check::REFERENCE.to_string());
         }
         for m in &f.members {
-            let scene = load(&scene_dir.join(format!("{}.toml", m.name)));
+            // Only the exact judges need the scene (the triangle-count scenes are large).
+            let scene = if matches!(f.judge, Judge::FillRule | Judge::Truth { .. }) {
+                load(&scene_dir.join(format!("{}.toml", m.name)))
+            } else {
+                Err(anyhow::anyhow!("not loaded: judged against the reference"))
+            };
             let truth = matches!(f.judge, Judge::Truth { .. })
                 .then(|| scene.as_ref().ok().map(judge::truth))
                 .flatten();
@@ -371,30 +376,28 @@ fn judge_one(
             &runs.info(&m.name, backend),
             *ties_break,
         ),
-        (Judge::FillRule, _) => {
-            let layout = m.layout.as_ref().expect("fill-rule members carry a layout");
-            if is_ref {
-                let frame = raster::render(
-                    scene,
-                    RasterOptions {
-                        count_coverage: true,
-                    },
-                    &|_| {},
-                );
-                judge::fill_rule_coverage(layout, &frame)
-            } else {
-                match runs
-                    .exr(&m.name, check::REFERENCE)
-                    .map(|p| read_buffers(&p))
-                {
-                    Some(Ok(r)) => match judge::Ids::of(&r, w, h) {
-                        Some(ri) => judge::fill_rule(layout, &ri, &test_ids),
-                        None => (Some("reference buffers lack id.prim".into()), Value::Null),
-                    },
-                    _ => (Some("no reference buffers".into()), Value::Null),
-                }
+        (Judge::FillRule, _) => match m.layout.as_ref() {
+            None => (
+                Some("no layout for this fill-rule scene".into()),
+                Value::Null,
+            ),
+            Some(layout) if is_ref => {
+                let opts = RasterOptions {
+                    count_coverage: true,
+                };
+                judge::fill_rule_coverage(layout, &raster::render(scene, opts, &|_| {}))
             }
-        }
+            Some(layout) => match runs
+                .exr(&m.name, check::REFERENCE)
+                .map(|p| read_buffers(&p))
+            {
+                Some(Ok(r)) => match judge::Ids::of(&r, w, h) {
+                    Some(ri) => judge::fill_rule(layout, &ri, &test_ids),
+                    None => (Some("reference buffers lack id.prim".into()), Value::Null),
+                },
+                _ => (Some("no reference buffers".into()), Value::Null),
+            },
+        },
         _ => (Some("no truth for this scene".into()), Value::Null),
     };
     why.extend(broken.map(|b| format!("id: {b}")));
@@ -600,7 +603,7 @@ fn page(record: &Value, svg: &str) -> String {
                 super::page::compact(&r["family"]),
                 super::page::compact(&r["backend"]),
                 if r["values_run"] == json!(0) {
-                    format!("skipped: {}", super::page::compact(&r["skipped"]))
+                    super::page::compact(&r["skipped"])
                 } else if fb.is_object() {
                     super::page::compact(&fb["label"])
                 } else {
