@@ -476,68 +476,6 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
     Ok(ResolvedScene::resolve(&scene)?)
 }
 
-/// `rendiff render --renderer embree|embree-robust`: visibility only. A scene
-/// that needs shading, or a missing Embree library, exits with code 3 (skipped,
-/// the harness's convention) and says why, so `check` can run it as a child.
-fn render_embree(
-    scene: &ResolvedScene,
-    mode: rendiff::backends::embree::EmbreeMode,
-    scene_path: &Path,
-    output: Option<PathBuf>,
-    pool: &rayon::ThreadPool,
-    no_preview: bool,
-) -> Result<ExitCode> {
-    use rendiff::backends::embree::{self, EmbreeError};
-    let missing: Vec<&str> = scene
-        .requires
-        .iter()
-        .map(String::as_str)
-        .filter(|r| !rendiff::check::EMBREE_FEATURES.contains(r))
-        .collect();
-    if !missing.is_empty() {
-        eprintln!(
-            "{}: skipped: missing features: {}",
-            mode.name(),
-            missing.join(", ")
-        );
-        return Ok(ExitCode::from(3));
-    }
-    let frame = match pool.install(|| embree::render(scene, mode)) {
-        Ok(f) => f,
-        Err(EmbreeError::Unavailable(why)) => {
-            eprintln!("{}: skipped: {why}", mode.name());
-            return Ok(ExitCode::from(3));
-        }
-        Err(e) => anyhow::bail!("{}: {e}", mode.name()),
-    };
-    let out = output.unwrap_or_else(|| {
-        let stem = scene_path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "scene".into());
-        Path::new("out").join(format!("{stem}.{}.exr", mode.name()))
-    });
-    let mut attrs = frame_attrs(&frame, &scene_path.display().to_string());
-    attrs.insert(
-        "threads".to_string(),
-        pool.current_num_threads().to_string(),
-    );
-    write_frame_with(&out, &frame, None, &attrs)?;
-    if !no_preview {
-        preview::write_previews(&out, &frame)?;
-    }
-    println!(
-        "{}: {}x{} px, {} triangles, {:.3} s -> {}",
-        mode.name(),
-        frame.width,
-        frame.height,
-        scene.triangles.len(),
-        frame.seconds,
-        out.display()
-    );
-    Ok(ExitCode::SUCCESS)
-}
-
 fn render(scene: &ResolvedScene, renderer: Renderer, bvh: BvhQuality, quiet: bool) -> Frame {
     let cam = &scene.camera;
     match renderer {
@@ -611,4 +549,66 @@ fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// `rendiff render --renderer embree|embree-robust`: visibility only. A scene
+/// that needs shading, or a missing Embree library, exits with code 3 (skipped,
+/// the harness's convention) and says why, so `check` can run it as a child.
+fn render_embree(
+    scene: &ResolvedScene,
+    mode: rendiff::backends::embree::EmbreeMode,
+    scene_path: &Path,
+    output: Option<PathBuf>,
+    pool: &rayon::ThreadPool,
+    no_preview: bool,
+) -> Result<ExitCode> {
+    use rendiff::backends::embree::{self, EmbreeError};
+    let missing: Vec<&str> = scene
+        .requires
+        .iter()
+        .map(String::as_str)
+        .filter(|r| !rendiff::check::EMBREE_FEATURES.contains(r))
+        .collect();
+    if !missing.is_empty() {
+        eprintln!(
+            "{}: skipped: missing features: {}",
+            mode.name(),
+            missing.join(", ")
+        );
+        return Ok(ExitCode::from(3));
+    }
+    let frame = match pool.install(|| embree::render(scene, mode)) {
+        Ok(f) => f,
+        Err(EmbreeError::Unavailable(why)) => {
+            eprintln!("{}: skipped: {why}", mode.name());
+            return Ok(ExitCode::from(3));
+        }
+        Err(e) => anyhow::bail!("{}: {e}", mode.name()),
+    };
+    let out = output.unwrap_or_else(|| {
+        let stem = scene_path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into());
+        Path::new("out").join(format!("{stem}.{}.exr", mode.name()))
+    });
+    let mut attrs = frame_attrs(&frame, &scene_path.display().to_string());
+    attrs.insert(
+        "threads".to_string(),
+        pool.current_num_threads().to_string(),
+    );
+    write_frame_with(&out, &frame, None, &attrs)?;
+    if !no_preview {
+        preview::write_previews(&out, &frame)?;
+    }
+    println!(
+        "{}: {}x{} px, {} triangles, {:.3} s -> {}",
+        mode.name(),
+        frame.width,
+        frame.height,
+        scene.triangles.len(),
+        frame.seconds,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
 }
