@@ -420,7 +420,6 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     spp,
                     bias: inject_bias,
                 },
-                isolate: None,
             };
             let outcome = match rendiff::check::run(&opts) {
                 Ok(o) => o,

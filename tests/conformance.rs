@@ -31,7 +31,6 @@ fn main() {
             quiet: false,
             references: Some(root.join("tests/references")),
             core: check::CoreShading::default(),
-            isolate: None,
         };
         match check::run(&opts) {
             Err(e) => {

@@ -70,7 +70,7 @@ pub struct RenderRecord {
     pub info: serde_json::Value,
     /// Peak resident memory (bytes) of the process that rendered, where it ran
     /// as a child process of its own (external renderers; the core and Embree
-    /// when the check isolates them): memory is then per renderer.
+    /// when the check isolates them, `check::run_isolating`): memory is then per renderer.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_rss_bytes: Option<u64>,
 }

@@ -73,10 +73,6 @@ pub struct CheckOptions {
     pub references: Option<PathBuf>,
     /// The core's path-tracing settings.
     pub core: CoreShading,
-    /// Render the core loops and Embree in child processes of this rendiff
-    /// binary (`rendiff render`), so that each render's peak memory is its own
-    /// (`max_rss_bytes`); `None`: in process, as usual.
-    pub isolate: Option<PathBuf>,
 }
 
 /// How the core shades in a check run (the reference for radiance).
@@ -269,6 +265,14 @@ fn describe(rec: &RenderRecord) -> String {
 
 /// Runs every scene on every backend, then the comparison; writes manifest.json and results.json.
 pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
+    run_isolating(opts, None)
+}
+
+/// Like [`run`], but with `isolate` set the core loops and Embree render in
+/// child processes of that rendiff binary (`rendiff render`), so that each
+/// render's peak memory (`max_rss_bytes`) is its own, as the external ones'
+/// already are. A separate entry point, so that `CheckOptions` stays as it was.
+pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<CheckOutcome> {
     if opts.scenes.is_empty() {
         bail!("no scenes to check");
     }
@@ -346,7 +350,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", core_missing.join(", ")),
                     ..RenderRecord::default()
                 }
-            } else if let Some(bin) = &opts.isolate {
+            } else if let Some(bin) = isolate {
                 let job = isolated::Job {
                     bin,
                     backend: name,
@@ -404,7 +408,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", emissing.join(", ")),
                     ..RenderRecord::default()
                 }
-            } else if let Some(bin) = &opts.isolate {
+            } else if let Some(bin) = isolate {
                 let job = isolated::Job {
                     bin,
                     backend: name,

@@ -1,5 +1,5 @@
 //! The triangle-count family: each size through `rendiff check` with every
-//! render in a child process of its own (`CheckOptions::isolate`), so the peak
+//! render in a child process of its own (`check::run_isolating`), so the peak
 //! memory (`wait4`'s max RSS) and the time are per renderer. Sizes run smallest
 //! first; a renderer whose next size, scaled linearly from the last one it
 //! ran, would exceed the memory or time budget is not run there, and the table
@@ -76,7 +76,6 @@ pub fn run(
             scenes: vec![file.clone()],
             run_dir: run_dir.clone(),
             only,
-            isolate: bin.clone(),
             ..template.clone()
         };
         eprintln!(
@@ -84,7 +83,7 @@ pub fn run(
             m.name,
             m.triangles.unwrap_or(0)
         );
-        let outcome = check::run(&opts);
+        let outcome = check::run_isolating(&opts, bin.as_deref());
         last.clear();
         if let Ok(o) = &outcome {
             for sr in &o.manifest.scenes {

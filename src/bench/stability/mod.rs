@@ -159,7 +159,6 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         quiet: true,
         references: None,
         core: check::CoreShading::default(),
-        isolate: None,
     };
     eprintln!(
         "stability: {} scenes through rendiff check ({})",
