@@ -177,6 +177,17 @@ enum Command {
         #[arg(long, default_value = "reports/baseline.json")]
         baseline: PathBuf,
     },
+    /// Internal: run a command and write its peak memory (max RSS, bytes) to a
+    /// file; `check` measures renders through it, from a small process.
+    #[command(hide = true, name = "peak-rss")]
+    PeakRss {
+        /// File to write the peak to.
+        #[arg(long)]
+        report: PathBuf,
+        /// The command and its arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, required = true)]
+        command: Vec<std::ffi::OsString>,
+    },
     /// Make a run's verdicts and numbers the new baseline (the only way thresholds change).
     Bless {
         /// Run folder (holds manifest.json and results.json).
@@ -362,6 +373,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 baseline.display()
             );
             Ok(ExitCode::SUCCESS)
+        }
+        Command::PeakRss { report, command } => {
+            let code = rendiff::check::process::peak_rss_main(&report, &command)?;
+            Ok(ExitCode::from(u8::try_from(code).unwrap_or(255)))
         }
         Command::Bench {
             what: Some(what), ..

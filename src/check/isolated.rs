@@ -3,7 +3,7 @@
 //! whole check, a child's peak (`wait4`'s `ru_maxrss`) is that renderer's own.
 
 use super::manifest::RenderRecord;
-use super::process::{run_with_timeout, shell_line};
+use super::process::{run_measured, shell_line};
 use super::CheckOptions;
 use crate::exr_io::read_buffers;
 use std::path::Path;
@@ -65,7 +65,7 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
         job.scene.file_stem().unwrap_or_default().to_string_lossy(),
         job.backend
     ));
-    match run_with_timeout(cmd, opts.timeout, &work) {
+    match run_measured(cmd, opts.timeout, &work, job.bin) {
         Err(e) => {
             rec.status = "error".into();
             rec.message = format!("{e:#}");

@@ -268,10 +268,11 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
     run_isolating(opts, None)
 }
 
-/// Like [`run`], but with `isolate` set the core loops and Embree render in
-/// child processes of that rendiff binary (`rendiff render`), so that each
-/// render's peak memory (`max_rss_bytes`) is its own, as the external ones'
-/// already are. A separate entry point, so that `CheckOptions` stays as it was.
+/// Like [`run`], but with `isolate` (a rendiff binary) set, every render runs
+/// in a child process of its own whose peak memory is measured
+/// (`max_rss_bytes`, see [`process::run_measured`]): the core loops and Embree
+/// through `rendiff render`, the external renderers as always. A separate
+/// entry point, so that `CheckOptions` stays as it was.
 pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<CheckOutcome> {
     if opts.scenes.is_empty() {
         bail!("no scenes to check");
@@ -445,7 +446,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                     if !wanted(opts, &b.name) {
                         continue;
                     }
-                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch);
+                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch, isolate);
                     say(opts, format!("  {:<14} {}", b.name, describe(&rec)));
                     runs.renders.push(rec);
                 }
@@ -478,6 +479,7 @@ fn external(
     dir: &Path,
     rel_dir: &str,
     scratch: &Path,
+    measure: Option<&Path>,
 ) -> RenderRecord {
     let mut rec = RenderRecord {
         backend: b.name.clone(),
@@ -533,7 +535,11 @@ fn external(
     // covers in-process renderers (pyrender, Mitsuba) that hang.
     let limit = opts.timeout + opts.timeout.min(Duration::from_secs(30));
     let work = scratch.join(format!("{}-{}", runs.scene, b.name));
-    match run_with_timeout(cmd, limit, &work) {
+    let outcome = match measure {
+        Some(helper) => process::run_measured(cmd, limit, &work, helper),
+        None => run_with_timeout(cmd, limit, &work),
+    };
+    match outcome {
         Err(e) => {
             rec.status = "error".into();
             rec.message = format!("{e:#}");

@@ -19,9 +19,8 @@ pub struct Outcome {
     pub stderr: String,
     /// Wall-clock seconds.
     pub seconds: f64,
-    /// Peak resident memory in bytes of the process and every descendant it
-    /// waited for (the kernel's `ru_maxrss` from `wait4`); `None` where the
-    /// platform does not report it or the process was killed.
+    /// Peak resident memory in bytes of the command and the children it waited
+    /// for, from [`run_measured`]; `None` otherwise or when it was killed.
     pub max_rss_bytes: Option<u64>,
 }
 
@@ -35,13 +34,63 @@ impl Outcome {
 
 /// Runs `cmd` with stdin closed and output captured to files in `scratch`
 /// (pipes could fill up and deadlock a chatty renderer); kills it after `timeout`.
-pub fn run_with_timeout(mut cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
+pub fn run_with_timeout(cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
+    run(cmd, timeout, scratch, false)
+}
+
+/// Like [`run_with_timeout`], and measures the command's peak memory: it runs
+/// under `helper` (the rendiff binary's hidden `peak-rss` command), which
+/// starts it from its own small process and reports `wait4`'s max RSS of it
+/// and the children it waited for. Started directly from a large process, a
+/// child's max RSS would include its parent's resident memory at the moment
+/// of the spawn (Linux records the pre-exec image). The helper runs in a
+/// process group of its own, and a timeout kills the whole group.
+pub fn run_measured(
+    cmd: Command,
+    timeout: Duration,
+    scratch: &Path,
+    helper: &Path,
+) -> Result<Outcome> {
+    std::fs::create_dir_all(scratch)
+        .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
+    let report = scratch.join("peak_rss.txt");
+    let _ = std::fs::remove_file(&report);
+    let mut wrapped = Command::new(helper);
+    wrapped
+        .arg("peak-rss")
+        .arg("--report")
+        .arg(&report)
+        .arg("--")
+        .arg(cmd.get_program())
+        .args(cmd.get_args());
+    if let Some(d) = cmd.get_current_dir() {
+        wrapped.current_dir(d);
+    }
+    for (k, v) in cmd.get_envs() {
+        match v {
+            Some(v) => wrapped.env(k, v),
+            None => wrapped.env_remove(k),
+        };
+    }
+    let mut o = run(wrapped, timeout, scratch, true)?;
+    o.max_rss_bytes = std::fs::read_to_string(&report)
+        .ok()
+        .and_then(|t| t.trim().parse::<u64>().ok());
+    Ok(o)
+}
+
+fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> Result<Outcome> {
     std::fs::create_dir_all(scratch)
         .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
     let out_path = scratch.join("stdout.txt");
     let err_path = scratch.join("stderr.txt");
     let out = std::fs::File::create(&out_path)?;
     let err = std::fs::File::create(&err_path)?;
+    #[cfg(unix)]
+    if own_group {
+        use std::os::unix::process::CommandExt;
+        cmd.process_group(0);
+    }
     let start = Instant::now();
     let mut child = cmd
         .stdin(Stdio::null())
@@ -49,86 +98,83 @@ pub fn run_with_timeout(mut cmd: Command, timeout: Duration, scratch: &Path) -> 
         .stderr(Stdio::from(err))
         .spawn()
         .with_context(|| format!("cannot start {:?}", cmd.get_program()))?;
-    let (status, timed_out, max_rss_bytes) = wait_with_timeout(&mut child, start, timeout)?;
+    let mut timed_out = false;
+    let status = loop {
+        if let Some(st) = child.try_wait()? {
+            break Some(st);
+        }
+        if start.elapsed() > timeout {
+            timed_out = true;
+            kill(&mut child, own_group);
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
     let read = |p: &Path| {
         std::fs::read(p)
             .map(|b| String::from_utf8_lossy(&b).into_owned())
             .unwrap_or_default()
     };
     Ok(Outcome {
-        code: status,
+        code: status.and_then(|s| s.code()),
         timed_out,
         stdout: read(&out_path),
         stderr: read(&err_path),
         seconds: start.elapsed().as_secs_f64(),
-        max_rss_bytes,
+        max_rss_bytes: None,
     })
 }
 
-/// Waits for `child` (killing it after `timeout`) and returns its exit code,
-/// whether it timed out, and its peak memory. On Unix the child is reaped with
-/// `wait4`, whose rusage covers the child and its own reaped descendants (a
-/// harness process and the renderer it ran), so each render's peak is its own.
-#[cfg(unix)]
-fn wait_with_timeout(
-    child: &mut std::process::Child,
-    start: Instant,
-    timeout: Duration,
-) -> Result<(Option<i32>, bool, Option<u64>)> {
-    let pid = child.id() as libc::pid_t;
-    let reap = |flags: libc::c_int| -> Result<Option<(libc::c_int, libc::rusage)>> {
-        loop {
-            let mut status: libc::c_int = 0;
-            // SAFETY: zeroed rusage is a valid value of a plain C struct; wait4
-            // only writes through the two pointers, which outlive the call.
-            let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-            let r = unsafe { libc::wait4(pid, &mut status, flags, &mut usage) };
-            if r == pid {
-                return Ok(Some((status, usage)));
-            }
-            if r == 0 {
-                return Ok(None);
-            }
-            let err = std::io::Error::last_os_error();
-            if err.kind() != std::io::ErrorKind::Interrupted {
-                return Err(err).context("wait4 on a child process failed");
-            }
+/// Kills the child, and with `group` every process in its group (the child leads it).
+fn kill(child: &mut std::process::Child, group: bool) {
+    #[cfg(unix)]
+    if group {
+        // SAFETY: kill(2) with a negative pid signals that process group; no memory is touched.
+        unsafe {
+            libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL);
         }
-    };
-    loop {
-        if let Some((status, usage)) = reap(libc::WNOHANG)? {
-            let code = libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status));
-            // ru_maxrss is in KiB on Linux.
-            let rss = u64::try_from(usage.ru_maxrss).ok().map(|k| k * 1024);
-            return Ok((code, false, rss));
-        }
-        if start.elapsed() > timeout {
-            let _ = child.kill();
-            reap(0)?;
-            return Ok((None, true, None));
-        }
-        std::thread::sleep(Duration::from_millis(20));
     }
+    #[cfg(not(unix))]
+    let _ = group;
+    let _ = child.kill();
 }
 
-/// Portable fallback: no peak memory.
-#[cfg(not(unix))]
-fn wait_with_timeout(
-    child: &mut std::process::Child,
-    start: Instant,
-    timeout: Duration,
-) -> Result<(Option<i32>, bool, Option<u64>)> {
-    loop {
-        if let Some(st) = child.try_wait()? {
-            return Ok((st.code(), false, None));
+/// The hidden `rendiff peak-rss --report FILE -- PROGRAM ARGS...`: runs the
+/// program (stdio, environment and folder inherited), waits for it with
+/// `wait4`, writes its max RSS in bytes to FILE, and returns its exit code
+/// (128 + the signal when a signal ended it).
+#[cfg(unix)]
+pub fn peak_rss_main(report: &Path, argv: &[std::ffi::OsString]) -> Result<i32> {
+    let (prog, args) = argv.split_first().context("peak-rss: no command given")?;
+    let child = Command::new(prog)
+        .args(args)
+        .spawn()
+        .with_context(|| format!("peak-rss: cannot start {prog:?}"))?;
+    let pid = child.id() as libc::pid_t;
+    let (status, usage) = loop {
+        let mut status: libc::c_int = 0;
+        // SAFETY: a zeroed rusage is a valid plain C struct; wait4 writes only
+        // through the two pointers, which outlive the call.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+        if r == pid {
+            break (status, usage);
         }
-        if start.elapsed() > timeout {
-            let _ = child.kill();
-            let _ = child.wait();
-            return Ok((None, true, None));
+        let e = std::io::Error::last_os_error();
+        if e.kind() != std::io::ErrorKind::Interrupted {
+            return Err(e).context("peak-rss: wait4 failed");
         }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    };
+    // ru_maxrss is in KiB on Linux.
+    let bytes = u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024;
+    std::fs::write(report, format!("{bytes}\n"))
+        .with_context(|| format!("{}: cannot write the peak", report.display()))?;
+    Ok(if libc::WIFEXITED(status) {
+        libc::WEXITSTATUS(status)
+    } else {
+        128 + libc::WTERMSIG(status)
+    })
 }
 
 /// Quotes one word for a POSIX shell, so reproduction commands can be pasted safely.
@@ -184,23 +230,5 @@ mod tests {
         assert_eq!(o.code, Some(3));
         assert_eq!(o.stdout.trim(), "out");
         assert_eq!(o.stderr_tail(1), "err");
-    }
-
-    #[test]
-    fn peak_memory_of_the_child_is_measured() {
-        let dir = tempfile::tempdir().unwrap();
-        // A shell whose child (dd) fills a 64 MiB buffer: the peak covers the grandchild too.
-        let mut cmd = Command::new("sh");
-        cmd.args([
-            "-c",
-            "dd if=/dev/zero of=/dev/null bs=64M count=1 2>/dev/null; true",
-        ]);
-        let big = run_with_timeout(cmd, Duration::from_secs(30), dir.path()).unwrap();
-        let mut cmd = Command::new("true");
-        cmd.arg("x");
-        let small = run_with_timeout(cmd, Duration::from_secs(30), dir.path()).unwrap();
-        let (b, s) = (big.max_rss_bytes.unwrap(), small.max_rss_bytes.unwrap());
-        assert!(s > 0 && s < 32 << 20, "true: {s} bytes");
-        assert!(b >= 32 << 20, "sh running dd bs=64M: {b} bytes");
     }
 }
