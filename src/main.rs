@@ -32,6 +32,10 @@ enum Renderer {
     Raster,
     /// Outer loop over pixels, BVH (obvhs), rows in parallel.
     Trace,
+    /// Embree's rtcIntersect1 per pixel center, default scene flags (visibility only).
+    Embree,
+    /// Embree with RTC_SCENE_FLAG_ROBUST (visibility only).
+    EmbreeRobust,
 }
 
 #[derive(Subcommand)]
@@ -176,6 +180,17 @@ enum Command {
         #[arg(long, default_value = "reports/baseline.json")]
         baseline: PathBuf,
     },
+    /// Internal: run a command and write its peak memory (max RSS, bytes) to a
+    /// file; `check` measures renders through it, from a small process.
+    #[command(hide = true, name = "peak-rss")]
+    PeakRss {
+        /// File to write the peak to.
+        #[arg(long)]
+        report: PathBuf,
+        /// The command and its arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, required = true)]
+        command: Vec<std::ffi::OsString>,
+    },
     /// Make a run's verdicts and numbers the new baseline (the only way thresholds change).
     Bless {
         /// Run folder (holds manifest.json and results.json).
@@ -224,7 +239,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let name = match renderer {
                 Renderer::Raster => "raster",
                 Renderer::Trace => "trace",
+                Renderer::Embree => "embree",
+                Renderer::EmbreeRobust => "embree_robust",
             };
+            let embree_mode = match renderer {
+                Renderer::Embree => Some(rendiff::backends::embree::EmbreeMode::Default),
+                Renderer::EmbreeRobust => Some(rendiff::backends::embree::EmbreeMode::Robust),
+                _ => None,
+            };
+            if let Some(mode) = embree_mode {
+                return render_embree(&resolved, mode, &scene, output, &pool, no_preview);
+            }
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()
@@ -352,6 +377,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 baseline.display()
             );
             Ok(ExitCode::SUCCESS)
+        }
+        Command::PeakRss { report, command } => {
+            let code = rendiff::check::process::peak_rss_main(&report, &command)?;
+            Ok(ExitCode::from(u8::try_from(code).unwrap_or(255)))
         }
         Command::Bench {
             what: Some(what), ..
@@ -493,6 +522,9 @@ fn render(
             bar.finish();
             f
         }
+        Renderer::Embree | Renderer::EmbreeRobust => {
+            unreachable!("Embree renders go through render_embree")
+        }
     }
 }
 
@@ -542,4 +574,66 @@ fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// `rendiff render --renderer embree|embree-robust`: visibility only. A scene
+/// that needs shading, or a missing Embree library, exits with code 3 (skipped,
+/// the harness's convention) and says why, so `check` can run it as a child.
+fn render_embree(
+    scene: &ResolvedScene,
+    mode: rendiff::backends::embree::EmbreeMode,
+    scene_path: &Path,
+    output: Option<PathBuf>,
+    pool: &rayon::ThreadPool,
+    no_preview: bool,
+) -> Result<ExitCode> {
+    use rendiff::backends::embree::{self, EmbreeError};
+    let missing: Vec<&str> = scene
+        .requires
+        .iter()
+        .map(String::as_str)
+        .filter(|r| !rendiff::check::EMBREE_FEATURES.contains(r))
+        .collect();
+    if !missing.is_empty() {
+        eprintln!(
+            "{}: skipped: missing features: {}",
+            mode.name(),
+            missing.join(", ")
+        );
+        return Ok(ExitCode::from(3));
+    }
+    let frame = match pool.install(|| embree::render(scene, mode)) {
+        Ok(f) => f,
+        Err(EmbreeError::Unavailable(why)) => {
+            eprintln!("{}: skipped: {why}", mode.name());
+            return Ok(ExitCode::from(3));
+        }
+        Err(e) => anyhow::bail!("{}: {e}", mode.name()),
+    };
+    let out = output.unwrap_or_else(|| {
+        let stem = scene_path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into());
+        Path::new("out").join(format!("{stem}.{}.exr", mode.name()))
+    });
+    let mut attrs = frame_attrs(&frame, &scene_path.display().to_string());
+    attrs.insert(
+        "threads".to_string(),
+        pool.current_num_threads().to_string(),
+    );
+    write_frame_with(&out, &frame, None, &attrs)?;
+    if !no_preview {
+        preview::write_previews(&out, &frame)?;
+    }
+    println!(
+        "{}: {}x{} px, {} triangles, {:.3} s -> {}",
+        mode.name(),
+        frame.width,
+        frame.height,
+        scene.triangles.len(),
+        frame.seconds,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -160,6 +160,27 @@ fn stability_writes_a_break_table() {
         assert!(rows
             .iter()
             .all(|r| r["family"].is_string() && r["backend"].is_string()));
+        // The exact-truth families judge the raster reference too.
+        for fam in ["pixel centers, offset", "coplanar", "z-fighting"] {
+            assert!(
+                rows.iter().any(|r| r["family"] == fam
+                    && r["backend"] == "raster"
+                    && r["values_run"] == 2),
+                "{fam}: no raster row"
+            );
+        }
+        // Peak memory is measured per renderer, each in its own process.
+        let mem = record["memory"]["rows"].as_array().expect("memory rows");
+        for b in ["raster", "trace"] {
+            let r = mem
+                .iter()
+                .find(|r| r["backend"] == b)
+                .unwrap_or_else(|| panic!("no memory row for {b}"));
+            assert_eq!(r["status"], "ok", "{b}: {r}");
+            let rss = r["max_rss_bytes"].as_u64().expect("max_rss_bytes");
+            assert!(rss > 1 << 20, "{b}: peak {rss} bytes");
+            assert!(r["bytes_per_triangle"].as_f64().is_some_and(|x| x > 0.0));
+        }
     }
 }
 

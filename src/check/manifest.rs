@@ -68,6 +68,11 @@ pub struct RenderRecord {
     /// Backend-specific details (settings, precision, operation counts).
     #[serde(default)]
     pub info: serde_json::Value,
+    /// Peak resident memory (bytes) of the process that rendered, in measuring
+    /// runs (`check::run_isolating`), where every render runs in a child
+    /// process of its own: memory per renderer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_rss_bytes: Option<u64>,
 }
 
 /// results.json.

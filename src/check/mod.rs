@@ -6,6 +6,7 @@
 //! the others still run. The Python side then compares every buffer with the
 //! reference (OpenImageIO + numpy) and writes results.json.
 
+pub mod isolated;
 pub mod manifest;
 pub mod process;
 
@@ -264,6 +265,15 @@ fn describe(rec: &RenderRecord) -> String {
 
 /// Runs every scene on every backend, then the comparison; writes manifest.json and results.json.
 pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
+    run_isolating(opts, None)
+}
+
+/// Like [`run`], but with `isolate` (a rendiff binary) set, every render runs
+/// in a child process of its own whose peak memory is measured
+/// (`max_rss_bytes`, see [`process::run_measured`]): the core loops and Embree
+/// through `rendiff render`, the external renderers as always. A separate
+/// entry point, so that `CheckOptions` stays as it was.
+pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<CheckOutcome> {
     if opts.scenes.is_empty() {
         bail!("no scenes to check");
     }
@@ -341,6 +351,16 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", core_missing.join(", ")),
                     ..RenderRecord::default()
                 }
+            } else if let Some(bin) = isolate {
+                let job = isolated::Job {
+                    bin,
+                    backend: name,
+                    scene: scene_path,
+                    exr: &exr,
+                    rel_exr: &rel_exr,
+                    scratch: &scratch,
+                };
+                isolated::render(opts, &job, version.clone())
             } else {
                 let sc = &scene;
                 let core = opts.core;
@@ -389,6 +409,20 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     reason: format!("missing features: {}", emissing.join(", ")),
                     ..RenderRecord::default()
                 }
+            } else if let Some(bin) = isolate {
+                let job = isolated::Job {
+                    bin,
+                    backend: name,
+                    scene: scene_path,
+                    exr: &exr,
+                    rel_exr: &rel_exr,
+                    scratch: &scratch,
+                };
+                isolated::render(
+                    opts,
+                    &job,
+                    embree::version().unwrap_or_else(|e| e.to_string()),
+                )
             } else {
                 let command = shell_line([exe, "check", "--only", name, &scene_arg]);
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
@@ -412,7 +446,7 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
                     if !wanted(opts, &b.name) {
                         continue;
                     }
-                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch);
+                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch, isolate);
                     say(opts, format!("  {:<14} {}", b.name, describe(&rec)));
                     runs.renders.push(rec);
                 }
@@ -445,6 +479,7 @@ fn external(
     dir: &Path,
     rel_dir: &str,
     scratch: &Path,
+    measure: Option<&Path>,
 ) -> RenderRecord {
     let mut rec = RenderRecord {
         backend: b.name.clone(),
@@ -500,13 +535,18 @@ fn external(
     // covers in-process renderers (pyrender, Mitsuba) that hang.
     let limit = opts.timeout + opts.timeout.min(Duration::from_secs(30));
     let work = scratch.join(format!("{}-{}", runs.scene, b.name));
-    match run_with_timeout(cmd, limit, &work) {
+    let outcome = match measure {
+        Some(helper) => process::run_measured(cmd, limit, &work, helper),
+        None => run_with_timeout(cmd, limit, &work),
+    };
+    match outcome {
         Err(e) => {
             rec.status = "error".into();
             rec.message = format!("{e:#}");
         }
         Ok(o) => {
             rec.time_s = o.seconds;
+            rec.max_rss_bytes = o.max_rss_bytes;
             if o.timed_out {
                 rec.status = "error".into();
                 rec.message = format!(

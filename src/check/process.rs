@@ -19,6 +19,9 @@ pub struct Outcome {
     pub stderr: String,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// Peak resident memory in bytes of the command and the children it waited
+    /// for, from [`run_measured`]; `None` otherwise or when it was killed.
+    pub max_rss_bytes: Option<u64>,
 }
 
 impl Outcome {
@@ -31,13 +34,63 @@ impl Outcome {
 
 /// Runs `cmd` with stdin closed and output captured to files in `scratch`
 /// (pipes could fill up and deadlock a chatty renderer); kills it after `timeout`.
-pub fn run_with_timeout(mut cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
+pub fn run_with_timeout(cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
+    run(cmd, timeout, scratch, false)
+}
+
+/// Like [`run_with_timeout`], and measures the command's peak memory: it runs
+/// under `helper` (the rendiff binary's hidden `peak-rss` command), which
+/// starts it from its own small process and reports `wait4`'s max RSS of it
+/// and the children it waited for. Started directly from a large process, a
+/// child's max RSS would include its parent's resident memory at the moment
+/// of the spawn (Linux records the pre-exec image). The helper runs in a
+/// process group of its own, and a timeout kills the whole group.
+pub fn run_measured(
+    cmd: Command,
+    timeout: Duration,
+    scratch: &Path,
+    helper: &Path,
+) -> Result<Outcome> {
+    std::fs::create_dir_all(scratch)
+        .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
+    let report = scratch.join("peak_rss.txt");
+    let _ = std::fs::remove_file(&report);
+    let mut wrapped = Command::new(helper);
+    wrapped
+        .arg("peak-rss")
+        .arg("--report")
+        .arg(&report)
+        .arg("--")
+        .arg(cmd.get_program())
+        .args(cmd.get_args());
+    if let Some(d) = cmd.get_current_dir() {
+        wrapped.current_dir(d);
+    }
+    for (k, v) in cmd.get_envs() {
+        match v {
+            Some(v) => wrapped.env(k, v),
+            None => wrapped.env_remove(k),
+        };
+    }
+    let mut o = run(wrapped, timeout, scratch, true)?;
+    o.max_rss_bytes = std::fs::read_to_string(&report)
+        .ok()
+        .and_then(|t| t.trim().parse::<u64>().ok());
+    Ok(o)
+}
+
+fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> Result<Outcome> {
     std::fs::create_dir_all(scratch)
         .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
     let out_path = scratch.join("stdout.txt");
     let err_path = scratch.join("stderr.txt");
     let out = std::fs::File::create(&out_path)?;
     let err = std::fs::File::create(&err_path)?;
+    #[cfg(unix)]
+    if own_group {
+        use std::os::unix::process::CommandExt;
+        cmd.process_group(0);
+    }
     let start = Instant::now();
     let mut child = cmd
         .stdin(Stdio::null())
@@ -52,7 +105,7 @@ pub fn run_with_timeout(mut cmd: Command, timeout: Duration, scratch: &Path) -> 
         }
         if start.elapsed() > timeout {
             timed_out = true;
-            let _ = child.kill();
+            kill(&mut child, own_group);
             let _ = child.wait();
             break None;
         }
@@ -69,6 +122,58 @@ pub fn run_with_timeout(mut cmd: Command, timeout: Duration, scratch: &Path) -> 
         stdout: read(&out_path),
         stderr: read(&err_path),
         seconds: start.elapsed().as_secs_f64(),
+        max_rss_bytes: None,
+    })
+}
+
+/// Kills the child, and with `group` every process in its group (the child leads it).
+fn kill(child: &mut std::process::Child, group: bool) {
+    #[cfg(unix)]
+    if group {
+        // SAFETY: kill(2) with a negative pid signals that process group; no memory is touched.
+        unsafe {
+            libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL);
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = group;
+    let _ = child.kill();
+}
+
+/// The hidden `rendiff peak-rss --report FILE -- PROGRAM ARGS...`: runs the
+/// program (stdio, environment and folder inherited), waits for it with
+/// `wait4`, writes its max RSS in bytes to FILE, and returns its exit code
+/// (128 + the signal when a signal ended it).
+#[cfg(unix)]
+pub fn peak_rss_main(report: &Path, argv: &[std::ffi::OsString]) -> Result<i32> {
+    let (prog, args) = argv.split_first().context("peak-rss: no command given")?;
+    let child = Command::new(prog)
+        .args(args)
+        .spawn()
+        .with_context(|| format!("peak-rss: cannot start {prog:?}"))?;
+    let pid = child.id() as libc::pid_t;
+    let (status, usage) = loop {
+        let mut status: libc::c_int = 0;
+        // SAFETY: a zeroed rusage is a valid plain C struct; wait4 writes only
+        // through the two pointers, which outlive the call.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+        if r == pid {
+            break (status, usage);
+        }
+        let e = std::io::Error::last_os_error();
+        if e.kind() != std::io::ErrorKind::Interrupted {
+            return Err(e).context("peak-rss: wait4 failed");
+        }
+    };
+    // ru_maxrss is in KiB on Linux.
+    let bytes = u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024;
+    std::fs::write(report, format!("{bytes}\n"))
+        .with_context(|| format!("{}: cannot write the peak", report.display()))?;
+    Ok(if libc::WIFEXITED(status) {
+        libc::WEXITSTATUS(status)
+    } else {
+        128 + libc::WTERMSIG(status)
     })
 }
 
