@@ -32,7 +32,7 @@ pub struct Counters {
     pub ties: u64,
     /// Triangle setups (raster: per triangle and tile it touches).
     pub triangle_setups: u64,
-    /// BVH nodes whose box was tested (trace only).
+    /// Ray-box tests (trace only): nodes tested per ray; a packet counts each live lane.
     pub bvh_nodes_visited: u64,
 }
 
