@@ -101,17 +101,24 @@ impl TriEdges {
     /// counter-clockwise seen from the eye; +1: back-facing).
     #[inline]
     pub fn covers(&self, cam: &Camera, ray: &PixelRay, c: &mut Counters) -> i8 {
-        c.coverage_tests += 1;
-        let s0 = edge_sign(cam, &self.0[0], ray, c);
-        if s0 == 0 || edge_sign(cam, &self.0[1], ray, c) != s0 {
-            return 0;
-        }
-        if edge_sign(cam, &self.0[2], ray, c) != s0 {
-            return 0;
-        }
-        c.covered += 1;
-        s0
+        covers_by(c, |k, c| edge_sign(cam, &self.0[k], ray, c))
     }
+}
+
+/// The coverage rule, given each edge's sign (edges a->b, b->c, c->a, asked
+/// for in that order and only as far as needed): covered when all three signs
+/// agree and are not 0; the common sign is the facing. Counts the test. Every
+/// loop combines signs through here, whatever computed them, so an early exit
+/// skips the same (counted) work everywhere.
+#[inline(always)]
+pub fn covers_by(c: &mut Counters, mut sign: impl FnMut(usize, &mut Counters) -> i8) -> i8 {
+    c.coverage_tests += 1;
+    let s0 = sign(0, c);
+    if s0 == 0 || sign(1, c) != s0 || sign(2, c) != s0 {
+        return 0;
+    }
+    c.covered += 1;
+    s0
 }
 
 /// Relative margin by which boxes grow, per axis, proportional to their distance

@@ -14,7 +14,7 @@ use crate::frame::Frame;
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{
-    edge_sign, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
+    covers_by, edge_sign, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
 };
 use glam::Vec3;
 use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
@@ -199,7 +199,8 @@ impl TraceBvh {
                 for k in node.first..node.first + node.count {
                     let leaf = &self.leaves[k as usize];
                     let t = &leaf.tri;
-                    let facing = covers(cam, leaf, t, ray, &r, c);
+                    let signs = [0, 1, 2].map(|k| leaf.edge_sign32(k, r.dir, r.dir_norm));
+                    let facing = covers(cam, t, signs, ray, c);
                     if facing == 0 {
                         continue;
                     }
@@ -234,38 +235,24 @@ impl TraceBvh {
     }
 }
 
-/// Coverage of one candidate, edge by edge with early exit, in the same order
-/// as [`crate::visibility::TriEdges::covers`]: each sign from the f32 filter when it
-/// is sure, else from [`edge_sign`] (f64 filter, exact arithmetic, tie rule).
-/// The triangle is only read when the filter gives up.
-#[inline]
+/// Coverage of one candidate by [`covers_by`]: each edge's sign from the f32
+/// filter when it is sure, else from [`edge_sign`] (f64 filter, exact
+/// arithmetic, tie rule). `signs32` are the filter's answers (0: unsure).
+#[inline(always)]
 fn covers(
     cam: &Camera,
-    leaf: &LeafTri,
     t: &crate::scene::resolve::Tri,
+    signs32: [i8; 3],
     ray: &PixelRay,
-    r: &Ray32,
     c: &mut Counters,
 ) -> i8 {
-    c.coverage_tests += 1;
-    let mut s0 = 0;
-    for k in 0..3 {
-        let mut s = leaf.edge_sign32(k, r);
-        if s == 0 {
-            let (p, q) = (t[k].as_dvec3(), t[(k + 1) % 3].as_dvec3());
-            s = edge_sign(cam, &EdgePlane::new(cam.eye, p, q), ray, c);
+    covers_by(c, |k, c| {
+        if signs32[k] != 0 {
+            return signs32[k];
         }
-        if k == 0 {
-            if s == 0 {
-                return 0;
-            }
-            s0 = s;
-        } else if s != s0 {
-            return 0;
-        }
-    }
-    c.covered += 1;
-    s0
+        let (p, q) = (t[k].as_dvec3(), t[(k + 1) % 3].as_dvec3());
+        edge_sign(cam, &EdgePlane::new(cam.eye, p, q), ray, c)
+    })
 }
 
 /// Smallest hit key any triangle inside a box entered at ray parameter `tmin`

@@ -9,7 +9,7 @@
 //! lane's answer is the single-ray answer: the nearest key over all covering
 //! candidates, with the same exact coverage and depth functions.
 
-use super::primary::{max, min, LeafTri, Node32, Ray32};
+use super::primary::{max, min, round_down, LeafTri, Node32, Ray32};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
 use crate::scene::resolve::ResolvedScene;
@@ -30,8 +30,6 @@ type Mask = u32;
 pub(crate) struct Packet {
     /// The exact rays (fallback signs and depth).
     rays: [PixelRay; LANES],
-    /// The f32 rays (fallback path's first try).
-    r32: [Ray32; LANES],
     /// `D` per axis, per lane.
     dir: [[f32; LANES]; 3],
     /// `1 / D` per axis, per lane.
@@ -70,18 +68,9 @@ impl Packet {
             }
         }
         // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key, in f32.
-        let zscale = rays.map(|r| {
-            let z = r.planar * (1.0 - 1.0 / (1u64 << 19) as f64);
-            let f = z as f32;
-            if f64::from(f) > z {
-                f.next_down()
-            } else {
-                f
-            }
-        });
+        let zscale = rays.map(|r| round_down(r.planar * (1.0 - 1.0 / (1u64 << 19) as f64)));
         Packet {
             rays,
-            r32,
             dir,
             inv,
             dir_norm: r32.map(|r| r.dir_norm),
@@ -121,11 +110,9 @@ impl Packet {
         // f32 signs of the three edges for all lanes at once.
         let mut sign = [[0i8; LANES]; 3];
         for (k, row) in sign.iter_mut().enumerate() {
-            let (n, beta) = leaf.edge(k);
             for (i, s) in row.iter_mut().enumerate() {
-                let det = n[0] * self.dir[0][i] + n[1] * self.dir[1][i] + n[2] * self.dir[2][i];
-                let bound = beta * self.dir_norm[i];
-                *s = i8::from(det > bound) - i8::from(-det > bound);
+                let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
+                *s = leaf.edge_sign32(k, d, self.dir_norm[i]);
             }
         }
         let t = &leaf.tri;
@@ -134,20 +121,7 @@ impl Packet {
         while lanes != 0 {
             let i = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let (s0, s1, s2) = (sign[0][i], sign[1][i], sign[2][i]);
-            let facing = if s0 != 0 && s1 != 0 && s2 != 0 {
-                // All three decided in f32: the single-ray test would reach the same verdict
-                // without touching any other counter.
-                c.coverage_tests += 1;
-                if s0 == s1 && s1 == s2 {
-                    c.covered += 1;
-                    s0
-                } else {
-                    0
-                }
-            } else {
-                covers(cam, leaf, t, &self.rays[i], &self.r32[i], c)
-            };
+            let facing = covers(cam, t, [0, 1, 2].map(|k| sign[k][i]), &self.rays[i], c);
             if facing == 0 {
                 continue;
             }
