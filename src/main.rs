@@ -141,7 +141,7 @@ enum Command {
         #[arg(default_value = "scenes/million.toml")]
         scene: PathBuf,
         /// Resolution override, e.g. 1920x1080.
-        #[arg(long, value_parser = parse_size)]
+        #[arg(long, value_parser = rendiff::bench::knobs::parse_size)]
         size: Option<(u32, u32)>,
         /// Thread counts, comma-separated.
         #[arg(long, value_delimiter = ',', default_value = "1,2")]
@@ -257,7 +257,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     .unwrap_or_else(|| "scene".into());
                 Path::new("out").join(format!("{stem}.{name}.exr"))
             });
-            let frame = pool.install(|| render(&resolved, renderer, bvh, kernel, quiet));
+            let (frame, traced_bvh) =
+                pool.install(|| render(&resolved, renderer, bvh, kernel, quiet));
             let mut attrs = frame_attrs(&frame, &scene.display().to_string());
             attrs.insert(
                 "threads".to_string(),
@@ -265,7 +266,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             );
             let radiance = rendiff::shade::needs_shading(&resolved).then(|| {
                 pool.install(|| {
-                    let bvh = trace::TraceBvh::build(&resolved, bvh);
+                    let bvh = traced_bvh.unwrap_or_else(|| trace::TraceBvh::build(&resolved, bvh));
                     let opts = rendiff::shade::ShadeOptions {
                         spp: spp.unwrap_or(resolved.integrator.spp),
                         seed,
@@ -477,18 +478,6 @@ fn write_report(run: &Path) {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once('x')
-        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
-    let p = |v: &str| v.parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
-    let (w, h) = (p(w)?, p(h)?);
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("size must be 1..=16384 per side, got {s}"));
-    }
-    Ok((w, h))
-}
-
 fn load_scene(path: &Path) -> Result<ResolvedScene> {
     let scene = Scene::load(path)?;
     Ok(ResolvedScene::resolve(&scene)?)
@@ -500,7 +489,7 @@ fn render(
     bvh: BvhQuality,
     kernel: trace::TraceKernel,
     quiet: bool,
-) -> Frame {
+) -> (Frame, Option<trace::TraceBvh>) {
     let cam = &scene.camera;
     match renderer {
         Renderer::Raster => {
@@ -509,7 +498,7 @@ fn render(
             let bar = LazyProgress::new(tiles, "raster tiles", !quiet);
             let f = raster::render(scene, raster::RasterOptions::default(), &|n| bar.inc(n));
             bar.finish();
-            f
+            (f, None)
         }
         Renderer::Trace => {
             let bar = LazyProgress::new(u64::from(cam.height), "trace rows", !quiet);
@@ -518,9 +507,9 @@ fn render(
                 count_coverage: false,
                 kernel,
             };
-            let f = trace::render(scene, opts, &|n| bar.inc(n));
+            let (f, tree) = trace::render_keeping_bvh(scene, opts, &|n| bar.inc(n));
             bar.finish();
-            f
+            (f, Some(tree))
         }
         Renderer::Embree | Renderer::EmbreeRobust => {
             unreachable!("Embree renders go through render_embree")

@@ -106,10 +106,11 @@ pub fn exact_sign(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> i8 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn lcg(seed: &mut u64) -> f64 {
+    /// A tiny deterministic generator of values in [-1, 1) for predicate tests.
+    pub(crate) fn lcg(seed: &mut u64) -> f64 {
         *seed = seed
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);

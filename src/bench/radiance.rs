@@ -14,6 +14,36 @@ pub fn read_rgb(path: &Path) -> Result<RgbImage> {
         .ok_or_else(|| anyhow::anyhow!("{}: no R,G,B channels", path.display()))
 }
 
+/// Loads a global-illumination scene and its cached reference, and checks
+/// they fit together (the spp knobs and the variance benchmark both need this).
+/// `what` names the caller in the error.
+pub fn gi_scene_and_reference(
+    scene: &Path,
+    reference: &Path,
+    what: &str,
+) -> Result<(crate::scene::resolve::ResolvedScene, RgbImage)> {
+    let resolved = super::load_scene(scene)?;
+    if !resolved.requires.contains("global_illumination") {
+        bail!(
+            "{}: not a global_illumination scene, which {what} needs",
+            scene.display()
+        );
+    }
+    let image = read_rgb(reference)?;
+    let cam = &resolved.camera;
+    if (image.width, image.height) != (cam.width as usize, cam.height as usize) {
+        bail!(
+            "{}: reference is {}x{}, the scene {}x{}",
+            reference.display(),
+            image.width,
+            image.height,
+            cam.width,
+            cam.height
+        );
+    }
+    Ok((resolved, image))
+}
+
 /// How far a render is from the reference.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct RgbError {

@@ -13,32 +13,16 @@ use crate::raster::{self, RasterOptions};
 use crate::scene::resolve::ResolvedScene;
 use crate::shade::{self, ShadeOptions};
 use crate::trace::{BvhQuality, TraceBvh};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use serde_json::{json, Value};
 use std::path::Path;
 use std::time::Duration;
 
 /// The radiance group: core spp settings, then Mitsuba's (unless external renderers are off).
 pub fn radiance_group(opts: &KnobsOptions) -> Result<Group> {
-    let scene = super::load_scene(&opts.gi_scene)?;
-    if !scene.requires.contains("global_illumination") {
-        bail!(
-            "{}: the spp knobs need a global_illumination scene",
-            opts.gi_scene.display()
-        );
-    }
-    let reference = radiance::read_rgb(&opts.reference)?;
+    let (scene, reference) =
+        radiance::gi_scene_and_reference(&opts.gi_scene, &opts.reference, "the spp knobs")?;
     let cam = &scene.camera;
-    if (reference.width, reference.height) != (cam.width as usize, cam.height as usize) {
-        bail!(
-            "{}: reference is {}x{}, the scene {}x{}",
-            opts.reference.display(),
-            reference.width,
-            reference.height,
-            cam.width,
-            cam.height
-        );
-    }
     let mut g = Group {
         id: format!("radiance-{}", stem(&opts.gi_scene)),
         title: format!("radiance: {} {}x{}", stem(&opts.gi_scene), cam.width, cam.height),

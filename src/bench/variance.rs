@@ -224,25 +224,9 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
     if let Some(spp) = opts.spp.iter().find(|&&n| n < 2) {
         bail!("spp {spp}: a variance estimate needs at least 2 samples per pixel");
     }
-    let scene = super::load_scene(&opts.scene)?;
-    if !scene.requires.contains("global_illumination") {
-        bail!(
-            "{}: the variance benchmark needs a global_illumination scene",
-            opts.scene.display()
-        );
-    }
-    let reference = radiance::read_rgb(&opts.reference)?;
+    let (scene, reference) =
+        radiance::gi_scene_and_reference(&opts.scene, &opts.reference, "the variance benchmark")?;
     let cam = &scene.camera;
-    if (reference.width, reference.height) != (cam.width as usize, cam.height as usize) {
-        bail!(
-            "{}: reference is {}x{}, the scene {}x{}",
-            opts.reference.display(),
-            reference.width,
-            reference.height,
-            cam.width,
-            cam.height
-        );
-    }
     let Some(ref_var) = reference.var.as_deref() else {
         bail!(
             "{}: the reference has no var.R/G/B channels",

@@ -345,12 +345,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                 &exr.display().to_string(),
             ]);
             let rec = if !core_missing.is_empty() {
-                RenderRecord {
-                    backend: name.into(),
-                    status: "skipped".into(),
-                    reason: format!("missing features: {}", core_missing.join(", ")),
-                    ..RenderRecord::default()
-                }
+                skipped_for_features(name, &core_missing)
             } else if let Some(bin) = isolate {
                 let job = isolated::Job {
                     bin,
@@ -373,13 +368,17 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                     version.clone(),
                     opts.core.seed,
                     move || {
-                        let frame = if name == "raster" {
-                            raster::render(sc, RasterOptions::default(), &|_| {})
+                        let (frame, traced_bvh) = if name == "raster" {
+                            (raster::render(sc, RasterOptions::default(), &|_| {}), None)
                         } else {
-                            trace::render(sc, TraceOptions::default(), &|_| {})
+                            let (f, b) =
+                                trace::render_keeping_bvh(sc, TraceOptions::default(), &|_| {});
+                            (f, Some(b))
                         };
                         let radiance = shade::needs_shading(sc).then(|| {
-                            let bvh = trace::TraceBvh::build(sc, trace::BvhQuality::Medium);
+                            let bvh = traced_bvh.unwrap_or_else(|| {
+                                trace::TraceBvh::build(sc, trace::BvhQuality::Medium)
+                            });
                             let shading = ShadeOptions {
                                 spp: core.spp.unwrap_or(sc.integrator.spp),
                                 seed: core.seed,
@@ -403,12 +402,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
             let exr = run_dir.join(&rel_exr);
             let emissing = missing(&runs.requires, EMBREE_FEATURES);
             let rec = if !emissing.is_empty() {
-                RenderRecord {
-                    backend: name.into(),
-                    status: "skipped".into(),
-                    reason: format!("missing features: {}", emissing.join(", ")),
-                    ..RenderRecord::default()
-                }
+                skipped_for_features(name, &emissing)
             } else if let Some(bin) = isolate {
                 let job = isolated::Job {
                     bin,
@@ -697,4 +691,14 @@ pub fn summary(results: &Results) -> (String, Tally) {
         ));
     }
     (s, t)
+}
+
+/// The record of a backend skipped because it cannot model what the scene requires.
+fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
+    RenderRecord {
+        backend: backend.into(),
+        status: "skipped".into(),
+        reason: format!("missing features: {}", missing.join(", ")),
+        ..RenderRecord::default()
+    }
 }

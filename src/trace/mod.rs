@@ -291,11 +291,22 @@ pub struct TraceOptions {
 
 /// Renders depth and IDs by ray tracing. `progress` is called with rows finished.
 pub fn render(scene: &ResolvedScene, opts: TraceOptions, progress: &(dyn Fn(u64) + Sync)) -> Frame {
+    render_keeping_bvh(scene, opts, progress).0
+}
+
+/// [`render`], handing back the BVH it built, for callers that shade the
+/// frame next (shading traces through the same tree: one build, not two).
+/// The frame's time includes the build.
+pub fn render_keeping_bvh(
+    scene: &ResolvedScene,
+    opts: TraceOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Frame, TraceBvh) {
     let start = Instant::now();
     let bvh = TraceBvh::build(scene, opts.bvh);
     let mut frame = render_with_bvh(scene, &bvh, opts, progress);
     frame.seconds = start.elapsed().as_secs_f64();
-    frame
+    (frame, bvh)
 }
 
 /// Traces every pixel through an already built BVH (benchmarks time the two phases apart).

@@ -251,13 +251,7 @@ impl Ray32 {
 mod tests {
     use super::*;
     use crate::predicate::exact_sign;
-
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
+    use crate::predicate::tests::lcg;
 
     #[test]
     fn rounding_is_directed() {
