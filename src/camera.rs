@@ -152,15 +152,32 @@ impl Camera {
     /// Screen coordinates `(sx, sy)` of pixel `(x, y)`'s center (DESIGN.md formula).
     #[inline]
     pub fn screen(&self, x: u32, y: u32) -> (f64, f64) {
-        let sx = (2.0 * (f64::from(x) + 0.5) / f64::from(self.width) - 1.0) * self.aspect_tan;
-        let sy = (1.0 - 2.0 * (f64::from(y) + 0.5) / f64::from(self.height)) * self.tan_half_vfov;
-        (sx, sy)
+        (self.screen_x(x), self.screen_y(y))
+    }
+
+    /// `sx` of column `x`'s pixel centers (a packet of rays shares a few columns).
+    #[inline]
+    pub fn screen_x(&self, x: u32) -> f64 {
+        (2.0 * (f64::from(x) + 0.5) / f64::from(self.width) - 1.0) * self.aspect_tan
+    }
+
+    /// `sy` of row `y`'s pixel centers.
+    #[inline]
+    pub fn screen_y(&self, y: u32) -> f64 {
+        (1.0 - 2.0 * (f64::from(y) + 0.5) / f64::from(self.height)) * self.tan_half_vfov
     }
 
     /// Unnormalized direction `d = f + sx r + sy u`; `t` along it is planar depth.
     #[inline]
     pub fn direction(&self, x: u32, y: u32) -> DVec3 {
         let (sx, sy) = self.screen(x, y);
+        self.screen_direction(sx, sy)
+    }
+
+    /// Unnormalized direction through screen point `(sx, sy)`: the one formula
+    /// behind pixel rays and Monte Carlo sample rays.
+    #[inline(always)]
+    pub fn screen_direction(&self, sx: f64, sy: f64) -> DVec3 {
         self.forward + self.right * sx + self.up_ortho * sy
     }
 
@@ -170,13 +187,22 @@ impl Camera {
     pub fn direction_at(&self, fx: f64, fy: f64) -> DVec3 {
         let sx = (2.0 * fx / f64::from(self.width) - 1.0) * self.aspect_tan;
         let sy = (1.0 - 2.0 * fy / f64::from(self.height)) * self.tan_half_vfov;
-        self.forward + self.right * sx + self.up_ortho * sy
+        self.screen_direction(sx, sy)
     }
 
     /// The pixel's ray. The single definition both loops use.
     #[inline]
     pub fn pixel_ray(&self, x: u32, y: u32) -> PixelRay {
-        let p = self.eye + self.direction(x, y);
+        let (sx, sy) = self.screen(x, y);
+        self.screen_ray(sx, sy)
+    }
+
+    /// The ray through screen point `(sx, sy)` of [`Camera::screen`]: the rest
+    /// of [`Camera::pixel_ray`], for callers that compute `sx` once per column
+    /// and `sy` once per row.
+    #[inline(always)]
+    pub fn screen_ray(&self, sx: f64, sy: f64) -> PixelRay {
+        let p = self.eye + self.screen_direction(sx, sy);
         let dir = p - self.eye;
         PixelRay {
             p,

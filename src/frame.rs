@@ -2,6 +2,7 @@
 
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{geometric_normal, key_depth, key_prim, Counters, NO_HIT};
+use rayon::prelude::*;
 
 /// Background value of the ID buffers.
 pub const BACKGROUND_ID: u32 = u32::MAX;
@@ -43,22 +44,25 @@ impl Frame {
         seconds: f64,
     ) -> Frame {
         let cam = &scene.camera;
-        let mut z = Vec::with_capacity(keys.len());
-        let mut prim = Vec::with_capacity(keys.len());
-        let mut object = Vec::with_capacity(keys.len());
-        let mut normal = Vec::with_capacity(keys.len());
-        for &k in keys {
-            z.push(key_depth(k));
-            let p = key_prim(k);
-            prim.push(p);
-            if k == NO_HIT {
-                object.push(BACKGROUND_ID);
-                normal.push([0.0; 3]);
-            } else {
-                object.push(scene.object_ids[p as usize]);
-                normal.push(geometric_normal(&scene.triangles[p as usize]));
-            }
-        }
+        // One pass per buffer, each split across rayon's workers: at 1080p the
+        // lookups touch 2M random triangles, and a serial pass took about an
+        // eighth of a one-thread trace.
+        let z: Vec<f32> = keys.par_iter().map(|&k| key_depth(k)).collect();
+        let prim: Vec<u32> = keys.par_iter().map(|&k| key_prim(k)).collect();
+        let object: Vec<u32> = keys
+            .par_iter()
+            .map(|&k| match k {
+                NO_HIT => BACKGROUND_ID,
+                k => scene.object_ids[key_prim(k) as usize],
+            })
+            .collect();
+        let normal: Vec<[f32; 3]> = keys
+            .par_iter()
+            .map(|&k| match k {
+                NO_HIT => [0.0; 3],
+                k => geometric_normal(&scene.triangles[key_prim(k) as usize]),
+            })
+            .collect();
         Frame {
             width: cam.width,
             height: cam.height,

@@ -133,6 +133,18 @@ fn peers_writes_throughput_ratios() {
     assert!(rows[0]["core_trace"]["mrays_per_s"]
         .as_f64()
         .is_some_and(|x| x > 0.0));
+    // Mrays/s come from the queries alone; the whole render is recorded beside them.
+    assert!(rows[0]["core_trace"]["queries"]["median_s"]
+        .as_f64()
+        .is_some());
+    assert!(rows[0]["core_trace"]["timing"]["trace"]["median_s"]
+        .as_f64()
+        .is_some());
+    assert_eq!(rows[0]["core_trace"]["raster_equals_trace"], true);
+    assert_eq!(
+        rows[0]["core_trace_single_rays"]["raster_equals_trace"],
+        true
+    );
     assert!(record.get("goals").is_some());
 }
 

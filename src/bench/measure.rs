@@ -69,6 +69,28 @@ pub fn trace_kernel(
     timed(runs, || trace::render_with_bvh(scene, bvh, opts, &|_| {}))
 }
 
+/// Times the ray queries alone (hit keys per pixel, the frame's buffers are
+/// filled afterwards, untimed): the phase Embree's `trace_s` times, so Mrays/s
+/// compare like with like. The frame of the last run comes back for checks.
+pub fn trace_queries(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    kernel: trace::TraceKernel,
+    runs: usize,
+) -> Timed<Frame> {
+    let opts = trace::TraceOptions {
+        kernel,
+        ..trace::TraceOptions::default()
+    };
+    let t = timed(runs, || trace::trace_keys(scene, bvh, opts, &|_| {}));
+    let k = t.last;
+    Timed {
+        median_s: t.median_s,
+        runs_s: t.runs_s,
+        last: Frame::from_keys(scene, &k.keys, k.coverage, k.counters, "trace", t.median_s),
+    }
+}
+
 /// Embree's phases, medians over the timed runs.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct EmbreeStats {

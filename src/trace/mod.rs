@@ -317,6 +317,36 @@ pub fn render_with_bvh(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
+    let t = trace_keys(scene, bvh, opts, progress);
+    Frame::from_keys(
+        scene,
+        &t.keys,
+        t.coverage,
+        t.counters,
+        "trace",
+        start.elapsed().as_secs_f64(),
+    )
+}
+
+/// The ray queries' answers, before the frame's buffers are filled from them.
+pub struct TracedKeys {
+    /// Nearest hit key per pixel, row-major ([`NO_HIT`] for background).
+    pub keys: Vec<u64>,
+    /// Per-pixel (front, back) coverage counts, when asked for.
+    pub coverage: Option<Vec<[u16; 2]>>,
+    /// What the queries cost.
+    pub counters: Counters,
+}
+
+/// Traces every pixel and stops at the per-pixel hit keys: the part of a
+/// render that answers ray queries, which the throughput benchmark compares
+/// with Embree's `rtcIntersect*` loop (that also stops at keys).
+pub fn trace_keys(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    opts: TraceOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> TracedKeys {
     let cam = &scene.camera;
     let w = cam.width as usize;
     let mut keys = vec![NO_HIT; cam.pixel_count()];
@@ -359,8 +389,7 @@ pub fn render_with_bvh(
                 let mut stack = Vec::with_capacity(64);
                 let y0 = band * packet::PH;
                 for x0 in (0..w).step_by(packet::PW) {
-                    let mut pk = packet::Packet::new(cam, x0, y0);
-                    bvh.trace_packet(scene, &mut pk, &mut c, &mut stack);
+                    let pk = bvh.trace_packet(scene, x0, y0, &mut c, &mut stack);
                     for (i, &k) in pk.best.iter().enumerate() {
                         let (x, dy) = (x0 + i % packet::PW, i / packet::PW);
                         if x < w && dy * w < rows.len() {
@@ -373,14 +402,11 @@ pub fn render_with_bvh(
             })
             .reduce(Counters::default, sum)
     };
-    Frame::from_keys(
-        scene,
-        &keys,
-        opts.count_coverage.then_some(cov),
+    TracedKeys {
+        keys,
+        coverage: opts.count_coverage.then_some(cov),
         counters,
-        "trace",
-        start.elapsed().as_secs_f64(),
-    )
+    }
 }
 
 fn sum(mut a: Counters, b: Counters) -> Counters {

@@ -9,7 +9,7 @@
 //! lane's answer is the single-ray answer: the nearest key over all covering
 //! candidates, with the same exact coverage and depth functions.
 
-use super::primary::{max, min, round_down, LeafTri, Node32, Ray32};
+use super::primary::{dir_norm_bound, max, min, LeafTri, Node32};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
 use crate::scene::resolve::ResolvedScene;
@@ -47,33 +47,40 @@ pub(crate) struct Packet {
 }
 
 impl Packet {
-    /// The packet whose top-left pixel is `(x0, y0)`; lanes outside the image are inactive.
+    /// The packet whose top-left pixel is `(x0, y0)`; lanes outside the image are
+    /// inactive. Built lane-parallel (inlined into the AVX2 kernel): `sx` once per
+    /// column and `sy` once per row, then [`Camera::screen_ray`], so every lane's
+    /// exact ray is bit for bit [`Camera::pixel_ray`] (a test checks it).
+    #[inline(always)]
     pub fn new(cam: &Camera, x0: usize, y0: usize) -> Packet {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        // Columns or rows past the image give finite rays on inactive lanes.
+        let sx: [f64; PW] = std::array::from_fn(|i| cam.screen_x((x0 + i) as u32));
+        let sy: [f64; PH] = std::array::from_fn(|j| cam.screen_y((y0 + j) as u32));
+        let rays: [PixelRay; LANES] =
+            std::array::from_fn(|i| cam.screen_ray(sx[i % PW], sy[i / PW]));
         let mut active: Mask = 0;
-        let mut rays = [cam.pixel_ray(x0 as u32, y0 as u32); LANES];
-        for (i, ray) in rays.iter_mut().enumerate() {
-            let (x, y) = (x0 + i % PW, y0 + i / PW);
-            if x < cam.width as usize && y < cam.height as usize {
-                *ray = cam.pixel_ray(x as u32, y as u32);
-                active |= 1 << i;
-            }
+        for i in 0..LANES {
+            active |= Mask::from(x0 + i % PW < w && y0 + i / PW < h) << i;
         }
-        let r32 = rays.map(|r| Ray32::new(&r));
         let mut dir = [[0f32; LANES]; 3];
         let mut inv = [[0f32; LANES]; 3];
-        for (i, r) in r32.iter().enumerate() {
-            for k in 0..3 {
-                dir[k][i] = r.dir[k];
-                inv[k][i] = r.inv[k];
+        for k in 0..3 {
+            for i in 0..LANES {
+                dir[k][i] = rays[i].dir[k] as f32;
+                inv[k][i] = 1.0 / dir[k][i];
             }
         }
-        // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key, in f32.
-        let zscale = rays.map(|r| round_down(r.planar * (1.0 - 1.0 / (1u64 << 19) as f64)));
+        let dir_norm = std::array::from_fn(|i| dir_norm_bound([dir[0][i], dir[1][i], dir[2][i]]));
+        // Pixel rays have planar > 0 (D = forward + sideways terms), so rounding
+        // planar (1 - 2^-18) to nearest stays below planar (1 - 2^-19), and then
+        // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key.
+        let zscale = rays.map(|r| (r.planar * (1.0 - 1.0 / (1u64 << 18) as f64)) as f32);
         Packet {
             rays,
             dir,
             inv,
-            dir_norm: r32.map(|r| r.dir_norm),
+            dir_norm,
             zscale,
             best: [NO_HIT; LANES],
             best_z: [f32::INFINITY; LANES],
@@ -105,27 +112,53 @@ impl Packet {
     }
 
     /// Tests one triangle against the lanes in `m`, updating their nearest keys.
+    ///
+    /// The f32 edge signs of all lanes come first, as masks. Lanes that
+    /// [`covers_by`](crate::visibility::covers_by) would reject from f32 signs
+    /// alone (the first two certain and opposite, or the first two agreeing and
+    /// the third certain and opposite) and lanes all three of whose signs agree
+    /// are settled from the masks, with the counts `covers_by` would make; only
+    /// lanes with an unsure sign take the per-lane path.
     #[inline(always)]
     fn leaf(&mut self, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
-        // f32 signs of the three edges for all lanes at once.
-        let mut sign = [[0i8; LANES]; 3];
-        for (k, row) in sign.iter_mut().enumerate() {
-            for (i, s) in row.iter_mut().enumerate() {
+        let mut pos = [0 as Mask; 3];
+        let mut neg = [0 as Mask; 3];
+        for k in 0..3 {
+            let mut det = [0f32; LANES];
+            let mut bound = [0f32; LANES];
+            for i in 0..LANES {
                 let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
-                *s = leaf.edge_sign32(k, d, self.dir_norm[i]);
+                (det[i], bound[i]) = leaf.edge_det32(k, d, self.dir_norm[i]);
+            }
+            for i in 0..LANES {
+                pos[k] |= Mask::from(det[i] > bound[i]) << i;
+                neg[k] |= Mask::from(-det[i] > bound[i]) << i;
             }
         }
-        let t = &leaf.tri;
-        let mut depth: Option<TriDepth> = None;
-        let mut lanes = m;
+        let [p0, p1, p2] = pos;
+        let [n0, n1, n2] = neg;
+        let rejected = m & ((p0 & n1) | (n0 & p1) | (p0 & p1 & n2) | (n0 & n1 & p2));
+        let inside = m & ((p0 & p1 & p2) | (n0 & n1 & n2));
+        let unsure = m & !rejected & !inside;
+        c.coverage_tests += u64::from(rejected.count_ones() + inside.count_ones());
+        c.covered += u64::from(inside.count_ones());
+        let mut hit = inside;
+        let mut lanes = unsure;
         while lanes != 0 {
             let i = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
-            let facing = covers(cam, t, [0, 1, 2].map(|k| sign[k][i]), &self.rays[i], c);
-            if facing == 0 {
-                continue;
+            let signs = [0, 1, 2].map(|k| ((pos[k] >> i) & 1) as i8 - ((neg[k] >> i) & 1) as i8);
+            if covers(cam, &leaf.tri, signs, &self.rays[i], c) != 0 {
+                hit |= 1 << i;
             }
-            let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
+        }
+        if hit == 0 {
+            return;
+        }
+        let d = TriDepth::new(cam, &leaf.tri);
+        while hit != 0 {
+            let i = hit.trailing_zeros() as usize;
+            hit &= hit - 1;
             if let Some(z) = d.depth(cam, &self.rays[i]) {
                 let k = hit_key(z, leaf.prim);
                 if k < self.best[i] {
@@ -138,24 +171,25 @@ impl Packet {
 }
 
 impl TraceBvh {
-    /// Traces a packet to completion; the nearest keys are left in `pk.best`.
+    /// Traces the packet whose top-left pixel is `(x0, y0)` to completion; the
+    /// nearest keys are in the returned packet's `best`.
     /// On x86-64 CPUs with AVX2 the same code runs compiled for 256-bit
     /// vectors (the lane loops are auto-vectorized; arithmetic is unchanged,
     /// as Rust never contracts a*b+c into an FMA by itself).
     pub(crate) fn trace_packet(
         &self,
         scene: &ResolvedScene,
-        pk: &mut Packet,
+        x0: usize,
+        y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
-    ) {
+    ) -> Packet {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { self.trace_packet_avx2(scene, pk, c, stack) };
-            return;
+            return unsafe { self.trace_packet_avx2(scene, x0, y0, c, stack) };
         }
-        self.trace_packet_body(scene, pk, c, stack);
+        self.trace_packet_body(scene, x0, y0, c, stack)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -163,24 +197,27 @@ impl TraceBvh {
     fn trace_packet_avx2(
         &self,
         scene: &ResolvedScene,
-        pk: &mut Packet,
+        x0: usize,
+        y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
-    ) {
-        self.trace_packet_body(scene, pk, c, stack);
+    ) -> Packet {
+        self.trace_packet_body(scene, x0, y0, c, stack)
     }
 
     #[inline(always)]
     fn trace_packet_body(
         &self,
         scene: &ResolvedScene,
-        pk: &mut Packet,
+        x0: usize,
+        y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
-    ) {
+    ) -> Packet {
         let cam = &scene.camera;
+        let mut pk = Packet::new(cam, x0, y0);
         if self.nodes32.is_empty() || pk.active == 0 {
-            return;
+            return pk;
         }
         // Near-to-far child order along the packet's mean direction.
         let mean = [0, 1, 2].map(|k| pk.dir[k].iter().sum::<f32>());
@@ -205,6 +242,74 @@ impl TraceBvh {
             let (near, far) = if da <= db { (a, b) } else { (b, a) };
             stack.push((far, m));
             stack.push((near, m));
+        }
+        pk
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::primary::Ray32;
+    use super::*;
+    use glam::DVec3;
+
+    /// Every lane's exact ray is bit for bit the camera's pixel ray, its f32
+    /// data is that ray's, and exactly the lanes inside the image are active.
+    #[test]
+    fn packet_rays_are_the_pixel_rays() {
+        let cams = [
+            Camera::new(
+                DVec3::new(0.3, -2.0, 5.0),
+                DVec3::ZERO,
+                DVec3::Y,
+                60.0,
+                37,
+                23,
+                1e-3,
+                100.0,
+            ),
+            Camera::new(
+                DVec3::splat(1e6),
+                DVec3::new(1e6, 1e6 + 1.0, 1e6 - 3.0),
+                DVec3::Z,
+                130.0,
+                9,
+                5,
+                0.5,
+                f64::INFINITY,
+            ),
+            Camera::new(
+                DVec3::new(-1.0, 0.0, 0.0),
+                DVec3::new(1.0, 1e-3, 0.0),
+                DVec3::Y,
+                1.0,
+                1920,
+                1080,
+                1e-7,
+                1.0,
+            ),
+        ];
+        for cam in cams.map(Result::unwrap) {
+            let (w, h) = (cam.width as usize, cam.height as usize);
+            for (x0, y0) in [(0, 0), (w / PW * PW, h / PH * PH), (PW, PH)] {
+                let pk = Packet::new(&cam, x0, y0);
+                for i in 0..LANES {
+                    let (x, y) = (x0 + i % PW, y0 + i / PW);
+                    let inside = x < w && y < h;
+                    assert_eq!(pk.active >> i & 1 == 1, inside, "lane {i} at ({x}, {y})");
+                    let exact = cam.pixel_ray(x as u32, y as u32);
+                    assert_eq!(pk.rays[i], exact, "lane {i} at ({x}, {y})");
+                    let r32 = Ray32::new(&exact);
+                    assert_eq!([0, 1, 2].map(|k| pk.dir[k][i]), r32.dir);
+                    assert_eq!([0, 1, 2].map(|k| pk.inv[k][i]), r32.inv);
+                    assert_eq!(pk.dir_norm[i], r32.dir_norm);
+                    assert!(f64::from(pk.dir_norm[i]) >= exact.dir.length());
+                    // The pruning scale stays below the ray's planar factor by 2^-20.
+                    let bound = exact.planar * (1.0 - 1.0 / (1u64 << 20) as f64);
+                    assert!(f64::from(pk.zscale[i]) <= bound);
+                    assert!(f64::from(pk.zscale[i]) > exact.planar * 0.999);
+                }
+            }
         }
     }
 }

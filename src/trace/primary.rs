@@ -216,10 +216,17 @@ impl LeafTri {
     /// the packet kernel's lane loop vectorizes.
     #[inline(always)]
     pub fn edge_sign32(&self, k: usize, d: [f32; 3], dir_norm: f32) -> i8 {
+        let (det, bound) = self.edge_det32(k, d, dir_norm);
+        i8::from(det > bound) - i8::from(-det > bound)
+    }
+
+    /// Edge `k`'s f32 determinant and the bound its magnitude must clear for
+    /// its sign to be exact (the packet kernel compares all lanes at once).
+    #[inline(always)]
+    pub fn edge_det32(&self, k: usize, d: [f32; 3], dir_norm: f32) -> (f32, f32) {
         let n = &self.n[k];
         let det = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-        let bound = self.beta[k] * dir_norm;
-        i8::from(det > bound) - i8::from(-det > bound)
+        (det, self.beta[k] * dir_norm)
     }
 }
 
@@ -242,9 +249,18 @@ impl Ray32 {
         Ray32 {
             dir,
             inv: dir.map(|d| 1.0 / d),
-            dir_norm: round_up(ray.dir.length() * (1.0 + 1e-6)),
+            dir_norm: dir_norm_bound(dir),
         }
     }
+}
+
+/// An upper bound on `|D|` from its f32 rounding `d`, for the edge filter.
+/// The f32 sum of squares and square root are each within a few ulps, and `d`
+/// within one ulp per component of `D`, so a 2^-18 margin (64 ulps) covers them
+/// (pixel directions are near unit length: no overflow or underflow).
+#[inline(always)]
+pub(crate) fn dir_norm_bound(d: [f32; 3]) -> f32 {
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() * (1.0 + 1.0 / (1u32 << 18) as f32)
 }
 
 #[cfg(test)]
