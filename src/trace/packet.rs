@@ -44,6 +44,10 @@ pub(crate) struct Packet {
     best_z: [f32; LANES],
     /// Lanes inside the image.
     active: Mask,
+    /// Per axis, the sign every lane's direction shares (+1 or -1, by the sign
+    /// of `1 / D`), or 0 when lanes differ: a shared sign fixes which slab
+    /// plane is entered first, saving a min and a max per lane.
+    axis_sign: [i8; 3],
 }
 
 impl Packet {
@@ -76,7 +80,13 @@ impl Packet {
         // planar (1 - 2^-18) to nearest stays below planar (1 - 2^-19), and then
         // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key.
         let zscale = rays.map(|r| (r.planar * (1.0 - 1.0 / (1u64 << 18) as f64)) as f32);
+        let axis_sign = inv.map(|v| {
+            let pos = v.iter().all(|&x| x > 0.0);
+            let neg = v.iter().all(|&x| x < 0.0);
+            i8::from(pos) - i8::from(neg)
+        });
         Packet {
+            axis_sign,
             rays,
             dir,
             inv,
@@ -95,11 +105,26 @@ impl Packet {
         let mut tmax = [f32::INFINITY; LANES];
         for k in 0..3 {
             let (lo, hi) = node.bounds(k);
-            for i in 0..LANES {
-                let t0 = lo * self.inv[k][i];
-                let t1 = hi * self.inv[k][i];
-                tmin[i] = max(tmin[i], min(t0, t1));
-                tmax[i] = min(tmax[i], max(t0, t1));
+            let inv = &self.inv[k];
+            if self.axis_sign[k] == 0 {
+                for i in 0..LANES {
+                    let t0 = lo * inv[i];
+                    let t1 = hi * inv[i];
+                    tmin[i] = max(tmin[i], min(t0, t1));
+                    tmax[i] = min(tmax[i], max(t0, t1));
+                }
+            } else {
+                // lo <= hi and rounding is monotone: with 1/D of one sign on every
+                // lane, min(t0, t1) is always the same one of the two.
+                let (near, far) = if self.axis_sign[k] > 0 {
+                    (lo, hi)
+                } else {
+                    (hi, lo)
+                };
+                for i in 0..LANES {
+                    tmin[i] = max(tmin[i], near * inv[i]);
+                    tmax[i] = min(tmax[i], far * inv[i]);
+                }
             }
         }
         let mut m: Mask = 0;
