@@ -148,16 +148,24 @@ impl Packet {
     fn leaf(&mut self, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
         let mut pos = [0 as Mask; 3];
         let mut neg = [0 as Mask; 3];
-        for k in 0..3 {
-            let mut det = [0f32; LANES];
-            let mut bound = [0f32; LANES];
-            for i in 0..LANES {
-                let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
-                (det[i], bound[i]) = leaf.edge_det32(k, d, self.dir_norm[i]);
+        for r in 0..PH {
+            // A row of lanes is one 256-bit vector: skip rows the box let no lane into.
+            if (m >> (r * PW)) & ((1 << PW) - 1) == 0 {
+                continue;
             }
-            for i in 0..LANES {
-                pos[k] |= Mask::from(det[i] > bound[i]) << i;
-                neg[k] |= Mask::from(-det[i] > bound[i]) << i;
+            for k in 0..3 {
+                let mut det = [0f32; PW];
+                let mut bound = [0f32; PW];
+                for j in 0..PW {
+                    let i = r * PW + j;
+                    let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
+                    (det[j], bound[j]) = leaf.edge_det32(k, d, self.dir_norm[i]);
+                }
+                for j in 0..PW {
+                    let i = r * PW + j;
+                    pos[k] |= Mask::from(det[j] > bound[j]) << i;
+                    neg[k] |= Mask::from(-det[j] > bound[j]) << i;
+                }
             }
         }
         let [p0, p1, p2] = pos;
