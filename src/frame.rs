@@ -44,25 +44,37 @@ impl Frame {
         seconds: f64,
     ) -> Frame {
         let cam = &scene.camera;
-        // One pass per buffer, each split across rayon's workers: at 1080p the
-        // lookups touch 2M random triangles, and a serial pass took about an
-        // eighth of a one-thread trace.
-        let z: Vec<f32> = keys.par_iter().map(|&k| key_depth(k)).collect();
-        let prim: Vec<u32> = keys.par_iter().map(|&k| key_prim(k)).collect();
-        let object: Vec<u32> = keys
-            .par_iter()
-            .map(|&k| match k {
-                NO_HIT => BACKGROUND_ID,
-                k => scene.object_ids[key_prim(k) as usize],
-            })
-            .collect();
-        let normal: Vec<[f32; 3]> = keys
-            .par_iter()
-            .map(|&k| match k {
-                NO_HIT => [0.0; 3],
-                k => geometric_normal(&scene.triangles[key_prim(k) as usize]),
-            })
-            .collect();
+        // One pass, split by rows across rayon's workers. Neighbouring pixels
+        // often show the same triangle, so the last one's object id and normal
+        // are reused (a normal is an f64 cross product and square root).
+        let n = keys.len();
+        let row = (cam.width as usize).max(1);
+        let mut z = vec![0f32; n];
+        let mut prim = vec![0u32; n];
+        let mut object = vec![0u32; n];
+        let mut normal = vec![[0f32; 3]; n];
+        keys.par_chunks(row)
+            .zip(z.par_chunks_mut(row))
+            .zip(prim.par_chunks_mut(row))
+            .zip(object.par_chunks_mut(row))
+            .zip(normal.par_chunks_mut(row))
+            .for_each(|((((keys, z), prim), object), normal)| {
+                let mut last = (u32::MAX, BACKGROUND_ID, [0.0; 3]);
+                for (i, &k) in keys.iter().enumerate() {
+                    z[i] = key_depth(k);
+                    let p = key_prim(k);
+                    prim[i] = p;
+                    if k == NO_HIT {
+                        (object[i], normal[i]) = (BACKGROUND_ID, [0.0; 3]);
+                        continue;
+                    }
+                    if p != last.0 {
+                        let t = &scene.triangles[p as usize];
+                        last = (p, scene.object_ids[p as usize], geometric_normal(t));
+                    }
+                    (object[i], normal[i]) = (last.1, last.2);
+                }
+            });
         Frame {
             width: cam.width,
             height: cam.height,
@@ -80,5 +92,49 @@ impl Frame {
     /// Index of pixel (x, y).
     pub fn index(&self, x: u32, y: u32) -> usize {
         y as usize * self.width as usize + x as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::visibility::hit_key;
+
+    /// Every pixel's buffers are its own key's: runs of one prim (where the
+    /// last lookup is reused), alternating prims and background all match a
+    /// per-pixel lookup, across row boundaries too.
+    #[test]
+    fn buffers_follow_each_pixels_key() {
+        let s =
+            crate::scene::Scene::load(std::path::Path::new("scenes/three_triangles.toml")).unwrap();
+        let scene = ResolvedScene::resolve(&s).unwrap();
+        let cam = &scene.camera;
+        let tris = scene.triangles.len() as u32;
+        let keys: Vec<u64> = (0..cam.pixel_count() as u32)
+            .map(|i| match (i / 7) % 5 {
+                0 => NO_HIT,
+                r => hit_key(1.0 + i as f32, (r + i / 97) % tris),
+            })
+            .collect();
+        let f = Frame::from_keys(&scene, &keys, None, Counters::default(), "t", 0.0);
+        for (i, &k) in keys.iter().enumerate() {
+            assert_eq!(f.z[i].to_bits(), key_depth(k).to_bits(), "pixel {i}");
+            assert_eq!(f.prim[i], key_prim(k), "pixel {i}");
+            if k == NO_HIT {
+                assert_eq!(
+                    (f.object[i], f.normal[i]),
+                    (BACKGROUND_ID, [0.0; 3]),
+                    "pixel {i}"
+                );
+            } else {
+                let p = key_prim(k) as usize;
+                assert_eq!(f.object[i], scene.object_ids[p], "pixel {i}");
+                assert_eq!(
+                    f.normal[i],
+                    geometric_normal(&scene.triangles[p]),
+                    "pixel {i}"
+                );
+            }
+        }
     }
 }
