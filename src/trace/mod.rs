@@ -8,6 +8,7 @@
 
 mod packet;
 mod primary;
+mod rows;
 
 use crate::camera::{Camera, PixelRay};
 use crate::frame::Frame;

@@ -10,6 +10,9 @@
 //! candidates, with the same exact coverage and depth functions.
 
 use super::primary::{dir_norm_bound, max, min, LeafTri, Node32};
+#[cfg(target_arch = "x86_64")]
+use super::rows::Avx2;
+use super::rows::{Portable, Rows, ROW};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
 use crate::scene::resolve::ResolvedScene;
@@ -21,6 +24,15 @@ pub(crate) const PW: usize = 8;
 pub(crate) const PH: usize = 4;
 /// Rays per packet.
 const LANES: usize = PW * PH;
+
+// A packet row is one row of comparisons (one 256-bit vector).
+const _: () = assert!(PW == ROW);
+
+/// Lanes `r * ROW ..` of a per-lane array.
+#[inline(always)]
+fn row(a: &[f32; LANES], r: usize) -> &[f32; ROW] {
+    a[r * ROW..][..ROW].try_into().unwrap()
+}
 
 /// One bit per lane.
 type Mask = u32;
@@ -100,7 +112,7 @@ impl Packet {
 
     /// Lanes whose ray may reach something in the box that beats their best.
     #[inline(always)]
-    fn node_mask(&self, node: &Node32) -> Mask {
+    fn node_mask<S: Rows>(&self, s: S, node: &Node32) -> Mask {
         let mut tmin = [f32::NEG_INFINITY; LANES];
         let mut tmax = [f32::INFINITY; LANES];
         for k in 0..3 {
@@ -127,11 +139,21 @@ impl Packet {
                 }
             }
         }
+        // A lane misses as in `Node32::misses`, or is pruned when even the box's
+        // entry is beyond its best hit.
         let mut m: Mask = 0;
-        for i in 0..LANES {
-            let live =
-                !Node32::misses(tmin[i], tmax[i]) & (tmin[i] * self.zscale[i] <= self.best_z[i]);
-            m |= Mask::from(live) << i;
+        let zero = [0f32; ROW];
+        for r in 0..PH {
+            let tmax_slack = row(&tmax, r).map(Node32::slack_tmax);
+            let tmin_r = row(&tmin, r);
+            let mut entry_z = [0f32; ROW];
+            for (j, z) in entry_z.iter_mut().enumerate() {
+                *z = tmin_r[j] * self.zscale[r * ROW + j];
+            }
+            let out = s.gt(tmin_r, &tmax_slack)
+                | s.gt(&zero, row(&tmax, r))
+                | s.gt(&entry_z, row(&self.best_z, r));
+            m |= (!out & ((1 << ROW) - 1)) << (r * ROW);
         }
         m
     }
@@ -145,27 +167,25 @@ impl Packet {
     /// are settled from the masks, with the counts `covers_by` would make; only
     /// lanes with an unsure sign take the per-lane path.
     #[inline(always)]
-    fn leaf(&mut self, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
+    fn leaf<S: Rows>(&mut self, s: S, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
         let mut pos = [0 as Mask; 3];
         let mut neg = [0 as Mask; 3];
         for r in 0..PH {
             // A row of lanes is one 256-bit vector: skip rows the box let no lane into.
-            if (m >> (r * PW)) & ((1 << PW) - 1) == 0 {
+            if (m >> (r * ROW)) & ((1 << ROW) - 1) == 0 {
                 continue;
             }
             for k in 0..3 {
-                let mut det = [0f32; PW];
-                let mut bound = [0f32; PW];
-                for j in 0..PW {
-                    let i = r * PW + j;
+                let mut det = [0f32; ROW];
+                let mut bound = [0f32; ROW];
+                for j in 0..ROW {
+                    let i = r * ROW + j;
                     let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
                     (det[j], bound[j]) = leaf.edge_det32(k, d, self.dir_norm[i]);
                 }
-                for j in 0..PW {
-                    let i = r * PW + j;
-                    pos[k] |= Mask::from(det[j] > bound[j]) << i;
-                    neg[k] |= Mask::from(-det[j] > bound[j]) << i;
-                }
+                let neg_det = det.map(|d| -d);
+                pos[k] |= s.gt(&det, &bound) << (r * ROW);
+                neg[k] |= s.gt(&neg_det, &bound) << (r * ROW);
             }
         }
         let [p0, p1, p2] = pos;
@@ -207,8 +227,9 @@ impl TraceBvh {
     /// Traces the packet whose top-left pixel is `(x0, y0)` to completion; the
     /// nearest keys are in the returned packet's `best`.
     /// On x86-64 CPUs with AVX2 the same code runs compiled for 256-bit
-    /// vectors (the lane loops are auto-vectorized; arithmetic is unchanged,
-    /// as Rust never contracts a*b+c into an FMA by itself).
+    /// vectors (the lane loops are auto-vectorized, and rows of comparisons
+    /// become masks with `vmovmskps`, see [`super::rows`]); the arithmetic is
+    /// unchanged, as Rust never contracts a*b+c into an FMA by itself.
     pub(crate) fn trace_packet(
         &self,
         scene: &ResolvedScene,
@@ -218,29 +239,31 @@ impl TraceBvh {
         stack: &mut Vec<(u32, Mask)>,
     ) -> Packet {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2, checked just above.
-            return unsafe { self.trace_packet_avx2(scene, x0, y0, c, stack) };
+        if let Some(avx2) = Avx2::detect() {
+            // SAFETY: the token proves the CPU supports AVX2.
+            return unsafe { self.trace_packet_avx2(avx2, scene, x0, y0, c, stack) };
         }
-        self.trace_packet_body(scene, x0, y0, c, stack)
+        self.trace_packet_body(Portable, scene, x0, y0, c, stack)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn trace_packet_avx2(
         &self,
+        avx2: Avx2,
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
     ) -> Packet {
-        self.trace_packet_body(scene, x0, y0, c, stack)
+        self.trace_packet_body(avx2, scene, x0, y0, c, stack)
     }
 
     #[inline(always)]
-    fn trace_packet_body(
+    fn trace_packet_body<S: Rows>(
         &self,
+        s: S,
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
@@ -259,13 +282,13 @@ impl TraceBvh {
         while let Some((ni, mask)) = stack.pop() {
             let node = &self.nodes32[ni as usize];
             c.bvh_nodes_visited += u64::from(mask.count_ones());
-            let m = pk.node_mask(node) & mask;
+            let m = pk.node_mask(s, node) & mask;
             if m == 0 {
                 continue;
             }
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
-                    pk.leaf(cam, &self.leaves[k as usize], m, c);
+                    pk.leaf(s, cam, &self.leaves[k as usize], m, c);
                 }
                 continue;
             }
@@ -285,6 +308,49 @@ mod tests {
     use super::super::primary::Ray32;
     use super::*;
     use glam::DVec3;
+
+    /// The AVX2 kernel (when the CPU has it) and the portable one give the
+    /// same keys and the same counts on every packet, and every key is the
+    /// single-ray kernel's.
+    #[test]
+    fn avx2_and_portable_kernels_agree() {
+        for (path, size) in [
+            ("scenes/icosphere.toml", (61, 35)),
+            ("scenes/million.toml", (160, 90)),
+        ] {
+            let s = crate::scene::Scene::load(std::path::Path::new(path)).unwrap();
+            let scene = crate::bench::resized(&ResolvedScene::resolve(&s).unwrap(), size.0, size.1)
+                .unwrap();
+            let bvh = TraceBvh::build(&scene, crate::trace::BvhQuality::Medium);
+            let cam = &scene.camera;
+            let mut stack = Vec::new();
+            let mut single_stack = Vec::new();
+            for y0 in (0..size.1 as usize).step_by(PH) {
+                for x0 in (0..size.0 as usize).step_by(PW) {
+                    let mut c = Counters::default();
+                    let portable =
+                        bvh.trace_packet_body(Portable, &scene, x0, y0, &mut c, &mut stack);
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(avx2) = Avx2::detect() {
+                        let mut c2 = Counters::default();
+                        // SAFETY: the token proves the CPU supports AVX2.
+                        let fast = unsafe {
+                            bvh.trace_packet_avx2(avx2, &scene, x0, y0, &mut c2, &mut stack)
+                        };
+                        assert_eq!(fast.best, portable.best, "{path} packet ({x0}, {y0})");
+                        assert_eq!(c2, c, "{path} packet ({x0}, {y0})");
+                    }
+                    for i in (0..LANES).filter(|i| portable.active >> i & 1 == 1) {
+                        let (x, y) = ((x0 + i % PW) as u32, (y0 + i / PW) as u32);
+                        let ray = cam.pixel_ray(x, y);
+                        let mut cs = Counters::default();
+                        let want = bvh.trace_with(&scene, &ray, &mut cs, None, &mut single_stack);
+                        assert_eq!(portable.best[i], want, "{path} pixel ({x}, {y})");
+                    }
+                }
+            }
+        }
+    }
 
     /// Every lane's exact ray is bit for bit the camera's pixel ray, its f32
     /// data is that ray's, and exactly the lanes inside the image are active.

@@ -158,7 +158,14 @@ impl Node32 {
     /// `tmax > 0` always passes `tmin <= tmax (1 + 2^-20)` (16 u of room).
     #[inline]
     pub fn misses(tmin: f32, tmax: f32) -> bool {
-        (tmin > tmax * (1.0 + SLAB_SLACK)) | (tmax < 0.0)
+        (tmin > Node32::slack_tmax(tmax)) | (tmax < 0.0)
+    }
+
+    /// `tmax` with the room [`Node32::misses`] gives it (the packet kernel
+    /// applies the same test to a row of lanes at once).
+    #[inline(always)]
+    pub fn slack_tmax(tmax: f32) -> f32 {
+        tmax * (1.0 + SLAB_SLACK)
     }
 
     /// The box's eye-relative extent on axis `k`.
