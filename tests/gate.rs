@@ -6,7 +6,9 @@ use rendiff::check::manifest::{ResultEntry, Results};
 use rendiff::gate::{self, Baseline, BaselineEntry, ChangeKind, Noise, Provenance};
 use serde_json::{json, Value};
 use std::path::Path;
-use std::process::Command;
+
+mod common_cli;
+use common_cli::{rendiff, small_check};
 
 fn entry(
     scene: &str,
@@ -227,12 +229,6 @@ fn the_committed_baseline_is_blessed_with_provenance() {
 
 // ---------------------------------------------------------------- the command line, on a real run
 
-fn rendiff(root: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
-    c.current_dir(root);
-    c
-}
-
 fn edit(results: &mut Value, scene: &str, backend: &str, buffer: &str, f: impl FnOnce(&mut Value)) {
     let e = results["results"]
         .as_array_mut()
@@ -245,34 +241,11 @@ fn edit(results: &mut Value, scene: &str, backend: &str, buffer: &str, f: impl F
 
 #[test]
 fn bless_then_gate_passes_and_catches_every_kind_of_change() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    assert!(
-        root.join(".venv/bin/python").exists(),
-        ".venv is missing: run scripts/setup.sh (check's comparison needs the Python harness)"
-    );
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let out = rendiff(root)
-        .args([
-            "check",
-            "scenes/three_triangles.toml",
-            "scenes/pixel_grid.toml",
-            "--only",
-            "trace,embree",
-            "--quiet",
-            "-o",
-        ])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    small_check(&run);
     let baseline = dir.path().join("base/baseline.json");
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("bless")
         .arg(&run)
         .arg("--baseline")
@@ -298,7 +271,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
 
     // Unchanged: passes, writes RUN/gate.md, leaves the baseline alone.
     let before = std::fs::read(&baseline).unwrap();
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("gate")
         .arg("--baseline")
         .arg(&baseline)
@@ -343,7 +316,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     extra["scene"] = "brand_new".into();
     arr.push(extra);
     std::fs::write(&path, serde_json::to_string_pretty(&r).unwrap()).unwrap();
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("gate")
         .arg("--baseline")
         .arg(&baseline)
@@ -368,7 +341,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     assert_eq!(std::fs::read_to_string(run.join("gate.md")).unwrap(), md);
 
     // Bless refuses a failing run unless told to accept its failures.
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("bless")
         .arg(&run)
         .arg("--baseline")
@@ -382,7 +355,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         before,
         "a refused bless changed the baseline"
     );
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("bless")
         .arg(&run)
         .arg("--baseline")
@@ -396,7 +369,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let out = rendiff(root)
+    let out = rendiff()
         .arg("gate")
         .arg("--baseline")
         .arg(&baseline)

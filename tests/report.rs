@@ -4,51 +4,10 @@
 //! network), survives runs without radiance, verdicts or renders, and escapes
 //! every name that comes from a scene file.
 
+mod common_cli;
+
+use common_cli::{need_venv, rendiff, small_check};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn rendiff() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
-    c.current_dir(root());
-    c
-}
-
-fn need_venv() {
-    let py = root().join(".venv/bin/python");
-    assert!(
-        py.exists(),
-        "{} is missing: run scripts/setup.sh (check's comparison needs the Python harness)",
-        py.display()
-    );
-}
-
-/// A quick real run: two scenes, the core tracer and Embree against raster.
-fn small_run(run: &Path) {
-    need_venv();
-    let out = rendiff()
-        .args([
-            "check",
-            "scenes/three_triangles.toml",
-            "scenes/pixel_grid.toml",
-            "--only",
-            "trace,embree",
-            "--quiet",
-            "-o",
-        ])
-        .arg(run)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.code() == Some(0),
-        "check failed: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
@@ -122,7 +81,7 @@ fn assert_self_contained(report: &Path) {
 fn check_writes_a_self_contained_report_of_every_scene_and_backend() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    small_run(&run);
+    small_check(&run);
     let report = run.join("report");
     let index = read(&report.join("index.html"));
     for scene in ["three_triangles", "pixel_grid"] {

@@ -6,6 +6,9 @@
 //! A missing browser fails the test with the fix (`scripts/setup.sh` installs
 //! chromium); only RENDIFF_ALLOW_NO_BROWSER=1 turns that into a skip.
 
+mod common_cli;
+
+use common_cli::small_check;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -86,34 +89,10 @@ fn the_report_renders_in_a_headless_browser() {
         }
         panic!("{CHROMIUM} not found: run scripts/setup.sh (it installs chromium), or set RENDIFF_ALLOW_NO_BROWSER=1 to skip");
     }
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    assert!(
-        root.join(".venv/bin/python").exists(),
-        ".venv is missing: run scripts/setup.sh (check's comparison needs the Python harness)"
-    );
     // Kept under target/tmp so the screenshot can be looked at after the test.
     let run: PathBuf = Path::new(env!("CARGO_TARGET_TMPDIR")).join("report-browser-run");
     let _ = std::fs::remove_dir_all(&run);
-    let out = Command::new(env!("CARGO_BIN_EXE_rendiff"))
-        .current_dir(root)
-        .args([
-            "check",
-            "scenes/three_triangles.toml",
-            "scenes/pixel_grid.toml",
-            "--only",
-            "trace,embree",
-            "--quiet",
-            "-o",
-        ])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    small_check(&run);
     let report = run.join("report");
     let profile = tempfile::tempdir().unwrap();
 
