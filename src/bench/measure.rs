@@ -50,23 +50,12 @@ pub fn trace(scene: &ResolvedScene, q: BvhQuality, runs: usize) -> TraceTimes {
     TraceTimes { build, trace }
 }
 
-/// Times tracing through an existing BVH (the default kernel: packets).
+/// Times tracing through an existing BVH (the default kernel: packets), the
+/// frame's buffers included.
 pub fn trace_with(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Timed<Frame> {
-    trace_kernel(scene, bvh, trace::TraceKernel::Packets, runs)
-}
-
-/// Times tracing through an existing BVH with a chosen kernel.
-pub fn trace_kernel(
-    scene: &ResolvedScene,
-    bvh: &TraceBvh,
-    kernel: trace::TraceKernel,
-    runs: usize,
-) -> Timed<Frame> {
-    let opts = trace::TraceOptions {
-        kernel,
-        ..trace::TraceOptions::default()
-    };
-    timed(runs, || trace::render_with_bvh(scene, bvh, opts, &|_| {}))
+    timed(runs, || {
+        trace::render_with_bvh(scene, bvh, trace::TraceOptions::default(), &|_| {})
+    })
 }
 
 /// Times the ray queries alone (hit keys per pixel, the frame's buffers are
@@ -83,11 +72,10 @@ pub fn trace_queries(
         ..trace::TraceOptions::default()
     };
     let t = timed(runs, || trace::trace_keys(scene, bvh, opts, &|_| {}));
-    let k = t.last;
     Timed {
         median_s: t.median_s,
         runs_s: t.runs_s,
-        last: Frame::from_keys(scene, &k.keys, k.coverage, k.counters, "trace", t.median_s),
+        last: t.last.into_frame(scene, t.median_s),
     }
 }
 

@@ -319,14 +319,7 @@ pub fn render_with_bvh(
 ) -> Frame {
     let start = Instant::now();
     let t = trace_keys(scene, bvh, opts, progress);
-    Frame::from_keys(
-        scene,
-        &t.keys,
-        t.coverage,
-        t.counters,
-        "trace",
-        start.elapsed().as_secs_f64(),
-    )
+    t.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
 /// The ray queries' answers, before the frame's buffers are filled from them.
@@ -337,6 +330,20 @@ pub struct TracedKeys {
     pub coverage: Option<Vec<[u16; 2]>>,
     /// What the queries cost.
     pub counters: Counters,
+}
+
+impl TracedKeys {
+    /// The trace frame these keys make (`seconds`: what the caller timed).
+    pub fn into_frame(self, scene: &ResolvedScene, seconds: f64) -> Frame {
+        Frame::from_keys(
+            scene,
+            &self.keys,
+            self.coverage,
+            self.counters,
+            "trace",
+            seconds,
+        )
+    }
 }
 
 /// Traces every pixel and stops at the per-pixel hit keys: the part of a
