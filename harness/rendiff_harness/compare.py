@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, diffimages, exrbuf, expectations, lighting, radiance, resolved, tolerance
+from . import classify, diffimages, exrbuf, expectations, lighting, radiance, resolved, tolerance, verify
 
 MANIFEST_FORMAT = "rendiff-manifest/1"
 RESULTS_FORMAT = "rendiff-results/1"
@@ -152,6 +152,8 @@ def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any])
         "reason": "",
         "pixels": 0,
         "edge_mismatches": 0,
+        "tie_mismatches": 0,
+        "crack_mismatches": 0,
         "interior_mismatches": 0,
         "mask_mismatches": 0,
         "max_abs_error": 0.0,
@@ -168,7 +170,7 @@ def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any])
 
 
 NUMERIC_FIELDS = (
-    "pixels", "edge_mismatches", "interior_mismatches", "mask_mismatches",
+    "pixels", "edge_mismatches", "tie_mismatches", "crack_mismatches", "interior_mismatches", "mask_mismatches",
     "max_abs_error", "mean_abs_error", "max_rel_error", "compared_pixels",
 )
 
@@ -234,6 +236,7 @@ class Reference:
     _normals: np.ndarray | None = field(default=None, repr=False)
     attrs: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    topology_cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def unit_normals(self) -> np.ndarray:
         """(N, 3) float64 unit normals of every triangle (zero for degenerate ones)."""
@@ -298,23 +301,57 @@ def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) ->
 class IdResult:
     edge: int
     interior: int
-    edge_mask: np.ndarray  # (H, W) bool
+    edge_mask: np.ndarray  # (H, W) bool: allowed ID differences (edge, tie, declared-or-not crack)
     interior_mask: np.ndarray  # (H, W) bool
     tolerance: str
     details: list[str]
+    tie: int = 0
+    crack: int = 0
+    classes: np.ndarray | None = None  # (H, W) int8: verify.EDGE..INTERIOR, -1 where the IDs agree
+    explanations: list[dict[str, Any]] = field(default_factory=list)
 
 
 EdgeDistance = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 """(ref ids, test ids, rows, cols) of the mismatched pixels -> pixel distance to an edge involved."""
 
 
-def compare_ids(
-    ref: Reference, test: Mapping[str, np.ndarray], model: tolerance.Model, edge_distance: EdgeDistance | None = None
-) -> IdResult:
-    """Exact id.prim / id.object comparison, each mismatch classified edge or interior.
+def origin_offset(ref: Reference) -> float:
+    """|f32(eye) - eye|: how far a renderer whose camera origin is f32 moves every ray."""
+    eye = np.asarray(ref.scene.camera.eye, dtype=np.float64)
+    return float(np.linalg.norm(eye.astype(np.float32).astype(np.float64) - eye))
 
-    `edge_distance` defaults to classify.mismatch_edge_distance on the reference's scene;
-    the metamorphic comparison (metamorphic.py) passes one that also looks at the variant's scene.
+
+def pixel_size(ref: Reference) -> float:
+    """One pixel on the image plane at distance 1."""
+    return 2.0 * ref.scene.camera.tan_half_vfov / ref.scene.camera.height
+
+
+def point_norm(ref: Reference, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """|X| of the points at planar depth z along pixel rays (distance from the world origin)."""
+    cam = ref.scene.camera
+    w, h = cam.width, cam.height
+    sx = (2.0 * (cols + 0.5) / w - 1.0) * cam.tan_half_vfov * (w / h)
+    sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
+    d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
+    zz = np.where(np.isfinite(z), z, 0.0)
+    return np.linalg.norm(cam.eye[None, :] + zz[:, None] * d, axis=1)
+
+
+def compare_ids(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    model: tolerance.Model,
+    edge_distance: EdgeDistance | None = None,
+    depth_tol: verify.DepthTolerance | None = None,
+    backend: str = "the test renderer",
+) -> IdResult:
+    """Exact id.prim / id.object comparison; every mismatch gets a class (verify.py).
+
+    With `edge_distance` (the metamorphic comparison, metamorphic.py, which also looks at
+    the variant's scene) a mismatch is only edge (within `model.edge_px` of an edge
+    involved) or interior. Otherwise the verifier classifies each mismatch as edge, tie,
+    crack or interior, with the test renderer's per-pixel rounding distance
+    (`model.edge_eps`) and depth tolerance `depth_tol` (for ties; default: exact).
     """
     rp, tp = ref.buffers["id.prim"], test["id.prim"]
     h, w = rp.shape
@@ -322,27 +359,63 @@ def compare_ids(
     idx = np.flatnonzero(mism)
     rows, cols = idx // w, idx % w
     r_ids, t_ids = rp.ravel()[idx], tp.ravel()[idx]
-    if edge_distance is None:
-        dist = classify.mismatch_edge_distance(ref.scene, r_ids, t_ids, rows, cols)
-    else:
-        dist = edge_distance(r_ids, t_ids, rows, cols)
     n = ref.scene.triangle_count
-    invalid = (t_ids != BACKGROUND_ID) & (t_ids.astype(np.uint64) >= np.uint64(n))
-    is_edge = (dist <= model.edge_px) & ~invalid
-    edge_mask = np.zeros((h, w), dtype=bool)
-    interior_mask = np.zeros((h, w), dtype=bool)
-    edge_mask.ravel()[idx[is_edge]] = True
-    interior_mask.ravel()[idx[~is_edge]] = True
     details: list[str] = []
-    tol_text = model.edge_text()
-    if invalid.any():
-        details.append(f"{int(invalid.sum())} pixels carry IDs naming no triangle (scene has {n})")
-    bad = np.nonzero(~is_edge)[0][:EXAMPLES]
-    if bad.size:
-        ex = ", ".join(
-            f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])} d={_dist(dist[k])}" for k in bad
+    classes = np.full((h, w), -1, dtype=np.int8)
+    explanations: list[dict[str, Any]] = []
+    if edge_distance is not None:
+        dist = edge_distance(r_ids, t_ids, rows, cols)
+        invalid = (t_ids != BACKGROUND_ID) & (t_ids.astype(np.uint64) >= np.uint64(n))
+        cls = np.where((dist <= model.edge_px) & ~invalid, verify.EDGE, verify.INTERIOR).astype(np.int8)
+        tol_text = model.edge_text()
+        bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
+        if invalid.any():
+            details.append(f"{int(invalid.sum())} pixels carry IDs naming no triangle (scene has {n})")
+        if bad.size:
+            ex = ", ".join(
+                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])} d={_dist(dist[k])}" for k in bad
+            )
+            details.append(f"interior e.g. {ex}")
+    else:
+        zr = ref.buffers.get("Z")
+        zt = test.get("Z")
+        z_here = np.full(idx.size, np.inf)
+        if zr is not None:
+            z_here = zr.ravel()[idx].astype(np.float64)
+        if zt is not None:
+            zt_here = zt.ravel()[idx].astype(np.float64)
+            z_here = np.where(np.isfinite(z_here), z_here, zt_here)
+        ectx = tolerance.EdgeContext(
+            z=z_here, point_norm=point_norm(ref, rows, cols, z_here), pixel_size=pixel_size(ref),
+            origin_offset=origin_offset(ref),
         )
-        details.append(f"interior e.g. {ex}")
+        eps, tol_text = model.edge_eps(ectx)
+
+        def exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+            return np.zeros_like(z)
+
+        result = verify.classify_mismatches(
+            ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend
+        )
+        cls = result.cls
+        explanations = result.groups
+        tol_text += (
+            "; tie: both triangles cover the center and their depths agree within the depth tolerance; "
+            "crack: a leak through a closed edge (allowed only where the backend declares it)"
+        )
+        bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
+        if bad.size:
+            details.append("interior e.g. " + "; ".join(
+                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in bad
+            ))
+        cracks = np.nonzero(cls == verify.CRACK)[0][:EXAMPLES]
+        if cracks.size:
+            details.append("crack e.g. " + "; ".join(
+                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in cracks
+            ))
+    classes.ravel()[idx] = cls
+    edge_mask = (classes == verify.EDGE) | (classes == verify.TIE) | (classes == verify.CRACK)
+    interior_mask = classes == verify.INTERIOR
     # id.object must follow id.prim: where the prims agree the objects must too.
     if "id.object" in ref.buffers and "id.object" in test:
         obj_bad = ~mism & (ref.buffers["id.object"] != test["id.object"])
@@ -354,11 +427,26 @@ def compare_ids(
                 f"{oi.size} pixels with the same id.prim but a different id.object, e.g. ({x},{y}) "
                 f"ref {_id(ref.buffers['id.object'][y, x])} test {_id(test['id.object'][y, x])}"
             )
+            explanations.insert(0, {
+                "class": "interior", "ref_prim": None, "test_prim": None, "pixels": int(oi.size),
+                "example": [int(x), int(y)],
+                "why": f"same prim, different object id (ref {_id(ref.buffers['id.object'][y, x])}, "
+                f"test {_id(test['id.object'][y, x])}): the exporter or renderer mislabels objects",
+            })
         tol_text += "; id.object must match wherever id.prim does"
     else:
         tol_text += "; id.object not compared (missing on one side)"
     return IdResult(
-        int(edge_mask.sum()), int(interior_mask.sum()), edge_mask, interior_mask, tol_text, details
+        int(np.count_nonzero(classes == verify.EDGE)),
+        int(interior_mask.sum()),
+        edge_mask,
+        interior_mask,
+        tol_text,
+        details,
+        tie=int(np.count_nonzero(classes == verify.TIE)),
+        crack=int(np.count_nonzero(classes == verify.CRACK)),
+        classes=classes,
+        explanations=explanations,
     )
 
 
@@ -385,6 +473,50 @@ class DepthResult:
     max_rel: float
     tolerance: str
     details: list[str]
+    tie: int = 0
+    crack: int = 0
+
+
+def depth_context(
+    ref: Reference,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    z_ref: np.ndarray,
+    prims: np.ndarray | None,
+    render: Mapping[str, Any],
+    attrs: Mapping[str, Any],
+) -> tolerance.DepthContext:
+    """Everything a depth model may look at for the K pixels (rows, cols) seen at z_ref."""
+    if prims is not None:
+        cos = ref.ray_cos(rows, cols, prims)
+        t = ref.scene.triangles[prims.astype(np.int64)].astype(np.float64)
+        extent = np.max(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2), axis=1)
+    else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
+        cos = np.zeros(z_ref.size)
+        extent = None
+    return tolerance.DepthContext(
+        z_ref=z_ref, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
+        point_norm=point_norm(ref, rows, cols, z_ref), extent=extent, origin_offset=origin_offset(ref),
+    )
+
+
+def depth_tolerance_fn(
+    ref: Reference, model: tolerance.Model, render: Mapping[str, Any], attrs: Mapping[str, Any]
+) -> verify.DepthTolerance:
+    """The test renderer's depth tolerance at (z, cos), for the verifier's tie test."""
+
+    def tol(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        ctx = tolerance.DepthContext(
+            z_ref=z, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
+            point_norm=np.abs(z) + float(np.linalg.norm(ref.scene.camera.eye)), origin_offset=origin_offset(ref),
+        )
+        try:
+            t, _ = model.depth(ctx)
+        except tolerance.ToleranceError:
+            return np.zeros_like(z)
+        return np.broadcast_to(np.asarray(t, dtype=np.float64), z.shape)
+
+    return tol
 
 
 def compare_depth(
@@ -394,14 +526,28 @@ def compare_depth(
     render: Mapping[str, Any],
     attrs: Mapping[str, Any],
     id_edge_mask: np.ndarray | None,
+    id_classes: np.ndarray | None = None,
 ) -> DepthResult:
+    """Hit/miss masks exact except at allowed ID classes; depth within the backend's model.
+
+    With `id_classes` (the verifier's classes of the ID mismatches), a mask mismatch at an
+    edge or tie pixel is allowed, at a crack pixel it is a crack, elsewhere interior.
+    Without it, `id_edge_mask` marks the allowed pixels (the metamorphic comparison).
+    """
     zr = ref.buffers["Z"].astype(np.float64)
     zt = test["Z"].astype(np.float64)
     h, w = zr.shape
     hr, ht = np.isfinite(zr), np.isfinite(zt)
     mask_mm = hr != ht
-    edge_mask = mask_mm & id_edge_mask if id_edge_mask is not None else np.zeros_like(mask_mm)
-    interior_mask = mask_mm & ~edge_mask
+    tie_mask = np.zeros_like(mask_mm)
+    crack_mask = np.zeros_like(mask_mm)
+    if id_classes is not None:
+        edge_mask = mask_mm & (id_classes == verify.EDGE)
+        tie_mask = mask_mm & (id_classes == verify.TIE)
+        crack_mask = mask_mm & (id_classes == verify.CRACK)
+    else:
+        edge_mask = mask_mm & id_edge_mask if id_edge_mask is not None else np.zeros_like(mask_mm)
+    interior_mask = mask_mm & ~edge_mask & ~tie_mask & ~crack_mask
     details: list[str] = []
     notes: list[str] = []
 
@@ -421,15 +567,10 @@ def compare_depth(
     rows, cols = idx // w, idx % w
     z_ref = zr.ravel()[idx]
     z_test = zt.ravel()[idx]
-    if have_ref_ids:
-        cos = ref.ray_cos(rows, cols, ref.buffers["id.prim"].ravel()[idx])
-    else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
-        cos = np.zeros(idx.size)
+    prims = ref.buffers["id.prim"].ravel()[idx] if have_ref_ids else None
+    if prims is None:
         notes.append("reference has no id.prim: grazing factor at its cap")
-    pixel_size = 2.0 * ref.scene.camera.tan_half_vfov / ref.scene.camera.height
-    ctx = tolerance.DepthContext(
-        z_ref=z_ref, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size
-    )
+    ctx = depth_context(ref, rows, cols, z_ref, prims, render, attrs)
     tol, tol_text = model.depth(ctx)
     tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), z_ref.shape)
     err = np.abs(z_test - z_ref)
@@ -451,7 +592,10 @@ def compare_depth(
             for k in worst
         )
         details.append(f"{bi.size} depths beyond tolerance, worst {ex}")
-    text = f"{tol_text}; compared {scope}; hit/miss masks exact (mismatches at ID edge mismatches count as edge)"
+    text = (
+        f"{tol_text}; compared {scope}; hit/miss masks exact except where the ID mismatch is an allowed class "
+        "(edge, tie; crack only where declared)"
+    )
     if notes:
         text += "; " + "; ".join(notes)
     return DepthResult(
@@ -464,6 +608,8 @@ def compare_depth(
         max_rel=float(rel.max()) if idx.size else 0.0,
         tolerance=text,
         details=details,
+        tie=int(tie_mask.sum()),
+        crack=int(crack_mask.sum()),
     )
 
 
@@ -484,14 +630,17 @@ def _declared_buffers(render: Mapping[str, Any]) -> set[str] | None:
 
 def _apply_verdict(entry: dict[str, Any], exps: expectations.Expectations, details: list[str]) -> None:
     exp = exps.lookup(entry["scene"], entry["backend"], entry["buffer"])
-    counts = {k: int(entry[k]) for k in expectations.COUNT_KEYS}
-    verdict = expectations.evaluate(counts, exp)
+    counts = {k: int(entry.get(k) or 0) for k in expectations.COUNT_KEYS}
+    declared = exps.declared(entry["backend"], "crack")
+    verdict = expectations.evaluate(counts, exp, cracks_allowed=declared is not None)
     entry["status"] = verdict.status
     if exp is not None:
         entry["bound"] = exp.bound_json()
     parts = [verdict.reason] if verdict.reason else []
     if verdict.status in ("fail", "expected_fail", "unexpected_pass"):
         parts += details
+    if declared is not None and int(entry.get("crack_mismatches") or 0) > 0:
+        parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
     entry["reason"] = "; ".join(parts)
 
 
@@ -544,10 +693,13 @@ def compare_backend(
     elif "id.prim" not in ref.buffers:
         e_id["reason"] = "reference has no id.prim channel"
     else:
-        id_res = compare_ids(ref, test, model)
+        id_res = compare_ids(ref, test, model, depth_tol=depth_tolerance_fn(ref, model, render, attrs), backend=backend)
         e_id["edge_mismatches"] = id_res.edge
+        e_id["tie_mismatches"] = id_res.tie
+        e_id["crack_mismatches"] = id_res.crack
         e_id["interior_mismatches"] = id_res.interior
         e_id["tolerance"] = id_res.tolerance
+        e_id["explanations"] = id_res.explanations
         _apply_verdict(e_id, exps, id_res.details)
         if not model.known:
             _add_reason(e_id, f"no precision model for {backend} in tolerance.py: compared exactly")
@@ -576,13 +728,16 @@ def compare_backend(
     else:
         try:
             z_res = compare_depth(
-                ref, test, model, render, attrs, id_res.edge_mask if id_res is not None else None
+                ref, test, model, render, attrs, id_res.edge_mask if id_res is not None else None,
+                id_res.classes if id_res is not None else None,
             )
         except tolerance.ToleranceError as exc:
             e_z["reason"] = str(exc)
             z_res = None
         if z_res is not None:
             e_z["edge_mismatches"] = z_res.edge
+            e_z["tie_mismatches"] = z_res.tie
+            e_z["crack_mismatches"] = z_res.crack
             e_z["interior_mismatches"] = z_res.interior
             e_z["mask_mismatches"] = z_res.mask
             e_z["compared_pixels"] = z_res.compared
@@ -600,14 +755,19 @@ def compare_backend(
                     _add_reason(e_z, f"diff image not written: {exc}")
     out.append(e_z)
 
+    # ---- N (where the backend writes normals)
+    if "N" in test:
+        out.append(compare_normals(scene_name, backend, render, ref, test, exps))
+
     # ---- RGB
     if is_shaded(ref.scene.requires):
         e_rgb = rgb_entry(scene_name, backend, render)
         e_rgb["pixels"] = pixels
+        own = str(render.get("reason") or "")
         if "RGB" not in test:
             e_rgb["status"] = "skipped" if declared is None or "RGB" not in declared else "error"
             e_rgb["reason"] = (
-                f"{backend} does not produce RGB" if e_rgb["status"] == "skipped"
+                (own or f"{backend} does not produce RGB") if e_rgb["status"] == "skipped"
                 else f"{exr}: manifest lists buffer RGB but the EXR has no R,G,B channels"
             )
         elif "RGB" not in ref.buffers:
@@ -626,6 +786,73 @@ def compare_backend(
                 _rgb_image(e_rgb, run, diff_dir, backend, res)
         out.append(e_rgb)
     return out
+
+
+def compare_normals(
+    scene_name: str,
+    backend: str,
+    render: Mapping[str, Any],
+    ref: Reference,
+    buffers: Mapping[str, np.ndarray],
+    exps: expectations.Expectations,
+) -> dict[str, Any]:
+    """A backend's N against the documented winding convention: N = normalize((b-a) x (c-a)).
+
+    Judged at every pixel where the backend's own id.prim names a triangle (its
+    visibility is judged by its id entry), so the reference's normals are checked too:
+    a flipped, unnormalized or wrong-triangle normal is an interior mismatch.
+    """
+    e = base_entry(scene_name, backend, "N", render)
+    h, w = ref.shape
+    e["pixels"] = h * w
+    e["max_angle_rad"] = None
+    n = buffers.get("N")
+    ids = buffers.get("id.prim")
+    if n is None or ids is None:
+        e["status"] = "skipped"
+        e["reason"] = f"{backend} writes no N" if n is None else f"{backend} writes N but no id.prim to judge it by"
+        return e
+    prims = ids.ravel()
+    valid = np.flatnonzero(prims.astype(np.uint64) < np.uint64(ref.scene.triangle_count))
+    tris = ref.scene.triangles[prims[valid].astype(np.int64)].astype(np.float64)
+    e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    cross = np.cross(e1, e2)
+    length = np.linalg.norm(cross, axis=1)
+    with np.errstate(all="ignore"):
+        expect = cross / np.where(length > 0, length, 1.0)[:, None]
+        cond = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) / length
+    got = np.asarray(n, dtype=np.float64).reshape(-1, 3)[valid]
+    got_len = np.linalg.norm(got, axis=1)
+    with np.errstate(all="ignore"):
+        cosang = np.einsum("ij,ij->i", got, expect) / got_len
+        # atan2 of |cross| and dot is accurate at small angles, where acos is not.
+        angle = np.arctan2(np.linalg.norm(np.cross(got, expect), axis=1) / got_len, cosang)
+    angle = np.where(np.isfinite(angle) & (length > 0), angle, np.pi)
+    tol, text = tolerance.normal_tolerance(backend, np.where(np.isfinite(cond), cond, np.inf))
+    unit_ok = np.abs(got_len - 1.0) <= 4.0 * tolerance.F32_U + tol
+    bad = ~(angle <= tol) | ~unit_ok
+    e["compared_pixels"] = int(valid.size)
+    e["interior_mismatches"] = int(bad.sum())
+    e["max_angle_rad"] = float(angle.max()) if valid.size and np.isfinite(angle.max()) else (0.0 if not valid.size else None)
+    e["tolerance"] = f"N: {text}; |N| = 1 within 4 * 2^-24; facing per the winding (b-a) x (c-a)"
+    details = []
+    if bad.any():
+        k = np.nonzero(bad)[0][:EXAMPLES]
+        ex = ", ".join(
+            f"({valid[j] % w},{valid[j] // w}) prim {prims[valid[j]]} angle {angle[j]:.3g} rad (tol {tol[j]:.2g})"
+            for j in k
+        )
+        flipped = int(np.count_nonzero(bad & (cosang < 0)))
+        details.append(f"{int(bad.sum())} normals off, {flipped} of them facing the other way; e.g. {ex}")
+        first = valid[k[0]]
+        e["explanations"] = [{
+            "class": "interior", "ref_prim": int(prims[first]), "test_prim": int(prims[first]),
+            "pixels": int(bad.sum()), "example": [int(first % w), int(first // w)],
+            "why": f"N is {angle[k[0]]:.3g} rad from normalize((b-a) x (c-a)) of the prim it names"
+            + (" (flipped)" if cosang[k[0]] < 0 else ""),
+        }]
+    _apply_verdict(e, exps, details)
+    return e
 
 
 def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:
@@ -723,6 +950,14 @@ def compare_scene(
         ref = load_reference(run, scene_entry, reference)
     except EntryError as exc:
         out = []
+        own_ref = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference]
+        if not renders or (own_ref and own_ref[0].get("status") == "error"):
+            # The scene itself failed (it could not be loaded, or the reference could not
+            # render it): one `scene` entry, so a broken scene can never look like a pass.
+            e = base_entry(name, reference, "scene", own_ref[0] if own_ref else {})
+            e["status"] = "error"
+            e["reason"] = str(exc)
+            out.append(e)
         for r in renders:
             own = "" if r.get("status") == "ok" else f" ({r['backend']} itself {r.get('status')}: {_render_reason(r)})"
             out += status_entries(name, r, "error", f"{exc}{own}", bufs)
@@ -730,6 +965,9 @@ def compare_scene(
     if is_shaded(ref.scene.requires):
         bufs = SHADED_BUFFERS
     results: list[dict[str, Any]] = []
+    if "N" in ref.buffers:  # the reference's own normals, against the winding convention
+        own = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference][0]
+        results.append(compare_normals(name, reference, own, ref, ref.buffers, exps))
     for r in renders:
         status = r.get("status")
         if status in ("skipped", "error"):

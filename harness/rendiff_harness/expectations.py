@@ -1,29 +1,36 @@
-"""The expectations file: known divergences of external renderers, each with a reason and an exact bound.
+"""The expectations file: known renderer bugs and per-backend declarations, each with a reason.
 
-DESIGN.md: "A known divergence of an external renderer is recorded in an expectations
-file with its reason and an exact bound; a run that does better than recorded is
-flagged as an *unexpected pass* so the bound gets tightened."
+DESIGN.md "Comparing": allowed classes (edge, tie; crack where declared) pass without any
+entry, and their counts are held by the regression gate, not here. This file keeps only
+
+* known bugs: `[[expect]]` with `status = "expected_fail"` and a reason that says what
+  is wrong, optionally bounding the failing count (`interior_mismatches`,
+  `crack_mismatches`: [lo, hi]); and
+* per-backend declarations: `[[declare]]` with `backend`, `allows = "crack"` and a
+  reason, written once per backend (for example "POV-Ray mesh2 is not watertight at
+  exact ties"): that backend's crack mismatches are allowed (still counted and gated).
 
 Format (TOML, read with tomllib):
 
     [[expect]]
     scene = "pixel_grid"            # a scene name, or "*" for every scene
     backend = "povray"              # a backend name
-    buffer = "id"                   # "id", "Z" or "RGB"
-    edge_mismatches = [0, 120]      # two-sided bound [lo, hi] on the count (default [0, 0])
-    interior_mismatches = [0, 0]    # likewise (default [0, 0])
-    status = "expected_fail"        # optional: a known failure (default: a bound to pass within)
-    reason = "why this differs"     # required
+    buffer = "id"                   # "id", "Z", "N" or "RGB"
+    status = "expected_fail"        # required: only known failures are recorded
+    interior_mismatches = [0, 120]  # optional two-sided bound [lo, hi] on the failing count
+    reason = "what is wrong"        # required
 
-Verdicts (`evaluate`), with counts c = (edge, interior):
+    [[declare]]
+    backend = "povray"
+    allows = "crack"
+    reason = "why this backend is not watertight"
 
-* no entry: bounds [0, 0] for both -> `pass` when both are 0, else `fail`.
-* plain entry: any count above its hi -> `fail`; else any count below its lo ->
-  `unexpected_pass` (the run does better than recorded: tighten the bound); else `pass`.
-* `status = "expected_fail"` entry (bounds default to [0, inf): any failure is expected):
-  no mismatch at all -> `unexpected_pass` (the known failure is gone: remove the entry);
-  a count above hi -> `fail` (worse than the known failure); a count below lo ->
-  `unexpected_pass` (tighten); else `expected_fail`.
+Verdicts (`evaluate`): failing = interior (+ crack unless the backend declares cracks).
+No entry: `pass` when failing is 0, else `fail`. An `expected_fail` entry: no failing
+pixel -> `unexpected_pass` (the bug is gone: remove the entry); a count above its hi ->
+`fail` (worse than the known bug); below its lo -> `unexpected_pass` (tighten); else
+`expected_fail`. Per-scene count pins of allowed classes (the old plain entries) are
+rejected with a message saying so.
 
 A more specific entry (exact scene name) wins over a "*" one; two entries for the same
 (scene, backend, buffer) are an error. Every problem is reported as one
@@ -39,11 +46,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-BUFFERS = ("id", "Z", "RGB")
-COUNT_KEYS = ("edge_mismatches", "interior_mismatches")
+BUFFERS = ("id", "Z", "N", "RGB")
+COUNT_KEYS = ("interior_mismatches", "crack_mismatches")
+ALLOWED_CLASS_KEYS = ("edge_mismatches", "tie_mismatches")
 ENTRY_KEYS = frozenset({"scene", "backend", "buffer", "status", "reason", *COUNT_KEYS})
-TOP_KEYS = frozenset({"expect"})
-STATUSES = ("bound", "expected_fail")
+DECLARE_KEYS = frozenset({"backend", "allows", "reason"})
+DECLARABLE = ("crack",)
+TOP_KEYS = frozenset({"expect", "declare"})
+STATUSES = ("expected_fail",)
 INF = math.inf
 
 Bound = tuple[int, float]  # (lo, hi); hi may be inf for expected_fail defaults
@@ -81,6 +91,16 @@ class Expectation:
 
 
 @dataclass(frozen=True)
+class Declaration:
+    """A backend's declared property: a class of mismatch it is allowed, with the reason."""
+
+    index: int
+    backend: str
+    allows: str
+    reason: str
+
+
+@dataclass(frozen=True)
 class Verdict:
     status: str  # pass | fail | expected_fail | unexpected_pass
     reason: str
@@ -91,6 +111,14 @@ class Expectations:
     path: Path | None
     entries: list[Expectation] = field(default_factory=list)
     used: set[int] = field(default_factory=set)
+    declarations: list[Declaration] = field(default_factory=list)
+
+    def declared(self, backend: str, allows: str) -> Declaration | None:
+        """The backend's declaration that `allows` (e.g. "crack") is its known property."""
+        for d in self.declarations:
+            if d.backend == backend and d.allows == allows:
+                return d
+        return None
 
     def lookup(self, scene: str, backend: str, buffer: str) -> Expectation | None:
         """The entry for (scene, backend, buffer): an exact scene match beats "*"."""
@@ -149,6 +177,13 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
     if unknown:
         raise ExpectationsError(f"{path}: unknown top-level key(s) {unknown}; only [[expect]] entries are allowed")
     raw = data.get("expect", [])
+    for key in ALLOWED_CLASS_KEYS:
+        for i, entry in enumerate(raw if isinstance(raw, list) else [], start=1):
+            if isinstance(entry, dict) and key in entry:
+                raise ExpectationsError(
+                    f"{_where(path, i, entry)}: key {key!r}: edge and tie mismatches are allowed classes, "
+                    "passed by the verifier and held by the regression gate; per-scene counts are not recorded here"
+                )
     if not isinstance(raw, list):
         raise ExpectationsError(f"{path}: 'expect' must be an array of tables ([[expect]])")
     entries: list[Expectation] = []
@@ -171,24 +206,48 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
             raise ExpectationsError(f"{where}: key 'buffer' must be one of {list(BUFFERS)}, got {buffer!r}")
         if backend == "*":
             raise ExpectationsError(f"{where}: key 'backend' must name one backend ('*' is for scenes only)")
-        status = _string(entry, "status", where, required=False) or "bound"
+        status = _string(entry, "status", where, required=False)
         if status not in STATUSES:
             raise ExpectationsError(
-                f"{where}: key 'status' must be \"expected_fail\" (or absent), got {status!r}"
+                f"{where}: key 'status' must be \"expected_fail\" (only known bugs are recorded; allowed "
+                f"classes need no entry), got {status!r}"
             )
         bounds = {k: _bound(entry[k], where, k) for k in COUNT_KEYS if k in entry}
-        if status == "bound" and not bounds:
-            raise ExpectationsError(
-                f"{where}: give at least one bound ({', '.join(COUNT_KEYS)}) or status = \"expected_fail\""
-            )
         key = (scene, backend, buffer)
         if key in seen:
             raise ExpectationsError(f"{where}: duplicates entry {seen[key]} for the same scene/backend/buffer")
         seen[key] = i
         entries.append(
-            Expectation(i, scene, backend, buffer, reason, status == "expected_fail", bounds)
+            Expectation(i, scene, backend, buffer, reason, True, bounds)
         )
     return entries
+
+
+def parse_declarations(data: Mapping[str, Any], path: Path | str) -> list[Declaration]:
+    """The `[[declare]]` entries: one per (backend, allows), each with a reason."""
+    raw = data.get("declare", [])
+    if not isinstance(raw, list):
+        raise ExpectationsError(f"{path}: 'declare' must be an array of tables ([[declare]])")
+    out: list[Declaration] = []
+    seen: dict[tuple[str, str], int] = {}
+    for i, entry in enumerate(raw, start=1):
+        where = f"{path}: [[declare]] entry {i}"
+        if not isinstance(entry, dict):
+            raise ExpectationsError(f"{where}: must be a table")
+        extra = sorted(set(entry) - DECLARE_KEYS)
+        if extra:
+            raise ExpectationsError(f"{where}: unknown key {extra[0]!r} (allowed: {', '.join(sorted(DECLARE_KEYS))})")
+        backend = _string(entry, "backend", where)
+        allows = _string(entry, "allows", where)
+        reason = _string(entry, "reason", where)
+        assert backend is not None and allows is not None and reason is not None
+        if allows not in DECLARABLE:
+            raise ExpectationsError(f"{where}: key 'allows' must be one of {list(DECLARABLE)}, got {allows!r}")
+        if (backend, allows) in seen:
+            raise ExpectationsError(f"{where}: duplicates entry {seen[(backend, allows)]} ({backend} allows {allows})")
+        seen[(backend, allows)] = i
+        out.append(Declaration(i, backend, allows, reason))
+    return out
 
 
 def load(path: str | Path | None) -> Expectations:
@@ -208,7 +267,7 @@ def load(path: str | Path | None) -> Expectations:
         raise ExpectationsError(f"{path}: not UTF-8 text: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ExpectationsError(f"{path}: invalid TOML: {exc}") from None
-    return Expectations(path, parse(data, path))
+    return Expectations(path, parse(data, path), declarations=parse_declarations(data, path))
 
 
 def _counts_text(counts: Mapping[str, int]) -> str:
@@ -220,27 +279,36 @@ def _fmt_bound(b: Bound) -> str:
     return f"[{lo}, {'inf' if hi == INF else int(hi)}]"
 
 
-def evaluate(counts: Mapping[str, int], expectation: Expectation | None) -> Verdict:
-    """Verdict for one result's counts (keys edge_mismatches, interior_mismatches)."""
+def failing_counts(counts: Mapping[str, int], cracks_allowed: bool) -> dict[str, int]:
+    """The counts that fail a result: interior, and crack unless the backend declares cracks."""
+    out = {"interior_mismatches": int(counts.get("interior_mismatches", 0) or 0)}
+    if not cracks_allowed:
+        out["crack_mismatches"] = int(counts.get("crack_mismatches", 0) or 0)
+    return out
+
+
+def evaluate(
+    counts: Mapping[str, int], expectation: Expectation | None, cracks_allowed: bool = False
+) -> Verdict:
+    """Verdict for one result's class counts (interior_mismatches, crack_mismatches, ...)."""
+    bad = failing_counts(counts, cracks_allowed)
     if expectation is None:
-        over = {k: v for k, v in counts.items() if v > 0}
+        over = {k: v for k, v in bad.items() if v > 0}
         if not over:
             return Verdict("pass", "")
-        return Verdict("fail", f"{_counts_text(over)} mismatches; no expectation allows any")
+        hint = "" if cracks_allowed or not over.get("crack_mismatches") else " (this backend declares no cracks)"
+        return Verdict("fail", f"{_counts_text(over)} mismatches{hint}")
 
     e = expectation
-    above = [k for k in COUNT_KEYS if counts.get(k, 0) > e.bound(k)[1]]
-    below = [k for k in COUNT_KEYS if counts.get(k, 0) < e.bound(k)[0]]
+    above = [k for k in bad if bad[k] > e.bound(k)[1]]
+    below = [k for k in bad if bad[k] < e.bound(k)[0]]
     tag = f"expectation {e.index} ({e.label()}): {e.reason}"
     if above:
-        detail = "; ".join(f"{k} {counts.get(k, 0)} above bound {_fmt_bound(e.bound(k))}" for k in above)
-        worse = " (worse than the known failure)" if e.expected_fail else ""
-        return Verdict("fail", f"{detail}{worse} [{tag}]")
-    if e.expected_fail and all(counts.get(k, 0) == 0 for k in COUNT_KEYS):
-        return Verdict("unexpected_pass", f"no mismatches: the known failure is gone, remove the expectation [{tag}]")
+        detail = "; ".join(f"{k} {bad[k]} above bound {_fmt_bound(e.bound(k))}" for k in above)
+        return Verdict("fail", f"{detail} (worse than the known failure) [{tag}]")
+    if all(v == 0 for v in bad.values()):
+        return Verdict("unexpected_pass", f"no failing mismatches: the known failure is gone, remove the expectation [{tag}]")
     if below:
-        detail = "; ".join(f"{k} {counts.get(k, 0)} below bound {_fmt_bound(e.bound(k))}" for k in below)
+        detail = "; ".join(f"{k} {bad[k]} below bound {_fmt_bound(e.bound(k))}" for k in below)
         return Verdict("unexpected_pass", f"{detail}: better than recorded, tighten the bound [{tag}]")
-    if e.expected_fail:
-        return Verdict("expected_fail", f"known failure ({_counts_text(counts)}): {tag}")
-    return Verdict("pass", tag)
+    return Verdict("expected_fail", f"known failure ({_counts_text(bad)}): {tag}")

@@ -46,9 +46,26 @@ class DepthContext:
     info: Mapping[str, Any]  # the render's `info` from manifest.json
     attrs: Mapping[str, Any]  # the test EXR's rendiff attributes (exrbuf.read_attrs)
     pixel_size: float = 0.0  # side of one pixel on the image plane at distance 1 (2 tan(vfov/2) / H)
+    point_norm: np.ndarray | None = None  # (K,) |X|: distance of the hit point from the world origin
+    extent: np.ndarray | None = None  # (K,) longest edge of the triangle seen
+    origin_offset: float = 0.0  # |f32(eye) - eye|: how far an f32 camera origin moves the rays
+
+
+@dataclass(frozen=True)
+class EdgeContext:
+    """What an edge model may look at, for the K mismatched pixels (classify's `eps`)."""
+
+    z: np.ndarray  # (K,) planar depth at the pixel (the reference's, else the test's; inf: none)
+    point_norm: np.ndarray  # (K,) |X| of that point from the world origin
+    pixel_size: float  # one pixel on the image plane at distance 1
+    origin_offset: float  # |f32(eye) - eye|
 
 
 DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
+EdgeModel = Callable[[EdgeContext], tuple[np.ndarray, str]]
+
+F32_U = 2.0**-24
+"""Unit roundoff of f32: rounding to nearest moves a value by at most this times its size."""
 
 
 @dataclass(frozen=True)
@@ -58,9 +75,19 @@ class Model:
     edge_reason: str
     depth: DepthModel
     known: bool = True  # False: a strict fallback for a backend without a model
+    edge_extra: EdgeModel | None = None  # per-pixel growth of edge_px (f32 camera origin, plane offsets)
 
     def edge_text(self) -> str:
         return f"edge: pixel center within {self.edge_px:.3g} px of a triangle edge ({self.edge_reason})"
+
+    def edge_eps(self, ctx: EdgeContext) -> tuple[np.ndarray, str]:
+        """Per-pixel rounding distance (px) and the sentence that derives it."""
+        base = np.full(ctx.z.shape, self.edge_px, dtype=np.float64)
+        if self.edge_extra is None:
+            return base, self.edge_text()
+        extra, text = self.edge_extra(ctx)
+        extra = np.where(np.isfinite(extra), extra, 0.0)
+        return base + extra, f"{self.edge_text()} + {text}"
 
 
 def _param(ctx: DepthContext, key: str) -> float | None:
@@ -86,6 +113,26 @@ def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
     return np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
 
 
+def origin_shift(ctx: DepthContext) -> np.ndarray:
+    """|dZ| from rays that start at f32(eye) instead of eye: |do| / |cos|, capped.
+
+    Moving a ray's origin by `do` (the backend computes Z for the true eye plane, but
+    along the moved ray) moves its hit on a plane by at most |do| / |cos| along the
+    plane's slope; capped like the grazing models.
+    """
+    if ctx.origin_offset <= 0.0:
+        return np.zeros_like(ctx.z_ref)
+    return np.minimum(ctx.origin_offset / np.maximum(ctx.cos, 1e-300), MAX_REL * np.abs(ctx.z_ref))
+
+
+def origin_edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+    """Edge shift of rays from f32(eye): a point at depth z moves by |do| / z on the image plane."""
+    with np.errstate(all="ignore"):
+        px = ctx.origin_offset / (np.abs(ctx.z) * ctx.pixel_size)
+    px = np.where(np.isfinite(px), px, 0.0)
+    return px, f"|f32(eye) - eye| {ctx.origin_offset:.3g} / (z * pixel) (rays start at the f32 eye)"
+
+
 # --------------------------------------------------------------------------- models
 
 
@@ -94,20 +141,32 @@ def exact_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     return np.zeros_like(ctx.z_ref), "exact: Z must be bit-identical (one shared depth function)"
 
 
-POVRAY_REL = 1e-6
+def povray_plane_error(point_norm: np.ndarray, extent: np.ndarray | float = 0.0) -> np.ndarray:
+    """Offset e of POV-Ray's mesh2 plane from the true one at a point X, world units.
+
+    POV-Ray keeps each mesh triangle's unit normal n and plane offset d = n.P1 in single
+    precision (`SnglVector3d` normals, `SNGL Distance`; source/core/shape/mesh.h) and
+    intersects with t = (d - n.O) / (n.D) in double. Rounding n to f32 moves each
+    component by <= u|n_i| (u = 2^-24), so n.X moves by <= u|X| (Cauchy-Schwarz, |n| = 1);
+    rounding d moves it by <= u|d| <= u|X - P1| + u|X|. Whether d is computed from the
+    rounded or the unrounded normal, the plane's offset at X is within
+    u (|X| + |P1|) + u|X| <= u (3|X| + extent), with extent >= |X - P1| the triangle's
+    longest edge. It grows with the distance from the origin, not with depth.
+    """
+    return F32_U * (3.0 * np.abs(point_norm) + extent)
 
 
 def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
-    """POV-Ray: 32-bit fixed point over [0, R) plus f32-vertex / grazing-angle error.
+    """POV-Ray: 32-bit fixed point, single-precision plane offsets, two f32 roundings.
 
     The depth pass encodes planar depth as 32-bit fixed point split over two 16-bit PNG
     channels; one step is R / (65536 * 65535) ~ R / 2^32 (`depth_step`, written by the
-    backend into info and the EXR attributes). Measured max error: 7.5e-9 on `polygon`
-    and 5.9e-7 on `mesh2`, where vertices are float32 and POV-Ray's intersection code
-    works on them (notes). The relative part 1e-6 / |cos| (~8 f32 ulps, scaled by the
-    grazing factor, capped at 1e-3) covers that, plus the final f32 rounding of both Z.
-    When `depth_step` is missing it is derived as R / 2^32 with R = `depth_range` if
-    present, else from the reference's largest depth times the backend's margin 1+2^-6.
+    backend into info and the EXR attributes). The plane's offset error e at the hit point
+    (`povray_plane_error`) moves the hit along the ray by e / |cos|, and planar depth by
+    at most that (D.f <= |D|); capped at MAX_REL x Z for edge-on triangles. Both sides'
+    Z are stored as f32: 2 x 2^-24 |Z|. When `depth_step` is missing it is derived as
+    R / 2^32 with R = `depth_range` if present, else from the reference's largest depth
+    times the backend's margin 1+2^-6.
     """
     step = _param(ctx, "depth_step")
     source = "depth_step from the render"
@@ -119,12 +178,31 @@ def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
             r = zmax * (1.0 + 2.0**-6)
             source = "R/2^32 with R estimated from the reference's largest depth (render gave no depth_step)"
         step = r / 65536.0 / 65535.0
-    tol = step + relative_grazing(ctx, POVRAY_REL)
+    point = ctx.point_norm if ctx.point_norm is not None else np.abs(ctx.z_ref)
+    extent = ctx.extent if ctx.extent is not None else 0.0
+    plane = povray_plane_error(point, extent)
+    # Grazing amplification capped at MAX_REL x Z, but never below the plane error itself.
+    slope = np.maximum(np.minimum(plane / np.maximum(ctx.cos, 1e-300), MAX_REL * np.abs(ctx.z_ref)), plane)
+    tol = step + slope + 2.0 * F32_U * np.abs(ctx.z_ref)
     text = (
         f"povray: |dZ| <= depth_step ({step:.3g}, {source}; 32-bit fixed point) "
-        f"+ Z*min({POVRAY_REL:g}/|cos|, {MAX_REL:g}) (f32 mesh2 vertices, grazing angle)"
+        f"+ max(min(e / |cos|, {MAX_REL:g} Z), e), e = 2^-24 (3|X| + extent) (mesh2 keeps plane normal and offset in f32; "
+        "|X| = hit point's distance from the origin) + 2^-23 Z (both sides stored as f32)"
     )
     return tol, text
+
+
+def povray_edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+    """POV-Ray's inside test runs on the hit point, which its f32 plane moves along the ray.
+
+    A hit moved by e / |cos| along the ray lands up to e / |cos| off the plane; its
+    dominant-axis projection then shifts sideways by at most sqrt(3) e / |cos| x |cos|
+    = sqrt(3) e, which a point at depth z sees as sqrt(3) e / (z pixel) px.
+    """
+    e = povray_plane_error(ctx.point_norm)
+    with np.errstate(all="ignore"):
+        px = np.sqrt(3.0) * e / (np.abs(ctx.z) * ctx.pixel_size)
+    return np.where(np.isfinite(px), px, 0.0), "sqrt(3) 2^-24 3|X| / (z pixel) (f32 plane offset moves the hit)"
 
 
 def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
@@ -176,8 +254,11 @@ def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     facing the camera; the f32 ray-triangle t loses more at grazing angles (Embree,
     same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3.
     """
-    tol = relative_grazing(ctx, MITSUBA_REL)
-    return tol, f"mitsuba: |dZ| <= Z*min({MITSUBA_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing)"
+    tol = relative_grazing(ctx, MITSUBA_REL) + origin_shift(ctx)
+    return tol, (
+        f"mitsuba: |dZ| <= Z*min({MITSUBA_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
+        f"+ |f32(eye) - eye| {ctx.origin_offset:.3g} / |cos| (f32 sensor origin)"
+    )
 
 
 EMBREE_REL = 1e-5
@@ -189,8 +270,11 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
     angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3.
     """
-    tol = relative_grazing(ctx, EMBREE_REL)
-    return tol, f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing)"
+    tol = relative_grazing(ctx, EMBREE_REL) + origin_shift(ctx)
+    return tol, (
+        f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
+        f"+ |f32(eye) - eye| {ctx.origin_offset:.3g} / |cos| (rays start at the f32 eye)"
+    )
 
 
 # llvmpipe snaps vertices to a 1/256 px grid (8 subpixel bits); rounding to nearest moves
@@ -215,6 +299,7 @@ MODELS: dict[str, Model] = {
         "POV-Ray mesh2 stores f32 vertices and picks its own tie winners for centers on edges; "
         "measured differences lie within ~1e-6 of an edge",
         povray_depth,
+        edge_extra=povray_edge,
     ),
     "pyrender": Model(
         "pyrender",
@@ -226,16 +311,19 @@ MODELS: dict[str, Model] = {
     "mitsuba": Model(
         "mitsuba", 1e-4, "float32 ray-triangle tests decide centers within f32 rounding of an edge",
         mitsuba_depth,
+        edge_extra=origin_edge,
     ),
     "embree": Model(
         "embree", 1e-4, "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
         embree_depth,
+        edge_extra=origin_edge,
     ),
     "embree_robust": Model(
         "embree_robust",
         1e-4,
         "float32 watertight ray-triangle tests (ROBUST): measured ID differences within 1e-4 of shared edges",
         embree_depth,
+        edge_extra=origin_edge,
     ),
 }
 
@@ -251,6 +339,34 @@ def model_for(backend: str) -> Model:
         return tol, f"exact: no precision model for backend {backend!r} in tolerance.py"
 
     return Model(backend, 0.0, f"no precision model for backend {backend!r} in tolerance.py", strict, known=False)
+
+
+# --------------------------------------------------------------------------- normals (N)
+
+CORE_NORMAL_BACKENDS = frozenset({"raster", "trace", "embree", "embree_robust"})
+"""Backends whose N is the core's `geometric_normal` of the prim they hit (frame.rs)."""
+
+
+def normal_tolerance(backend: str, cond: np.ndarray) -> tuple[np.ndarray, str]:
+    """Allowed angle (radians) between a backend's N and normalize((b - a) x (c - a)).
+
+    `cond` = |e1| |e2| / |e1 x e2| >= 1 per pixel (1 / sin of the triangle's angle at a:
+    large for slivers). The core (and Embree, whose buffers the core fills from its hit
+    keys) takes the cross product in f64 from the f32 vertices and rounds the unit vector
+    to f32: each component moves by <= u = 2^-24 of its size, the vector by <= sqrt(3) u,
+    and with the f64 terms 4u bounds the angle. A renderer that works in f32 (Mitsuba's
+    `geo_normal`) rounds the edges (<= u |e| each: 2u |e1||e2| on the cross product), each
+    cross component (two products and a difference: 3u |e1||e2|, sqrt(3) of that on the
+    vector) and normalizes and stores (about 3u + sqrt(3) u): angle <= 8u cond + 6u.
+    """
+    if backend in CORE_NORMAL_BACKENDS:
+        tol = np.full(cond.shape, 4.0 * F32_U)
+        return tol, "angle <= 4 * 2^-24 (f64 cross product of the f32 vertices, unit vector rounded to f32)"
+    tol = 8.0 * F32_U * cond + 6.0 * F32_U
+    return tol, (
+        "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "
+        "slivers amplify the cross product's rounding)"
+    )
 
 
 # --------------------------------------------------------------------------- radiance (RGB)
