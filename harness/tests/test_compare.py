@@ -515,3 +515,74 @@ def test_edge_tolerances() -> None:
     unknown = tolerance.model_for("zzz")
     assert unknown.edge_px == 0.0 and not unknown.known
     assert unknown.depth(_ctx(1.0, 1.0))[0][0] == 0.0
+
+
+# --------------------------------------------------------------------------- normals, scene errors
+
+
+def _normals_of(scene: resolved.ResolvedScene, prim: np.ndarray) -> np.ndarray:
+    t = scene.triangles.astype(np.float64)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    out = np.zeros(prim.shape + (3,), dtype=np.float32)
+    hit = prim != BG
+    out[hit] = n[prim[hit].astype(np.int64)]
+    return out
+
+
+def _normals_run(tmp_path: Path, flip_reference: bool, tilt_test: float) -> dict[tuple[str, str, str], Any]:
+    run = tmp_path / "run"
+    sdir = write_scene(run / "scenes/quads/resolved", TRIS, OIDS, vfov_deg=90.0, width=32, height=32, name="quads")
+    scene, ref = _ref(sdir)
+    n_ref = _normals_of(scene, ref["prim"])
+    n_test = n_ref.copy()
+    if flip_reference:
+        n_ref = -n_ref
+    x, y = PLAIN_PX
+    n_test[y, x] = (n_test[y, x] + np.array([tilt_test, 0, 0], dtype=np.float32)).astype(np.float32)
+    n_test[y, x] /= np.linalg.norm(n_test[y, x])
+    s = run / "scenes/quads"
+    exrbuf.write_buffers(s / "raster.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_ref)
+    exrbuf.write_buffers(s / "mitsuba.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_test)
+    manifest = {
+        "format": "rendiff-manifest/1", "reference": "raster",
+        "scenes": [{"scene": "quads", "resolved": "scenes/quads/resolved", "requires": ["depth", "ids", "normals"],
+                    "renders": [_ok("raster", "scenes/quads/raster.exr", buffers=["Z", "id", "N"]),
+                                _ok("mitsuba", "scenes/quads/mitsuba.exr", buffers=["Z", "id", "N"])]}],
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    return _index(_strict_json(run / "results.json"))
+
+
+def test_normals_are_judged_against_the_winding_for_every_backend_and_the_reference(tmp_path: Path) -> None:
+    res = _normals_run(tmp_path / "a", flip_reference=False, tilt_test=0.0)
+    for backend in ("raster", "mitsuba"):
+        e = res[("quads", backend, "N")]
+        assert e["status"] == "pass", e
+        assert e["compared_pixels"] == 400 and e["max_angle_rad"] < 1e-6  # every hit pixel
+    # The reference's normals negated: every one of its pixels fails, and says "flipped".
+    res = _normals_run(tmp_path / "b", flip_reference=True, tilt_test=0.0)
+    e = res[("quads", "raster", "N")]
+    assert e["status"] == "fail" and e["interior_mismatches"] == 400 and "facing the other way" in e["reason"]
+    # A test normal off by 1e-4 rad at one pixel fails there (f32 bound: ~1e-6 rad for a right triangle).
+    res = _normals_run(tmp_path / "c", flip_reference=False, tilt_test=1e-4)
+    e = res[("quads", "mitsuba", "N")]
+    assert e["status"] == "fail" and e["interior_mismatches"] == 1
+
+
+def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    manifest = {
+        "format": "rendiff-manifest/1", "reference": "raster",
+        "scenes": [{"scene": "broken", "resolved": "scenes/broken/resolved", "requires": [],
+                    "renders": [{"backend": "raster", "status": "error",
+                                 "message": "cannot load scene: broken.toml: camera.vfov: must be in (0, 180)"}]}],
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) == 0
+    res = _index(_strict_json(run / "results.json"))
+    assert list(res) == [("broken", "raster", "scene")]
+    e = res[("broken", "raster", "scene")]
+    assert e["status"] == "error" and "camera.vfov" in e["reason"]
