@@ -53,8 +53,22 @@ pub fn confined_path(
     Ok(full)
 }
 
-/// Loads every face of every model in an OBJ file as triangles (polygons are fan-triangulated).
-pub fn load_obj(mesh: &Path, field: &str) -> Result<Vec<Tri64>, SceneError> {
+/// One `o`/`g` group of an OBJ file (a tobj model), fan-triangulated.
+#[derive(Debug, Clone)]
+pub struct ObjGroup {
+    /// The group's name as written in the file (untrusted text); tobj names a
+    /// file without `o`/`g` lines `unnamed_object`.
+    pub name: String,
+    /// Its faces as triangles, in file order.
+    pub triangles: Vec<Tri64>,
+}
+
+/// Loads an OBJ file as its `o`/`g` groups (tobj models), in file order; each
+/// group's polygons are fan-triangulated in file order. Groups without faces
+/// (only points or lines) are left out; a file with no faces at all is an error.
+/// tobj also starts a new model, under the same name, where a `usemtl` inside a
+/// group switches to another material found in the file's `mtllib`.
+pub fn load_obj(mesh: &Path, field: &str) -> Result<Vec<ObjGroup>, SceneError> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -93,12 +107,69 @@ pub fn load_obj(mesh: &Path, field: &str) -> Result<Vec<Tri64>, SceneError> {
                 f64::from(pos[3 * k + 2]),
             ))
         };
+        let mut triangles = Vec::with_capacity(m.indices.len() / 3);
         for f in m.indices.chunks_exact(3) {
-            out.push([vert(f[0])?, vert(f[1])?, vert(f[2])?]);
+            triangles.push([vert(f[0])?, vert(f[1])?, vert(f[2])?]);
+        }
+        if !triangles.is_empty() {
+            out.push(ObjGroup {
+                name: model.name.clone(),
+                triangles,
+            });
         }
     }
     if out.is_empty() {
         return Err(SceneError::new(mesh, field, "OBJ mesh has no faces"));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_obj(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("rendiff-obj-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(format!("{name}.obj"));
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn groups_are_kept_in_file_order() {
+        let p = write_obj(
+            "two_groups",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0 0\n\
+             o first\nf 1 2 3\nf 2 4 3\n\
+             o second\nf 2 5 4 3\n",
+        );
+        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        assert_eq!(groups.len(), 2);
+        assert_eq!(groups[0].name, "first");
+        assert_eq!(groups[0].triangles.len(), 2);
+        assert_eq!(groups[1].name, "second");
+        // A quad is fan-triangulated: (2 5 4), (2 4 3).
+        assert_eq!(groups[1].triangles.len(), 2);
+        assert_eq!(groups[1].triangles[0][1], DVec3::new(2.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn a_file_without_groups_is_one_group() {
+        let p = write_obj("no_groups", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        assert_eq!(groups.len(), 1);
+        assert_eq!(groups[0].triangles.len(), 1);
+    }
+
+    #[test]
+    fn groups_without_faces_are_left_out() {
+        let p = write_obj(
+            "empty_group",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\no lines_only\nl 1 2\no tri\nf 1 2 3\n",
+        );
+        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        assert_eq!(groups.len(), 1);
+        assert_eq!(groups[0].name, "tri");
+    }
 }

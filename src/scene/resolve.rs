@@ -17,7 +17,8 @@ pub type Tri = [Vec3; 3];
 /// Per-object bookkeeping that maps ID ranges back to the scene file.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ObjectInfo {
-    /// Name from the scene file (untrusted text).
+    /// Name from the scene file (untrusted text); for an OBJ with several
+    /// `o`/`g` groups, `<scene object name>/<group name>`, one object per group.
     pub name: String,
     /// Index into `materials`.
     pub material: u32,
@@ -113,15 +114,27 @@ impl ResolvedScene {
         let mut object_ids = Vec::new();
         let mut degenerate = Vec::new();
         let mut objects = Vec::new();
-        for (oi, o) in scene.file.objects.iter().enumerate() {
-            let field = format!("objects[{oi}]");
-            let (tris64, origin): (Vec<Tri64>, PathBuf) = match (&o.mesh, &o.shape) {
+        for (si, o) in scene.file.objects.iter().enumerate() {
+            let field = format!("objects[{si}]");
+            // One rendiff object per OBJ `o`/`g` group (file order); a generator
+            // or a single-group OBJ stays one object under the scene's name.
+            let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (&o.mesh, &o.shape) {
                 (Some(rel), _) => {
                     let mesh_field = format!("{field}.mesh");
                     let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
-                    (load_obj(&full, &mesh_field)?, full)
+                    let groups = load_obj(&full, &mesh_field)?;
+                    let parts = if groups.len() == 1 {
+                        let g = groups.into_iter().next().expect("one group");
+                        vec![(o.name.clone(), g.triangles)]
+                    } else {
+                        groups
+                            .into_iter()
+                            .map(|g| (format!("{}/{}", o.name, g.name), g.triangles))
+                            .collect()
+                    };
+                    (parts, full)
                 }
-                (None, Some(shape)) => (shape.triangles(), path.clone()),
+                (None, Some(shape)) => (vec![(o.name.clone(), shape.triangles())], path.clone()),
                 (None, None) => unreachable!("validated: mesh or shape"),
             };
             let material = match &o.material {
@@ -129,44 +142,53 @@ impl ResolvedScene {
                 None => 0,
             };
             let (m, tr) = transform_matrix(&o.transform);
-            let first = triangles.len();
-            for (ti, t) in tris64.iter().enumerate() {
-                let w = t.map(|v| (m * v + tr).as_vec3());
-                if w.iter().any(|v| !v.is_finite()) {
+            // Triangle index within the scene object (file order across groups), for messages.
+            let mut ti = 0usize;
+            for (name, tris64) in parts {
+                let oi = objects.len();
+                if oi >= u32::MAX as usize {
+                    return Err(SceneError::new(path, "objects", "more than 2^32-1 objects"));
+                }
+                let first = triangles.len();
+                for t in &tris64 {
+                    let w = t.map(|v| (m * v + tr).as_vec3());
+                    if w.iter().any(|v| !v.is_finite()) {
+                        return Err(SceneError::new(
+                            &origin,
+                            &field,
+                            format!("triangle {ti} is not finite after the transform (overflow to Inf or NaN)"),
+                        ));
+                    }
+                    let deg = is_degenerate(&w);
+                    if deg && !o.allow_degenerate {
+                        return Err(SceneError::new(
+                            &origin,
+                            &field,
+                            format!(
+                                "triangle {ti} has zero area after rounding to f32; \
+                                 set `allow_degenerate = true` on the object if this is intended"
+                            ),
+                        ));
+                    }
+                    triangles.push(w);
+                    degenerate.push(deg);
+                    object_ids.push(oi as u32);
+                    ti += 1;
+                }
+                if triangles.len() >= u32::MAX as usize {
                     return Err(SceneError::new(
-                        &origin,
-                        &field,
-                        format!("triangle {ti} is not finite after the transform (overflow to Inf or NaN)"),
+                        path,
+                        "objects",
+                        "more than 2^32-2 triangles",
                     ));
                 }
-                let deg = is_degenerate(&w);
-                if deg && !o.allow_degenerate {
-                    return Err(SceneError::new(
-                        &origin,
-                        &field,
-                        format!(
-                            "triangle {ti} has zero area after rounding to f32; \
-                             set `allow_degenerate = true` on the object if this is intended"
-                        ),
-                    ));
-                }
-                triangles.push(w);
-                degenerate.push(deg);
-                object_ids.push(oi as u32);
+                objects.push(ObjectInfo {
+                    name,
+                    material,
+                    first_prim: first as u32,
+                    prim_count: (triangles.len() - first) as u32,
+                });
             }
-            if triangles.len() >= u32::MAX as usize {
-                return Err(SceneError::new(
-                    path,
-                    "objects",
-                    "more than 2^32-2 triangles",
-                ));
-            }
-            objects.push(ObjectInfo {
-                name: o.name.clone(),
-                material,
-                first_prim: first as u32,
-                prim_count: (triangles.len() - first) as u32,
-            });
         }
         let camera = Camera::from_spec(&scene.file.camera, scene_size(&triangles))
             .map_err(|(field, problem)| SceneError::new(path, field, problem))?;
@@ -234,6 +256,90 @@ pub fn scene_size(tris: &[Tri]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn resolve_with_obj(tag: &str, obj: &str) -> ResolvedScene {
+        let dir =
+            std::env::temp_dir().join(format!("rendiff-resolve-{}-{tag}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("m.obj"), obj).unwrap();
+        let scene = dir.join("s.toml");
+        let text = r#"
+requires = ["depth", "ids"]
+[camera]
+eye = [0.0, 0.0, 5.0]
+look_at = [0.0, 0.0, 0.0]
+vfov = 45.0
+width = 8
+height = 6
+[[objects]]
+name = "gen"
+shape = { kind = "three_triangles" }
+[[objects]]
+name = "file"
+mesh = "m.obj"
+[[objects]]
+name = "after"
+shape = { kind = "three_triangles" }
+"#;
+        std::fs::write(&scene, text).unwrap();
+        ResolvedScene::resolve(&super::super::Scene::load(&scene).unwrap()).unwrap()
+    }
+
+    fn summary(r: &ResolvedScene) -> Vec<(String, u32, u32)> {
+        r.objects
+            .iter()
+            .map(|o| (o.name.clone(), o.first_prim, o.prim_count))
+            .collect()
+    }
+
+    #[test]
+    fn obj_groups_become_objects() {
+        let r = resolve_with_obj(
+            "groups",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0 0\n\
+             o first\nf 1 2 3\n\
+             g second\nf 2 4 3\nf 2 5 4 3\n",
+        );
+        let s = |n: &str, a, b| (n.to_string(), a, b);
+        assert_eq!(
+            summary(&r),
+            vec![
+                s("gen", 0, 3),
+                s("file/first", 3, 1),
+                s("file/second", 4, 3),
+                s("after", 7, 3)
+            ]
+        );
+        let ids: Vec<u32> = r.object_ids.clone();
+        assert_eq!(ids, vec![0, 0, 0, 1, 2, 2, 2, 3, 3, 3]);
+        // prim order is object order, then file order.
+        assert_eq!(r.triangles[3][1], Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(r.triangles[4][1], Vec3::new(1.0, 1.0, 0.0));
+        assert_eq!(r.triangles[5][1], Vec3::new(2.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn single_group_obj_is_one_object_under_the_scene_name() {
+        for (tag, obj) in [
+            (
+                "nogroup",
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n",
+            ),
+            (
+                "onegroup",
+                "o only\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n",
+            ),
+        ] {
+            let r = resolve_with_obj(tag, obj);
+            let s = |n: &str, a, b| (n.to_string(), a, b);
+            assert_eq!(
+                summary(&r),
+                vec![s("gen", 0, 3), s("file", 3, 2), s("after", 5, 3)],
+                "{tag}"
+            );
+            assert_eq!(r.object_ids, vec![0, 0, 0, 1, 1, 2, 2, 2], "{tag}");
+        }
+    }
 
     #[test]
     fn degenerate_detection_is_exact() {
