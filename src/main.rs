@@ -96,8 +96,8 @@ enum Command {
     /// Writes RUN/manifest.json, the buffers, diff images and RUN/results.json.
     /// Exit 1 if any comparison fails or errors.
     Check {
-        /// Scene files or folders.
-        #[arg(default_value = "scenes")]
+        /// Scene files or folders (default: scenes and the real-asset corpus scenes/corpus).
+        #[arg(default_values = ["scenes", "scenes/corpus"])]
         scenes: Vec<PathBuf>,
         /// Run folder.
         #[arg(short, long, default_value = "reports/runs/latest")]
@@ -126,6 +126,12 @@ enum Command {
         /// Deliberately wrong core shading, for testing the statistical gate's power.
         #[arg(long, value_enum, hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
+        /// Folder of camera calibration probe scenes, rendered first on every backend.
+        #[arg(long, default_value = "scenes/calibration")]
+        calibration: PathBuf,
+        /// Render no calibration probes (the comparison then measures no camera).
+        #[arg(long, conflicts_with = "calibration")]
+        no_calibration: bool,
     },
     /// Benchmarks: speed against accuracy (knobs), against other renderers (peers),
     /// raster vs trace by triangle size (crossover), numerical extremes (stability).
@@ -199,9 +205,14 @@ enum Command {
         /// Baseline file to (re)write, atomically.
         #[arg(long, default_value = "reports/baseline.json")]
         baseline: PathBuf,
-        /// Accept failing verdicts into the baseline instead of refusing.
+        /// Accept failing or erroring verdicts (scenes that could not be
+        /// loaded included) into the baseline instead of refusing.
         #[arg(long)]
         allow_failures: bool,
+        /// Accept a run whose set of scenes differs from the current
+        /// baseline's (scenes added or removed) instead of refusing.
+        #[arg(long)]
+        allow_scene_changes: bool,
     },
 }
 
@@ -365,10 +376,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
             run,
             baseline,
             allow_failures,
+            allow_scene_changes,
         } => {
             let opts = rendiff::gate::BlessOptions {
                 command: rendiff::check::process::shell_line(std::env::args()),
                 allow_failures,
+                allow_scene_changes,
             };
             let b = rendiff::gate::bless(&run, &baseline, &opts)?;
             println!(
@@ -425,6 +438,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             seed,
             spp,
             inject_bias,
+            calibration,
+            no_calibration,
         } => {
             let opts = rendiff::check::CheckOptions {
                 scenes: rendiff::check::collect_scenes(&scenes)?,
@@ -440,6 +455,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     spp,
                     bias: inject_bias,
                 },
+                calibration: (!no_calibration).then_some(calibration),
             };
             let outcome = match rendiff::check::run(&opts) {
                 Ok(o) => o,
@@ -565,8 +581,9 @@ fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     })
 }
 
-/// `rendiff render --renderer embree|embree-robust`: visibility only. A scene
-/// that needs shading, or a missing Embree library, exits with code 3 (skipped,
+/// `rendiff render --renderer embree|embree-robust`: visibility only (no RGB on
+/// a shaded scene). A scene needing a visibility feature Embree lacks, or a
+/// missing Embree library, exits with code 3 (skipped,
 /// the harness's convention) and says why, so `check` can run it as a child.
 fn render_embree(
     scene: &ResolvedScene,
@@ -577,11 +594,15 @@ fn render_embree(
     no_preview: bool,
 ) -> Result<ExitCode> {
     use rendiff::backends::embree::{self, EmbreeError};
+    // Visibility only: shading features do not matter (check::Capability).
     let missing: Vec<&str> = scene
         .requires
         .iter()
         .map(String::as_str)
-        .filter(|r| !rendiff::check::EMBREE_FEATURES.contains(r))
+        .filter(|r| {
+            rendiff::check::VISIBILITY_FEATURES.contains(r)
+                && !rendiff::check::EMBREE_FEATURES.contains(r)
+        })
         .collect();
     if !missing.is_empty() {
         eprintln!(

@@ -1,4 +1,5 @@
-//! Cross-renderer conformance: every scene in scenes/ on every backend (core
+//! Cross-renderer conformance: every scene in scenes/ (and scenes/corpus/),
+//! after the camera calibration probes of scenes/calibration/, on every backend (core
 //! trace, Embree default and robust, POV-Ray, pyrender, Mitsuba 3), compared
 //! with the core's raster output. One test per (scene, backend, buffer), so a
 //! failure names exactly what broke; skipped combinations show as ignored with
@@ -21,8 +22,14 @@ fn main() {
         // Listing must not render anything.
         vec![Trial::test("conformance::all", || Ok(()))]
     } else {
+        // scenes/ and the real-asset corpus scenes/corpus/ when it is there (not
+        // recursive: the probes in scenes/calibration/ are no ordinary scenes).
+        let mut folders = vec![root.join("scenes")];
+        if root.join("scenes/corpus").is_dir() {
+            folders.push(root.join("scenes/corpus"));
+        }
         let opts = CheckOptions {
-            scenes: check::collect_scenes(&[root.join("scenes")]).expect("scenes/ is readable"),
+            scenes: check::collect_scenes(&folders).expect("scene folders are readable"),
             run_dir: run_dir.clone(),
             root: root.clone(),
             only: None,
@@ -31,6 +38,10 @@ fn main() {
             quiet: false,
             references: Some(root.join("tests/references")),
             core: check::CoreShading::default(),
+            // The probes, as in every `rendiff check`: conformance is where each
+            // backend's camera is measured against DESIGN.md, and the run it
+            // leaves is what `rendiff gate` holds against the baseline.
+            calibration: Some(root.join("scenes/calibration")),
         };
         match check::run(&opts) {
             Err(e) => {

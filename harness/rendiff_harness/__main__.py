@@ -3,7 +3,9 @@
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
 0 = rendered, 2 = error (backend failed or unavailable, bad input),
-3 = skipped (the backend cannot model a feature the scene requires).
+3 = skipped (the backend cannot model a feature the scene requires; with
+`render --visibility-only`, only a missing visibility feature skips, a missing
+shading feature drops RGB alone: registry.plan).
 Expected failures print one line naming the backend and the problem, never a
 traceback; a traceback means a bug in rendiff.
 """
@@ -89,15 +91,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         scene = resolved.load(args.scene)
     except resolved.SceneError as exc:
         return _fail(f"{backend.name}: cannot load scene: {exc}")
-    missing = registry.missing_features(backend, scene)
-    if missing:
+    plan = registry.plan(backend, scene, visibility_only=args.visibility_only)
+    if not plan.render:
         print(
             json.dumps(
                 {
                     "backend": backend.name,
                     "status": "skipped",
-                    "reason": f"missing features: {', '.join(missing)}",
-                    "missing": missing,
+                    "reason": plan.reason,
+                    "missing": list(plan.missing),
                 }
             )
         )
@@ -118,7 +120,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     try:
         version = backend.version()
         t0 = time.monotonic()
-        options = {k: v for k, v in (("spp", args.spp), ("seed", args.seed)) if v is not None}
+        options: dict[str, Any] = {k: v for k, v in (("spp", args.spp), ("seed", args.seed)) if v is not None}
+        if plan.visibility_only:
+            options[registry.VISIBILITY_ONLY] = True
         info = backend.render(scene, out, workdir, float(args.timeout), **options, **settings)
         elapsed = time.monotonic() - t0
     except BackendError as exc:  # includes BackendUnavailable
@@ -129,12 +133,14 @@ def cmd_render(args: argparse.Namespace) -> int:
     finally:
         if own_workdir:
             shutil.rmtree(workdir, ignore_errors=True)
-    print(
-        json.dumps(
-            {"backend": backend.name, "status": "ok", "version": version, "time_s": elapsed, "info": info},
-            default=str,
-        )
-    )
+    buffers = backend.buffers & registry.VISIBILITY_BUFFERS if plan.visibility_only else backend.buffers
+    result: dict[str, Any] = {
+        "backend": backend.name, "status": "ok", "version": version, "time_s": elapsed, "info": info,
+        "buffers": sorted(buffers), "visibility_only": plan.visibility_only,
+    }
+    if plan.reason:
+        result["reason"] = plan.reason
+    print(json.dumps(result, default=str))
     return EXIT_OK
 
 
@@ -216,6 +222,12 @@ def build_parser() -> argparse.ArgumentParser:
         "ignored by backends without Monte Carlo",
     )
     p_render.add_argument("--seed", type=int, default=None, help="random seed for path-traced scenes (default 0)")
+    p_render.add_argument(
+        "--visibility-only", action="store_true",
+        help="render the visibility buffers (Z, id, N) but no RGB, so that a scene needing a shading feature "
+        "the backend lacks is still rendered for depth and IDs (`rendiff check` passes it then); a backend "
+        "whose render() has no visibility_only keyword is skipped on such scenes, as without the flag",
+    )
     q = p_render.add_argument_group(
         "quality settings (speed/accuracy knobs; defaults keep the conformance contract; "
         "a backend refuses a setting it does not have)"

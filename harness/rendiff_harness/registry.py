@@ -11,6 +11,12 @@ A backend module provides (see backends/povray.py for a complete one):
     # optional keyword-only `spp`, `seed` (Monte Carlo backends); passed only when given
     # optional keyword-only quality settings (`aa_method`, `quality`, `max_depth`, ...): the
     # CLI refuses one that the backend's render() does not take (`Backend.accepts`)
+    # optional keyword-only `visibility_only: bool`: render Z/id (and N) but no RGB, so that a
+    # scene needing a shading feature the backend lacks is still compared on depth and IDs
+    # (`plan`); a backend without it is skipped on such scenes, as before
+
+Capabilities are judged per buffer (`plan`): the visibility buffers need only the
+VISIBILITY_FEATURES, radiance needs every other feature the scene requires.
 
 Modules are imported lazily and one failing import never hides the others: an
 ImportError (a missing Python package, typically) turns that backend into an
@@ -37,6 +43,12 @@ BACKEND_MODULES = [
 
 _REQUIRED = ("NAME", "FEATURES", "BUFFERS", "version", "unavailable_reason", "render")
 KNOWN_BUFFERS = frozenset({"Z", "id", "N", "RGB"})
+VISIBILITY_FEATURES = frozenset({"depth", "ids", "normals"})
+"""The features the visibility buffers (Z, id, N) need; every other feature is a shading one
+(needed by RGB only). The one Python list; the Rust side's is `check::VISIBILITY_FEATURES`."""
+VISIBILITY_BUFFERS = frozenset({"Z", "id", "N"})
+VISIBILITY_ONLY = "visibility_only"
+"""The render() keyword that asks a backend for its visibility buffers only."""
 
 
 @dataclass(frozen=True)
@@ -141,14 +153,53 @@ def missing_features(backend: Backend | ModuleType, scene: ResolvedScene) -> lis
     return sorted(scene.requires - features)
 
 
+@dataclass(frozen=True)
+class Plan:
+    """What a backend renders of a scene: everything, the visibility buffers only, or nothing.
+
+    `reason` says why anything is left out: "missing features: ..." for a skip,
+    "RGB not rendered: missing features: ..." for a visibility-only render, "" otherwise.
+    """
+
+    render: bool
+    visibility_only: bool
+    missing: tuple[str, ...]
+    reason: str
+
+
+def visibility_only_reason(missing: list[str] | tuple[str, ...]) -> str:
+    """The reason recorded for a render without RGB (the Rust side writes the same words)."""
+    return f"RGB not rendered: missing features: {', '.join(missing)}"
+
+
+def plan(backend: Backend, scene: ResolvedScene, visibility_only: bool = False) -> Plan:
+    """Decide per buffer: a missing visibility feature skips the backend; a missing shading
+    feature drops only RGB, when `visibility_only` is allowed and the backend's render() takes
+    it (`Backend.accepts`), else the backend is skipped as a whole.
+
+    With `visibility_only` and nothing missing, an accepting backend still renders no RGB.
+    """
+    missing = tuple(missing_features(backend, scene))
+    skip = Plan(False, False, missing, f"missing features: {', '.join(missing)}")
+    if any(f in VISIBILITY_FEATURES for f in missing):
+        return skip
+    if not visibility_only or not backend.accepts(VISIBILITY_ONLY):
+        return skip if missing else Plan(True, False, (), "")
+    return Plan(True, True, missing, visibility_only_reason(missing) if missing else "")
+
+
 __all__ = [
     "BACKEND_MODULES",
     "Backend",
     "BackendError",
     "BackendUnavailable",
+    "Plan",
+    "VISIBILITY_FEATURES",
     "all_backends",
     "get",
     "known_names",
     "load",
     "missing_features",
+    "plan",
+    "visibility_only_reason",
 ]

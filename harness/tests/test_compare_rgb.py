@@ -196,8 +196,8 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
 
 def test_expectations_accept_rgb_buffer(tmp_path: Path) -> None:
     p = tmp_path / "e.toml"
-    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "RGB"\nedge_mismatches = [0, 3]\nreason = "r"\n')
+    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "RGB"\nstatus = "expected_fail"\nreason = "r"\n')
     assert expectations.load(p).lookup("s", "pyrender", "RGB") is not None
-    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "rgb"\nedge_mismatches = [0, 3]\nreason = "r"\n')
+    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "rgb"\nstatus = "expected_fail"\nreason = "r"\n')
     with pytest.raises(expectations.ExpectationsError, match="RGB"):
         expectations.load(p)

@@ -33,6 +33,10 @@ pub struct SceneRuns {
     pub resolved: String,
     /// Features the scene requires.
     pub requires: Vec<String>,
+    /// Why the scene is in the run: empty for an ordinary scene,
+    /// `"calibration"` for a camera calibration probe (`check::CALIBRATION_ROLE`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub role: String,
     /// One entry per backend.
     pub renders: Vec<RenderRecord>,
 }

@@ -5,6 +5,11 @@
 //! a timeout, so one crashing or hanging renderer is reported as an error and
 //! the others still run. The Python side then compares every buffer with the
 //! reference (OpenImageIO + numpy) and writes results.json.
+//!
+//! Capabilities are judged per buffer ([`Capability`]): a backend lacking only
+//! shading features renders its depth and ID buffers without RGB. The camera
+//! calibration probes (`CheckOptions::calibration`) run first, as scenes with
+//! `role: "calibration"`.
 
 pub mod isolated;
 pub mod manifest;
@@ -49,6 +54,16 @@ pub const CORE_FEATURES: &[&str] = &[
 /// Scene features Embree's visibility queries model.
 pub const EMBREE_FEATURES: &[&str] = &["depth", "ids", "normals"];
 
+/// The scene features the visibility buffers (Z, id, N) need; every other
+/// feature is a shading one, needed by RGB only. A backend lacking one of these
+/// is skipped on the scene; a backend lacking only shading features renders
+/// its visibility buffers and no RGB (`reason` says which features). The one
+/// Rust list; the Python harness's is `registry.VISIBILITY_FEATURES`.
+pub const VISIBILITY_FEATURES: &[&str] = &["depth", "ids", "normals"];
+
+/// `role` of a calibration probe in manifest.json (docs/run-format.md).
+pub const CALIBRATION_ROLE: &str = "calibration";
+
 /// Seed of the core's path tracer in check runs (recorded in the buffers).
 pub const CHECK_SEED: u64 = 1;
 
@@ -73,6 +88,9 @@ pub struct CheckOptions {
     pub references: Option<PathBuf>,
     /// The core's path-tracing settings.
     pub core: CoreShading,
+    /// Folder of calibration probe scenes (`*.toml`), rendered first on every
+    /// backend and recorded with `role: "calibration"`; `None` renders none.
+    pub calibration: Option<PathBuf>,
 }
 
 /// How the core shades in a check run (the reference for radiance).
@@ -169,6 +187,47 @@ fn missing(requires: &[String], features: &[&str]) -> Vec<String> {
         .collect()
 }
 
+/// What a backend renders of a scene, judged per buffer from its features.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Capability {
+    /// Every buffer it produces.
+    Full,
+    /// The visibility buffers only: these shading features are missing.
+    VisibilityOnly(Vec<String>),
+    /// Nothing: a visibility feature is missing (all missing features listed).
+    Skip(Vec<String>),
+}
+
+impl Capability {
+    /// Decides from the scene's requirements and the backend's features.
+    pub fn of(requires: &[String], features: &[&str]) -> Self {
+        let miss = missing(requires, features);
+        if miss.is_empty() {
+            Capability::Full
+        } else if miss
+            .iter()
+            .any(|m| VISIBILITY_FEATURES.contains(&m.as_str()))
+        {
+            Capability::Skip(miss)
+        } else {
+            Capability::VisibilityOnly(miss)
+        }
+    }
+}
+
+/// The manifest reason of a render without RGB (the Python side words it the same).
+pub fn rgb_not_rendered(missing: &[String]) -> String {
+    format!("RGB not rendered: missing features: {}", missing.join(", "))
+}
+
+/// Marks an ok record as visibility only: no RGB listed, the reason recorded.
+fn visibility_only(rec: &mut RenderRecord, missing: &[String]) {
+    if rec.status == "ok" {
+        rec.buffers.retain(|b| b != "RGB");
+        rec.reason = rgb_not_rendered(missing);
+    }
+}
+
 fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -257,6 +316,7 @@ fn say(opts: &CheckOptions, line: String) {
 
 fn describe(rec: &RenderRecord) -> String {
     match rec.status.as_str() {
+        "ok" if !rec.reason.is_empty() => format!("ok ({:.2} s; {})", rec.time_s, rec.reason),
         "ok" => format!("ok ({:.2} s)", rec.time_s),
         "skipped" => format!("skipped: {}", rec.reason),
         _ => format!("ERROR: {}", rec.message),
@@ -277,6 +337,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
     if opts.scenes.is_empty() {
         bail!("no scenes to check");
     }
+    let jobs = scene_jobs(opts)?;
     let run_dir = &opts.run_dir;
     std::fs::create_dir_all(run_dir)
         .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
@@ -288,7 +349,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
     let exe = "rendiff";
     let version = format!("rendiff {}", env!("CARGO_PKG_VERSION"));
     let mut scenes = Vec::new();
-    for (si, scene_path) in opts.scenes.iter().enumerate() {
+    for (si, (scene_path, role)) in jobs.iter().enumerate() {
         let name = stem(scene_path);
         let rel_dir = format!("scenes/{name}");
         let dir = run_dir.join(&rel_dir);
@@ -297,16 +358,17 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
             scene_file: scene_path.display().to_string(),
             resolved: format!("{rel_dir}/resolved"),
             requires: Vec::new(),
+            role: role.to_string(),
             renders: Vec::new(),
+        };
+        let what = if role.is_empty() {
+            String::new()
+        } else {
+            format!(" ({role} probe)")
         };
         say(
             opts,
-            format!(
-                "[{}/{}] {}",
-                si + 1,
-                opts.scenes.len(),
-                scene_path.display()
-            ),
+            format!("[{}/{}] {}{what}", si + 1, jobs.len(), scene_path.display()),
         );
         let resolved = Scene::load(scene_path)
             .map_err(anyhow::Error::from)
@@ -400,9 +462,10 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
             }
             let rel_exr = format!("{rel_dir}/{name}.exr");
             let exr = run_dir.join(&rel_exr);
-            let emissing = missing(&runs.requires, EMBREE_FEATURES);
-            let rec = if !emissing.is_empty() {
-                skipped_for_features(name, &emissing)
+            // Embree renders visibility only: on a shaded scene it still gives Z and IDs.
+            let capability = Capability::of(&runs.requires, EMBREE_FEATURES);
+            let mut rec = if let Capability::Skip(emissing) = &capability {
+                skipped_for_features(name, emissing)
             } else if let Some(bin) = isolate {
                 let job = isolated::Job {
                     bin,
@@ -425,6 +488,9 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                     embree::render(sc, mode).map(|f| (f, None))
                 })
             };
+            if let Capability::VisibilityOnly(m) = &capability {
+                visibility_only(&mut rec, m);
+            }
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
             runs.renders.push(rec);
         }
@@ -482,8 +548,8 @@ fn external(
         ..RenderRecord::default()
     };
     let features: Vec<&str> = b.features.iter().map(String::as_str).collect();
-    let miss = missing(&runs.requires, &features);
-    if !miss.is_empty() {
+    let capability = Capability::of(&runs.requires, &features);
+    if let Capability::Skip(miss) = &capability {
         rec.status = "skipped".into();
         rec.reason = format!("missing features: {}", miss.join(", "));
         return rec;
@@ -501,7 +567,7 @@ fn external(
     let exr = opts.run_dir.join(&rel_exr);
     let resolved = dir.join("resolved");
     let secs = opts.timeout.as_secs_f64();
-    let args: Vec<String> = vec![
+    let mut args: Vec<String> = vec![
         "render".into(),
         "--backend".into(),
         b.name.clone(),
@@ -512,6 +578,10 @@ fn external(
         "--timeout".into(),
         format!("{secs}"),
     ];
+    if let Capability::VisibilityOnly(_) = &capability {
+        // Z and IDs without RGB; a backend that cannot do that answers "skipped".
+        args.push("--visibility-only".into());
+    }
     let mut words = vec![
         python(&opts.root).display().to_string(),
         "-m".into(),
@@ -572,7 +642,14 @@ fn external(
                 rec.status = "skipped".into();
                 rec.reason = o.stderr_tail(3);
                 if rec.reason.is_empty() {
-                    rec.reason = o.stdout.trim().to_string();
+                    // The harness's skip line: {"status": "skipped", "reason": ...}.
+                    rec.reason = o
+                        .stdout
+                        .lines()
+                        .rev()
+                        .find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+                        .and_then(|v| v.get("reason")?.as_str().map(String::from))
+                        .unwrap_or_else(|| o.stdout.trim().to_string());
                 }
             } else {
                 rec.status = "error".into();
@@ -583,6 +660,9 @@ fn external(
                 rec.message = format!("{} failed ({how}): {}", b.name, o.stderr_tail(6));
             }
         }
+    }
+    if let Capability::VisibilityOnly(m) = &capability {
+        visibility_only(&mut rec, m);
     }
     // Never take a partial output for a result.
     if rec.status != "ok" {
@@ -620,10 +700,65 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
     serde_json::from_str(&text).with_context(|| format!("{}: unreadable", results_path.display()))
 }
 
-/// Scene files named on the command line: files as they are, folders expanded to their `*.toml`.
+/// The run's scenes in order, each with its manifest `role`: the calibration
+/// probes first (`CALIBRATION_ROLE`), then `opts.scenes`. A file named twice
+/// runs once; two files with one stem are refused (they would share
+/// `RUN/scenes/<stem>/`). A missing probe folder fails here, before anything runs.
+fn scene_jobs(opts: &CheckOptions) -> Result<Vec<(PathBuf, &'static str)>> {
+    let mut list: Vec<(PathBuf, &'static str)> = Vec::new();
+    if let Some(dir) = &opts.calibration {
+        if !dir.is_dir() {
+            bail!(
+                "calibration probe folder {} not found: add the probe scenes there, or pass --no-calibration to check without camera calibration",
+                dir.display()
+            );
+        }
+        let probes = collect_scenes(std::slice::from_ref(dir))?;
+        if probes.is_empty() {
+            bail!(
+                "calibration probe folder {} has no *.toml probe scenes: add them, or pass --no-calibration",
+                dir.display()
+            );
+        }
+        list.extend(probes.into_iter().map(|p| (p, CALIBRATION_ROLE)));
+    }
+    list.extend(opts.scenes.iter().map(|p| (p.clone(), "")));
+    let mut seen: std::collections::HashMap<String, PathBuf> = std::collections::HashMap::new();
+    let mut out = Vec::new();
+    for (path, role) in list {
+        let name = stem(&path);
+        match seen.get(&name) {
+            Some(prev) if same_file(prev, &path) => continue,
+            Some(prev) => bail!(
+                "two scene files named {name:?}: {} and {}; their outputs would share RUN/scenes/{name}/ (rename one)",
+                prev.display(),
+                path.display()
+            ),
+            None => {
+                seen.insert(name, path.clone());
+                out.push((path, role));
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// Scene files named on the command line: files as they are, folders expanded
+/// to their `*.toml` (not recursively: `scenes/calibration/` stays out of
+/// `scenes`). A path that does not exist is an error naming it.
 pub fn collect_scenes(args: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for a in args {
+        if !a.exists() {
+            bail!("{}: no such scene file or folder", a.display());
+        }
         if a.is_dir() {
             let mut v: Vec<PathBuf> = std::fs::read_dir(a)
                 .with_context(|| format!("{}: cannot list", a.display()))?
@@ -700,5 +835,110 @@ fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
         status: "skipped".into(),
         reason: format!("missing features: {}", missing.join(", ")),
         ..RenderRecord::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn req(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn capabilities_are_judged_per_buffer() {
+        let shaded = req(&["depth", "ids", "lambert", "shadows", "two_sided"]);
+        assert_eq!(Capability::of(&shaded, CORE_FEATURES), Capability::Full);
+        assert_eq!(
+            Capability::of(&shaded, EMBREE_FEATURES),
+            Capability::VisibilityOnly(req(&["lambert", "shadows", "two_sided"]))
+        );
+        // A missing visibility feature skips, and every missing feature is named.
+        let normals = req(&["depth", "ids", "normals", "lambert"]);
+        assert_eq!(
+            Capability::of(&normals, &["depth", "ids", "lambert"]),
+            Capability::Skip(req(&["normals"]))
+        );
+        assert_eq!(
+            Capability::of(&normals, &["depth", "ids"]),
+            Capability::Skip(req(&["normals", "lambert"]))
+        );
+        assert_eq!(
+            rgb_not_rendered(&req(&["one_sided", "shadows"])),
+            "RGB not rendered: missing features: one_sided, shadows"
+        );
+    }
+
+    #[test]
+    fn visibility_features_are_known_and_embree_has_them() {
+        for f in VISIBILITY_FEATURES {
+            assert!(crate::scene::KNOWN_FEATURES.contains(f), "{f}");
+            assert!(EMBREE_FEATURES.contains(f), "{f}");
+        }
+    }
+
+    #[test]
+    fn visibility_only_records_drop_rgb_and_say_why() {
+        let mut rec = RenderRecord {
+            status: "ok".into(),
+            buffers: req(&["Z", "id", "RGB"]),
+            ..RenderRecord::default()
+        };
+        visibility_only(&mut rec, &req(&["shadows"]));
+        assert_eq!(rec.buffers, req(&["Z", "id"]));
+        assert_eq!(rec.reason, "RGB not rendered: missing features: shadows");
+        let mut skipped = skipped_for_features("x", &req(&["ids"]));
+        visibility_only(&mut skipped, &req(&["shadows"]));
+        assert_eq!(skipped.reason, "missing features: ids");
+    }
+
+    #[test]
+    fn scene_jobs_put_probes_first_and_refuse_stem_clashes() {
+        let dir = tempfile::tempdir().unwrap();
+        let probes = dir.path().join("calibration");
+        let other = dir.path().join("other");
+        std::fs::create_dir_all(&probes).unwrap();
+        std::fs::create_dir_all(&other).unwrap();
+        for p in [
+            probes.join("p.toml"),
+            dir.path().join("a.toml"),
+            other.join("a.toml"),
+        ] {
+            std::fs::write(p, "").unwrap();
+        }
+        let mut opts = CheckOptions {
+            scenes: vec![dir.path().join("a.toml"), dir.path().join("a.toml")],
+            run_dir: dir.path().join("run"),
+            root: dir.path().into(),
+            only: None,
+            timeout: Duration::from_secs(1),
+            expectations: dir.path().join("e.toml"),
+            quiet: true,
+            references: None,
+            core: CoreShading::default(),
+            calibration: Some(probes.clone()),
+        };
+        let jobs = scene_jobs(&opts).unwrap();
+        let got: Vec<(String, &str)> = jobs.iter().map(|(p, r)| (stem(p), *r)).collect();
+        assert_eq!(
+            got,
+            [("p".into(), CALIBRATION_ROLE), ("a".into(), "")],
+            "probes first, a file named twice runs once"
+        );
+        opts.scenes.push(other.join("a.toml"));
+        let e = scene_jobs(&opts).unwrap_err().to_string();
+        assert!(e.contains("two scene files named \"a\""), "{e}");
+        opts.calibration = Some(dir.path().join("none"));
+        let e = scene_jobs(&opts).unwrap_err().to_string();
+        assert!(e.contains("--no-calibration") && e.contains("none"), "{e}");
+        opts.calibration = Some(other.clone());
+        opts.scenes.clear();
+        assert_eq!(scene_jobs(&opts).unwrap().len(), 1);
+        let e = collect_scenes(&[dir.path().join("missing")]).unwrap_err();
+        assert!(
+            e.to_string().contains("no such scene file or folder"),
+            "{e}"
+        );
     }
 }

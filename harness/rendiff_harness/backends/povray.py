@@ -622,12 +622,17 @@ def render(
     aa_threshold: float | None = None,
     aa_depth: int | None = None,
     quality: int | None = None,
+    visibility_only: bool = False,
 ) -> dict[str, object]:
     """Render IDs and depth (and radiance when shaded); write `out_exr` atomically; return settings and sub-timings.
 
     The keyword settings (module docstring, "Quality settings") reach the radiance passes only.
+    `visibility_only` skips the radiance passes (no RGB), so a scene needing a shading feature
+    POV-Ray lacks (`one_sided`, `area_light`, ...) is still rendered for depth and IDs
+    (registry.plan); nothing in the ID and depth passes depends on the shading features.
     """
     settings = Settings(aa_method, aa_threshold, aa_depth, quality)
+    shaded = is_shaded(scene) and not visibility_only
     binary = _binary()
     if binary is None:
         raise BackendUnavailable(f"{NAME}: `{BINARY}` not found on PATH; {_INSTALL_HINT}")
@@ -640,11 +645,13 @@ def render(
         "near_far": "clipped_by planes",
         "radiance_flags": settings.flags(),
     }
+    if visibility_only:
+        info["visibility_only"] = True
     n = scene.triangle_count
     if n == 0:
         prim = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
         z = np.full((h, w), np.inf, dtype=np.float32)
-        rgb = np.zeros((h, w, 3), dtype=np.float32) if is_shaded(scene) else None
+        rgb = np.zeros((h, w, 3), dtype=np.float32) if shaded else None
         exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=prim, RGB=rgb, attrs={"backend": NAME})
         info["note"] = "empty scene: POV-Ray not run"
         return info
@@ -681,7 +688,7 @@ def render(
         "backend": NAME, "version": version(), "depth_range": r, "depth_step": depth_step(r),
     }
     rgb = None
-    if is_shaded(scene):
+    if shaded:
         rgb, shade_info = _radiance(
             binary, scratch, scene, mesh, prim, np.where(hit, depth, np.inf), deadline, timeout_s, settings
         )

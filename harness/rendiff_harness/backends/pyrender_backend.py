@@ -619,11 +619,15 @@ def render_radiance(
     return rgb, info
 
 
-def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float) -> dict[str, object]:
-    """Render `scene` into `out_exr` (Z, id.prim, id.object); returns settings and timings.
+def render(
+    scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, *, visibility_only: bool = False
+) -> dict[str, object]:
+    """Render `scene` into `out_exr` (Z, id.prim, id.object, and RGB when shaded); returns settings and timings.
 
     Runs in-process (the caller enforces `timeout_s` by running us in our own process);
-    `workdir` is unused: nothing is written besides the EXR.
+    `workdir` is unused: nothing is written besides the EXR. `visibility_only` skips the lit
+    pass (no RGB), so a scene needing a shading feature pyrender lacks (`shadows`,
+    `one_sided`, ...) is still rendered for depth and IDs (registry.plan).
     """
     from .. import exrbuf
 
@@ -637,7 +641,9 @@ def render(scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float)
         "depth_bits": DEPTH_BITS,
     }
     rgb = None
-    if is_shaded(scene):
+    if visibility_only:
+        info["visibility_only"] = True
+    elif is_shaded(scene):
         rgb64, rinfo = render_radiance(scene, buffers["prim"], buffers["Z"], float(info["znear"]), float(info["zfar"]))
         rgb = rgb64.astype(np.float32)
         info["radiance"] = rinfo

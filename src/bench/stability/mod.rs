@@ -159,6 +159,9 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         quiet: true,
         references: None,
         core: check::CoreShading::default(),
+        // No calibration probes: the bench looks for where each renderer breaks, and the
+        // probes would only add their renders to a long run.
+        calibration: None,
     };
     eprintln!(
         "stability: {} scenes through rendiff check ({})",

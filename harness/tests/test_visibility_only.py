@@ -1,0 +1,158 @@
+"""Capabilities per buffer: a backend lacking only shading features still renders Z and IDs.
+
+`registry.plan` decides; `render --visibility-only` (what `rendiff check` passes when a
+backend lacks a shading feature the scene needs) carries it out; POV-Ray and pyrender then
+skip their radiance passes, and a backend whose render() has no `visibility_only` keyword
+is skipped as before.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixtures
+from rendiff_harness import __main__ as cli
+from rendiff_harness import backends, exrbuf, registry, resolved
+
+REPO = Path(__file__).resolve().parents[2]
+needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
+
+QUAD = [[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]], [[-1.5, -0.5, -1.0], [1.5, -0.5, -1.0], [0.0, 1.5, -1.0]]]
+SUN = [{"kind": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": [1.0, 1.0, 1.0]}]
+# Shaded, with features both POV-Ray (one_sided) and pyrender (shadows, one_sided) lack.
+SHADED = ("depth", "ids", "lambert", "directional_light", "shadows", "one_sided")
+
+FAKE = '''
+NAME = "{name}"
+FEATURES = frozenset({{"depth", "ids", "lambert"}})
+BUFFERS = frozenset({{"Z", "id", "RGB"}})
+def version(): return "fake 1"
+def unavailable_reason(): return None
+def render(scene, out_exr, workdir, timeout_s{kw}):
+    from rendiff_harness import exrbuf
+    import numpy as np
+    h, w = scene.camera.height, scene.camera.width
+    prim = np.zeros((h, w), dtype=np.uint32)
+    rgb = None if {no_rgb} else np.zeros((h, w, 3), dtype=np.float32)
+    exrbuf.write_buffers(out_exr, Z=np.ones((h, w), dtype=np.float32), prim=prim, obj=prim, RGB=rgb)
+    return {{"visibility_only": {no_rgb}}}
+'''
+
+
+def _fake_backends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`vis_backend` takes visibility_only; `full_backend` (like Mitsuba's) does not."""
+    files = {
+        "vis_backend": FAKE.format(name="vis", kw=", *, visibility_only=False", no_rgb="visibility_only"),
+        "full_backend": FAKE.format(name="full", kw="", no_rgb="False"),
+    }
+    for name, text in files.items():
+        (tmp_path / f"{name}.py").write_text(text)
+        monkeypatch.delitem(sys.modules, f"rendiff_harness.backends.{name}", raising=False)
+    monkeypatch.setattr(backends, "__path__", [*backends.__path__, str(tmp_path)])
+    monkeypatch.setattr(registry, "BACKEND_MODULES", [*registry.BACKEND_MODULES, *files])
+
+
+def _scene(tmp_path: Path, requires: tuple[str, ...]) -> Path:
+    return fixtures.write_scene(tmp_path / "scene", QUAD, [0, 1], requires=requires, lights=SUN)
+
+
+def test_visibility_features_are_the_rust_list() -> None:
+    """One list per language; the two must agree (src/check/mod.rs's VISIBILITY_FEATURES)."""
+    rust = (REPO / "src/check/mod.rs").read_text()
+    m = re.search(r"pub const VISIBILITY_FEATURES: &\[&str\] = &\[([^\]]*)\]", rust)
+    assert m, "VISIBILITY_FEATURES not found in src/check/mod.rs"
+    assert frozenset(re.findall(r'"(\w+)"', m.group(1))) == registry.VISIBILITY_FEATURES
+    assert registry.VISIBILITY_FEATURES == {"depth", "ids", "normals"}
+
+
+def test_plan_per_buffer(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _fake_backends(tmp_path, monkeypatch)
+    vis, full = registry.get("vis"), registry.get("full")
+    assert vis.accepts("visibility_only") and not full.accepts("visibility_only")
+
+    shaded = resolved.load(_scene(tmp_path / "a", ("depth", "ids", "lambert", "shadows", "one_sided")))
+    p = registry.plan(vis, shaded, visibility_only=True)
+    assert (p.render, p.visibility_only, p.missing) == (True, True, ("one_sided", "shadows"))
+    assert p.reason == "RGB not rendered: missing features: one_sided, shadows"
+    # Without the flag, or for a backend without the keyword: skipped as a whole, as before.
+    for backend, flag in ((vis, False), (full, True), (full, False)):
+        p = registry.plan(backend, shaded, visibility_only=flag)
+        assert (p.render, p.reason) == (False, "missing features: one_sided, shadows"), (backend.name, flag)
+
+    # A missing visibility feature skips the backend whatever the flag.
+    normals = resolved.load(_scene(tmp_path / "b", ("depth", "ids", "normals", "lambert", "shadows")))
+    p = registry.plan(vis, normals, visibility_only=True)
+    assert not p.render and p.reason == "missing features: normals, shadows"
+
+    # Everything supported: a full render; the flag still drops RGB where it is accepted.
+    lit = resolved.load(_scene(tmp_path / "c", ("depth", "ids", "lambert")))
+    assert registry.plan(vis, lit) == registry.Plan(True, False, (), "")
+    assert registry.plan(full, lit, visibility_only=True) == registry.Plan(True, False, (), "")
+    assert registry.plan(vis, lit, visibility_only=True) == registry.Plan(True, True, (), "")
+
+
+def test_cli_visibility_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    _fake_backends(tmp_path, monkeypatch)
+    d = _scene(tmp_path, ("depth", "ids", "lambert", "shadows"))
+    out = tmp_path / "vis.exr"
+    assert cli.main(["render", "--backend", "vis", "--scene", str(d), "--out", str(out), "--visibility-only"]) == 0
+    msg = json.loads(capsys.readouterr().out)
+    assert msg["status"] == "ok" and msg["visibility_only"] is True and msg["buffers"] == ["Z", "id"]
+    assert msg["reason"] == "RGB not rendered: missing features: shadows"
+    assert msg["info"] == {"visibility_only": True}
+    assert "R" not in exrbuf.read_buffers(out)
+
+    # A backend without the keyword keeps today's behaviour: skipped, exit 3.
+    out = tmp_path / "full.exr"
+    assert cli.main(["render", "--backend", "full", "--scene", str(d), "--out", str(out), "--visibility-only"]) == 3
+    msg = json.loads(capsys.readouterr().out)
+    assert msg["status"] == "skipped" and msg["reason"] == "missing features: shadows" and not out.exists()
+    # And so does the accepting one without the flag.
+    assert cli.main(["render", "--backend", "vis", "--scene", str(d), "--out", str(out)]) == 3
+    assert json.loads(capsys.readouterr().out)["missing"] == ["shadows"]
+
+
+def _check_visibility(scene_dir: Path, out: Path) -> None:
+    """Z and IDs present and plausible (both triangles seen), no RGB channels."""
+    buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
+    assert "RGB" not in buf and "R" not in buf
+    prim = buf["id.prim"]
+    assert set(np.unique(prim).tolist()) == {0, 1, exrbuf.BACKGROUND_ID}
+    assert np.isfinite(buf["Z"][prim != exrbuf.BACKGROUND_ID]).all()
+    assert np.isinf(buf["Z"][prim == exrbuf.BACKGROUND_ID]).all()
+
+
+@needs_povray
+def test_povray_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    d = _scene(tmp_path, SHADED)
+    out = tmp_path / "pov.exr"
+    rc = cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(out), "--visibility-only"])
+    assert rc == 0, capsys.readouterr().err
+    msg = json.loads(capsys.readouterr().out)
+    assert msg["reason"] == "RGB not rendered: missing features: one_sided" and msg["buffers"] == ["Z", "id"]
+    assert set(msg["info"]["passes"]) == {"ids", "depth"}  # no lit or emission pass
+    _check_visibility(d, out)
+
+
+def test_pyrender_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path) -> None:
+    from rendiff_harness.backends import pyrender_backend as pb
+
+    reason = pb.unavailable_reason()
+    if reason is not None:
+        pytest.skip(f"pyrender backend unavailable: {reason}")
+    d = _scene(tmp_path, SHADED)
+    scene = resolved.load(d)
+    backend = registry.get("pyrender")
+    p = registry.plan(backend, scene, visibility_only=True)
+    assert p.visibility_only and p.reason == "RGB not rendered: missing features: one_sided, shadows"
+    out = tmp_path / "pyr.exr"
+    info = backend.render(scene, out, tmp_path, 60.0, visibility_only=True)
+    assert info["visibility_only"] is True and "radiance" not in info
+    _check_visibility(d, out)
