@@ -321,6 +321,11 @@ def origin_offset(ref: Reference) -> float:
     return float(np.linalg.norm(eye.astype(np.float32).astype(np.float64) - eye))
 
 
+def eye_norm(ref: Reference) -> float:
+    """|eye|: the size of the camera's coordinates, which f32 arithmetic rounds relative to."""
+    return float(np.linalg.norm(np.asarray(ref.scene.camera.eye, dtype=np.float64)))
+
+
 def pixel_size(ref: Reference) -> float:
     """One pixel on the image plane at distance 1."""
     return 2.0 * ref.scene.camera.tan_half_vfov / ref.scene.camera.height
@@ -387,15 +392,16 @@ def compare_ids(
             z_here = np.where(np.isfinite(z_here), z_here, zt_here)
         ectx = tolerance.EdgeContext(
             z=z_here, point_norm=point_norm(ref, rows, cols, z_here), pixel_size=pixel_size(ref),
-            origin_offset=origin_offset(ref),
+            origin_offset=origin_offset(ref), eye_norm=eye_norm(ref),
         )
         eps, tol_text = model.edge_eps(ectx)
 
         def exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
             return np.zeros_like(z)
 
+        slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm)
         result = verify.classify_mismatches(
-            ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend
+            ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend, slack
         )
         cls = result.cls
         explanations = result.groups
@@ -487,16 +493,20 @@ def depth_context(
     attrs: Mapping[str, Any],
 ) -> tolerance.DepthContext:
     """Everything a depth model may look at for the K pixels (rows, cols) seen at z_ref."""
+    span = None
     if prims is not None:
         cos = ref.ray_cos(rows, cols, prims)
         t = ref.scene.triangles[prims.astype(np.int64)].astype(np.float64)
         extent = np.max(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2), axis=1)
+        vz = (t - ref.scene.camera.eye[None, None, :]) @ ref.scene.camera.forward
+        span = vz.max(axis=1) - vz.min(axis=1)
     else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
         cos = np.zeros(z_ref.size)
         extent = None
     return tolerance.DepthContext(
         z_ref=z_ref, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
         point_norm=point_norm(ref, rows, cols, z_ref), extent=extent, origin_offset=origin_offset(ref),
+        eye_norm=eye_norm(ref), depth_span=span,
     )
 
 
@@ -508,7 +518,7 @@ def depth_tolerance_fn(
     def tol(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
         ctx = tolerance.DepthContext(
             z_ref=z, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
-            point_norm=np.abs(z) + float(np.linalg.norm(ref.scene.camera.eye)), origin_offset=origin_offset(ref),
+            point_norm=np.abs(z) + eye_norm(ref), origin_offset=origin_offset(ref), eye_norm=eye_norm(ref),
         )
         try:
             t, _ = model.depth(ctx)

@@ -49,6 +49,8 @@ class DepthContext:
     point_norm: np.ndarray | None = None  # (K,) |X|: distance of the hit point from the world origin
     extent: np.ndarray | None = None  # (K,) longest edge of the triangle seen
     origin_offset: float = 0.0  # |f32(eye) - eye|: how far an f32 camera origin moves the rays
+    eye_norm: float = 0.0  # |eye|: distance of the eye from the world origin
+    depth_span: np.ndarray | None = None  # (K,) max - min planar depth of the triangle's vertices
 
 
 @dataclass(frozen=True)
@@ -59,10 +61,14 @@ class EdgeContext:
     point_norm: np.ndarray  # (K,) |X| of that point from the world origin
     pixel_size: float  # one pixel on the image plane at distance 1
     origin_offset: float  # |f32(eye) - eye|
+    eye_norm: float = 0.0  # |eye|
 
 
 DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
 EdgeModel = Callable[[EdgeContext], tuple[np.ndarray, str]]
+PositionError = Callable[[float, float, np.ndarray], np.ndarray]
+"""(|f32(eye) - eye|, |eye|, |X| (K,)) -> how far the renderer's f32 arithmetic may move the
+point X it renders relative to its camera, world units (K,)."""
 
 F32_U = 2.0**-24
 """Unit roundoff of f32: rounding to nearest moves a value by at most this times its size."""
@@ -76,6 +82,18 @@ class Model:
     depth: DepthModel
     known: bool = True  # False: a strict fallback for a backend without a model
     edge_extra: EdgeModel | None = None  # per-pixel growth of edge_px (f32 camera origin, plane offsets)
+    position: PositionError | None = None  # how far f32 arithmetic moves a point relative to the camera
+
+    def eye_uncertainty(self, origin_offset: float, eye_norm: float, point_norm: np.ndarray) -> float:
+        """World distance by which the renderer may see the eye moved relative to the geometry.
+
+        The verifier calls an edge closed only if the eye is farther than this from both
+        triangles' planes (verify.py): closer, either may turn edge-on and the edge become
+        an outline for this renderer.
+        """
+        if self.position is None or point_norm.size == 0:
+            return 0.0
+        return float(np.max(self.position(origin_offset, eye_norm, point_norm), initial=0.0))
 
     def edge_text(self) -> str:
         return f"edge: pixel center within {self.edge_px:.3g} px of a triangle edge ({self.edge_reason})"
@@ -113,24 +131,61 @@ def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
     return np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
 
 
-def origin_shift(ctx: DepthContext) -> np.ndarray:
-    """|dZ| from rays that start at f32(eye) instead of eye: |do| / |cos|, capped.
+def f32_origin(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
+    """Rays that start at the f32-rounded eye (Embree: `org` is `eye.as_vec3()`): exactly that offset."""
+    return np.full(point.shape, offset)
 
-    Moving a ray's origin by `do` (the backend computes Z for the true eye plane, but
-    along the moved ray) moves its hit on a plane by at most |do| / |cos| along the
-    plane's slope; capped like the grazing models.
+
+def f32_sensor(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
+    """Mitsuba: the sensor's to_world is f32, so its origin is f32(eye), and each ray starts at
+    to_world applied to a near-plane point, then moved by near * d, in f32: two more roundings
+    of every coordinate of a point about |eye| from the origin (<= u |eye| each, sqrt(3) on
+    the vector): offset + 2 sqrt(3) u |eye|."""
+    return np.full(point.shape, offset + 2.0 * math.sqrt(3.0) * F32_U * eye_norm)
+
+
+def f32_view_transform(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
+    """GL (pyrender): the vertex shader takes each vertex X to eye space with an f32 4x4 view
+    matrix (unit rotation rows, translation about |eye|): each component is a 4-term dot
+    product, off by <= 4u (|X| + |eye|) (gamma_4), sqrt(3) of that on the vector."""
+    return 4.0 * math.sqrt(3.0) * F32_U * (np.abs(point) + eye_norm)
+
+
+def shift_depth(ctx: DepthContext, moved: np.ndarray) -> np.ndarray:
+    """|dZ| from a point moved by `moved` relative to the camera: moved / |cos| along the plane.
+
+    A hit on the same triangle stays inside it, so the change is also at most the triangle's
+    planar-depth span (when known); that bounds edge-on triangles without a fitted cap.
     """
-    if ctx.origin_offset <= 0.0:
-        return np.zeros_like(ctx.z_ref)
-    return np.minimum(ctx.origin_offset / np.maximum(ctx.cos, 1e-300), MAX_REL * np.abs(ctx.z_ref))
-
-
-def origin_edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
-    """Edge shift of rays from f32(eye): a point at depth z moves by |do| / z on the image plane."""
     with np.errstate(all="ignore"):
-        px = ctx.origin_offset / (np.abs(ctx.z) * ctx.pixel_size)
-    px = np.where(np.isfinite(px), px, 0.0)
-    return px, f"|f32(eye) - eye| {ctx.origin_offset:.3g} / (z * pixel) (rays start at the f32 eye)"
+        d = moved / np.maximum(ctx.cos, 1e-300)
+    if ctx.depth_span is not None:
+        d = np.minimum(d, np.maximum(ctx.depth_span, moved))
+    else:
+        d = np.minimum(d, np.maximum(MAX_REL * np.abs(ctx.z_ref), moved))
+    return np.where(np.isfinite(d), d, 0.0)
+
+
+def shift_edge(moved: np.ndarray, ctx: EdgeContext) -> np.ndarray:
+    """A point moved by `moved` at depth z moves by moved / (z pixel) px on the image."""
+    with np.errstate(all="ignore"):
+        px = moved / (np.abs(ctx.z) * ctx.pixel_size)
+    return np.where(np.isfinite(px), px, 0.0)
+
+
+def position_edge(position: PositionError, text: str) -> EdgeModel:
+    """An edge model from a backend's position error."""
+
+    def edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+        moved = position(ctx.origin_offset, ctx.eye_norm, ctx.point_norm)
+        return shift_edge(moved, ctx), f"{text} / (z * pixel)"
+
+    return edge
+
+
+def _position(ctx: DepthContext, position: PositionError) -> np.ndarray:
+    point = ctx.point_norm if ctx.point_norm is not None else np.abs(ctx.z_ref) + ctx.eye_norm
+    return position(ctx.origin_offset, ctx.eye_norm, point)
 
 
 # --------------------------------------------------------------------------- models
@@ -163,8 +218,8 @@ def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     channels; one step is R / (65536 * 65535) ~ R / 2^32 (`depth_step`, written by the
     backend into info and the EXR attributes). The plane's offset error e at the hit point
     (`povray_plane_error`) moves the hit along the ray by e / |cos|, and planar depth by
-    at most that (D.f <= |D|); capped at MAX_REL x Z for edge-on triangles. Both sides'
-    Z are stored as f32: 2 x 2^-24 |Z|. When `depth_step` is missing it is derived as
+    at most that (D.f <= |D|), and never beyond the triangle's own depth span (the hit
+    stays on it; `shift_depth`). Both sides' Z are stored as f32: 2 x 2^-24 |Z|. When `depth_step` is missing it is derived as
     R / 2^32 with R = `depth_range` if present, else from the reference's largest depth
     times the backend's margin 1+2^-6.
     """
@@ -181,12 +236,11 @@ def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     point = ctx.point_norm if ctx.point_norm is not None else np.abs(ctx.z_ref)
     extent = ctx.extent if ctx.extent is not None else 0.0
     plane = povray_plane_error(point, extent)
-    # Grazing amplification capped at MAX_REL x Z, but never below the plane error itself.
-    slope = np.maximum(np.minimum(plane / np.maximum(ctx.cos, 1e-300), MAX_REL * np.abs(ctx.z_ref)), plane)
+    slope = shift_depth(ctx, plane)
     tol = step + slope + 2.0 * F32_U * np.abs(ctx.z_ref)
     text = (
         f"povray: |dZ| <= depth_step ({step:.3g}, {source}; 32-bit fixed point) "
-        f"+ max(min(e / |cos|, {MAX_REL:g} Z), e), e = 2^-24 (3|X| + extent) (mesh2 keeps plane normal and offset in f32; "
+        "+ min(e / |cos|, the triangle's depth span), e = 2^-24 (3|X| + extent) (mesh2 keeps plane normal and offset in f32; "
         "|X| = hit point's distance from the origin) + 2^-23 Z (both sides stored as f32)"
     )
     return tol, text
@@ -234,11 +288,12 @@ def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     slope = np.abs(ctx.z_ref) * np.minimum(
         ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL
     )
-    tol = tol + slope
+    tol = tol + slope + shift_depth(ctx, _position(ctx, f32_view_transform))
     text = (
         f"pyrender: |dZ| <= pyrender_backend.depth_tolerance(z, znear={znear:.6g}, zfar={zfar:.6g}) "
         "(4 steps of the 24-bit GL depth buffer z^2(f-n)/(f n)2^-24 + 1 f32 ulp) "
-        f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping)"
+        f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping) "
+        "+ min(4 sqrt(3) 2^-24 (|X| + |eye|) / |cos|, depth span) (f32 view transform of the vertices)"
     )
     return tol, text
 
@@ -254,10 +309,11 @@ def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     facing the camera; the f32 ray-triangle t loses more at grazing angles (Embree,
     same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3.
     """
-    tol = relative_grazing(ctx, MITSUBA_REL) + origin_shift(ctx)
+    tol = relative_grazing(ctx, MITSUBA_REL) + shift_depth(ctx, _position(ctx, f32_sensor))
     return tol, (
         f"mitsuba: |dZ| <= Z*min({MITSUBA_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
-        f"+ |f32(eye) - eye| {ctx.origin_offset:.3g} / |cos| (f32 sensor origin)"
+        f"+ min(o / |cos|, depth span), o = |f32(eye) - eye| ({ctx.origin_offset:.3g}) + 2 sqrt(3) 2^-24 |eye| "
+        "(f32 sensor transform)"
     )
 
 
@@ -270,10 +326,10 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
     angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3.
     """
-    tol = relative_grazing(ctx, EMBREE_REL) + origin_shift(ctx)
+    tol = relative_grazing(ctx, EMBREE_REL) + shift_depth(ctx, _position(ctx, f32_origin))
     return tol, (
         f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
-        f"+ |f32(eye) - eye| {ctx.origin_offset:.3g} / |cos| (rays start at the f32 eye)"
+        f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye)"
     )
 
 
@@ -300,6 +356,7 @@ MODELS: dict[str, Model] = {
         "measured differences lie within ~1e-6 of an edge",
         povray_depth,
         edge_extra=povray_edge,
+        position=lambda offset, eye, point: povray_plane_error(point),
     ),
     "pyrender": Model(
         "pyrender",
@@ -307,23 +364,28 @@ MODELS: dict[str, Model] = {
         "GL fixed-point rasterization: llvmpipe snaps vertices to 1/256 px, moving an edge by "
         "<= sqrt(2)*2^-9 px; measured max 2.1e-3 px",
         pyrender_depth,
+        edge_extra=position_edge(f32_view_transform, "4 sqrt(3) 2^-24 (|X| + |eye|) (f32 view transform)"),
+        position=f32_view_transform,
     ),
     "mitsuba": Model(
         "mitsuba", 1e-4, "float32 ray-triangle tests decide centers within f32 rounding of an edge",
         mitsuba_depth,
-        edge_extra=origin_edge,
+        edge_extra=position_edge(f32_sensor, "(|f32(eye) - eye| + 2 sqrt(3) 2^-24 |eye|) (f32 sensor transform)"),
+        position=f32_sensor,
     ),
     "embree": Model(
         "embree", 1e-4, "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
         embree_depth,
-        edge_extra=origin_edge,
+        edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
+        position=f32_origin,
     ),
     "embree_robust": Model(
         "embree_robust",
         1e-4,
         "float32 watertight ray-triangle tests (ROBUST): measured ID differences within 1e-4 of shared edges",
         embree_depth,
-        edge_extra=origin_edge,
+        edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
+        position=f32_origin,
     ),
 }
 

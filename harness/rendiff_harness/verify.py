@@ -214,24 +214,74 @@ class Classified:
     groups: list[dict[str, object]] = field(default_factory=list)
 
 
-def _orient(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    return float(np.linalg.det(np.stack([a - eye, b - eye, c - eye])))
+def _side(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float) -> int:
+    """Which side of the plane (eye, a, b) c lies on: +1, -1, or 0 when the eye is within
+    `slack` of the plane of (a, b, c), so that the renderer's view of it may be edge-on."""
+    det = float(np.linalg.det(np.stack([a - eye, b - eye, c - eye])))
+    # det = |(b-a) x (c-a)| x (signed distance of the eye from the plane of a, b, c).
+    area2 = float(np.linalg.norm(np.cross(b - a, c - a)))
+    if abs(det) <= slack * area2:
+        return 0
+    return 1 if det > 0.0 else -1
 
 
-def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int) -> tuple[bool, str]:
-    """Is edge `local` of `tri` an outline as seen from the eye? (True, why) or (False, neighbor)."""
+def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int, slack: float) -> tuple[bool, str]:
+    """Is edge `local` of `tri` an outline as seen from the eye? (True, why) or (False, neighbor).
+
+    Closed means a neighbor across the edge lies on the other side, with the eye farther
+    than `slack` (the renderer's eye uncertainty) from both planes.
+    """
     neigh = topo.neighbors(tri, local)
     if not neigh:
         return True, "a mesh boundary edge"
     t = scene.triangles.astype(np.float64)
     eye = scene.camera.eye
     a, b, c = t[tri, local], t[tri, (local + 1) % 3], t[tri, (local + 2) % 3]
-    own = _orient(eye, a, b, c)
+    own = _side(eye, a, b, c, slack)
+    if own == 0:
+        return True, "an edge of a triangle this renderer may see edge-on"
     for n_tri, n_local in neigh:
-        other = t[n_tri, (n_local + 2) % 3]
-        if own * _orient(eye, a, b, other) < 0.0:
+        other = _side(eye, a, b, t[n_tri, (n_local + 2) % 3], slack)
+        if own * other < 0:
             return False, str(n_tri)
-    return True, "a silhouette edge (its neighbors fold behind it)"
+    return True, "a silhouette edge (its neighbors fold behind it, or may for this renderer)"
+
+
+MAX_PATCH = 64
+"""Triangles the outline search visits around one pixel before it calls the patch closed."""
+
+
+def _outline_near(
+    scene: ResolvedScene, topo: Topology, start: int, near: list[int], row: int, col: int, eps: float, slack: float
+) -> tuple[str, str]:
+    """Is there an outline of the surface within `eps` of the pixel center? (why, "") or ("", neighbor).
+
+    A renderer whose rounding moves the sample by up to `eps` may land anywhere in that
+    disc. Starting from the missed triangle's edges near the center (`near`), walk across
+    closed edges to the neighbors and look at their edges within `eps`: an outline (a mesh
+    boundary, a silhouette, or an edge this renderer may see edge-on) means the renderer
+    could have missed the surface legitimately. Only when the whole patch under the disc
+    is closed is the miss a leak.
+    """
+    seen = {start}
+    frontier = [(start, near)]
+    first_closed = ""
+    while frontier and len(seen) <= MAX_PATCH:
+        tri, edges = frontier.pop()
+        for j in edges:
+            is_outline, what = _silhouette(scene, topo, tri, j, slack)
+            if is_outline:
+                return f"{what} of prim {tri}", ""
+            first_closed = first_closed or what
+            for n_tri, _ in topo.neighbors(tri, j):
+                if n_tri in seen:
+                    continue
+                seen.add(n_tri)
+                g = side_geometry(scene, np.array([n_tri]), np.array([row]), np.array([col]))
+                n_near = [k for k in range(3) if g.edge_d[0, k] <= eps]
+                if n_near:
+                    frontier.append((n_tri, n_near))
+    return "", first_closed
 
 
 def _shared(topo: Topology, r: int, t: int) -> set[int]:
@@ -248,8 +298,10 @@ def classify_mismatches(
     depth_tol: DepthTolerance,
     topo_cache: dict[str, Topology] | None = None,
     backend: str = "the test renderer",
+    eye_slack: float = 0.0,
 ) -> Classified:
-    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px)."""
+    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px),
+    `eye_slack` how far (world units) its arithmetic may move the eye relative to the geometry."""
     k = int(np.asarray(ref_ids).size)
     cls = np.full(k, INTERIOR, dtype=np.int8)
     why = [""] * k
@@ -286,6 +338,8 @@ def classify_mismatches(
                     topo_cache["topo"] = topo
         return topo
 
+    rows_a = np.asarray(rows).ravel()
+    cols_a = np.asarray(cols).ravel()
     for i in range(k):
         r, t = int(r_ids[i]), int(t_ids[i])
         rn = "background" if r == BACKGROUND_ID else f"prim {r}"
@@ -343,24 +397,17 @@ def classify_mismatches(
                 )
             continue
         tp = get_topo()
-        closed_by: list[str] = []
-        outline = ""
-        for j in near:
-            is_outline, what = _silhouette(scene, tp, missed, j)
-            if is_outline:
-                outline = what
-                break
-            closed_by.append(what)
+        outline, closed_by = _outline_near(scene, tp, missed, near, int(rows_a[i]), int(cols_a[i]), e, eye_slack)
         if outline:
             cls[i] = EDGE
             d = min(g.edge_d[i, j] for j in near)
-            why[i] = f"center {d:.2g} px from {outline} of {missed_name}: edge"
+            why[i] = f"center {d:.2g} px from {outline} (reached from {missed_name}): edge"
         else:
             cls[i] = CRACK
             d = min(g.edge_d[i, j] for j in near)
             why[i] = (
-                f"center {d:.2g} px from the closed edge {missed_name} shares with prim {closed_by[0]}, "
-                f"but {who} saw {seen_name} behind it: crack"
+                f"center {d:.2g} px from the closed edge {missed_name} shares with prim {closed_by}, "
+                f"and no outline within {e:.2g} px, but {who} saw {seen_name} behind it: crack"
             )
         del seen
     return Classified(cls, why, explain(cls, why, r_ids, t_ids, rows, cols))

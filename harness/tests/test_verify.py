@@ -138,3 +138,28 @@ def test_no_mismatches(tmp_path: Path, n: int) -> None:
     e = np.zeros(n, dtype=np.uint32)
     res = verify.classify_mismatches(s, e, e, e.astype(np.int64), e.astype(np.int64), 1e-3, _exact)
     assert res.cls.size == 0 and res.groups == []
+
+
+def test_a_sliver_neighbor_whose_outline_is_within_reach_makes_it_an_edge(tmp_path: Path) -> None:
+    # a's edge y = 0 (py = 8) is closed by a sliver reaching down to y = -0.1 (py <= 8.16),
+    # whose boundary is ~0.64 px from the center (8.5, 7.5): a renderer whose rounding
+    # reaches that far may legitimately pass below the whole surface.
+    a = [[-3, 0, 0], [3, 0, 0], [0, 3, 0]]
+    sliver = [[3, 0, 0], [-3, 0, 0], [0, -0.1, 0]]
+    s = _scene(tmp_path, [a, sliver])
+    assert _one(s, 0, BG, (8, 7), eps=0.6)[0] == "crack"
+    cls, why = _one(s, 0, BG, (8, 7), eps=0.7)
+    assert cls == "edge" and "of prim 1" in why
+
+
+def test_an_eye_close_to_a_plane_opens_the_edge(tmp_path: Path) -> None:
+    # Flat neighbors seen from 5 units away: closed, unless the renderer may move the eye by
+    # more than its distance to their planes (5), when either may turn edge-on.
+    a = [[-3, 0, 0], [3, 0, 0], [0, 3, 0]]
+    flat = [[3, 0, 0], [-3, 0, 0], [0, -3, 0]]
+    s = _scene(tmp_path, [a, flat])
+    x, y = 8, 7
+    args = (s, np.array([0], dtype=np.uint32), np.array([BG], dtype=np.uint32), np.array([y]), np.array([x]), 0.6,
+            _exact)
+    assert verify.CLASSES[int(verify.classify_mismatches(*args, eye_slack=4.9).cls[0])] == "crack"
+    assert verify.CLASSES[int(verify.classify_mismatches(*args, eye_slack=5.1).cls[0])] == "edge"
