@@ -8,8 +8,9 @@
 //! show, and where it came from (renderer versions, CPU, command, date).
 //!
 //! Noise policy (set by bless, per entry, so the file says what is allowed):
-//! * mismatch counts (`edge_mismatches`, `interior_mismatches`,
-//!   `mask_mismatches`, any buffer) may not grow at all: every backend here is
+//! * mismatch counts (`edge_mismatches`, `tie_mismatches`, `crack_mismatches`,
+//!   `interior_mismatches`, `mask_mismatches`, any buffer: `id`, `Z`, `N`, ...)
+//!   may not grow at all, allowed classes included: every backend here is
 //!   deterministic (one sample at each pixel center for IDs and depth; Monte
 //!   Carlo radiance uses fixed seeds, recorded in the provenance).
 //! * depth errors (`max_abs_error`, `max_rel_error` of `Z` entries) may grow to
@@ -18,6 +19,15 @@
 //!   1.5 plus two f32 roundings of slack (relative 2^-22; absolute 2^-22 × the
 //!   scene's farthest reference depth), because a different CPU or SIMD path
 //!   may round a last bit differently.
+//! * every other entry (`N` normals, `camera` calibration probes, a scene that
+//!   failed to load: buffer `scene`) is gated by its status and by being
+//!   present on both sides. A number a side did not record (an older run or
+//!   baseline) is not compared.
+//!
+//! Bless refuses a run with failing or erroring verdicts (scene load errors
+//! named first) unless given `--allow-failures`, and a run whose set of
+//! scenes differs from the current baseline's unless given
+//! `--allow-scene-changes`.
 
 use crate::check::manifest::{Manifest, ResultEntry, Results};
 use crate::exr_io::{read_buffers, write_atomically};
@@ -33,8 +43,20 @@ use std::path::Path;
 /// Format tag of the baseline file.
 pub const BASELINE_FORMAT: &str = "rendiff-baseline/1";
 
-/// Counts that must not grow.
-pub const COUNT_METRICS: &[&str] = &["edge_mismatches", "interior_mismatches", "mask_mismatches"];
+/// Counts that must not grow: every mismatch class the verifier records
+/// (edge and tie are allowed, crack is allowed only where a backend declares
+/// it, interior never is), and hit/miss mask mismatches. Allowed is not
+/// invisible: an allowed class that grows is still a regression.
+pub const COUNT_METRICS: &[&str] = &[
+    "edge_mismatches",
+    "tie_mismatches",
+    "crack_mismatches",
+    "interior_mismatches",
+    "mask_mismatches",
+];
+
+/// Buffer of the entry a scene that could not be loaded gets (backend: the reference).
+pub const SCENE_BUFFER: &str = "scene";
 
 /// Depth errors that may grow within their noise bound (gated on `Z` entries
 /// only: a radiance error is a sample statistic, judged by its failing-pixel
@@ -394,7 +416,11 @@ pub fn compare(baseline: &Baseline, results: &Results) -> Outcome {
             what: "not in the baseline".into(),
             before: "—".into(),
             now: e.status.clone(),
-            detail: "bless to accept it".into(),
+            detail: if is_bad(&e.status) && !e.reason.is_empty() {
+                short(&e.reason, 160)
+            } else {
+                "bless to accept it".into()
+            },
         });
     }
     out.changes.sort_by_key(|c| c.kind);
@@ -662,12 +688,103 @@ fn find_seeds(v: &Value, out: &mut Vec<(String, Value)>) {
 }
 
 /// Options of `rendiff bless`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct BlessOptions {
     /// The command line, for provenance.
     pub command: String,
-    /// Bless even if the run has failing verdicts (they become accepted).
+    /// Bless even if the run has failing or erroring verdicts, scene load
+    /// errors included (they become accepted).
     pub allow_failures: bool,
+    /// Bless even if the run's set of scenes differs from the current baseline's.
+    pub allow_scene_changes: bool,
+}
+
+/// True for the entry of a scene that could not be loaded (buffer `scene`).
+pub fn is_scene_error(e: &ResultEntry) -> bool {
+    e.buffer == SCENE_BUFFER && is_bad(&e.status)
+}
+
+/// Why bless refuses a run's verdicts: one line naming the scenes that could
+/// not be loaded first, then the failing verdicts; None when nothing fails.
+pub fn failure_summary(results: &Results) -> Option<String> {
+    let (scenes, verdicts): (Vec<&ResultEntry>, Vec<&ResultEntry>) = results
+        .results
+        .iter()
+        .filter(|e| is_bad(&e.status))
+        .partition(|e| is_scene_error(e));
+    let mut parts = Vec::new();
+    if !scenes.is_empty() {
+        let names: Vec<String> = scenes
+            .iter()
+            .map(|e| format!("{} ({})", e.scene, short(&e.reason, 120)))
+            .collect();
+        parts.push(format!(
+            "{} scene{} could not be loaded: {}",
+            scenes.len(),
+            if scenes.len() == 1 { "" } else { "s" },
+            names.join(", ")
+        ));
+    }
+    if !verdicts.is_empty() {
+        let errors = verdicts.iter().filter(|e| e.status == "error").count();
+        let names: Vec<String> = verdicts
+            .iter()
+            .take(3)
+            .map(|e| format!("{} ({})", e.key(), e.status))
+            .collect();
+        parts.push(format!(
+            "{} failing verdict{}{}, e.g. {}",
+            verdicts.len(),
+            if verdicts.len() == 1 { "" } else { "s" },
+            if errors > 0 {
+                format!(" ({errors} of them errors)")
+            } else {
+                String::new()
+            },
+            names.join(", ")
+        ));
+    }
+    (!parts.is_empty()).then(|| parts.join("; "))
+}
+
+/// The scenes of a set of verdicts.
+fn scene_set<'a>(names: impl Iterator<Item = &'a str>) -> std::collections::BTreeSet<String> {
+    names.map(String::from).collect()
+}
+
+/// Scenes added in `now` and removed from `before` (each sorted).
+pub fn scene_changes(before: &Baseline, now: &Baseline) -> (Vec<String>, Vec<String>) {
+    let a = scene_set(before.entries.iter().map(|e| e.scene.as_str()));
+    let b = scene_set(now.entries.iter().map(|e| e.scene.as_str()));
+    (
+        b.difference(&a).cloned().collect(),
+        a.difference(&b).cloned().collect(),
+    )
+}
+
+/// One line saying how the scene sets differ, None when they are the same.
+pub fn scene_change_summary(before: &Baseline, now: &Baseline) -> Option<String> {
+    let (added, removed) = scene_changes(before, now);
+    if added.is_empty() && removed.is_empty() {
+        return None;
+    }
+    let list = |v: &[String]| {
+        if v.is_empty() {
+            "none".to_string()
+        } else {
+            v.iter()
+                .map(|s| format!("{s:?}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    Some(format!(
+        "the run's scenes differ from the baseline's: added {}: {}; removed {}: {}",
+        added.len(),
+        list(&added),
+        removed.len(),
+        list(&removed)
+    ))
 }
 
 /// Builds a baseline from a run (numbers, noise bounds, provenance).
@@ -677,18 +794,10 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
         "results.json (run `rendiff check` first)",
     )?;
     let manifest: Manifest = read_json(&run.join("manifest.json"), "manifest")?;
-    let bad: Vec<String> = results
-        .results
-        .iter()
-        .filter(|e| is_bad(&e.status))
-        .map(|e| format!("{} ({})", e.key(), e.status))
-        .collect();
-    if !bad.is_empty() && !opts.allow_failures {
+    if let Some(bad) = failure_summary(&results).filter(|_| !opts.allow_failures) {
         bail!(
-            "{}: {} failing verdicts, e.g. {}; fix them, or pass --allow-failures to accept them into the baseline",
+            "{}: {bad}; fix them, or pass --allow-failures to accept them into the baseline",
             run.display(),
-            bad.len(),
-            bad[..bad.len().min(3)].join(", ")
         );
     }
     // The scale of each scene's depth, for the absolute error slack.
@@ -778,14 +887,28 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
             seeds,
             expectations,
         },
-        policy: "Mismatch counts (edge, interior, mask) may not grow. Depth errors (max_abs_error, max_rel_error of Z entries) may grow to baseline x error_factor + slack: exact for raster/trace; x1.5 plus two f32 roundings (2^-22 relative, 2^-22 x the scene's farthest reference depth absolute) for external renderers. Statuses may not turn fail/error/unexpected_pass, nor pass -> skipped. Entries must match one to one. Change thresholds only with `rendiff bless`.".into(),
+        policy: "Mismatch counts (edge, tie, crack, interior, mask; any buffer) may not grow. Depth errors (max_abs_error, max_rel_error of Z entries) may grow to baseline x error_factor + slack: exact for raster/trace; x1.5 plus two f32 roundings (2^-22 relative, 2^-22 x the scene's farthest reference depth absolute) for external renderers. Statuses (any buffer: id, Z, N, camera, scene) may not turn fail/error/unexpected_pass, nor pass -> skipped. Entries must match one to one. Change thresholds only with `rendiff bless`.".into(),
         entries,
     })
 }
 
-/// `rendiff bless`: writes the baseline from a run, atomically.
+/// `rendiff bless`: writes the baseline from a run, atomically. Refuses (see
+/// [`BlessOptions`]) a run with failures, or one whose scenes differ from
+/// those of the baseline it would replace.
 pub fn bless(run: &Path, baseline_path: &Path, opts: &BlessOptions) -> Result<Baseline> {
     let b = baseline_from_run(run, opts)?;
+    if !opts.allow_scene_changes && baseline_path.exists() {
+        let old = load_baseline(baseline_path).context(
+            "cannot compare the run's scenes with the current baseline; pass --allow-scene-changes to replace it",
+        )?;
+        if let Some(why) = scene_change_summary(&old, &b) {
+            bail!(
+                "{}: {why}; pass --allow-scene-changes to bless them into {}",
+                run.display(),
+                baseline_path.display()
+            );
+        }
+    }
     let text = serde_json::to_string_pretty(&b)? + "\n";
     write_atomically(baseline_path, |tmp| {
         std::fs::write(tmp, &text).with_context(|| format!("{}: cannot write", tmp.display()))?;

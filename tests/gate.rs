@@ -259,7 +259,27 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         String::from_utf8_lossy(&out.stderr)
     );
     let b = gate::load_baseline(&baseline).unwrap();
-    assert_eq!(b.entries.len(), 8, "2 scenes x 2 backends x 2 buffers");
+    let r: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("results.json")).unwrap()).unwrap();
+    assert_eq!(
+        b.entries.len(),
+        r["results"].as_array().unwrap().len(),
+        "one baseline entry per verdict"
+    );
+    for scene in ["three_triangles", "pixel_grid"] {
+        for backend in ["trace", "embree"] {
+            for buffer in ["id", "Z"] {
+                assert!(
+                    b.entries.iter().any(|e| (
+                        e.scene.as_str(),
+                        e.backend.as_str(),
+                        e.buffer.as_str()
+                    ) == (scene, backend, buffer)),
+                    "no {scene}/{backend}/{buffer} in the baseline"
+                );
+            }
+        }
+    }
     assert!(b.provenance.renderers["embree"].starts_with("Embree"));
     assert!(b.provenance.renderers["trace"].starts_with("rendiff"));
     assert_eq!(b.provenance.rendiff_version, env!("CARGO_PKG_VERSION"));
@@ -340,7 +360,8 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     }
     assert_eq!(std::fs::read_to_string(run.join("gate.md")).unwrap(), md);
 
-    // Bless refuses a failing run unless told to accept its failures.
+    // Bless refuses a failing run unless told to accept its failures, and a
+    // run with a new scene unless told to accept scene changes.
     let out = rendiff()
         .arg("bless")
         .arg(&run)
@@ -363,6 +384,22 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         .arg("--allow-failures")
         .output()
         .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("added 1: \"brand_new\"") && err.contains("--allow-scene-changes"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&baseline).unwrap(), before);
+    let out = rendiff()
+        .arg("bless")
+        .arg(&run)
+        .arg("--baseline")
+        .arg(&baseline)
+        .arg("--allow-failures")
+        .arg("--allow-scene-changes")
+        .output()
+        .unwrap();
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -382,4 +419,285 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
+}
+
+// ---------------------------------------------------------------- the verifier's classes and new buffers (issue 11)
+
+/// An entry with the verifier's four class counts (None: field absent).
+fn classed(backend: &str, tie: Option<u64>, crack: Option<u64>) -> ResultEntry {
+    let mut e = entry("a", backend, "id", "pass", 2, 0.0);
+    if let Some(t) = tie {
+        e.details.insert("tie_mismatches".into(), t.into());
+    }
+    if let Some(c) = crack {
+        e.details.insert("crack_mismatches".into(), c.into());
+    }
+    e
+}
+
+fn other(scene: &str, backend: &str, buffer: &str, status: &str) -> ResultEntry {
+    ResultEntry {
+        scene: scene.into(),
+        backend: backend.into(),
+        buffer: buffer.into(),
+        status: status.into(),
+        reason: format!("{status} because"),
+        details: json!({"rms_px": 0.01, "max_angle_rad": 1e-4, "interior_mismatches": 0})
+            .as_object()
+            .unwrap()
+            .clone(),
+    }
+}
+
+#[test]
+fn tie_and_crack_counts_are_held_like_edge_counts() {
+    assert!(gate::COUNT_METRICS.contains(&"tie_mismatches"));
+    assert!(gate::COUNT_METRICS.contains(&"crack_mismatches"));
+    let base = vec![
+        classed("povray", Some(4), Some(0)),
+        classed("embree", Some(0), Some(7)),
+        classed("trace", Some(1), Some(1)),
+    ];
+    let now = vec![
+        classed("povray", Some(5), Some(0)),
+        classed("embree", Some(0), Some(3)),
+        classed("trace", Some(1), Some(1)),
+    ];
+    let o = gate::compare(&baseline_of(&base), &results(now));
+    let by = |backend: &str, what: &str| {
+        o.changes
+            .iter()
+            .filter(|c| c.backend == backend && c.what == what)
+            .map(|c| c.kind)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        by("povray", "tie_mismatches worse"),
+        vec![ChangeKind::Regression],
+        "a tie count that grows is a regression: {:#?}",
+        o.changes
+    );
+    let c = o
+        .changes
+        .iter()
+        .find(|c| c.what == "tie_mismatches worse")
+        .unwrap();
+    assert_eq!((c.before.as_str(), c.now.as_str()), ("4", "5 (+1)"));
+    assert_eq!(
+        by("embree", "crack_mismatches better"),
+        vec![ChangeKind::Improvement],
+        "a crack count that shrinks is an improvement"
+    );
+    assert!(by("trace", "tie_mismatches worse").is_empty());
+    assert_eq!(o.regressions(), 1);
+}
+
+#[test]
+fn class_counts_a_side_did_not_record_are_not_compared() {
+    // An older baseline (no tie/crack fields at all) against a new run, and a
+    // run that did not compare them (null) against a baseline that has them.
+    let base = vec![
+        classed("povray", None, None),
+        classed("embree", Some(3), Some(2)),
+    ];
+    let mut now = vec![
+        classed("povray", Some(40), Some(9)),
+        classed("embree", None, None),
+    ];
+    now[1].details.insert("tie_mismatches".into(), Value::Null);
+    let o = gate::compare(&baseline_of(&base), &results(now));
+    assert_eq!(o.regressions(), 0, "{:#?}", o.changes);
+    assert!(o.changes.is_empty(), "{:#?}", o.changes);
+}
+
+#[test]
+fn normals_camera_and_scene_entries_are_gated_by_status_and_presence() {
+    let base = vec![
+        other("a", "povray", "N", "pass"),
+        other("probe", "povray", "camera", "pass"),
+        other("probe", "embree", "camera", "pass"),
+        other("b", "trace", "N", "pass"),
+    ];
+    let now = vec![
+        other("a", "povray", "N", "fail"),
+        other("probe", "povray", "camera", "pass"),
+        // embree's camera entry is gone; a scene that no longer loads appears.
+        other("b", "trace", "N", "pass"),
+        ResultEntry {
+            reason: "cannot load scene: bad TOML at line 3".into(),
+            ..other("c", "raster", "scene", "error")
+        },
+    ];
+    let o = gate::compare(&baseline_of(&base), &results(now));
+    let find = |buffer: &str, what: &str| {
+        o.changes
+            .iter()
+            .filter(|c| c.buffer == buffer && c.what == what)
+            .map(|c| (c.kind, c.detail.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(find("N", "new failure").len(), 1, "{:#?}", o.changes);
+    assert_eq!(find("camera", "missing result").len(), 1);
+    let scene = find("scene", "not in the baseline");
+    assert_eq!(scene.len(), 1);
+    assert_eq!(scene[0].0, ChangeKind::Regression);
+    assert!(
+        scene[0].1.contains("cannot load scene"),
+        "the load error is named: {scene:?}"
+    );
+    assert_eq!(o.regressions(), 3);
+}
+
+#[test]
+fn bless_names_scene_load_errors_first_and_scene_changes_in_one_line() {
+    let mut scene_err = other("zz_broken", "raster", "scene", "error");
+    scene_err.reason = "cannot load scene: no such material \"x\"".into();
+    let r = results(vec![
+        entry("a", "trace", "id", "fail", 0, 0.0),
+        entry("a", "trace", "Z", "pass", 0, 0.0),
+        scene_err.clone(),
+    ]);
+    let why = gate::failure_summary(&r).unwrap();
+    assert!(
+        why.starts_with("1 scene could not be loaded: zz_broken (cannot load scene"),
+        "{why}"
+    );
+    assert!(why.contains("a::trace::id (fail)"), "{why}");
+    assert!(
+        gate::failure_summary(&results(vec![entry("a", "trace", "id", "pass", 0, 0.0)])).is_none()
+    );
+
+    let before = baseline_of(&[
+        entry("a", "trace", "id", "pass", 0, 0.0),
+        entry("gone", "trace", "id", "pass", 0, 0.0),
+    ]);
+    let now = baseline_of(&[
+        entry("a", "trace", "id", "pass", 0, 0.0),
+        entry("new1", "trace", "id", "pass", 0, 0.0),
+        entry("new2", "trace", "Z", "pass", 0, 0.0),
+    ]);
+    let (added, removed) = gate::scene_changes(&before, &now);
+    assert_eq!(added, vec!["new1", "new2"]);
+    assert_eq!(removed, vec!["gone"]);
+    let line = gate::scene_change_summary(&before, &now).unwrap();
+    assert!(!line.contains('\n'));
+    assert!(
+        line.contains("added 2: \"new1\", \"new2\"") && line.contains("removed 1: \"gone\""),
+        "{line}"
+    );
+    assert!(gate::scene_change_summary(&before, &before).is_none());
+}
+
+/// A run folder without renders (bless only reads the two JSON files; the
+/// EXRs it would read for depth scales are optional).
+fn json_run(run: &Path, scenes: &[&str], extra: Vec<Value>) {
+    std::fs::create_dir_all(run).unwrap();
+    let manifest = json!({
+        "format": "rendiff-manifest/1", "reference": "raster", "created_unix": 1_795_000_000u64,
+        "rendiff_version": "0.1.0",
+        "scenes": scenes.iter().map(|s| json!({
+            "scene": s, "scene_file": format!("scenes/{s}.toml"), "resolved": format!("scenes/{s}/resolved"),
+            "requires": ["depth", "ids"],
+            "renders": [{"backend": "trace", "status": "ok", "exr": format!("scenes/{s}/trace.exr"),
+                         "version": "rendiff 0.1.0", "time_s": 0.1}]
+        })).collect::<Vec<_>>()
+    });
+    let mut entries: Vec<Value> = scenes
+        .iter()
+        .flat_map(|s| {
+            ["id", "Z", "N"].map(|buf| {
+                json!({"scene": s, "backend": "trace", "buffer": buf, "status": "pass", "reason": "",
+                       "edge_mismatches": 0, "tie_mismatches": 1, "crack_mismatches": 0, "interior_mismatches": 0,
+                       "mask_mismatches": 0, "max_abs_error": 0.0, "max_rel_error": 0.0,
+                       "explanations": [{"class": "tie", "ref_prim": 16, "test_prim": 20, "pixels": 1,
+                                         "example": [3, 4], "why": "prims 16 and 20 are identical triangles: tie"}]})
+            })
+        })
+        .collect();
+    entries.extend(extra);
+    let results = json!({"format": "rendiff-results/1", "reference": "raster", "results": entries});
+    std::fs::write(run.join("manifest.json"), manifest.to_string()).unwrap();
+    std::fs::write(run.join("results.json"), results.to_string()).unwrap();
+}
+
+fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, String) {
+    let out = rendiff()
+        .arg("bless")
+        .arg(run)
+        .arg("--baseline")
+        .arg(baseline)
+        .args(flags)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let baseline = dir.path().join("baseline.json");
+    let first = dir.path().join("first");
+    json_run(&first, &["alpha", "beta"], vec![]);
+    let (code, err) = bless_cli(&first, &baseline, &[]);
+    assert_eq!(
+        code,
+        Some(0),
+        "the first bless has nothing to compare with: {err}"
+    );
+    let b = gate::load_baseline(&baseline).unwrap();
+    let e = b.entries.iter().find(|e| e.buffer == "N").unwrap();
+    assert_eq!(
+        e.metrics["tie_mismatches"],
+        json!(1),
+        "class counts are blessed"
+    );
+    assert_eq!(e.metrics["crack_mismatches"], json!(0));
+    let blessed = std::fs::read(&baseline).unwrap();
+
+    // A scene that could not be loaded: refused, named, even with the scene set unchanged.
+    let broken = dir.path().join("broken");
+    json_run(
+        &broken,
+        &["alpha", "beta"],
+        vec![
+            json!({"scene": "beta", "backend": "raster", "buffer": "scene", "status": "error",
+                    "reason": "cannot load scene: unknown shape kind \"blob\""}),
+        ],
+    );
+    let (code, err) = bless_cli(&broken, &baseline, &[]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("1 scene could not be loaded: beta (cannot load scene: unknown shape kind")
+            && err.contains("--allow-failures"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&baseline).unwrap(), blessed);
+
+    // Scenes added and removed: one line naming both, refused until allowed.
+    let changed = dir.path().join("changed");
+    json_run(&changed, &["alpha", "gamma", "delta"], vec![]);
+    let (code, err) = bless_cli(&changed, &baseline, &[]);
+    assert_eq!(code, Some(2), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("scenes differ"))
+        .unwrap_or_else(|| panic!("no scene-change line in {err}"));
+    assert!(
+        line.contains("added 2: \"delta\", \"gamma\"")
+            && line.contains("removed 1: \"beta\"")
+            && line.contains("--allow-scene-changes"),
+        "{line}"
+    );
+    assert_eq!(std::fs::read(&baseline).unwrap(), blessed);
+    let (code, err) = bless_cli(&changed, &baseline, &["--allow-scene-changes"]);
+    assert_eq!(code, Some(0), "{err}");
+    let b = gate::load_baseline(&baseline).unwrap();
+    assert!(b.entries.iter().any(|e| e.scene == "gamma"));
+    assert!(!b.entries.iter().any(|e| e.scene == "beta"));
+    // The same scenes again: no flag needed.
+    let (code, err) = bless_cli(&changed, &baseline, &[]);
+    assert_eq!(code, Some(0), "{err}");
 }

@@ -125,7 +125,7 @@ fn check_writes_a_self_contained_report_of_every_scene_and_backend() {
             "no Embree version"
         );
     }
-    // The numbers behind a verdict are on the page (pixel_grid: Embree's tie rule, an expectation).
+    // The numbers behind a verdict are on the page (pixel_grid: Embree's edge mismatches).
     let results: serde_json::Value =
         serde_json::from_str(&read(&run.join("results.json"))).unwrap();
     let e = results["results"]
@@ -141,10 +141,21 @@ fn check_writes_a_self_contained_report_of_every_scene_and_backend() {
         page.contains(&format!("<td class=\"num\">{edge}</td>")),
         "edge count {edge} not shown"
     );
+    // Its reason (an expectation's, when one applies) and the comparison's
+    // explanation of the mismatching pixels are on the page too.
+    let reason = e["reason"].as_str().unwrap_or("");
     assert!(
-        page.contains("expectation"),
-        "the expectation's reason is not shown"
+        reason.is_empty() || page.contains(&rendiff::report::html::escape(reason)),
+        "the verdict's reason {reason:?} is not shown"
     );
+    if let Some(first) = e["explanations"].as_array().and_then(|a| a.first()) {
+        let why = first["why"].as_str().unwrap();
+        assert!(
+            page.contains(&rendiff::report::html::escape(why)),
+            "explanation {why:?} not shown"
+        );
+        assert!(page.contains("id=\"why-embree-id\""));
+    }
     assert_self_contained(&report);
 
     // `rendiff report` rewrites it in place, leaving no temporary folders.
@@ -501,4 +512,233 @@ fn a_synthetic_run_shows_radiance_every_status_and_fallback_diff_maps() {
     let out = rendiff().arg("report").arg(&run).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("manifest.json"));
+}
+
+// ---------------------------------------------------------------- the verifier's fields (issue 11)
+
+/// The synthetic run with what the verifier writes: class counts, explanations,
+/// normals (N), camera probe entries, the top-level calibration, and a scene
+/// that could not be loaded. `calibration: false` leaves the calibration out
+/// (an older run).
+fn verifier_run(run: &Path, calibration: bool) {
+    synthetic_run(run);
+    let path = run.join("results.json");
+    let mut r: serde_json::Value = serde_json::from_str(&read(&path)).unwrap();
+    for e in r["results"].as_array_mut().unwrap() {
+        if e["backend"] == "fake" && e["buffer"] == "id" {
+            e["edge_mismatches"] = 3.into();
+            e["tie_mismatches"] = 1.into();
+            e["crack_mismatches"] = 2.into();
+            e["interior_mismatches"] = 1.into();
+            e["explanations"] = serde_json::json!([
+                {"class": "tie", "ref_prim": 0, "test_prim": 1, "pixels": 1, "example": [3, 4],
+                 "why": "prims 0 and 1 are identical triangles: tie"},
+                {"class": "interior", "ref_prim": 1, "test_prim": 0, "pixels": 1, "example": [2, 0],
+                 "why": "<script>alert('why')</script> inside prim 1"},
+                {"class": "crack", "ref_prim": 1, "test_prim": null, "pixels": 2, "example": [5, 1],
+                 "why": "background seen on the edge of prims 0 and 1: crack"},
+                "not an object: ignored"
+            ]);
+        }
+    }
+    let arr = r["results"].as_array_mut().unwrap();
+    arr.push(serde_json::json!({"scene": "syn", "backend": "fake", "buffer": "N", "status": "pass", "reason": "",
+        "compared_pixels": 40, "interior_mismatches": 0, "max_angle_rad": 0.0125, "tolerance": "1e-2 rad"}));
+    arr.push(serde_json::json!({"scene": "syn", "backend": "fake", "buffer": "camera", "status": "pass", "reason": "",
+        "offset_x_px": 0.0004, "offset_y_px": -0.0002, "scale_x": 1.000001, "scale_y": 0.999999,
+        "rotation": 1e-7, "rms_px": 0.0031, "bound_px": 0.01}));
+    arr.push(serde_json::json!({"scene": "zz_unloadable", "backend": "raster", "buffer": "scene", "status": "error",
+        "reason": "cannot load scene: unknown shape kind \"blob\""}));
+    if calibration {
+        r["calibration"] = serde_json::json!({
+            "fake": {"offset_x_px": 0.0004, "offset_y_px": -0.0002, "scale_x": 1.000001, "scale_y": 0.999999,
+                     "rotation": 1e-7, "rms_px": 0.0031, "bound_px": 0.01, "status": "pass", "reason": ""},
+            "<b>povray</b>": {"offset_x_px": 0.5, "offset_y_px": 0.5, "scale_x": 1.0, "scale_y": 1.0,
+                     "rotation": 0.0, "rms_px": 0.71, "bound_px": 0.01, "status": "fail",
+                     "reason": "pixel centers offset by (0.5, 0.5) px: exporter convention error"}
+        });
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&r).unwrap()).unwrap();
+}
+
+/// The part of `html` from the `<h2 id="{id}">` heading to the next `<h2`.
+fn section<'a>(html: &'a str, id: &str) -> &'a str {
+    let start = html
+        .find(&format!("<h2 id=\"{id}\">"))
+        .unwrap_or_else(|| panic!("no section {id}"));
+    let rest = &html[start..];
+    let end = rest[4..].find("<h2").map_or(rest.len(), |i| i + 4);
+    &rest[..end]
+}
+
+fn report_of(run: &Path) -> PathBuf {
+    let out = rendiff().arg("report").arg(run).output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    run.join("report")
+}
+
+#[test]
+fn the_overview_shows_failures_apart_from_skips_class_counts_and_calibration() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    verifier_run(&run, true);
+    let report = report_of(&run);
+    let index = read(&report.join("index.html"));
+
+    // Needs attention: failures and errors only, the unloadable scene first.
+    let attention = section(&index, "attention");
+    let (load, fail, error) = (
+        attention
+            .find("cannot load scene: unknown shape kind")
+            .unwrap(),
+        attention.find("1 interior mismatch at (2,0)").unwrap(),
+        attention.find("segfault").unwrap(),
+    );
+    assert!(load < fail && load < error, "scene load errors come first");
+    assert!(
+        !attention.contains(">skipped<") && !attention.contains("missing features: ids"),
+        "skips are not failures: {attention}"
+    );
+    assert!(!attention.contains(">pass<"));
+    // Skipped: its own section, with the reason.
+    let skipped = section(&index, "skipped");
+    assert!(skipped.contains(">skipped<") || skipped.contains("skippy"));
+    assert!(skipped.contains("missing features: ids"), "{skipped}");
+    assert!(index.find("id=\"attention\"").unwrap() < index.find("id=\"skipped\"").unwrap());
+
+    // The matrix: edge/tie/crack/interior per entry, camera entries their rms.
+    let matrix = section(&index, "matrix");
+    assert!(matrix.contains(">3/1/2/1</span>"), "{matrix}");
+    assert!(matrix.contains("title=\"3 edge, 1 tie, 2 crack, 1 interior\""));
+    assert!(matrix.contains(">-/-/-/0</span>"), "N: interior only");
+    assert!(matrix.contains("rms 0.003100 px"), "{matrix}");
+    assert!(
+        index.contains("zz_unloadable.html"),
+        "the unloadable scene has a page"
+    );
+
+    // Camera calibration: every backend, its numbers, status and reason; names escaped.
+    let cal = section(&index, "calibration");
+    for needle in [
+        "&lt;b&gt;povray&lt;/b&gt;",
+        "<td class=\"num\">0.5000</td>",
+        "<td class=\"num\">0.7100</td>",
+        "<td class=\"num\">1.000001</td>",
+        "<td class=\"num\">0.999999</td>",
+        "<td class=\"num\">1.000e-7</td>",
+        "pixel centers offset by (0.5, 0.5) px: exporter convention error",
+        "offset x (px)",
+        "rms (px)",
+        "bound (px)",
+        "syn.html#camera",
+    ] {
+        assert!(cal.contains(needle), "calibration lacks {needle:?}: {cal}");
+    }
+    assert!(!index.contains("<b>povray</b>"));
+    assert!(cal.find(">fake<").is_some() && cal.contains(">fail<") && cal.contains(">pass<"));
+    assert_self_contained(&report);
+}
+
+#[test]
+fn scene_pages_explain_mismatches_normals_cameras_and_load_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    verifier_run(&run, true);
+    let report = report_of(&run);
+    let page = read(&report.join("syn.html"));
+
+    let why = section(&page, "why");
+    for needle in [
+        "id=\"why-fake-id\"",
+        "<span class=\"cls c-tie\">tie</span>",
+        "<span class=\"cls c-crack\">crack</span>",
+        "<span class=\"cls c-interior\">interior</span>",
+        "prims 0 and 1 are identical triangles: tie",
+        "background seen on the edge of prims 0 and 1: crack",
+        "&lt;script&gt;alert(&#39;why&#39;)&lt;/script&gt; inside prim 1",
+        "<td>(3, 4)</td>",
+        "<td>(5, 1)</td>",
+        "<td class=\"num\">2</td>",
+    ] {
+        assert!(why.contains(needle), "explanations lack {needle:?}: {why}");
+    }
+    assert_eq!(
+        why.matches("<tr><td><span class=\"cls").count(),
+        3,
+        "the non-object is skipped"
+    );
+    assert!(!page.contains("<script>alert"), "unescaped why");
+
+    // Verdicts: the four classes and the normals' largest angle.
+    let verdicts = section(&page, "verdicts");
+    assert!(verdicts.contains("<th>tie</th><th>crack</th>"));
+    assert!(
+        verdicts.contains("<td class=\"num\">3</td><td class=\"num\">1</td><td class=\"num\">2</td><td class=\"num\">1</td>"),
+        "{verdicts}"
+    );
+    assert!(verdicts.contains("0.01250 rad (0.716°)"), "{verdicts}");
+    // Camera probe numbers of this scene.
+    let cam = section(&page, "camera");
+    assert!(
+        cam.contains("<td class=\"num\">0.003100</td>") && cam.contains("1.000001"),
+        "{cam}"
+    );
+
+    // The scene that could not be loaded says so at the top of its page.
+    let broken = read(&report.join("zz_unloadable.html"));
+    assert!(
+        broken.contains("This scene could not be loaded")
+            && broken.contains("cannot load scene: unknown shape kind &quot;blob&quot;"),
+        "{broken}"
+    );
+    assert_self_contained(&report);
+}
+
+#[test]
+fn calibration_is_shown_when_everything_passes_and_absent_fields_are_not_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    verifier_run(&run, true);
+    // Everything passes: no attention rows, the calibration table is still there.
+    let path = run.join("results.json");
+    let mut r: serde_json::Value = serde_json::from_str(&read(&path)).unwrap();
+    r["results"]
+        .as_array_mut()
+        .unwrap()
+        .retain(|e| e["status"] == "pass");
+    r["calibration"]["<b>povray</b>"]["status"] = "pass".into();
+    std::fs::write(&path, r.to_string()).unwrap();
+    let report = report_of(&run);
+    let index = read(&report.join("index.html"));
+    // A render that failed is listed even without a verdict about it.
+    let attention = section(&index, "attention");
+    assert!(attention.contains("segfault") && attention.contains("<td>render</td>"));
+    let mpath = run.join("manifest.json");
+    let mut m: serde_json::Value = serde_json::from_str(&read(&mpath)).unwrap();
+    m["scenes"][0]["renders"]
+        .as_array_mut()
+        .unwrap()
+        .retain(|r| r["status"] == "ok");
+    std::fs::write(&mpath, m.to_string()).unwrap();
+    let report = report_of(&run);
+    let index = read(&report.join("index.html"));
+    assert!(section(&index, "attention").contains("Nothing failed"));
+    assert!(section(&index, "calibration").contains("<table class=\"calibration\">"));
+    assert!(section(&index, "skipped").contains("Nothing was skipped"));
+
+    // An older run: no calibration, no class fields beyond edge/interior, no explanations.
+    let old = dir.path().join("old");
+    synthetic_run(&old);
+    let report = report_of(&old);
+    let index = read(&report.join("index.html"));
+    assert!(section(&index, "calibration").contains("Not recorded"));
+    assert!(section(&index, "matrix").contains(">0/-/-/1</span>"));
+    let page = read(&report.join("syn.html"));
+    assert!(section(&page, "why").contains("No explanations recorded"));
+    assert!(!page.contains("id=\"camera\""));
 }

@@ -22,6 +22,9 @@ pub struct RunData {
     pub results_problem: Option<String>,
     /// The expectations file the comparison used (results.json `expectations`).
     pub expectations: Option<String>,
+    /// The camera calibration per backend (results.json `calibration`), None
+    /// when the comparison did not record one (older runs).
+    pub calibration: Option<serde_json::Map<String, Value>>,
     /// Scenes in manifest order (plus any only results.json names).
     pub scenes: Vec<SceneData>,
 }
@@ -69,6 +72,16 @@ pub struct ObjectInfo {
     pub prim_count: u64,
     /// Material index.
     pub material: Option<usize>,
+}
+
+impl ResolvedInfo {
+    /// The index and object that owns prim `p`.
+    pub fn object_of(&self, p: u64) -> Option<(usize, &ObjectInfo)> {
+        self.objects
+            .iter()
+            .enumerate()
+            .find(|(_, o)| p >= o.first_prim && p - o.first_prim < o.prim_count)
+    }
 }
 
 impl SceneData {
@@ -128,6 +141,68 @@ pub fn status_rank(status: &str) -> u8 {
 /// A number field of a verdict (counts and errors), None when null or absent.
 pub fn num(e: &ResultEntry, key: &str) -> Option<f64> {
     e.details.get(key).and_then(Value::as_f64)
+}
+
+/// The mismatch classes the verifier records, with their short names
+/// (results.json `<class>_mismatches`), in the order the report shows them.
+pub const CLASSES: &[(&str, &str)] = &[
+    ("edge_mismatches", "edge"),
+    ("tie_mismatches", "tie"),
+    ("crack_mismatches", "crack"),
+    ("interior_mismatches", "interior"),
+];
+
+/// Buffer of the entry a scene that could not be loaded gets.
+pub const SCENE_BUFFER: &str = "scene";
+
+/// True for the verdict that says a scene could not be loaded.
+pub fn is_scene_error(e: &ResultEntry) -> bool {
+    e.buffer == SCENE_BUFFER && status_rank(&e.status) == 0
+}
+
+/// One line of a verdict's `explanations`: why a group of pixels differs.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Explanation {
+    /// edge | tie | crack | interior (untrusted text).
+    pub class: String,
+    /// The reference's prim there (None: background or not recorded).
+    pub ref_prim: Option<u64>,
+    /// The test backend's prim there.
+    pub test_prim: Option<u64>,
+    /// How many pixels this explains.
+    pub pixels: Option<u64>,
+    /// One such pixel.
+    pub example: Option<(i64, i64)>,
+    /// The reason, in words (untrusted text).
+    pub why: String,
+}
+
+/// A verdict's `explanations`, skipping anything that is not an object (an
+/// older run has none).
+pub fn explanations(e: &ResultEntry) -> Vec<Explanation> {
+    let Some(list) = e.details.get("explanations").and_then(Value::as_array) else {
+        return Vec::new();
+    };
+    list.iter()
+        .filter_map(Value::as_object)
+        .map(|o| {
+            let s = |k: &str| o.get(k).and_then(Value::as_str).unwrap_or("").to_string();
+            let example = o.get("example").and_then(Value::as_array).and_then(|a| {
+                match (a.first()?.as_f64(), a.get(1)?.as_f64()) {
+                    (Some(x), Some(y)) => Some((x as i64, y as i64)),
+                    _ => None,
+                }
+            });
+            Explanation {
+                class: s("class"),
+                ref_prim: o.get("ref_prim").and_then(Value::as_u64),
+                test_prim: o.get("test_prim").and_then(Value::as_u64),
+                pixels: o.get("pixels").and_then(Value::as_u64),
+                example,
+                why: s("why"),
+            }
+        })
+        .collect()
 }
 
 /// A text field of a verdict, "" when absent.
@@ -205,10 +280,15 @@ impl RunData {
                 Err(e) => (None, Some(format!("{}: unreadable: {e}", rpath.display()))),
             },
         };
-        let expectations = std::fs::read_to_string(&rpath)
+        let raw = std::fs::read_to_string(&rpath)
             .ok()
-            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok());
+        let expectations = raw
+            .as_ref()
             .and_then(|v| v.get("expectations")?.as_str().map(String::from));
+        let calibration = raw
+            .as_ref()
+            .and_then(|v| v.get("calibration")?.as_object().cloned());
         let mut by_scene: BTreeMap<String, Vec<ResultEntry>> = BTreeMap::new();
         for e in results.iter().flat_map(|r| r.results.iter()) {
             by_scene.entry(e.scene.clone()).or_default().push(e.clone());
@@ -239,6 +319,7 @@ impl RunData {
             results,
             results_problem,
             expectations,
+            calibration,
             scenes,
         })
     }

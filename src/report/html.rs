@@ -112,6 +112,9 @@ figcaption button{font-size:11px;padding:0 5px;margin-left:4px}
 .legend span.sw{display:inline-block;width:12px;height:12px;border:1px solid #888;vertical-align:middle;margin:0 3px 0 8px}
 .note{background:#fff7d6;border:1px solid #e8d48a;padding:6px 8px;margin:8px 0}
 .muted{color:#666}
+.counts{font-size:11px;color:#555;font-variant-numeric:tabular-nums}
+.cls{display:inline-block;padding:0 5px;border-radius:3px;font-size:12px;font-weight:600}
+.c-edge{background:#ffe9a8}.c-tie{background:#d7e8ff}.c-crack{background:#ffd1b3}.c-interior{background:#f8c9c9}.c-other{background:#eee}
 details{margin:4px 0}
 svg{background:#fff;border:1px solid #ddd}
 "#;

@@ -2,13 +2,14 @@
 //! buffer matrix, render times, depth-error distributions and versions, each
 //! linking to the scene pages that explain it.
 
-use super::data::{num, status_rank, RunData, SceneData};
+use super::data::{is_scene_error, num, status_rank, RunData, SceneData, CLASSES};
 use super::html::{badge, command_block, escape, page, url};
 use super::images::{Kind, SceneImages};
 use super::stats::Histogram;
 use super::svg;
-use crate::check::manifest::ResultEntry;
+use crate::check::manifest::{RenderRecord, ResultEntry};
 use crate::check::process::shell_line;
+use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -37,6 +38,150 @@ pub fn utc(secs: u64) -> String {
 /// A count or "-" when not compared.
 pub fn count(e: &ResultEntry, key: &str) -> String {
     num(e, key).map_or_else(|| "-".into(), |v| format!("{v}"))
+}
+
+/// What the four mismatch classes mean, for the tables' captions.
+pub const CLASS_WORDS: &str = "edge: within the renderer's rounding distance of an edge the two triangles share (allowed); \
+     tie: both triangles cover the pixel at the same depth (coplanar or duplicate surfaces; allowed); \
+     crack: a watertightness leak near an edge (allowed only for a backend that declares it); \
+     interior: anything else (a bug)";
+
+/// One `<td class="num">` per mismatch class (edge, tie, crack, interior).
+pub fn class_cells(e: &ResultEntry) -> String {
+    CLASSES
+        .iter()
+        .map(|(k, _)| format!("<td class=\"num\">{}</td>", count(e, k)))
+        .collect()
+}
+
+/// A verdict's class counts in one short span (`edge/tie/crack/interior`),
+/// "" when it recorded none of them; a camera probe's RMS residual instead.
+pub fn compact_counts(e: &ResultEntry) -> String {
+    if CLASSES.iter().any(|(k, _)| num(e, k).is_some()) {
+        let counts: Vec<String> = CLASSES.iter().map(|(k, _)| count(e, k)).collect();
+        let title: Vec<String> = CLASSES
+            .iter()
+            .map(|(k, w)| format!("{} {w}", count(e, k)))
+            .collect();
+        format!(
+            " <span class=\"counts\" title=\"{}\">{}</span>",
+            escape(&title.join(", ")),
+            escape(&counts.join("/"))
+        )
+    } else if let Some(rms) = num(e, "rms_px") {
+        format!(" <span class=\"counts\">rms {} px</span>", sig(rms))
+    } else {
+        String::new()
+    }
+}
+
+/// A number with about four significant digits.
+pub fn sig(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if !v.is_finite() {
+        format!("{v}")
+    } else if (1e-3..1e5).contains(&v.abs()) {
+        let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// The numbers of a camera calibration (results.json's `calibration` and
+/// `camera` entries), with the column titles the report gives them.
+pub const CAMERA_FIELDS: &[(&str, &str)] = &[
+    ("offset_x_px", "offset x (px)"),
+    ("offset_y_px", "offset y (px)"),
+    ("scale_x", "scale x"),
+    ("scale_y", "scale y"),
+    ("rotation", "rotation"),
+    ("rms_px", "rms (px)"),
+    ("bound_px", "bound (px)"),
+];
+
+/// One camera number as the calibration tables show it: scales with six
+/// decimals (a field-of-view error is a small deviation from 1), the rest
+/// with four significant digits; "-" when not recorded.
+pub fn camera_value(field: &str, v: Option<&Value>) -> String {
+    match v.and_then(Value::as_f64) {
+        None => "-".into(),
+        Some(x) if field.starts_with("scale") => format!("{x:.6}"),
+        Some(x) => sig(x),
+    }
+}
+
+/// The header cells of a camera table.
+pub fn camera_header() -> String {
+    CAMERA_FIELDS
+        .iter()
+        .map(|(_, title)| format!("<th>{title}</th>"))
+        .collect()
+}
+
+/// The number cells of a camera table, from an object holding [`CAMERA_FIELDS`].
+pub fn camera_cells(get: impl Fn(&str) -> Option<Value>) -> String {
+    CAMERA_FIELDS
+        .iter()
+        .map(|(k, _)| {
+            format!(
+                "<td class=\"num\">{}</td>",
+                camera_value(k, get(k).as_ref())
+            )
+        })
+        .collect()
+}
+
+/// The "Camera calibration" section: one row per backend from results.json's
+/// top-level `calibration`, and links to the probe scenes whose `camera`
+/// entries it was measured on.
+fn calibration_section(data: &RunData) -> String {
+    let mut b = String::from(
+        "<h2 id=\"calibration\">Camera calibration</h2><p class=\"muted\">Each backend's camera measured on the probe scenes against the reference conventions \
+         (pixel-center offset, scale, rotation; the RMS residual of the fit and the bound it is held to). An offset beyond its bound is a convention error in the exporter.</p>",
+    );
+    match &data.calibration {
+        None => b.push_str("<p class=\"muted\">Not recorded: this run's results.json has no <code>calibration</code> (an older comparison, or none ran).</p>"),
+        Some(c) if c.is_empty() => b.push_str("<p class=\"muted\">No backend was calibrated.</p>"),
+        Some(c) => {
+            let _ = write!(
+                b,
+                "<table class=\"calibration\"><tr><th>backend</th>{}<th>status</th></tr>",
+                camera_header()
+            );
+            for (be, v) in c {
+                let status = v.get("status").and_then(Value::as_str).unwrap_or("");
+                let reason = v.get("reason").and_then(Value::as_str).unwrap_or("");
+                let _ = write!(
+                    b,
+                    "<tr><td>{}</td>{}<td>{} <span class=\"reason\">{}</span></td></tr>",
+                    escape(be),
+                    camera_cells(|k| v.get(k).cloned()),
+                    if status.is_empty() {
+                        "-".into()
+                    } else {
+                        badge(status, reason)
+                    },
+                    escape(reason)
+                );
+            }
+            b.push_str("</table>");
+        }
+    }
+    let probes: Vec<&SceneData> = data
+        .scenes
+        .iter()
+        .filter(|s| {
+            s.results.iter().any(|e| e.buffer == "camera")
+                || s.runs.as_ref().is_some_and(|r| r.role == "calibration")
+        })
+        .collect();
+    if !probes.is_empty() {
+        let links: Vec<String> = probes.iter().map(|s| scene_link(s, "#camera")).collect();
+        let _ = write!(b, "<p>Per-probe measurements: {}.</p>", links.join(", "));
+    }
+    b
 }
 
 /// The command that reruns a whole run (from the repository root).
@@ -104,41 +249,135 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     }
     b.push_str("</p>");
 
-    // ---- failures first
+    // ---- failures and errors first, scenes that could not be loaded before all else
     let mut attention: Vec<(&SceneData, &ResultEntry)> = data
         .scenes
         .iter()
         .flat_map(|s| s.results.iter().map(move |e| (s, e)))
-        .filter(|(_, e)| e.status != "pass")
+        .filter(|(_, e)| status_rank(&e.status) == 0)
         .collect();
     attention.sort_by_key(|(s, e)| {
         (
-            status_rank(&e.status),
+            !is_scene_error(e),
             s.name.clone(),
             e.backend.clone(),
             e.buffer.clone(),
         )
     });
+    // Renders that failed or were skipped with no verdict saying so (results.json missing).
+    let unjudged = |status: &str| -> Vec<(&SceneData, &RenderRecord)> {
+        data.scenes
+            .iter()
+            .flat_map(|s| {
+                s.runs
+                    .iter()
+                    .flat_map(|r| r.renders.iter())
+                    .filter(move |r| {
+                        r.status == status && !s.results.iter().any(|e| e.backend == r.backend)
+                    })
+                    .map(move |r| (s, r))
+            })
+            .collect()
+    };
+    let render_errors = unjudged("error");
     b.push_str("<h2 id=\"attention\">Needs attention</h2>");
-    if attention.is_empty() && data.results.is_some() {
-        b.push_str("<p>Every comparison passed.</p>");
+    if attention.is_empty() && render_errors.is_empty() {
+        b.push_str(if data.results.is_some() {
+            "<p>Nothing failed: no fail, error or unexpected_pass.</p>"
+        } else {
+            "<p class=\"muted\">No verdicts and no failed render.</p>"
+        });
     } else {
-        b.push_str("<table><tr><th>status</th><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>interior</th><th>why</th></tr>");
+        let _ = write!(
+            b,
+            "<p class=\"muted\">Failures, errors and unexpected passes only; scenes that could not be loaded first. Classes: {}.</p>\
+             <table><tr><th>status</th><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>why</th></tr>",
+            CLASS_WORDS
+        );
         for (s, e) in attention {
             let _ = write!(
                 b,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"reason\">{}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}<td class=\"reason\">{}</td></tr>",
                 badge(&e.status, &e.reason),
                 scene_link(s, &format!("#b-{}", super::data::page_stem(&e.backend))),
                 escape(&e.backend),
                 escape(&e.buffer),
-                count(e, "edge_mismatches"),
-                count(e, "interior_mismatches"),
+                class_cells(e),
+                escape(&e.reason)
+            );
+        }
+        for (s, r) in render_errors {
+            let _ = write!(
+                b,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>render</td>{}<td class=\"reason\">{}</td></tr>",
+                badge(&r.status, &r.message),
+                scene_link(s, &format!("#b-{}", super::data::page_stem(&r.backend))),
+                escape(&r.backend),
+                "<td class=\"num\">-</td>".repeat(CLASSES.len()),
+                escape(&r.message)
+            );
+        }
+        b.push_str("</table>");
+    }
+
+    // ---- known failures, then skips, each with its reason
+    let listed = |status: &str| -> Vec<(&SceneData, &ResultEntry)> {
+        let mut v: Vec<(&SceneData, &ResultEntry)> = data
+            .scenes
+            .iter()
+            .flat_map(|s| s.results.iter().map(move |e| (s, e)))
+            .filter(|(_, e)| e.status == status)
+            .collect();
+        v.sort_by_key(|(s, e)| (s.name.clone(), e.backend.clone(), e.buffer.clone()));
+        v
+    };
+    let expected = listed("expected_fail");
+    if !expected.is_empty() {
+        b.push_str("<h2 id=\"expected\">Known failures (expected)</h2><p class=\"muted\">Failing as the expectations file says, with its reason; they do not turn the run red.</p><table><tr><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>expectation</th></tr>");
+        for (s, e) in expected {
+            let _ = write!(
+                b,
+                "<tr><td>{}</td><td>{}</td><td>{}</td>{}<td class=\"reason\">{}</td></tr>",
+                scene_link(s, &format!("#b-{}", super::data::page_stem(&e.backend))),
+                escape(&e.backend),
+                escape(&e.buffer),
+                class_cells(e),
                 escape(&e.reason)
             );
         }
         b.push_str("</table>");
     }
+    let skipped = listed("skipped");
+    let render_skips = unjudged("skipped");
+    b.push_str("<h2 id=\"skipped\">Skipped</h2>");
+    if skipped.is_empty() && render_skips.is_empty() {
+        b.push_str("<p class=\"muted\">Nothing was skipped.</p>");
+    } else {
+        b.push_str("<table><tr><th>scene</th><th>backend</th><th>buffer</th><th>reason</th></tr>");
+        for (s, e) in skipped {
+            let _ = write!(
+                b,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"reason\">{}</td></tr>",
+                scene_link(s, &format!("#b-{}", super::data::page_stem(&e.backend))),
+                escape(&e.backend),
+                escape(&e.buffer),
+                escape(&e.reason)
+            );
+        }
+        for (s, r) in render_skips {
+            let _ = write!(
+                b,
+                "<tr><td>{}</td><td>{}</td><td>render</td><td class=\"reason\">{}</td></tr>",
+                scene_link(s, &format!("#b-{}", super::data::page_stem(&r.backend))),
+                escape(&r.backend),
+                escape(&r.reason)
+            );
+        }
+        b.push_str("</table>");
+    }
+
+    // ---- camera calibration (shown even when every backend passes)
+    b.push_str(&calibration_section(data));
 
     // ---- matrix
     let backends = data.backends();
@@ -147,7 +386,8 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     order.sort_by_key(|&i| (data.scenes[i].worst_rank(), data.scenes[i].name.clone()));
     let _ = write!(
         b,
-        "<h2 id=\"matrix\">Scene × backend × buffer</h2><p class=\"muted\">Scenes with failures first. Hover a badge for its reason; the reference column shows its render. Buffers: {}.</p><table class=\"matrix\"><tr><th>scene</th>",
+        "<h2 id=\"matrix\">Scene × backend × buffer</h2><p class=\"muted\">Scenes with failures first. Hover a badge for its reason; the reference column shows its render. Buffers: {}. \
+         Numbers after a verdict are its mismatch counts per class, <span class=\"counts\">edge/tie/crack/interior</span> (- where not compared); camera entries show their RMS residual.</p><table class=\"matrix\"><tr><th>scene</th>",
         escape(&buffers.join(", "))
     );
     for be in &backends {
@@ -175,21 +415,13 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
                 }
             }
             for e in entries {
-                let mut counts = String::new();
-                for (k, short) in [
-                    ("edge_mismatches", "edge"),
-                    ("interior_mismatches", "interior"),
-                ] {
-                    if let Some(n) = num(e, k).filter(|n| *n > 0.0) {
-                        let _ = write!(counts, " <span class=\"muted\">{n} {short}</span>");
-                    }
-                }
                 let _ = write!(
                     b,
-                    "<a href=\"{}\">{}:&nbsp;{}</a>{counts}<br>",
+                    "<a href=\"{}\">{}:&nbsp;{}</a>{}<br>",
                     url(&format!("{}.html#b-{}", s.page, super::data::page_stem(be))),
                     escape(&e.buffer),
-                    badge(&e.status, &e.reason)
+                    badge(&e.status, &e.reason),
+                    compact_counts(e)
                 );
             }
             b.push_str("</td>");

@@ -3,10 +3,14 @@
 //! where the mismatches fall (per object), the depth-error distribution, times,
 //! versions and the exact commands that reproduce each result.
 
-use super::data::{num, page_stem, status_rank, text, RunData, SceneData};
+use super::data::{
+    explanations, is_scene_error, num, page_stem, status_rank, text, RunData, SceneData, CLASSES,
+};
 use super::html::{badge, command_block, escape, page, url};
 use super::images::{Kind, SceneImages};
-use super::overview::{count, expectations_arg};
+use super::overview::{
+    camera_cells, camera_header, class_cells, count, expectations_arg, CLASS_WORDS,
+};
 use super::svg;
 use crate::check::manifest::ResultEntry;
 use crate::check::process::shell_line;
@@ -23,6 +27,124 @@ fn err(e: &ResultEntry, key: &str) -> String {
             }
         },
     )
+}
+
+/// The largest normal angle of an `N` verdict, in radians and degrees ("-" when absent).
+fn angle(e: &ResultEntry) -> String {
+    num(e, "max_angle_rad").map_or_else(
+        || "-".into(),
+        |r| format!("{} rad ({:.3}°)", super::overview::sig(r), r.to_degrees()),
+    )
+}
+
+/// A prim ID with the object that owns it in the resolved scene; null is the background.
+fn prim_cell(scene: &SceneData, p: Option<u64>) -> String {
+    let Some(p) = p else {
+        return "<span class=\"muted\">background</span>".into();
+    };
+    match scene.resolved.as_ref().and_then(|r| r.object_of(p)) {
+        Some((i, o)) if !o.name.is_empty() => {
+            format!(
+                "{p} <span class=\"muted\">(object {i}: {})</span>",
+                escape(&o.name)
+            )
+        }
+        Some((i, _)) => format!("{p} <span class=\"muted\">(object {i})</span>"),
+        None => p.to_string(),
+    }
+}
+
+/// CSS class of a mismatch class; anything unknown gets a neutral look.
+fn class_css(class: &str) -> &'static str {
+    match class {
+        "edge" => "c-edge",
+        "tie" => "c-tie",
+        "crack" => "c-crack",
+        "interior" => "c-interior",
+        _ => "c-other",
+    }
+}
+
+/// "Why pixels differ": each verdict's `explanations` as a table.
+fn explanation_section(scene: &SceneData, rows: &[&ResultEntry]) -> String {
+    let mut b = String::from(
+        "<h2 id=\"why\">Why pixels differ</h2><p class=\"muted\">The comparison's explanation of each group of mismatching pixels: its class, \
+         the triangles (prims) the reference and the backend saw, how many pixels, one example pixel (x, y) and the reason.</p>",
+    );
+    let mut any = false;
+    for e in rows {
+        let list = explanations(e);
+        if list.is_empty() {
+            continue;
+        }
+        any = true;
+        let _ = write!(
+            b,
+            "<h3 id=\"why-{}-{}\">{} · {}</h3>",
+            escape(&page_stem(&e.backend)),
+            escape(&page_stem(&e.buffer)),
+            escape(&e.backend),
+            escape(&e.buffer),
+        );
+        let total: f64 = CLASSES.iter().filter_map(|(k, _)| num(e, k)).sum();
+        let explained: u64 = list.iter().filter_map(|x| x.pixels).sum();
+        if total > 0.0 {
+            let _ = write!(
+                b,
+                "<p class=\"muted\">{} group{} explaining {explained} of {total} mismatching pixels (the comparison lists only the first groups).</p>",
+                list.len(),
+                if list.len() == 1 { "" } else { "s" }
+            );
+        }
+        let _ = write!(
+            b,
+            "<table class=\"why\"><tr><th>class</th><th>reference prim</th><th>{} prim</th><th>pixels</th><th>example pixel</th><th>why</th></tr>",
+            escape(&e.backend)
+        );
+        for x in &list {
+            let _ = write!(
+                b,
+                "<tr><td><span class=\"cls {}\">{}</span></td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}</td></tr>",
+                class_css(&x.class),
+                escape(&x.class),
+                prim_cell(scene, x.ref_prim),
+                prim_cell(scene, x.test_prim),
+                x.pixels.map_or_else(|| "-".into(), |n| n.to_string()),
+                x.example
+                    .map_or_else(|| "-".into(), |(px, py)| format!("({px}, {py})")),
+                escape(&x.why)
+            );
+        }
+        b.push_str("</table>");
+    }
+    if !any {
+        b.push_str("<p class=\"muted\">No explanations recorded for this scene (every verdict matched, or an older comparison that did not write them).</p>");
+    }
+    b
+}
+
+/// The camera probe measurements of this scene (its `camera` entries), if any.
+fn camera_section(rows: &[&ResultEntry]) -> String {
+    let cams: Vec<&&ResultEntry> = rows.iter().filter(|e| e.buffer == "camera").collect();
+    if cams.is_empty() {
+        return String::new();
+    }
+    let mut b = format!(
+        "<h2 id=\"camera\">Camera calibration probe</h2><p class=\"muted\">Each backend's camera as measured on this probe scene; the calibration on the overview combines every probe.</p><table><tr><th>backend</th>{}<th>status</th></tr>",
+        camera_header()
+    );
+    for e in cams {
+        let _ = write!(
+            b,
+            "<tr><td>{}</td>{}<td>{} <span class=\"reason\">{}</span></td></tr>",
+            escape(&e.backend),
+            camera_cells(|k| e.details.get(k).cloned()),
+            badge(&e.status, &e.reason),
+            escape(&e.reason)
+        );
+    }
+    b.push_str("</table>");
+    b
 }
 
 /// The command that reruns one backend on one scene and compares it again.
@@ -66,7 +188,18 @@ fn extra_fields(e: &ResultEntry) -> String {
         "reason",
         "pixels",
         "edge_mismatches",
+        "tie_mismatches",
+        "crack_mismatches",
         "interior_mismatches",
+        "explanations",
+        "max_angle_rad",
+        "offset_x_px",
+        "offset_y_px",
+        "scale_x",
+        "scale_y",
+        "rotation",
+        "rms_px",
+        "bound_px",
         "mask_mismatches",
         "max_abs_error",
         "mean_abs_error",
@@ -137,28 +270,36 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     if let Some(p) = &data.results_problem {
         let _ = write!(b, "<p class=\"note\">No verdicts: {}</p>", escape(p));
     }
+    for e in scene.results.iter().filter(|e| is_scene_error(e)) {
+        let _ = write!(
+            b,
+            "<p class=\"note\">{} This scene could not be loaded, so nothing in it was compared: {}</p>",
+            badge(&e.status, &e.reason),
+            escape(&e.reason)
+        );
+    }
 
     // ---- verdicts
     let mut rows: Vec<&ResultEntry> = scene.results.iter().collect();
     rows.sort_by_key(|e| (status_rank(&e.status), e.backend.clone(), e.buffer.clone()));
-    b.push_str("<h2 id=\"verdicts\">Verdicts</h2><p class=\"muted\">Failures first. Edge: mismatches within the backend's rounding distance of a triangle edge; interior: the rest (bugs); mask: hit on one side only. Errors are |Z_test − Z_ref| where both hit the same triangle.</p>");
-    b.push_str("<table><tr><th>backend</th><th>buffer</th><th>status</th><th>edge</th><th>interior</th><th>mask</th><th>compared px</th><th>max |ΔZ|</th><th>mean |ΔZ|</th><th>max rel</th><th>bound</th><th>why</th></tr>");
+    let _ = write!(b, "<h2 id=\"verdicts\">Verdicts</h2><p class=\"muted\">Failures first. Mismatch classes: {}. Mask: hit on one side only. Errors are |Z_test − Z_ref| where both hit the same triangle; max angle: the largest angle between the normals (N) where both hit the same triangle. - : not compared.</p>", escape(CLASS_WORDS));
+    b.push_str("<table><tr><th>backend</th><th>buffer</th><th>status</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>mask</th><th>compared px</th><th>max |ΔZ|</th><th>mean |ΔZ|</th><th>max rel</th><th>max angle</th><th>bound</th><th>why</th></tr>");
     for e in &rows {
         let tol = text(e, "tolerance");
         let _ = write!(
             b,
-            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}</td></tr>",
+            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td>{}<td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}</td></tr>",
             url(&page_stem(&e.backend)),
             escape(&e.backend),
             escape(&e.buffer),
             badge(&e.status, &e.reason),
-            count(e, "edge_mismatches"),
-            count(e, "interior_mismatches"),
+            class_cells(e),
             count(e, "mask_mismatches"),
             count(e, "compared_pixels"),
             err(e, "max_abs_error"),
             err(e, "mean_abs_error"),
             err(e, "max_rel_error"),
+            escape(&angle(e)),
             escape(&bound_text(e)),
             escape(&e.reason),
             if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) },
@@ -166,6 +307,8 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
         );
     }
     b.push_str("</table>");
+    b.push_str(&explanation_section(scene, &rows));
+    b.push_str(&camera_section(&rows));
 
     // ---- pictures
     b.push_str("<h2 id=\"images\">Images</h2>");
