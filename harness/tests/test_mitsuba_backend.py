@@ -191,3 +191,59 @@ def test_render_writes_exr(tmp_path: Path) -> None:
     assert "RGB" not in got
     timings = info["timings_s"]
     assert isinstance(timings, dict) and set(timings) >= {"build", "render", "write"}
+
+
+# --------------------------------------------------------------------------- camera export (calibration)
+
+
+def _old_look_at(mi: Any, cam: Any) -> Any:
+    """The export before the fix: Mitsuba's look_at, evaluated in float32."""
+    return mi.ScalarTransform4f().look_at(
+        origin=[float(v) for v in cam.eye],
+        target=[float(v) for v in cam.eye + cam.forward],
+        up=[float(v) for v in cam.up_ortho],
+    )
+
+
+@needs_mitsuba
+@pytest.mark.parametrize("probe", ["camera_near", "camera_far"])
+def test_to_world_is_the_float64_basis_rounded_once(tmp_path: Path, probe: str) -> None:
+    from test_calibration import probe_scene
+
+    cam = probe_scene(tmp_path / probe, probe).camera
+    m64 = mb.camera_to_world(cam)
+    assert np.allclose(m64[:3, 0], -cam.right) and np.allclose(m64[:3, 1], cam.up_ortho)
+    assert np.allclose(m64[:3, 2], cam.forward) and np.array_equal(m64[:3, 3], cam.eye)
+    assert np.allclose(m64[:3, :3].T @ m64[:3, :3], np.eye(3), atol=1e-15)
+    assert np.allclose(mb.world_to_camera(cam) @ m64, np.eye(4), atol=1e-12 * max(1.0, float(np.abs(cam.eye).max())))
+    mi = mb._import_mitsuba()
+    sensor = mi.load_dict(mb.sensor_dict(mi, cam, cam.near, 50.0))
+    m32 = np.array(sensor.world_transform().matrix, dtype=np.float64)
+    # each entry is the float64 one rounded to float32 once (to nearest: <= 2^-24 of its size)
+    assert np.all(np.abs(m32 - m64) <= 2.0**-24 * np.abs(m64)), m32 - m64
+    # the old look_at export is off by about one float32 step of |eye| (f32 target - origin)
+    old = np.array(_old_look_at(mi, cam).matrix, dtype=np.float64)
+    err = np.abs(old[:3, :3] - m64[:3, :3]).max()
+    if probe == "camera_far":
+        assert err > 1e-5, f"the far probe must show the float32 look_at error (got {err:.3g})"
+
+
+@needs_mitsuba
+def test_far_probe_calibrates_and_the_old_look_at_does_not(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """2.5e4 from the origin, the float64 to_world keeps Mitsuba's camera within its f32 rounding;
+    the float32 look_at turned it by ~5e-4 rad (0.036 px): a convention error, named as such."""
+    from test_calibration import probe_scene
+
+    from rendiff_harness import calibration
+
+    scene = probe_scene(tmp_path / "far", "camera_far")
+    buf, info = mb.render_arrays(scene)
+    now = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info)
+    assert now.status == "pass", now.reason
+    assert now.max_shift_px is not None and now.max_shift_px < 1e-4
+    monkeypatch.setattr(mb, "sensor_to_world", _old_look_at)
+    buf, info = mb.render_arrays(scene)
+    before = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info)
+    assert before.status == "fail"
+    assert before.reason.startswith("convention error in the mitsuba exporter: camera turned by (")
+    assert before.max_shift_px is not None and before.max_shift_px > 0.01

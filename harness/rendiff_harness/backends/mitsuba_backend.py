@@ -6,8 +6,17 @@ Conventions and their translation (external-renderers notes, re-verified by the 
   `prim_index` AOV *is* the global prim_id. The film stores it as float32, exact below
   2^24; larger scenes are refused.
 * Camera: `perspective` sensor, `fov_axis: 'y'`, fov = 2 atan(tan_half_vfov) in degrees,
-  `to_world = look_at(eye, eye + forward, up_ortho)`. Mitsuba's film has row 0 at the top
-  and x to the right, as in DESIGN.md.
+  and `to_world` the camera-to-world matrix built in float64 from the resolved basis
+  (`camera_to_world`): columns (-right, up_ortho, forward, eye), because Mitsuba's camera
+  looks along its +z with +x to the *left* (its own `look_at` puts
+  normalize(cross(up, dir)) = -right there), passed whole with its float64 inverse
+  transpose. Mitsuba rounds each entry to float32 once. Its `look_at(origin, target, up)`
+  is evaluated in float32 instead: `target - origin` with target = eye + forward loses
+  about one float32 step of |eye|, which turned the camera by ~ulp(|eye|) radians
+  (measured on the calibration probe camera_far, 2.5e4 from the origin: turned by
+  5e-4 rad, pixel centers offset by (0.036, 0.014) px, 37 times Mitsuba's own rounding;
+  now (4e-6, -3e-6) px; docs/calibration.md). Mitsuba's film has row 0 at the top and x to the
+  right, as in DESIGN.md.
 * Pixel centers: `stratified` sampler with `sample_count: 1, jitter: False` and a `box`
   reconstruction filter put the single sample at the pixel center with weight 1. Every
   other sampler jitters, even at 1 spp.
@@ -232,14 +241,42 @@ def build_mesh(mi: ModuleType, scene: ResolvedScene) -> Any:
     return mesh
 
 
+def camera_to_world(cam: Camera) -> np.ndarray:
+    """Mitsuba's camera-to-world matrix (4x4 float64) for the DESIGN.md camera.
+
+    Mitsuba's camera space looks along +z with +y up and +x to the *left* of the image
+    (its `look_at` uses normalize(cross(up, dir)), i.e. -right), so the columns are
+    (-right, up_ortho, forward, eye), all taken from the resolved scene's float64 basis.
+    """
+    m = np.eye(4, dtype=np.float64)
+    m[:3, 0] = -np.asarray(cam.right, dtype=np.float64)
+    m[:3, 1] = np.asarray(cam.up_ortho, dtype=np.float64)
+    m[:3, 2] = np.asarray(cam.forward, dtype=np.float64)
+    m[:3, 3] = np.asarray(cam.eye, dtype=np.float64)
+    return m
+
+
+def world_to_camera(cam: Camera) -> np.ndarray:
+    """The inverse of `camera_to_world`, in float64 (the basis is orthonormal: R^T, -R^T eye)."""
+    m = camera_to_world(cam)
+    inv = np.eye(4, dtype=np.float64)
+    inv[:3, :3] = m[:3, :3].T
+    inv[:3, 3] = -(m[:3, :3].T @ m[:3, 3])
+    return inv
+
+
+def sensor_to_world(mi: ModuleType, cam: Camera) -> Any:
+    """The sensor's `to_world`: `camera_to_world` passed whole (Mitsuba rounds each entry to
+    float32 once), with its float64 inverse transpose so that Mitsuba inverts nothing."""
+    matrix = camera_to_world(cam)
+    inverse_transpose = world_to_camera(cam).T
+    return mi.ScalarTransform4f(mi.ScalarMatrix4f(matrix.tolist()), mi.ScalarMatrix4f(inverse_transpose.tolist()))
+
+
 def sensor_dict(mi: ModuleType, cam: Camera, near: float, far: float) -> dict[str, Any]:
     """Pinhole sensor sampling exactly the pixel centers, one sample each."""
     fov_deg = math.degrees(2.0 * math.atan(cam.tan_half_vfov))
-    to_world = mi.ScalarTransform4f().look_at(
-        origin=[float(v) for v in cam.eye],
-        target=[float(v) for v in cam.eye + cam.forward],
-        up=[float(v) for v in cam.up_ortho],
-    )
+    to_world = sensor_to_world(mi, cam)
     return {
         "type": "perspective",
         "fov_axis": "y",
