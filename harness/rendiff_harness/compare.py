@@ -1116,6 +1116,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def calibrate(run: Path, manifest: Mapping[str, Any], results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Camera calibration from the run's probe scenes (calibration.py): adds the `camera`
+    entries to `results` and returns the summary for results.json's `calibration`.
+
+    A backend whose camera fails calibration has a convention error in its exporter, not a
+    renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
+    say so, by name, instead of fails blamed on the renderer.
+    """
+    from . import calibration
+
+    try:
+        rep = calibration.calibrate_run(run, manifest)
+    except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
+        traceback.print_exc(file=sys.stderr)
+        e = base_entry("calibration", str(manifest.get("reference", "raster")), "camera", {})
+        e["status"] = "error"
+        e["reason"] = f"internal error in calibration (a rendiff bug): {type(exc).__name__}: {exc}"
+        results.append(blank_if_not_compared(e))
+        return {}
+    probes = {str(sc["scene"]) for sc in manifest["scenes"] if sc.get("role") == "calibration"}
+    bad = {b: v for b, v in rep.summary.items() if v.get("status") == "fail"}
+    for e in results:
+        cal = bad.get(e["backend"])
+        if cal is None or e["scene"] in probes or e["status"] not in ("fail", "unexpected_pass"):
+            continue
+        e["status"] = "error"
+        e["reason"] = f"not judged: {e['backend']}'s camera failed calibration ({cal.get('reason', '')}); was: {e['reason']}"
+    results.extend(rep.entries)
+    return rep.summary
+
+
 def run_compare(
     run: Path,
     expectations_path: str | Path | None,
@@ -1133,10 +1164,12 @@ def run_compare(
     results: list[dict[str, Any]] = []
     for sc in manifest["scenes"]:
         results += compare_scene(run, sc, reference, exps, images, refs)
+    summary = calibrate(run, manifest, results)
     unused = exps.unused()
     doc = {
         "format": RESULTS_FORMAT,
         "reference": reference,
+        "calibration": summary,
         "expectations": str(expectations_path) if expectations_path is not None else None,
         "unused_expectations": [
             {"entry": e.index, "scene": e.scene, "backend": e.backend, "buffer": e.buffer} for e in unused

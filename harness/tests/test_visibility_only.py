@@ -156,3 +156,21 @@ def test_pyrender_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path) -> 
     info = backend.render(scene, out, tmp_path, 60.0, visibility_only=True)
     assert info["visibility_only"] is True and "radiance" not in info
     _check_visibility(d, out)
+
+
+def test_mitsuba_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path) -> None:
+    from rendiff_harness.backends import mitsuba_backend as mb
+
+    reason = mb.unavailable_reason()
+    if reason is not None:
+        pytest.skip(f"mitsuba backend unavailable: {reason}")
+    shadowless = ("depth", "ids", "lambert", "directional_light", "shadowless", "one_sided")
+    d = _scene(tmp_path, shadowless)
+    scene = resolved.load(d)
+    backend = registry.get("mitsuba")
+    p = registry.plan(backend, scene, visibility_only=True)
+    assert p.visibility_only and p.reason == "RGB not rendered: missing features: shadowless"
+    out = tmp_path / "mi.exr"
+    info = backend.render(scene, out, tmp_path, 60.0, visibility_only=True)
+    assert info["visibility_only"] is True and "radiance" not in info
+    _check_visibility(d, out)

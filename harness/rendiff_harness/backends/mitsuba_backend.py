@@ -574,12 +574,15 @@ def render(
     spp: int | None = None,
     seed: int | None = None,
     max_depth: int | None = None,
+    visibility_only: bool = False,
 ) -> dict[str, object]:
     """Render `scene` into `out_exr` (Z, id.prim, id.object, N; R,G,B [+ var.*] when shaded).
 
     In-process (the caller enforces `timeout_s`); `workdir` is unused. `spp` / `seed`
     matter only for `global_illumination` (default: the scene's integrator.spp, seed 0);
     `max_depth` (default: the scene's) only there too, and is refused elsewhere.
+    `visibility_only` (a scene whose shading features Mitsuba cannot model, e.g.
+    `shadowless`) skips radiance: depth, IDs and normals are still compared.
     """
     from .. import exrbuf
 
@@ -594,7 +597,9 @@ def render(
         "far_clip": float(info["far_clip"]),
     }
     rgb = var = None
-    if is_shaded(scene):
+    if visibility_only:
+        info["visibility_only"] = True
+    elif is_shaded(scene):
         rgb, var, rinfo = render_radiance(scene, spp=spp, seed=seed, max_depth=max_depth)
         rgb = rgb.astype(np.float32)
         var = None if var is None else var.astype(np.float32)
