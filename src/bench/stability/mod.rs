@@ -256,8 +256,16 @@ fn judge_all(fams: &[Family], scene_dir: &Path, runs: &Runs) -> Value {
     }
     let mut out = Vec::new();
     for f in fams {
-        let mut rows: Vec<String> = backends.clone();
-        if matches!(f.judge, Judge::FillRule | Judge::Truth { .. }) {
+        // The reference has entries of its own now (its normals), so it is in `backends`
+        // already; the exact judges want it first, once.
+        let mut rows: Vec<String> = backends
+            .iter()
+            .filter(|b| b.as_str() != check::REFERENCE)
+            .cloned()
+            .collect();
+        if matches!(f.judge, Judge::FillRule | Judge::Truth { .. })
+            || backends.iter().any(|b| b == check::REFERENCE)
+        {
             rows.insert(0, check::REFERENCE.to_string());
         }
         for m in &f.members {
