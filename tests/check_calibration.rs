@@ -2,35 +2,17 @@
 //! recorded in manifest.json with `role: "calibration"`; a missing probe
 //! folder stops the run before anything renders, with one line saying what to do.
 //!
-//! These use a throwaway probe of their own (a small depth/ids scene), so they
-//! test the mechanism, not the probe set in scenes/calibration/, and stay fast
-//! (the core tracer only).
+//! These copy one of the repository's probes into a folder of their own (with a
+//! file that is not a scene), so they test the mechanism and stay fast (the core
+//! tracer only); the probes' own measurement is tested in harness/tests.
 
 mod common_cli;
 
 use common_cli::{need_venv, rendiff};
 use serde_json::Value;
 
-const PROBE: &str = r#"
-description = "throwaway probe: one triangle"
-requires = ["depth", "ids"]
-
-[camera]
-eye = [0.0, 0.0, 4.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 45.0
-width = 16
-height = 12
-
-[[materials]]
-name = "grey"
-albedo = [0.5, 0.5, 0.5]
-
-[[objects]]
-name = "tri"
-material = "grey"
-shape = { kind = "triangles", vertices = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]] }
-"#;
+/// The repository's near probe (the far one is the same view 2.5e4 away).
+const PROBE: &str = "scenes/calibration/camera_near.toml";
 
 #[test]
 fn probes_run_first_and_are_marked_in_the_manifest() {
@@ -38,7 +20,7 @@ fn probes_run_first_and_are_marked_in_the_manifest() {
     let dir = tempfile::tempdir().unwrap();
     let probes = dir.path().join("probes");
     std::fs::create_dir(&probes).unwrap();
-    std::fs::write(probes.join("probe_tri.toml"), PROBE).unwrap();
+    std::fs::copy(PROBE, probes.join("probe_near.toml")).unwrap();
     std::fs::write(probes.join("notes.txt"), "not a scene").unwrap();
     // No expectations: verdicts are not what this test is about.
     let none = dir.path().join("expectations.toml");
@@ -68,7 +50,7 @@ fn probes_run_first_and_are_marked_in_the_manifest() {
         .iter()
         .map(|s| s["scene"].as_str().unwrap())
         .collect();
-    assert_eq!(names, ["probe_tri", "three_triangles"]);
+    assert_eq!(names, ["probe_near", "three_triangles"]);
     assert_eq!(scenes[0]["role"], "calibration");
     assert!(
         scenes[1].get("role").is_none(),
@@ -83,6 +65,16 @@ fn probes_run_first_and_are_marked_in_the_manifest() {
             .find(|r| r["backend"] == backend)
             .unwrap_or_else(|| panic!("probe not rendered by {backend}"));
         assert_eq!(r["status"], "ok", "{r}");
+    }
+    // Each backend's camera is measured on it, and the core's passes.
+    let results: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("results.json")).unwrap()).unwrap();
+    for backend in ["raster", "trace"] {
+        assert_eq!(
+            results["calibration"][backend]["status"], "pass",
+            "{}",
+            results["calibration"]
+        );
     }
 }
 
