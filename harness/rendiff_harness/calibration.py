@@ -710,18 +710,19 @@ def probe_scenes(manifest: Mapping[str, Any], scenes: Collection[str] | None = N
 
 
 def _reason(render: Mapping[str, Any]) -> str:
-    if render.get("status") == "skipped":
-        return str(render.get("reason") or "skipped (no reason given)")
-    return str(render.get("message") or render.get("reason") or "error (no message given)")
+    from . import compare  # lazy: compare imports this module
+
+    return compare._render_reason(render)
 
 
 def _run_path(run: Path, rel: Any, what: str) -> Path:
-    if not isinstance(rel, str) or not rel:
-        raise CalibrationError(f"{what}: no path in manifest.json")
-    p = Path(rel)
-    if p.is_absolute() or ".." in p.parts:
-        raise CalibrationError(f"{what}: path {rel!r} in manifest.json must be relative to the run folder")
-    return run / p
+    """compare.run_path, with its error as a CalibrationError."""
+    from . import compare  # lazy: compare imports this module
+
+    try:
+        return compare.run_path(run, rel, what)
+    except compare.EntryError as exc:
+        raise CalibrationError(str(exc)) from None
 
 
 def _read(run: Path, render: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
