@@ -141,36 +141,28 @@ def test_povray_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path, capsy
     _check_visibility(d, out)
 
 
-def test_pyrender_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path) -> None:
-    from rendiff_harness.backends import pyrender_backend as pb
+@pytest.mark.parametrize(
+    ("module", "requires", "missing"),
+    [
+        ("pyrender_backend", SHADED, "one_sided, shadows"),
+        ("mitsuba_backend", ("depth", "ids", "lambert", "directional_light", "shadowless", "one_sided"), "shadowless"),
+    ],
+)
+def test_in_process_backends_render_visibility_on_a_scene_they_cannot_shade(
+    tmp_path: Path, module: str, requires: tuple[str, ...], missing: str
+) -> None:
+    import importlib
 
-    reason = pb.unavailable_reason()
+    mod = importlib.import_module(f"rendiff_harness.backends.{module}")
+    reason = mod.unavailable_reason()
     if reason is not None:
-        pytest.skip(f"pyrender backend unavailable: {reason}")
-    d = _scene(tmp_path, SHADED)
+        pytest.skip(f"{module} unavailable: {reason}")
+    d = _scene(tmp_path, requires)
     scene = resolved.load(d)
-    backend = registry.get("pyrender")
+    backend = registry.get(mod.NAME)
     p = registry.plan(backend, scene, visibility_only=True)
-    assert p.visibility_only and p.reason == "RGB not rendered: missing features: one_sided, shadows"
-    out = tmp_path / "pyr.exr"
-    info = backend.render(scene, out, tmp_path, 60.0, visibility_only=True)
-    assert info["visibility_only"] is True and "radiance" not in info
-    _check_visibility(d, out)
-
-
-def test_mitsuba_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path) -> None:
-    from rendiff_harness.backends import mitsuba_backend as mb
-
-    reason = mb.unavailable_reason()
-    if reason is not None:
-        pytest.skip(f"mitsuba backend unavailable: {reason}")
-    shadowless = ("depth", "ids", "lambert", "directional_light", "shadowless", "one_sided")
-    d = _scene(tmp_path, shadowless)
-    scene = resolved.load(d)
-    backend = registry.get("mitsuba")
-    p = registry.plan(backend, scene, visibility_only=True)
-    assert p.visibility_only and p.reason == "RGB not rendered: missing features: shadowless"
-    out = tmp_path / "mi.exr"
+    assert p.visibility_only and p.reason == f"RGB not rendered: missing features: {missing}"
+    out = tmp_path / "vis.exr"
     info = backend.render(scene, out, tmp_path, 60.0, visibility_only=True)
     assert info["visibility_only"] is True and "radiance" not in info
     _check_visibility(d, out)
