@@ -28,6 +28,13 @@
 //! named first) unless given `--allow-failures`, and a run whose set of
 //! scenes differs from the current baseline's unless given
 //! `--allow-scene-changes`.
+//!
+//! Both read results.json and the baseline into typed records ([`Verdict`],
+//! [`BaselineEntry`]): a status is one of [`Status`], a count is unsigned and
+//! an error a non-negative number (or null: not recorded). Anything else is
+//! refused with one line naming the file and the field, e.g.
+//! `RUN/results.json: results[12].status: unknown status "passs"`, never
+//! read as an improvement.
 
 use crate::check::manifest::{Manifest, ResultEntry, Results};
 use crate::exr_io::{read_buffers, write_atomically};
@@ -72,9 +79,208 @@ pub const EXACT_BACKENDS: &[&str] = &["raster", "trace"];
 /// Relative slack of two f32 roundings.
 pub const F32_SLACK: f64 = 1.0 / 4_194_304.0; // 2^-22
 
+/// A verdict's status, as results.json and the baseline spell it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Within the conventions.
+    Pass,
+    /// A renderer is wrong.
+    Fail,
+    /// Not compared (a missing feature or backend).
+    Skipped,
+    /// The comparison could not be made (crash, timeout, unreadable buffer).
+    Error,
+    /// A known divergence within its recorded bound.
+    ExpectedFail,
+    /// A known divergence that went away: update the expectation.
+    UnexpectedPass,
+}
+
+impl Status {
+    /// Every status.
+    pub const ALL: [Status; 6] = [
+        Status::Pass,
+        Status::Fail,
+        Status::Skipped,
+        Status::Error,
+        Status::ExpectedFail,
+        Status::UnexpectedPass,
+    ];
+
+    /// The name results.json uses.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Pass => "pass",
+            Status::Fail => "fail",
+            Status::Skipped => "skipped",
+            Status::Error => "error",
+            Status::ExpectedFail => "expected_fail",
+            Status::UnexpectedPass => "unexpected_pass",
+        }
+    }
+
+    /// The status spelled `s`, None for anything else.
+    pub fn parse(s: &str) -> Option<Status> {
+        Status::ALL.into_iter().find(|x| x.as_str() == s)
+    }
+
+    /// True for statuses that turn a run red.
+    pub fn is_bad(self) -> bool {
+        matches!(self, Status::Fail | Status::Error | Status::UnexpectedPass)
+    }
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// Statuses that turn a run red.
-pub fn is_bad(status: &str) -> bool {
-    matches!(status, "fail" | "error" | "unexpected_pass")
+pub fn is_bad(status: Status) -> bool {
+    status.is_bad()
+}
+
+/// One verdict of results.json, typed: the gate's and bless's view of a
+/// [`ResultEntry`] (see [`verdicts`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Verdict {
+    /// Scene stem.
+    pub scene: String,
+    /// Backend compared with the reference.
+    pub backend: String,
+    /// Buffer (`id`, `Z`, `N`, `camera`, `scene`, ...).
+    pub buffer: String,
+    /// Status.
+    pub status: Status,
+    /// Why (skip reason, error message, failure summary, expectation reason).
+    pub reason: String,
+    /// The [`COUNT_METRICS`] it recorded (absent or null: not recorded).
+    pub counts: BTreeMap<String, u64>,
+    /// The [`ERROR_METRICS`] it recorded (absent or null: not recorded).
+    pub errors: BTreeMap<String, f64>,
+}
+
+impl Verdict {
+    /// `scene::backend::buffer`, the name a test or a report row uses.
+    pub fn key(&self) -> String {
+        format!("{}::{}::{}", self.scene, self.backend, self.buffer)
+    }
+
+    /// A recorded count or error, as a number.
+    pub fn metric(&self, name: &str) -> Option<f64> {
+        self.counts
+            .get(name)
+            .map(|&c| c as f64)
+            .or_else(|| self.errors.get(name).copied())
+    }
+}
+
+/// Checks a status field: a string naming a [`Status`].
+fn typed_status(v: Option<&Value>) -> std::result::Result<Status, String> {
+    match v {
+        None => Err("missing".into()),
+        Some(Value::String(s)) => Status::parse(s).ok_or_else(|| format!("unknown status {s:?}")),
+        Some(other) => Err(format!("{other} is not a status")),
+    }
+}
+
+/// Checks a count field: None when not recorded (absent or null).
+fn typed_count(v: Option<&Value>) -> std::result::Result<Option<u64>, String> {
+    match v {
+        None | Some(Value::Null) => Ok(None),
+        Some(x) => x
+            .as_u64()
+            .map(Some)
+            .ok_or_else(|| format!("{x} is not a count")),
+    }
+}
+
+/// Checks an error field: a non-negative number, None when not recorded.
+fn typed_error(v: Option<&Value>) -> std::result::Result<Option<f64>, String> {
+    match v {
+        None | Some(Value::Null) => Ok(None),
+        Some(x) => match x.as_f64() {
+            Some(f) if f >= 0.0 => Ok(Some(f)),
+            _ => Err(format!("{x} is not an error (a non-negative number)")),
+        },
+    }
+}
+
+/// Types one verdict; an error names the field (`status`, `edge_mismatches`, ...).
+fn verdict(e: &ResultEntry) -> std::result::Result<Verdict, String> {
+    let status =
+        Status::parse(&e.status).ok_or_else(|| format!("status: unknown status {:?}", e.status))?;
+    let mut counts = BTreeMap::new();
+    for m in COUNT_METRICS {
+        if let Some(c) = typed_count(e.details.get(*m)).map_err(|why| format!("{m}: {why}"))? {
+            counts.insert(m.to_string(), c);
+        }
+    }
+    let mut errors = BTreeMap::new();
+    for m in ERROR_METRICS {
+        if let Some(x) = typed_error(e.details.get(*m)).map_err(|why| format!("{m}: {why}"))? {
+            errors.insert(m.to_string(), x);
+        }
+    }
+    Ok(Verdict {
+        scene: e.scene.clone(),
+        backend: e.backend.clone(),
+        buffer: e.buffer.clone(),
+        status,
+        reason: e.reason.clone(),
+        counts,
+        errors,
+    })
+}
+
+/// Types every verdict of a results.json; the error is one line naming the
+/// first bad field, e.g. `results[12].status: unknown status "passs"`.
+pub fn verdicts(results: &Results) -> Result<Vec<Verdict>> {
+    results
+        .results
+        .iter()
+        .enumerate()
+        .map(|(i, e)| verdict(e).map_err(|why| anyhow::anyhow!("results[{i}].{why}")))
+        .collect()
+}
+
+/// Reads RUN/results.json into typed verdicts; an error names the file and the field.
+pub fn load_verdicts(path: &Path) -> Result<Vec<Verdict>> {
+    let what = "results.json (run `rendiff check` first)";
+    let v: Value = read_json(path, what)?;
+    // Statuses first, so that one of the wrong type is named like an unknown one.
+    if let Some(list) = v.get("results").and_then(Value::as_array) {
+        for (i, e) in list.iter().enumerate() {
+            typed_status(e.get("status"))
+                .map_err(|why| anyhow::anyhow!("{}: results[{i}].status: {why}", path.display()))?;
+        }
+    }
+    let results: Results = serde_json::from_value(v)
+        .with_context(|| format!("{}: not a valid {what}", path.display()))?;
+    verdicts(&results).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+/// Checks a baseline's statuses and numbers before it is typed, naming the
+/// first bad field (`entries[3].metrics.edge_mismatches: -1 is not a count`).
+fn check_baseline_fields(v: &Value) -> std::result::Result<(), String> {
+    let Some(entries) = v.get("entries").and_then(Value::as_array) else {
+        return Ok(()); // the typed read names a missing or malformed list
+    };
+    for (i, e) in entries.iter().enumerate() {
+        typed_status(e.get("status")).map_err(|why| format!("entries[{i}].status: {why}"))?;
+        let metrics = e.get("metrics");
+        for m in COUNT_METRICS {
+            typed_count(metrics.and_then(|x| x.get(*m)))
+                .map_err(|why| format!("entries[{i}].metrics.{m}: {why}"))?;
+        }
+        for m in ERROR_METRICS {
+            typed_error(metrics.and_then(|x| x.get(*m)))
+                .map_err(|why| format!("entries[{i}].metrics.{m}: {why}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// reports/baseline.json.
@@ -123,7 +329,7 @@ pub struct BaselineEntry {
     /// Buffer (`id`, `Z`, ...).
     pub buffer: String,
     /// Blessed status.
-    pub status: String,
+    pub status: Status,
     /// Blessed reason (for the summary).
     #[serde(default)]
     pub reason: String,
@@ -260,8 +466,8 @@ fn key(scene: &str, backend: &str, buffer: &str) -> (String, String, String) {
     (scene.to_string(), backend.to_string(), buffer.to_string())
 }
 
-fn metric(e: &ResultEntry, k: &str) -> Option<f64> {
-    e.details.get(k).and_then(Value::as_f64)
+fn metric(e: &Verdict, k: &str) -> Option<f64> {
+    e.metric(k)
 }
 
 fn fmt_num(metric: &str, v: f64) -> String {
@@ -283,11 +489,12 @@ fn short(s: &str, n: usize) -> String {
     }
 }
 
-/// Compares a run's verdicts with the baseline (see the module docs for the rules).
-pub fn compare(baseline: &Baseline, results: &Results) -> Outcome {
+/// Compares a run's verdicts ([`verdicts`] of its results.json) with the
+/// baseline (see the module docs for the rules).
+pub fn compare(baseline: &Baseline, results: &[Verdict]) -> Outcome {
     let mut out = Outcome::default();
-    let mut now: BTreeMap<(String, String, String), &ResultEntry> = BTreeMap::new();
-    for e in &results.results {
+    let mut now: BTreeMap<(String, String, String), &Verdict> = BTreeMap::new();
+    for e in results {
         now.insert(key(&e.scene, &e.backend, &e.buffer), e);
     }
     let mut seen = std::collections::BTreeSet::new();
@@ -308,61 +515,61 @@ pub fn compare(baseline: &Baseline, results: &Results) -> Outcome {
             out.changes.push(change(
                 ChangeKind::Regression,
                 "missing result",
-                b.status.clone(),
+                b.status.to_string(),
                 "—".into(),
                 "in the baseline, not in this run".into(),
             ));
             continue;
         };
         out.compared += 1;
-        let (was, is) = (b.status.as_str(), e.status.as_str());
+        let (was, is) = (b.status, e.status);
         let why = short(&e.reason, 160);
-        if is_bad(is) && !is_bad(was) {
+        if is.is_bad() && !was.is_bad() {
             out.changes.push(change(
                 ChangeKind::Regression,
                 "new failure",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 why,
             ));
-        } else if is == "skipped" && matches!(was, "pass" | "expected_fail") {
+        } else if is == Status::Skipped && matches!(was, Status::Pass | Status::ExpectedFail) {
             out.changes.push(change(
                 ChangeKind::Regression,
                 "no longer compared",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 why,
             ));
-        } else if is_bad(was) && !is_bad(is) {
+        } else if was.is_bad() && !is.is_bad() {
             out.changes.push(change(
                 ChangeKind::Improvement,
                 "fixed",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 String::new(),
             ));
-        } else if was == "skipped" && is != "skipped" {
+        } else if was == Status::Skipped && is != Status::Skipped {
             out.changes.push(change(
                 ChangeKind::Improvement,
                 "now compared",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 String::new(),
             ));
-        } else if is_bad(was) && is_bad(is) {
+        } else if was.is_bad() && is.is_bad() {
             out.changes.push(change(
                 ChangeKind::Note,
                 "still failing (accepted in the baseline)",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 why,
             ));
         } else if was != is {
             out.changes.push(change(
                 ChangeKind::Note,
                 "status changed",
-                was.into(),
-                is.into(),
+                was.to_string(),
+                is.to_string(),
                 why,
             ));
         }
@@ -415,8 +622,8 @@ pub fn compare(baseline: &Baseline, results: &Results) -> Outcome {
             buffer: e.buffer.clone(),
             what: "not in the baseline".into(),
             before: "—".into(),
-            now: e.status.clone(),
-            detail: if is_bad(&e.status) && !e.reason.is_empty() {
+            now: e.status.to_string(),
+            detail: if e.status.is_bad() && !e.reason.is_empty() {
                 short(&e.reason, 160)
             } else {
                 "bless to accept it".into()
@@ -620,9 +827,13 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<
     serde_json::from_str(&text).with_context(|| format!("{}: not a valid {what}", path.display()))
 }
 
-/// Reads a baseline file and checks its format tag.
+/// Reads a baseline file and checks its format tag, statuses and numbers
+/// (an error names the file and the field).
 pub fn load_baseline(path: &Path) -> Result<Baseline> {
-    let b: Baseline = read_json(path, "rendiff baseline")?;
+    let v: Value = read_json(path, "rendiff baseline")?;
+    check_baseline_fields(&v).map_err(|why| anyhow::anyhow!("{}: {why}", path.display()))?;
+    let b: Baseline = serde_json::from_value(v)
+        .with_context(|| format!("{}: not a valid rendiff baseline", path.display()))?;
     if b.format != BASELINE_FORMAT {
         bail!(
             "{}: format is {:?}, expected {BASELINE_FORMAT:?}",
@@ -637,10 +848,7 @@ pub fn load_baseline(path: &Path) -> Result<Baseline> {
 /// returns the summary and whether the gate passed.
 pub fn gate(baseline_path: &Path, run: &Path) -> Result<(String, bool)> {
     let baseline = load_baseline(baseline_path)?;
-    let results: Results = read_json(
-        &run.join("results.json"),
-        "results.json (run `rendiff check` first)",
-    )?;
+    let results = load_verdicts(&run.join("results.json"))?;
     let manifest: Option<Manifest> = read_json(&run.join("manifest.json"), "manifest").ok();
     let outcome = compare(&baseline, &results);
     let text = markdown(
@@ -700,17 +908,16 @@ pub struct BlessOptions {
 }
 
 /// True for the entry of a scene that could not be loaded (buffer `scene`).
-pub fn is_scene_error(e: &ResultEntry) -> bool {
-    e.buffer == SCENE_BUFFER && is_bad(&e.status)
+pub fn is_scene_error(e: &Verdict) -> bool {
+    e.buffer == SCENE_BUFFER && e.status.is_bad()
 }
 
 /// Why bless refuses a run's verdicts: one line naming the scenes that could
 /// not be loaded first, then the failing verdicts; None when nothing fails.
-pub fn failure_summary(results: &Results) -> Option<String> {
-    let (scenes, verdicts): (Vec<&ResultEntry>, Vec<&ResultEntry>) = results
-        .results
+pub fn failure_summary(results: &[Verdict]) -> Option<String> {
+    let (scenes, verdicts): (Vec<&Verdict>, Vec<&Verdict>) = results
         .iter()
-        .filter(|e| is_bad(&e.status))
+        .filter(|e| e.status.is_bad())
         .partition(|e| is_scene_error(e));
     let mut parts = Vec::new();
     if !scenes.is_empty() {
@@ -726,7 +933,10 @@ pub fn failure_summary(results: &Results) -> Option<String> {
         ));
     }
     if !verdicts.is_empty() {
-        let errors = verdicts.iter().filter(|e| e.status == "error").count();
+        let errors = verdicts
+            .iter()
+            .filter(|e| e.status == Status::Error)
+            .count();
         let names: Vec<String> = verdicts
             .iter()
             .take(3)
@@ -789,10 +999,7 @@ pub fn scene_change_summary(before: &Baseline, now: &Baseline) -> Option<String>
 
 /// Builds a baseline from a run (numbers, noise bounds, provenance).
 pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
-    let results: Results = read_json(
-        &run.join("results.json"),
-        "results.json (run `rendiff check` first)",
-    )?;
+    let results = load_verdicts(&run.join("results.json"))?;
     let manifest: Manifest = read_json(&run.join("manifest.json"), "manifest")?;
     if let Some(bad) = failure_summary(&results).filter(|_| !opts.allow_failures) {
         bail!(
@@ -847,22 +1054,23 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
         .and_then(|t| serde_json::from_str::<Value>(&t).ok())
         .and_then(|v| v.get("expectations")?.as_str().map(String::from));
     let mut entries: Vec<BaselineEntry> = results
-        .results
         .iter()
         .map(|e| BaselineEntry {
             scene: e.scene.clone(),
             backend: e.backend.clone(),
             buffer: e.buffer.clone(),
-            status: e.status.clone(),
+            status: e.status,
             reason: short(&e.reason, 200),
             metrics: COUNT_METRICS
                 .iter()
                 .chain(ERROR_METRICS)
                 .map(|m| {
-                    (
-                        m.to_string(),
-                        e.details.get(*m).cloned().unwrap_or(Value::Null),
-                    )
+                    let v = match (e.counts.get(*m), e.errors.get(*m)) {
+                        (Some(&c), _) => Value::from(c),
+                        (_, Some(&x)) => Value::from(x),
+                        _ => Value::Null,
+                    };
+                    (m.to_string(), v)
                 })
                 .collect(),
             noise: Noise::for_backend(&e.backend, z_far.get(&e.scene).copied().unwrap_or(0.0)),

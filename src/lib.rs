@@ -9,6 +9,7 @@ pub mod backends;
 pub mod bench;
 pub mod camera;
 pub mod check;
+pub mod diff;
 pub mod exr_io;
 pub mod frame;
 pub mod gate;

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use rendiff::exr_io::{frame_attrs, read_buffers, write_frame_with};
+use rendiff::exr_io::{frame_attrs, write_frame_with};
 use rendiff::frame::Frame;
 use rendiff::progress::LazyProgress;
 use rendiff::scene::resolve::ResolvedScene;
@@ -162,7 +162,8 @@ enum Command {
         #[arg(short, long, default_value = "reports/bench/core.json")]
         output: PathBuf,
     },
-    /// Compare two buffer EXRs: exact IDs, depth statistics. Exit 1 on any difference.
+    /// Compare two buffer EXRs, every buffer bit for bit (IDs, depth, normals,
+    /// radiance). Exit 1 on any difference, 2 when they share no buffer.
     Diff {
         /// Reference EXR.
         a: PathBuf,
@@ -533,48 +534,15 @@ fn render(
     }
 }
 
+/// `rendiff diff`: one line per buffer present in either file (src/diff.rs);
+/// exit 1 on any difference, 0 when identical, 2 (an error) when the files
+/// share no buffer.
 fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
-    let ba = read_buffers(a)?;
-    let bb = read_buffers(b)?;
-    if (ba.width, ba.height) != (bb.width, bb.height) {
-        println!(
-            "size differs: {}x{} vs {}x{}",
-            ba.width, ba.height, bb.width, bb.height
-        );
-        return Ok(ExitCode::from(1));
+    let d = rendiff::diff::diff_files(a, b)?;
+    for line in d.lines(&a.display().to_string(), &b.display().to_string()) {
+        println!("{line}");
     }
-    let mut differs = false;
-    for (name, x, y) in [
-        ("id.prim", &ba.prim, &bb.prim),
-        ("id.object", &ba.object, &bb.object),
-    ] {
-        match (x, y) {
-            (Some(x), Some(y)) => {
-                let n = x.iter().zip(y).filter(|(p, q)| p != q).count();
-                println!("{name}: {n} of {} pixels differ", x.len());
-                differs |= n > 0;
-            }
-            _ => {
-                println!("{name}: missing in one file");
-                differs = true;
-            }
-        }
-    }
-    match (&ba.z, &bb.z) {
-        (Some(x), Some(y)) => {
-            let s = rendiff::compare_depth(x, y);
-            println!(
-                "Z: {} bitwise differences, {} hit/miss mismatches, max abs {:.3e}, max rel {:.3e}, mean abs {:.3e} over {} common hits",
-                s.bit_differences, s.mask_mismatches, s.max_abs, s.max_rel, s.mean_abs, s.common_hits
-            );
-            differs |= s.bit_differences > 0;
-        }
-        _ => {
-            println!("Z: missing in one file");
-            differs = true;
-        }
-    }
-    Ok(if differs {
+    Ok(if d.differs() {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS

@@ -43,7 +43,7 @@ fn baseline_of(entries: &[ResultEntry]) -> Baseline {
                 scene: e.scene.clone(),
                 backend: e.backend.clone(),
                 buffer: e.buffer.clone(),
-                status: e.status.clone(),
+                status: gate::Status::parse(&e.status).unwrap(),
                 reason: e.reason.clone(),
                 metrics: e
                     .details
@@ -56,12 +56,13 @@ fn baseline_of(entries: &[ResultEntry]) -> Baseline {
     }
 }
 
-fn results(entries: Vec<ResultEntry>) -> Results {
-    Results {
+fn results(entries: Vec<ResultEntry>) -> Vec<gate::Verdict> {
+    gate::verdicts(&Results {
         format: "rendiff-results/1".into(),
         reference: "raster".into(),
         results: entries,
-    }
+    })
+    .unwrap()
 }
 
 fn kinds(o: &gate::Outcome, what: &str) -> Vec<ChangeKind> {
@@ -208,7 +209,7 @@ fn the_committed_baseline_is_blessed_with_provenance() {
     }
     for e in &b.entries {
         // A failure gets into the baseline only through `bless --allow-failures`, with its reason.
-        if gate::is_bad(&e.status) {
+        if e.status.is_bad() {
             assert!(
                 !e.reason.is_empty(),
                 "accepted failure without a reason: {} {} {}",
@@ -700,4 +701,142 @@ fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
     // The same scenes again: no flag needed.
     let (code, err) = bless_cli(&changed, &baseline, &[]);
     assert_eq!(code, Some(0), "{err}");
+}
+
+// ---------------------------------------------------------------- typed verdicts and baseline (issue 12)
+
+fn gate_cli(run: &Path, baseline: &Path) -> (Option<i32>, String, String) {
+    let out = rendiff()
+        .arg("gate")
+        .arg("--baseline")
+        .arg(baseline)
+        .arg(run)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Rewrites a JSON file through `f`.
+fn edit_json(path: &Path, f: impl FnOnce(&mut Value)) {
+    let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    f(&mut v);
+    std::fs::write(path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+}
+
+/// The one error line of a refused command, checked to name `file` and `field`.
+fn one_error_line(code: Option<i32>, err: &str, file: &Path, field: &str) {
+    assert_eq!(code, Some(2), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    let want = format!("{}: {field}", file.display());
+    assert!(err.contains(&want), "expected {want:?} in: {err}");
+}
+
+#[test]
+fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let baseline = dir.path().join("baseline.json");
+    let run = dir.path().join("run");
+    json_run(&run, &["alpha", "beta"], vec![]);
+    let (code, err) = bless_cli(&run, &baseline, &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let blessed = std::fs::read(&baseline).unwrap();
+    let results = run.join("results.json");
+    let clean = std::fs::read(&results).unwrap();
+    type Case = (&'static str, fn(&mut Value), &'static str);
+    let cases: [Case; 5] = [
+        (
+            "unknown status",
+            |v| v["results"][4]["status"] = "passs".into(),
+            "results[4].status: unknown status \"passs\"",
+        ),
+        (
+            "negative count",
+            |v| v["results"][3]["edge_mismatches"] = (-1).into(),
+            "results[3].edge_mismatches: -1 is not a count",
+        ),
+        (
+            "fractional count",
+            |v| v["results"][0]["tie_mismatches"] = 0.5.into(),
+            "results[0].tie_mismatches: 0.5 is not a count",
+        ),
+        (
+            "negative error",
+            |v| v["results"][1]["max_abs_error"] = (-1e-3).into(),
+            "results[1].max_abs_error: -0.001 is not an error",
+        ),
+        (
+            "status of the wrong type",
+            |v| v["results"][2]["status"] = 1.into(),
+            "results[2].status: 1 is not a status",
+        ),
+    ];
+    for (what, f, field) in cases {
+        std::fs::write(&results, &clean).unwrap();
+        edit_json(&results, f);
+        let (code, out, err) = gate_cli(&run, &baseline);
+        one_error_line(code, &err, &results, field);
+        assert!(
+            !out.contains("better") && !out.contains("Improvement"),
+            "{what} read as an improvement: {out}"
+        );
+        let (code, err) = bless_cli(&run, &baseline, &["--allow-failures"]);
+        one_error_line(code, &err, &results, field);
+        assert_eq!(
+            std::fs::read(&baseline).unwrap(),
+            blessed,
+            "{what}: a refused bless changed the baseline"
+        );
+    }
+
+    // The baseline is typed the same way.
+    std::fs::write(&results, &clean).unwrap();
+    let (code, out, err) = gate_cli(&run, &baseline);
+    assert_eq!(code, Some(0), "{out}{err}");
+    edit_json(&baseline, |v| {
+        v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into()
+    });
+    let (code, _, err) = gate_cli(&run, &baseline);
+    one_error_line(
+        code,
+        &err,
+        &baseline,
+        "entries[2].metrics.interior_mismatches: -2 is not a count",
+    );
+    std::fs::write(&baseline, &blessed).unwrap();
+    edit_json(&baseline, |v| {
+        v["entries"][0]["status"] = "expected_failure".into()
+    });
+    let (code, _, err) = gate_cli(&run, &baseline);
+    one_error_line(
+        code,
+        &err,
+        &baseline,
+        "entries[0].status: unknown status \"expected_failure\"",
+    );
+}
+
+#[test]
+fn statuses_round_trip_with_their_results_json_names() {
+    for s in gate::Status::ALL {
+        let v = serde_json::to_value(s).unwrap();
+        assert_eq!(v, Value::String(s.as_str().into()));
+        assert_eq!(serde_json::from_value::<gate::Status>(v).unwrap(), s);
+        assert_eq!(gate::Status::parse(s.as_str()), Some(s));
+    }
+    assert_eq!(gate::Status::parse("passs"), None);
+    let bad = Results {
+        format: "rendiff-results/1".into(),
+        reference: "raster".into(),
+        results: vec![
+            entry("a", "trace", "id", "pass", 0, 0.0),
+            entry("a", "trace", "Z", "PASS", 0, 0.0),
+        ],
+    };
+    let e = gate::verdicts(&bad).unwrap_err().to_string();
+    assert_eq!(e, "results[1].status: unknown status \"PASS\"");
 }
