@@ -23,43 +23,131 @@ fn rendiff() -> Command {
     Command::new(env!("CARGO_BIN_EXE_rendiff"))
 }
 
-/// Writes `scene.toml` (and optional extra files) in a fresh folder, renders it,
-/// and checks the failure contract. Returns stderr.
-fn expect_failure(toml: &str, extra: &[(&str, &str)], must_mention: &[&str]) -> String {
-    let dir = tempfile::tempdir().unwrap();
-    let scene_dir = dir.path().join("scenes");
-    std::fs::create_dir_all(&scene_dir).unwrap();
-    for (name, body) in extra {
-        let p = dir.path().join(name);
-        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
-        std::fs::write(p, body).unwrap();
-    }
-    let scene = scene_dir.join("bad.toml");
-    std::fs::write(&scene, toml).unwrap();
-    let out = dir.path().join("out").join("bad.exr");
-    let res = rendiff()
-        .args(["render", "--renderer", "raster", "--quiet"])
-        .arg(&scene)
-        .arg("-o")
-        .arg(&out)
-        .output()
+/// Runs a command with a time limit; a command still running then is killed
+/// and the test fails (a hang is a bug, never a slow success).
+fn output_within(cmd: &mut Command, secs: u64) -> std::process::Output {
+    use std::io::Read;
+    let mut child = cmd
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .unwrap();
+    // Drain both pipes on threads so a chatty child cannot block on a full pipe.
+    let mut so = child.stdout.take().unwrap();
+    let mut se = child.stderr.take().unwrap();
+    let t_out = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        so.read_to_end(&mut v).ok();
+        v
+    });
+    let t_err = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        se.read_to_end(&mut v).ok();
+        v
+    });
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break st;
+        }
+        if start.elapsed().as_secs() >= secs {
+            child.kill().ok();
+            child.wait().ok();
+            panic!("{cmd:?} still running after {secs} s (hang)");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    std::process::Output {
+        status,
+        stdout: t_out.join().unwrap(),
+        stderr: t_err.join().unwrap(),
+    }
+}
+
+/// Checks the failure contract of one run: exit 2, no panic, one line on
+/// stderr (so no raw control character either).
+fn check_failure(res: &std::process::Output, must_mention: &[&str]) -> String {
     let stderr = String::from_utf8_lossy(&res.stderr).to_string();
     assert_eq!(res.status.code(), Some(2), "exit code; stderr: {stderr}");
     assert!(!stderr.contains("panicked"), "panic: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "not one line: {stderr:?}"
+    );
+    assert!(
+        !stderr.trim_end().chars().any(char::is_control),
+        "raw control character: {stderr:?}"
+    );
+    assert!(stderr.len() < 1200, "{} characters: {stderr}", stderr.len());
+    for m in must_mention {
+        assert!(stderr.contains(m), "expected {m:?} in: {stderr}");
+    }
+    stderr
+}
+
+/// Writes `scenes/bad.toml` in a fresh folder after `setup` (given the temporary
+/// root) prepared other files, then renders it with the raster and exports it,
+/// each within 60 s, and checks the failure contract: exit 2, one line naming
+/// the file and the problem, no panic, and no output file. Returns stderr.
+fn expect_failure_with(toml: &str, setup: impl FnOnce(&Path), must_mention: &[&str]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_dir = dir.path().join("scenes");
+    std::fs::create_dir_all(&scene_dir).unwrap();
+    setup(dir.path());
+    let scene = scene_dir.join("bad.toml");
+    std::fs::write(&scene, toml).unwrap();
+    let out = dir.path().join("out").join("bad.exr");
+    let res = output_within(
+        rendiff()
+            .args(["render", "--renderer", "raster", "--quiet"])
+            .arg(&scene)
+            .arg("-o")
+            .arg(&out),
+        60,
+    );
+    let stderr = check_failure(&res, must_mention);
     assert!(
         stderr.contains("bad.toml") || must_mention.iter().any(|m| m.ends_with(".obj")),
         "file not named: {stderr}"
     );
-    for m in must_mention {
-        assert!(stderr.contains(m), "expected {m:?} in: {stderr}");
-    }
     assert!(!out.exists(), "an output file was written");
     assert!(
         !out.parent().unwrap().exists()
             || std::fs::read_dir(out.parent().unwrap()).unwrap().count() == 0
     );
+    let export_dir = dir.path().join("export");
+    let res = output_within(
+        rendiff()
+            .arg("export")
+            .arg(&scene)
+            .arg("-o")
+            .arg(&export_dir),
+        60,
+    );
+    check_failure(&res, must_mention);
+    assert!(
+        !export_dir.exists(),
+        "export wrote {}",
+        export_dir.display()
+    );
     stderr
+}
+
+/// [`expect_failure_with`] whose setup writes `extra` files (paths relative to
+/// the temporary root, which holds `scenes/`).
+fn expect_failure(toml: &str, extra: &[(&str, &str)], must_mention: &[&str]) -> String {
+    expect_failure_with(
+        toml,
+        |root| {
+            for (name, body) in extra {
+                let p = root.join(name);
+                std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+                std::fs::write(p, body).unwrap();
+            }
+        },
+        must_mention,
+    )
 }
 
 #[test]
@@ -283,4 +371,233 @@ fn render_writes_exr_previews_and_counters() {
     let counters: rendiff::visibility::Counters =
         serde_json::from_str(&b.attrs["counters"]).unwrap();
     assert!(counters.bvh_nodes_visited > 0 && counters.coverage_tests > 0);
+}
+
+// ---- Confinement, budgets and messages (issue 12, items 1, 2, 5 and 8) ----
+
+fn mesh_scene(mesh: &str) -> String {
+    format!("requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"{mesh}\"\n")
+}
+
+const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+
+fn mkfifo(p: &Path) {
+    let c = std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0, "mkfifo");
+}
+
+/// `mtllib` is never followed: /dev/zero (allocated until the process aborted),
+/// a FIFO (hung), a path outside the scene's folder. The mesh still renders.
+#[test]
+fn mtllib_is_never_opened() {
+    let dir = tempfile::tempdir().unwrap();
+    mkfifo(&dir.path().join("pipe.mtl"));
+    let obj = format!(
+        "mtllib /dev/zero\nmtllib pipe.mtl\nmtllib ../../../etc/passwd\nusemtl x\n{TRIANGLE_OBJ}"
+    );
+    std::fs::write(dir.path().join("m.obj"), obj).unwrap();
+    let scene = dir.path().join("s.toml");
+    std::fs::write(&scene, mesh_scene("m.obj")).unwrap();
+    let out = dir.path().join("s.exr");
+    let res = output_within(
+        rendiff()
+            .args(["render", "--renderer", "raster", "--quiet", "--no-preview"])
+            .arg(&scene)
+            .arg("-o")
+            .arg(&out),
+        60,
+    );
+    assert!(
+        res.status.success(),
+        "{:?}: {}",
+        res.status,
+        String::from_utf8_lossy(&res.stderr)
+    );
+    assert!(out.exists());
+    let res = output_within(
+        rendiff()
+            .arg("export")
+            .arg(&scene)
+            .arg("-o")
+            .arg(dir.path().join("exp")),
+        60,
+    );
+    assert!(res.status.success());
+}
+
+#[test]
+fn mesh_fifo_is_refused_without_opening_it() {
+    expect_failure_with(
+        &mesh_scene("pipe.obj"),
+        |root| mkfifo(&root.join("scenes/pipe.obj")),
+        &["objects[0].mesh", "pipe.obj", "is a FIFO"],
+    );
+}
+
+#[test]
+fn mesh_folder_is_refused() {
+    expect_failure_with(
+        &mesh_scene("sub.obj"),
+        |root| std::fs::create_dir_all(root.join("scenes/sub.obj")).unwrap(),
+        &["objects[0].mesh", "sub.obj", "is a folder"],
+    );
+}
+
+#[test]
+fn mesh_socket_is_refused() {
+    expect_failure_with(
+        &mesh_scene("sock.obj"),
+        |root| {
+            let l = std::os::unix::net::UnixListener::bind(root.join("scenes/sock.obj")).unwrap();
+            std::mem::forget(l);
+        },
+        &["objects[0].mesh", "sock.obj", "is a socket"],
+    );
+}
+
+#[test]
+fn mesh_not_utf8_is_named() {
+    expect_failure_with(
+        &mesh_scene("bin.obj"),
+        |root| std::fs::write(root.join("scenes/bin.obj"), b"v 0 0 0\n\xff\xfe\x00\x01").unwrap(),
+        &["objects[0].mesh", "bin.obj", "not UTF-8", "line 2"],
+    );
+}
+
+#[test]
+fn mesh_symlinks_are_resolved_and_confined() {
+    expect_failure_with(
+        &mesh_scene("link.obj"),
+        |root| {
+            std::fs::write(root.join("secret.obj"), TRIANGLE_OBJ).unwrap();
+            std::os::unix::fs::symlink("../secret.obj", root.join("scenes/link.obj")).unwrap();
+        },
+        &["objects[0].mesh", "outside the scene's folder"],
+    );
+    expect_failure_with(
+        &mesh_scene("zero.obj"),
+        |root| std::os::unix::fs::symlink("/dev/zero", root.join("scenes/zero.obj")).unwrap(),
+        &["objects[0].mesh", "outside the scene's folder"],
+    );
+}
+
+#[test]
+fn mesh_over_the_size_limit_is_refused_before_reading() {
+    let limit = rendiff::scene::MAX_MESH_FILE_BYTES;
+    expect_failure_with(
+        &mesh_scene("huge.obj"),
+        |root| {
+            // Sparse: no disk space, and reading it would take the whole limit.
+            let f = std::fs::File::create(root.join("scenes/huge.obj")).unwrap();
+            f.set_len(limit + 1).unwrap();
+        },
+        &[
+            "huge.obj",
+            "objects[0].mesh",
+            "1 GiB",
+            &(limit + 1).to_string(),
+        ],
+    );
+}
+
+#[test]
+fn scene_file_that_is_a_fifo_or_device_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe.toml");
+    mkfifo(&fifo);
+    for (scene, what) in [
+        (fifo.as_path(), "is a FIFO"),
+        (Path::new("/dev/zero"), "character device"),
+        (dir.path(), "is a folder"),
+    ] {
+        for sub in ["render", "export"] {
+            let mut cmd = rendiff();
+            cmd.arg(sub).arg(scene).arg("-o").arg(dir.path().join("o"));
+            if sub == "render" {
+                cmd.args(["--renderer", "raster"]);
+            }
+            check_failure(&output_within(&mut cmd, 60), &[what]);
+        }
+    }
+}
+
+/// Eight 4096 x 4096 grids in a scene of a few hundred bytes: 268M triangles,
+/// refused before any is generated (the process used to abort).
+#[test]
+fn triangle_budget_counts_all_objects() {
+    let grid = "[[objects]]\nname = \"g\"\nshape = { kind = \"grid\", min = [-1.0, -1.0], max = [1.0, 1.0], nx = 4096, ny = 4096 }\n";
+    let s = format!("requires = [\"depth\"]\n{CAMERA}{}", grid.repeat(8));
+    expect_failure(&s, &[], &["objects", "268435456", "67108864"]);
+    // Two grids are exactly the limit; one more triangle from an OBJ is refused
+    // before anything is generated.
+    let s = format!(
+        "requires = [\"depth\"]\n{CAMERA}{}[[objects]]\nname = \"m\"\nmesh = \"m.obj\"\n",
+        grid.repeat(2)
+    );
+    expect_failure(
+        &s,
+        &[("scenes/m.obj", TRIANGLE_OBJ)],
+        &["m.obj", "objects[2].mesh", "67108864"],
+    );
+}
+
+#[test]
+fn image_pixel_budget() {
+    expect_failure(
+        &camera_variant("width = 16\nheight = 12", "width = 16384\nheight = 16384"),
+        &[],
+        &["camera.width/height", "268435456", "67108864"],
+    );
+}
+
+#[test]
+fn spp_budget() {
+    expect_failure(
+        &format!("requires = [\"depth\"]\n[integrator]\nspp = 4000000000\n{CAMERA}{OBJECT}"),
+        &[],
+        &["integrator.spp", "4000000000", "65536"],
+    );
+}
+
+#[test]
+fn huge_camera_coordinates_are_out_of_range() {
+    expect_failure(
+        &camera_variant("eye = [0.0, 0.0, 5.0]", "eye = [0.0, 0.0, 1e200]"),
+        &[],
+        &["camera.eye", "out of range"],
+    );
+}
+
+/// A serde error used to be five lines, one of them the whole source line.
+#[test]
+fn toml_errors_are_one_short_line_with_position() {
+    let long = "a".repeat(10_000);
+    let s = format!(
+        "requires = [\"depth\"]\n{}{OBJECT}",
+        CAMERA.replace("width = 16", &format!("width = \"{long}\""))
+    );
+    expect_failure(
+        &s,
+        &[],
+        &["malformed scene file", "line 7, column", "width"],
+    );
+}
+
+/// Control characters from TOML strings and file names are escaped.
+#[test]
+fn control_characters_are_escaped() {
+    let stderr = expect_failure(
+        &mesh_scene("x\\u001b[31mred\\u0007.obj"),
+        &[],
+        &["objects[0].mesh", "\\u{1b}[31mred\\u{7}"],
+    );
+    assert!(!stderr.contains('\u{1b}'));
+    let dir = tempfile::tempdir().unwrap();
+    let res = output_within(
+        rendiff()
+            .args(["render", "--renderer", "raster"])
+            .arg(dir.path().join("a\u{1b}]0;title\u{7}\nb.toml")),
+        60,
+    );
+    check_failure(&res, &["\\u{1b}]0;title\\u{7}\\nb.toml"]);
 }

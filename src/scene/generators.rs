@@ -123,6 +123,22 @@ impl Shape {
         }
     }
 
+    /// How many triangles [`Shape::triangles`] will generate, computed without
+    /// generating them (so budgets are checked before any allocation). Call it
+    /// after [`Shape::validate`]; the arithmetic saturates either way.
+    pub fn triangle_count(&self) -> u64 {
+        match self {
+            Shape::ThreeTriangles => 3,
+            Shape::Icosphere { subdivisions, .. } => {
+                20u64.saturating_mul(4u64.saturating_pow(*subdivisions))
+            }
+            Shape::Grid { nx, ny, .. } => 2 * u64::from(*nx) * u64::from(*ny),
+            Shape::Quad { .. } => 2,
+            Shape::Box { .. } => 12,
+            Shape::Triangles { vertices } => vertices.len() as u64 / 3,
+        }
+    }
+
     /// Generates the triangles in object space.
     pub fn triangles(&self) -> Vec<Tri64> {
         match self {
@@ -314,6 +330,35 @@ mod tests {
         assert_eq!(g.len(), 450);
         assert_eq!(g[0][1].x, -0.96875 + 0.125);
         assert!(normal(&g[0]).z > 0.0);
+    }
+
+    #[test]
+    fn triangle_count_matches_generation() {
+        let shapes = [
+            Shape::ThreeTriangles,
+            Shape::Icosphere {
+                subdivisions: 3,
+                radius: 1.0,
+            },
+            Shape::Grid {
+                min: [0.0, 0.0],
+                max: [1.0, 1.0],
+                nx: 7,
+                ny: 5,
+            },
+            Shape::Quad { size: [1.0, 2.0] },
+            Shape::Box {
+                min: [0.0; 3],
+                max: [1.0; 3],
+                inward: true,
+            },
+            Shape::Triangles {
+                vertices: vec![[0.0; 3]; 6],
+            },
+        ];
+        for s in shapes {
+            assert_eq!(s.triangle_count(), s.triangles().len() as u64, "{s:?}");
+        }
     }
 
     #[test]

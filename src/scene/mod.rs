@@ -37,19 +37,45 @@ impl SceneError {
 }
 
 impl fmt::Display for SceneError {
+    /// One line: `file: field: problem`, each part through [`printable`] (no
+    /// raw control characters from file names or scene text reach a terminal)
+    /// and clipped, so a hostile value cannot make a 10,000-character message.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let file = printable(&self.file.display().to_string(), 300);
+        let problem = printable(&self.problem, 600);
         if self.field.is_empty() {
-            write!(f, "{}: {}", self.file.display(), self.problem)
+            write!(f, "{file}: {problem}")
         } else {
-            write!(
-                f,
-                "{}: {}: {}",
-                self.file.display(),
-                self.field,
-                self.problem
-            )
+            write!(f, "{file}: {}: {problem}", printable(&self.field, 200))
         }
     }
+}
+
+/// Text from a file name or a scene, made safe for one line of a terminal:
+/// control characters (NUL, ESC, newlines, DEL, C1) and bidirectional
+/// overrides are escaped as `char::escape_debug` writes them (`\0`, `\u{1b}`,
+/// `\n`), and text longer than `max_chars` is cut with `...` and the count of
+/// characters left out. Every message of this module goes through it (via
+/// [`SceneError`]'s `Display`).
+pub fn printable(text: &str, max_chars: usize) -> String {
+    let mut out = String::with_capacity(text.len().min(4 * max_chars));
+    for (i, c) in text.chars().enumerate() {
+        if i >= max_chars {
+            let left = text.chars().count() - i;
+            out.push_str(&format!("... ({left} more characters)"));
+            break;
+        }
+        let bidi = matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
+        if bidi {
+            // escape_debug leaves these (printable but reordering) alone.
+            out.extend(c.escape_unicode());
+        } else if c.is_control() {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 impl std::error::Error for SceneError {}
@@ -241,20 +267,21 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Reads, parses and validates a scene file.
+    /// Reads, parses and validates a scene file. The file must be a regular
+    /// file (never a FIFO or device: those are refused before they are opened)
+    /// of at most [`MAX_SCENE_FILE_BYTES`], in UTF-8.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| SceneError::new(path, "", format!("cannot read scene file: {e}")))?;
+        let bytes = read_regular_file(path, MAX_SCENE_FILE_BYTES)
+            .map_err(|p| SceneError::new(path, "", format!("cannot read scene file: {p}")))?;
+        let text = utf8_text(bytes)
+            .map_err(|p| SceneError::new(path, "", format!("cannot read scene file: {p}")))?;
         Self::parse(path, &text)
     }
 
     /// Parses and validates scene text; `path` is used for messages and for mesh paths.
     pub fn parse(path: &Path, text: &str) -> Result<Scene, SceneError> {
-        let file: SceneFile = toml::from_str(text).map_err(|e| {
-            let field = String::new();
-            let msg = e.to_string().trim_end().replace('\n', "\n  ");
-            SceneError::new(path, field, format!("malformed scene file: {msg}"))
-        })?;
+        let file: SceneFile =
+            toml::from_str(text).map_err(|e| SceneError::new(path, "", toml_problem(text, &e)))?;
         let dir = path
             .parent()
             .map(Path::to_path_buf)
@@ -341,14 +368,17 @@ fn validate_feature_pairs(
             format!("must be -1 (unlimited) or >= 1, got {}", i.max_depth),
         ));
     }
-    if i.spp == 0 {
-        return Err(SceneError::new(
-            path,
-            "integrator.spp",
-            "must be at least 1",
-        ));
-    }
+    check_spp(i.spp).map_err(|p| SceneError::new(path, "integrator.spp", p))?;
     Ok(())
+}
+
+/// Triangles the scene's built-in shapes generate, all objects together
+/// (OBJ meshes are counted when they are read).
+pub fn shape_triangles(s: &SceneFile) -> u64 {
+    s.objects
+        .iter()
+        .filter_map(|o| o.shape.as_ref())
+        .fold(0u64, |n, sh| n.saturating_add(sh.triangle_count()))
 }
 
 fn finite3(path: &Path, field: &str, v: &[f64; 3]) -> Result<(), SceneError> {
@@ -365,6 +395,191 @@ fn finite3(path: &Path, field: &str, v: &[f64; 3]) -> Result<(), SceneError> {
 
 /// Largest image side accepted; bigger is almost surely a typo and would exhaust memory.
 pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// Most pixels (width x height) an image may have: 2^26 = 67,108,864, 64
+/// Mpixel (8192 x 8192, or 16384 x 4096; 8K UHD is 33 Mpixel).
+///
+/// Derivation: a visibility render holds about 36 B per pixel while it runs
+/// (the u64 winner key, Z f32, id.prim and id.object u32, the normal 3 x f32),
+/// and a shaded one another 24 B (RGB and its variance), before the EXR and
+/// PNG encoders' copies; at this limit that is 2.4 to 4 GiB. A 16384 x 16384
+/// image (268 Mpixel, about 10 GiB before encoding) aborted the process in
+/// `Frame::from_keys` instead of giving an error.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 26;
+
+/// Most triangles a scene may have, all objects together: 2^26 = 67,108,864
+/// (64 Mi).
+///
+/// Derivation: peak memory per triangle measured by `rendiff bench stability`
+/// (README, "Triangle count"; marginal bytes from 4M to 16M triangles) is
+/// 113 B for the raster, 305 B for the tracer (BVH included) and 185 B for
+/// Embree, so this limit is about 7 GiB for the raster and 19 GiB for the
+/// tracer: the most a well-equipped workstation can render, four times the
+/// bench's 16M-triangle family, and room for the largest single generator
+/// (a 4096 x 4096 grid, 33.5M triangles). Eight such grids (268M triangles,
+/// about 80 GB to trace) are refused before anything is generated.
+pub const MAX_SCENE_TRIANGLES: u64 = 1 << 26;
+
+/// Most samples per pixel a path-traced render may ask for: 2^16 = 65,536,
+/// sixteen times the 4,096 spp of the cached Mitsuba references
+/// (tests/references/). More is a typo in practice: `spp = 4000000000` would
+/// render for years instead of failing.
+pub const MAX_SPP: u32 = 1 << 16;
+
+/// Largest scene (TOML) file read: 64 MiB, checked from metadata before
+/// reading. Hand-written scenes are a few KiB; 64 MiB holds about 700k literal
+/// triangles (`shape = { kind = "triangles" }`), and larger geometry belongs in
+/// an OBJ file.
+pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
+
+/// Largest mesh (OBJ) file read: 1 GiB, checked from metadata before reading.
+/// A 16M-triangle OBJ is about 700 MB of text; the whole text is held while
+/// tobj parses it (about 12 B per triangle of indices and 12 B per vertex on
+/// top), so one mesh at this limit needs about 2 to 3 GiB before resolution.
+pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
+
+/// Checks a samples-per-pixel count against [`MAX_SPP`] (also for `--spp`).
+pub fn check_spp(spp: u32) -> Result<(), String> {
+    if spp == 0 {
+        Err("must be at least 1".into())
+    } else if spp > MAX_SPP {
+        Err(format!(
+            "{spp} samples per pixel is more than the limit of {MAX_SPP} (16x the references' 4096)"
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// Largest magnitude of a camera coordinate: f32's range, where all geometry
+/// lives; beyond it no renderer can place the camera relative to the scene
+/// (and `look_at - eye` may overflow f64 when squared).
+pub const MAX_CAMERA_COORDINATE: f64 = f32::MAX as f64;
+
+/// Says what a file system entry is when it is not a regular file.
+fn special_kind(ft: &std::fs::FileType) -> Option<&'static str> {
+    #[cfg(unix)]
+    use std::os::unix::fs::FileTypeExt;
+    if ft.is_file() {
+        return None;
+    }
+    if ft.is_dir() {
+        return Some("is a folder, not a file");
+    }
+    #[cfg(unix)]
+    {
+        if ft.is_fifo() {
+            return Some("is a FIFO (named pipe), not a regular file");
+        }
+        if ft.is_socket() {
+            return Some("is a socket, not a regular file");
+        }
+        if ft.is_char_device() {
+            return Some("is a character device, not a regular file");
+        }
+        if ft.is_block_device() {
+            return Some("is a block device, not a regular file");
+        }
+    }
+    Some("is not a regular file")
+}
+
+/// Human size of a byte limit (the limits are powers of two).
+fn bytes_in_words(n: u64) -> String {
+    if n >= 1 << 30 && n.is_multiple_of(1 << 30) {
+        format!("{} GiB", n >> 30)
+    } else if n >= 1 << 20 && n.is_multiple_of(1 << 20) {
+        format!("{} MiB", n >> 20)
+    } else {
+        format!("{n} bytes")
+    }
+}
+
+/// Reads a whole regular file of at most `limit` bytes. The kind and size are
+/// checked from metadata (symlinks followed) before the file is opened, so a
+/// FIFO, device, socket or folder is never opened (opening a FIFO blocks,
+/// `/dev/zero` never ends); the open itself is non-blocking and re-checked on
+/// the open handle, so a file swapped in between cannot slip through.
+/// Returns the problem in words (the caller names the file and field).
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let check = |meta: &std::fs::Metadata| -> Result<(), String> {
+        if let Some(kind) = special_kind(&meta.file_type()) {
+            return Err(kind.to_string());
+        }
+        if meta.len() > limit {
+            return Err(format!(
+                "is {} bytes, more than the limit of {} ({limit} bytes)",
+                meta.len(),
+                bytes_in_words(limit)
+            ));
+        }
+        Ok(())
+    };
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot be opened: {e}"))?;
+    check(&meta)?;
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = opts
+        .open(path)
+        .map_err(|e| format!("cannot be opened: {e}"))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| format!("cannot be read: {e}"))?;
+    check(&meta)?;
+    let mut buf = Vec::with_capacity(meta.len() as usize);
+    file.take(limit + 1)
+        .read_to_end(&mut buf)
+        .map_err(|e| format!("read error: {e}"))?;
+    if buf.len() as u64 > limit {
+        return Err(format!(
+            "grew past the limit of {} while being read",
+            bytes_in_words(limit)
+        ));
+    }
+    Ok(buf)
+}
+
+/// The bytes as UTF-8 text, or the problem in words (with the first bad byte's line).
+pub fn utf8_text(bytes: Vec<u8>) -> Result<String, String> {
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = 1 + e.as_bytes()[..at].iter().filter(|b| **b == b'\n').count();
+        format!(
+            "is not UTF-8 text (invalid byte 0x{:02x} at offset {at}, line {line})",
+            e.as_bytes()[at]
+        )
+    })
+}
+
+/// One line for a TOML or serde error: line and column, toml's message (clipped),
+/// and the start of the offending line, instead of toml's multi-line report
+/// (which quotes the whole source line, however long).
+fn toml_problem(text: &str, e: &toml::de::Error) -> String {
+    let msg = printable(e.message().trim(), 160);
+    let Some(span) = e.span() else {
+        return format!("malformed scene file: {msg}");
+    };
+    let start = span.start.min(text.len());
+    let start = (0..=start)
+        .rev()
+        .find(|i| text.is_char_boundary(*i))
+        .unwrap_or(0);
+    let before = &text[..start];
+    let line = 1 + before.matches('\n').count();
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = 1 + text[line_start..start].chars().count();
+    let line_text = text[line_start..].lines().next().unwrap_or("").trim();
+    format!(
+        "malformed scene file at line {line}, column {column}: {msg} (in `{}`)",
+        printable(line_text, 60)
+    )
+}
 
 fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> {
     let mut requires = BTreeSet::new();
@@ -383,9 +598,23 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
     }
     validate_feature_pairs(path, s, &requires)?;
     let c = &s.camera;
-    finite3(path, "camera.eye", &c.eye)?;
-    finite3(path, "camera.look_at", &c.look_at)?;
-    finite3(path, "camera.up", &c.up)?;
+    for (field, v) in [
+        ("camera.eye", &c.eye),
+        ("camera.look_at", &c.look_at),
+        ("camera.up", &c.up),
+    ] {
+        finite3(path, field, v)?;
+        if v.iter().any(|x| x.abs() > MAX_CAMERA_COORDINATE) {
+            return Err(SceneError::new(
+                path,
+                field,
+                format!(
+                    "coordinates out of range: {v:?} exceeds the limit of {MAX_CAMERA_COORDINATE:e} \
+                     in magnitude (f32's range, where all geometry lives)"
+                ),
+            ));
+        }
+    }
     if c.width == 0 || c.height == 0 {
         return Err(SceneError::new(
             path,
@@ -406,6 +635,18 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
             ),
         ));
     }
+    let pixels = u64::from(c.width) * u64::from(c.height);
+    if pixels > MAX_IMAGE_PIXELS {
+        return Err(SceneError::new(
+            path,
+            "camera.width/height",
+            format!(
+                "image size {}x{} is {pixels} pixels, more than the limit of {MAX_IMAGE_PIXELS} \
+                 (64 Mpixel, e.g. 8192x8192)",
+                c.width, c.height
+            ),
+        ));
+    }
     if !(c.vfov.is_finite() && c.vfov > 0.0 && c.vfov < 180.0) {
         return Err(SceneError::new(
             path,
@@ -422,12 +663,20 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
         c.look_at[2] - c.eye[2],
     ];
     let flen = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    if !(flen > 0.0 && flen.is_finite()) {
+    if !flen.is_finite() {
         return Err(SceneError::new(
             path,
             "camera.look_at",
-            "look_at equals eye: the view direction is undefined",
+            "coordinates out of range: the distance from eye to look_at overflows",
         ));
+    }
+    if flen <= 0.0 {
+        let problem = if f.iter().all(|x| *x == 0.0) {
+            "look_at equals eye: the view direction is undefined"
+        } else {
+            "look_at is too close to eye (the distance underflows): the view direction is undefined"
+        };
+        return Err(SceneError::new(path, "camera.look_at", problem));
     }
     let ulen = (c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]).sqrt();
     let cross = [
@@ -545,6 +794,17 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
                 .map_err(|p| SceneError::new(path, format!("{field}.shape"), p))?;
         }
     }
+    let generated = shape_triangles(s);
+    if generated > MAX_SCENE_TRIANGLES {
+        return Err(SceneError::new(
+            path,
+            "objects",
+            format!(
+                "the scene's shapes have {generated} triangles together, more than the limit of \
+                 {MAX_SCENE_TRIANGLES} (64 Mi) per scene"
+            ),
+        ));
+    }
     for (i, l) in s.lights.iter().enumerate() {
         let field = format!("lights[{i}]");
         match l {
@@ -572,4 +832,49 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
         }
     }
     Ok(requires)
+}
+
+#[cfg(test)]
+mod message_tests {
+    use super::*;
+
+    #[test]
+    fn printable_escapes_control_and_bidi_characters_and_clips() {
+        assert_eq!(
+            printable("a\u{1b}[2J\0\n\u{7f}\u{9b}b", 100),
+            "a\\u{1b}[2J\\0\\n\\u{7f}\\u{9b}b"
+        );
+        assert_eq!(printable("x\u{202e}y", 100), "x\\u{202e}y");
+        assert_eq!(printable("éé\ttab", 100), "éé\\ttab");
+        assert_eq!(
+            printable(&"n".repeat(50), 10),
+            format!("{}... (40 more characters)", "n".repeat(10))
+        );
+    }
+
+    #[test]
+    fn scene_error_display_is_one_escaped_line() {
+        let e = SceneError::new(Path::new("a\u{1b}b.toml"), "f\n", "p\u{0}".repeat(1000));
+        let s = e.to_string();
+        assert!(!s.chars().any(char::is_control), "{s:?}");
+        assert!(s.starts_with("a\\u{1b}b.toml: f\\n: p\\0"), "{s}");
+        assert!(s.len() < 1000, "{}", s.len());
+    }
+
+    #[test]
+    fn toml_errors_are_one_line_with_position() {
+        let text = format!(
+            "requires = [\"depth\"]\nname = 3\ncamera = \"{}\"\n",
+            "x".repeat(10_000)
+        );
+        let e = Scene::parse(Path::new("s.toml"), &text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            !e.contains('\n') && e.len() < 400,
+            "{} characters: {e}",
+            e.len()
+        );
+        assert!(e.contains("line 3, column 10"), "{e}");
+    }
 }

@@ -1,7 +1,14 @@
 //! OBJ mesh loading (tobj), confined to the scene's folder.
+//!
+//! The mesh is read here (a regular file of at most [`MAX_MESH_FILE_BYTES`],
+//! in UTF-8, its triangles counted against the scene's budget) and tobj parses
+//! the text in memory: tobj never opens a file itself. Materials are not
+//! loaded: rendiff's materials come from the scene file, so an OBJ's `mtllib`
+//! lines are ignored (never opened, wherever they point) and so are its
+//! `usemtl` lines; objects come from `o`/`g` groups only.
 
 use super::generators::Tri64;
-use super::SceneError;
+use super::{read_regular_file, utf8_text, SceneError, MAX_MESH_FILE_BYTES, MAX_SCENE_TRIANGLES};
 use glam::DVec3;
 use std::path::{Component, Path, PathBuf};
 
@@ -63,20 +70,56 @@ pub struct ObjGroup {
     pub triangles: Vec<Tri64>,
 }
 
+/// Upper bound of the triangles an OBJ text makes: each `f` line of n
+/// vertices is fan-triangulated into n - 2 (exact for a file tobj accepts).
+pub fn count_face_triangles(text: &str) -> u64 {
+    text.lines()
+        .filter_map(|line| {
+            let mut words = line.split_whitespace();
+            (words.next() == Some("f")).then(|| (words.count() as u64).saturating_sub(2))
+        })
+        .sum()
+}
+
 /// Loads an OBJ file as its `o`/`g` groups (tobj models), in file order; each
 /// group's polygons are fan-triangulated in file order. Groups without faces
 /// (only points or lines) are left out; a file with no faces at all is an error.
-/// tobj also starts a new model, under the same name, where a `usemtl` inside a
-/// group switches to another material found in the file's `mtllib`.
-pub fn load_obj(mesh: &Path, field: &str) -> Result<Vec<ObjGroup>, SceneError> {
+/// The file must be a regular file (see [`super::read_regular_file`]) of at
+/// most [`MAX_MESH_FILE_BYTES`] in UTF-8 with at most `budget` triangles (what
+/// the scene's other objects leave of [`MAX_SCENE_TRIANGLES`]), all checked
+/// before tobj parses it. `mtllib` and `usemtl` are ignored (module docs).
+pub fn load_obj(mesh: &Path, field: &str, budget: u64) -> Result<Vec<ObjGroup>, SceneError> {
+    let bytes = read_regular_file(mesh, MAX_MESH_FILE_BYTES)
+        .map_err(|p| SceneError::new(mesh, field, format!("mesh file {p}")))?;
+    let text =
+        utf8_text(bytes).map_err(|p| SceneError::new(mesh, field, format!("mesh file {p}")))?;
+    let count = count_face_triangles(&text);
+    if count > budget {
+        return Err(SceneError::new(
+            mesh,
+            field,
+            format!(
+                "mesh has {count} triangles; with the scene's other objects ({} triangles) \
+                 that is more than the limit of {MAX_SCENE_TRIANGLES} (64 Mi) per scene",
+                MAX_SCENE_TRIANGLES.saturating_sub(budget)
+            ),
+        ));
+    }
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _materials) = tobj::load_obj(mesh, &opts)
-        .map_err(|e| SceneError::new(mesh, field, format!("cannot parse OBJ mesh: {e}")))?;
+    // The material loader refuses without touching the file system; tobj keeps
+    // going without materials (its error is only reported in the unused
+    // materials result).
+    let parsed = tobj::load_obj_buf(&mut text.as_bytes(), &opts, |_| {
+        Err(tobj::LoadError::OpenFileFailed)
+    });
+    drop(text);
+    let (models, _materials) =
+        parsed.map_err(|e| SceneError::new(mesh, field, format!("cannot parse OBJ mesh: {e}")))?;
     let mut out = Vec::new();
     for model in &models {
         let m = &model.mesh;
@@ -144,7 +187,7 @@ mod tests {
              o first\nf 1 2 3\nf 2 4 3\n\
              o second\nf 2 5 4 3\n",
         );
-        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        let groups = load_obj(&p, "objects[0].mesh", MAX_SCENE_TRIANGLES).unwrap();
         assert_eq!(groups.len(), 2);
         assert_eq!(groups[0].name, "first");
         assert_eq!(groups[0].triangles.len(), 2);
@@ -157,7 +200,7 @@ mod tests {
     #[test]
     fn a_file_without_groups_is_one_group() {
         let p = write_obj("no_groups", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        let groups = load_obj(&p, "objects[0].mesh", MAX_SCENE_TRIANGLES).unwrap();
         assert_eq!(groups.len(), 1);
         assert_eq!(groups[0].triangles.len(), 1);
     }
@@ -168,7 +211,7 @@ mod tests {
             "empty_group",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\no lines_only\nl 1 2\no tri\nf 1 2 3\n",
         );
-        let groups = load_obj(&p, "objects[0].mesh").unwrap();
+        let groups = load_obj(&p, "objects[0].mesh", MAX_SCENE_TRIANGLES).unwrap();
         assert_eq!(groups.len(), 1);
         assert_eq!(groups[0].name, "tri");
     }

@@ -110,19 +110,37 @@ impl ResolvedScene {
                 emission: [0.0; 3],
             });
         }
-        let mut triangles: Vec<Tri> = Vec::new();
-        let mut object_ids = Vec::new();
-        let mut degenerate = Vec::new();
-        let mut objects = Vec::new();
+        // Every OBJ mesh is read and counted first, against what the shapes leave
+        // of the scene's triangle budget (validation refused shapes beyond it), so
+        // a scene over budget is refused before any shape is generated.
+        let mut budget =
+            super::MAX_SCENE_TRIANGLES.saturating_sub(super::shape_triangles(&scene.file));
+        let mut meshes = Vec::with_capacity(scene.file.objects.len());
         for (si, o) in scene.file.objects.iter().enumerate() {
+            meshes.push(match &o.mesh {
+                Some(rel) => {
+                    let mesh_field = format!("objects[{si}].mesh");
+                    let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
+                    let groups = load_obj(&full, &mesh_field, budget)?;
+                    let n: usize = groups.iter().map(|g| g.triangles.len()).sum();
+                    budget = budget.saturating_sub(n as u64);
+                    Some((groups, full))
+                }
+                None => None,
+            });
+        }
+        let total = super::MAX_SCENE_TRIANGLES - budget;
+        let total = usize::try_from(total).unwrap_or(usize::MAX);
+        let mut triangles: Vec<Tri> = Vec::with_capacity(total);
+        let mut object_ids = Vec::with_capacity(total);
+        let mut degenerate = Vec::with_capacity(total);
+        let mut objects = Vec::new();
+        for ((si, o), mesh) in scene.file.objects.iter().enumerate().zip(meshes) {
             let field = format!("objects[{si}]");
             // One rendiff object per OBJ `o`/`g` group (file order); a generator
             // or a single-group OBJ stays one object under the scene's name.
-            let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (&o.mesh, &o.shape) {
-                (Some(rel), _) => {
-                    let mesh_field = format!("{field}.mesh");
-                    let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
-                    let groups = load_obj(&full, &mesh_field)?;
+            let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (mesh, &o.shape) {
+                (Some((groups, full)), _) => {
                     let parts = if groups.len() == 1 {
                         let g = groups.into_iter().next().expect("one group");
                         vec![(o.name.clone(), g.triangles)]

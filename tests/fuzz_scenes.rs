@@ -1,0 +1,663 @@
+//! Fuzzer: hostile scenes and meshes through the real binary.
+//!
+//! proptest generates scene folders (TOML with wrong types, huge, NaN and
+//! infinite numbers, degenerate cameras, budgets exceeded; OBJ text with bad
+//! indices, quads and n-gons, `mtllib` lines naming /dev/zero or a FIFO,
+//! control characters in names; meshes that are FIFOs, folders, symlinks,
+//! non-UTF-8 or outside the folder). Each is run through `rendiff render
+//! --renderer raster` and `rendiff export`. No run may panic (exit 101 or a
+//! signal), hang past [`TIMEOUT`], exit with anything but 0 or 2, print more
+//! or less than one line (or a raw control character) on stderr when it
+//! fails, or leave a file in the output folder when it fails.
+//!
+//! The table of counts is printed at the end (`cargo test --test fuzz_scenes
+//! -- --nocapture`). `RENDIFF_FUZZ_CASES` (default 2000) and `RENDIFF_FUZZ_SEED`
+//! change the number of scene folders and the seed, `RENDIFF_FUZZ_BIN` the
+//! binary; a failure prints the
+//! folder's files so it can be reproduced by hand.
+
+use proptest::prelude::*;
+use proptest::strategy::ValueTree;
+use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// Per-run limit; every accepted scene is tiny, so anything near this is a hang.
+const TIMEOUT: Duration = Duration::from_secs(20);
+
+// ---------------------------------------------------------------- generators
+
+/// A TOML number (or something that is not one).
+fn number(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        300 => (-4.0f64..4.0).prop_map(|x| format!("{x:?}")),
+        80 => (-3i64..4).prop_map(|x| x.to_string()),
+        1 => Just("0.0".to_string()),
+        1 => Just("-0.0".to_string()),
+        h => prop::sample::select(vec![
+            "nan", "+nan", "-nan", "inf", "-inf", "1e200", "-1e200", "1e39", "3.5e38",
+            "1e-300", "5e-324", "1e308", "-1.7976931348623157e308", "1e-45",
+        ])
+        .prop_map(str::to_string),
+        h => prop::sample::select(vec![
+            "\"1.0\"", "true", "[]", "{}", "1979-05-27", "0x10", "1_000", "9223372036854775808",
+        ])
+        .prop_map(str::to_string),
+    ]
+}
+
+fn vec3(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        200 => (number(h), number(h), number(h)).prop_map(|(a, b, c)| format!("[{a}, {b}, {c}]")),
+        h => (number(h), number(h)).prop_map(|(a, b)| format!("[{a}, {b}]")),
+        h => Just("[1.0, 2.0, 3.0, 4.0]".to_string()),
+        h => number(h),
+    ]
+}
+
+/// Three numbers in `lo..hi` (valid by construction), or anything at weight h.
+fn range3(h: u32, lo: f64, hi: f64) -> impl Strategy<Value = String> {
+    prop_oneof![
+        30 => (lo..hi, lo..hi, lo..hi).prop_map(|(a, b, c)| format!("[{a:?}, {b:?}, {c:?}]")),
+        h => vec3(h),
+    ]
+}
+
+/// Two numbers in `lo..hi`, or anything at weight h.
+fn range2(h: u32, lo: f64, hi: f64) -> impl Strategy<Value = String> {
+    prop_oneof![
+        30 => (lo..hi, lo..hi).prop_map(|(a, b)| format!("[{a:?}, {b:?}]")),
+        h => vec2(h),
+    ]
+}
+
+fn vec2(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        200 => (number(h), number(h)).prop_map(|(a, b)| format!("[{a}, {b}]")),
+        h => vec3(h),
+    ]
+}
+
+/// Image sides and counts: mostly small (so accepted scenes stay fast), some
+/// at or beyond the limits and the integer types.
+fn count(h: u32, small: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        30 => (1..=small).prop_map(|x| x.to_string()),
+        h => prop::sample::select(vec![
+            "0", "-1", "4096", "4097", "16384", "16385", "100000", "4294967295", "4294967296",
+            "99999999999999999999", "1.5", "\"8\"", "nan",
+        ])
+        .prop_map(str::to_string),
+    ]
+}
+
+/// A string: plain, empty, long, with escaped control characters (valid TOML)
+/// or with raw ones (invalid TOML, quoted back in the error).
+fn name(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        30 => "[a-z]{1,8}".prop_map(|s| format!("\"{s}\"")),
+        1 => Just("\"\"".to_string()),
+        1 => Just(format!("\"{}\"", "n".repeat(5000))),
+        2 => prop::sample::select(vec![
+            "\"a\\u001b[31mred\\u0000\"", "\"\\u0007bell\\r\\n\"", "\"\\u202eevil\"",
+            "\"tab\\tname\"", "\"\\u009bcsi\"",
+        ])
+        .prop_map(str::to_string),
+        h => prop::sample::select(vec!["\"raw\u{1b}[2Jesc\"", "\"raw\u{0}nul\"", "\"x\u{7f}y\""])
+            .prop_map(str::to_string),
+        h => Just("42".to_string()),
+    ]
+}
+
+/// Mesh paths; the folder is set up so that each names something specific.
+fn mesh_path(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        6 => Just("m.obj"),
+        3 => Just("n.obj"),
+        1 => Just("inside_link.obj"),
+        1 => Just("sub/../m.obj"),
+        h => prop::sample::select(vec![
+        "pipe.obj",
+        "dir.obj",
+        "zero.obj",
+        "bin.obj",
+        "inside_link.obj",
+        "missing.obj",
+        "../outside.obj",
+        "/dev/zero",
+        "/etc/passwd",
+        "",
+        ".",
+        "x\\u001b]0;title\\u0007.obj",
+        "nul\\u0000.obj",
+    ]),
+    ]
+    .prop_map(|p| format!("\"{p}\""))
+}
+
+fn shape(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        2 => Just("{ kind = \"three_triangles\" }".to_string()),
+        2 => (
+            prop_oneof![4 => (0u32..=4).prop_map(|x| x.to_string()), 1 => count(h, 4)],
+            prop_oneof![30 => (0.1f64..3.0).prop_map(|x| format!("{x:?}")), h => number(h)]
+        )
+            .prop_map(|(s, r)| format!("{{ kind = \"icosphere\", subdivisions = {s}, radius = {r} }}")),
+        2 => (range2(h, -3.0, -0.1), range2(h, 0.1, 3.0), count(h, 48), count(h, 48))
+            .prop_map(|(a, b, x, y)| format!("{{ kind = \"grid\", min = {a}, max = {b}, nx = {x}, ny = {y} }}")),
+        1 => range2(h, 0.1, 4.0).prop_map(|s| format!("{{ kind = \"quad\", size = {s} }}")),
+        2 => (range3(h, -3.0, -0.1), range3(h, 0.1, 3.0), any::<bool>())
+            .prop_map(|(a, b, i)| format!("{{ kind = \"box\", min = {a}, max = {b}, inward = {i} }}")),
+        2 => (prop::collection::vec((vec3(h), vec3(h), vec3(h)), 1..4), prop::collection::vec(vec3(h), 0..3))
+            .prop_map(|(tris, odd)| {
+                let mut v: Vec<String> = tris.into_iter().flat_map(|(a, b, c)| [a, b, c]).collect();
+                v.extend(odd);
+                format!("{{ kind = \"triangles\", vertices = [{}] }}", v.join(", "))
+            }),
+        h => Just("{ kind = \"teapot\" }".to_string()),
+        h => Just("\"three_triangles\"".to_string()),
+    ]
+}
+
+fn object(h: u32) -> impl Strategy<Value = String> {
+    (
+        name(h),
+        prop_oneof![12 => shape(h).prop_map(|s| format!("shape = {s}")), 8 => mesh_path(h).prop_map(|m| format!("mesh = {m}")), h => Just(String::new())],
+        prop::option::weighted(0.05, name(h)),
+        prop::option::weighted(0.3, (vec3(h), vec3(h), vec3(h))),
+        prop::option::weighted(0.3, any::<bool>()),
+    )
+        .prop_map(|(n, geom, mat, tr, deg)| {
+            let mut s = format!("[[objects]]\nname = {n}\n{geom}\n");
+            if let Some(m) = mat {
+                s += &format!("material = {m}\n");
+            }
+            if let Some((sc, ro, tr)) = tr {
+                s += &format!("transform = {{ scale = {sc}, rotate = {ro}, translate = {tr} }}\n");
+            }
+            if let Some(d) = deg {
+                s += &format!("allow_degenerate = {d}\n");
+            }
+            s
+        })
+}
+
+fn requires(h: u32) -> impl Strategy<Value = String> {
+    prop_oneof![
+        20 => Just("[\"depth\", \"ids\"]"),
+        2 => Just("[\"depth\", \"ids\", \"lambert\", \"point_light\", \"shadows\", \"one_sided\"]"),
+        2 => Just("[\"depth\", \"ids\", \"emission\", \"lambert\", \"global_illumination\", \"area_light\", \"two_sided\"]"),
+        h => Just("[\"depth\", \"teleport\"]"),
+        h => Just("[\"lambert\"]"),
+        h => Just("\"depth\""),
+        h => Just("[]"),
+    ]
+    .prop_map(str::to_string)
+}
+
+fn camera(h: u32) -> impl Strategy<Value = String> {
+    (
+        prop_oneof![12 => Just("[0.0, 0.0, 5.0]".to_string()), h => Just("[0.0, 0.0, 0.0]".to_string()), 3 => vec3(h)],
+        prop_oneof![12 => Just("[0.0, 0.0, 0.0]".to_string()), 3 => vec3(h)],
+        prop::option::weighted(0.4, prop_oneof![12 => Just("[0.0, 1.0, 0.0]".to_string()), h => Just("[0.0, 0.0, 1.0]".to_string()), h => Just("[0.0, 0.0, 0.0]".to_string()), 3 => vec3(h)]),
+        prop_oneof![20 => (1.0f64..170.0).prop_map(|x| format!("{x:?}")), 2 => number(h), h => Just("180.0".to_string()), 1 => Just("179.99999999999997".to_string())],
+        count(h, 48),
+        count(h, 48),
+        prop::option::weighted(if h > 1 { 0.3 } else { 0.02 }, number(h)),
+        prop::option::weighted(if h > 1 { 0.3 } else { 0.02 }, number(h)),
+    )
+        .prop_map(|(eye, look, up, vfov, w, h, near, far)| {
+            let mut s = format!("[camera]\neye = {eye}\nlook_at = {look}\nvfov = {vfov}\nwidth = {w}\nheight = {h}\n");
+            if let Some(u) = up {
+                s += &format!("up = {u}\n");
+            }
+            if let Some(n) = near {
+                s += &format!("near = {n}\n");
+            }
+            if let Some(f) = far {
+                s += &format!("far = {f}\n");
+            }
+            s
+        })
+}
+
+fn extras(h: u32) -> impl Strategy<Value = String> {
+    (
+        prop::option::weighted(0.3, (name(h), range3(h, 0.0, 1.0), prop_oneof![9 => Just("[0.0, 0.0, 0.0]".to_string()), 1 => vec3(h)])),
+        prop::option::weighted(if h > 1 { 0.3 } else { 0.03 }, prop_oneof![
+            h => (vec3(h), vec3(h)).prop_map(|(p, i)| format!("[[lights]]\nkind = \"point\"\nposition = {p}\nintensity = {i}\n")),
+            h => (vec3(h), vec3(h)).prop_map(|(d, e)| format!("[[lights]]\nkind = \"directional\"\ndirection = {d}\nirradiance = {e}\n")),
+            20 => Just("[[lights]]\nkind = \"point\"\nposition = [0.0, 2.0, 2.0]\nintensity = [5.0, 5.0, 5.0]\n".to_string()),
+            h => Just("[[lights]]\nkind = \"spot\"\n".to_string()),
+        ]),
+        prop::option::weighted(0.3, (
+            prop_oneof![8 => Just("-1".to_string()), 8 => Just("3".to_string()), h => Just("0".to_string()), h => Just("-2".to_string()), h => Just("2147483648".to_string())],
+            prop_oneof![16 => (1u32..=2).prop_map(|x| x.to_string()), h => Just("0".to_string()), h => Just("65537".to_string()), h => Just("4000000000".to_string()), h => Just("-5".to_string())],
+        )),
+    )
+        .prop_map(|(mat, light, integ)| {
+            let mut s = String::new();
+            if let Some((n, a, e)) = mat {
+                s += &format!("[[materials]]\nname = {n}\nalbedo = {a}\nemission = {e}\n");
+            }
+            if let Some(l) = light {
+                s += &l;
+            }
+            if let Some((d, spp)) = integ {
+                s += &format!("[integrator]\nmax_depth = {d}\nspp = {spp}\n");
+            }
+            s
+        })
+}
+
+/// A whole scene file, sometimes damaged afterwards.
+fn scene_toml() -> impl Strategy<Value = Vec<u8>> {
+    // h: how hostile this scene is (weight of each wrong choice against ~30
+    // for the valid ones): most scenes are nearly valid, so they reach
+    // resolution, meshes and rendering; a quarter are hostile throughout.
+    prop_oneof![3 => Just(1u32), 1 => Just(30u32)].prop_flat_map(scene_with)
+}
+
+fn scene_with(h: u32) -> impl Strategy<Value = Vec<u8>> {
+    (
+        requires(h),
+        camera(h),
+        prop_oneof![20 => prop::collection::vec(object(h), 1..4), h => Just(vec![])],
+        extras(h),
+        prop_oneof![
+            40 => Just(0u8),  // as generated
+            h => Just(1),     // truncated
+            h => Just(2),     // an unknown field
+            h => Just(3),     // a random byte inserted
+            h => Just(4),     // a duplicated table header
+            h => Just(5),     // not UTF-8
+        ],
+        any::<prop::sample::Index>(),
+        any::<u8>(),
+    )
+        .prop_map(|(req, cam, objs, extra, damage, at, byte)| {
+            // Tables first: `requires` must precede the first [table].
+            // A lit scene gets its light (the generated ones are hostile).
+            let light = if req.contains("point_light") {
+                "[[lights]]\nkind = \"point\"\nposition = [0.0, 2.0, 2.0]\nintensity = [5.0, 5.0, 5.0]\n"
+            } else {
+                ""
+            };
+            let text = format!("requires = {req}\n{light}{extra}{cam}{}", objs.concat());
+            let mut b = text.into_bytes();
+            let i = at.index(b.len() + 1);
+            match damage {
+                1 => b.truncate(i),
+                2 => b
+                    .splice(0..0, b"colour = 3\n".iter().copied())
+                    .for_each(drop),
+                3 => b.insert(i, byte),
+                4 => b.extend_from_slice(b"[camera]\nvfov = 1.0\n"),
+                5 => b.splice(0..0, [0xffu8, 0xfe, b'\n']).for_each(drop),
+                _ => {}
+            }
+            b
+        })
+}
+
+/// OBJ text: vertices (some NaN, infinite or beyond f32), faces with bad,
+/// negative and mixed-format indices, quads and n-gons, groups with hostile
+/// names, `mtllib`/`usemtl` lines, garbage.
+fn obj_text(h: u32) -> impl Strategy<Value = String> {
+    let coord = prop_oneof![
+        400 => (-3.0f32..3.0).prop_map(|x| format!("{x}")),
+        h => prop::sample::select(vec!["nan", "inf", "-inf", "1e39", "-1e40", "1e-45", "x", "0x1p3"])
+            .prop_map(str::to_string),
+    ];
+    let index = prop_oneof![
+        100 => (1i64..5).prop_map(|i| i.to_string()),
+        h => (5i64..12).prop_map(|i| i.to_string()),
+        h => (-6i64..=0).prop_map(|i| i.to_string()),
+        h => prop::sample::select(vec!["99999", "4294967296", "1/1/1", "2//2", "3/3", "a", "1e3", ""])
+            .prop_map(str::to_string),
+    ];
+    let line = prop_oneof![
+        6 => (coord.clone(), coord.clone(), coord.clone()).prop_map(|(x, y, z)| format!("v {x} {y} {z}")),
+        h => (coord.clone(), coord.clone(), coord.clone(), coord.clone()).prop_map(|(x, y, z, w)| format!("v {x} {y} {z} {w}")),
+        h => (coord.clone(), coord.clone()).prop_map(|(x, y)| format!("v {x} {y}")),
+        6 => prop::collection::vec(index, 3..9).prop_map(|v| format!("f {}", v.join(" "))),
+        h => prop::collection::vec((1i64..5).prop_map(|i| i.to_string()), 1..3).prop_map(|v| format!("f {}", v.join(" "))),
+        3 => prop::sample::select(vec![
+            "mtllib /dev/zero", "mtllib pipe.mtl", "mtllib ../../../../etc/shadow", "mtllib dir.obj",
+            "mtllib", "usemtl red", "o", "o second", "g grp", "g \u{1b}[31mred\u{7}",
+            "o nul\u{0}name", "vt 0 0", "vn 0 0 1", "l 1 2", "p 1", "s off", "# comment",
+            "\u{feff}v 0 0 0", "v 0 0 0\r", "vp 1", "",
+        ])
+        .prop_map(str::to_string),
+        h => prop::sample::select(vec!["usemtl", "f 1 2 \\", "f", "v", "vt", "l 1 99"])
+            .prop_map(str::to_string),
+    ];
+    prop::collection::vec(line, 0..40).prop_map(|lines| {
+        // A valid triangle first, so that many meshes get past the parser.
+        let mut s = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n");
+        for l in lines {
+            s += &l;
+            s.push('\n');
+        }
+        s
+    })
+}
+
+#[derive(Debug, Clone)]
+struct Case {
+    scene: Vec<u8>,
+    m_obj: String,
+    n_obj: String,
+}
+
+fn case() -> impl Strategy<Value = Case> {
+    (
+        scene_toml(),
+        prop_oneof![3 => Just(1u32), 1 => Just(30u32)].prop_flat_map(obj_text),
+        prop_oneof![3 => Just(1u32), 1 => Just(30u32)].prop_flat_map(obj_text),
+    )
+        .prop_map(|(scene, m_obj, n_obj)| Case {
+            scene,
+            m_obj,
+            n_obj,
+        })
+}
+
+// ---------------------------------------------------------------- running
+
+/// The binary under test; `RENDIFF_FUZZ_BIN` runs another build (an older
+/// one, to see what the fuzzer finds there).
+fn binary() -> PathBuf {
+    std::env::var_os("RENDIFF_FUZZ_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_rendiff")))
+}
+
+#[derive(Default)]
+struct Tally {
+    inputs: AtomicUsize,
+    runs: AtomicUsize,
+    clean_errors: AtomicUsize,
+    successes: AtomicUsize,
+    panics: AtomicUsize,
+    hangs: AtomicUsize,
+    leftovers: AtomicUsize,
+    bad_messages: AtomicUsize,
+    other_exits: AtomicUsize,
+    /// Clean errors by the part after the file name (field, or problem start).
+    kinds: Mutex<std::collections::BTreeMap<String, usize>>,
+}
+
+fn mkfifo(p: &Path) {
+    let c = std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0, "mkfifo");
+}
+
+/// Writes the case's folder: `root/scenes/` with the scene and its meshes
+/// (and the hostile entries [`mesh_path`] names), `root/outside.obj`.
+fn write_case(root: &Path, c: &Case) -> PathBuf {
+    let s = root.join("scenes");
+    std::fs::create_dir_all(s.join("dir.obj")).unwrap();
+    std::fs::create_dir_all(s.join("sub")).unwrap();
+    std::fs::write(s.join("scene.toml"), &c.scene).unwrap();
+    std::fs::write(s.join("m.obj"), &c.m_obj).unwrap();
+    std::fs::write(s.join("n.obj"), &c.n_obj).unwrap();
+    std::fs::write(s.join("bin.obj"), b"v 0 0 0\n\xc3\x28\n").unwrap();
+    std::fs::write(
+        root.join("outside.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    mkfifo(&s.join("pipe.obj"));
+    mkfifo(&s.join("pipe.mtl"));
+    std::os::unix::fs::symlink("/dev/zero", s.join("zero.obj")).unwrap();
+    std::os::unix::fs::symlink("m.obj", s.join("inside_link.obj")).unwrap();
+    s.join("scene.toml")
+}
+
+enum Outcome {
+    Exited(Option<i32>, String),
+    Hang,
+}
+
+fn run_limited(cmd: &mut Command) -> Outcome {
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn rendiff");
+    let mut se = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        se.read_to_end(&mut v).ok();
+        v
+    });
+    let start = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            let err = reader.join().unwrap();
+            return Outcome::Exited(st.code(), String::from_utf8_lossy(&err).into_owned());
+        }
+        if start.elapsed() > TIMEOUT {
+            child.kill().ok();
+            child.wait().ok();
+            return Outcome::Hang;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(files_under(&p));
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+/// Runs one case through render and export; returns the problems found.
+fn run_case(c: &Case, t: &Tally) -> Vec<String> {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_case(dir.path(), c);
+    let out = dir.path().join("out");
+    let mut problems = Vec::new();
+    let render_out = out.join("render").join("r.exr");
+    let export_out = out.join("export");
+    let commands: [(&str, Command, PathBuf); 2] = [
+        (
+            "render",
+            {
+                let mut cmd = Command::new(binary());
+                cmd.args([
+                    "render",
+                    "--renderer",
+                    "raster",
+                    "--quiet",
+                    "--threads",
+                    "1",
+                ])
+                .arg(&scene)
+                .arg("-o")
+                .arg(&render_out);
+                cmd
+            },
+            out.join("render"),
+        ),
+        (
+            "export",
+            {
+                let mut cmd = Command::new(binary());
+                cmd.arg("export").arg(&scene).arg("-o").arg(&export_out);
+                cmd
+            },
+            export_out.clone(),
+        ),
+    ];
+    for (what, mut cmd, folder) in commands {
+        t.runs.fetch_add(1, Ordering::Relaxed);
+        match run_limited(&mut cmd) {
+            Outcome::Hang => {
+                t.hangs.fetch_add(1, Ordering::Relaxed);
+                problems.push(format!("{what}: still running after {TIMEOUT:?}"));
+            }
+            Outcome::Exited(Some(0), _) => {
+                t.successes.fetch_add(1, Ordering::Relaxed);
+                let stray: Vec<_> = files_under(&folder)
+                    .into_iter()
+                    .filter(|p| p.to_string_lossy().contains(".tmp-"))
+                    .collect();
+                if !stray.is_empty() {
+                    t.leftovers.fetch_add(1, Ordering::Relaxed);
+                    problems.push(format!("{what}: temporary files left: {stray:?}"));
+                }
+            }
+            Outcome::Exited(Some(2), err) => {
+                let body = err.strip_suffix('\n').unwrap_or(&err);
+                let one_line = !body.is_empty() && !body.contains('\n');
+                let clean_chars = !body.chars().any(char::is_control);
+                if one_line && clean_chars && body.len() < 2000 && !body.contains("panicked") {
+                    t.clean_errors.fetch_add(1, Ordering::Relaxed);
+                    let key: String = body
+                        .split(": ")
+                        .nth(2)
+                        .unwrap_or(body)
+                        .chars()
+                        .take(36)
+                        .collect();
+                    *t.kinds.lock().unwrap().entry(key).or_default() += 1;
+                    if std::env::var_os("RENDIFF_FUZZ_SHOW").is_some() {
+                        eprintln!("{what}: {body}");
+                    }
+                } else {
+                    t.bad_messages.fetch_add(1, Ordering::Relaxed);
+                    problems.push(format!(
+                        "{what}: exit 2 but stderr is not one clean line: {err:?}"
+                    ));
+                }
+                let left = files_under(&folder);
+                if !left.is_empty() {
+                    t.leftovers.fetch_add(1, Ordering::Relaxed);
+                    problems.push(format!("{what}: failed but left {left:?}"));
+                }
+            }
+            Outcome::Exited(code, err) => {
+                if code == Some(101) || code.is_none() {
+                    t.panics.fetch_add(1, Ordering::Relaxed);
+                } else {
+                    t.other_exits.fetch_add(1, Ordering::Relaxed);
+                }
+                let tail: String = err.chars().take(600).collect();
+                problems.push(format!("{what}: exit {code:?}: {tail}"));
+            }
+        }
+    }
+    problems
+}
+
+#[test]
+fn hostile_scenes_fail_cleanly() {
+    // The nested strategies are large values: generate on a big stack.
+    std::thread::Builder::new()
+        .stack_size(256 << 20)
+        .spawn(fuzz)
+        .unwrap()
+        .join()
+        .unwrap();
+}
+
+fn fuzz() {
+    let cases: usize = std::env::var("RENDIFF_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2000);
+    let seed: u64 = std::env::var("RENDIFF_FUZZ_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(12);
+    let mut seed_bytes = [0u8; 32];
+    seed_bytes[..8].copy_from_slice(&seed.to_le_bytes());
+    let mut runner = TestRunner::new_with_rng(
+        Config {
+            failure_persistence: None,
+            ..Config::default()
+        },
+        TestRng::from_seed(RngAlgorithm::ChaCha, &seed_bytes),
+    );
+    // Generated up front (deterministic for a seed), run on two workers.
+    let strategy = case();
+    let all: Vec<Case> = (0..cases)
+        .map(|_| strategy.new_tree(&mut runner).unwrap().current())
+        .collect();
+    drop(strategy);
+    let tally = Tally::default();
+    let next = AtomicUsize::new(0);
+    let failures: Mutex<Vec<(usize, Vec<String>)>> = Mutex::new(Vec::new());
+    let started = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(c) = all.get(i) else { break };
+                tally.inputs.fetch_add(1, Ordering::Relaxed);
+                let problems = run_case(c, &tally);
+                if !problems.is_empty() {
+                    failures.lock().unwrap().push((i, problems));
+                }
+            });
+        }
+    });
+    let g = |a: &AtomicUsize| a.load(Ordering::Relaxed);
+    eprintln!(
+        "\nfuzz_scenes (seed {seed}, {:.1} s):\n\
+         | inputs | runs | clean errors (exit 2, one line) | successes | panics | hangs | leftovers | bad messages | other exits |\n\
+         |---|---|---|---|---|---|---|---|---|\n\
+         | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        started.elapsed().as_secs_f64(),
+        g(&tally.inputs),
+        g(&tally.runs),
+        g(&tally.clean_errors),
+        g(&tally.successes),
+        g(&tally.panics),
+        g(&tally.hangs),
+        g(&tally.leftovers),
+        g(&tally.bad_messages),
+        g(&tally.other_exits),
+    );
+    let mut kinds: Vec<_> = tally.kinds.lock().unwrap().clone().into_iter().collect();
+    kinds.sort_by_key(|k| std::cmp::Reverse(k.1));
+    let kinds: Vec<String> = kinds
+        .iter()
+        .take(30)
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    eprintln!("clean errors by field (top 30): {}", kinds.join("; "));
+    let mut failures = failures.into_inner().unwrap();
+    failures.sort_by_key(|f| f.0);
+    for (i, problems) in failures.iter().take(10) {
+        let c = &all[*i];
+        eprintln!(
+            "--- case {i}:\n{}\nscene.toml:\n{}\nm.obj:\n{}\nn.obj:\n{}",
+            problems.join("\n"),
+            String::from_utf8_lossy(&c.scene).escape_debug(),
+            c.m_obj.escape_debug(),
+            c.n_obj.escape_debug()
+        );
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed (first ones above)",
+        failures.len(),
+        all.len()
+    );
+}
