@@ -50,8 +50,8 @@ enum Command {
         /// Output EXR; default out/<scene>.<renderer>.exr.
         #[arg(short, long)]
         output: Option<PathBuf>,
-        /// Worker threads (default: all cores).
-        #[arg(long)]
+        /// Worker threads (default: all cores; at most 4 per core).
+        #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// BVH build quality for the tracer.
         #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
@@ -66,7 +66,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
         /// Samples per pixel for path tracing (default: the scene's integrator.spp).
-        #[arg(long)]
+        #[arg(long, value_parser = parse_spp)]
         spp: Option<u32>,
         /// Random seed for path tracing.
         #[arg(long, default_value_t = 1)]
@@ -121,7 +121,7 @@ enum Command {
         #[arg(long, default_value_t = rendiff::check::CHECK_SEED)]
         seed: u64,
         /// Samples per pixel of the core's path tracer (default: each scene's integrator.spp).
-        #[arg(long)]
+        #[arg(long, value_parser = parse_spp)]
         spp: Option<u32>,
         /// Deliberately wrong core shading, for testing the statistical gate's power.
         #[arg(long, value_enum, hide = true)]
@@ -150,7 +150,7 @@ enum Command {
         #[arg(long, value_parser = rendiff::bench::knobs::parse_size)]
         size: Option<(u32, u32)>,
         /// Thread counts, comma-separated.
-        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = parse_threads)]
         threads: Vec<usize>,
         /// Timed runs per configuration.
         #[arg(long, default_value_t = 3)]
@@ -537,6 +537,33 @@ fn render(
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);
 /// exit 1 on any difference, 0 when identical, 2 (an error) when the files
 /// share no buffer.
+/// More worker threads than this per core only adds switching (and `--threads
+/// 100000` once started 2661 threads and stalled the machine).
+const MAX_THREADS_PER_CORE: usize = 4;
+
+/// `--threads N`: 1 to 4 per core of this machine, checked before any thread starts.
+fn parse_threads(s: &str) -> std::result::Result<usize, String> {
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a thread count"))?;
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    let max = MAX_THREADS_PER_CORE * cores;
+    if n == 0 || n > max {
+        return Err(format!(
+            "{n} threads: give 1 to {max} ({MAX_THREADS_PER_CORE} per core on {cores} cores)"
+        ));
+    }
+    Ok(n)
+}
+
+/// `--spp N`: the scene file's own limit (`scene::check_spp`), before any rendering.
+fn parse_spp(s: &str) -> std::result::Result<u32, String> {
+    let n: u32 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a sample count"))?;
+    rendiff::scene::check_spp(n).map(|()| n)
+}
+
 fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     let d = rendiff::diff::diff_files(a, b)?;
     for line in d.lines(&a.display().to_string(), &b.display().to_string()) {

@@ -601,3 +601,32 @@ fn control_characters_are_escaped() {
     );
     check_failure(&res, &["\\u{1b}]0;title\\u{7}\\nb.toml"]);
 }
+
+#[test]
+fn thread_and_sample_counts_are_bounded_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.exr");
+    for (flag, value, needle) in [
+        ("--threads", "100000", "per core"),
+        ("--threads", "0", "give 1 to"),
+        ("--spp", "4000000000", "limit of 65536"),
+    ] {
+        let res = output_within(
+            rendiff()
+                .args([
+                    "render",
+                    "scenes/three_triangles.toml",
+                    "--renderer",
+                    "raster",
+                    "-o",
+                ])
+                .arg(&out)
+                .args([flag, value]),
+            60,
+        );
+        assert_eq!(res.status.code(), Some(2), "{flag} {value}");
+        let err = String::from_utf8_lossy(&res.stderr);
+        assert!(err.contains(needle), "{flag} {value}: {err}");
+        assert!(!out.exists(), "{flag} {value}: no output may be written");
+    }
+}
