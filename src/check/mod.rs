@@ -809,11 +809,7 @@ pub fn summary(results: &Results) -> (String, Tally) {
                 .map(|v| v.to_string())
                 .unwrap_or_else(|| "-".into())
         };
-        let mut note: String = r.reason.lines().next().unwrap_or("").to_string();
-        if note.len() > 90 {
-            note.truncate(87);
-            note.push_str("...");
-        }
+        let note = short_note(r.reason.lines().next().unwrap_or(""));
         s.push_str(&format!(
             "{:<18} {:<14} {:<3} {:<16} {:>6} {:>9}  {}\n",
             r.scene,
@@ -838,9 +834,48 @@ fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
     }
 }
 
+/// The first 87 characters of a verdict's reason for the table, "..." when cut, and
+/// control characters escaped: reasons carry renderers' stderr, which may hold any
+/// text (a byte-index cut inside a multi-byte character used to panic here).
+fn short_note(line: &str) -> String {
+    let clean: String = line
+        .chars()
+        .flat_map(|c| {
+            if c.is_control() {
+                c.escape_debug().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect();
+    if clean.chars().count() <= 90 {
+        return clean;
+    }
+    let mut cut: String = clean.chars().take(87).collect();
+    cut.push_str("...");
+    cut
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn table_notes_cut_on_character_boundaries_and_escape_controls() {
+        // 86 ASCII bytes, then multi-byte characters across the old byte cut at 87.
+        let reason = format!(
+            "{}ééé✓✓✓ and more text to pass ninety characters",
+            "x".repeat(86)
+        );
+        let note = short_note(&reason);
+        assert!(
+            note.ends_with("...") && note.chars().count() == 90,
+            "{note}"
+        );
+        assert!(note.starts_with(&"x".repeat(86)) && note.contains('é'));
+        assert_eq!(short_note("bell\u{7} esc\u{1b}"), "bell\\u{7} esc\\u{1b}");
+        assert_eq!(short_note("short"), "short");
+    }
 
     fn req(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()
