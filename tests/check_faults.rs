@@ -87,9 +87,11 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
     let (s, why) = status("hang", "id");
     assert_eq!(s, "error");
     assert!(why.contains("timed out"), "{why}");
+    // The limit it names is the one applied, with the slack explained.
+    assert!(why.contains("--timeout"), "{why}");
     let (s, why) = status("crash", "Z");
     assert_eq!(s, "error");
-    assert!(why.contains("signal"), "{why}");
+    assert!(why.contains("killed by signal 11 (SIGSEGV)"), "{why}");
     let (s, why) = status("liar", "id");
     assert_eq!(s, "error");
     assert!(why.contains("wrote no buffer file"), "{why}");

@@ -105,12 +105,10 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
                     rec.status = "skipped".into();
                     rec.reason = o.stderr_tail(2);
                 }
-                other => {
+                _ => {
                     rec.status = "error".into();
-                    let how = other
-                        .map(|c| format!("exit {c}"))
-                        .unwrap_or_else(|| "killed by a signal".into());
-                    rec.message = format!("{} failed ({how}): {}", job.backend, o.stderr_tail(6));
+                    rec.message =
+                        format!("{} failed ({}): {}", job.backend, o.how(), o.stderr_tail(6));
                 }
             }
         }

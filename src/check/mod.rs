@@ -165,8 +165,8 @@ fn harness_backends(root: &Path, scratch: &Path) -> Result<Vec<HarnessBackend>, 
         .map_err(|e| format!("cannot run the Python harness: {e:#}"))?;
     if o.code != Some(0) {
         return Err(format!(
-            "the Python harness failed to start (exit {:?}): {}; run scripts/setup.sh",
-            o.code,
+            "the Python harness failed to start ({}): {}; run scripts/setup.sh",
+            o.how(),
             o.stderr_tail(5)
         ));
     }
@@ -614,8 +614,10 @@ fn external(
             if o.timed_out {
                 rec.status = "error".into();
                 rec.message = format!(
-                    "timed out after {:.0} s and was killed",
-                    limit.as_secs_f64()
+                    "timed out and was killed after {:.0} s (--timeout {} s for the render, plus {:.0} s for the harness's own start-up)",
+                    limit.as_secs_f64(),
+                    opts.timeout.as_secs_f64(),
+                    (limit - opts.timeout).as_secs_f64()
                 );
             } else if o.code == Some(0) {
                 let last = o
@@ -653,11 +655,7 @@ fn external(
                 }
             } else {
                 rec.status = "error".into();
-                let how = o
-                    .code
-                    .map(|c| format!("exit {c}"))
-                    .unwrap_or_else(|| "killed by a signal".into());
-                rec.message = format!("{} failed ({how}): {}", b.name, o.stderr_tail(6));
+                rec.message = format!("{} failed ({}): {}", b.name, o.how(), o.stderr_tail(6));
             }
         }
     }
@@ -690,8 +688,8 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
     }
     if o.timed_out || o.code != Some(0) {
         bail!(
-            "the comparison failed (exit {:?}): {}\nrun scripts/setup.sh if the Python harness is missing",
-            o.code,
+            "the comparison failed ({}): {}\nrun scripts/setup.sh if the Python harness is missing",
+            o.how(),
             o.stderr_tail(12)
         );
     }

@@ -11,6 +11,8 @@ use std::time::{Duration, Instant};
 pub struct Outcome {
     /// Exit code; `None` when killed (timeout or signal).
     pub code: Option<i32>,
+    /// The signal that ended it, when one did.
+    pub signal: Option<i32>,
     /// True when it ran past its time limit and was killed.
     pub timed_out: bool,
     /// Captured standard output.
@@ -25,6 +27,16 @@ pub struct Outcome {
 }
 
 impl Outcome {
+    /// How it ended, for messages: "exit 3", "killed by signal 11 (SIGSEGV)", "timed out".
+    pub fn how(&self) -> String {
+        match (self.code, self.signal) {
+            (Some(c), _) => format!("exit {c}"),
+            (None, _) if self.timed_out => "timed out and killed".into(),
+            (None, Some(s)) => format!("killed by signal {s} ({})", signal_name(s)),
+            (None, None) => "killed by a signal".into(),
+        }
+    }
+
     /// The last `n` lines of stderr, for error messages.
     pub fn stderr_tail(&self, n: usize) -> String {
         let lines: Vec<&str> = self.stderr.lines().collect();
@@ -116,14 +128,40 @@ fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> 
             .map(|b| String::from_utf8_lossy(&b).into_owned())
             .unwrap_or_default()
     };
+    #[cfg(unix)]
+    let signal = {
+        use std::os::unix::process::ExitStatusExt;
+        status.and_then(|s| s.signal())
+    };
+    #[cfg(not(unix))]
+    let signal = None;
     Ok(Outcome {
         code: status.and_then(|s| s.code()),
+        signal,
         timed_out,
         stdout: read(&out_path),
         stderr: read(&err_path),
         seconds: start.elapsed().as_secs_f64(),
         max_rss_bytes: None,
     })
+}
+
+/// The usual name of a POSIX signal number, or "unknown signal".
+pub fn signal_name(sig: i32) -> &'static str {
+    match sig {
+        1 => "SIGHUP",
+        2 => "SIGINT",
+        3 => "SIGQUIT",
+        4 => "SIGILL",
+        6 => "SIGABRT",
+        7 => "SIGBUS",
+        8 => "SIGFPE",
+        9 => "SIGKILL",
+        11 => "SIGSEGV",
+        13 => "SIGPIPE",
+        15 => "SIGTERM",
+        _ => "unknown signal",
+    }
 }
 
 /// Kills the child, and with `group` every process in its group (the child leads it).
