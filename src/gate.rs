@@ -847,6 +847,7 @@ pub fn load_baseline(path: &Path) -> Result<Baseline> {
 /// `rendiff gate`: compares RUN with the baseline, writes RUN/gate.md and
 /// returns the summary and whether the gate passed.
 pub fn gate(baseline_path: &Path, run: &Path) -> Result<(String, bool)> {
+    crate::check::run_folder::ensure_complete(run)?;
     let baseline = load_baseline(baseline_path)?;
     let results = load_verdicts(&run.join("results.json"))?;
     let manifest: Option<Manifest> = read_json(&run.join("manifest.json"), "manifest").ok();
@@ -999,6 +1000,7 @@ pub fn scene_change_summary(before: &Baseline, now: &Baseline) -> Option<String>
 
 /// Builds a baseline from a run (numbers, noise bounds, provenance).
 pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
+    crate::check::run_folder::ensure_complete(run)?;
     let results = load_verdicts(&run.join("results.json"))?;
     let manifest: Manifest = read_json(&run.join("manifest.json"), "manifest")?;
     if let Some(bad) = failure_summary(&results).filter(|_| !opts.allow_failures) {

@@ -20,6 +20,7 @@ pub mod raster;
 pub mod report;
 pub mod scene;
 pub mod shade;
+pub mod shutdown;
 pub mod trace;
 pub mod visibility;
 

@@ -219,6 +219,9 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = rendiff::shutdown::install() {
+        eprintln!("warning: SIGINT/SIGTERM not hooked ({e}); an interrupted run may leave renderers running");
+    }
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -283,6 +286,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         spp: spp.unwrap_or(resolved.integrator.spp),
                         seed,
                         bias: inject_bias,
+                        deadline: None,
                     };
                     rendiff::shade::shade(&resolved, &frame, &bvh, opts)
                 })
@@ -458,16 +462,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
                 calibration: (!no_calibration).then_some(calibration),
             };
-            let outcome = match rendiff::check::run(&opts) {
-                Ok(o) => o,
-                Err(e) => {
-                    // Still show what rendered, if anything did.
-                    if output.join("manifest.json").exists() {
-                        write_report(&output);
-                    }
-                    return Err(e);
-                }
-            };
+            // On failure the run folder keeps its INCOMPLETE marker: no report.
+            let outcome = rendiff::check::run(&opts)?;
             let (table, tally) = rendiff::check::summary(&outcome.results);
             println!("{table}");
             println!(
@@ -523,6 +519,7 @@ fn render(
                 bvh,
                 count_coverage: false,
                 kernel,
+                deadline: None,
             };
             let (f, tree) = trace::render_keeping_bvh(scene, opts, &|n| bar.inc(n));
             bar.finish();

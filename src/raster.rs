@@ -93,6 +93,8 @@ pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
 pub struct RasterOptions {
     /// Also count every covering triangle per pixel (front/back), for watertightness tests.
     pub count_coverage: bool,
+    /// Stop rasterizing when this passes (`check --timeout`); the frame is then partial.
+    pub deadline: Option<Instant>,
 }
 
 /// Renders depth and IDs by rasterization. `progress` is called with the number
@@ -129,6 +131,12 @@ pub fn render(
         .map(|(ti, bin)| {
             let tx = ti as u32 % tiles_x;
             let ty = ti as u32 / tiles_x;
+            // Past the deadline a tile renders nothing (background, right size).
+            let bin = if crate::progress::past(opts.deadline) {
+                &[][..]
+            } else {
+                &bin[..]
+            };
             let out = render_tile(scene, &rects, bin, tx * TILE, ty * TILE, opts);
             progress(1);
             out

@@ -5,12 +5,13 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 const FAKE_PYTHON: &str = r#"#!/bin/bash
 # Stands in for the venv's python: fakes three broken backends, delegates the rest.
 if [ "$3" = "info" ]; then
   b='"version":"0","features":["depth","ids"],"buffers":["Z","id"],"available":true,"reason":null'
-  echo "{\"backends\":[{\"name\":\"hang\",$b},{\"name\":\"crash\",$b},{\"name\":\"liar\",$b},{\"name\":\"partial\",$b}]}"
+  echo "{\"backends\":[{\"name\":\"hang\",$b},{\"name\":\"crash\",$b},{\"name\":\"liar\",$b},{\"name\":\"partial\",$b},{\"name\":\"forkhang\",$b}]}"
   exit 0
 fi
 if [ "$3" = "render" ]; then
@@ -18,6 +19,7 @@ if [ "$3" = "render" ]; then
   for a in "$@"; do [ "$prev" = "--out" ] && out="$a"; prev="$a"; done
   case "$5" in
     hang) exec sleep 600 ;;
+    forkhang) sleep 600 & echo $! > "$FAKE_PIDS/forkhang.pid"; wait ;;
     crash) kill -SEGV $$ ;;
     liar) echo '{"status":"ok"}'; exit 0 ;;
     partial) printf 'half an EXR' > "$out"; echo "renderer died mid-write" >&2; exit 1 ;;
@@ -45,6 +47,7 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
         .current_dir(root)
         .env("RENDIFF_PYTHON", &fake)
         .env("REAL_PYTHON", &real)
+        .env("FAKE_PIDS", dir.path())
         // No calibration probes: the fakes would hang, crash and lie on each probe
         // too (a hang costs the 1 s timeout per scene); one scene shows the faults.
         .args([
@@ -105,4 +108,194 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
     for healthy in ["trace", "embree", "embree_robust"] {
         assert_eq!(status(healthy, "id").0, "pass", "{healthy} must still run");
     }
+    // A timeout kills the renderer's whole process group: what it forked too.
+    let (s, why) = status("forkhang", "id");
+    assert_eq!(s, "error");
+    assert!(why.contains("timed out"), "{why}");
+    let pid = read_pid(&dir.path().join("forkhang.pid"));
+    assert!(
+        gone_within(pid, Duration::from_secs(5)),
+        "process {pid}, forked by a renderer that timed out, still runs"
+    );
+}
+
+fn read_pid(path: &Path) -> i32 {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .trim()
+        .parse()
+        .unwrap()
+}
+
+/// True when `pid` is gone (or a zombie) within `limit`.
+fn gone_within(pid: i32, limit: Duration) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+            Err(_) => return true,
+            // Field 3, after the parenthesized command name, is the state.
+            Ok(stat)
+                if stat
+                    .rsplit(')')
+                    .next()
+                    .is_some_and(|r| r.trim_start().starts_with('Z')) =>
+            {
+                return true
+            }
+            Ok(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+    false
+}
+
+fn fake_python(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let real = root.join(".venv/bin/python");
+    assert!(
+        real.exists(),
+        "{} is missing: run scripts/setup.sh (the comparison needs the Python harness)",
+        real.display()
+    );
+    let fake = dir.join("python");
+    std::fs::write(&fake, FAKE_PYTHON).unwrap();
+    Command::new("chmod").arg("+x").arg(&fake).status().unwrap();
+    (fake, real)
+}
+
+/// SIGTERM (what `timeout` and CI runners send) and SIGINT during a check:
+/// rendiff kills every renderer's process group, leaves no staging folder or
+/// temporary file, exits 128 + the signal, and the run folder, which held a
+/// finished run, is now marked incomplete: `gate`, `report` and `bless` refuse
+/// it instead of passing stale verdicts.
+#[test]
+fn an_interrupted_check_stops_its_renderers_and_leaves_no_stale_verdict() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (sig, name) in [(libc::SIGTERM, "SIGTERM"), (libc::SIGINT, "SIGINT")] {
+        let dir = tempfile::tempdir().unwrap();
+        let (fake, real) = fake_python(dir.path());
+        let runs = dir.path().join("runs");
+        let run = runs.join("latest");
+        // A finished run whose verdicts all pass: what an interrupted rerun used to leave.
+        let finished = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+            .current_dir(root)
+            .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
+            .args(["--only", "trace", "--quiet", "-o"])
+            .arg(&run)
+            .output()
+            .unwrap();
+        assert_eq!(finished.status.code(), Some(0), "{finished:?}");
+        let gate = |run: &Path| {
+            Command::new(env!("CARGO_BIN_EXE_rendiff"))
+                .current_dir(root)
+                .args(["gate", "--baseline", "reports/baseline.json"])
+                .arg(run)
+                .output()
+                .unwrap()
+        };
+        let child = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+            .current_dir(root)
+            .env("RENDIFF_PYTHON", &fake)
+            .env("REAL_PYTHON", &real)
+            .env("FAKE_PIDS", dir.path())
+            .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
+            .args(["--only", "trace,forkhang", "--timeout", "600", "-o"])
+            .arg(&run)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let pid_file = dir.path().join("forkhang.pid");
+        let start = Instant::now();
+        while !pid_file.exists() {
+            assert!(start.elapsed().as_secs() < 60, "the renderer never started");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let grandchild = read_pid(&pid_file);
+        // SAFETY: kill(2) on our own child's pid; no memory is touched.
+        unsafe {
+            libc::kill(child.id() as i32, sig);
+        }
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(128 + sig), "{name}: {stderr}");
+        assert!(
+            stderr.contains(&format!("interrupted by {name}")),
+            "{stderr}"
+        );
+        assert!(
+            gone_within(grandchild, Duration::from_secs(5)),
+            "{name}: process {grandchild}, forked by a renderer, outlived rendiff"
+        );
+        let left: Vec<String> = std::fs::read_dir(&runs)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            left,
+            vec!["latest".to_string()],
+            "{name}: leftovers beside the run"
+        );
+        assert!(
+            run.join("INCOMPLETE").exists(),
+            "{name}: run not marked incomplete"
+        );
+        let g = gate(&run);
+        let gerr = String::from_utf8_lossy(&g.stderr);
+        assert_eq!(g.status.code(), Some(2), "{name}: gate must refuse: {gerr}");
+        assert!(gerr.contains("incomplete run"), "{gerr}");
+        for cmd in [vec!["report"], vec!["bless", "--baseline"]] {
+            let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
+            c.current_dir(root).args(&cmd);
+            if cmd[0] == "bless" {
+                c.arg(dir.path().join("baseline.json"));
+            }
+            let o = c.arg(&run).output().unwrap();
+            assert_eq!(o.status.code(), Some(2), "{name}: {cmd:?} must refuse");
+        }
+    }
+}
+
+/// `check --timeout` bounds the core's own renders, not only external ones:
+/// a path-traced scene at 65,536 samples per pixel stops at the limit and is
+/// reported as timed out, with no buffer kept.
+#[test]
+fn the_timeout_bounds_the_cores_own_renders() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let start = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(root)
+        .args(["check", "scenes/cornell_gi.toml", "--no-calibration"])
+        .args([
+            "--only",
+            "trace",
+            "--spp",
+            "65536",
+            "--timeout",
+            "2",
+            "--quiet",
+        ])
+        .arg("-o")
+        .arg(&run)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(
+        start.elapsed() < Duration::from_secs(120),
+        "the core's render ran past its timeout"
+    );
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("manifest.json")).unwrap()).unwrap();
+    let trace = manifest["scenes"][0]["renders"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["backend"] == "trace")
+        .unwrap();
+    assert_eq!(trace["status"], "error");
+    let msg = trace["message"].as_str().unwrap();
+    assert!(msg.contains("timed out"), "{msg}");
+    assert!(!run.join("scenes/cornell_gi/trace.exr").exists());
 }

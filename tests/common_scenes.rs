@@ -31,7 +31,14 @@ pub fn load(path: &Path) -> ResolvedScene {
 
 /// Renders with both loops.
 pub fn both(scene: &ResolvedScene, count_coverage: bool) -> (Frame, Frame) {
-    let r = raster::render(scene, RasterOptions { count_coverage }, &|_| {});
+    let r = raster::render(
+        scene,
+        RasterOptions {
+            count_coverage,
+            ..RasterOptions::default()
+        },
+        &|_| {},
+    );
     let t = trace::render(
         scene,
         TraceOptions {

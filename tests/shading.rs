@@ -23,7 +23,17 @@ fn scene_file(name: &str) -> ResolvedScene {
 fn shade_with(scene: &ResolvedScene, spp: u32, seed: u64, bias: Option<Bias>) -> shade::Radiance {
     let (r, _) = both(scene, false);
     let bvh = TraceBvh::build(scene, BvhQuality::Medium);
-    shade::shade(scene, &r, &bvh, ShadeOptions { spp, seed, bias })
+    shade::shade(
+        scene,
+        &r,
+        &bvh,
+        ShadeOptions {
+            spp,
+            seed,
+            bias,
+            deadline: None,
+        },
+    )
 }
 
 /// World point seen at pixel i on the plane y = 0.
@@ -182,6 +192,7 @@ fn path_tracer_is_deterministic_per_seed_and_independent_of_the_loop() {
         spp: 1,
         seed: 9,
         bias: None,
+        deadline: None,
     };
     assert_eq!(
         shade::shade(&scene, &r, &bvh, opts).rgb,

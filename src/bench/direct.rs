@@ -155,6 +155,7 @@ pub fn core_supersampled(
         spp: 1,
         seed: 0,
         bias: None,
+        deadline: None,
     };
     let t = super::timed(runs, || {
         let frame = raster::render(&big, RasterOptions::default(), &|_| {});

@@ -152,6 +152,7 @@ pub fn core_path(
             spp,
             seed,
             bias: None,
+            deadline: None,
         };
         shade::shade(scene, &frame, &bvh, opts)
     });

@@ -92,7 +92,16 @@ fn stack(
 ) -> Result<SeedStack> {
     let mut st = SeedStack::new(scene.camera.pixel_count());
     for seed in first..first + seeds {
-        let r = path::render(scene, bvh, ShadeOptions { spp, seed, bias });
+        let r = path::render(
+            scene,
+            bvh,
+            ShadeOptions {
+                spp,
+                seed,
+                bias,
+                deadline: None,
+            },
+        );
         let var = r
             .var
             .ok_or_else(|| anyhow::anyhow!("the path tracer reported no variance"))?;

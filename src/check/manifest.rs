@@ -4,6 +4,11 @@
 
 use serde::{Deserialize, Serialize};
 
+/// File in a run folder whose `check` has started and not finished (it was
+/// interrupted, or failed before results.json): `gate`, `report` and `bless`
+/// refuse such a folder (`run_folder::ensure_complete`).
+pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
+
 /// Format tag of manifest.json.
 pub const MANIFEST_FORMAT: &str = "rendiff-manifest/1";
 

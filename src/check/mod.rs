@@ -14,6 +14,7 @@
 pub mod isolated;
 pub mod manifest;
 pub mod process;
+pub mod run_folder;
 
 use crate::backends::embree::{self, EmbreeError, EmbreeMode};
 use crate::exr_io::{frame_attrs, write_frame_with};
@@ -243,6 +244,9 @@ fn wanted(opts: &CheckOptions, name: &str) -> bool {
 }
 
 /// Renders a core loop or Embree in process; a panic becomes an error record.
+/// `render` gets the deadline (`check --timeout` from now): the core's loops
+/// stop there, and a render that ends past it is a timeout, its partial
+/// buffers discarded, exactly as for an external renderer that is killed.
 #[allow(clippy::too_many_arguments)] // one call site per backend kind; a struct would only rename them
 fn in_process(
     name: &str,
@@ -252,7 +256,9 @@ fn in_process(
     command: String,
     version: String,
     seed: u64,
-    render: impl FnOnce() -> Result<(Frame, Option<Radiance>), EmbreeError> + std::panic::UnwindSafe,
+    timeout: Duration,
+    render: impl FnOnce(Instant) -> Result<(Frame, Option<Radiance>), EmbreeError>
+        + std::panic::UnwindSafe,
 ) -> RenderRecord {
     let mut rec = RenderRecord {
         backend: name.into(),
@@ -261,7 +267,17 @@ fn in_process(
         ..RenderRecord::default()
     };
     let start = Instant::now();
-    match std::panic::catch_unwind(render) {
+    let deadline = start + timeout;
+    match std::panic::catch_unwind(move || render(deadline)) {
+        Ok(Ok(_)) if crate::progress::past(Some(deadline)) => {
+            rec.status = "error".into();
+            rec.time_s = start.elapsed().as_secs_f64();
+            rec.message = format!(
+                "timed out: stopped after {:.0} s (--timeout {} s); its partial buffers were discarded",
+                rec.time_s,
+                timeout.as_secs_f64()
+            );
+        }
         Ok(Ok((frame, radiance))) => {
             rec.time_s = start.elapsed().as_secs_f64();
             let mut attrs = frame_attrs(&frame, &scene.name);
@@ -338,9 +354,27 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
         bail!("no scenes to check");
     }
     let jobs = scene_jobs(opts)?;
+    // Everything is written to a staging folder that replaces the run folder
+    // once results.json exists (run_folder.rs): never a half-old run.
+    let staging = run_folder::Staging::begin(&opts.run_dir)?;
+    let staged = CheckOptions {
+        run_dir: staging.dir.clone(),
+        ..opts.clone()
+    };
+    let outcome = render_and_compare(&staged, &jobs, isolate, &opts.run_dir)?;
+    staging.publish()?;
+    Ok(outcome)
+}
+
+/// The run itself, written to `opts.run_dir` (the staging folder); commands in
+/// the manifest name `shown_dir`, where the run will be once published.
+fn render_and_compare(
+    opts: &CheckOptions,
+    jobs: &[(PathBuf, &'static str)],
+    isolate: Option<&Path>,
+    shown_dir: &Path,
+) -> Result<CheckOutcome> {
     let run_dir = &opts.run_dir;
-    std::fs::create_dir_all(run_dir)
-        .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
     let scratch = run_dir.join("scratch");
     let externals = harness_backends(&opts.root, &scratch.join("info"));
     if let Err(e) = &externals {
@@ -429,12 +463,21 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                     command,
                     version.clone(),
                     opts.core.seed,
-                    move || {
+                    opts.timeout,
+                    move |deadline| {
+                        let deadline = Some(deadline);
                         let (frame, traced_bvh) = if name == "raster" {
-                            (raster::render(sc, RasterOptions::default(), &|_| {}), None)
+                            let o = RasterOptions {
+                                deadline,
+                                ..RasterOptions::default()
+                            };
+                            (raster::render(sc, o, &|_| {}), None)
                         } else {
-                            let (f, b) =
-                                trace::render_keeping_bvh(sc, TraceOptions::default(), &|_| {});
+                            let o = TraceOptions {
+                                deadline,
+                                ..TraceOptions::default()
+                            };
+                            let (f, b) = trace::render_keeping_bvh(sc, o, &|_| {});
                             (f, Some(b))
                         };
                         let radiance = shade::needs_shading(sc).then(|| {
@@ -445,6 +488,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                                 spp: core.spp.unwrap_or(sc.integrator.spp),
                                 seed: core.seed,
                                 bias: core.bias,
+                                deadline,
                             };
                             shade::shade(sc, &frame, &bvh, shading)
                         });
@@ -484,9 +528,19 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
                 let command = shell_line([exe, "check", "--only", name, &scene_arg]);
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
                 let sc = &scene;
-                in_process(name, sc, &exr, &rel_exr, command, v, 0, move || {
-                    embree::render(sc, mode).map(|f| (f, None))
-                })
+                // Embree cannot be stopped mid-render; one that ends past
+                // the deadline still counts as timed out.
+                in_process(
+                    name,
+                    sc,
+                    &exr,
+                    &rel_exr,
+                    command,
+                    v,
+                    0,
+                    opts.timeout,
+                    move |_| embree::render(sc, mode).map(|f| (f, None)),
+                )
             };
             if let Capability::VisibilityOnly(m) = &capability {
                 visibility_only(&mut rec, m);
@@ -513,6 +567,14 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
             }
         }
         scenes.push(runs);
+    }
+    // Commands name the published run folder, not the staging folder.
+    let (staged, shown) = (
+        run_dir.display().to_string(),
+        shown_dir.display().to_string(),
+    );
+    for rec in scenes.iter_mut().flat_map(|s| s.renders.iter_mut()) {
+        rec.command = rec.command.replace(&staged, &shown);
     }
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),

@@ -45,9 +45,12 @@ impl Outcome {
 }
 
 /// Runs `cmd` with stdin closed and output captured to files in `scratch`
-/// (pipes could fill up and deadlock a chatty renderer); kills it after `timeout`.
+/// (pipes could fill up and deadlock a chatty renderer), in a process group of
+/// its own; after `timeout` the whole group is killed, so nothing the command
+/// forked outlives it. The group is registered with [`crate::shutdown`], so an
+/// interrupted rendiff kills it too.
 pub fn run_with_timeout(cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
-    run(cmd, timeout, scratch, false)
+    run(cmd, timeout, scratch)
 }
 
 /// Like [`run_with_timeout`], and measures the command's peak memory: it runs
@@ -55,8 +58,8 @@ pub fn run_with_timeout(cmd: Command, timeout: Duration, scratch: &Path) -> Resu
 /// starts it from its own small process and reports `wait4`'s max RSS of it
 /// and the children it waited for. Started directly from a large process, a
 /// child's max RSS would include its parent's resident memory at the moment
-/// of the spawn (Linux records the pre-exec image). The helper runs in a
-/// process group of its own, and a timeout kills the whole group.
+/// of the spawn (Linux records the pre-exec image). Like every command here
+/// the helper runs in a process group of its own, and a timeout kills the group.
 pub fn run_measured(
     cmd: Command,
     timeout: Duration,
@@ -84,14 +87,14 @@ pub fn run_measured(
             None => wrapped.env_remove(k),
         };
     }
-    let mut o = run(wrapped, timeout, scratch, true)?;
+    let mut o = run(wrapped, timeout, scratch)?;
     o.max_rss_bytes = std::fs::read_to_string(&report)
         .ok()
         .and_then(|t| t.trim().parse::<u64>().ok());
     Ok(o)
 }
 
-fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> Result<Outcome> {
+fn run(mut cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
     std::fs::create_dir_all(scratch)
         .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
     let out_path = scratch.join("stdout.txt");
@@ -99,10 +102,11 @@ fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> 
     let out = std::fs::File::create(&out_path)?;
     let err = std::fs::File::create(&err_path)?;
     #[cfg(unix)]
-    if own_group {
+    {
         use std::os::unix::process::CommandExt;
         cmd.process_group(0);
     }
+    crate::shutdown::die_with_parent(&mut cmd);
     let start = Instant::now();
     let mut child = cmd
         .stdin(Stdio::null())
@@ -110,6 +114,7 @@ fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> 
         .stderr(Stdio::from(err))
         .spawn()
         .with_context(|| format!("cannot start {:?}", cmd.get_program()))?;
+    let group = crate::shutdown::track_group(child.id());
     let mut timed_out = false;
     let status = loop {
         if let Some(st) = child.try_wait()? {
@@ -117,12 +122,17 @@ fn run(mut cmd: Command, timeout: Duration, scratch: &Path, own_group: bool) -> 
         }
         if start.elapsed() > timeout {
             timed_out = true;
-            kill(&mut child, own_group);
+            crate::shutdown::kill_group(child.id() as i32);
+            let _ = child.kill();
             let _ = child.wait();
             break None;
         }
         std::thread::sleep(Duration::from_millis(20));
     };
+    // The leader is reaped; kill what it may have left in its group (a forked
+    // child that outlived a clean exit) before the group id can be reused.
+    crate::shutdown::kill_group(child.id() as i32);
+    drop(group);
     let read = |p: &Path| {
         std::fs::read(p)
             .map(|b| String::from_utf8_lossy(&b).into_owned())
@@ -162,20 +172,6 @@ pub fn signal_name(sig: i32) -> &'static str {
         15 => "SIGTERM",
         _ => "unknown signal",
     }
-}
-
-/// Kills the child, and with `group` every process in its group (the child leads it).
-fn kill(child: &mut std::process::Child, group: bool) {
-    #[cfg(unix)]
-    if group {
-        // SAFETY: kill(2) with a negative pid signals that process group; no memory is touched.
-        unsafe {
-            libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL);
-        }
-    }
-    #[cfg(not(unix))]
-    let _ = group;
-    let _ = child.kill();
 }
 
 /// The hidden `rendiff peak-rss --report FILE -- PROGRAM ARGS...`: runs the

@@ -257,6 +257,7 @@ pub fn page_stem(scene: &str) -> String {
 impl RunData {
     /// Reads RUN/manifest.json (required) and RUN/results.json (optional).
     pub fn load(dir: &Path) -> Result<RunData> {
+        crate::check::run_folder::ensure_complete(dir)?;
         let mpath = dir.join("manifest.json");
         let mtext = std::fs::read_to_string(&mpath).with_context(|| {
             format!(

@@ -37,6 +37,7 @@ pub fn write(run: &Path) -> Result<PathBuf> {
     let data = data::RunData::load(run)?;
     let tmp = run.join(format!(".{REPORT_DIR}.tmp-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
+    let _pending = crate::shutdown::track_path(&tmp);
     std::fs::create_dir_all(&tmp)
         .with_context(|| format!("{}: cannot create report folder", tmp.display()))?;
     let result = build(&data, &tmp);

@@ -45,6 +45,8 @@ pub struct ShadeOptions {
     pub seed: u64,
     /// A deliberate error, for detection-power tests only.
     pub bias: Option<Bias>,
+    /// Stop shading when this passes (`check --timeout`); the result is then partial.
+    pub deadline: Option<std::time::Instant>,
 }
 
 /// Radiance buffers of one render.

@@ -178,6 +178,9 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
     let out: Vec<([f32; 3], [f32; 3])> = (0..cam.pixel_count())
         .into_par_iter()
         .map(|i| {
+            if crate::progress::past(opts.deadline) {
+                return ([0.0; 3], [0.0; 3]);
+            }
             let (px, py) = ((i % w) as f64, (i / w) as f64);
             let mut rng = pixel_rng(opts.seed, i as u64);
             let mut sum = DVec3::ZERO;

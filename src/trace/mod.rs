@@ -288,6 +288,8 @@ pub struct TraceOptions {
     pub count_coverage: bool,
     /// Packets or single rays.
     pub kernel: TraceKernel,
+    /// Stop tracing when this passes (`check --timeout`); the frame is then partial.
+    pub deadline: Option<Instant>,
 }
 
 /// Renders depth and IDs by ray tracing. `progress` is called with rows finished.
@@ -365,6 +367,9 @@ pub fn trace_keys(
             .enumerate()
             .map(|(y, (row, crow))| {
                 let mut c = Counters::default();
+                if crate::progress::past(opts.deadline) {
+                    return c;
+                }
                 let mut stack = Vec::with_capacity(64);
                 for (x, (k, cv)) in row.iter_mut().zip(crow.iter_mut()).enumerate() {
                     let ray = cam.pixel_ray(x as u32, y as u32);
@@ -379,6 +384,9 @@ pub fn trace_keys(
             .enumerate()
             .map(|(y, row)| {
                 let mut c = Counters::default();
+                if crate::progress::past(opts.deadline) {
+                    return c;
+                }
                 let mut stack = Vec::with_capacity(64);
                 for (x, k) in row.iter_mut().enumerate() {
                     let ray = cam.pixel_ray(x as u32, y as u32);
@@ -394,6 +402,9 @@ pub fn trace_keys(
             .enumerate()
             .map(|(band, rows)| {
                 let mut c = Counters::default();
+                if crate::progress::past(opts.deadline) {
+                    return c;
+                }
                 let mut stack = Vec::with_capacity(64);
                 let y0 = band * packet::PH;
                 for x0 in (0..w).step_by(packet::PW) {

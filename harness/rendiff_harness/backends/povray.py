@@ -80,7 +80,6 @@ import math
 import os
 import re
 import shutil
-import signal
 import subprocess
 import tempfile
 import time
@@ -92,6 +91,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import exrbuf
+from ..children import die_with_parent
 from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
 
@@ -443,15 +443,14 @@ def _run(
         stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
-        start_new_session=True,
+        # Same process group as the harness, so rendiff's group kill (timeout,
+        # SIGINT/SIGTERM) reaches POV-Ray; and dead with the harness (children.py).
+        preexec_fn=die_with_parent,
     )
     try:
         out, err = proc.communicate(timeout=remaining)
     except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        proc.kill()
         proc.communicate()
         raise BackendError(
             f"{NAME}: timed out after {timeout_s:g} s (in the {stem} pass); scratch kept in {scratch}"

@@ -394,6 +394,7 @@ fn judge_one(
             Some(layout) if is_ref => {
                 let opts = RasterOptions {
                     count_coverage: true,
+                    deadline: None,
                 };
                 judge::fill_rule_coverage(layout, &raster::render(scene, opts, &|_| {}))
             }

@@ -1,0 +1,70 @@
+"""Renderers the harness starts die with it, and stay in its process group."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, cast
+
+import pytest
+
+from rendiff_harness.backends import povray
+from rendiff_harness.children import die_with_parent
+
+HARNESS = Path(__file__).resolve().parents[1]
+
+
+def _gone(pid: int, limit_s: float) -> bool:
+    """True when `pid` has exited (or is a zombie) within `limit_s`."""
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except FileNotFoundError:
+            return True
+        if stat.rsplit(")", 1)[1].split()[0] == "Z":
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_child_dies_when_the_harness_is_killed() -> None:
+    script = (
+        "import subprocess\n"
+        "from rendiff_harness.children import die_with_parent\n"
+        "p = subprocess.Popen(['sleep', '600'], preexec_fn=die_with_parent)\n"
+        "print(p.pid, flush=True)\n"
+        "p.wait()\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(HARNESS))
+    harness = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, env=env)
+    assert harness.stdout is not None
+    child = int(harness.stdout.readline())
+    harness.kill()  # SIGKILL: no handler runs
+    harness.wait()
+    assert _gone(child, 5.0), f"process {child} outlived the harness that started it"
+
+
+def test_povray_runs_in_the_harness_group_and_dies_with_it(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    seen: dict[str, Any] = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_popen(cmd: list[str], **kw: Any) -> None:
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr(povray.subprocess, "Popen", fake_popen)
+    cam = cast(povray.Camera, SimpleNamespace(width=4, height=4))  # _run reads only the size
+    with pytest.raises(Stop):
+        povray._run("povray", tmp_path, cam, "t", "// sdl", time.monotonic() + 60, 60.0)
+    # A new session or group would put POV-Ray out of reach of rendiff's group kill.
+    assert not seen.get("start_new_session")
+    assert seen.get("process_group") is None
+    assert seen.get("preexec_fn") is die_with_parent

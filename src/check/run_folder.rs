@@ -1,0 +1,247 @@
+//! Atomic run folders. A `check` renders into a fresh staging folder beside
+//! the run folder and swaps it into place only once results.json is written,
+//! so a run folder holds one finished run or is marked incomplete: an
+//! interrupted or failed `check` never leaves old verdicts beside new buffers
+//! for `gate` to pass (docs/run-format.md, "Incomplete runs").
+//!
+//! Order of events, and what an interruption at each step leaves:
+//! 1. `RUN/INCOMPLETE` is written: the previous run, if any, is now refused by
+//!    `gate`, `report` and `bless` (its verdicts no longer describe the
+//!    scenes a user just asked about).
+//! 2. Everything renders into `PARENT/.NAME.partial-PID/` (removed by the
+//!    signal handler, or by the next check if rendiff was SIGKILLed).
+//! 3. [`Staging::publish`] renames RUN away, renames the staging folder to
+//!    RUN (it has no marker) and removes the old one.
+
+use super::manifest::INCOMPLETE_MARKER;
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+/// A run being written: where it goes, where it is staged.
+pub struct Staging {
+    /// The folder the user named (`check -o`).
+    pub run_dir: PathBuf,
+    /// Where this run is written until it is published.
+    pub dir: PathBuf,
+    _guard: crate::shutdown::PathGuard,
+}
+
+/// A folder `check` may replace: missing, empty, or a rendiff run (it has a
+/// manifest.json or an incomplete-run marker). Anything else is refused, so
+/// `-o ~/Documents` cannot delete a user's files.
+fn replaceable(run_dir: &Path) -> Result<()> {
+    let meta = match std::fs::symlink_metadata(run_dir) {
+        Err(_) => return Ok(()),
+        Ok(m) => m,
+    };
+    if !meta.is_dir() {
+        bail!(
+            "{}: run folder exists and is not a folder; choose another -o",
+            run_dir.display()
+        );
+    }
+    let mut entries = std::fs::read_dir(run_dir)
+        .with_context(|| format!("{}: cannot list the run folder", run_dir.display()))?;
+    let empty = entries.next().is_none();
+    if empty || run_dir.join("manifest.json").is_file() || run_dir.join(INCOMPLETE_MARKER).is_file()
+    {
+        return Ok(());
+    }
+    bail!(
+        "{}: run folder exists but holds no rendiff run (no manifest.json); rendiff check replaces its run folder, so choose an empty or new -o",
+        run_dir.display()
+    )
+}
+
+fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
+    let name = run_dir
+        .file_name()
+        .with_context(|| format!("{}: not a folder name", run_dir.display()))?
+        .to_string_lossy()
+        .into_owned();
+    let parent = run_dir
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    Ok(parent.join(format!(".{name}.{what}-{}", std::process::id())))
+}
+
+/// Removes staging folders of this run folder left by a rendiff that was
+/// killed outright (its process id no longer runs).
+fn sweep_abandoned(run_dir: &Path) {
+    let (Some(parent), Some(name)) = (run_dir.parent(), run_dir.file_name()) else {
+        return;
+    };
+    let parent = if parent.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        parent
+    };
+    let prefixes = [
+        format!(".{}.partial-", name.to_string_lossy()),
+        format!(".{}.old-", name.to_string_lossy()),
+    ];
+    let Ok(list) = std::fs::read_dir(parent) else {
+        return;
+    };
+    for e in list.flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = prefixes
+            .iter()
+            .find_map(|p| file.strip_prefix(p.as_str()))
+            .and_then(|pid| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
+impl Staging {
+    /// Marks `run_dir` incomplete and creates a fresh staging folder for the run.
+    pub fn begin(run_dir: &Path) -> Result<Staging> {
+        replaceable(run_dir)?;
+        std::fs::create_dir_all(run_dir)
+            .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
+        let marker = run_dir.join(INCOMPLETE_MARKER);
+        std::fs::write(
+            &marker,
+            format!(
+                "rendiff check (process {}) started writing this run and has not finished it\n",
+                std::process::id()
+            ),
+        )
+        .with_context(|| format!("{}: cannot mark the run incomplete", marker.display()))?;
+        sweep_abandoned(run_dir);
+        let dir = sibling(run_dir, "partial")?;
+        let _ = std::fs::remove_dir_all(&dir);
+        let guard = crate::shutdown::track_path(&dir);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create staging folder", dir.display()))?;
+        Ok(Staging {
+            run_dir: run_dir.to_path_buf(),
+            dir,
+            _guard: guard,
+        })
+    }
+
+    /// Puts the finished run in place of the old one.
+    pub fn publish(self) -> Result<()> {
+        let old = sibling(&self.run_dir, "old")?;
+        let _old_guard = crate::shutdown::track_path(&old);
+        std::fs::rename(&self.run_dir, &old).with_context(|| {
+            format!(
+                "{}: cannot move the previous run aside",
+                self.run_dir.display()
+            )
+        })?;
+        std::fs::rename(&self.dir, &self.run_dir).with_context(|| {
+            format!(
+                "{}: cannot move the finished run into place from {}",
+                self.run_dir.display(),
+                self.dir.display()
+            )
+        })?;
+        let _ = std::fs::remove_dir_all(&old);
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    /// A run that was not published leaves no staging folder behind (the
+    /// run folder keeps its marker).
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Refuses a run folder whose run did not finish (`INCOMPLETE` present): what
+/// `gate`, `report` and `bless` call before reading anything.
+pub fn ensure_complete(run_dir: &Path) -> Result<()> {
+    let marker = run_dir.join(INCOMPLETE_MARKER);
+    if marker.exists() {
+        let why = std::fs::read_to_string(&marker).unwrap_or_default();
+        bail!(
+            "{}: incomplete run ({}); its verdicts are not trustworthy: run rendiff check again",
+            run_dir.display(),
+            crate::scene::printable(why.trim(), 200)
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn finished_run(dir: &Path) {
+        std::fs::create_dir_all(dir.join("scenes/a")).unwrap();
+        std::fs::write(dir.join("manifest.json"), "{}").unwrap();
+        std::fs::write(dir.join("results.json"), "{}").unwrap();
+        std::fs::write(dir.join("scenes/a/trace.exr"), "old").unwrap();
+    }
+
+    #[test]
+    fn an_unpublished_run_is_marked_incomplete_and_leaves_no_staging() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        ensure_complete(&run).unwrap();
+        let staged = {
+            let s = Staging::begin(&run).unwrap();
+            std::fs::write(s.dir.join("manifest.json"), "{}").unwrap();
+            s.dir.clone()
+        }; // dropped: the check failed or was interrupted
+        assert!(!staged.exists(), "staging folder left behind");
+        let err = ensure_complete(&run).unwrap_err().to_string();
+        assert!(err.contains("incomplete run"), "{err}");
+        assert_eq!(
+            std::fs::read_dir(t.path()).unwrap().count(),
+            1,
+            "only the run folder remains"
+        );
+    }
+
+    #[test]
+    fn a_published_run_replaces_the_old_one_entirely() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let s = Staging::begin(&run).unwrap();
+        std::fs::write(s.dir.join("manifest.json"), "{\"new\":1}").unwrap();
+        s.publish().unwrap();
+        ensure_complete(&run).unwrap();
+        assert!(!run.join("scenes/a/trace.exr").exists(), "old buffer kept");
+        assert_eq!(
+            std::fs::read_to_string(run.join("manifest.json")).unwrap(),
+            "{\"new\":1}"
+        );
+        assert_eq!(std::fs::read_dir(t.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_folder_that_is_no_run_is_never_replaced() {
+        let t = tempfile::tempdir().unwrap();
+        let docs = t.path().join("docs");
+        std::fs::create_dir_all(&docs).unwrap();
+        std::fs::write(docs.join("thesis.tex"), "precious").unwrap();
+        let err = Staging::begin(&docs).err().unwrap().to_string();
+        assert!(err.contains("holds no rendiff run"), "{err}");
+        assert!(docs.join("thesis.tex").exists());
+        assert!(!docs.join(INCOMPLETE_MARKER).exists());
+    }
+
+    #[test]
+    fn staging_left_by_a_killed_check_is_swept() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        // No process has pid 4194304 (above Linux's pid_max limit).
+        let dead = t.path().join(".latest.partial-4194304");
+        std::fs::create_dir_all(&dead).unwrap();
+        let s = Staging::begin(&run).unwrap();
+        assert!(!dead.exists());
+        s.publish().unwrap();
+    }
+}

@@ -1,0 +1,164 @@
+//! Clean shutdown on SIGINT, SIGTERM and SIGHUP (what a terminal, `timeout`
+//! and CI runners send). rendiff starts renderers in process groups of their
+//! own, so a signal aimed at rendiff's group no longer reaches them: without
+//! this, an interrupted `check` would leave POV-Ray or the harness running and
+//! a half-written EXR or a staging folder on disk.
+//!
+//! Every child process group and every temporary path is registered here while
+//! it lives (a guard deregisters it). On a signal, a watcher thread kills the
+//! registered groups, removes the registered paths, says so in one line and
+//! exits with 128 + the signal number. Children are also started with
+//! `PR_SET_PDEATHSIG` (see [`die_with_parent`]), so even a SIGKILL of rendiff,
+//! which no handler sees, takes its direct children with it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+static GROUPS: Mutex<Vec<i32>> = Mutex::new(Vec::new());
+static PATHS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Keeps a child's process group registered for [`install`]'s handler; drop
+/// it once the child has been waited for.
+#[must_use = "the group is deregistered when the guard drops"]
+pub struct GroupGuard(i32);
+
+impl Drop for GroupGuard {
+    fn drop(&mut self) {
+        let mut g = GROUPS.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = g.iter().position(|&p| p == self.0) {
+            g.swap_remove(i);
+        }
+    }
+}
+
+/// Registers the process group `pgid` (a child started with `process_group(0)`,
+/// whose pid is its group id) to be killed if rendiff is interrupted.
+pub fn track_group(pgid: u32) -> GroupGuard {
+    let id = pgid as i32;
+    GROUPS.lock().unwrap_or_else(|e| e.into_inner()).push(id);
+    GroupGuard(id)
+}
+
+/// Keeps a temporary file or folder registered for removal on interruption;
+/// dropping the guard only deregisters it (the path is then either renamed
+/// into place or removed by its owner).
+#[must_use = "the path is deregistered when the guard drops"]
+pub struct PathGuard(PathBuf);
+
+impl Drop for PathGuard {
+    fn drop(&mut self) {
+        let mut p = PATHS.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = p.iter().position(|x| *x == self.0) {
+            p.swap_remove(i);
+        }
+    }
+}
+
+/// Registers a temporary path (file or folder) to be removed on interruption.
+pub fn track_path(path: &Path) -> PathGuard {
+    PATHS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push(path.to_path_buf());
+    PathGuard(path.to_path_buf())
+}
+
+/// Starts the watcher thread. Called once by `main`; library users (tests)
+/// keep the default signal behaviour. An error means the signals could not be
+/// hooked, which is reported but never stops a command.
+pub fn install() -> std::io::Result<()> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])?;
+    std::thread::Builder::new()
+        .name("rendiff-shutdown".into())
+        .spawn(move || {
+            if let Some(sig) = signals.forever().next() {
+                let (groups, paths) = clean_up();
+                eprintln!(
+                    "rendiff: interrupted by {}: killed {groups} child process group(s), removed {paths} temporary file(s) or folder(s)",
+                    crate::check::process::signal_name(sig)
+                );
+                std::process::exit(128 + sig);
+            }
+        })?;
+    Ok(())
+}
+
+/// Kills every registered group and removes every registered path; returns
+/// how many of each. Paths are removed twice: a folder being written into can
+/// get a new entry between the first removal and the exit.
+fn clean_up() -> (usize, usize) {
+    let groups: Vec<i32> = GROUPS.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    for &g in &groups {
+        kill_group(g);
+    }
+    let paths: Vec<PathBuf> = PATHS.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    for _ in 0..2 {
+        for p in &paths {
+            remove_path(p);
+        }
+    }
+    (groups.len(), paths.len())
+}
+
+fn remove_path(p: &Path) {
+    match std::fs::symlink_metadata(p) {
+        Ok(m) if m.is_dir() => {
+            let _ = std::fs::remove_dir_all(p);
+        }
+        Ok(_) => {
+            let _ = std::fs::remove_file(p);
+        }
+        Err(_) => {}
+    }
+}
+
+/// SIGKILL to a whole process group (the renderer and whatever it forked).
+pub fn kill_group(pgid: i32) {
+    #[cfg(unix)]
+    // SAFETY: kill(2) with a negative pid signals that process group; no memory is touched.
+    unsafe {
+        libc::kill(-pgid, libc::SIGKILL);
+    }
+    #[cfg(not(unix))]
+    let _ = pgid;
+}
+
+/// Makes a child about to be started (a `pre_exec` hook) die with SIGKILL when
+/// the rendiff thread that started it ends, which covers a SIGKILL of rendiff
+/// itself. Linux only; elsewhere a no-op.
+pub fn die_with_parent(cmd: &mut std::process::Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: prctl(2) is async-signal-safe and touches no memory of the parent.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                Ok(())
+            });
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = cmd;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn guards_deregister_what_they_registered() {
+        let p = std::env::temp_dir().join(format!("rendiff-shutdown-test-{}", std::process::id()));
+        {
+            let _g = track_path(&p);
+            assert!(PATHS.lock().unwrap().contains(&p));
+        }
+        assert!(!PATHS.lock().unwrap().contains(&p));
+        {
+            let _g = track_group(999_999);
+            assert!(GROUPS.lock().unwrap().contains(&999_999));
+        }
+        assert!(!GROUPS.lock().unwrap().contains(&999_999));
+    }
+}
