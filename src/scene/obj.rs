@@ -81,6 +81,78 @@ pub fn count_face_triangles(text: &str) -> u64 {
         .sum()
 }
 
+/// The first line that explains tobj's error, with its 1-based number: tobj
+/// names the problem but not where it is, and a user with a 50 MB scan needs
+/// the line. Only the error kinds a line can show are located (a number that
+/// does not parse, a face with fewer than three corners or an index out of
+/// range); `None` when no line shows the problem the way tobj saw it.
+fn offending_line<'a>(text: &'a str, err: &tobj::LoadError) -> Option<(usize, &'a str)> {
+    use tobj::LoadError as E;
+    let floats = |rest: &str, min: usize| {
+        let v: Vec<&str> = rest.split_whitespace().collect();
+        v.len() < min || v.iter().any(|t| t.parse::<f32>().is_err())
+    };
+    // Vertex counts of the whole file: tobj resolves indices against them.
+    let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
+    for l in text.lines() {
+        match l.split_whitespace().next() {
+            Some("v") => nv += 1,
+            Some("vt") => nvt += 1,
+            Some("vn") => nvn += 1,
+            _ => {}
+        }
+    }
+    let (mut sv, mut svt, mut svn) = (0i64, 0i64, 0i64);
+    let bad_index = |t: &str, seen: i64, total: i64| match t.parse::<i64>() {
+        Ok(i) if i > 0 => i > total,
+        Ok(i) if i < 0 => -i > seen,
+        _ => true,
+    };
+    for (n, l) in text.lines().enumerate() {
+        let mut words = l.split_whitespace();
+        let key = words.next();
+        let rest = l.trim_start().get(key.map_or(0, str::len)..).unwrap_or("");
+        let hit = match (key, err) {
+            (Some("v"), E::PositionParseError) => floats(rest, 3),
+            (Some("vn"), E::NormalParseError) => floats(rest, 3),
+            (Some("vt"), E::TexcoordParseError) => floats(rest, 1),
+            (Some("f"), E::FaceParseError | E::InvalidPolygon) => {
+                let corners: Vec<&str> = rest.split_whitespace().collect();
+                corners.len() < 3
+                    || corners.iter().any(|c| {
+                        c.split('/')
+                            .next()
+                            .is_none_or(|i| i.parse::<i64>().is_err())
+                    })
+            }
+            (Some("f"), E::FaceVertexOutOfBounds) => rest
+                .split_whitespace()
+                .any(|c| bad_index(c.split('/').next().unwrap_or(""), sv, nv)),
+            (Some("f"), E::FaceTexCoordOutOfBounds) => rest.split_whitespace().any(|c| {
+                c.split('/')
+                    .nth(1)
+                    .is_some_and(|t| !t.is_empty() && bad_index(t, svt, nvt))
+            }),
+            (Some("f"), E::FaceNormalOutOfBounds) => rest.split_whitespace().any(|c| {
+                c.split('/')
+                    .nth(2)
+                    .is_some_and(|t| !t.is_empty() && bad_index(t, svn, nvn))
+            }),
+            _ => false,
+        };
+        if hit {
+            return Some((n + 1, l));
+        }
+        match key {
+            Some("v") => sv += 1,
+            Some("vt") => svt += 1,
+            Some("vn") => svn += 1,
+            _ => {}
+        }
+    }
+    None
+}
+
 /// Loads an OBJ file as its `o`/`g` groups (tobj models), in file order; each
 /// group's polygons are fan-triangulated in file order. Groups without faces
 /// (only points or lines) are left out; a file with no faces at all is an error.
@@ -117,9 +189,14 @@ pub fn load_obj(mesh: &Path, field: &str, budget: u64) -> Result<Vec<ObjGroup>, 
     let parsed = tobj::load_obj_buf(&mut text.as_bytes(), &opts, |_| {
         Err(tobj::LoadError::OpenFileFailed)
     });
+    let (models, _materials) = parsed.map_err(|e| {
+        let at = match offending_line(&text, &e) {
+            Some((n, line)) => format!(" at line {n}: {}", super::printable(line.trim(), 80)),
+            None => String::new(),
+        };
+        SceneError::new(mesh, field, format!("cannot parse OBJ mesh: {e}{at}"))
+    })?;
     drop(text);
-    let (models, _materials) =
-        parsed.map_err(|e| SceneError::new(mesh, field, format!("cannot parse OBJ mesh: {e}")))?;
     let mut out = Vec::new();
     for model in &models {
         let m = &model.mesh;
@@ -177,6 +254,35 @@ mod tests {
         let p = dir.join(format!("{name}.obj"));
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    #[test]
+    fn parse_errors_name_the_line() {
+        let cases = [
+            (
+                "bad_position",
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 x 0\nf 1 2 3\n",
+                "line 4: v 1 x 0",
+            ),
+            (
+                "out_of_range",
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n",
+                "line 5: f 1 2 9",
+            ),
+            (
+                "bad_normal",
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0\nf 1 2 3\n",
+                "line 4: vn 0 0",
+            ),
+        ];
+        for (name, text, want) in cases {
+            let e = load_obj(&write_obj(name, text), "objects[0].mesh", u64::MAX)
+                .err()
+                .unwrap_or_else(|| panic!("{name}: loaded"))
+                .to_string();
+            assert!(e.contains(want), "{name}: {e}");
+            assert_eq!(e.lines().count(), 1, "{e}");
+        }
     }
 
     #[test]
