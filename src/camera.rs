@@ -1,4 +1,4 @@
-//! The pinhole camera of DESIGN.md: pixel centers, row 0 at the top, planar depth.
+//! The pinhole camera of docs/DESIGN.md: pixel centers, row 0 at the top, planar depth.
 //!
 //! Both visibility loops get their pixel rays from [`Camera::pixel_ray`], the one
 //! place where a pixel becomes a ray, so they cannot disagree on it.
@@ -149,7 +149,7 @@ impl Camera {
         })
     }
 
-    /// Screen coordinates `(sx, sy)` of pixel `(x, y)`'s center (DESIGN.md formula).
+    /// Screen coordinates `(sx, sy)` of pixel `(x, y)`'s center (docs/DESIGN.md formula).
     #[inline]
     pub fn screen(&self, x: u32, y: u32) -> (f64, f64) {
         (self.screen_x(x), self.screen_y(y))

@@ -14,7 +14,7 @@ use exr::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// The buffers of DESIGN.md in the order `diff` reports them; other channels follow, sorted.
+/// The buffers of docs/DESIGN.md in the order `diff` reports them; other channels follow, sorted.
 pub const KNOWN_BUFFERS: &[&str] = &[
     "id.prim",
     "id.object",
@@ -297,7 +297,7 @@ fn compare_buffer(name: &str, x: &Samples, y: &Samples, width: usize) -> BufferD
     }
 }
 
-/// The order buffers are reported in: DESIGN.md's first, then the rest by name.
+/// The order buffers are reported in: docs/DESIGN.md's first, then the rest by name.
 fn order(name: &str) -> (usize, &str) {
     (
         KNOWN_BUFFERS

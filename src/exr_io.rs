@@ -1,4 +1,4 @@
-//! DESIGN.md's buffer files: one OpenEXR per render with `Z` (f32), `id.prim`
+//! docs/DESIGN.md's buffer files: one OpenEXR per render with `Z` (f32), `id.prim`
 //! and `id.object` (u32) and `N.x N.y N.z` (f32), written atomically, with the
 //! render's metadata (operation counts, timings) as text attributes.
 
@@ -134,7 +134,7 @@ pub struct Buffers {
     pub attrs: BTreeMap<String, String>,
 }
 
-/// Reads the DESIGN.md channels of an EXR; IDs must be stored as uint.
+/// Reads the docs/DESIGN.md channels of an EXR; IDs must be stored as uint.
 pub fn read_buffers(path: &Path) -> Result<Buffers> {
     if !path.exists() {
         bail!("{}: file not found", path.display());

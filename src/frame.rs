@@ -1,4 +1,4 @@
-//! The buffers one render produces (DESIGN.md "Buffers"), plus its operation counts.
+//! The buffers one render produces (docs/DESIGN.md "Buffers"), plus its operation counts.
 
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{geometric_normal, key_depth, key_prim, Counters, NO_HIT};

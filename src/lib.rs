@@ -2,7 +2,7 @@
 //!
 //! The core renders visibility two ways, [`raster`] (outer loop over
 //! triangles) and [`trace`] (outer loop over pixels), through one shared
-//! definition in [`visibility`], and writes DESIGN.md's buffers ([`exr_io`]).
+//! definition in [`visibility`], and writes docs/DESIGN.md's buffers ([`exr_io`]).
 //! See ARCHITECTURE.md for who owns what.
 
 pub mod backends;

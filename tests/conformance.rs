@@ -39,7 +39,7 @@ fn main() {
             references: Some(root.join("tests/references")),
             core: check::CoreShading::default(),
             // The probes, as in every `rendiff check`: conformance is where each
-            // backend's camera is measured against DESIGN.md, and the run it
+            // backend's camera is measured against docs/DESIGN.md, and the run it
             // leaves is what `rendiff gate` holds against the baseline.
             calibration: Some(root.join("scenes/calibration")),
         };

@@ -1,4 +1,4 @@
-"""Camera calibration: where does each backend really sample its pixels? (DESIGN.md "Comparing").
+"""Camera calibration: where does each backend really sample its pixels? (docs/DESIGN.md "Comparing").
 
 Entry point (the only one): `calibrate_run(run, manifest, scenes=None) -> CalibrationReport`.
 It reads the probe scenes of a `rendiff check` run (manifest scenes with
@@ -16,7 +16,7 @@ How it measures (docs/calibration.md has the derivations)
 ---------------------------------------------------------
 A probe scene shows planes tilted every way, none touching another or the image border.
 On a plane with unit normal n through a point P, the planar depth Z along the
-unnormalized ray d = f + sx r + sy u (DESIGN.md) satisfies
+unnormalized ray d = f + sx r + sy u (docs/DESIGN.md) satisfies
 
     h / Z = n.d = n.f + (n.r) sx + (n.u) sy,        h = n.(P - eye),
 

@@ -1,4 +1,4 @@
-"""Edge / interior geometry for ID mismatches (DESIGN.md "Comparing").
+"""Edge / interior geometry for ID mismatches (docs/DESIGN.md "Comparing").
 
 An ID mismatch is an *edge* mismatch when the pixel center lies within the renderer's
 own rounding distance of an edge of a triangle involved (the reference's prim or the

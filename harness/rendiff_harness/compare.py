@@ -7,7 +7,7 @@ prints a compact table. The Rust side decides pass/fail from results.json, so th
 0 whenever it could write results; 2 when the manifest (or the expectations file, or
 results.json itself) cannot be read/written, with one line naming the file.
 
-What is compared (DESIGN.md "Comparing"):
+What is compared (docs/DESIGN.md "Comparing"):
 
 * `id`: id.prim read exactly as u32. A mismatch is a pixel whose prim differs
   (background 0xFFFFFFFF is a value). Each mismatch is *edge* when the pixel center lies

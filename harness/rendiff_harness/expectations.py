@@ -1,6 +1,6 @@
 """The expectations file: known renderer bugs and per-backend declarations, each with a reason.
 
-DESIGN.md "Comparing": allowed classes (edge, tie; crack where declared) pass without any
+docs/DESIGN.md "Comparing": allowed classes (edge, tie; crack where declared) pass without any
 entry, and their counts are held by the regression gate, not here. This file keeps only
 
 * known bugs: `[[expect]]` with `status = "expected_fail"` and a reason that says what

@@ -1,4 +1,4 @@
-"""Read and write the buffer EXRs of DESIGN.md ("Buffers", docs/resolved-scene.md).
+"""Read and write the buffer EXRs of docs/DESIGN.md ("Buffers", docs/resolved-scene.md).
 
 Layout: one single-part scanline EXR per (scene, renderer) with channels
 `Z` (f32 planar depth, +inf = background), `id.prim` / `id.object` (u32,
@@ -59,7 +59,7 @@ AttrValue = str | float | int
 
 
 class BufferError(builtins.BufferError):
-    """A buffer file that cannot be written or read as DESIGN.md specifies.
+    """A buffer file that cannot be written or read as docs/DESIGN.md specifies.
 
     Subclasses the builtin of the same name so that `except BufferError` works
     whether or not the caller imported this one. The message starts with the path.

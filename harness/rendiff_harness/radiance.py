@@ -1,6 +1,6 @@
 """Radiance comparison (the `RGB` buffer): deterministic tolerances or a statistical test.
 
-docs/radiance.md "Comparison" and DESIGN.md "Comparing". Which test applies is decided
+docs/radiance.md "Comparison" and docs/DESIGN.md "Comparing". Which test applies is decided
 by the files, never by the scene name:
 
 Deterministic (no var.* channels on either side: local shading at pixel centers)

@@ -23,7 +23,7 @@ class SceneError(Exception):
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole camera exactly as DESIGN.md defines it (pixel centers, row 0 on top)."""
+    """Pinhole camera exactly as docs/DESIGN.md defines it (pixel centers, row 0 on top)."""
 
     eye: np.ndarray
     look_at: np.ndarray

@@ -1,7 +1,7 @@
 """Per-backend precision models: how far a renderer may legitimately differ from the reference.
 
 Two numbers per backend, both derived from what the renderer computes in
-(/work/shared/notes/external-renderers.md, DESIGN.md "Comparing"):
+(docs/external-renderers.md, docs/DESIGN.md "Comparing"):
 
 * `edge_px`: an ID mismatch is an *edge* mismatch when the pixel center lies within
   this many pixels of an edge of one of the triangles involved (classify.py). Inside
@@ -192,7 +192,7 @@ def _position(ctx: DepthContext, position: PositionError) -> np.ndarray:
 
 
 def exact_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
-    """The rendiff loops share one depth function (DESIGN.md): equal inputs give equal bits."""
+    """The rendiff loops share one depth function (docs/DESIGN.md): equal inputs give equal bits."""
     return np.zeros_like(ctx.z_ref), "exact: Z must be bit-identical (one shared depth function)"
 
 

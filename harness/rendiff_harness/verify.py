@@ -1,4 +1,4 @@
-"""The verifier: one class for every ID mismatch, from the geometry (DESIGN.md "Comparing").
+"""The verifier: one class for every ID mismatch, from the geometry (docs/DESIGN.md "Comparing").
 
 A result passes when every pixel is one the conventions allow, judged at the test
 renderer's own precision (the Khronos CTS rasterization verifier's rule). For a pixel

@@ -2,7 +2,7 @@
 
 `cast` is a pixel-center ray cast.
 
-It follows DESIGN.md literally (one ray through each pixel center, planar depth, nearest
+It follows docs/DESIGN.md literally (one ray through each pixel center, planar depth, nearest
 wins, equal depth -> lower prim_id, no culling, zero-area never visible) but shares no
 code with any backend or with the Rust core. Coverage is decided in float64 on the
 projected triangle (equivalent in sign to the 3-D orientation test for geometry in front

@@ -11,7 +11,7 @@
 //! point returns [`EmbreeError::Unavailable`] and the caller reports the
 //! backend as *skipped*.
 //!
-//! Conventions (DESIGN.md):
+//! Conventions (docs/DESIGN.md):
 //! - The ray of pixel (x, y) has origin `eye` and direction `D` of
 //!   [`PixelRay`], both rounded to f32 (Embree's precision). Planar depth of a
 //!   hit at ray parameter `t` is `(o32 - eye)·f + t·(D32·f)`, evaluated in f64
@@ -413,7 +413,7 @@ impl Device {
         };
         if culling != 0 {
             return Err(EmbreeError::Failed(
-                "this libembree3 was built with back-face culling, which DESIGN.md forbids".into(),
+                "this libembree3 was built with back-face culling, which docs/DESIGN.md forbids".into(),
             ));
         }
         device.check("rtcNewDevice")?;

@@ -1,5 +1,5 @@
 //! `rendiff bench knobs`: every knob that trades time for accuracy, measured
-//! in one run against one reference per scene (DESIGN.md "Speed versus
+//! in one run against one reference per scene (docs/DESIGN.md "Speed versus
 //! accuracy"), as time-vs-error groups with their Pareto fronts.
 //!
 //! - Visibility (per scene; reference: the core raster with exact predicates,

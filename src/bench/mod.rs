@@ -1,4 +1,4 @@
-//! `rendiff bench`: speed measured against accuracy (DESIGN.md "Speed versus
+//! `rendiff bench`: speed measured against accuracy (docs/DESIGN.md "Speed versus
 //! accuracy"), in one run per question, written as JSON plus an HTML page with
 //! SVG plots under `reports/bench/`.
 //!

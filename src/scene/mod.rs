@@ -80,7 +80,7 @@ pub fn printable(text: &str, max_chars: usize) -> String {
 
 impl std::error::Error for SceneError {}
 
-/// Scene features a renderer may or may not model (DESIGN.md "Scene").
+/// Scene features a renderer may or may not model (docs/DESIGN.md "Scene").
 /// A backend runs a scene only if it models every feature the scene requires.
 pub const KNOWN_FEATURES: &[&str] = &[
     "depth",
@@ -153,7 +153,7 @@ impl Default for IntegratorSpec {
     }
 }
 
-/// Pinhole camera as DESIGN.md defines it.
+/// Pinhole camera as docs/DESIGN.md defines it.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {

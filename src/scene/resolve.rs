@@ -28,7 +28,7 @@ pub struct ObjectInfo {
     pub prim_count: u32,
 }
 
-/// A resolved material (see DESIGN.md: albedo and emission).
+/// A resolved material (see docs/DESIGN.md: albedo and emission).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Material {
     /// Name from the scene file (untrusted text).

@@ -16,12 +16,12 @@ Conventions and their translation (external-renderers notes, re-verified by the 
   (measured on the calibration probe camera_far, 2.5e4 from the origin: turned by
   5e-4 rad, pixel centers offset by (0.036, 0.014) px, 37 times Mitsuba's own rounding;
   now (4e-6, -3e-6) px; docs/calibration.md). Mitsuba's film has row 0 at the top and x to the
-  right, as in DESIGN.md.
+  right, as in docs/DESIGN.md.
 * Pixel centers: `stratified` sampler with `sample_count: 1, jitter: False` and a `box`
   reconstruction filter put the single sample at the pixel center with weight 1. Every
   other sampler jitters, even at 1 spp.
 * Depth: camera rays start on the near plane, and the `depth` AOV is the ray distance
-  from there, along the *normalized* direction. With DESIGN.md's unnormalized pixel
+  from there, along the *normalized* direction. With docs/DESIGN.md's unnormalized pixel
   direction d (forward component 1), cos(theta) = 1/|d|, so
   Z = depth / |d| + near_clip (done in float64). A miss writes depth 0 -> Z = +inf.
 * Normals: `geo_normal` is Mitsuba's face normal normalize((b - a) x (c - a)), in world
@@ -242,7 +242,7 @@ def build_mesh(mi: ModuleType, scene: ResolvedScene) -> Any:
 
 
 def camera_to_world(cam: Camera) -> np.ndarray:
-    """Mitsuba's camera-to-world matrix (4x4 float64) for the DESIGN.md camera.
+    """Mitsuba's camera-to-world matrix (4x4 float64) for the docs/DESIGN.md camera.
 
     Mitsuba's camera space looks along +z with +y up and +x to the *left* of the image
     (its `look_at` uses normalize(cross(up, dir)), i.e. -right), so the columns are

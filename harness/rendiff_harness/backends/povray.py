@@ -1,6 +1,6 @@
 """POV-Ray 3.7 backend: resolved scene -> SDL -> `povray` CLI -> 16-bit PNGs -> buffer EXR.
 
-Everything here follows /work/shared/notes/external-renderers.md ("POV-Ray 3.7"):
+Everything here follows docs/external-renderers.md ("POV-Ray 3.7"):
 
 * Security: Debian's POV-Ray ignores povray.conf I/O restrictions, so SDL is a
   program with full file access. The SDL below is built only from numbers this
@@ -186,11 +186,11 @@ def _vec(v: np.ndarray | tuple[float, float, float]) -> str:
 
 
 def camera_sdl(cam: Camera) -> str:
-    """Pinhole through pixel centers with DESIGN.md's basis, used as-is (right-handed).
+    """Pinhole through pixel centers with docs/DESIGN.md's basis, used as-is (right-handed).
 
     POV-Ray shoots direction + x0*right + y0*up with x0, y0 in [-0.5, 0.5] at pixel
     centers; with |direction| = 0.5/tan(vfov/2) and right = r*W/H this is exactly
-    DESIGN.md's (sx, sy). Handedness only matters for POV's look_at/sky helpers,
+    docs/DESIGN.md's (sx, sy). Handedness only matters for POV's look_at/sky helpers,
     which are not used: an explicit `right` pointing right keeps the image unmirrored.
     """
     direction = cam.forward * (0.5 / cam.tan_half_vfov)

@@ -9,7 +9,7 @@ Conventions and their translation (docs/external-renderers notes, re-measured he
   here: `msaa_support()` measures why (recorded in the info dict and by `bench knobs`).
 * Camera: OpenGL `look_at` pose (columns right, up, -forward, eye) with
   `PerspectiveCamera(yfov = 2 atan(tan_half_vfov), aspectRatio = W/H)` puts GL's pixel
-  centers on DESIGN.md's pixel centers. pyrender flips its read-back so row 0 is the top.
+  centers on docs/DESIGN.md's pixel centers. pyrender flips its read-back so row 0 is the top.
 * IDs: every triangle gets its own three vertices, coloured with the uint8 RGB of
   (prim_id + 1), little end first (R = low byte); rendered with FLAT (no lighting, no gamma)
   and SKIP_CULL_FACES. Black = background. 24 bits limit a scene to 2^24 - 1 triangles.

@@ -299,7 +299,7 @@ transform = {{ translate = {} }}
 /// vertex lies exactly on it), seen from a fixed relative eye, all moved by
 /// `off`: a base quad (ids 0, 1), an overlapping quad with different vertices
 /// (2, 3) and one triangle twice (4, 5), each partly outside the others. Equal
-/// depth goes to the lower id (DESIGN.md), so the truth is the lowest covering id.
+/// depth goes to the lower id (docs/DESIGN.md), so the truth is the lowest covering id.
 pub fn coplanar_scene(off: [f64; 3]) -> String {
     let p = |x: f64, y: f64| v3(add(off, [x, y, x / 4.0 + y / 8.0]));
     let quad = |x0: f64, y0: f64, x1: f64, y1: f64| {
