@@ -11,4 +11,4 @@ scripts/setup.sh
 echo "==> Python harness tests"
 (cd harness && ../.venv/bin/python -m pytest -q tests)
 echo "==> cargo test"
-cargo test --all-targets "$@"
+cargo test --workspace --all-targets "$@"

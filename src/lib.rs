@@ -1,28 +1,25 @@
 //! rendiff: a differential-testing harness for renderers.
 //!
-//! The core renders visibility two ways, [`raster`] (outer loop over
-//! triangles) and [`trace`] (outer loop over pixels), through one shared
-//! definition in [`visibility`], and writes docs/DESIGN.md's buffers ([`exr_io`]).
-//! See ARCHITECTURE.md for who owns what.
+//! The renderer core lives in the `rendiff-core` crate (re-exported here
+//! under the same module names, so `rendiff::raster` and `rendiff::trace`
+//! are the core's loops); this crate is the tool around it: the command line,
+//! [`check`] (every backend on every scene, external processes), [`report`],
+//! [`gate`] and the benchmarks ([`bench`]). See ARCHITECTURE.md for who owns
+//! what.
 
-pub mod backends;
+pub use rendiff_core::{
+    backends, camera, deadline, exr_io, frame, names, pending, predicate, raster, scene, shade,
+    trace, visibility,
+};
+
 pub mod bench;
-pub mod camera;
 pub mod check;
 pub mod diff;
-pub mod exr_io;
-pub mod frame;
 pub mod gate;
-pub mod predicate;
 pub mod preview;
 pub mod progress;
-pub mod raster;
 pub mod report;
-pub mod scene;
-pub mod shade;
 pub mod shutdown;
-pub mod trace;
-pub mod visibility;
 
 /// Depth comparison statistics (the `diff` command and tests).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

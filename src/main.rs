@@ -5,6 +5,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rendiff::exr_io::{frame_attrs, write_frame_with};
 use rendiff::frame::Frame;
+use rendiff::names::Named;
 use rendiff::progress::LazyProgress;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
@@ -54,10 +55,10 @@ enum Command {
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// BVH build quality for the tracer.
-        #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
+        #[arg(long, value_parser = named::<BvhQuality>(), default_value = "medium")]
         bvh: BvhQuality,
         /// How the tracer's pixel rays walk the BVH (same buffers either way).
-        #[arg(long, value_enum, default_value_t = trace::TraceKernel::Packets)]
+        #[arg(long, value_parser = named::<trace::TraceKernel>(), default_value = "packets")]
         kernel: trace::TraceKernel,
         /// Skip the PNG previews.
         #[arg(long)]
@@ -72,7 +73,7 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Deliberately wrong shading, for testing the statistical gate's power.
-        #[arg(long, value_enum, hide = true)]
+        #[arg(long, value_parser = named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
     },
     /// List scenes in a folder with the features they require.
@@ -124,7 +125,7 @@ enum Command {
         #[arg(long, value_parser = parse_spp)]
         spp: Option<u32>,
         /// Deliberately wrong core shading, for testing the statistical gate's power.
-        #[arg(long, value_enum, hide = true)]
+        #[arg(long, value_parser = named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
         /// Folder of camera calibration probe scenes, rendered first on every backend.
         #[arg(long, default_value = "scenes/calibration")]
@@ -156,7 +157,7 @@ enum Command {
         #[arg(long, default_value_t = 3)]
         runs: usize,
         /// BVH build quality.
-        #[arg(long, value_enum, default_value_t = BvhQuality::Medium)]
+        #[arg(long, value_parser = named::<BvhQuality>(), default_value = "medium")]
         bvh: BvhQuality,
         /// Output JSON file.
         #[arg(short, long, default_value = "reports/bench/core.json")]
@@ -215,6 +216,14 @@ enum Command {
         #[arg(long)]
         allow_scene_changes: bool,
     },
+}
+
+/// A clap parser for a core enum: its names are the core's ([`Named`]), so the
+/// core needs no command-line library and each name is written once.
+fn named<T: Named + Clone>() -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(T::ALL.iter().map(|v| v.name()))
+        .map(|s| T::from_name(&s).expect("clap accepted only listed names"))
 }
 
 fn main() -> ExitCode {

@@ -51,11 +51,3 @@ impl LazyProgress {
         self.bar.finish_and_clear();
     }
 }
-
-/// True once `deadline` has passed. The core's loops call it once per tile,
-/// row or pixel and skip the rest of their work when it is true, so `check
-/// --timeout` bounds the core's own renders as it bounds external ones (the
-/// caller then discards the partial frame). `None` never expires.
-pub fn past(deadline: Option<Instant>) -> bool {
-    deadline.is_some_and(|d| Instant::now() >= d)
-}

@@ -11,11 +11,9 @@
 //! `PR_SET_PDEATHSIG` (see [`die_with_parent`]), so even a SIGKILL of rendiff,
 //! which no handler sees, takes its direct children with it.
 
-use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 static GROUPS: Mutex<Vec<i32>> = Mutex::new(Vec::new());
-static PATHS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// Keeps a child's process group registered for [`install`]'s handler; drop
 /// it once the child has been waited for.
@@ -39,29 +37,7 @@ pub fn track_group(pgid: u32) -> GroupGuard {
     GroupGuard(id)
 }
 
-/// Keeps a temporary file or folder registered for removal on interruption;
-/// dropping the guard only deregisters it (the path is then either renamed
-/// into place or removed by its owner).
-#[must_use = "the path is deregistered when the guard drops"]
-pub struct PathGuard(PathBuf);
-
-impl Drop for PathGuard {
-    fn drop(&mut self) {
-        let mut p = PATHS.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(i) = p.iter().position(|x| *x == self.0) {
-            p.swap_remove(i);
-        }
-    }
-}
-
-/// Registers a temporary path (file or folder) to be removed on interruption.
-pub fn track_path(path: &Path) -> PathGuard {
-    PATHS
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push(path.to_path_buf());
-    PathGuard(path.to_path_buf())
-}
+pub use rendiff_core::pending::{track_path, PathGuard};
 
 /// Starts the watcher thread. Called once by `main`; library users (tests)
 /// keep the default signal behaviour. An error means the signals could not be
@@ -84,33 +60,14 @@ pub fn install() -> std::io::Result<()> {
     Ok(())
 }
 
-/// Kills every registered group and removes every registered path; returns
-/// how many of each. Paths are removed twice: a folder being written into can
-/// get a new entry between the first removal and the exit.
+/// Kills every registered group and removes every registered temporary path
+/// ([`rendiff_core::pending`]); returns how many of each.
 fn clean_up() -> (usize, usize) {
     let groups: Vec<i32> = GROUPS.lock().unwrap_or_else(|e| e.into_inner()).clone();
     for &g in &groups {
         kill_group(g);
     }
-    let paths: Vec<PathBuf> = PATHS.lock().unwrap_or_else(|e| e.into_inner()).clone();
-    for _ in 0..2 {
-        for p in &paths {
-            remove_path(p);
-        }
-    }
-    (groups.len(), paths.len())
-}
-
-fn remove_path(p: &Path) {
-    match std::fs::symlink_metadata(p) {
-        Ok(m) if m.is_dir() => {
-            let _ = std::fs::remove_dir_all(p);
-        }
-        Ok(_) => {
-            let _ = std::fs::remove_file(p);
-        }
-        Err(_) => {}
-    }
+    (groups.len(), rendiff_core::pending::remove_all())
 }
 
 /// SIGKILL to a whole process group (the renderer and whatever it forked).
@@ -149,12 +106,6 @@ mod tests {
 
     #[test]
     fn guards_deregister_what_they_registered() {
-        let p = std::env::temp_dir().join(format!("rendiff-shutdown-test-{}", std::process::id()));
-        {
-            let _g = track_path(&p);
-            assert!(PATHS.lock().unwrap().contains(&p));
-        }
-        assert!(!PATHS.lock().unwrap().contains(&p));
         {
             let _g = track_group(999_999);
             assert!(GROUPS.lock().unwrap().contains(&999_999));

@@ -135,8 +135,13 @@ def cmd_render(args: argparse.Namespace) -> int:
             shutil.rmtree(workdir, ignore_errors=True)
     buffers = backend.buffers & registry.VISIBILITY_BUFFERS if plan.visibility_only else backend.buffers
     result: dict[str, Any] = {
-        "backend": backend.name, "status": "ok", "version": version, "time_s": elapsed, "info": info,
-        "buffers": sorted(buffers), "visibility_only": plan.visibility_only,
+        "backend": backend.name,
+        "status": "ok",
+        "version": version,
+        "time_s": elapsed,
+        "info": info,
+        "buffers": sorted(buffers),
+        "visibility_only": plan.visibility_only,
     }
     if plan.reason:
         result["reason"] = plan.reason
@@ -212,18 +217,19 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--backend", required=True, help="backend name, see `info`")
     p_render.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
     p_render.add_argument("--out", required=True, help="output EXR path (written atomically)")
-    p_render.add_argument(
-        "--timeout", type=float, default=600.0, help="seconds before the renderer is killed"
-    )
+    p_render.add_argument("--timeout", type=float, default=600.0, help="seconds before the renderer is killed")
     p_render.add_argument("--workdir", default=None, help="scratch folder (default: a temp folder, removed)")
     p_render.add_argument(
-        "--spp", type=int, default=None,
+        "--spp",
+        type=int,
+        default=None,
         help="samples per pixel for path-traced scenes (default: the scene's integrator.spp); "
         "ignored by backends without Monte Carlo",
     )
     p_render.add_argument("--seed", type=int, default=None, help="random seed for path-traced scenes (default 0)")
     p_render.add_argument(
-        "--visibility-only", action="store_true",
+        "--visibility-only",
+        action="store_true",
         help="render the visibility buffers (Z, id, N) but no RGB, so that a scene needing a shading feature "
         "the backend lacks is still rendered for depth and IDs (`rendiff check` passes it then); a backend "
         "whose render() has no visibility_only keyword is skipped on such scenes, as without the flag",
@@ -232,26 +238,51 @@ def build_parser() -> argparse.ArgumentParser:
         "quality settings (speed/accuracy knobs; defaults keep the conformance contract; "
         "a backend refuses a setting it does not have)"
     )
-    q.add_argument("--aa-method", type=_bounded(int, 1, 2), default=None,
-                   help="POV-Ray antialiasing method (+AM1 adaptive, +AM2 recursive) for the radiance passes only; "
-                   "IDs and depth are never antialiased (default: off, one sample at the pixel center)")
-    q.add_argument("--aa-threshold", type=_bounded(float, 0.0, 3.0), default=None,
-                   help="POV-Ray antialiasing threshold +A (0..3, default 0.3; needs --aa-method)")
-    q.add_argument("--aa-depth", type=_bounded(int, 1, 9), default=None,
-                   help="POV-Ray antialiasing depth +R (1..9, default 3; needs --aa-method)")
-    q.add_argument("--quality", type=_bounded(int, 0, 11), default=None,
-                   help="POV-Ray quality level +Q for the radiance passes (0..11, default POV-Ray's 9)")
-    q.add_argument("--max-depth", type=_max_depth, default=None,
-                   help="Mitsuba path length limit for path-traced scenes (-1 = unlimited, or >= 1; "
-                   "default: the scene's integrator.max_depth)")
-    q.add_argument("--variant", choices=("scalar_rgb", "llvm_ad_rgb"), default=None,
-                   help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19)")
+    q.add_argument(
+        "--aa-method",
+        type=_bounded(int, 1, 2),
+        default=None,
+        help="POV-Ray antialiasing method (+AM1 adaptive, +AM2 recursive) for the radiance passes only; "
+        "IDs and depth are never antialiased (default: off, one sample at the pixel center)",
+    )
+    q.add_argument(
+        "--aa-threshold",
+        type=_bounded(float, 0.0, 3.0),
+        default=None,
+        help="POV-Ray antialiasing threshold +A (0..3, default 0.3; needs --aa-method)",
+    )
+    q.add_argument(
+        "--aa-depth",
+        type=_bounded(int, 1, 9),
+        default=None,
+        help="POV-Ray antialiasing depth +R (1..9, default 3; needs --aa-method)",
+    )
+    q.add_argument(
+        "--quality",
+        type=_bounded(int, 0, 11),
+        default=None,
+        help="POV-Ray quality level +Q for the radiance passes (0..11, default POV-Ray's 9)",
+    )
+    q.add_argument(
+        "--max-depth",
+        type=_max_depth,
+        default=None,
+        help="Mitsuba path length limit for path-traced scenes (-1 = unlimited, or >= 1; "
+        "default: the scene's integrator.max_depth)",
+    )
+    q.add_argument(
+        "--variant",
+        choices=("scalar_rgb", "llvm_ad_rgb"),
+        default=None,
+        help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19)",
+    )
     p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
     p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)
     p_ref.add_argument("rest", nargs=argparse.REMAINDER)
     p_meta = sub.add_parser(
-        "metamorphic", help="compare variant renders with base renders per backend (see metamorphic.py)",
+        "metamorphic",
+        help="compare variant renders with base renders per backend (see metamorphic.py)",
         add_help=False,
     )
     p_meta.add_argument("rest", nargs=argparse.REMAINDER)

@@ -38,7 +38,8 @@ def camera_space(camera: Camera, tris: np.ndarray) -> np.ndarray:
     """(M, 3, 3) world triangles -> (M, 3, 3) camera-space (x right, y up, z forward), float64."""
     rel = np.asarray(tris, dtype=np.float64) - camera.eye
     basis = np.stack([camera.right, camera.up_ortho, camera.forward], axis=1)  # (3, 3): columns
-    return rel @ basis
+    cam_tris: np.ndarray = rel @ basis
+    return cam_tris
 
 
 def _clip(verts: np.ndarray, count: np.ndarray, plane: float, sign: float) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +100,8 @@ def _segment_distance(cx: np.ndarray, cy: np.ndarray, a: np.ndarray, b: np.ndarr
     len2 = ex * ex + ey * ey
     safe = np.where(len2 > 0.0, len2, 1.0)
     t = np.where(len2 > 0.0, np.clip((dx * ex + dy * ey) / safe, 0.0, 1.0), 0.0)
-    return np.hypot(dx - t * ex, dy - t * ey)
+    distance: np.ndarray = np.hypot(dx - t * ex, dy - t * ey)
+    return distance
 
 
 def _polygon_distance(poly: np.ndarray, count: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
@@ -143,9 +145,7 @@ def edge_distance(camera: Camera, tris: np.ndarray, cx: np.ndarray, cy: np.ndarr
     return out
 
 
-def prim_edge_distance(
-    scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray
-) -> np.ndarray:
+def prim_edge_distance(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Distance from pixel (cols[i], rows[i])'s center to an edge of prim prims[i].
 
     Background (0xFFFFFFFF) and IDs that name no triangle give +inf.
@@ -156,9 +156,7 @@ def prim_edge_distance(
     idx = np.nonzero(valid)[0]
     if idx.size:
         tris = scene.triangles[prims[idx].astype(np.int64)]
-        dist[idx] = edge_distance(
-            scene.camera, tris, np.asarray(cols)[idx] + 0.5, np.asarray(rows)[idx] + 0.5
-        )
+        dist[idx] = edge_distance(scene.camera, tris, np.asarray(cols)[idx] + 0.5, np.asarray(rows)[idx] + 0.5)
     return dist
 
 
@@ -172,4 +170,5 @@ def mismatch_edge_distance(
     """
     d_ref = prim_edge_distance(scene, ref_prims, rows, cols)
     d_test = prim_edge_distance(scene, test_prims, rows, cols)
-    return np.minimum(d_ref, d_test)
+    distance: np.ndarray = np.minimum(d_ref, d_test)
+    return distance

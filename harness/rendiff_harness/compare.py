@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, diffimages, exrbuf, expectations, lighting, radiance, resolved, tolerance, verify
+from . import diffimages, expectations, exrbuf, lighting, radiance, resolved, tolerance, verify
 
 MANIFEST_FORMAT = "rendiff-manifest/1"
 RESULTS_FORMAT = "rendiff-results/1"
@@ -170,8 +170,16 @@ def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any])
 
 
 NUMERIC_FIELDS = (
-    "pixels", "edge_mismatches", "tie_mismatches", "crack_mismatches", "interior_mismatches", "mask_mismatches",
-    "max_abs_error", "mean_abs_error", "max_rel_error", "compared_pixels",
+    "pixels",
+    "edge_mismatches",
+    "tie_mismatches",
+    "crack_mismatches",
+    "interior_mismatches",
+    "mask_mismatches",
+    "max_abs_error",
+    "mean_abs_error",
+    "max_rel_error",
+    "compared_pixels",
 )
 
 
@@ -256,7 +264,8 @@ class Reference:
         sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
         d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
         n = self.unit_normals()[prims.astype(np.int64)]
-        return np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
+        cos: np.ndarray = np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
+        return cos
 
 
 def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) -> Reference:
@@ -339,7 +348,8 @@ def point_norm(ref: Reference, rows: np.ndarray, cols: np.ndarray, z: np.ndarray
     sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
     d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
     zz = np.where(np.isfinite(z), z, 0.0)
-    return np.linalg.norm(cam.eye[None, :] + zz[:, None] * d, axis=1)
+    norms: np.ndarray = np.linalg.norm(cam.eye[None, :] + zz[:, None] * d, axis=1)
+    return norms
 
 
 def compare_ids(
@@ -391,8 +401,11 @@ def compare_ids(
             zt_here = zt.ravel()[idx].astype(np.float64)
             z_here = np.where(np.isfinite(z_here), z_here, zt_here)
         ectx = tolerance.EdgeContext(
-            z=z_here, point_norm=point_norm(ref, rows, cols, z_here), pixel_size=pixel_size(ref),
-            origin_offset=origin_offset(ref), eye_norm=eye_norm(ref),
+            z=z_here,
+            point_norm=point_norm(ref, rows, cols, z_here),
+            pixel_size=pixel_size(ref),
+            origin_offset=origin_offset(ref),
+            eye_norm=eye_norm(ref),
         )
         eps, tol_text = model.edge_eps(ectx)
 
@@ -411,14 +424,20 @@ def compare_ids(
         )
         bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
         if bad.size:
-            details.append("interior e.g. " + "; ".join(
-                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in bad
-            ))
+            details.append(
+                "interior e.g. "
+                + "; ".join(
+                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in bad
+                )
+            )
         cracks = np.nonzero(cls == verify.CRACK)[0][:EXAMPLES]
         if cracks.size:
-            details.append("crack e.g. " + "; ".join(
-                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in cracks
-            ))
+            details.append(
+                "crack e.g. "
+                + "; ".join(
+                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in cracks
+                )
+            )
     classes.ravel()[idx] = cls
     edge_mask = (classes == verify.EDGE) | (classes == verify.TIE) | (classes == verify.CRACK)
     interior_mask = classes == verify.INTERIOR
@@ -433,12 +452,18 @@ def compare_ids(
                 f"{oi.size} pixels with the same id.prim but a different id.object, e.g. ({x},{y}) "
                 f"ref {_id(ref.buffers['id.object'][y, x])} test {_id(test['id.object'][y, x])}"
             )
-            explanations.insert(0, {
-                "class": "interior", "ref_prim": None, "test_prim": None, "pixels": int(oi.size),
-                "example": [int(x), int(y)],
-                "why": f"same prim, different object id (ref {_id(ref.buffers['id.object'][y, x])}, "
-                f"test {_id(test['id.object'][y, x])}): the exporter or renderer mislabels objects",
-            })
+            explanations.insert(
+                0,
+                {
+                    "class": "interior",
+                    "ref_prim": None,
+                    "test_prim": None,
+                    "pixels": int(oi.size),
+                    "example": [int(x), int(y)],
+                    "why": f"same prim, different object id (ref {_id(ref.buffers['id.object'][y, x])}, "
+                    f"test {_id(test['id.object'][y, x])}): the exporter or renderer mislabels objects",
+                },
+            )
         tol_text += "; id.object must match wherever id.prim does"
     else:
         tol_text += "; id.object not compared (missing on one side)"
@@ -504,9 +529,16 @@ def depth_context(
         cos = np.zeros(z_ref.size)
         extent = None
     return tolerance.DepthContext(
-        z_ref=z_ref, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
-        point_norm=point_norm(ref, rows, cols, z_ref), extent=extent, origin_offset=origin_offset(ref),
-        eye_norm=eye_norm(ref), depth_span=span,
+        z_ref=z_ref,
+        cos=cos,
+        info=_info(render),
+        attrs=attrs,
+        pixel_size=pixel_size(ref),
+        point_norm=point_norm(ref, rows, cols, z_ref),
+        extent=extent,
+        origin_offset=origin_offset(ref),
+        eye_norm=eye_norm(ref),
+        depth_span=span,
     )
 
 
@@ -517,8 +549,14 @@ def depth_tolerance_fn(
 
     def tol(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
         ctx = tolerance.DepthContext(
-            z_ref=z, cos=cos, info=_info(render), attrs=attrs, pixel_size=pixel_size(ref),
-            point_norm=np.abs(z) + eye_norm(ref), origin_offset=origin_offset(ref), eye_norm=eye_norm(ref),
+            z_ref=z,
+            cos=cos,
+            info=_info(render),
+            attrs=attrs,
+            pixel_size=pixel_size(ref),
+            point_norm=np.abs(z) + eye_norm(ref),
+            origin_offset=origin_offset(ref),
+            eye_norm=eye_norm(ref),
         )
         try:
             t, _ = model.depth(ctx)
@@ -697,7 +735,8 @@ def compare_backend(
     if "id.prim" not in test:
         e_id["status"] = "skipped" if declared is None or "id" not in declared else "error"
         e_id["reason"] = (
-            f"{backend} does not produce id" if e_id["status"] == "skipped"
+            f"{backend} does not produce id"
+            if e_id["status"] == "skipped"
             else f"{exr}: manifest lists buffer id but the EXR has no id.prim channel"
         )
     elif "id.prim" not in ref.buffers:
@@ -730,7 +769,8 @@ def compare_backend(
     if "Z" not in test:
         e_z["status"] = "skipped" if declared is None or "Z" not in declared else "error"
         e_z["reason"] = (
-            f"{backend} does not produce Z" if e_z["status"] == "skipped"
+            f"{backend} does not produce Z"
+            if e_z["status"] == "skipped"
             else f"{exr}: manifest lists buffer Z but the EXR has no Z channel"
         )
     elif "Z" not in ref.buffers:
@@ -738,7 +778,12 @@ def compare_backend(
     else:
         try:
             z_res = compare_depth(
-                ref, test, model, render, attrs, id_res.edge_mask if id_res is not None else None,
+                ref,
+                test,
+                model,
+                render,
+                attrs,
+                id_res.edge_mask if id_res is not None else None,
                 id_res.classes if id_res is not None else None,
             )
         except tolerance.ToleranceError as exc:
@@ -777,7 +822,8 @@ def compare_backend(
         if "RGB" not in test:
             e_rgb["status"] = "skipped" if declared is None or "RGB" not in declared else "error"
             e_rgb["reason"] = (
-                (own or f"{backend} does not produce RGB") if e_rgb["status"] == "skipped"
+                (own or f"{backend} does not produce RGB")
+                if e_rgb["status"] == "skipped"
                 else f"{exr}: manifest lists buffer RGB but the EXR has no R,G,B channels"
             )
         elif "RGB" not in ref.buffers:
@@ -843,7 +889,9 @@ def compare_normals(
     bad = ~(angle <= tol) | ~unit_ok
     e["compared_pixels"] = int(valid.size)
     e["interior_mismatches"] = int(bad.sum())
-    e["max_angle_rad"] = float(angle.max()) if valid.size and np.isfinite(angle.max()) else (0.0 if not valid.size else None)
+    e["max_angle_rad"] = (
+        float(angle.max()) if valid.size and np.isfinite(angle.max()) else (0.0 if not valid.size else None)
+    )
     e["tolerance"] = f"N: {text}; |N| = 1 within 4 * 2^-24; facing per the winding (b-a) x (c-a)"
     details = []
     if bad.any():
@@ -855,12 +903,17 @@ def compare_normals(
         flipped = int(np.count_nonzero(bad & (cosang < 0)))
         details.append(f"{int(bad.sum())} normals off, {flipped} of them facing the other way; e.g. {ex}")
         first = valid[k[0]]
-        e["explanations"] = [{
-            "class": "interior", "ref_prim": int(prims[first]), "test_prim": int(prims[first]),
-            "pixels": int(bad.sum()), "example": [int(first % w), int(first // w)],
-            "why": f"N is {angle[k[0]]:.3g} rad from normalize((b-a) x (c-a)) of the prim it names"
-            + (" (flipped)" if cosang[k[0]] < 0 else ""),
-        }]
+        e["explanations"] = [
+            {
+                "class": "interior",
+                "ref_prim": int(prims[first]),
+                "test_prim": int(prims[first]),
+                "pixels": int(bad.sum()),
+                "example": [int(first % w), int(first // w)],
+                "why": f"N is {angle[k[0]]:.3g} rad from normalize((b-a) x (c-a)) of the prim it names"
+                + (" (flipped)" if cosang[k[0]] < 0 else ""),
+            }
+        ]
     _apply_verdict(e, exps, details)
     return e
 
@@ -883,22 +936,29 @@ def compare_rgb(
     if var_a is not None or var_b is not None:
         test_attrs = {**_info(render), **attrs}
         res = radiance.compare_statistical(
-            b, var_b, _side_dof(ref.attrs) if var_b is not None else math.inf,
-            a, var_a, _side_dof(attrs, _info(render)) if var_a is not None else math.inf,
-            ref_n=radiance.samples_per_pixel(ref.attrs), test_n=radiance.samples_per_pixel(test_attrs),
+            b,
+            var_b,
+            _side_dof(ref.attrs) if var_b is not None else math.inf,
+            a,
+            var_a,
+            _side_dof(attrs, _info(render)) if var_a is not None else math.inf,
+            ref_n=radiance.samples_per_pixel(ref.attrs),
+            test_n=radiance.samples_per_pixel(test_attrs),
         )
         if var_a is None or var_b is None:
             side = backend if var_a is None else "the reference"
             res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
         return res
     model = tolerance.rgb_model(backend, b, attrs, _info(render))
-    shadow_edges = None
+    shadow_edges: radiance.ShadowEdges | None = None
     scene = ref.scene
     if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
         eps = radiance.SHADOW_EDGE_REL * lighting.scene_size(scene)
 
-        def shadow_edges(rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
+        def ambiguous(rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
             return lighting.shadow_ambiguity(scene, ref.buffers["id.prim"], ref.buffers["Z"], rows, cols, eps)
+
+        shadow_edges = ambiguous
 
     text = model.text
     if shadow_edges is not None:
@@ -929,9 +989,7 @@ def fill_rgb_entry(e: dict[str, Any], res: radiance.RgbResult, ref_rgb: np.ndarr
     e["flip_note"] = note
 
 
-def _rgb_image(
-    e: dict[str, Any], run: Path, diff_dir: Path | None, backend: str, res: radiance.RgbResult
-) -> None:
+def _rgb_image(e: dict[str, Any], run: Path, diff_dir: Path | None, backend: str, res: radiance.RgbResult) -> None:
     if diff_dir is None:
         return
     path = diff_dir / f"{backend}.RGB.png"
@@ -1142,7 +1200,9 @@ def calibrate(run: Path, manifest: Mapping[str, Any], results: list[dict[str, An
         if cal is None or e["scene"] in probes or e["status"] not in ("fail", "unexpected_pass"):
             continue
         e["status"] = "error"
-        e["reason"] = f"not judged: {e['backend']}'s camera failed calibration ({cal.get('reason', '')}); was: {e['reason']}"
+        e["reason"] = (
+            f"not judged: {e['backend']}'s camera failed calibration ({cal.get('reason', '')}); was: {e['reason']}"
+        )
     results.extend(rep.entries)
     return rep.summary
 

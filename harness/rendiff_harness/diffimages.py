@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -36,7 +37,7 @@ class DiffImageError(Exception):
     """A diff image that could not be written; the message names the file."""
 
 
-def _oiio():  # type: ignore[no-untyped-def]
+def _oiio() -> ModuleType:
     try:
         import OpenImageIO as oiio
     except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -117,9 +118,7 @@ def write_id_diff(
     return path
 
 
-def write_depth_diff(
-    path: str | Path, ref_z: np.ndarray, test_z: np.ndarray, scale: float
-) -> Path:
+def write_depth_diff(path: str | Path, ref_z: np.ndarray, test_z: np.ndarray, scale: float) -> Path:
     """Write the |dZ| heat map (inferno), normalized by `scale` (> 0; else by 1)."""
     path = Path(path)
     try:

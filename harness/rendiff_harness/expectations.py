@@ -194,9 +194,7 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
         where = _where(path, i, entry)
         extra = sorted(set(entry) - ENTRY_KEYS)
         if extra:
-            raise ExpectationsError(
-                f"{where}: unknown key {extra[0]!r} (allowed: {', '.join(sorted(ENTRY_KEYS))})"
-            )
+            raise ExpectationsError(f"{where}: unknown key {extra[0]!r} (allowed: {', '.join(sorted(ENTRY_KEYS))})")
         scene = _string(entry, "scene", where)
         backend = _string(entry, "backend", where)
         buffer = _string(entry, "buffer", where)
@@ -213,13 +211,11 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
                 f"classes need no entry), got {status!r}"
             )
         bounds = {k: _bound(entry[k], where, k) for k in COUNT_KEYS if k in entry}
-        key = (scene, backend, buffer)
-        if key in seen:
-            raise ExpectationsError(f"{where}: duplicates entry {seen[key]} for the same scene/backend/buffer")
-        seen[key] = i
-        entries.append(
-            Expectation(i, scene, backend, buffer, reason, True, bounds)
-        )
+        ident = (scene, backend, buffer)
+        if ident in seen:
+            raise ExpectationsError(f"{where}: duplicates entry {seen[ident]} for the same scene/backend/buffer")
+        seen[ident] = i
+        entries.append(Expectation(i, scene, backend, buffer, reason, True, bounds))
     return entries
 
 
@@ -287,9 +283,7 @@ def failing_counts(counts: Mapping[str, int], cracks_allowed: bool) -> dict[str,
     return out
 
 
-def evaluate(
-    counts: Mapping[str, int], expectation: Expectation | None, cracks_allowed: bool = False
-) -> Verdict:
+def evaluate(counts: Mapping[str, int], expectation: Expectation | None, cracks_allowed: bool = False) -> Verdict:
     """Verdict for one result's class counts (interior_mismatches, crack_mismatches, ...)."""
     bad = failing_counts(counts, cracks_allowed)
     if expectation is None:
@@ -307,7 +301,9 @@ def evaluate(
         detail = "; ".join(f"{k} {bad[k]} above bound {_fmt_bound(e.bound(k))}" for k in above)
         return Verdict("fail", f"{detail} (worse than the known failure) [{tag}]")
     if all(v == 0 for v in bad.values()):
-        return Verdict("unexpected_pass", f"no failing mismatches: the known failure is gone, remove the expectation [{tag}]")
+        return Verdict(
+            "unexpected_pass", f"no failing mismatches: the known failure is gone, remove the expectation [{tag}]"
+        )
     if below:
         detail = "; ".join(f"{k} {bad[k]} below bound {_fmt_bound(e.bound(k))}" for k in below)
         return Verdict("unexpected_pass", f"{detail}: better than recorded, tighten the bound [{tag}]")

@@ -32,8 +32,13 @@ import tempfile
 import zlib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import OpenImageIO
 
 BACKGROUND_ID = 0xFFFFFFFF
 ATTR_PREFIX = "rendiff:"
@@ -122,22 +127,13 @@ def _collect_channels(
 
 
 def _attr(name: str, type_name: str, payload: bytes) -> bytes:
-    return (
-        name.encode("ascii")
-        + b"\0"
-        + type_name.encode("ascii")
-        + b"\0"
-        + struct.pack("<i", len(payload))
-        + payload
-    )
+    return name.encode("ascii") + b"\0" + type_name.encode("ascii") + b"\0" + struct.pack("<i", len(payload)) + payload
 
 
 def _user_attr(path: Path, key: str, value: AttrValue) -> bytes:
     """Encode one user attribute; floats as EXR `double` so timings and settings survive."""
     if not key or not key.isascii() or "\0" in key or len(ATTR_PREFIX + key) > 255:
-        raise BufferError(
-            f"{path}: attribute name {key!r} must be 1-{255 - len(ATTR_PREFIX)} ASCII characters"
-        )
+        raise BufferError(f"{path}: attribute name {key!r} must be 1-{255 - len(ATTR_PREFIX)} ASCII characters")
     name = ATTR_PREFIX + key
     if isinstance(value, bool):
         raise BufferError(f"{path}: attribute {key!r}: bool is ambiguous, store an int or a string")
@@ -162,7 +158,7 @@ def _header(
     attrs: Mapping[str, AttrValue],
 ) -> tuple[bytes, bool]:
     chlist = b"".join(
-        n.encode("ascii") + b"\0" + struct.pack("<iB3xii", t, 0, 1, 1) for n, t in zip(names, types)
+        n.encode("ascii") + b"\0" + struct.pack("<iB3xii", t, 0, 1, 1) for n, t in zip(names, types, strict=True)
     )
     box = struct.pack("<iiii", 0, 0, w - 1, h - 1)
     parts = [
@@ -219,10 +215,7 @@ def _encode(
         offsets.append(offset)
         offset += len(c)
     return (
-        struct.pack("<ii", _EXR_MAGIC, version)
-        + header
-        + struct.pack(f"<{len(offsets)}Q", *offsets)
-        + b"".join(chunks)
+        struct.pack("<ii", _EXR_MAGIC, version) + header + struct.pack(f"<{len(offsets)}Q", *offsets) + b"".join(chunks)
     )
 
 
@@ -272,7 +265,7 @@ def write_buffers(
 # --------------------------------------------------------------------------- reading
 
 
-def _oiio():  # type: ignore[no-untyped-def]
+def _oiio() -> ModuleType:
     """Import OpenImageIO lazily so that `info` works (and says why) without it."""
     try:
         import OpenImageIO as oiio
@@ -284,7 +277,7 @@ def _oiio():  # type: ignore[no-untyped-def]
     return oiio
 
 
-def _open(path: Path):  # type: ignore[no-untyped-def]
+def _open(path: Path) -> tuple[ModuleType, OpenImageIO.ImageInput]:
     oiio = _oiio()
     if not path.is_file():
         raise BufferError(f"{path}: missing (no such file)")
@@ -317,9 +310,7 @@ def read_buffers(path: str | Path, require: Iterable[str] = ()) -> dict[str, np.
             c = names.index(cname)
             is_uint = cname in _UINT_CHANNELS
             if is_uint and formats[c].basetype != oiio.UINT32:
-                raise BufferError(
-                    f"{path}: channel {cname} is stored as {formats[c]}, expected uint (exact ids)"
-                )
+                raise BufferError(f"{path}: channel {cname} is stored as {formats[c]}, expected uint (exact ids)")
             pix = inp.read_image(0, 0, c, c + 1, oiio.UINT32 if is_uint else oiio.FLOAT)
             if pix is None:
                 raise BufferError(f"{path}: cannot read channel {cname}: {inp.geterror()}")
@@ -353,9 +344,7 @@ def read_attrs(path: str | Path) -> dict[str, AttrValue]:
         for p in inp.spec().extra_attribs:
             if p.name.startswith(ATTR_PREFIX):
                 value = p.value
-                result[p.name[len(ATTR_PREFIX) :]] = (
-                    value if isinstance(value, (str, int, float)) else str(value)
-                )
+                result[p.name[len(ATTR_PREFIX) :]] = value if isinstance(value, (str, int, float)) else str(value)
         return result
     finally:
         inp.close()

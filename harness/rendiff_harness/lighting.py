@@ -39,7 +39,10 @@ SHADOW_OFFSET_POS = 1e-9
 
 def shadow_offset(scene: ResolvedScene, x: np.ndarray) -> np.ndarray:
     """(K,) the contract's shadow-ray offset along n at the points x (K, 3)."""
-    return SHADOW_OFFSET_SIZE * max(scene_size(scene), 1.0) + SHADOW_OFFSET_POS * np.linalg.norm(x, axis=-1)
+    offset: np.ndarray = SHADOW_OFFSET_SIZE * max(scene_size(scene), 1.0) + SHADOW_OFFSET_POS * np.linalg.norm(
+        x, axis=-1
+    )
+    return offset
 
 
 def face_normals(tris: np.ndarray) -> np.ndarray:
@@ -65,7 +68,8 @@ def hit_points(scene: ResolvedScene, z: np.ndarray) -> np.ndarray:
     cam = scene.camera
     d = cam.pixel_directions()
     zz = np.where(np.isfinite(z), z.astype(np.float64), np.nan)
-    return cam.eye[None, None, :] + zz[..., None] * d
+    points: np.ndarray = cam.eye[None, None, :] + zz[..., None] * d
+    return points
 
 
 def lights_of(scene: ResolvedScene) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[tuple[np.ndarray, np.ndarray]]]:
@@ -77,7 +81,9 @@ def lights_of(scene: ResolvedScene) -> tuple[list[tuple[np.ndarray, np.ndarray]]
     for i, light in enumerate(scene.lights):
         kind = light.get("kind") if isinstance(light, dict) else None
         if kind == "point":
-            points.append((np.asarray(light["position"], float).reshape(3), np.asarray(light["intensity"], float).reshape(3)))
+            points.append(
+                (np.asarray(light["position"], float).reshape(3), np.asarray(light["intensity"], float).reshape(3))
+            )
         elif kind == "directional":
             d = np.asarray(light["direction"], float).reshape(3)
             n = float(np.linalg.norm(d))
@@ -182,9 +188,7 @@ def upper_bound(
 # --------------------------------------------------------------------------- shadow rays
 
 
-def _segment_hits(
-    origins: np.ndarray, targets: np.ndarray, tris: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _segment_hits(origins: np.ndarray, targets: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(K, M) segment parameter s in (0, 1) where segment k crosses triangle m (nan if not), and inside mask."""
     o, e = origins[:, None, :], (targets - origins)[:, None, :]
     a, b, c = tris[None, :, 0], tris[None, :, 1], tris[None, :, 2]
@@ -284,7 +288,12 @@ def shadow_ambiguity(
             # (K', M): triangle m lies in pixel k's receiver plane, or is the pixel's own
             blockers = ~(
                 (np.abs(n_own[sl] @ normals.T) > 1.0 - 1e-9)
-                & (np.abs(np.einsum("kj,mj->km", n_own[sl], tris[:, 0]) - np.einsum("kj,kj->k", n_own[sl], xs)[:, None]) < eps)
+                & (
+                    np.abs(
+                        np.einsum("kj,mj->km", n_own[sl], tris[:, 0]) - np.einsum("kj,kj->k", n_own[sl], xs)[:, None]
+                    )
+                    < eps
+                )
             )
             blockers[np.arange(xs.shape[0]), own[sl]] = False
             s, inside = _segment_hits(xs, es, tris)
@@ -304,15 +313,13 @@ def shadow_ambiguity(
 def emissive_materials(scene: ResolvedScene) -> np.ndarray:
     """(M,) bool: materials with any emission > 0."""
     _, emi = scene.material_arrays()
-    return (emi > 0).any(axis=1) if emi.size else np.zeros(0, dtype=bool)
+    return np.asarray((emi > 0).any(axis=1)) if emi.size else np.zeros(0, dtype=bool)
 
 
 def light_summary(scene: ResolvedScene) -> list[dict[str, Any]]:
     """The lights as plain floats (for info dicts)."""
     points, dirs = lights_of(scene)
-    out: list[dict[str, Any]] = [
-        {"kind": "point", "position": p.tolist(), "intensity": i.tolist()} for p, i in points
-    ]
+    out: list[dict[str, Any]] = [{"kind": "point", "position": p.tolist(), "intensity": i.tolist()} for p, i in points]
     out += [{"kind": "directional", "direction": d.tolist(), "irradiance": e.tolist()} for d, e in dirs]
     return out
 

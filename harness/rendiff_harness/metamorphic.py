@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, compare, exrbuf, expectations, resolved, tolerance
+from . import classify, compare, expectations, exrbuf, resolved, tolerance
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
@@ -135,8 +135,15 @@ def load_spec(path: Path) -> list[Case]:
         if math.frexp(float(s))[0] != 0.5:
             raise SpecError(f"{where} ({c['relation']}): 'depth_scale' must be a power of two (exact), got {s!r}")
         cases.append(
-            Case(c["relation"], str(c.get("description", "")), c["base"], c["variant"],
-                 maps["prim_map"], maps["object_map"], float(s))
+            Case(
+                c["relation"],
+                str(c.get("description", "")),
+                c["base"],
+                c["variant"],
+                maps["prim_map"],
+                maps["object_map"],
+                float(s),
+            )
         )
     return cases
 
@@ -252,7 +259,7 @@ def relation_edge_distance(
 
     def distance(r_ids: np.ndarray, t_ids: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         raw = variant_prims[rows, cols]
-        d = np.minimum(
+        d: np.ndarray = np.minimum(
             classify.prim_edge_distance(base, r_ids, rows, cols),
             classify.prim_edge_distance(variant, raw, rows, cols),
         )
@@ -305,7 +312,8 @@ def _verdict(e: dict[str, Any], exps: expectations.Expectations, details: list[s
 
 
 def _render(scene_entry: Mapping[str, Any], backend: str) -> Mapping[str, Any] | None:
-    for r in scene_entry.get("renders", []):
+    renders: list[Mapping[str, Any]] = scene_entry.get("renders", [])
+    for r in renders:
         if r.get("backend") == backend:
             return r
     return None
@@ -423,20 +431,32 @@ def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None,
     return doc
 
 
+def _cell(r: Mapping[str, Any], k: str) -> str:
+    v = r.get(k)
+    return "-" if v is None else (f"{v:.2g}" if isinstance(v, float) else str(v))
+
+
 def format_table(results: Sequence[Mapping[str, Any]]) -> str:
     header = ("relation", "backend", "buf", "status", "edge", "interior", "mask", "max_rel")
     rows = [header]
     for r in results:
-        def n(k: str) -> str:
-            v = r.get(k)
-            return "-" if v is None else (f"{v:.2g}" if isinstance(v, float) else str(v))
-
-        rows.append((r["relation"], r["backend"], r["buffer"], r["status"], n("edge_mismatches"),
-                     n("interior_mismatches"), n("mask_mismatches") if r["buffer"] == "Z" else "-",
-                     n("max_rel_error") if r["buffer"] == "Z" else "-"))
+        rows.append(
+            (
+                r["relation"],
+                r["backend"],
+                r["buffer"],
+                r["status"],
+                _cell(r, "edge_mismatches"),
+                _cell(r, "interior_mismatches"),
+                _cell(r, "mask_mismatches") if r["buffer"] == "Z" else "-",
+                _cell(r, "max_rel_error") if r["buffer"] == "Z" else "-",
+            )
+        )
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
-    lines = ["  ".join(c.ljust(widths[i]) if i < 4 else c.rjust(widths[i]) for i, c in enumerate(row)).rstrip()
-             for row in rows]
+    lines = [
+        "  ".join(c.ljust(widths[i]) if i < 4 else c.rjust(widths[i]) for i, c in enumerate(row)).rstrip()
+        for row in rows
+    ]
     counts: dict[str, int] = {}
     for r in results:
         counts[r["status"]] = counts.get(r["status"], 0) + 1
@@ -469,7 +489,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERROR
     print(format_table(doc["results"]))
     for u in doc["unused_expectations"]:
-        print(f"note: expectation {u['entry']} ({u['relation']}/{u['backend']}/{u['buffer']}) matched nothing",
-              file=sys.stderr)
+        print(
+            f"note: expectation {u['entry']} ({u['relation']}/{u['backend']}/{u['buffer']}) matched nothing",
+            file=sys.stderr,
+        )
     print(f"results: {out}")
     return EXIT_OK

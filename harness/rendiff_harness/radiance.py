@@ -86,8 +86,9 @@ never part of the verdict, None with a note when the package is missing or fails
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -139,6 +140,9 @@ def _errors(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
 
 # --------------------------------------------------------------------------- deterministic
 
+ShadowEdges = Callable[[np.ndarray, np.ndarray], np.ndarray | None]
+"""`shadow_edges(rows, cols)`: per failing pixel, whether its shadow ray is ambiguous (None: not computed)."""
+
 
 def compare_deterministic(
     ref: np.ndarray,
@@ -147,7 +151,7 @@ def compare_deterministic(
     rel_tol: float,
     tol_text: str,
     id_edge_mask: np.ndarray | None = None,
-    shadow_edges: Any = None,
+    shadow_edges: ShadowEdges | None = None,
 ) -> RgbResult:
     """|a - b| <= abs_tol + rel_tol |b| per channel; see the module docstring.
 
@@ -163,7 +167,7 @@ def compare_deterministic(
     err = np.abs(a - b)
     ok = err <= tol  # NaN compares False: a non-finite value fails
     ok &= np.isfinite(a) & np.isfinite(b)
-    fail = ~ok.all(axis=2)
+    fail = ~np.asarray(ok.all(axis=2))
     with np.errstate(divide="ignore", invalid="ignore"):
         score = np.where(tol > 0, err / np.where(tol > 0, tol, 1.0), np.where(err == 0, 0.0, np.inf))
     score = np.nan_to_num(score, nan=np.inf).max(axis=2)
@@ -184,9 +188,7 @@ def compare_deterministic(
     bad = np.argwhere(interior)
     if bad.size:
         worst = bad[np.argsort(-score[interior])[:EXAMPLES]]
-        ex = ", ".join(
-            f"({x},{y}) ref {_rgb(b[y, x])} test {_rgb(a[y, x])}" for y, x in worst
-        )
+        ex = ", ".join(f"({x},{y}) ref {_rgb(b[y, x])} test {_rgb(a[y, x])}" for y, x in worst)
         details.append(f"{len(bad)} pixels beyond tolerance, worst {ex}")
     mx, mean, rel = _errors(a, b)
     return RgbResult(
@@ -214,12 +216,13 @@ def _rgb(v: np.ndarray) -> str:
 # --------------------------------------------------------------------------- statistical
 
 
-def _special():  # type: ignore[no-untyped-def]
+def _special() -> ModuleType:
     try:
         import scipy.special as sp
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise RadianceError(f"scipy missing ({exc}): pip install -r harness/requirements.txt") from None
-    return sp
+    special: ModuleType = sp  # scipy ships no type hints (pyproject.toml)
+    return special
 
 
 def sidak(alpha: float, m: int) -> float:
@@ -262,12 +265,11 @@ def box3(x: np.ndarray) -> np.ndarray:
     if h < 3 or w < 3:
         return np.zeros((0, 0) + x.shape[2:])
     c = np.cumsum(np.cumsum(np.pad(x, ((1, 0), (1, 0), (0, 0))), axis=0), axis=1)
-    return c[3:, 3:] - c[:-3, 3:] - c[3:, :-3] + c[:-3, :-3]
+    sums: np.ndarray = c[3:, 3:] - c[:-3, 3:] - c[3:, :-3] + c[:-3, :-3]
+    return sums
 
 
-def lift_variances(
-    var_a: np.ndarray, n_a: float, var_b: np.ndarray, n_b: float
-) -> tuple[np.ndarray, np.ndarray]:
+def lift_variances(var_a: np.ndarray, n_a: float, var_b: np.ndarray, n_b: float) -> tuple[np.ndarray, np.ndarray]:
     """Each side's variance of its mean, lifted to at least the pooled per-sample variance / its spp.
 
     Per-sample variances s_i^2 = var_i * n_i are pooled with weights n_i (samples seen);
@@ -328,9 +330,7 @@ def compare_statistical(
     if fail_px.any():
         idx = np.argwhere(fail_px)
         worst = idx[np.argsort(p.min(axis=2)[fail_px])[:EXAMPLES]]
-        ex = ", ".join(
-            f"({x},{y}) ref {_rgb(b[y, x])} test {_rgb(a[y, x])} t {_rgb(t[y, x])}" for y, x in worst
-        )
+        ex = ", ".join(f"({x},{y}) ref {_rgb(b[y, x])} test {_rgb(a[y, x])} t {_rgb(t[y, x])}" for y, x in worst)
         details.append(f"{int(fail_px.sum())} pixels fail the per-pixel test, e.g. {ex}")
     if fail_w.any():
         wi = np.argwhere(fail_w.any(axis=2))
@@ -338,11 +338,15 @@ def compare_statistical(
         ex = ", ".join(f"({x + 1},{y + 1}) z {_rgb(zw[y, x])}" for y, x in worst)
         details.append(f"{int(fail_w.any(axis=2).sum())} 3x3 windows fail the cluster test, e.g. centers {ex}")
     mx, mean, rel = _errors(a, b)
-    nu_text = lambda nu: "inf" if not math.isfinite(nu) else f"{nu:g}"  # noqa: E731
+
+    def nu_text(nu: float) -> str:
+        return "inf" if not math.isfinite(nu) else f"{nu:g}"
+
     lift_text = (
         f"each side's variance lifted to the spp-weighted pooled per-sample variance / its spp "
         f"(spp ref {ref_n:g}, test {test_n:g})"
-        if lifted else "no variance lift (spp unknown on a side)"
+        if lifted
+        else "no variance lift (spp unknown on a side)"
     )
     text = (
         f"statistical: Welch t per pixel-channel (var of each mean + float32 floor; {lift_text}; "

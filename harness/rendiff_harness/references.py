@@ -113,8 +113,18 @@ def command_line(scene_dir: str | Path, out: str | Path, spp: int, seed: int) ->
     return " ".join(
         shlex.quote(a)
         for a in (
-            "python", "-m", "rendiff_harness", "reference",
-            "--scene", str(scene_dir), "--spp", str(spp), "--seed", str(seed), "--out", str(out),
+            "python",
+            "-m",
+            "rendiff_harness",
+            "reference",
+            "--scene",
+            str(scene_dir),
+            "--spp",
+            str(spp),
+            "--seed",
+            str(seed),
+            "--out",
+            str(out),
         )
     )
 
@@ -215,10 +225,11 @@ def generate(
         "command": command_line(scene_dir, out, spp, seed),
         "export_command": (
             f"rendiff export {shlex.quote(scene.source)} -o {shlex.quote(str(scene_dir))}"
-            if scene.source.endswith(".toml") else None
+            if scene.source.endswith(".toml")
+            else None
         ),
         "python": sys.version.split()[0],
-        "created": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "created": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "render_seconds": round(seconds, 3),
         "exr_sha256": file_sha256(out),
     }
@@ -243,10 +254,14 @@ def load(exr: str | Path, scene: resolved.ResolvedScene) -> CachedReference:
     try:
         prov = json.loads(js.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ReferenceError(f"{js}: cached reference corrupt (provenance unreadable: {exc}): regenerate with {fix}") from None
+        raise ReferenceError(
+            f"{js}: cached reference corrupt (provenance unreadable: {exc}): regenerate with {fix}"
+        ) from None
     if not isinstance(prov, dict) or prov.get("format") != FORMAT:
         got = prov.get("format") if isinstance(prov, dict) else type(prov).__name__
-        raise ReferenceError(f"{js}: cached reference corrupt (format {got!r}, expected {FORMAT!r}): regenerate with {fix}")
+        raise ReferenceError(
+            f"{js}: cached reference corrupt (format {got!r}, expected {FORMAT!r}): regenerate with {fix}"
+        )
     want_sum = prov.get("exr_sha256")
     if not isinstance(want_sum, str) or file_sha256(exr) != want_sum:
         raise ReferenceError(
@@ -289,7 +304,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
     p.add_argument("--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel (default {DEFAULT_SPP})")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed (default {DEFAULT_SEED})")
-    p.add_argument("--out", required=True, help="output EXR (tests/references/<scene>.exr); <out>.json is written beside it")
+    p.add_argument(
+        "--out", required=True, help="output EXR (tests/references/<scene>.exr); <out>.json is written beside it"
+    )
     args = p.parse_args(argv)
     if args.spp < 2 or args.seed < 0:
         print("rendiff_harness reference: --spp must be >= 2 and --seed >= 0", file=sys.stderr)
@@ -301,6 +318,16 @@ def main(argv: list[str]) -> int:
     except (ReferenceError, resolved.SceneError, BackendError, exrbuf.BufferError) as exc:
         print(f"rendiff_harness reference: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps({"status": "ok", "out": str(args.out), "provenance": str(provenance_path(args.out)),
-                      "spp": prov["spp"], "seconds": prov["render_seconds"], "renderer": prov["renderer"]}))
+    print(
+        json.dumps(
+            {
+                "status": "ok",
+                "out": str(args.out),
+                "provenance": str(provenance_path(args.out)),
+                "spp": prov["spp"],
+                "seconds": prov["render_seconds"],
+                "renderer": prov["renderer"],
+            }
+        )
+    )
     return 0

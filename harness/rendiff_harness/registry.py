@@ -122,9 +122,7 @@ def load(module_name: str) -> Backend:
         return Backend(module_name, None, f"backend module {module_name!r} lacks {', '.join(absent)}")
     extra = frozenset(module.BUFFERS) - KNOWN_BUFFERS
     if extra:
-        return Backend(
-            module_name, None, f"backend module {module_name!r} declares unknown buffers {sorted(extra)}"
-        )
+        return Backend(module_name, None, f"backend module {module_name!r} declares unknown buffers {sorted(extra)}")
     return Backend(module_name, module, None)
 
 

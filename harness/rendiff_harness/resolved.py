@@ -49,11 +49,12 @@ class Camera:
     def pixel_directions(self) -> np.ndarray:
         """Unnormalized ray directions d(x, y), shaped (H, W, 3); t along d is planar depth."""
         sx, sy = self.screen_coords()
-        return (
+        directions: np.ndarray = (
             self.forward[None, None, :]
             + sx[..., None] * self.right[None, None, :]
             + sy[..., None] * self.up_ortho[None, None, :]
         )
+        return directions
 
 
 @dataclass(frozen=True)

@@ -128,7 +128,8 @@ def _param(ctx: DepthContext, key: str) -> float | None:
 
 def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
     """|z| * min(rel / |cos|, MAX_REL), without dividing by zero."""
-    return np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
+    tol: np.ndarray = np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
+    return tol
 
 
 def f32_origin(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
@@ -148,7 +149,8 @@ def f32_view_transform(offset: float, eye_norm: float, point: np.ndarray) -> np.
     """GL (pyrender): the vertex shader takes each vertex X to eye space with an f32 4x4 view
     matrix (unit rotation rows, translation about |eye|): each component is a 4-term dot
     product, off by <= 4u (|X| + |eye|) (gamma_4), sqrt(3) of that on the vector."""
-    return 4.0 * math.sqrt(3.0) * F32_U * (np.abs(point) + eye_norm)
+    tol: np.ndarray = 4.0 * math.sqrt(3.0) * F32_U * (np.abs(point) + eye_norm)
+    return tol
 
 
 def shift_depth(ctx: DepthContext, moved: np.ndarray) -> np.ndarray:
@@ -208,7 +210,8 @@ def povray_plane_error(point_norm: np.ndarray, extent: np.ndarray | float = 0.0)
     u (|X| + |P1|) + u|X| <= u (3|X| + extent), with extent >= |X - P1| the triangle's
     longest edge. It grows with the distance from the origin, not with depth.
     """
-    return F32_U * (3.0 * np.abs(point_norm) + extent)
+    error: np.ndarray = F32_U * (3.0 * np.abs(point_norm) + extent)
+    return error
 
 
 def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
@@ -219,9 +222,9 @@ def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     backend into info and the EXR attributes). The plane's offset error e at the hit point
     (`povray_plane_error`) moves the hit along the ray by e / |cos|, and planar depth by
     at most that (D.f <= |D|), and never beyond the triangle's own depth span (the hit
-    stays on it; `shift_depth`). Both sides' Z are stored as f32: 2 x 2^-24 |Z|. When `depth_step` is missing it is derived as
-    R / 2^32 with R = `depth_range` if present, else from the reference's largest depth
-    times the backend's margin 1+2^-6.
+    stays on it; `shift_depth`). Both sides' Z are stored as f32: 2 x 2^-24 |Z|. When
+    `depth_step` is missing it is derived as R / 2^32 with R = `depth_range` if present,
+    else from the reference's largest depth times the backend's margin 1+2^-6.
     """
     step = _param(ctx, "depth_step")
     source = "depth_step from the render"
@@ -240,7 +243,8 @@ def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     tol = step + slope + 2.0 * F32_U * np.abs(ctx.z_ref)
     text = (
         f"povray: |dZ| <= depth_step ({step:.3g}, {source}; 32-bit fixed point) "
-        "+ min(e / |cos|, the triangle's depth span), e = 2^-24 (3|X| + extent) (mesh2 keeps plane normal and offset in f32; "
+        "+ min(e / |cos|, the triangle's depth span), e = 2^-24 (3|X| + extent) "
+        "(mesh2 keeps plane normal and offset in f32; "
         "|X| = hit point's distance from the origin) + 2^-23 Z (both sides stored as f32)"
     )
     return tol, text
@@ -285,9 +289,7 @@ def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     # |dz/dsx| = z |n.r| / |n.d| <= z / |cos| per image-plane unit, i.e. z * pixel_size / |cos|
     # per pixel. Capped like the other grazing-angle models.
     snap = np.sqrt(2.0) / 256.0
-    slope = np.abs(ctx.z_ref) * np.minimum(
-        ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL
-    )
+    slope = np.abs(ctx.z_ref) * np.minimum(ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL)
     tol = tol + slope + shift_depth(ctx, _position(ctx, f32_view_transform))
     text = (
         f"pyrender: |dZ| <= pyrender_backend.depth_tolerance(z, znear={znear:.6g}, zfar={zfar:.6g}) "
@@ -342,11 +344,15 @@ PYRENDER_EDGE_PX = math.sqrt(2.0) * 2.0**-9  # 2.76e-3 px; measured max 2.1e-3 p
 
 MODELS: dict[str, Model] = {
     "trace": Model(
-        "trace", 0.0, "the rendiff tracer shares the coverage predicate with raster: must be identical",
+        "trace",
+        0.0,
+        "the rendiff tracer shares the coverage predicate with raster: must be identical",
         exact_depth,
     ),
     "raster": Model(
-        "raster", 0.0, "the rendiff rasterizer shares the coverage predicate with trace: must be identical",
+        "raster",
+        0.0,
+        "the rendiff rasterizer shares the coverage predicate with trace: must be identical",
         exact_depth,
     ),
     "povray": Model(
@@ -368,13 +374,17 @@ MODELS: dict[str, Model] = {
         position=f32_view_transform,
     ),
     "mitsuba": Model(
-        "mitsuba", 1e-4, "float32 ray-triangle tests decide centers within f32 rounding of an edge",
+        "mitsuba",
+        1e-4,
+        "float32 ray-triangle tests decide centers within f32 rounding of an edge",
         mitsuba_depth,
         edge_extra=position_edge(f32_sensor, "(|f32(eye) - eye| + 2 sqrt(3) 2^-24 |eye|) (f32 sensor transform)"),
         position=f32_sensor,
     ),
     "embree": Model(
-        "embree", 1e-4, "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
+        "embree",
+        1e-4,
+        "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
         embree_depth,
         edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
         position=f32_origin,
@@ -540,9 +550,7 @@ RGB_MODELS: dict[str, Callable[[np.ndarray, Mapping[str, Any], Mapping[str, Any]
 }
 
 
-def rgb_model(
-    backend: str, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]
-) -> RgbTolerance:
+def rgb_model(backend: str, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
     """Deterministic RGB tolerance of `backend` at the reference values `ref` (H, W, 3).
 
     Unknown backends: f32 output at 4 ulps when the EXR says rgb_encoding = float32, else

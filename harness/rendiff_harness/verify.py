@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import classify
-from .resolved import ResolvedScene
+from .resolved import Camera, ResolvedScene
 
 BACKGROUND_ID = classify.BACKGROUND_ID
 CLASSES = ("edge", "tie", "crack", "interior")
@@ -72,9 +72,7 @@ class Topology:
         key = self.edge_key(tri, local)
         lo = int(np.searchsorted(self.keys, key, side="left"))
         hi = int(np.searchsorted(self.keys, key, side="right"))
-        return [
-            (int(self.key_tri[i]), int(self.key_local[i])) for i in range(lo, hi) if int(self.key_tri[i]) != tri
-        ]
+        return [(int(self.key_tri[i]), int(self.key_local[i])) for i in range(lo, hi) if int(self.key_tri[i]) != tri]
 
 
 def topology(triangles: np.ndarray) -> Topology:
@@ -112,7 +110,7 @@ class Side:
     cos: np.ndarray  # (K,) |cos| between the pixel ray and the triangle's normal
 
 
-def _project(cam: classify.Camera, p: np.ndarray) -> np.ndarray:
+def _project(cam: Camera, p: np.ndarray) -> np.ndarray:
     """Camera-space points (..., 3) with z > 0 -> pixel coordinates (..., 2)."""
     w, h = cam.width, cam.height
     z = np.where(p[..., 2] > 0.0, p[..., 2], 1.0)
@@ -121,7 +119,7 @@ def _project(cam: classify.Camera, p: np.ndarray) -> np.ndarray:
     return np.stack([px, py], axis=-1)
 
 
-def _near_far(cam: classify.Camera, cam_tris: np.ndarray) -> tuple[float, float]:
+def _near_far(cam: Camera, cam_tris: np.ndarray) -> tuple[float, float]:
     near = cam.near if cam.near > 0.0 else 1e-12 * max(1.0, float(np.abs(cam_tris).max(initial=0.0)))
     far = cam.far if np.isfinite(cam.far) and cam.far > near else np.inf
     return near, far
@@ -355,9 +353,11 @@ def classify_mismatches(
             if shared:
                 near_v = [j for j in range(3) if sr.vert_d[i, j] <= e and int(tp.corner_vid[r, j]) in shared]
                 near_e = [
-                    j for j in range(3)
+                    j
+                    for j in range(3)
                     if sr.edge_d[i, j] <= e
-                    and int(tp.corner_vid[r, j]) in shared and int(tp.corner_vid[r, (j + 1) % 3]) in shared
+                    and int(tp.corner_vid[r, j]) in shared
+                    and int(tp.corner_vid[r, (j + 1) % 3]) in shared
                 ]
                 if near_e or near_v:
                     cls[i] = EDGE
@@ -371,8 +371,7 @@ def classify_mismatches(
             same = sorted(int(v) for v in tp.corner_vid[r]) == sorted(int(v) for v in tp.corner_vid[t])
             what = "identical triangles" if same else "coplanar here"
             why[i] = (
-                f"prims {r} and {t} are {what} (depths {sr.z[i]:.9g} and {st.z[i]:.9g} agree within "
-                f"{tol[i]:.3g}): tie"
+                f"prims {r} and {t} are {what} (depths {sr.z[i]:.9g} and {st.z[i]:.9g} agree within {tol[i]:.3g}): tie"
             )
             continue
         # The side that saw the farther surface missed the nearer triangle.
@@ -418,10 +417,12 @@ def explain(
 ) -> list[dict[str, object]]:
     """Mismatches grouped by (class, ref prim, test prim): failing classes first, then by size."""
     groups: dict[tuple[int, int, int], dict[str, object]] = {}
+    pixels: dict[tuple[int, int, int], int] = {}  # each group's "pixels", typed
     for i in range(cls.size):
         key = (int(cls[i]), int(r_ids[i]), int(t_ids[i]))
         g = groups.get(key)
         if g is None:
+            pixels[key] = 1
             groups[key] = {
                 "class": CLASSES[int(cls[i])],
                 "ref_prim": None if key[1] == BACKGROUND_ID else key[1],
@@ -431,11 +432,10 @@ def explain(
                 "why": why[i],
             }
         else:
-            g["pixels"] = int(g["pixels"]) + 1  # type: ignore[call-overload]
+            pixels[key] += 1
+            g["pixels"] = pixels[key]
     rank = {INTERIOR: 0, CRACK: 1, TIE: 2, EDGE: 3}
-    ordered = sorted(
-        groups.items(), key=lambda kv: (rank[kv[0][0]], -int(kv[1]["pixels"]))  # type: ignore[call-overload]
-    )
+    ordered = sorted(groups.items(), key=lambda kv: (rank[kv[0][0]], -pixels[kv[0]]))
     return [g for _, g in ordered[:MAX_EXPLANATIONS]]
 
 

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from fixtures import write_scene
 
+from fixtures import write_scene
 from rendiff_harness.resolved import ResolvedScene
 
 BACKGROUND_ID = 0xFFFFFFFF
@@ -65,9 +65,7 @@ def _segment_dist(
     return np.hypot(px - (ax + t * ex), py - (ay + t * ey))
 
 
-def _edge(
-    ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray, px: np.ndarray, py: np.ndarray
-) -> np.ndarray:
+def _edge(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Edge function of a -> b at p, evaluated from the lexicographically smaller endpoint.
 
     Both triangles sharing an edge then get exactly opposite values (bit for bit), so
@@ -405,9 +403,16 @@ def furnace(directory: Path, albedo: float = 0.5, emission: float = 1.0, width: 
 
     tris = _box((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0), inward=True)
     path = _write(
-        directory, tris, eye=(0.1, 0.2, 0.3), look_at=(0.5, -0.3, -1.0), vfov_deg=70.0, width=width, height=height,
+        directory,
+        tris,
+        eye=(0.1, 0.2, 0.3),
+        look_at=(0.5, -0.3, -1.0),
+        vfov_deg=70.0,
+        width=width,
+        height=height,
         requires=("depth", "ids", "emission", "lambert", "area_light", "global_illumination", "one_sided"),
-        materials=[{"name": "wall", "albedo": [albedo] * 3, "emission": [emission] * 3}], name="furnace",
+        materials=[{"name": "wall", "albedo": [albedo] * 3, "emission": [emission] * 3}],
+        name="furnace",
     )
     meta = json.loads((path / "scene.json").read_text())
     meta["integrator"] = {"max_depth": -1, "spp": 64}
@@ -442,7 +447,13 @@ def _box(lo: Any, hi: Any, yaw_deg: float = 0.0, at: Any = (0.0, 0.0, 0.0), inwa
 
 
 CORNELL_REQUIRES = (
-    "depth", "ids", "emission", "lambert", "area_light", "global_illumination", "one_sided",
+    "depth",
+    "ids",
+    "emission",
+    "lambert",
+    "area_light",
+    "global_illumination",
+    "one_sided",
 )
 
 
@@ -476,8 +487,18 @@ def cornell(
         {"name": "light", "albedo": [0.78, 0.78, 0.78], "emission": list(emission)},
     ]
     path = _write(
-        directory, tris, oids, eye=(0.0, 1.0, 3.3), look_at=(0.0, 1.0, 0.0), vfov_deg=40.0,
-        width=width, height=height, requires=requires, materials=materials, lights=lights, name="cornell",
+        directory,
+        tris,
+        oids,
+        eye=(0.0, 1.0, 3.3),
+        look_at=(0.0, 1.0, 0.0),
+        vfov_deg=40.0,
+        width=width,
+        height=height,
+        requires=requires,
+        materials=materials,
+        lights=lights,
+        name="cornell",
     )
     # fixtures.write_scene gives every object material 0: set the real ones.
     import json

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -50,19 +51,32 @@ def write_scene(
     objects = []
     for o in range(n_obj):
         idx = np.nonzero(oids == o)[0]
-        objects.append({"name": f"object{o}", "material": 0, "first_prim": int(idx[0]) if idx.size else 0,
-                        "prim_count": int(idx.size)})
+        objects.append(
+            {
+                "name": f"object{o}",
+                "material": 0,
+                "first_prim": int(idx[0]) if idx.size else 0,
+                "prim_count": int(idx.size),
+            }
+        )
     meta = {
         "format": "rendiff-resolved/1",
         "name": name,
         "source": "fixture",
         "requires": list(requires),
         "camera": {
-            "eye": e.tolist(), "look_at": la.tolist(), "up": u0.tolist(),
-            "vfov_deg": vfov_deg, "tan_half_vfov": tan_half,
-            "width": width, "height": height,
-            "forward": f.tolist(), "right": r.tolist(), "up_ortho": u.tolist(),
-            "near": near, "far": far,
+            "eye": e.tolist(),
+            "look_at": la.tolist(),
+            "up": u0.tolist(),
+            "vfov_deg": vfov_deg,
+            "tan_half_vfov": tan_half,
+            "width": width,
+            "height": height,
+            "forward": f.tolist(),
+            "right": r.tolist(),
+            "up_ortho": u.tolist(),
+            "near": near,
+            "far": far,
         },
         "triangle_count": n,
         "objects": objects,

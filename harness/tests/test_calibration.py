@@ -14,10 +14,10 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-import fixtures
 import numpy as np
 import pytest
 
+import fixtures
 from rendiff_harness import calibration as cal
 from rendiff_harness import exrbuf, resolved
 from rendiff_harness.resolved import ResolvedScene

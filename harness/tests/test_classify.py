@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fixtures import write_scene
 
+from fixtures import write_scene
 from rendiff_harness import classify, resolved
 from rendiff_harness.resolved import Camera
 
@@ -17,10 +17,18 @@ from rendiff_harness.resolved import Camera
 # For a point at planar depth z: px = (x/z + 1) * 8, py = (1 - y/z) * 8.
 
 
-def _camera(tmp_path: Path, width: int = 16, height: int = 16, near: float = 1e-3, far: float | None = None,
-            vfov: float = 90.0) -> Camera:
-    d = write_scene(tmp_path / "cam", [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], vfov_deg=vfov, width=width,
-                    height=height, near=near, far=far)
+def _camera(
+    tmp_path: Path, width: int = 16, height: int = 16, near: float = 1e-3, far: float | None = None, vfov: float = 90.0
+) -> Camera:
+    d = write_scene(
+        tmp_path / "cam",
+        [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]],
+        vfov_deg=vfov,
+        width=width,
+        height=height,
+        near=near,
+        far=far,
+    )
     return resolved.load(d).camera
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import backend_cases as cases
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import __main__ as cli
 from rendiff_harness import exrbuf, registry
 from rendiff_harness.backends import mitsuba_backend as mb
@@ -39,7 +39,9 @@ def test_options_reach_only_backends_that_accept_them(monkeypatch: pytest.Monkey
 def test_render_cli_spp_and_seed_for_path_tracing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     d = cases.cornell(tmp_path / "s", width=8, height=8)
     out = tmp_path / "m.exr"
-    rc = cli.main(["render", "--backend", "mitsuba", "--scene", str(d), "--out", str(out), "--spp", "16", "--seed", "2"])
+    rc = cli.main(
+        ["render", "--backend", "mitsuba", "--scene", str(d), "--out", str(out), "--spp", "16", "--seed", "2"]
+    )
     assert rc == 0, capsys.readouterr().err
     msg = json.loads(capsys.readouterr().out)
     assert msg["status"] == "ok" and msg["info"]["radiance"]["spp"] == 16
@@ -50,8 +52,9 @@ def test_render_cli_spp_and_seed_for_path_tracing(tmp_path: Path, capsys: pytest
 
 @pytest.mark.skipif(povray.unavailable_reason() is not None, reason=f"{povray.unavailable_reason()}")
 def test_render_cli_povray_ignores_spp(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    d = cases.lit_plane(tmp_path / "s", [], requires=("depth", "ids", "emission", "two_sided"), emission=(1, 2, 3),
-                        width=8, height=6)
+    d = cases.lit_plane(
+        tmp_path / "s", [], requires=("depth", "ids", "emission", "two_sided"), emission=(1, 2, 3), width=8, height=6
+    )
     out = tmp_path / "p.exr"
     rc = cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(out), "--spp", "16"])
     assert rc == 0, capsys.readouterr().err

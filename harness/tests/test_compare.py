@@ -7,11 +7,11 @@ import math
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
-from fixtures import write_scene
 
+import backend_cases as cases
+from fixtures import write_scene
 from rendiff_harness import compare, diffimages, exrbuf, resolved, tolerance
 from rendiff_harness.__main__ import main as harness_main
 
@@ -48,8 +48,16 @@ def _write_exr(path: Path, bufs: dict[str, np.ndarray], attrs: dict[str, Any] | 
 
 
 def _ok(backend: str, exr: str, **kw: Any) -> dict[str, Any]:
-    r = {"backend": backend, "status": "ok", "exr": exr, "time_s": 0.5, "version": f"{backend} 1.0",
-         "command": f"render {backend}", "buffers": ["Z", "id"], "info": {}}
+    r = {
+        "backend": backend,
+        "status": "ok",
+        "exr": exr,
+        "time_s": 0.5,
+        "version": f"{backend} 1.0",
+        "command": f"render {backend}",
+        "buffers": ["Z", "id"],
+        "info": {},
+    }
     r.update(kw)
     return r
 
@@ -78,8 +86,9 @@ def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
     pov["prim"][INTERIOR_PX[1], INTERIOR_PX[0]] = 2
     pov["obj"][INTERIOR_PX[1], INTERIOR_PX[0]] = 1
     pov["Z"][INTERIOR_PX[1], INTERIOR_PX[0]] = 5.0
-    renders.append(_ok("povray", rel(Path(_write_exr(s / "povray.exr", pov, {"depth_step": 1e-9}))),
-                       info={"depth_step": 1e-9}))
+    renders.append(
+        _ok("povray", rel(Path(_write_exr(s / "povray.exr", pov, {"depth_step": 1e-9}))), info={"depth_step": 1e-9})
+    )
 
     mit = _copy(ref)
     hit = np.isfinite(mit["Z"])
@@ -102,8 +111,15 @@ def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
     renders.append(_ok("newthing", rel(Path(_write_exr(s / "newthing.exr", odd)))))
 
     renders.append({"backend": "embree", "status": "skipped", "reason": "missing features: lambert"})
-    renders.append({"backend": "embree_robust", "status": "error", "message": "timed out after 600 s",
-                    "time_s": 600.0, "command": "rendiff render --backend embree_robust"})
+    renders.append(
+        {
+            "backend": "embree_robust",
+            "status": "error",
+            "message": "timed out after 600 s",
+            "time_s": 600.0,
+            "command": "rendiff render --backend embree_robust",
+        }
+    )
 
     sdir2 = write_scene(run / "scenes/noref/resolved", TRIS[:1], vfov_deg=90.0, width=8, height=8, name="noref")
     _, ref2 = _ref(sdir2)
@@ -119,10 +135,20 @@ def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
         "created": "2026-11-22T10:00:00Z",
         "rendiff_version": "0.1.0",
         "scenes": [
-            {"scene": "quads", "scene_file": "scenes/quads.toml", "resolved": "scenes/quads/resolved",
-             "requires": ["depth", "ids"], "renders": renders},
-            {"scene": "noref", "scene_file": "scenes/noref.toml", "resolved": "scenes/noref/resolved",
-             "requires": ["depth", "ids"], "renders": renders2},
+            {
+                "scene": "quads",
+                "scene_file": "scenes/quads.toml",
+                "resolved": "scenes/quads/resolved",
+                "requires": ["depth", "ids"],
+                "renders": renders,
+            },
+            {
+                "scene": "noref",
+                "scene_file": "scenes/noref.toml",
+                "resolved": "scenes/noref/resolved",
+                "requires": ["depth", "ids"],
+                "renders": renders2,
+            },
         ],
     }
     (run / "manifest.json").write_text(json.dumps(manifest, indent=1))
@@ -346,8 +372,9 @@ reason = "not watertight"
 def test_malformed_expectations_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run, _ = build_run(tmp_path)
     exp = tmp_path / "bad.toml"
-    exp.write_text('[[expect]]\nscene = "quads"\nbackend = "povray"\nbuffer = "id"\nreason = "r"\n'
-                   "edge_mismatches = [4, 1]\n")
+    exp.write_text(
+        '[[expect]]\nscene = "quads"\nbackend = "povray"\nbuffer = "id"\nreason = "r"\nedge_mismatches = [4, 1]\n'
+    )
     assert compare.main(["--run", str(run), "--expectations", str(exp)]) == 2
     err = capsys.readouterr().err
     assert str(exp) in err and "entry 1" in err and "'edge_mismatches'" in err
@@ -465,8 +492,9 @@ def test_harness_cli_dispatches_compare(tmp_path: Path, capsys: pytest.CaptureFi
 # --------------------------------------------------------------------------- tolerance models
 
 
-def _ctx(z: float, cos: float, info: dict[str, Any] | None = None, attrs: dict[str, Any] | None = None
-         ) -> tolerance.DepthContext:
+def _ctx(
+    z: float, cos: float, info: dict[str, Any] | None = None, attrs: dict[str, Any] | None = None
+) -> tolerance.DepthContext:
     return tolerance.DepthContext(np.array([z]), np.array([cos]), info or {}, attrs or {})
 
 
@@ -495,10 +523,12 @@ def test_povray_depth_step_sources() -> None:
 
 def test_povray_depth_grows_with_distance_from_the_origin_not_depth() -> None:
     m = tolerance.model_for("povray")
-    near = tolerance.DepthContext(np.array([2.0]), np.array([1.0]), {}, {"depth_step": 0.0},
-                                  point_norm=np.array([3.0]), extent=np.array([0.5]))
-    far = tolerance.DepthContext(np.array([2.0]), np.array([1.0]), {}, {"depth_step": 0.0},
-                                 point_norm=np.array([2e4]), extent=np.array([0.5]))
+    near = tolerance.DepthContext(
+        np.array([2.0]), np.array([1.0]), {}, {"depth_step": 0.0}, point_norm=np.array([3.0]), extent=np.array([0.5])
+    )
+    far = tolerance.DepthContext(
+        np.array([2.0]), np.array([1.0]), {}, {"depth_step": 0.0}, point_norm=np.array([2e4]), extent=np.array([0.5])
+    )
     t_near, t_far = m.depth(near)[0][0], m.depth(far)[0][0]
     assert t_near == pytest.approx(2.0**-24 * (9.0 + 0.5) + 2.0**-23 * 2.0)
     assert t_far == pytest.approx(2.0**-24 * (6e4 + 0.5) + 2.0**-23 * 2.0)
@@ -545,10 +575,19 @@ def _normals_run(tmp_path: Path, flip_reference: bool, tilt_test: float) -> dict
     exrbuf.write_buffers(s / "raster.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_ref)
     exrbuf.write_buffers(s / "mitsuba.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_test)
     manifest = {
-        "format": "rendiff-manifest/1", "reference": "raster",
-        "scenes": [{"scene": "quads", "resolved": "scenes/quads/resolved", "requires": ["depth", "ids", "normals"],
-                    "renders": [_ok("raster", "scenes/quads/raster.exr", buffers=["Z", "id", "N"]),
-                                _ok("mitsuba", "scenes/quads/mitsuba.exr", buffers=["Z", "id", "N"])]}],
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "scenes": [
+            {
+                "scene": "quads",
+                "resolved": "scenes/quads/resolved",
+                "requires": ["depth", "ids", "normals"],
+                "renders": [
+                    _ok("raster", "scenes/quads/raster.exr", buffers=["Z", "id", "N"]),
+                    _ok("mitsuba", "scenes/quads/mitsuba.exr", buffers=["Z", "id", "N"]),
+                ],
+            }
+        ],
     }
     (run / "manifest.json").write_text(json.dumps(manifest))
     assert compare.main(["--run", str(run), "--no-images"]) == 0
@@ -575,10 +614,22 @@ def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:
     run = tmp_path / "run"
     run.mkdir()
     manifest = {
-        "format": "rendiff-manifest/1", "reference": "raster",
-        "scenes": [{"scene": "broken", "resolved": "scenes/broken/resolved", "requires": [],
-                    "renders": [{"backend": "raster", "status": "error",
-                                 "message": "cannot load scene: broken.toml: camera.vfov: must be in (0, 180)"}]}],
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "scenes": [
+            {
+                "scene": "broken",
+                "resolved": "scenes/broken/resolved",
+                "requires": [],
+                "renders": [
+                    {
+                        "backend": "raster",
+                        "status": "error",
+                        "message": "cannot load scene: broken.toml: camera.vfov: must be in (0, 180)",
+                    }
+                ],
+            }
+        ],
     }
     (run / "manifest.json").write_text(json.dumps(manifest))
     assert compare.main(["--run", str(run), "--no-images"]) == 0

@@ -7,11 +7,11 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
-from rendiff_harness import compare, exrbuf, expectations, references, resolved
+import backend_cases as cases
+from rendiff_harness import compare, expectations, exrbuf, references, resolved
 from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.backends import pyrender_backend as pb
 
@@ -19,16 +19,30 @@ LIGHTS = [{"kind": "point", "position": [0.3, 0.2, 1.5], "intensity": [10.0, 5.0
 LIT_REQ = ("depth", "ids", "lambert", "point_light", "shadowless", "two_sided")
 
 
-def _exr(path: Path, rgb: np.ndarray | None, z: np.ndarray, prim: np.ndarray, var: np.ndarray | None = None,
-         attrs: dict[str, Any] | None = None) -> str:
+def _exr(
+    path: Path,
+    rgb: np.ndarray | None,
+    z: np.ndarray,
+    prim: np.ndarray,
+    var: np.ndarray | None = None,
+    attrs: dict[str, Any] | None = None,
+) -> str:
     path.parent.mkdir(parents=True, exist_ok=True)
     exrbuf.write_buffers(path, Z=z, prim=prim, obj=np.zeros_like(prim), RGB=rgb, var=var, attrs=attrs)
     return path.as_posix()
 
 
 def _ok(backend: str, exr: str, buffers: tuple[str, ...] = ("Z", "id", "RGB"), **kw: Any) -> dict[str, Any]:
-    r = {"backend": backend, "status": "ok", "exr": exr, "time_s": 0.1, "version": f"{backend} 1",
-         "command": f"render {backend}", "buffers": list(buffers), "info": {}}
+    r = {
+        "backend": backend,
+        "status": "ok",
+        "exr": exr,
+        "time_s": 0.1,
+        "version": f"{backend} 1",
+        "command": f"render {backend}",
+        "buffers": list(buffers),
+        "info": {},
+    }
     r.update(kw)
     return r
 
@@ -45,7 +59,11 @@ def _lit_scene(run: Path) -> tuple[resolved.ResolvedScene, np.ndarray, np.ndarra
 def _povray_like(want: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
     s = float(want.max()) * (1 + 2**-6)
     codes = np.rint(want / s * 65535)
-    return (codes * (s / 65535)).astype(np.float32), {"rgb_scale": s, "emission_scale": 0.0, "rgb_encoding": "png16-linear"}
+    return (codes * (s / 65535)).astype(np.float32), {
+        "rgb_scale": s,
+        "emission_scale": 0.0,
+        "rgb_encoding": "png16-linear",
+    }
 
 
 def _run_dir(tmp_path: Path) -> Path:
@@ -55,8 +73,13 @@ def _run_dir(tmp_path: Path) -> Path:
 
 
 def _manifest(run: Path, scenes: list[dict[str, Any]]) -> None:
-    doc = {"format": "rendiff-manifest/1", "reference": "raster", "created": "x", "rendiff_version": "0",
-           "scenes": scenes}
+    doc = {
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "created": "x",
+        "rendiff_version": "0",
+        "scenes": scenes,
+    }
     (run / "manifest.json").write_text(json.dumps(doc))
 
 
@@ -75,7 +98,12 @@ def test_deterministic_rgb_entries(tmp_path: Path) -> None:
     renders.append(_ok("povray", rel(_exr(s / "povray.exr", pov, z, prim, attrs=pattrs))))
     scale = float(want.max()) * 1.02
     pyr = pb.decode_rgb8(pb.encode_rgb8(want, scale).astype(np.uint8), scale).astype(np.float32)
-    renders.append(_ok("pyrender", rel(_exr(s / "pyrender.exr", pyr, z, prim, attrs={"rgb_scale": scale, "znear": 1.0, "zfar": 50.0}))))
+    renders.append(
+        _ok(
+            "pyrender",
+            rel(_exr(s / "pyrender.exr", pyr, z, prim, attrs={"rgb_scale": scale, "znear": 1.0, "zfar": 50.0})),
+        )
+    )
     mit = (want * (1 + 3e-6)).astype(np.float32)
     mit[5, 7, 1] *= 1.01  # one pixel beyond 5e-5 relative
     renders.append(_ok("mitsuba", rel(_exr(s / "mitsuba.exr", mit, z, prim))))
@@ -97,8 +125,10 @@ def test_deterministic_rgb_entries(tmp_path: Path) -> None:
     assert e["status"] == "skipped" and e["min_p"] is None and e["pixels"] is None
     # expectations accept buffer "RGB"
     exp = tmp_path / "exp.toml"
-    exp.write_text('[[expect]]\nscene = "lit"\nbackend = "mitsuba"\nbuffer = "RGB"\ninterior_mismatches = [1, 1]\n'
-                   'status = "expected_fail"\nreason = "test"\n')
+    exp.write_text(
+        '[[expect]]\nscene = "lit"\nbackend = "mitsuba"\nbuffer = "RGB"\ninterior_mismatches = [1, 1]\n'
+        'status = "expected_fail"\nreason = "test"\n'
+    )
     res2 = _index(compare.run_compare(run, exp))
     assert res2[("lit", "mitsuba", "RGB")]["status"] == "expected_fail"
 
@@ -110,9 +140,13 @@ def test_unshaded_scenes_get_no_rgb_entries(tmp_path: Path) -> None:
     z = cases.plane_depth(scene, np.zeros(3), np.array([0.0, 0.0, 1.0])).astype(np.float32)
     prim = np.zeros(z.shape, dtype=np.uint32)
     exr = _exr(run / "scenes/plain/raster.exr", None, z, prim)
-    renders = [_ok("raster", Path(exr).relative_to(run).as_posix(), buffers=("Z", "id")),
-               {"backend": "povray", "status": "skipped", "reason": "x"}]
-    _manifest(run, [{"scene": "plain", "resolved": "scenes/plain/resolved", "requires": ["depth", "ids"], "renders": renders}])
+    renders = [
+        _ok("raster", Path(exr).relative_to(run).as_posix(), buffers=("Z", "id")),
+        {"backend": "povray", "status": "skipped", "reason": "x"},
+    ]
+    _manifest(
+        run, [{"scene": "plain", "resolved": "scenes/plain/resolved", "requires": ["depth", "ids"], "renders": renders}]
+    )
     doc = compare.run_compare(run, None)
     assert {r["buffer"] for r in doc["results"]} == {"id", "Z"}
 
@@ -139,8 +173,12 @@ def test_statistical_rgb_entries(tmp_path: Path) -> None:
     ref_m, ref_v = _noisy(truth, 0.3, 256, rng)
     renders = [_ok("raster", rel(_exr(s / "raster.exr", ref_m, z, prim, ref_v, {"spp": "256", "integrator": "path"})))]
     a_m, a_v = _noisy(truth, 0.3, 256, rng)
-    renders.append(_ok("mitsuba", rel(_exr(s / "mitsuba.exr", a_m, z, prim, a_v,
-                                           {"spp": 256, "var_samples": 64, "integrator": "path"}))))
+    renders.append(
+        _ok(
+            "mitsuba",
+            rel(_exr(s / "mitsuba.exr", a_m, z, prim, a_v, {"spp": 256, "var_samples": 64, "integrator": "path"})),
+        )
+    )
     b_m, b_v = _noisy(truth * 1.1, 0.3, 256, rng)  # 10% too bright
     renders.append(_ok("newthing", rel(_exr(s / "newthing.exr", b_m, z, prim, b_v, {"spp": 256}))))
     renders.append(_ok("novar", rel(_exr(s / "novar.exr", truth.astype(np.float32), z, prim))))
@@ -170,10 +208,19 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
     references.generate(sd, refs / "box.exr", spp=256, seed=1)
     rgb, var, info = mb.render_radiance(scene, spp=64, seed=2)  # stands in for the core's path tracer
     aov, _ = mb.render_arrays(scene)
-    exr = _exr(run / "scenes/box/raster.exr", rgb.astype(np.float32), aov["Z"], aov["prim"], var.astype(np.float32),
-               {"spp": "64", "integrator": "path"})
+    exr = _exr(
+        run / "scenes/box/raster.exr",
+        rgb.astype(np.float32),
+        aov["Z"],
+        aov["prim"],
+        var.astype(np.float32),
+        {"spp": "64", "integrator": "path"},
+    )
     renders = [_ok("raster", Path(exr).relative_to(run).as_posix())]
-    _manifest(run, [{"scene": "box", "resolved": "scenes/box/resolved", "requires": sorted(scene.requires), "renders": renders}])
+    _manifest(
+        run,
+        [{"scene": "box", "resolved": "scenes/box/resolved", "requires": sorted(scene.requires), "renders": renders}],
+    )
     res = _index(compare.run_compare(run, None, references_dir=refs))
     e = res[("box", compare.CACHED_REFERENCE_BACKEND, "RGB")]
     assert e["status"] == "pass" and e["mode"] == "statistical" and e["version"].startswith("mitsuba 3.9.1")
@@ -185,7 +232,10 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
     meta["materials"][3]["emission"] = [18.0, 12.0, 4.0]
     (sd / "scene.json").write_text(json.dumps(meta))
     e = _index(compare.run_compare(run, None, references_dir=refs))[("box", compare.CACHED_REFERENCE_BACKEND, "RGB")]
-    assert e["status"] == "error" and "reference is stale: regenerate with python -m rendiff_harness reference" in e["reason"]
+    assert (
+        e["status"] == "error"
+        and "reference is stale: regenerate with python -m rendiff_harness reference" in e["reason"]
+    )
     assert e["failing_pixels"] is None
     # missing
     shutil.rmtree(refs)
@@ -196,8 +246,12 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
 
 def test_expectations_accept_rgb_buffer(tmp_path: Path) -> None:
     p = tmp_path / "e.toml"
-    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "RGB"\nstatus = "expected_fail"\nreason = "r"\n')
+    p.write_text(
+        '[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "RGB"\nstatus = "expected_fail"\nreason = "r"\n'
+    )
     assert expectations.load(p).lookup("s", "pyrender", "RGB") is not None
-    p.write_text('[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "rgb"\nstatus = "expected_fail"\nreason = "r"\n')
+    p.write_text(
+        '[[expect]]\nscene = "*"\nbackend = "pyrender"\nbuffer = "rgb"\nstatus = "expected_fail"\nreason = "r"\n'
+    )
     with pytest.raises(expectations.ExpectationsError, match="RGB"):
         expectations.load(p)

@@ -18,8 +18,13 @@ def _write(tmp_path: Path, text: str) -> Path:
 
 
 def _entry(**kw: object) -> str:
-    base: dict[str, object] = {"scene": "grid", "backend": "povray", "buffer": "id", "reason": "a bug",
-                               "status": "expected_fail"}
+    base: dict[str, object] = {
+        "scene": "grid",
+        "backend": "povray",
+        "buffer": "id",
+        "reason": "a bug",
+        "status": "expected_fail",
+    }
     base.update(kw)
     lines = ["[[expect]]"]
     for k, v in base.items():
@@ -50,8 +55,8 @@ def test_none_means_no_entries() -> None:
 
 
 def test_parse_valid_entries_and_declarations(tmp_path: Path) -> None:
-    text = _entry() + _entry(scene="*", buffer="Z", interior_mismatches=[0, 2]) + _declare() + _declare(
-        backend="mitsuba"
+    text = (
+        _entry() + _entry(scene="*", buffer="Z", interior_mismatches=[0, 2]) + _declare() + _declare(backend="mitsuba")
     )
     loaded = ex.load(_write(tmp_path, text))
     a, b = loaded.entries
@@ -92,7 +97,10 @@ def test_exact_scene_beats_wildcard_and_usage_is_tracked(tmp_path: Path) -> None
         (_entry(status="known"), ["'status'", "expected_fail"]),
         (_entry(status=None), ["'status'", "only known bugs"]),
         (_entry() + _entry(), ["entry 2", "duplicates entry 1"]),
-        (_entry() + _entry(scene="b", interior_mismatches=[0, "x"]), ["entry 2 (b/povray/id)", "'interior_mismatches'"]),
+        (
+            _entry() + _entry(scene="b", interior_mismatches=[0, "x"]),
+            ["entry 2 (b/povray/id)", "'interior_mismatches'"],
+        ),
         (_declare(allows="edge"), ["[[declare]] entry 1", "'allows'", "crack"]),
         (_declare(reason=None), ["[[declare]] entry 1", "'reason' is required"]),
         (_declare(color="red"), ["[[declare]] entry 1", "unknown key 'color'"]),
@@ -144,7 +152,7 @@ def test_verdicts(
     counts: tuple[int, int, int, int], exp: ex.Expectation | None, cracks_allowed: bool, status: str
 ) -> None:
     keys = ("edge_mismatches", "tie_mismatches", "crack_mismatches", "interior_mismatches")
-    v = ex.evaluate(dict(zip(keys, counts)), exp, cracks_allowed)
+    v = ex.evaluate(dict(zip(keys, counts, strict=True)), exp, cracks_allowed)
     assert v.status == status, v.reason
     if exp is not None:
         assert "recorded reason" in v.reason

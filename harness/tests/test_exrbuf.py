@@ -43,12 +43,10 @@ def test_round_trip_is_bit_exact(tmp_path: Path, compression: str) -> None:
 
 def test_ids_are_uint_channels_in_the_file(tmp_path: Path) -> None:
     path = tmp_path / "b.exr"
-    exrbuf.write_buffers(
-        path, Z=np.zeros((2, 3)), prim=np.zeros((2, 3), np.uint32), obj=np.ones((2, 3), np.int64)
-    )
+    exrbuf.write_buffers(path, Z=np.zeros((2, 3)), prim=np.zeros((2, 3), np.uint32), obj=np.ones((2, 3), np.int64))
     inp = oiio.ImageInput.open(str(path))
     spec = inp.spec()
-    types = {n: str(f) for n, f in zip(spec.channelnames, spec.channelformats)}
+    types = {n: str(f) for n, f in zip(spec.channelnames, spec.channelformats, strict=True)}
     inp.close()
     assert types == {"Z": "float", "id.object": "uint", "id.prim": "uint"}
 

@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
-from fixtures import write_scene
 
+import backend_cases as cases
+from fixtures import write_scene
 from rendiff_harness import exrbuf, metamorphic, resolved
 from rendiff_harness.__main__ import main as harness_main
 
@@ -47,8 +47,13 @@ class Run:
 
     def scene(self, name: str, tris: Any, oids: Any, **camera: Any) -> dict[str, np.ndarray]:
         d = write_scene(self.root / f"scenes/{name}/resolved", tris, oids, name=name, **{**CAMERA, **camera})
-        self.scenes[name] = {"scene": name, "scene_file": f"{name}.toml", "resolved": f"scenes/{name}/resolved",
-                             "requires": ["depth", "ids"], "renders": []}
+        self.scenes[name] = {
+            "scene": name,
+            "scene_file": f"{name}.toml",
+            "resolved": f"scenes/{name}/resolved",
+            "requires": ["depth", "ids"],
+            "renders": [],
+        }
         return _cast(d)
 
     def render(self, scene: str, backend: str, bufs: dict[str, np.ndarray] | None, **extra: Any) -> None:
@@ -62,13 +67,28 @@ class Run:
         )
 
     def case(self, relation: str, variant: str, prim_map: list[int], object_map: list[int], scale: float = 1.0) -> None:
-        self.cases.append({"relation": relation, "base": "base", "variant": variant, "prim_map": prim_map,
-                           "object_map": object_map, "depth_scale": scale})
+        self.cases.append(
+            {
+                "relation": relation,
+                "base": "base",
+                "variant": variant,
+                "prim_map": prim_map,
+                "object_map": object_map,
+                "depth_scale": scale,
+            }
+        )
 
     def compare(self, expectations: Path | None = None) -> dict[tuple[str, str, str], dict[str, Any]]:
-        (self.root / "manifest.json").write_text(json.dumps(
-            {"format": "rendiff-manifest/1", "reference": "raster", "rendiff_version": "0.1.0",
-             "scenes": list(self.scenes.values())}))
+        (self.root / "manifest.json").write_text(
+            json.dumps(
+                {
+                    "format": "rendiff-manifest/1",
+                    "reference": "raster",
+                    "rendiff_version": "0.1.0",
+                    "scenes": list(self.scenes.values()),
+                }
+            )
+        )
         spec = self.root / "spec.json"
         spec.write_text(json.dumps({"format": metamorphic.SPEC_FORMAT, "cases": self.cases}))
         doc = metamorphic.run_metamorphic(self.root, spec, expectations, self.root / "metamorphic.json")
@@ -193,12 +213,16 @@ def test_known_failure_is_expected_fail_and_edge_bounds_are_refused(run: Run, tm
     run.render("same", "povray", bad, info={"depth_step": 1e-9})
     run.case("flip_winding", "same", [0, 1], [0, 1])
     exp = tmp_path / "exp.toml"
-    exp.write_text('[[expect]]\nscene = "flip_winding"\nbackend = "povray"\nbuffer = "id"\n'
-                   'interior_mismatches = [1, 1]\nstatus = "expected_fail"\nreason = "a test"\n')
+    exp.write_text(
+        '[[expect]]\nscene = "flip_winding"\nbackend = "povray"\nbuffer = "id"\n'
+        'interior_mismatches = [1, 1]\nstatus = "expected_fail"\nreason = "a test"\n'
+    )
     res = run.compare(exp)
     assert res[("flip_winding", "povray", "id")]["status"] == "expected_fail"
-    exp.write_text('[[expect]]\nscene = "flip_winding"\nbackend = "povray"\nbuffer = "id"\n'
-                   'edge_mismatches = [0, 5]\nreason = "a test"\n')
+    exp.write_text(
+        '[[expect]]\nscene = "flip_winding"\nbackend = "povray"\nbuffer = "id"\n'
+        'edge_mismatches = [0, 5]\nreason = "a test"\n'
+    )
     with pytest.raises(metamorphic.expectations.ExpectationsError, match="allowed classes"):
         run.compare(exp)
 
@@ -213,9 +237,23 @@ def test_bad_spec_exits_2_naming_the_file(tmp_path: Path, capsys: pytest.Capture
     r.scene("base", [BIG], [0])
     (r.root / "manifest.json").write_text(json.dumps({"format": "rendiff-manifest/1", "scenes": []}))
     spec = tmp_path / "spec.json"
-    spec.write_text(json.dumps({"format": metamorphic.SPEC_FORMAT, "cases": [
-        {"relation": "scale", "base": "base", "variant": "base", "prim_map": [0], "object_map": [0],
-         "depth_scale": 3.0}]}))
+    spec.write_text(
+        json.dumps(
+            {
+                "format": metamorphic.SPEC_FORMAT,
+                "cases": [
+                    {
+                        "relation": "scale",
+                        "base": "base",
+                        "variant": "base",
+                        "prim_map": [0],
+                        "object_map": [0],
+                        "depth_scale": 3.0,
+                    }
+                ],
+            }
+        )
+    )
     assert harness_main(["metamorphic", "--run", str(r.root), "--spec", str(spec)]) == 2
     err = capsys.readouterr().err
     assert str(spec) in err and "power of two" in err

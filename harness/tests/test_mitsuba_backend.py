@@ -6,10 +6,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import exrbuf, resolved
 from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.errors import BackendError, BackendUnavailable
@@ -35,8 +35,17 @@ def _render(tmp_path: Path, build: Callable[[Path], Path]) -> Rendered:
 def test_module_protocol() -> None:
     assert mb.NAME == "mitsuba"
     assert mb.FEATURES == {
-        "depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadows",
-        "area_light", "global_illumination", "two_sided", "one_sided",
+        "depth",
+        "ids",
+        "emission",
+        "lambert",
+        "point_light",
+        "directional_light",
+        "shadows",
+        "area_light",
+        "global_illumination",
+        "two_sided",
+        "one_sided",
     }
     assert "shadowless" not in mb.FEATURES  # Mitsuba always traces shadow rays
     assert mb.BUFFERS == {"Z", "id", "N", "RGB"}
@@ -232,9 +241,8 @@ def test_to_world_is_the_float64_basis_rounded_once(tmp_path: Path, probe: str) 
 def test_far_probe_calibrates_and_the_old_look_at_does_not(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """2.5e4 from the origin, the float64 to_world keeps Mitsuba's camera within its f32 rounding;
     the float32 look_at turned it by ~5e-4 rad (0.036 px): a convention error, named as such."""
-    from test_calibration import probe_scene
-
     from rendiff_harness import calibration
+    from test_calibration import probe_scene
 
     scene = probe_scene(tmp_path / "far", "camera_far")
     buf, info = mb.render_arrays(scene)

@@ -19,9 +19,7 @@ from rendiff_harness.errors import BackendError, BackendUnavailable
 from rendiff_harness.resolved import ResolvedScene
 
 HAVE_POVRAY = shutil.which("povray") is not None
-needs_povray = pytest.mark.skipif(
-    not HAVE_POVRAY, reason="povray binary not on PATH (apt-get install povray)"
-)
+needs_povray = pytest.mark.skipif(not HAVE_POVRAY, reason="povray binary not on PATH (apt-get install povray)")
 BG = exrbuf.BACKGROUND_ID
 
 
@@ -227,10 +225,7 @@ def test_random_soup_with_oblique_camera_matches_raycast(tmp_path: Path) -> None
     obj_ref = np.where(ref["prim"] == BG, BG, scene.object_ids[np.minimum(ref["prim"], 39)])
     assert np.array_equal(buf["id.object"][safe], obj_ref[safe])
     hit = buf["id.prim"] != BG
-    rel = (
-        np.abs(buf["Z"][hit] - plane_depth(scene, buf["id.prim"])[hit])
-        / plane_depth(scene, buf["id.prim"])[hit]
-    )
+    rel = np.abs(buf["Z"][hit] - plane_depth(scene, buf["id.prim"])[hit]) / plane_depth(scene, buf["id.prim"])[hit]
     assert rel.max() < 1e-6
 
 
@@ -271,9 +266,7 @@ def test_near_and_far_clip_like_a_ray_interval(tmp_path: Path) -> None:
         (4.0, 5.0, {BG}, np.inf),  # nothing between near and far
     ]
     for k, (near, far, prims, depth) in enumerate(cases):
-        d = fixtures.write_scene(
-            tmp_path / f"s{k}", tris, [0, 0, 1, 1], near=near, far=far, width=16, height=12
-        )
+        d = fixtures.write_scene(tmp_path / f"s{k}", tris, [0, 0, 1, 1], near=near, far=far, width=16, height=12)
         _, buf, _ = render(d, tmp_path / f"r{k}")
         assert set(np.unique(buf["id.prim"]).tolist()) == prims, (near, far)
         assert np.allclose(buf["Z"], depth, rtol=1e-6), (near, far)
@@ -381,11 +374,10 @@ def test_large_mesh_timing(tmp_path: Path) -> None:
     rel = np.abs(buf["Z"][hit] - pd[hit]) / pd[hit]
     cos = grazing_cosine(scene, prim)[hit]
     passes = {k: {m: round(x, 3) for m, x in v.items()} for k, v in info["passes"].items()}  # type: ignore[union-attr]
+    print(f"\n100k triangles 640x480: total {total:.2f} s, prepare {info['prepare_s']:.2f} s, passes {passes}")
     print(
-        f"\n100k triangles 640x480: total {total:.2f} s, prepare {info['prepare_s']:.2f} s, passes {passes}"
-    )
-    print(
-        f"depth rel err: max {rel.max():.3g}; where cos>0.1: {rel[cos > 0.1].max():.3g}; max rel*cos {(rel * cos).max():.3g}"
+        f"depth rel err: max {rel.max():.3g}; where cos>0.1: {rel[cos > 0.1].max():.3g}; "
+        f"max rel*cos {(rel * cos).max():.3g}"
     )
     assert (rel * cos).max() < 1e-6  # error along the normal; raw relative error grows as 1/cos at grazing
     rng = np.random.default_rng(0)

@@ -6,10 +6,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import exrbuf, resolved
 from rendiff_harness.backends import pyrender_backend as pb
 from rendiff_harness.errors import BackendError
@@ -32,7 +32,14 @@ def _render(tmp_path: Path, build: Callable[[Path], Path]) -> Rendered:
 def test_module_protocol() -> None:
     assert pb.NAME == "pyrender"
     assert pb.FEATURES == {
-        "depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadowless", "two_sided"
+        "depth",
+        "ids",
+        "emission",
+        "lambert",
+        "point_light",
+        "directional_light",
+        "shadowless",
+        "two_sided",
     }
     assert pb.BUFFERS == {"Z", "id", "RGB"}
     assert "pyrender 0.1.45" in pb.version() and "llvmpipe" in pb.version()

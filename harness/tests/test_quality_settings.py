@@ -7,10 +7,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import __main__ as cli
 from rendiff_harness import exrbuf
 from rendiff_harness.backends import mitsuba_backend as mb
@@ -31,11 +31,20 @@ def _render(tmp_path: Path, backend: str, scene: Path, *extra: str, name: str = 
 @pytest.mark.parametrize(
     "flag, value",
     [
-        ("--aa-method", "3"), ("--aa-method", "0"), ("--aa-method", "x"),
-        ("--aa-threshold", "-0.1"), ("--aa-threshold", "3.5"), ("--aa-threshold", "nan"),
-        ("--aa-depth", "0"), ("--aa-depth", "10"), ("--aa-depth", "2.5"),
-        ("--quality", "-1"), ("--quality", "12"),
-        ("--max-depth", "0"), ("--max-depth", "-2"), ("--max-depth", "two"),
+        ("--aa-method", "3"),
+        ("--aa-method", "0"),
+        ("--aa-method", "x"),
+        ("--aa-threshold", "-0.1"),
+        ("--aa-threshold", "3.5"),
+        ("--aa-threshold", "nan"),
+        ("--aa-depth", "0"),
+        ("--aa-depth", "10"),
+        ("--aa-depth", "2.5"),
+        ("--quality", "-1"),
+        ("--quality", "12"),
+        ("--max-depth", "0"),
+        ("--max-depth", "-2"),
+        ("--max-depth", "two"),
         ("--variant", "cuda_ad_rgb"),
     ],
 )
@@ -113,8 +122,9 @@ def test_povray_antialiasing_reaches_the_radiance_passes_only(
         return cmd
 
     monkeypatch.setattr(povray, "povray_command", spy)
-    rc, aa = _render(tmp_path, "povray", scene, "--aa-method", "2", "--aa-threshold", "0", "--aa-depth", "2",
-                     name="aa.exr")
+    rc, aa = _render(
+        tmp_path, "povray", scene, "--aa-method", "2", "--aa-threshold", "0", "--aa-depth", "2", name="aa.exr"
+    )
     assert rc == 0, capsys.readouterr().err
     msg = json.loads(capsys.readouterr().out)
     assert msg["info"]["radiance_flags"] == ["+A0.0", "+AM2", "+R2", "-J"]
@@ -164,9 +174,13 @@ def test_mitsuba_max_depth_reaches_the_integrator(tmp_path: Path, capsys: pytest
 
 @needs_mitsuba
 def test_mitsuba_max_depth_is_refused_for_local_shading(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    scene = cases.lit_plane(tmp_path / "s", [{"kind": "point", "position": [0, 0, 2], "intensity": [1, 1, 1]}],
-                            requires=("depth", "ids", "lambert", "point_light", "shadows", "two_sided"),
-                            width=8, height=6)
+    scene = cases.lit_plane(
+        tmp_path / "s",
+        [{"kind": "point", "position": [0, 0, 2], "intensity": [1, 1, 1]}],
+        requires=("depth", "ids", "lambert", "point_light", "shadows", "two_sided"),
+        width=8,
+        height=6,
+    )
     rc, out = _render(tmp_path, "mitsuba", scene, "--max-depth", "3")
     assert rc == cli.EXIT_ERROR
     assert "max_depth applies to path-traced" in capsys.readouterr().err

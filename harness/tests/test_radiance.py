@@ -36,8 +36,9 @@ def _estimate(
     return mean, s2 / n
 
 
-def _stat(ref: tuple[np.ndarray, np.ndarray], test: tuple[np.ndarray, np.ndarray], n_ref: int = N_SPP,
-          n_test: int = N_SPP) -> radiance.RgbResult:
+def _stat(
+    ref: tuple[np.ndarray, np.ndarray], test: tuple[np.ndarray, np.ndarray], n_ref: int = N_SPP, n_test: int = N_SPP
+) -> radiance.RgbResult:
     return radiance.compare_statistical(
         ref[0], ref[1], n_ref - 1, test[0], test[1], n_test - 1, ref_n=n_ref, test_n=n_test
     )
@@ -56,7 +57,10 @@ def test_false_alarm_rate_is_at_most_alpha() -> None:
         cluster += (res.cluster_failures or 0) > 0
         assert res.alpha == radiance.ALPHA and res.edge == 0
     rate = fails / seeds
-    print(f"false-alarm rate over {seeds} seeds: {rate:.3f} (pixel test {pixel}, cluster test {cluster}; alpha {radiance.ALPHA})")
+    print(
+        f"false-alarm rate over {seeds} seeds: {rate:.3f} "
+        f"(pixel test {pixel}, cluster test {cluster}; alpha {radiance.ALPHA})"
+    )
     # Binomial(200, 0.01): P(> 6 failures) < 0.5%; Sidak on independent tests is exact, so more means a bug.
     assert fails <= 6
 
@@ -182,9 +186,7 @@ def test_shadow_edge_callback_moves_failures_to_edge() -> None:
     test = ref.copy()
     test[1, 2] = 1.0
     test[3, 0] = 1.0
-    res = radiance.compare_deterministic(
-        ref, test, 0.0, 0.0, "t", shadow_edges=lambda r, c: (r == 1) & (c == 2)
-    )
+    res = radiance.compare_deterministic(ref, test, 0.0, 0.0, "t", shadow_edges=lambda r, c: (r == 1) & (c == 2))
     assert res.edge == 1 and res.interior == 1
     res = radiance.compare_deterministic(ref, test, 0.0, 0.0, "t", shadow_edges=lambda r, c: None)
     assert res.interior == 2 and "skipped" in res.notes[0]

@@ -14,10 +14,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import exrbuf, lighting, radiance, resolved, tolerance
 from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.backends import povray
@@ -50,7 +50,9 @@ def _requires(extra: tuple[str, ...], shadows: str, sides: str) -> tuple[str, ..
 def _render(module: Any, tmp_path: Path, case: str, shadows: str, sides: str) -> tuple[dict[str, Any], np.ndarray]:
     """Render CASES[case] with `module`; ({"bufs", "attrs", "info"}, closed-form radiance)."""
     lights, extra, emission, flip = CASES[case]
-    d = cases.lit_plane(tmp_path / case, lights, requires=_requires(extra, shadows, sides), emission=emission, flip=flip)
+    d = cases.lit_plane(
+        tmp_path / case, lights, requires=_requires(extra, shadows, sides), emission=emission, flip=flip
+    )
     scene = resolved.load(d)
     out = tmp_path / f"{case}.exr"
     info = module.render(scene, out, tmp_path / "work", 120.0)
@@ -66,7 +68,10 @@ def _check(backend: str, got: np.ndarray, want: np.ndarray, attrs: dict, info: d
     allowed = tol.abs_tol + tol.rel * np.abs(want)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(want > 0, err / want, 0.0)
-    print(f"{backend} {case}: max |err| {err.max():.3g}, max rel {rel.max():.3g}, max err/tol {np.max(err / np.maximum(allowed, 1e-300)):.3f}")
+    print(
+        f"{backend} {case}: max |err| {err.max():.3g}, max rel {rel.max():.3g}, "
+        f"max err/tol {np.max(err / np.maximum(allowed, 1e-300)):.3f}"
+    )
     assert np.all(err <= allowed), f"{backend} {case}: max err {err.max():.3g}; {tol.text}"
 
 
@@ -76,7 +81,9 @@ needs_povray = pytest.mark.skipif(povray.unavailable_reason() is not None, reaso
 
 
 @needs_povray
-@pytest.mark.parametrize("case", ["point", "two_points", "directional", "directional_back", "emission", "emission_and_lights"])
+@pytest.mark.parametrize(
+    "case", ["point", "two_points", "directional", "directional_back", "emission", "emission_and_lights"]
+)
 def test_povray_matches_closed_form(tmp_path: Path, case: str) -> None:
     r, want = _render(povray, tmp_path, case, "shadowless", "two_sided")
     _check("povray", r["bufs"]["RGB"], want, r["attrs"], r["info"], case)
@@ -105,7 +112,9 @@ def test_povray_sdl_mapping_is_exact_text(tmp_path: Path) -> None:
     c0, c1, c2 = (float(c) for c in colour)
     assert f"rgb <{c0!r},{c1!r},{c2!r}> fade_distance {fd!r} fade_power 2 }}" in sdl
     assert "parallel point_at" in sdl and "shadowless" not in sdl
-    scene2 = resolved.load(cases.lit_plane(tmp_path / "t", lights, requires=_requires(extra, "shadowless", "two_sided")))
+    scene2 = resolved.load(
+        cases.lit_plane(tmp_path / "t", lights, requires=_requires(extra, "shadowless", "two_sided"))
+    )
     assert povray.lights_sdl(scene2, 2.0, pts)[0].count("shadowless") == 2
 
 
@@ -188,9 +197,16 @@ def test_mitsuba_path_furnace_is_le_over_one_minus_rho(tmp_path: Path) -> None:
 @needs_mitsuba
 def test_mitsuba_two_sided_emitters_emit_on_both_sides_in_path(tmp_path: Path) -> None:
     """Path tracing with max_depth 1 sees only emission: Le on both sides when two-sided, front only else."""
-    for sides, flip, want in (("two_sided", True, EMISSION), ("one_sided", True, (0, 0, 0)), ("one_sided", False, EMISSION)):
+    for sides, flip, want in (
+        ("two_sided", True, EMISSION),
+        ("one_sided", True, (0, 0, 0)),
+        ("one_sided", False, EMISSION),
+    ):
         d = cases.lit_plane(
-            tmp_path / f"{sides}{flip}", [], flip=flip, emission=EMISSION,
+            tmp_path / f"{sides}{flip}",
+            [],
+            flip=flip,
+            emission=EMISSION,
             requires=("depth", "ids", "emission", "area_light", "global_illumination", sides),
         )
         import json
@@ -209,7 +225,10 @@ needs_pyrender = pytest.mark.skipif(pb.unavailable_reason() is not None, reason=
 
 
 @needs_pyrender
-@pytest.mark.parametrize("case", ["point", "two_points", "directional", "directional_back", "emission", "emission_back", "emission_and_lights"])
+@pytest.mark.parametrize(
+    "case",
+    ["point", "two_points", "directional", "directional_back", "emission", "emission_back", "emission_and_lights"],
+)
 def test_pyrender_lambert_shader_matches_closed_form(tmp_path: Path, case: str) -> None:
     r, want = _render(pb, tmp_path, case, "shadowless", "two_sided")
     got = r["bufs"]["RGB"]
@@ -219,7 +238,10 @@ def test_pyrender_lambert_shader_matches_closed_form(tmp_path: Path, case: str) 
     # in code units: GL rounds to nearest
     c_exact = 255 * np.clip(want / scale, 0, 1) ** (1 / 2.2)
     c_got = pb.encode_rgb8(got.astype(np.float64), scale)
-    print(f"pyrender {case}: max code error {np.abs(c_got - c_exact).max():.4f}, brightest code {r['info']['radiance']['max_code']}")
+    print(
+        f"pyrender {case}: max code error {np.abs(c_got - c_exact).max():.4f}, "
+        f"brightest code {r['info']['radiance']['max_code']}"
+    )
     assert np.abs(c_got - c_exact).max() <= 0.5 + tolerance.PYRENDER_CODE_SLACK
     assert r["info"]["radiance"]["max_code"] < 255
 
@@ -236,7 +258,9 @@ def test_pyrender_is_not_its_default_pbr_shader(tmp_path: Path) -> None:
 def test_pyrender_refuses_more_lights_than_it_binds(tmp_path: Path) -> None:
     lights = [{"kind": "point", "position": [0.1 * i, 0.0, 1.0], "intensity": [1.0, 1.0, 1.0]} for i in range(5)]
     scene = resolved.load(
-        cases.lit_plane(tmp_path / "s", lights, requires=("depth", "ids", "lambert", "point_light", "shadowless", "two_sided"))
+        cases.lit_plane(
+            tmp_path / "s", lights, requires=("depth", "ids", "lambert", "point_light", "shadowless", "two_sided")
+        )
     )
     with pytest.raises(BackendError, match="at most 4"):
         pb.render(scene, tmp_path / "o.exr", tmp_path / "w", 60.0)
@@ -262,6 +286,9 @@ def _check_occluded(backend: str, scene: resolved.ResolvedScene, bufs: dict, att
         assert not shadowed.any()
     rows, cols = np.nonzero(bad)
     amb = lighting.shadow_ambiguity(scene, prim, z, rows, cols, radiance.SHADOW_EDGE_REL * lighting.scene_size(scene))
-    print(f"{backend} occluder ({'shadows' if 'shadows' in scene.requires else 'shadowless'}): "
-          f"{int(bad.sum())} pixels beyond tolerance, all on ambiguous shadow rays: {bool(amb.all()) if amb is not None else None}")
-    assert amb is not None and amb.all(), list(zip(rows[~amb], cols[~amb]))
+    print(
+        f"{backend} occluder ({'shadows' if 'shadows' in scene.requires else 'shadowless'}): "
+        f"{int(bad.sum())} pixels beyond tolerance, all on ambiguous shadow rays: "
+        f"{bool(amb.all()) if amb is not None else None}"
+    )
+    assert amb is not None and amb.all(), list(zip(rows[~amb], cols[~amb], strict=True))

@@ -7,10 +7,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import backend_cases as cases
 import numpy as np
 import pytest
 
+import backend_cases as cases
 from rendiff_harness import __main__ as cli
 from rendiff_harness import exrbuf, radiance, references, resolved
 from rendiff_harness.backends import mitsuba_backend as mb
@@ -80,7 +80,9 @@ def test_stale_hash_says_regenerate(generated: tuple[Path, Path], tmp_path: Path
     (sd / "scene.json").write_text(json.dumps(meta))
     with pytest.raises(references.ReferenceError) as err:
         references.load(exr, resolved.load(sd))
-    assert "reference is stale" in str(err.value) and "regenerate with python -m rendiff_harness reference" in str(err.value)
+    assert "reference is stale" in str(err.value) and "regenerate with python -m rendiff_harness reference" in str(
+        err.value
+    )
     assert "--spp 32 --seed 5" in str(err.value)  # keeps the recorded settings
 
 
@@ -125,7 +127,9 @@ def test_corrupt_provenance_is_refused(generated: tuple[Path, Path], tmp_path: P
 
 
 @needs_mitsuba
-def test_reference_refuses_scenes_without_global_illumination(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_reference_refuses_scenes_without_global_illumination(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     d = cases.lit_plane(tmp_path / "s", [], requires=("depth", "ids", "emission", "two_sided"), emission=(1, 1, 1))
     rc = cli.main(["reference", "--scene", str(d), "--spp", "8", "--out", str(tmp_path / "x.exr")])
     assert rc == 2 and "global_illumination" in capsys.readouterr().err
@@ -176,8 +180,14 @@ def test_committed_reference_matches_its_scene_and_mitsuba(exr: Path, tmp_path: 
     def gate(sc: resolved.ResolvedScene, spp: int) -> radiance.RgbResult:
         rgb, var, info = mb.render_radiance(sc, spp=spp, seed=11)
         return radiance.compare_statistical(
-            cached.rgb, cached.var, radiance.degrees_of_freedom(cached.attrs), rgb, var, info["var_samples"] - 1,
-            ref_n=n_ref, test_n=info["spp"],
+            cached.rgb,
+            cached.var,
+            radiance.degrees_of_freedom(cached.attrs),
+            rgb,
+            var,
+            info["var_samples"] - 1,
+            ref_n=n_ref,
+            test_n=info["spp"],
         )
 
     same = gate(scene, 256)

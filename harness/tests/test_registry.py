@@ -25,7 +25,17 @@ def test_registry_lists_one_module_per_backend() -> None:
     pov = registry.load("povray")
     assert pov.module is not None and pov.name == "povray"
     assert pov.features == frozenset(
-        {"depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadows", "shadowless", "two_sided"}
+        {
+            "depth",
+            "ids",
+            "emission",
+            "lambert",
+            "point_light",
+            "directional_light",
+            "shadows",
+            "shadowless",
+            "two_sided",
+        }
     )
     assert pov.buffers == frozenset({"Z", "id", "RGB"})
     assert registry.get("povray").module_name == "povray"
@@ -55,9 +65,7 @@ def _extra_backends_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, files: 
         monkeypatch.delitem(sys.modules, f"rendiff_harness.backends.{name}", raising=False)
 
 
-def test_import_error_of_a_dependency_becomes_the_reason(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_import_error_of_a_dependency_becomes_the_reason(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _extra_backends_dir(tmp_path, monkeypatch, {"broken_backend": "import definitely_not_installed_pkg\n"})
     b = registry.load("broken_backend")
     reason = b.unavailable_reason() or ""
@@ -133,9 +141,7 @@ def test_render_unavailable_backend(
     empty = tmp_path / "empty"
     empty.mkdir()
     monkeypatch.setenv("PATH", str(empty))
-    assert (
-        cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(tmp_path / "o.exr")]) == 2
-    )
+    assert cli.main(["render", "--backend", "povray", "--scene", str(d), "--out", str(tmp_path / "o.exr")]) == 2
     err = capsys.readouterr().err
     assert "povray unavailable" in err and "apt-get install povray" in err and "Traceback" not in err
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fixtures import write_scene
 
+from fixtures import write_scene
 from rendiff_harness import resolved, verify
 
 BG = verify.BACKGROUND_ID
@@ -34,12 +34,23 @@ def _exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
     return np.zeros_like(z)
 
 
-def _one(scene: resolved.ResolvedScene, ref: int, test: int, px: tuple[int, int], eps: float = 1e-3,
-         depth_tol: verify.DepthTolerance = _exact) -> tuple[str, str]:
+def _one(
+    scene: resolved.ResolvedScene,
+    ref: int,
+    test: int,
+    px: tuple[int, int],
+    eps: float = 1e-3,
+    depth_tol: verify.DepthTolerance = _exact,
+) -> tuple[str, str]:
     x, y = px
     res = verify.classify_mismatches(
-        scene, np.array([ref], dtype=np.uint32), np.array([test], dtype=np.uint32), np.array([y]), np.array([x]),
-        eps, depth_tol,
+        scene,
+        np.array([ref], dtype=np.uint32),
+        np.array([test], dtype=np.uint32),
+        np.array([y]),
+        np.array([x]),
+        eps,
+        depth_tol,
     )
     return verify.CLASSES[int(res.cls[0])], res.why[0]
 
@@ -159,7 +170,14 @@ def test_an_eye_close_to_a_plane_opens_the_edge(tmp_path: Path) -> None:
     flat = [[3, 0, 0], [-3, 0, 0], [0, -3, 0]]
     s = _scene(tmp_path, [a, flat])
     x, y = 8, 7
-    args = (s, np.array([0], dtype=np.uint32), np.array([BG], dtype=np.uint32), np.array([y]), np.array([x]), 0.6,
-            _exact)
+    args = (
+        s,
+        np.array([0], dtype=np.uint32),
+        np.array([BG], dtype=np.uint32),
+        np.array([y]),
+        np.array([x]),
+        0.6,
+        _exact,
+    )
     assert verify.CLASSES[int(verify.classify_mismatches(*args, eye_slack=4.9).cls[0])] == "crack"
     assert verify.CLASSES[int(verify.classify_mismatches(*args, eye_slack=5.1).cls[0])] == "edge"

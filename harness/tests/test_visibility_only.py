@@ -24,12 +24,15 @@ from rendiff_harness import backends, exrbuf, registry, resolved
 REPO = Path(__file__).resolve().parents[2]
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
 
-QUAD = [[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]], [[-1.5, -0.5, -1.0], [1.5, -0.5, -1.0], [0.0, 1.5, -1.0]]]
+QUAD = [
+    [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
+    [[-1.5, -0.5, -1.0], [1.5, -0.5, -1.0], [0.0, 1.5, -1.0]],
+]
 SUN = [{"kind": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": [1.0, 1.0, 1.0]}]
 # Shaded, with features both POV-Ray (one_sided) and pyrender (shadows, one_sided) lack.
 SHADED = ("depth", "ids", "lambert", "directional_light", "shadows", "one_sided")
 
-FAKE = '''
+FAKE = """
 NAME = "{name}"
 FEATURES = frozenset({{"depth", "ids", "lambert"}})
 BUFFERS = frozenset({{"Z", "id", "RGB"}})
@@ -43,7 +46,7 @@ def render(scene, out_exr, workdir, timeout_s{kw}):
     rgb = None if {no_rgb} else np.zeros((h, w, 3), dtype=np.float32)
     exrbuf.write_buffers(out_exr, Z=np.ones((h, w), dtype=np.float32), prim=prim, obj=prim, RGB=rgb)
     return {{"visibility_only": {no_rgb}}}
-'''
+"""
 
 
 def _fake_backends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -98,7 +101,9 @@ def test_plan_per_buffer(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Non
     assert registry.plan(vis, lit, visibility_only=True) == registry.Plan(True, True, (), "")
 
 
-def test_cli_visibility_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_visibility_only(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     _fake_backends(tmp_path, monkeypatch)
     d = _scene(tmp_path, ("depth", "ids", "lambert", "shadows"))
     out = tmp_path / "vis.exr"

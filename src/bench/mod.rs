@@ -108,13 +108,7 @@ pub fn timed<T>(runs: usize, mut f: impl FnMut() -> T) -> Timed<T> {
 
 /// The scene with its camera at another resolution (same eye, field of view, near and far).
 pub fn resized(scene: &ResolvedScene, w: u32, h: u32) -> Result<ResolvedScene> {
-    let mut s = scene.clone();
-    let c = &scene.camera;
-    let precision = c.precision;
-    s.camera = crate::camera::Camera::new(c.eye, c.look_at, c.up, c.vfov_deg, w, h, c.near, c.far)
-        .map_err(anyhow::Error::msg)?;
-    s.camera.precision = precision;
-    Ok(s)
+    scene.resized(w, h).map_err(anyhow::Error::msg)
 }
 
 /// Loads and resolves a scene file.

@@ -269,7 +269,7 @@ fn in_process(
     let start = Instant::now();
     let deadline = start + timeout;
     match std::panic::catch_unwind(move || render(deadline)) {
-        Ok(Ok(_)) if crate::progress::past(Some(deadline)) => {
+        Ok(Ok(_)) if rendiff_core::deadline::past(Some(deadline)) => {
             rec.status = "error".into();
             rec.time_s = start.elapsed().as_secs_f64();
             rec.message = format!(

@@ -99,9 +99,17 @@ from ..resolved import Camera, ResolvedScene
 NAME = "mitsuba"
 FEATURES = frozenset(
     {
-        "depth", "ids",
-        "emission", "lambert", "point_light", "directional_light", "shadows",
-        "area_light", "global_illumination", "two_sided", "one_sided",
+        "depth",
+        "ids",
+        "emission",
+        "lambert",
+        "point_light",
+        "directional_light",
+        "shadows",
+        "area_light",
+        "global_illumination",
+        "two_sided",
+        "one_sided",
     }
 )
 BUFFERS = frozenset({"Z", "id", "N", "RGB"})
@@ -359,9 +367,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
         raise BackendError(f"mitsuba failed to render: {type(exc).__name__}: {exc}") from None
     t2 = time.perf_counter()
     if image.shape[:2] != (cam.height, cam.width):
-        raise BackendError(
-            f"mitsuba returned {image.shape[1]}x{image.shape[0]}, expected {cam.width}x{cam.height}"
-        )
+        raise BackendError(f"mitsuba returned {image.shape[1]}x{image.shape[0]}, expected {cam.width}x{cam.height}")
     ch = _channels(mi_scene, image)
     hit = ch["z.T"] > 0.0
     prim = prim_ids(ch["pi.I"], hit, n)
@@ -455,9 +461,7 @@ def light_dicts(scene: ResolvedScene) -> list[dict[str, Any]]:
     for pos, intensity in points:
         out.append({"type": "point", "position": [float(v) for v in pos], "intensity": _rgb(intensity)})
     for direction, irradiance in dirs:
-        out.append(
-            {"type": "directional", "direction": [float(v) for v in direction], "irradiance": _rgb(irradiance)}
-        )
+        out.append({"type": "directional", "direction": [float(v) for v in direction], "irradiance": _rgb(irradiance)})
     return out
 
 
@@ -521,8 +525,14 @@ def render_radiance(
         base_seed = DEFAULT_SEED if seed is None else int(seed)
         integ = {"type": "path", "max_depth": depth, "hide_emitters": False}
         mi_scene = _radiance_scene(
-            mi, scene, near, far, integ, {"type": "independent", "sample_count": per},
-            radiance_shapes(mi, scene, emitters=True), light_dicts(scene),
+            mi,
+            scene,
+            near,
+            far,
+            integ,
+            {"type": "independent", "sample_count": per},
+            radiance_shapes(mi, scene, emitters=True),
+            light_dicts(scene),
         )
         t1 = time.perf_counter()
         seeds = [(base_seed * k + i) % 2**32 for i in range(k)]
@@ -530,8 +540,16 @@ def render_radiance(
         rgb = means.mean(axis=0)
         var = means.var(axis=0, ddof=1) / k
         info.update(
-            integrator="path", spp=per * k, spp_requested=n_req, passes=k, spp_per_pass=per, seed=base_seed,
-            pass_seeds=seeds, max_depth=depth, scene_max_depth=int(scene.max_depth), sampler="independent",
+            integrator="path",
+            spp=per * k,
+            spp_requested=n_req,
+            passes=k,
+            spp_per_pass=per,
+            seed=base_seed,
+            pass_seeds=seeds,
+            max_depth=depth,
+            scene_max_depth=int(scene.max_depth),
+            sampler="independent",
             rfilter="box",
             var_samples=k,
         )
@@ -557,9 +575,14 @@ def render_radiance(
             rgb += _render_rgb(mi, _radiance_scene(mi, scene, near, far, integ, sampler, shapes, []), 1, 0)
             n_passes += 1
     info.update(
-        integrator="direct", spp=1, passes=n_passes,
-        sampler="stratified, 1 spp, no jitter (pixel centers)", rfilter="box",
-        pass_kinds="one `direct` pass per light (emitter_samples 1, bsdf_samples 0) + one `path` max_depth 1 pass for emission",
+        integrator="direct",
+        spp=1,
+        passes=n_passes,
+        sampler="stratified, 1 spp, no jitter (pixel centers)",
+        rfilter="box",
+        pass_kinds=(
+            "one `direct` pass per light (emitter_samples 1, bsdf_samples 0) + one `path` max_depth 1 pass for emission"
+        ),
     )
     info["timings_s"] = {"render": time.perf_counter() - t0}
     return rgb, None, info
@@ -614,7 +637,13 @@ def render(
             attrs["max_depth"] = int(rinfo["max_depth"])
     t0 = time.perf_counter()
     exrbuf.write_buffers(
-        out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], N=buffers["N"], RGB=rgb, var=var,
+        out_exr,
+        Z=buffers["Z"],
+        prim=buffers["prim"],
+        obj=buffers["obj"],
+        N=buffers["N"],
+        RGB=rgb,
+        var=var,
         attrs=attrs,
     )
     info["timings_s"]["write"] = time.perf_counter() - t0

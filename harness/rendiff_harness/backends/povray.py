@@ -98,9 +98,15 @@ from ..resolved import Camera, ResolvedScene
 NAME = "povray"
 FEATURES: frozenset[str] = frozenset(
     {
-        "depth", "ids",
-        "emission", "lambert", "point_light", "directional_light",
-        "shadows", "shadowless", "two_sided",
+        "depth",
+        "ids",
+        "emission",
+        "lambert",
+        "point_light",
+        "directional_light",
+        "shadows",
+        "shadowless",
+        "two_sided",
     }
 )
 BUFFERS: frozenset[str] = frozenset({"Z", "id", "RGB"})
@@ -276,7 +282,7 @@ def ids_sdl(scene: ResolvedScene, mesh: MeshSdl) -> str:
         raise BackendError(f"{NAME}: {n} triangles do not fit the 32-bit id encoding")
     code = np.arange(1, n + 1, dtype=np.int64)
     lows, highs = (code & 0xFFFF).tolist(), (code >> 16).tolist()
-    textures = [f"texture{{pigment{{rgb<{lo},{hi},0>/65535}}}}" for lo, hi in zip(lows, highs)]
+    textures = [f"texture{{pigment{{rgb<{lo},{hi},0>/65535}}}}" for lo, hi in zip(lows, highs, strict=True)]
     return (
         _PRELUDE
         + camera_sdl(scene.camera)
@@ -367,8 +373,10 @@ class Settings:
         lo, hi = AA_THRESHOLD_RANGE
         if self.aa_threshold is not None and not (lo <= self.aa_threshold <= hi):
             raise BackendError(f"{NAME}: antialiasing threshold must be in [{lo:g}, {hi:g}], got {self.aa_threshold!r}")
-        for what, value, (a, b) in (("antialiasing depth", self.aa_depth, AA_DEPTH_RANGE),
-                                    ("quality", self.quality, QUALITY_RANGE)):
+        for what, value, (a, b) in (
+            ("antialiasing depth", self.aa_depth, AA_DEPTH_RANGE),
+            ("quality", self.quality, QUALITY_RANGE),
+        ):
             if value is not None and not (isinstance(value, int) and a <= value <= b):
                 raise BackendError(f"{NAME}: {what} must be an integer in {a}..{b}, got {value!r}")
 
@@ -449,18 +457,16 @@ def _run(
     )
     try:
         out, err = proc.communicate(timeout=remaining)
-    except subprocess.TimeoutExpired:
+    except subprocess.TimeoutExpired as exc:
         proc.kill()
         proc.communicate()
         raise BackendError(
             f"{NAME}: timed out after {timeout_s:g} s (in the {stem} pass); scratch kept in {scratch}"
-        )
+        ) from exc
     elapsed = time.monotonic() - t0
     if proc.returncode != 0:
         tail = (err + out).decode("utf-8", "replace")[-_STDERR_TAIL:]
-        raise BackendError(
-            f"{NAME}: {stem} pass exited with rc={proc.returncode}; scratch kept in {scratch}\n{tail}"
-        )
+        raise BackendError(f"{NAME}: {stem} pass exited with rc={proc.returncode}; scratch kept in {scratch}\n{tail}")
     if not (scratch / png_name).is_file():
         raise BackendError(f"{NAME}: {stem} pass wrote no {png_name}; scratch kept in {scratch}")
     return elapsed
@@ -509,9 +515,7 @@ def decode_depth(png: np.ndarray, r: float) -> np.ndarray:
 _LIT_FINISH = "finish { ambient 0 emission 0 diffuse 1 specular 0 phong 0 brilliance 1 reflection 0 }"
 _EMIT_FINISH = "finish { ambient 0 emission 1 diffuse 0 specular 0 phong 0 reflection 0 }"
 _RADIANCE_PRELUDE = (
-    "#version 3.7;\n"
-    "global_settings { assumed_gamma 1.0 ambient_light 0 max_trace_level 1 }\n"
-    "background { rgb 0 }\n"
+    "#version 3.7;\nglobal_settings { assumed_gamma 1.0 ambient_light 0 max_trace_level 1 }\nbackground { rgb 0 }\n"
 )
 
 
@@ -523,7 +527,7 @@ def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, fin
     """mesh2 with one texture per material (colours (M, 3), already scaled) and faces tagged by material."""
     mats = scene.prim_materials()
     textures = [f"texture{{pigment{{rgb{_vec(c)}}}{finish}}}" for c in colours]
-    faces = [f"<{a},{b},{c}>,{int(m)}" for (a, b, c), m in zip(mesh.faces.tolist(), mats.tolist())]
+    faces = [f"<{a},{b},{c}>,{int(m)}" for (a, b, c), m in zip(mesh.faces.tolist(), mats.tolist(), strict=True)]
     return (
         "mesh2 {\n"
         + mesh.vertex_block
@@ -579,7 +583,9 @@ def lights_sdl(scene: ResolvedScene, scale: float, hit_points: np.ndarray) -> tu
     return "\n".join(parts) + "\n", fades
 
 
-def lit_sdl(scene: ResolvedScene, mesh: MeshSdl, scale: float, hit_points: np.ndarray) -> tuple[str, list[dict[str, float]]]:
+def lit_sdl(
+    scene: ResolvedScene, mesh: MeshSdl, scale: float, hit_points: np.ndarray
+) -> tuple[str, list[dict[str, float]]]:
     albedo, _ = scene.material_arrays()
     lights, fades = lights_sdl(scene, scale, hit_points)
     sdl = _RADIANCE_PRELUDE + camera_sdl(scene.camera) + lights + _material_mesh(scene, mesh, albedo, _LIT_FINISH)
@@ -684,18 +690,22 @@ def render(
     obj = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
     obj[hit] = scene.object_ids[prim[hit]]
     attrs: dict[str, str | float | int] = {
-        "backend": NAME, "version": version(), "depth_range": r, "depth_step": depth_step(r),
+        "backend": NAME,
+        "version": version(),
+        "depth_range": r,
+        "depth_step": depth_step(r),
     }
     rgb = None
     if shaded:
-        rgb, shade_info = _radiance(
+        shading = _radiance(
             binary, scratch, scene, mesh, prim, np.where(hit, depth, np.inf), deadline, timeout_s, settings
         )
-        info["radiance"] = shade_info
-        passes.update(shade_info.pop("passes"))
+        rgb = shading.rgb
+        info["radiance"] = shading.info
+        passes.update(shading.passes)
         attrs.update(
-            rgb_scale=float(shade_info["rgb_scale"]),
-            emission_scale=float(shade_info["emission_scale"]),
+            rgb_scale=shading.rgb_scale,
+            emission_scale=shading.emission_scale,
             rgb_encoding="png16-linear",
             integrator="direct",
             spp=1,
@@ -705,6 +715,17 @@ def render(
     exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=obj, RGB=rgb, attrs=attrs)
     shutil.rmtree(scratch, ignore_errors=True)
     return info
+
+
+@dataclass(frozen=True)
+class _Shading:
+    """What the radiance passes produced (`_radiance`)."""
+
+    rgb: np.ndarray  # (H, W, 3) float32
+    info: dict[str, object]  # becomes info["radiance"]
+    passes: dict[str, dict[str, float]]  # per pass timings, merged into info["passes"]
+    rgb_scale: float  # the lit pass's final exposure scale (0: not run)
+    emission_scale: float  # the emission pass's (0: not run)
 
 
 def _radiance(
@@ -717,7 +738,7 @@ def _radiance(
     deadline: float,
     timeout_s: float,
     settings: Settings = EXACT,
-) -> tuple[np.ndarray, dict[str, object]]:
+) -> _Shading:
     """Lit and emission passes -> (H, W, 3) float32 radiance and what was done.
 
     With antialiasing a pixel averages its area, so partly covered background pixels keep
@@ -733,6 +754,8 @@ def _radiance(
     rgb = np.zeros((h, w, 3))
     passes: dict[str, dict[str, float]] = {}
     info: dict[str, object] = {"rgb_scale": 0.0, "emission_scale": 0.0, "rescaled": 0}
+    scales = {"rgb_scale": 0.0, "emission_scale": 0.0}  # the same numbers as info's, typed
+    rescaled = 0
     plans: list[tuple[str, float]] = []
     if "lambert" in scene.requires and scene.lights:
         plans.append(("lit", exposure(lighting.upper_bound(scene, prim, z, emission=False))))
@@ -760,12 +783,13 @@ def _radiance(
                     "(the exposure bound is wrong: a bug)"
                 )
             scale *= 4.0
-            info["rescaled"] = int(info["rescaled"]) + 1  # type: ignore[call-overload]
+            rescaled += 1
+            info["rescaled"] = rescaled
         rgb += png.astype(np.float64) * (scale / PNG16_MAX)
-        info["rgb_scale" if stem == "lit" else "emission_scale"] = scale
-    info["passes"] = passes
-    info["quantization_step"] = (float(info["rgb_scale"]) + float(info["emission_scale"])) / PNG16_MAX  # type: ignore[arg-type]
+        key = "rgb_scale" if stem == "lit" else "emission_scale"
+        scales[key] = info[key] = scale
+    info["quantization_step"] = (scales["rgb_scale"] + scales["emission_scale"]) / PNG16_MAX
     if not settings.antialiased:
         rgb[~hit] = 0.0
     info["flags"] = settings.flags()
-    return rgb.astype(np.float32), info
+    return _Shading(rgb.astype(np.float32), info, passes, scales["rgb_scale"], scales["emission_scale"])

@@ -179,8 +179,10 @@ def msaa_support() -> dict[str, Any]:
     import inspect
 
     pyrender, GL = _import_gl()
-    params = [*inspect.signature(pyrender.OffscreenRenderer).parameters,
-              *inspect.signature(pyrender.OffscreenRenderer.render).parameters]
+    params = [
+        *inspect.signature(pyrender.OffscreenRenderer).parameters,
+        *inspect.signature(pyrender.OffscreenRenderer.render).parameters,
+    ]
     renderer = pyrender.OffscreenRenderer(1, 1)
     try:
         renderer._platform.make_current()
@@ -223,7 +225,8 @@ def vertex_depths(scene: ResolvedScene) -> np.ndarray:
     """Planar depth (along `forward`) of every vertex, float64, shaped (N*3,)."""
     cam = scene.camera
     verts = scene.triangles.reshape(-1, 3).astype(np.float64)
-    return (verts - cam.eye) @ cam.forward
+    depths: np.ndarray = (verts - cam.eye) @ cam.forward
+    return depths
 
 
 def choose_depth_range(scene: ResolvedScene) -> tuple[float, float]:
@@ -260,7 +263,8 @@ def choose_depth_range(scene: ResolvedScene) -> tuple[float, float]:
 def depth_step(z: npt.ArrayLike, near: float, far: float) -> np.ndarray:
     """Resolution of a 24-bit depth buffer at planar depth z, for GL planes near/far."""
     z = np.asarray(z, dtype=np.float64)
-    return z * z * (far - near) / (far * near) * 2.0**-DEPTH_BITS
+    step: np.ndarray = z * z * (far - near) / (far * near) * 2.0**-DEPTH_BITS
+    return step
 
 
 def depth_tolerance(z: npt.ArrayLike, near: float, far: float) -> np.ndarray:
@@ -274,7 +278,8 @@ def depth_tolerance(z: npt.ArrayLike, near: float, far: float) -> np.ndarray:
     """
     z = np.asarray(z, dtype=np.float64)
     ulp = np.spacing(np.abs(z).astype(np.float32)).astype(np.float64)
-    return DEPTH_TOLERANCE_STEPS * depth_step(z, near, far) + ulp
+    tolerance: np.ndarray = DEPTH_TOLERANCE_STEPS * depth_step(z, near, far) + ulp
+    return tolerance
 
 
 # --------------------------------------------------------------------------- IDs
@@ -303,8 +308,7 @@ def decode_ids(color: np.ndarray, count: int) -> np.ndarray:
     if np.any(code > count):
         bad = int(np.count_nonzero(code > count))
         raise BackendError(
-            f"pyrender produced {bad} pixels whose colour is no triangle ID "
-            "(blended colours: is MSAA or lighting on?)"
+            f"pyrender produced {bad} pixels whose colour is no triangle ID (blended colours: is MSAA or lighting on?)"
         )
     prim = code - np.uint32(1)  # background: 0 - 1 wraps to 0xFFFFFFFF
     return prim.astype(np.uint32)
@@ -345,13 +349,9 @@ def _build_scene(pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, nea
     pscene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.0, 0.0, 0.0])
     if scene.triangle_count:
         positions = np.ascontiguousarray(scene.triangles.reshape(-1, 3), dtype=np.float32)
-        prim = pyrender.Primitive(
-            positions=positions, color_0=encode_ids(scene.triangle_count), mode=GL.GL_TRIANGLES
-        )
+        prim = pyrender.Primitive(positions=positions, color_0=encode_ids(scene.triangle_count), mode=GL.GL_TRIANGLES)
         pscene.add(pyrender.Mesh([prim]))
-    camera = pyrender.PerspectiveCamera(
-        yfov=yfov(cam), znear=near, zfar=far, aspectRatio=cam.width / cam.height
-    )
+    camera = pyrender.PerspectiveCamera(yfov=yfov(cam), znear=near, zfar=far, aspectRatio=cam.width / cam.height)
     pscene.add(camera, pose=camera_pose(cam))
     return pscene
 
@@ -528,7 +528,9 @@ def _light_pose(direction: np.ndarray) -> np.ndarray:
     return pose
 
 
-def _lit_scene(pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, scale: float) -> Any:
+def _lit_scene(
+    pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, scale: float
+) -> Any:
     from .. import lighting
 
     cam = scene.camera
@@ -614,8 +616,12 @@ def render_radiance(
         info["rescaled"] += 1
     rgb = decode_rgb8(color, scale)
     rgb[~hit] = 0.0
-    info.update(rgb_scale=scale, max_code=int(color[hit].max(initial=0)), seconds=time.perf_counter() - t0,
-                shaders=str(SHADER_DIR.name))
+    info.update(
+        rgb_scale=scale,
+        max_code=int(color[hit].max(initial=0)),
+        seconds=time.perf_counter() - t0,
+        shaders=str(SHADER_DIR.name),
+    )
     return rgb, info
 
 
@@ -647,9 +653,7 @@ def render(
         rgb64, rinfo = render_radiance(scene, buffers["prim"], buffers["Z"], float(info["znear"]), float(info["zfar"]))
         rgb = rgb64.astype(np.float32)
         info["radiance"] = rinfo
-        attrs.update(
-            rgb_scale=float(rinfo["rgb_scale"]), rgb_encoding="png8-gamma2.2", integrator="direct", spp=1
-        )
+        attrs.update(rgb_scale=float(rinfo["rgb_scale"]), rgb_encoding="png8-gamma2.2", integrator="direct", spp=1)
     exrbuf.write_buffers(out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], RGB=rgb, attrs=attrs)
     info["timings_s"]["write"] = time.perf_counter() - t0
     return info

@@ -178,7 +178,7 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
     let out: Vec<([f32; 3], [f32; 3])> = (0..cam.pixel_count())
         .into_par_iter()
         .map(|i| {
-            if crate::progress::past(opts.deadline) {
+            if crate::deadline::past(opts.deadline) {
                 return ([0.0; 3], [0.0; 3]);
             }
             let (px, py) = ((i % w) as f64, (i / w) as f64);

@@ -75,7 +75,7 @@ pub fn render(
         .par_iter()
         .enumerate()
         .map(|(i, &prim)| {
-            if prim == BACKGROUND_ID || crate::progress::past(opts.deadline) {
+            if prim == BACKGROUND_ID || crate::deadline::past(opts.deadline) {
                 return [0.0; 3];
             }
             let ray = cam.pixel_ray((i % w) as u32, (i / w) as u32);

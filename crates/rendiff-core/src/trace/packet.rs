@@ -318,8 +318,13 @@ mod tests {
             ("scenes/icosphere.toml", (61, 35)),
             ("scenes/million.toml", (160, 90)),
         ] {
-            let s = crate::scene::Scene::load(std::path::Path::new(path)).unwrap();
-            let scene = crate::bench::resized(&ResolvedScene::resolve(&s).unwrap(), size.0, size.1)
+            let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../..")
+                .join(path);
+            let s = crate::scene::Scene::load(&file).unwrap();
+            let scene = ResolvedScene::resolve(&s)
+                .unwrap()
+                .resized(size.0, size.1)
                 .unwrap();
             let bvh = TraceBvh::build(&scene, crate::trace::BvhQuality::Medium);
             let cam = &scene.camera;

@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 /// BVH build quality: obvhs presets (without spatial splits, which would
 /// give a triangle several partial boxes and break conservative pruning).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum BvhQuality {
     /// obvhs fastest_build.
@@ -37,6 +37,18 @@ pub enum BvhQuality {
     Medium,
     /// obvhs slow_build.
     Slow,
+}
+
+impl crate::names::Named for BvhQuality {
+    const ALL: &'static [Self] = &[Self::Fastest, Self::Fast, Self::Medium, Self::Slow];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Fastest => "fastest",
+            Self::Fast => "fast",
+            Self::Medium => "medium",
+            Self::Slow => "slow",
+        }
+    }
 }
 
 impl BvhQuality {
@@ -268,7 +280,7 @@ fn lower_key(tmin: f32, ray: &PixelRay) -> u64 {
 
 /// How pixel rays walk the BVH. Both give the same buffers; they differ in speed
 /// (and in the traversal counters), which the benchmarks compare.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TraceKernel {
     /// 8x4-pixel packets walk the tree together (the default).
@@ -276,6 +288,16 @@ pub enum TraceKernel {
     Packets,
     /// One ray at a time.
     SingleRays,
+}
+
+impl crate::names::Named for TraceKernel {
+    const ALL: &'static [Self] = &[Self::Packets, Self::SingleRays];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Packets => "packets",
+            Self::SingleRays => "single-rays",
+        }
+    }
 }
 
 /// Options for one trace render.
@@ -367,7 +389,7 @@ pub fn trace_keys(
             .enumerate()
             .map(|(y, (row, crow))| {
                 let mut c = Counters::default();
-                if crate::progress::past(opts.deadline) {
+                if crate::deadline::past(opts.deadline) {
                     return c;
                 }
                 let mut stack = Vec::with_capacity(64);
@@ -384,7 +406,7 @@ pub fn trace_keys(
             .enumerate()
             .map(|(y, row)| {
                 let mut c = Counters::default();
-                if crate::progress::past(opts.deadline) {
+                if crate::deadline::past(opts.deadline) {
                     return c;
                 }
                 let mut stack = Vec::with_capacity(64);
@@ -402,7 +424,7 @@ pub fn trace_keys(
             .enumerate()
             .map(|(band, rows)| {
                 let mut c = Counters::default();
-                if crate::progress::past(opts.deadline) {
+                if crate::deadline::past(opts.deadline) {
                     return c;
                 }
                 let mut stack = Vec::with_capacity(64);

@@ -29,7 +29,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
         std::process::id()
     ));
     // Removed by the signal handler if rendiff is interrupted mid-write.
-    let _pending = crate::shutdown::track_path(&tmp);
+    let _pending = crate::pending::track_path(&tmp);
     let result = write(&tmp).and_then(|_| {
         std::fs::rename(&tmp, path)
             .with_context(|| format!("{}: cannot move result into place", path.display()))

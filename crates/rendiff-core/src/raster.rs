@@ -132,7 +132,7 @@ pub fn render(
             let tx = ti as u32 % tiles_x;
             let ty = ti as u32 / tiles_x;
             // Past the deadline a tile renders nothing (background, right size).
-            let bin = if crate::progress::past(opts.deadline) {
+            let bin = if crate::deadline::past(opts.deadline) {
                 &[][..]
             } else {
                 &bin[..]

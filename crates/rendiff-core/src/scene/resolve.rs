@@ -89,6 +89,17 @@ fn transform_matrix(t: &super::Transform) -> (DMat3, DVec3) {
 }
 
 impl ResolvedScene {
+    /// The scene with its camera at another resolution (same eye, field of
+    /// view, near and far): benchmarks and tests render one scene at many sizes.
+    pub fn resized(&self, w: u32, h: u32) -> Result<ResolvedScene, String> {
+        let mut s = self.clone();
+        let c = &self.camera;
+        s.camera =
+            crate::camera::Camera::new(c.eye, c.look_at, c.up, c.vfov_deg, w, h, c.near, c.far)?;
+        s.camera.precision = c.precision;
+        Ok(s)
+    }
+
     /// Resolves a validated scene: loads meshes, runs generators, applies transforms,
     /// rounds to f32, assigns IDs and builds the camera.
     pub fn resolve(scene: &Scene) -> Result<ResolvedScene, SceneError> {

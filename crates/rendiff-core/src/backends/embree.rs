@@ -413,7 +413,8 @@ impl Device {
         };
         if culling != 0 {
             return Err(EmbreeError::Failed(
-                "this libembree3 was built with back-face culling, which docs/DESIGN.md forbids".into(),
+                "this libembree3 was built with back-face culling, which docs/DESIGN.md forbids"
+                    .into(),
             ));
         }
         device.check("rtcNewDevice")?;

@@ -18,7 +18,7 @@ use glam::DVec3;
 
 /// Deliberate errors, so the statistical gate's detection power can be tested.
 /// Never used by a normal render.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Bias {
     /// Every albedo 2% too high.
@@ -34,6 +34,27 @@ pub enum Bias {
     VarianceHalved,
     /// Path tracing only: the reported variance of each pixel's mean doubled.
     VarianceDoubled,
+}
+
+impl crate::names::Named for Bias {
+    const ALL: &'static [Self] = &[
+        Self::Albedo2Percent,
+        Self::MissingCosine,
+        Self::OneBounceFewer,
+        Self::LightTimesPi,
+        Self::VarianceHalved,
+        Self::VarianceDoubled,
+    ];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Albedo2Percent => "albedo2-percent",
+            Self::MissingCosine => "missing-cosine",
+            Self::OneBounceFewer => "one-bounce-fewer",
+            Self::LightTimesPi => "light-times-pi",
+            Self::VarianceHalved => "variance-halved",
+            Self::VarianceDoubled => "variance-doubled",
+        }
+    }
 }
 
 /// How to shade.

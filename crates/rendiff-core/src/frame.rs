@@ -105,8 +105,11 @@ mod tests {
     /// per-pixel lookup, across row boundaries too.
     #[test]
     fn buffers_follow_each_pixels_key() {
-        let s =
-            crate::scene::Scene::load(std::path::Path::new("scenes/three_triangles.toml")).unwrap();
+        let s = crate::scene::Scene::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../scenes/three_triangles.toml"),
+        )
+        .unwrap();
         let scene = ResolvedScene::resolve(&s).unwrap();
         let cam = &scene.camera;
         let tris = scene.triangles.len() as u32;
