@@ -79,63 +79,9 @@ pub const EXACT_BACKENDS: &[&str] = &["raster", "trace"];
 /// Relative slack of two f32 roundings.
 pub const F32_SLACK: f64 = 1.0 / 4_194_304.0; // 2^-22
 
-/// A verdict's status, as results.json and the baseline spell it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Status {
-    /// Within the conventions.
-    Pass,
-    /// A renderer is wrong.
-    Fail,
-    /// Not compared (a missing feature or backend).
-    Skipped,
-    /// The comparison could not be made (crash, timeout, unreadable buffer).
-    Error,
-    /// A known divergence within its recorded bound.
-    ExpectedFail,
-    /// A known divergence that went away: update the expectation.
-    UnexpectedPass,
-}
-
-impl Status {
-    /// Every status.
-    pub const ALL: [Status; 6] = [
-        Status::Pass,
-        Status::Fail,
-        Status::Skipped,
-        Status::Error,
-        Status::ExpectedFail,
-        Status::UnexpectedPass,
-    ];
-
-    /// The name results.json uses.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Status::Pass => "pass",
-            Status::Fail => "fail",
-            Status::Skipped => "skipped",
-            Status::Error => "error",
-            Status::ExpectedFail => "expected_fail",
-            Status::UnexpectedPass => "unexpected_pass",
-        }
-    }
-
-    /// The status spelled `s`, None for anything else.
-    pub fn parse(s: &str) -> Option<Status> {
-        Status::ALL.into_iter().find(|x| x.as_str() == s)
-    }
-
-    /// True for statuses that turn a run red.
-    pub fn is_bad(self) -> bool {
-        matches!(self, Status::Fail | Status::Error | Status::UnexpectedPass)
-    }
-}
-
-impl std::fmt::Display for Status {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
+/// A verdict's status, as results.json and the baseline spell it (one home:
+/// `vocab`).
+pub use crate::vocab::Status;
 
 /// Statuses that turn a run red.
 pub fn is_bad(status: Status) -> bool {

@@ -9,7 +9,7 @@
 
 pub use rendiff_core::{
     backends, camera, deadline, exr_io, frame, names, pending, predicate, raster, scene, shade,
-    trace, visibility,
+    trace, visibility, vocab,
 };
 
 pub mod bench;

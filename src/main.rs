@@ -188,6 +188,14 @@ enum Command {
         #[arg(long, default_value = "reports/baseline.json")]
         baseline: PathBuf,
     },
+    /// The words of scene files and run records (features, statuses, buffers,
+    /// mismatch classes), from their one definition; the Python harness checks
+    /// its copy against `--json`.
+    Vocab {
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Internal: run a command and write its peak memory (max RSS, bytes) to a
     /// file; `check` measures renders through it, from a small process.
     #[command(hide = true, name = "peak-rss")]
@@ -406,6 +414,21 @@ fn run(cli: Cli) -> Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
+        Command::Vocab { json } => {
+            let v = rendiff::vocab::json();
+            if json {
+                println!("{v}");
+            } else if let Some(map) = v.as_object() {
+                for (k, words) in map {
+                    let list: Vec<&str> = words
+                        .as_array()
+                        .map(|a| a.iter().filter_map(|w| w.as_str()).collect())
+                        .unwrap_or_default();
+                    println!("{k:<20} {}", list.join(", "));
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
         Command::PeakRss { report, command } => {
             let code = rendiff::check::process::peak_rss_main(&report, &command)?;
             Ok(ExitCode::from(u8::try_from(code).unwrap_or(255)))
@@ -601,8 +624,8 @@ fn render_embree(
         .iter()
         .map(String::as_str)
         .filter(|r| {
-            rendiff::check::VISIBILITY_FEATURES.contains(r)
-                && !rendiff::check::EMBREE_FEATURES.contains(r)
+            rendiff::check::visibility_features().contains(r)
+                && !rendiff::check::embree_features().contains(r)
         })
         .collect();
     if !missing.is_empty() {

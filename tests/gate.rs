@@ -822,7 +822,7 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
 
 #[test]
 fn statuses_round_trip_with_their_results_json_names() {
-    for s in gate::Status::ALL {
+    for &s in gate::Status::ALL {
         let v = serde_json::to_value(s).unwrap();
         assert_eq!(v, Value::String(s.as_str().into()));
         assert_eq!(serde_json::from_value::<gate::Status>(v).unwrap(), s);

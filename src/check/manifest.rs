@@ -117,7 +117,7 @@ pub struct ResultEntry {
 impl ResultEntry {
     /// True for verdicts that must turn a run red.
     pub fn is_failure(&self) -> bool {
-        matches!(self.status.as_str(), "fail" | "error" | "unexpected_pass")
+        crate::vocab::Status::parse(&self.status).is_some_and(crate::vocab::Status::is_bad)
     }
 
     /// `scene::backend::buffer`, the name a test or a report row uses.

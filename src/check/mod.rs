@@ -12,6 +12,7 @@
 //! `role: "calibration"`.
 
 pub mod isolated;
+use crate::vocab::Feature;
 pub mod manifest;
 pub mod process;
 pub mod run_folder;
@@ -35,32 +36,21 @@ use std::time::{Duration, Instant};
 /// The backend every other one is compared against.
 pub const REFERENCE: &str = "raster";
 
-/// Scene features the core's visibility loops model.
-pub const CORE_FEATURES: &[&str] = &[
-    "depth",
-    "ids",
-    "normals",
-    "emission",
-    "lambert",
-    "point_light",
-    "directional_light",
-    "shadows",
-    "shadowless",
-    "area_light",
-    "global_illumination",
-    "two_sided",
-    "one_sided",
-];
+/// Scene features the core models: every one (`vocab::Feature`).
+pub fn core_features() -> Vec<&'static str> {
+    Feature::names()
+}
 
-/// Scene features Embree's visibility queries model.
-pub const EMBREE_FEATURES: &[&str] = &["depth", "ids", "normals"];
+/// Scene features Embree's visibility queries model: the visibility ones.
+pub fn embree_features() -> Vec<&'static str> {
+    visibility_features()
+}
 
-/// The scene features the visibility buffers (Z, id, N) need; every other
-/// feature is a shading one, needed by RGB only. A backend lacking one of these
-/// is skipped on the scene; a backend lacking only shading features renders
-/// its visibility buffers and no RGB (`reason` says which features). The one
-/// Rust list; the Python harness's is `registry.VISIBILITY_FEATURES`.
-pub const VISIBILITY_FEATURES: &[&str] = &["depth", "ids", "normals"];
+/// The scene features the visibility buffers (Z, id, N) need
+/// (`vocab::Feature::VISIBILITY`).
+pub fn visibility_features() -> Vec<&'static str> {
+    Feature::VISIBILITY.iter().map(|f| f.as_str()).collect()
+}
 
 /// `role` of a calibration probe in manifest.json (docs/run-format.md).
 pub const CALIBRATION_ROLE: &str = "calibration";
@@ -207,7 +197,7 @@ impl Capability {
             Capability::Full
         } else if miss
             .iter()
-            .any(|m| VISIBILITY_FEATURES.contains(&m.as_str()))
+            .any(|m| Feature::VISIBILITY.iter().any(|f| f.as_str() == m))
         {
             Capability::Skip(miss)
         } else {
@@ -423,7 +413,7 @@ fn render_and_compare(
             }
         };
         runs.requires = scene.requires.iter().cloned().collect();
-        let core_missing = missing(&runs.requires, CORE_FEATURES);
+        let core_missing = missing(&runs.requires, &core_features());
         let scene_arg = scene_path.display().to_string();
         for name in ["raster", "trace"] {
             if !wanted(opts, name) {
@@ -507,7 +497,7 @@ fn render_and_compare(
             let rel_exr = format!("{rel_dir}/{name}.exr");
             let exr = run_dir.join(&rel_exr);
             // Embree renders visibility only: on a shaded scene it still gives Z and IDs.
-            let capability = Capability::of(&runs.requires, EMBREE_FEATURES);
+            let capability = Capability::of(&runs.requires, &embree_features());
             let mut rec = if let Capability::Skip(emissing) = &capability {
                 skipped_for_features(name, emissing)
             } else if let Some(bin) = isolate {
@@ -944,9 +934,9 @@ mod tests {
     #[test]
     fn capabilities_are_judged_per_buffer() {
         let shaded = req(&["depth", "ids", "lambert", "shadows", "two_sided"]);
-        assert_eq!(Capability::of(&shaded, CORE_FEATURES), Capability::Full);
+        assert_eq!(Capability::of(&shaded, &core_features()), Capability::Full);
         assert_eq!(
-            Capability::of(&shaded, EMBREE_FEATURES),
+            Capability::of(&shaded, &embree_features()),
             Capability::VisibilityOnly(req(&["lambert", "shadows", "two_sided"]))
         );
         // A missing visibility feature skips, and every missing feature is named.
@@ -967,9 +957,9 @@ mod tests {
 
     #[test]
     fn visibility_features_are_known_and_embree_has_them() {
-        for f in VISIBILITY_FEATURES {
-            assert!(crate::scene::KNOWN_FEATURES.contains(f), "{f}");
-            assert!(EMBREE_FEATURES.contains(f), "{f}");
+        for f in visibility_features() {
+            assert!(Feature::parse(f).is_some(), "{f}");
+            assert!(embree_features().contains(&f), "{f}");
         }
     }
 

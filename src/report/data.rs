@@ -129,11 +129,12 @@ impl SceneData {
 
 /// Sort rank of a status: failures first, then known failures, skips, passes.
 pub fn status_rank(status: &str) -> u8 {
-    match status {
-        "fail" | "error" | "unexpected_pass" => 0,
-        "expected_fail" => 1,
-        "skipped" => 2,
-        "pass" => 3,
+    use crate::vocab::Status;
+    match Status::parse(status) {
+        Some(s) if s.is_bad() => 0,
+        Some(Status::ExpectedFail) => 1,
+        Some(Status::Skipped) => 2,
+        Some(Status::Pass) => 3,
         _ => 0,
     }
 }

@@ -24,3 +24,4 @@ pub mod scene;
 pub mod shade;
 pub mod trace;
 pub mod visibility;
+pub mod vocab;

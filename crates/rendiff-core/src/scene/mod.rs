@@ -80,24 +80,6 @@ pub fn printable(text: &str, max_chars: usize) -> String {
 
 impl std::error::Error for SceneError {}
 
-/// Scene features a renderer may or may not model (docs/DESIGN.md "Scene").
-/// A backend runs a scene only if it models every feature the scene requires.
-pub const KNOWN_FEATURES: &[&str] = &[
-    "depth",
-    "ids",
-    "normals",
-    "emission",
-    "lambert",
-    "point_light",
-    "directional_light",
-    "shadows",
-    "area_light",
-    "global_illumination",
-    "two_sided",
-    "one_sided",
-    "shadowless",
-];
-
 /// The whole scene file as written by a user.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -584,13 +566,13 @@ fn toml_problem(text: &str, e: &toml::de::Error) -> String {
 fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> {
     let mut requires = BTreeSet::new();
     for (i, r) in s.requires.iter().enumerate() {
-        if !KNOWN_FEATURES.contains(&r.as_str()) {
+        if crate::vocab::Feature::parse(r).is_none() {
             return Err(SceneError::new(
                 path,
                 format!("requires[{i}]"),
                 format!(
                     "unknown feature {r:?}; known features: {}",
-                    KNOWN_FEATURES.join(", ")
+                    crate::vocab::Feature::names().join(", ")
                 ),
             ));
         }

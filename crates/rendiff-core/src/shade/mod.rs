@@ -85,11 +85,9 @@ pub struct Radiance {
     pub seconds: f64,
 }
 
-/// True when the scene asks for radiance at all.
+/// True when the scene asks for radiance at all ([`crate::vocab::needs_shading`]).
 pub fn needs_shading(scene: &ResolvedScene) -> bool {
-    ["lambert", "emission", "global_illumination"]
-        .iter()
-        .any(|f| scene.requires.contains(*f))
+    crate::vocab::needs_shading(scene.requires.iter().map(String::as_str))
 }
 
 /// Shades a frame whose visibility is already computed; `bvh` serves shadow and path rays.
