@@ -1,5 +1,7 @@
-//! PNG previews for people: IDs in false color, depth through a color map.
-//! They are never compared; the EXR is the result.
+//! Images for people: IDs in false color, depth through a color map, radiance
+//! through the sRGB transfer, written as PNG. The one home of these encodings:
+//! `render`'s previews and the report's images both use them. They are never
+//! compared; the EXR is the result.
 
 use crate::exr_io::write_atomically;
 use crate::frame::{Frame, BACKGROUND_ID};
@@ -22,42 +24,70 @@ pub fn id_color(id: u32) -> [u8; 3] {
     ]
 }
 
-/// Depth mapped through viridis between the frame's nearest and farthest finite depth.
-pub fn depth_rgb(z: &[f32]) -> Vec<[u8; 3]> {
-    let finite = z.iter().copied().filter(|v| v.is_finite());
-    let lo = finite.clone().fold(f32::INFINITY, f32::min);
-    let hi = finite.fold(f32::NEG_INFINITY, f32::max);
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    z.iter()
-        .map(|&v| {
-            if v.is_finite() {
-                let c = colorous::VIRIDIS.eval_continuous(f64::from((v - lo) / span));
-                [c.r, c.g, c.b]
-            } else {
-                [0, 0, 0]
-            }
-        })
-        .collect()
+/// The nearest and farthest finite depth, if any pixel has one.
+pub fn finite_range(z: &[f32]) -> Option<(f32, f32)> {
+    let mut it = z.iter().copied().filter(|v| v.is_finite());
+    let first = it.next()?;
+    Some(it.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v))))
 }
 
-fn save(path: &Path, w: u32, h: u32, px: Vec<[u8; 3]>) -> Result<()> {
-    let buf: Vec<u8> = px.into_iter().flatten().collect();
-    let img = image::RgbImage::from_raw(w, h, buf).context("preview buffer size")?;
+/// Depth through viridis on a fixed range (the report shares one range across
+/// a scene's renders); returns the colors and how many pixels were clamped.
+/// Background (non-finite) is black.
+pub fn depth_colors(z: &[f32], lo: f32, hi: f32) -> (Vec<[u8; 3]>, u64) {
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut clamped = 0;
+    let px = z
+        .iter()
+        .map(|&v| {
+            if !v.is_finite() {
+                return [0, 0, 0];
+            }
+            if v < lo || v > hi {
+                clamped += 1;
+            }
+            let t = f64::from(((v - lo) / span).clamp(0.0, 1.0));
+            let c = colorous::VIRIDIS.eval_continuous(t);
+            [c.r, c.g, c.b]
+        })
+        .collect();
+    (px, clamped)
+}
+
+/// Depth through viridis between the frame's own nearest and farthest depth.
+pub fn depth_rgb(z: &[f32]) -> Vec<[u8; 3]> {
+    let (lo, hi) = finite_range(z).unwrap_or((0.0, 1.0));
+    depth_colors(z, lo, hi).0
+}
+
+/// Writes an 8-bit RGB PNG atomically.
+pub fn save_png(path: &Path, w: u32, h: u32, px: &[[u8; 3]]) -> Result<()> {
+    let buf: Vec<u8> = px.iter().flatten().copied().collect();
+    let img = image::RgbImage::from_raw(w, h, buf).context("image buffer size")?;
     write_atomically(path, |tmp| {
         img.save_with_format(tmp, image::ImageFormat::Png)
             .with_context(|| format!("{}: cannot write PNG", path.display()))
     })
 }
 
-/// Linear radiance to 8-bit sRGB (display transfer, clipped), for people only.
+fn save(path: &Path, w: u32, h: u32, px: Vec<[u8; 3]>) -> Result<()> {
+    save_png(path, w, h, &px)
+}
+
+/// Linear radiance to 8-bit sRGB (display transfer, clipped; NaN and infinities
+/// black), for people only.
 pub fn srgb8(v: f32) -> u8 {
-    let v = v.clamp(0.0, 1.0);
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let s = if v <= 0.003_130_8 {
         12.92 * v
     } else {
         1.055 * v.powf(1.0 / 2.4) - 0.055
     };
-    (s * 255.0 + 0.5) as u8
+    (s * 255.0).round() as u8
 }
 
 /// Writes `<stem>.rgb.png`: radiance through the sRGB transfer.

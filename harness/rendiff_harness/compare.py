@@ -41,10 +41,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import re
 import sys
-import tempfile
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
@@ -54,13 +52,13 @@ from typing import Any
 
 import numpy as np
 
-from . import diffimages, expectations, exrbuf, lighting, radiance, resolved, tolerance, verify
+from . import atomic, diffimages, expectations, exrbuf, lighting, radiance, resolved, tolerance, verify, vocab
 
 MANIFEST_FORMAT = "rendiff-manifest/1"
 RESULTS_FORMAT = "rendiff-results/1"
 BUFFERS = ("id", "Z")
 SHADED_BUFFERS = ("id", "Z", "RGB")
-SHADING_FEATURES = frozenset({"lambert", "emission", "global_illumination"})
+SHADING_FEATURES = frozenset(f.value for f in vocab.SHADED_FEATURES)
 CACHED_REFERENCE_BACKEND = "mitsuba_ref"
 RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean")
 BACKGROUND_ID = exrbuf.BACKGROUND_ID
@@ -196,7 +194,7 @@ def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
 
 def is_shaded(requires: Any) -> bool:
     """A scene whose buffers include radiance (docs/radiance.md)."""
-    return isinstance(requires, (list, tuple, set, frozenset)) and bool(SHADING_FEATURES & set(requires))
+    return isinstance(requires, (list, tuple, set, frozenset)) and vocab.needs_shading(requires)
 
 
 def buffers_for(scene_entry: Mapping[str, Any]) -> tuple[str, ...]:
@@ -685,7 +683,7 @@ def _apply_verdict(entry: dict[str, Any], exps: expectations.Expectations, detai
     if exp is not None:
         entry["bound"] = exp.bound_json()
     parts = [verdict.reason] if verdict.reason else []
-    if verdict.status in ("fail", "expected_fail", "unexpected_pass"):
+    if verdict.status in (vocab.Status.FAIL, vocab.Status.EXPECTED_FAIL, vocab.Status.UNEXPECTED_PASS):
         parts += details
     if declared is not None and int(entry.get("crack_mismatches") or 0) > 0:
         parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
@@ -1096,19 +1094,7 @@ def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json")
     """Write RUN/<name> (default results.json) atomically (temp file in RUN + os.replace)."""
     path = run / name
     text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=".results.", suffix=".json.tmp", dir=run)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic.write_text_atomically(path, text, prefix=".results.", suffix=".json.tmp")
     return path
 
 
@@ -1197,7 +1183,7 @@ def calibrate(run: Path, manifest: Mapping[str, Any], results: list[dict[str, An
     bad = {b: v for b, v in rep.summary.items() if v.get("status") == "fail"}
     for e in results:
         cal = bad.get(e["backend"])
-        if cal is None or e["scene"] in probes or e["status"] not in ("fail", "unexpected_pass"):
+        if cal is None or e["scene"] in probes or e["status"] not in (vocab.Status.FAIL, vocab.Status.UNEXPECTED_PASS):
             continue
         e["status"] = "error"
         e["reason"] = (

@@ -23,6 +23,8 @@ from types import ModuleType
 
 import numpy as np
 
+from . import atomic
+
 BG, MATCH, EDGE, INTERIOR = 0, 1, 2, 3
 ID_COLORS = (
     (0.0, 0.0, 0.0),  # background in both
@@ -50,16 +52,14 @@ def _write_png(path: Path, rgb: np.ndarray) -> None:
     oiio = _oiio()
     path.parent.mkdir(parents=True, exist_ok=True)
     buf = oiio.ImageBuf(np.ascontiguousarray(rgb, dtype=np.float32))
+    # OIIO creates the file (ordinary permissions) and picks the format from the .png suffix.
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.png")
     try:
-        if not buf.write(str(tmp), oiio.UINT8):
-            raise DiffImageError(f"{path}: OpenImageIO cannot write it: {buf.geterror() or oiio.geterror()}")
-        os.replace(tmp, path)
+        with atomic.renamed_into_place(tmp, path):
+            if not buf.write(str(tmp), oiio.UINT8):
+                raise DiffImageError(f"{path}: OpenImageIO cannot write it: {buf.geterror() or oiio.geterror()}")
     except OSError as exc:
         raise DiffImageError(f"{path}: {exc.strerror or exc}") from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def _color_map_knots(values: np.ndarray, colors: tuple[tuple[float, float, float], ...]) -> np.ndarray:

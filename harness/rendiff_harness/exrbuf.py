@@ -26,9 +26,7 @@ Use the `oiio.UINT32` constant (or the string "uint").
 from __future__ import annotations
 
 import builtins
-import os
 import struct
-import tempfile
 import zlib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -36,6 +34,8 @@ from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from . import atomic
 
 if TYPE_CHECKING:
     import OpenImageIO
@@ -243,23 +243,13 @@ def write_buffers(
     blob = _encode(path, chans, dict(attrs or {}), compression)
     directory = path.parent if str(path.parent) else Path(".")
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+        temp = atomic.AtomicFile(path)  # .<name>.XXXXXXXX.tmp in `directory`
     except OSError as exc:
         raise BufferError(f"{path}: cannot create a temp file in {directory}: {exc.strerror}") from exc
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(blob)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp_name, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp_name)
-        except FileNotFoundError:
-            pass
-        if isinstance(exc, OSError):
-            raise BufferError(f"{path}: write failed: {exc.strerror or exc}") from exc
-        raise
+        temp.commit(blob)  # removes the temp file on any failure
+    except OSError as exc:
+        raise BufferError(f"{path}: write failed: {exc.strerror or exc}") from exc
 
 
 # --------------------------------------------------------------------------- reading

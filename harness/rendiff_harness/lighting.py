@@ -39,9 +39,8 @@ SHADOW_OFFSET_POS = 1e-9
 
 def shadow_offset(scene: ResolvedScene, x: np.ndarray) -> np.ndarray:
     """(K,) the contract's shadow-ray offset along n at the points x (K, 3)."""
-    offset: np.ndarray = SHADOW_OFFSET_SIZE * max(scene_size(scene), 1.0) + SHADOW_OFFSET_POS * np.linalg.norm(
-        x, axis=-1
-    )
+    size_term = SHADOW_OFFSET_SIZE * max(scene_size(scene), 1.0)
+    offset: np.ndarray = size_term + SHADOW_OFFSET_POS * np.linalg.norm(x, axis=-1)
     return offset
 
 

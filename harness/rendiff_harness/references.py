@@ -41,7 +41,6 @@ import os
 import shlex
 import struct
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from . import exrbuf, resolved
+from . import atomic, exrbuf, resolved
 
 FORMAT = "rendiff-reference/1"
 DEFAULT_SPP = 4096
@@ -148,19 +147,7 @@ def regenerate_command(scene_dir: str | Path, exr: str | Path) -> str:
 
 
 def _write_json_atomically(path: Path, doc: dict[str, Any]) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(json.dumps(doc, indent=1, allow_nan=False) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic.write_text_atomically(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
 
 
 def generate(

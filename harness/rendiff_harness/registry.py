@@ -1,19 +1,16 @@
 """The backend registry: adding a renderer is one module in `backends/` plus one line here.
 
-A backend module provides (see backends/povray.py for a complete one):
+A backend module implements the `BackendModule` protocol (backends/__init__.py, which
+documents each member; see backends/povray.py for a complete one):
 
     NAME: str                                  # e.g. "povray"
     FEATURES: frozenset[str]                   # scene features it can model ("depth", "ids", ...)
     BUFFERS: frozenset[str]                    # subset of {"Z", "id", "N", "RGB"}
     def version() -> str                       # may raise BackendUnavailable
     def unavailable_reason() -> str | None     # None when usable, else what to install
-    def render(scene, out_exr, workdir, timeout_s) -> dict[str, object]   # raises BackendError
-    # optional keyword-only `spp`, `seed` (Monte Carlo backends); passed only when given
-    # optional keyword-only quality settings (`aa_method`, `quality`, `max_depth`, ...): the
-    # CLI refuses one that the backend's render() does not take (`Backend.accepts`)
-    # optional keyword-only `visibility_only: bool`: render Z/id (and N) but no RGB, so that a
-    # scene needing a shading feature the backend lacks is still compared on depth and IDs
-    # (`plan`); a backend without it is skipped on such scenes, as before
+    def render(scene, out_exr, workdir, timeout_s, **optional keywords) -> dict[str, object]
+
+`Backend` is the registry's entry for one module: the module, or why it could not be used.
 
 Capabilities are judged per buffer (`plan`): the visibility buffers need only the
 VISIBILITY_FEATURES, radiance needs every other feature the scene requires.
@@ -30,10 +27,20 @@ import importlib
 import inspect
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
+from typing import TYPE_CHECKING, cast
 
+from . import vocab
+from .backends import MEMBERS, BackendModule
 from .errors import BackendError, BackendUnavailable
 from .resolved import ResolvedScene
+
+if TYPE_CHECKING:
+    # mypy checks every shipped module against the protocol; nothing is imported at run time.
+    from .backends import mitsuba_backend, povray, pyrender_backend
+
+    _POVRAY: BackendModule = povray
+    _PYRENDER: BackendModule = pyrender_backend
+    _MITSUBA: BackendModule = mitsuba_backend
 
 BACKEND_MODULES = [
     "povray",
@@ -41,11 +48,11 @@ BACKEND_MODULES = [
     "mitsuba_backend",
 ]
 
-_REQUIRED = ("NAME", "FEATURES", "BUFFERS", "version", "unavailable_reason", "render")
+_REQUIRED = MEMBERS
 KNOWN_BUFFERS = frozenset({"Z", "id", "N", "RGB"})
-VISIBILITY_FEATURES = frozenset({"depth", "ids", "normals"})
+VISIBILITY_FEATURES = frozenset(f.value for f in vocab.VISIBILITY_FEATURES)
 """The features the visibility buffers (Z, id, N) need; every other feature is a shading one
-(needed by RGB only). The one Python list; the Rust side's is `check::VISIBILITY_FEATURES`."""
+(needed by RGB only). From `vocab` (which mirrors Rust's `vocab::Feature::VISIBILITY`)."""
 VISIBILITY_BUFFERS = frozenset({"Z", "id", "N"})
 VISIBILITY_ONLY = "visibility_only"
 """The render() keyword that asks a backend for its visibility buffers only."""
@@ -56,7 +63,7 @@ class Backend:
     """A registry entry: the imported module, or why it could not be imported."""
 
     module_name: str
-    module: ModuleType | None
+    module: BackendModule | None
     import_error: str | None
 
     @property
@@ -120,10 +127,11 @@ def load(module_name: str) -> Backend:
     absent = [attr for attr in _REQUIRED if not hasattr(module, attr)]
     if absent:
         return Backend(module_name, None, f"backend module {module_name!r} lacks {', '.join(absent)}")
-    extra = frozenset(module.BUFFERS) - KNOWN_BUFFERS
+    backend = cast(BackendModule, module)  # every member of the protocol is there (checked just above)
+    extra = frozenset(backend.BUFFERS) - KNOWN_BUFFERS
     if extra:
         return Backend(module_name, None, f"backend module {module_name!r} declares unknown buffers {sorted(extra)}")
-    return Backend(module_name, module, None)
+    return Backend(module_name, backend, None)
 
 
 def all_backends() -> list[Backend]:
@@ -145,7 +153,7 @@ def known_names() -> list[str]:
     return [b.name for b in all_backends()]
 
 
-def missing_features(backend: Backend | ModuleType, scene: ResolvedScene) -> list[str]:
+def missing_features(backend: Backend | BackendModule, scene: ResolvedScene) -> list[str]:
     """Scene requirements the backend cannot model (sorted); empty means it may run."""
     features = backend.features if isinstance(backend, Backend) else frozenset(backend.FEATURES)
     return sorted(scene.requires - features)

@@ -80,6 +80,14 @@ def test_incomplete_module_is_refused(tmp_path: Path, monkeypatch: pytest.Monkey
     assert b.module is None and "lacks" in (b.unavailable_reason() or "")
 
 
+def test_load_checks_every_member_of_the_protocol() -> None:
+    """`registry.load`'s run-time check (backends.MEMBERS) is the whole BackendModule protocol."""
+    protocol = backends.BackendModule
+    methods = {n for n, v in vars(protocol).items() if callable(v) and not n.startswith("_")}
+    assert set(backends.MEMBERS) == set(protocol.__annotations__) | methods
+    assert len(backends.MEMBERS) == len(set(backends.MEMBERS))
+
+
 def test_missing_features(tmp_path: Path) -> None:
     d = fixtures.write_scene(
         tmp_path / "s", fixtures_quad(), requires=("ids", "one_sided", "lambert", "depth", "area_light")

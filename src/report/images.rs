@@ -10,8 +10,8 @@ use super::data::{page_stem, run_relative, SceneData};
 use super::stats::{object_mismatches, Histogram, ObjectMismatches};
 use crate::exr_io::{read_buffers, Buffers};
 use crate::frame::BACKGROUND_ID;
-use crate::preview::id_color;
-use anyhow::{Context, Result};
+use crate::preview::{depth_colors, finite_range, id_color, srgb8 as srgb};
+use anyhow::Result;
 use std::path::Path;
 
 /// What a picture shows.
@@ -98,51 +98,7 @@ pub fn read_rgb(path: &Path) -> Result<Option<Vec<[f32; 3]>>> {
 }
 
 fn save_png(path: &Path, w: usize, h: usize, px: &[[u8; 3]]) -> Result<()> {
-    let buf: Vec<u8> = px.iter().flatten().copied().collect();
-    let img = image::RgbImage::from_raw(w as u32, h as u32, buf).context("image size")?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .with_context(|| format!("{}: cannot write PNG", path.display()))
-}
-
-fn srgb(v: f32) -> u8 {
-    let v = if v.is_finite() {
-        v.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let e = if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (e * 255.0).round() as u8
-}
-
-fn finite_range(z: &[f32]) -> Option<(f32, f32)> {
-    let mut it = z.iter().copied().filter(|v| v.is_finite());
-    let first = it.next()?;
-    Some(it.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v))))
-}
-
-/// Depth colors on a fixed range; returns the colors and how many pixels were clamped.
-pub fn depth_colors(z: &[f32], lo: f32, hi: f32) -> (Vec<[u8; 3]>, u64) {
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let mut clamped = 0;
-    let px = z
-        .iter()
-        .map(|&v| {
-            if !v.is_finite() {
-                return [0, 0, 0];
-            }
-            if v < lo || v > hi {
-                clamped += 1;
-            }
-            let t = f64::from(((v - lo) / span).clamp(0.0, 1.0));
-            let c = colorous::VIRIDIS.eval_continuous(t);
-            [c.r, c.g, c.b]
-        })
-        .collect();
-    (px, clamped)
+    crate::preview::save_png(path, w as u32, h as u32, px)
 }
 
 /// Fallback ID map when the harness wrote none: no edge/interior classes, just where IDs differ.
@@ -407,6 +363,7 @@ mod tests {
 
     #[test]
     fn depth_colors_share_a_range_and_count_clamps() {
+        // preview.rs owns the encoding; the report relies on these properties.
         let (px, clamped) = depth_colors(&[1.0, 2.0, 3.0, f32::INFINITY], 1.0, 2.0);
         assert_eq!(clamped, 1);
         assert_eq!(px[1], px[2], "above the range clamps to the top color");
