@@ -3,14 +3,15 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
+use rendiff::backends::embree::EmbreeMode;
 use rendiff::exr_io::{frame_attrs, write_frame_with};
-use rendiff::frame::Frame;
 use rendiff::names::Named;
 use rendiff::progress::LazyProgress;
+use rendiff::render::{Backend, NotRendered, RenderOptions, Rendered};
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use rendiff::trace::BvhQuality;
-use rendiff::{preview, raster, trace};
+use rendiff::{preview, trace};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -268,20 +269,38 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 .build()
                 .context("cannot start worker threads")?;
             let resolved = load_scene(&scene)?;
-            let name = match renderer {
-                Renderer::Raster => "raster",
-                Renderer::Trace => "trace",
-                Renderer::Embree => "embree",
-                Renderer::EmbreeRobust => "embree_robust",
+            let backend = match renderer {
+                Renderer::Raster => Backend::Raster,
+                Renderer::Trace => Backend::Trace,
+                Renderer::Embree => Backend::Embree(EmbreeMode::Default),
+                Renderer::EmbreeRobust => Backend::Embree(EmbreeMode::Robust),
             };
-            let embree_mode = match renderer {
-                Renderer::Embree => Some(rendiff::backends::embree::EmbreeMode::Default),
-                Renderer::EmbreeRobust => Some(rendiff::backends::embree::EmbreeMode::Robust),
-                _ => None,
+            let name = backend.name();
+            let opts = RenderOptions {
+                bvh,
+                kernel,
+                spp,
+                seed,
+                bias: inject_bias,
+                deadline: None,
             };
-            if let Some(mode) = embree_mode {
-                return render_embree(&resolved, mode, &scene, output, &pool, no_preview);
-            }
+            let what = match backend {
+                Backend::Raster => "raster tiles",
+                _ => "trace rows",
+            };
+            let bar = LazyProgress::new(backend.progress_total(&resolved), what, !quiet);
+            let result =
+                pool.install(|| rendiff::render::render(&resolved, backend, opts, &|n| bar.inc(n)));
+            bar.finish();
+            let Rendered { frame, radiance } = match result {
+                Ok(r) => r,
+                Err(NotRendered::Skipped(why)) => {
+                    // The harness's convention: `check` runs this as a child.
+                    eprintln!("{name}: skipped: {why}");
+                    return Ok(ExitCode::from(rendiff::check::isolated::EXIT_SKIPPED as u8));
+                }
+                Err(NotRendered::Failed(why)) => anyhow::bail!("{name}: {why}"),
+            };
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()
@@ -289,25 +308,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     .unwrap_or_else(|| "scene".into());
                 Path::new("out").join(format!("{stem}.{name}.exr"))
             });
-            let (frame, traced_bvh) =
-                pool.install(|| render(&resolved, renderer, bvh, kernel, quiet));
             let mut attrs = frame_attrs(&frame, &scene.display().to_string());
             attrs.insert(
                 "threads".to_string(),
                 pool.current_num_threads().to_string(),
             );
-            let radiance = rendiff::shade::needs_shading(&resolved).then(|| {
-                pool.install(|| {
-                    let bvh = traced_bvh.unwrap_or_else(|| trace::TraceBvh::build(&resolved, bvh));
-                    let opts = rendiff::shade::ShadeOptions {
-                        spp: spp.unwrap_or(resolved.integrator.spp),
-                        seed,
-                        bias: inject_bias,
-                        deadline: None,
-                    };
-                    rendiff::shade::shade(&resolved, &frame, &bvh, opts)
-                })
-            });
             if let Some(r) = &radiance {
                 attrs.insert("seed".to_string(), seed.to_string());
                 if let Some(b) = inject_bias {
@@ -334,10 +339,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 frame.seconds,
                 out.display()
             );
-            println!(
-                "  coverage tests {}, covered {}, exact fallbacks {}, ties {}, triangle setups {}, BVH nodes visited {}",
-                c.coverage_tests, c.covered, c.exact_fallbacks, c.ties, c.triangle_setups, c.bvh_nodes_visited
-            );
+            if !matches!(backend, Backend::Embree(_)) {
+                println!(
+                    "  coverage tests {}, covered {}, exact fallbacks {}, ties {}, triangle setups {}, BVH nodes visited {}",
+                    c.coverage_tests, c.covered, c.exact_fallbacks, c.ties, c.triangle_setups, c.bvh_nodes_visited
+                );
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Scenes { dir } => {
@@ -528,41 +535,6 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
     Ok(ResolvedScene::resolve(&scene)?)
 }
 
-fn render(
-    scene: &ResolvedScene,
-    renderer: Renderer,
-    bvh: BvhQuality,
-    kernel: trace::TraceKernel,
-    quiet: bool,
-) -> (Frame, Option<trace::TraceBvh>) {
-    let cam = &scene.camera;
-    match renderer {
-        Renderer::Raster => {
-            let tiles =
-                u64::from(cam.width.div_ceil(raster::TILE) * cam.height.div_ceil(raster::TILE));
-            let bar = LazyProgress::new(tiles, "raster tiles", !quiet);
-            let f = raster::render(scene, raster::RasterOptions::default(), &|n| bar.inc(n));
-            bar.finish();
-            (f, None)
-        }
-        Renderer::Trace => {
-            let bar = LazyProgress::new(u64::from(cam.height), "trace rows", !quiet);
-            let opts = trace::TraceOptions {
-                bvh,
-                count_coverage: false,
-                kernel,
-                deadline: None,
-            };
-            let (f, tree) = trace::render_keeping_bvh(scene, opts, &|n| bar.inc(n));
-            bar.finish();
-            (f, Some(tree))
-        }
-        Renderer::Embree | Renderer::EmbreeRobust => {
-            unreachable!("Embree renders go through render_embree")
-        }
-    }
-}
-
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);
 /// exit 1 on any difference, 0 when identical, 2 (an error) when the files
 /// share no buffer.
@@ -603,71 +575,4 @@ fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// `rendiff render --renderer embree|embree-robust`: visibility only (no RGB on
-/// a shaded scene). A scene needing a visibility feature Embree lacks, or a
-/// missing Embree library, exits with code 3 (skipped,
-/// the harness's convention) and says why, so `check` can run it as a child.
-fn render_embree(
-    scene: &ResolvedScene,
-    mode: rendiff::backends::embree::EmbreeMode,
-    scene_path: &Path,
-    output: Option<PathBuf>,
-    pool: &rayon::ThreadPool,
-    no_preview: bool,
-) -> Result<ExitCode> {
-    use rendiff::backends::embree::{self, EmbreeError};
-    // Visibility only: shading features do not matter (check::Capability).
-    let missing: Vec<&str> = scene
-        .requires
-        .iter()
-        .map(String::as_str)
-        .filter(|r| {
-            rendiff::check::visibility_features().contains(r)
-                && !rendiff::check::embree_features().contains(r)
-        })
-        .collect();
-    if !missing.is_empty() {
-        eprintln!(
-            "{}: skipped: missing features: {}",
-            mode.name(),
-            missing.join(", ")
-        );
-        return Ok(ExitCode::from(3));
-    }
-    let frame = match pool.install(|| embree::render(scene, mode)) {
-        Ok(f) => f,
-        Err(EmbreeError::Unavailable(why)) => {
-            eprintln!("{}: skipped: {why}", mode.name());
-            return Ok(ExitCode::from(3));
-        }
-        Err(e) => anyhow::bail!("{}: {e}", mode.name()),
-    };
-    let out = output.unwrap_or_else(|| {
-        let stem = scene_path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "scene".into());
-        Path::new("out").join(format!("{stem}.{}.exr", mode.name()))
-    });
-    let mut attrs = frame_attrs(&frame, &scene_path.display().to_string());
-    attrs.insert(
-        "threads".to_string(),
-        pool.current_num_threads().to_string(),
-    );
-    write_frame_with(&out, &frame, None, &attrs)?;
-    if !no_preview {
-        preview::write_previews(&out, &frame)?;
-    }
-    println!(
-        "{}: {}x{} px, {} triangles, {:.3} s -> {}",
-        mode.name(),
-        frame.width,
-        frame.height,
-        scene.triangles.len(),
-        frame.seconds,
-        out.display()
-    );
-    Ok(ExitCode::SUCCESS)
 }

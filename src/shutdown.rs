@@ -11,9 +11,21 @@
 //! `PR_SET_PDEATHSIG` (see [`die_with_parent`]), so even a SIGKILL of rendiff,
 //! which no handler sees, takes its direct children with it.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 static GROUPS: Mutex<Vec<i32>> = Mutex::new(Vec::new());
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Called by whoever just saw a child end: if the child ended because
+/// rendiff is being interrupted, wait here for the handler to exit the
+/// process, instead of carrying on (recording the killed renderer as failed,
+/// writing into a staging folder being removed) and racing it to the exit.
+pub fn hold_if_interrupted() {
+    while INTERRUPTED.load(Ordering::SeqCst) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
 
 /// Keeps a child's process group registered for [`install`]'s handler; drop
 /// it once the child has been waited for.
@@ -49,6 +61,7 @@ pub fn install() -> std::io::Result<()> {
         .name("rendiff-shutdown".into())
         .spawn(move || {
             if let Some(sig) = signals.forever().next() {
+                INTERRUPTED.store(true, Ordering::SeqCst);
                 let (groups, paths) = clean_up();
                 eprintln!(
                     "rendiff: interrupted by {}: killed {groups} child process group(s), removed {paths} temporary file(s) or folder(s)",

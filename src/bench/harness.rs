@@ -107,7 +107,7 @@ impl Harness {
         if o.timed_out {
             return Err(format!("{backend}: timed out after {} s", limit.as_secs()));
         }
-        if o.code == Some(3) {
+        if o.code == Some(crate::check::isolated::EXIT_SKIPPED) {
             let reason = last_json_line(&o.stdout)
                 .and_then(|v| v.get("reason").and_then(Value::as_str).map(String::from))
                 .unwrap_or_else(|| "no reason given".into());

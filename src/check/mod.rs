@@ -17,15 +17,12 @@ pub mod manifest;
 pub mod process;
 pub mod run_folder;
 
-use crate::backends::embree::{self, EmbreeError, EmbreeMode};
+use crate::backends::embree::{self, EmbreeMode};
 use crate::exr_io::{frame_attrs, write_frame_with};
-use crate::frame::Frame;
-use crate::raster::{self, RasterOptions};
+use crate::render::{Backend, NotRendered, RenderOptions, Rendered};
 use crate::scene::export::export;
 use crate::scene::resolve::ResolvedScene;
 use crate::scene::Scene;
-use crate::shade::{self, Radiance, ShadeOptions};
-use crate::trace::{self, TraceOptions};
 use anyhow::{bail, Context, Result};
 use manifest::{Manifest, RenderRecord, Results, SceneRuns, MANIFEST_FORMAT};
 use process::{run_with_timeout, shell_line};
@@ -36,14 +33,22 @@ use std::time::{Duration, Instant};
 /// The backend every other one is compared against.
 pub const REFERENCE: &str = "raster";
 
-/// Scene features the core models: every one (`vocab::Feature`).
+/// Scene features the core models ([`Backend::features`]: every one).
 pub fn core_features() -> Vec<&'static str> {
-    Feature::names()
+    Backend::Trace
+        .features()
+        .iter()
+        .map(|f| f.as_str())
+        .collect()
 }
 
-/// Scene features Embree's visibility queries model: the visibility ones.
+/// Scene features Embree's visibility queries model ([`Backend::features`]).
 pub fn embree_features() -> Vec<&'static str> {
-    visibility_features()
+    Backend::Embree(EmbreeMode::Default)
+        .features()
+        .iter()
+        .map(|f| f.as_str())
+        .collect()
 }
 
 /// The scene features the visibility buffers (Z, id, N) need
@@ -233,23 +238,24 @@ fn wanted(opts: &CheckOptions, name: &str) -> bool {
             .is_none_or(|o| o.iter().any(|x| x == name))
 }
 
-/// Renders a core loop or Embree in process; a panic becomes an error record.
-/// `render` gets the deadline (`check --timeout` from now): the core's loops
-/// stop there, and a render that ends past it is a timeout, its partial
-/// buffers discarded, exactly as for an external renderer that is killed.
+/// Renders a core loop or Embree in process (`render::render`, the entry
+/// point `rendiff render` uses too); a panic becomes an error record. The
+/// render's deadline is `check --timeout` from now: the core's loops stop
+/// there, and a render that ends past it is a timeout, its partial buffers
+/// discarded, exactly as for an external renderer that is killed. (Embree
+/// cannot be stopped mid-render; one that ends late still counts as timed out.)
 #[allow(clippy::too_many_arguments)] // one call site per backend kind; a struct would only rename them
 fn in_process(
-    name: &str,
+    backend: Backend,
     scene: &ResolvedScene,
     exr: &Path,
     rel_exr: &str,
     command: String,
     version: String,
-    seed: u64,
+    render_opts: RenderOptions,
     timeout: Duration,
-    render: impl FnOnce(Instant) -> Result<(Frame, Option<Radiance>), EmbreeError>
-        + std::panic::UnwindSafe,
 ) -> RenderRecord {
+    let name = backend.name();
     let mut rec = RenderRecord {
         backend: name.into(),
         command,
@@ -258,7 +264,14 @@ fn in_process(
     };
     let start = Instant::now();
     let deadline = start + timeout;
-    match std::panic::catch_unwind(move || render(deadline)) {
+    let render_opts = RenderOptions {
+        deadline: Some(deadline),
+        ..render_opts
+    };
+    let seed = render_opts.seed;
+    match std::panic::catch_unwind(move || {
+        crate::render::render(scene, backend, render_opts, &|_| {})
+    }) {
         Ok(Ok(_)) if rendiff_core::deadline::past(Some(deadline)) => {
             rec.status = "error".into();
             rec.time_s = start.elapsed().as_secs_f64();
@@ -268,7 +281,7 @@ fn in_process(
                 timeout.as_secs_f64()
             );
         }
-        Ok(Ok((frame, radiance))) => {
+        Ok(Ok(Rendered { frame, radiance })) => {
             rec.time_s = start.elapsed().as_secs_f64();
             let mut attrs = frame_attrs(&frame, &scene.name);
             if radiance.is_some() {
@@ -296,13 +309,13 @@ fn in_process(
                 }
             }
         }
-        Ok(Err(EmbreeError::Unavailable(why))) => {
+        Ok(Err(NotRendered::Skipped(why))) => {
             rec.status = "skipped".into();
             rec.reason = why;
         }
-        Ok(Err(e)) => {
+        Ok(Err(NotRendered::Failed(e))) => {
             rec.status = "error".into();
-            rec.message = e.to_string();
+            rec.message = e;
             rec.time_s = start.elapsed().as_secs_f64();
         }
         Err(_) => {
@@ -443,47 +456,26 @@ fn render_and_compare(
                 };
                 isolated::render(opts, &job, version.clone())
             } else {
-                let sc = &scene;
-                let core = opts.core;
+                let backend = if name == "raster" {
+                    Backend::Raster
+                } else {
+                    Backend::Trace
+                };
+                let render_opts = RenderOptions {
+                    spp: opts.core.spp,
+                    seed: opts.core.seed,
+                    bias: opts.core.bias,
+                    ..RenderOptions::default()
+                };
                 in_process(
-                    name,
-                    sc,
+                    backend,
+                    &scene,
                     &exr,
                     &rel_exr,
                     command,
                     version.clone(),
-                    opts.core.seed,
+                    render_opts,
                     opts.timeout,
-                    move |deadline| {
-                        let deadline = Some(deadline);
-                        let (frame, traced_bvh) = if name == "raster" {
-                            let o = RasterOptions {
-                                deadline,
-                                ..RasterOptions::default()
-                            };
-                            (raster::render(sc, o, &|_| {}), None)
-                        } else {
-                            let o = TraceOptions {
-                                deadline,
-                                ..TraceOptions::default()
-                            };
-                            let (f, b) = trace::render_keeping_bvh(sc, o, &|_| {});
-                            (f, Some(b))
-                        };
-                        let radiance = shade::needs_shading(sc).then(|| {
-                            let bvh = traced_bvh.unwrap_or_else(|| {
-                                trace::TraceBvh::build(sc, trace::BvhQuality::Medium)
-                            });
-                            let shading = ShadeOptions {
-                                spp: core.spp.unwrap_or(sc.integrator.spp),
-                                seed: core.seed,
-                                bias: core.bias,
-                                deadline,
-                            };
-                            shade::shade(sc, &frame, &bvh, shading)
-                        });
-                        Ok((frame, radiance))
-                    },
                 )
             };
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
@@ -517,19 +509,15 @@ fn render_and_compare(
             } else {
                 let command = shell_line([exe, "check", "--only", name, &scene_arg]);
                 let v = embree::version().unwrap_or_else(|e| e.to_string());
-                let sc = &scene;
-                // Embree cannot be stopped mid-render; one that ends past
-                // the deadline still counts as timed out.
                 in_process(
-                    name,
-                    sc,
+                    Backend::Embree(mode),
+                    &scene,
                     &exr,
                     &rel_exr,
                     command,
                     v,
-                    0,
+                    RenderOptions::default(),
                     opts.timeout,
-                    move |_| embree::render(sc, mode).map(|f| (f, None)),
                 )
             };
             if let Capability::VisibilityOnly(m) = &capability {
@@ -692,7 +680,7 @@ fn external(
                     rec.status = "error".into();
                     rec.message = "reported success but wrote no buffer file".into();
                 }
-            } else if o.code == Some(3) {
+            } else if o.code == Some(isolated::EXIT_SKIPPED) {
                 rec.status = "skipped".into();
                 rec.reason = o.stderr_tail(3);
                 if rec.reason.is_empty() {

@@ -133,6 +133,7 @@ fn run(mut cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
     // child that outlived a clean exit) before the group id can be reused.
     crate::shutdown::kill_group(child.id() as i32);
     drop(group);
+    crate::shutdown::hold_if_interrupted();
     let read = |p: &Path| {
         std::fs::read(p)
             .map(|b| String::from_utf8_lossy(&b).into_owned())

@@ -20,6 +20,7 @@ pub mod names;
 pub mod pending;
 pub mod predicate;
 pub mod raster;
+pub mod render;
 pub mod scene;
 pub mod shade;
 pub mod trace;
