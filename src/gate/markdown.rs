@@ -25,15 +25,7 @@ pub fn md(s: &str) -> String {
 }
 
 fn link_target(path: &str) -> String {
-    let mut out = String::new();
-    for b in path.bytes() {
-        if b.is_ascii_alphanumeric() || b"-_./#".contains(&b) {
-            out.push(char::from(b));
-        } else {
-            let _ = write!(out, "%{b:02X}");
-        }
-    }
-    out
+    crate::report::html::url(path)
 }
 
 /// The renderer versions of a run, one string per backend.
