@@ -134,6 +134,34 @@ enum Command {
         /// Render no calibration probes (the comparison then measures no camera).
         #[arg(long, conflicts_with = "calibration")]
         no_calibration: bool,
+        /// Run shard K of N (1-based, e.g. 2/4): a deterministic, cost-balanced
+        /// share of the scenes (probes run in every shard); `rendiff merge`
+        /// joins the shard runs.
+        #[arg(long)]
+        shard: Option<rendiff::check::shard::Shard>,
+        /// A previous run whose render times balance the shards (default: the
+        /// run folder's previous run, if any).
+        #[arg(long, requires = "shard")]
+        shard_costs: Option<PathBuf>,
+    },
+    /// Joins shard runs (`check --shard K/N`) into one run folder, compares it
+    /// once and writes its report: the verdicts one machine would give.
+    Merge {
+        /// The shard runs.
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// The merged run folder.
+        #[arg(short, long, default_value = "reports/runs/latest")]
+        output: PathBuf,
+        /// Known divergences with their bounds.
+        #[arg(long, default_value = "tests/expectations.toml")]
+        expectations: PathBuf,
+        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes.
+        #[arg(long, default_value = "tests/references")]
+        references: PathBuf,
+        /// Print only the summary.
+        #[arg(long)]
+        quiet: bool,
     },
     /// Benchmarks: speed against accuracy (knobs), against other renderers (peers),
     /// raster vs trace by triangle size (crossover), numerical extremes (stability).
@@ -421,6 +449,43 @@ fn run(cli: Cli) -> Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
+        Command::Merge {
+            runs,
+            output,
+            expectations,
+            references,
+            quiet,
+        } => {
+            let opts = rendiff::check::CheckOptions {
+                scenes: Vec::new(),
+                run_dir: output.clone(),
+                root: std::env::current_dir()?,
+                only: None,
+                timeout: std::time::Duration::from_secs(600),
+                expectations,
+                quiet,
+                references: Some(references),
+                core: rendiff::check::CoreShading::default(),
+                calibration: None,
+            };
+            let outcome = rendiff::check::shard::merge(&runs, &opts)?;
+            let (table, tally) = rendiff::check::summary(&outcome.results);
+            println!("{table}");
+            println!(
+                "merge: {} shard runs, {} ok, {} failing, {} skipped -> {}",
+                runs.len(),
+                tally.ok,
+                tally.failed,
+                tally.skipped,
+                output.join("results.json").display()
+            );
+            write_report(&output);
+            Ok(if tally.failed > 0 {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
         Command::Vocab { json } => {
             let v = rendiff::vocab::json();
             if json {
@@ -484,9 +549,32 @@ fn run(cli: Cli) -> Result<ExitCode> {
             inject_bias,
             calibration,
             no_calibration,
+            shard,
+            shard_costs,
         } => {
+            let mut scenes = rendiff::check::collect_scenes(&scenes)?;
+            if let Some(shard) = shard {
+                use rendiff::check::shard;
+                let costs = shard::recorded_costs(shard_costs.as_deref().unwrap_or(&output));
+                let all = scenes.len();
+                scenes = shard::select(&scenes, shard, &costs);
+                eprintln!(
+                    "shard {}/{}: {} of {all} scenes",
+                    shard.index,
+                    shard.total,
+                    scenes.len()
+                );
+                if scenes.is_empty() {
+                    anyhow::bail!(
+                        "shard {}/{} has no scenes ({all} scenes for {} shards): use fewer shards",
+                        shard.index,
+                        shard.total,
+                        shard.total
+                    );
+                }
+            }
             let opts = rendiff::check::CheckOptions {
-                scenes: rendiff::check::collect_scenes(&scenes)?,
+                scenes,
                 run_dir: output.clone(),
                 root: std::env::current_dir()?,
                 only,

@@ -16,6 +16,7 @@ use crate::vocab::Feature;
 pub mod manifest;
 pub mod process;
 pub mod run_folder;
+pub mod shard;
 
 use crate::backends::embree::{self, EmbreeMode};
 use crate::exr_io::{frame_attrs, write_frame_with};

@@ -1,0 +1,292 @@
+//! Shards and merge: a check run split across CI machines (`check --shard
+//! K/N`, as deqp-runner's `--fraction` and nextest's `--partition`) and put
+//! back together (`rendiff merge`) into one run folder whose verdicts are a
+//! single machine's.
+//!
+//! Sharding is deterministic: scenes are dealt to shards greedily, largest
+//! recorded cost first (the scene's render times in a previous run, when one
+//! is given; otherwise one unit per scene), ties broken by path, so every
+//! machine computes the same split without talking to the others. Every shard
+//! renders the calibration probes: they are cheap, and each shard's verdicts
+//! need its own backends' calibration.
+//!
+//! Merging copies each shard's scene folders into a fresh run, keeps one copy
+//! of the probes, writes the combined manifest and runs the comparison once
+//! over the whole: results.json, the report and the gate are then exactly
+//! what one machine's run would give (the comparison is deterministic given
+//! the buffers).
+
+use super::manifest::{Manifest, SceneRuns, MANIFEST_FORMAT};
+use super::run_folder::{ensure_complete, Staging};
+use super::{CheckOptions, CheckOutcome, CALIBRATION_ROLE};
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// `K/N`: this machine runs shard K (1-based) of N.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// 1-based index.
+    pub index: usize,
+    /// How many shards.
+    pub total: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("{s:?}: give the shard as K/N, e.g. 2/4"))?;
+        let parse = |t: &str| t.trim().parse::<usize>().ok();
+        match (parse(k), parse(n)) {
+            (Some(index), Some(total)) if total >= 1 && (1..=total).contains(&index) => {
+                Ok(Shard { index, total })
+            }
+            _ => Err(format!(
+                "{s:?}: K/N needs 1 <= K <= N (shard K of N machines)"
+            )),
+        }
+    }
+}
+
+/// Recorded cost of each scene (seconds of rendering, summed over its
+/// renders) in a previous run's manifest.json; empty when there is none.
+pub fn recorded_costs(previous_run: &Path) -> BTreeMap<String, f64> {
+    let text = match std::fs::read_to_string(previous_run.join("manifest.json")) {
+        Ok(t) => t,
+        Err(_) => return BTreeMap::new(),
+    };
+    let Ok(m) = serde_json::from_str::<Manifest>(&text) else {
+        return BTreeMap::new();
+    };
+    m.scenes
+        .iter()
+        .map(|s| {
+            let t: f64 = s.renders.iter().map(|r| r.time_s.max(0.0)).sum();
+            (s.scene.clone(), t)
+        })
+        .collect()
+}
+
+fn stem(p: &Path) -> String {
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The scenes shard `shard` runs, in their original order. Greedy
+/// longest-processing-time assignment: scenes by cost (unknown cost: the mean
+/// of the known ones, or 1), largest first, each to the least loaded shard.
+pub fn select(scenes: &[PathBuf], shard: Shard, costs: &BTreeMap<String, f64>) -> Vec<PathBuf> {
+    let known: Vec<f64> = costs.values().copied().filter(|c| *c > 0.0).collect();
+    let default = if known.is_empty() {
+        1.0
+    } else {
+        known.iter().sum::<f64>() / known.len() as f64
+    };
+    let cost = |p: &PathBuf| {
+        costs
+            .get(&stem(p))
+            .copied()
+            .filter(|c| *c > 0.0)
+            .unwrap_or(default)
+    };
+    let mut order: Vec<usize> = (0..scenes.len()).collect();
+    order.sort_by(|&a, &b| {
+        cost(&scenes[b])
+            .total_cmp(&cost(&scenes[a]))
+            .then_with(|| scenes[a].cmp(&scenes[b]))
+    });
+    let mut load = vec![0.0f64; shard.total];
+    let mut owner = vec![0usize; scenes.len()];
+    for i in order {
+        let (k, _) = load
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1).then(a.0.cmp(&b.0)))
+            .expect("at least one shard");
+        load[k] += cost(&scenes[i]);
+        owner[i] = k;
+    }
+    scenes
+        .iter()
+        .zip(owner)
+        .filter(|(_, k)| *k == shard.index - 1)
+        .map(|(p, _)| p.clone())
+        .collect()
+}
+
+fn copy_tree(from: &Path, to: &Path) -> Result<()> {
+    std::fs::create_dir_all(to).with_context(|| format!("{}: cannot create", to.display()))?;
+    for e in std::fs::read_dir(from).with_context(|| format!("{}: cannot list", from.display()))? {
+        let e = e?;
+        let (src, dst) = (e.path(), to.join(e.file_name()));
+        let kind = e.file_type()?;
+        if kind.is_dir() {
+            copy_tree(&src, &dst)?;
+        } else if kind.is_file() {
+            std::fs::copy(&src, &dst).with_context(|| format!("{}: cannot copy", src.display()))?;
+        }
+        // Links and special files are never part of a run: skipped.
+    }
+    Ok(())
+}
+
+/// `rendiff merge SHARD_RUN... -o RUN`: one run folder from shard runs, then
+/// the comparison over all of it. `opts` gives the output folder, the
+/// repository root, expectations and references (its scenes are unused).
+/// Refuses incomplete shards, a scene present in two shards, and shards of
+/// different rendiff versions or references.
+pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
+    if shards.is_empty() {
+        bail!("no shard runs to merge");
+    }
+    let mut manifests = Vec::new();
+    for run in shards {
+        ensure_complete(run)?;
+        let path = run.join("manifest.json");
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!("{}: cannot read (not a finished check run)", path.display())
+        })?;
+        let m: Manifest = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a rendiff manifest", path.display()))?;
+        if m.format != MANIFEST_FORMAT {
+            bail!(
+                "{}: format {:?}, expected {MANIFEST_FORMAT:?}",
+                path.display(),
+                m.format
+            );
+        }
+        manifests.push((run.clone(), m));
+    }
+    let first = &manifests[0].1;
+    for (run, m) in &manifests[1..] {
+        if m.rendiff_version != first.rendiff_version || m.reference != first.reference {
+            bail!(
+                "{}: made by rendiff {} with reference {}, but {} by rendiff {} with reference {}: shards must come from one build",
+                run.display(), m.rendiff_version, m.reference,
+                manifests[0].0.display(), first.rendiff_version, first.reference
+            );
+        }
+    }
+    let staging = Staging::begin(&opts.run_dir)?;
+    let mut scenes: Vec<SceneRuns> = Vec::new();
+    let mut seen: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for (run, m) in &manifests {
+        for s in &m.scenes {
+            if let Some(prev) = seen.get(&s.scene) {
+                if s.role == CALIBRATION_ROLE {
+                    continue; // every shard renders the probes; one copy is kept
+                }
+                bail!(
+                    "scene {:?} is in two shards ({} and {}): merge shards of one split",
+                    s.scene,
+                    prev.display(),
+                    run.display()
+                );
+            }
+            seen.insert(s.scene.clone(), run.clone());
+            let rel = format!("scenes/{}", s.scene);
+            let from = run.join(&rel);
+            if from.is_dir() {
+                copy_tree(&from, &staging.dir.join(&rel))?;
+            }
+            let mut s = s.clone();
+            let (old, new) = (
+                run.display().to_string(),
+                opts.run_dir.display().to_string(),
+            );
+            for r in &mut s.renders {
+                r.command = r.command.replace(&old, &new);
+            }
+            scenes.push(s);
+        }
+    }
+    // Probes first, as in a single run; then the scenes in file order.
+    scenes.sort_by(|a, b| {
+        (a.role != CALIBRATION_ROLE, &a.scene_file)
+            .cmp(&(b.role != CALIBRATION_ROLE, &b.scene_file))
+    });
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        reference: first.reference.clone(),
+        created_unix: manifests
+            .iter()
+            .map(|(_, m)| m.created_unix)
+            .max()
+            .unwrap_or(0),
+        rendiff_version: first.rendiff_version.clone(),
+        scenes,
+    };
+    crate::exr_io::write_atomically(&staging.dir.join("manifest.json"), |tmp| {
+        std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
+        Ok(())
+    })?;
+    let staged = CheckOptions {
+        run_dir: staging.dir.clone(),
+        ..opts.clone()
+    };
+    let results = super::compare(&staged, &staging.dir.join("scratch"))?;
+    staging.publish()?;
+    Ok(CheckOutcome { manifest, results })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paths(names: &[&str]) -> Vec<PathBuf> {
+        names
+            .iter()
+            .map(|n| PathBuf::from(format!("s/{n}.toml")))
+            .collect()
+    }
+
+    #[test]
+    fn shards_partition_the_scenes_and_keep_their_order() {
+        let all = paths(&["a", "b", "c", "d", "e", "f", "g"]);
+        for n in 1..=4 {
+            let mut union = Vec::new();
+            for k in 1..=n {
+                let part = select(&all, Shard { index: k, total: n }, &BTreeMap::new());
+                let mut sorted = part.clone();
+                sorted.sort();
+                assert_eq!(part, sorted, "order kept");
+                union.extend(part);
+            }
+            union.sort();
+            assert_eq!(union, all, "every scene in exactly one of {n} shards");
+        }
+    }
+
+    #[test]
+    fn recorded_costs_balance_the_shards() {
+        let all = paths(&["big", "m1", "m2", "m3", "m4"]);
+        let costs: BTreeMap<String, f64> = [
+            ("big", 4.0),
+            ("m1", 1.0),
+            ("m2", 1.0),
+            ("m3", 1.0),
+            ("m4", 1.0),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
+        let one = select(&all, Shard { index: 1, total: 2 }, &costs);
+        let two = select(&all, Shard { index: 2, total: 2 }, &costs);
+        assert_eq!(one, paths(&["big"]));
+        assert_eq!(two.len(), 4);
+    }
+
+    #[test]
+    fn shard_syntax_is_checked() {
+        assert_eq!(
+            "2/4".parse::<Shard>().unwrap(),
+            Shard { index: 2, total: 4 }
+        );
+        for bad in ["0/3", "4/3", "3", "a/b", "1/0"] {
+            assert!(bad.parse::<Shard>().is_err(), "{bad}");
+        }
+    }
+}
