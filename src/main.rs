@@ -143,6 +143,10 @@ enum Command {
         /// run folder's previous run, if any).
         #[arg(long, requires = "shard")]
         shard_costs: Option<PathBuf>,
+        /// External renders of a scene run this many at a time (default: the
+        /// cores; 1 runs them one after another).
+        #[arg(long, value_parser = parse_threads)]
+        jobs: Option<usize>,
     },
     /// Joins shard runs (`check --shard K/N`) into one run folder, compares it
     /// once and writes its report: the verdicts one machine would give.
@@ -467,6 +471,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 references: Some(references),
                 core: rendiff::check::CoreShading::default(),
                 calibration: None,
+                jobs: 1,
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
             let (table, tally) = rendiff::check::summary(&outcome.results);
@@ -551,7 +556,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             no_calibration,
             shard,
             shard_costs,
+            jobs,
         } => {
+            let jobs = jobs.unwrap_or_else(rendiff::check::default_jobs);
             let mut scenes = rendiff::check::collect_scenes(&scenes)?;
             if let Some(shard) = shard {
                 use rendiff::check::shard;
@@ -588,6 +595,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     bias: inject_bias,
                 },
                 calibration: (!no_calibration).then_some(calibration),
+                jobs,
             };
             // On failure the run folder keeps its INCOMPLETE marker: no report.
             let outcome = rendiff::check::run(&opts)?;

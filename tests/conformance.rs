@@ -42,6 +42,7 @@ fn main() {
             // backend's camera is measured against docs/DESIGN.md, and the run it
             // leaves is what `rendiff gate` holds against the baseline.
             calibration: Some(root.join("scenes/calibration")),
+            jobs: check::default_jobs(),
         };
         match check::run(&opts) {
             Err(e) => {

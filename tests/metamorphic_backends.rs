@@ -298,6 +298,7 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
         core: check::CoreShading::default(),
         // No calibration probes: each backend is compared with itself, so its camera offset cancels.
         calibration: None,
+        jobs: check::default_jobs(),
     };
     check::run(&opts).map_err(|e| format!("rendiff check failed: {e:#}"))?;
     let out = run_dir.join("metamorphic.json");

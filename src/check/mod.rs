@@ -88,6 +88,40 @@ pub struct CheckOptions {
     /// Folder of calibration probe scenes (`*.toml`), rendered first on every
     /// backend and recorded with `role: "calibration"`; `None` renders none.
     pub calibration: Option<PathBuf>,
+    /// External renders of one scene run this many at a time (their start-up
+    /// dominates and is single-threaded); 1 runs them one after another.
+    pub jobs: usize,
+}
+
+/// The default of `--jobs`: the cores this process may use.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Runs `f` on every item, at most `jobs` at a time, on scoped threads; the
+/// results come back in item order (so records and messages keep the
+/// sequential run's order).
+fn run_pool<T: Sync, R: Send>(jobs: usize, items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let jobs = jobs.clamp(1, items.len().max(1));
+    let next = AtomicUsize::new(0);
+    let out: std::sync::Mutex<Vec<Option<R>>> =
+        std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..jobs {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(item) = items.get(i) else { break };
+                let r = f(item);
+                out.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+            });
+        }
+    });
+    out.into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|r| r.expect("every item ran"))
+        .collect()
 }
 
 /// How the core shades in a check run (the reference for radiance).
@@ -535,11 +569,14 @@ fn render_and_compare(
                 ..RenderRecord::default()
             }),
             Ok(list) => {
-                for b in list {
-                    if !wanted(opts, &b.name) {
-                        continue;
-                    }
-                    let rec = external(opts, b, &runs, &dir, &rel_dir, &scratch, isolate);
+                // Independent processes: run side by side (`--jobs`), record in order.
+                let todo: Vec<&HarnessBackend> =
+                    list.iter().filter(|b| wanted(opts, &b.name)).collect();
+                let jobs = if isolate.is_some() { 1 } else { opts.jobs };
+                let recs = run_pool(jobs, &todo, |b| {
+                    external(opts, b, &runs, &dir, &rel_dir, &scratch, isolate)
+                });
+                for (b, rec) in todo.iter().zip(recs) {
                     say(opts, format!("  {:<14} {}", b.name, describe(&rec)));
                     runs.renders.push(rec);
                 }
@@ -992,6 +1029,7 @@ mod tests {
             references: None,
             core: CoreShading::default(),
             calibration: Some(probes.clone()),
+            jobs: 1,
         };
         let jobs = scene_jobs(&opts).unwrap();
         let got: Vec<(String, &str)> = jobs.iter().map(|(p, r)| (stem(p), *r)).collect();

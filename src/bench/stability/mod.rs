@@ -162,6 +162,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         // No calibration probes: the bench looks for where each renderer breaks, and the
         // probes would only add their renders to a long run.
         calibration: None,
+        jobs: 1,
     };
     eprintln!(
         "stability: {} scenes through rendiff check ({})",
