@@ -861,15 +861,17 @@ pub struct Tally {
     pub skipped: usize,
 }
 
-/// A fixed-width table of every verdict, failures first, and the tally.
+/// A table of every verdict, failures first, and the tally. Columns are as
+/// wide as their widest cell (scene names run long), and the edge/tie/crack
+/// counts are the verifier's allowed classes, interior its failures.
 pub fn summary(results: &Results) -> (String, Tally) {
     let mut rows: Vec<&manifest::ResultEntry> = results.results.iter().collect();
     rows.sort_by_key(|r| (!r.is_failure(), r.status != "skipped", r.key()));
     let mut t = Tally::default();
-    let mut s = format!(
-        "{:<18} {:<14} {:<3} {:<16} {:>6} {:>9}  {}\n",
-        "scene", "backend", "buf", "status", "edge", "interior", "note"
-    );
+    let mut cells: Vec<[String; 9]> = vec![[
+        "scene", "backend", "buf", "status", "edge", "tie", "crack", "interior", "note",
+    ]
+    .map(String::from)];
     for r in rows {
         if r.is_failure() {
             t.failed += 1;
@@ -885,17 +887,37 @@ pub fn summary(results: &Results) -> (String, Tally) {
                 .map(|v| v.to_string())
                 .unwrap_or_else(|| "-".into())
         };
-        let note = short_note(r.reason.lines().next().unwrap_or(""));
-        s.push_str(&format!(
-            "{:<18} {:<14} {:<3} {:<16} {:>6} {:>9}  {}\n",
-            r.scene,
-            r.backend,
-            r.buffer,
-            r.status,
+        cells.push([
+            r.scene.clone(),
+            r.backend.clone(),
+            r.buffer.clone(),
+            r.status.clone(),
             n("edge_mismatches"),
+            n("tie_mismatches"),
+            n("crack_mismatches"),
             n("interior_mismatches"),
-            note
-        ));
+            short_note(r.reason.lines().next().unwrap_or("")),
+        ]);
+    }
+    let mut width = [0usize; 9];
+    for row in &cells {
+        for (w, c) in width.iter_mut().zip(row) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let mut s = String::new();
+    for row in &cells {
+        let mut line = String::new();
+        for (i, c) in row.iter().enumerate() {
+            let pad = width[i].saturating_sub(c.chars().count());
+            match i {
+                8 => line.push_str(c),
+                4..=7 => line.push_str(&format!("{}{c}  ", " ".repeat(pad))),
+                _ => line.push_str(&format!("{c}{}  ", " ".repeat(pad))),
+            }
+        }
+        s.push_str(line.trim_end());
+        s.push('\n');
     }
     (s, t)
 }
