@@ -5,7 +5,7 @@ It reads the probe scenes of a `rendiff check` run (manifest scenes with
 `"role": "calibration"`, or the names given in `scenes`), measures every backend that
 rendered a Z buffer of them (the reference included) and returns
 
-* `report.entries`: results.json entries (`compare.base_entry` shape, buffer "camera"), one
+* `report.entries`: results.json entries (`results.Entry`'s shape, buffer "camera"), one
   per (probe, backend), with the measured fields below;
 * `report.summary`: `{backend: {...measured fields..., "status", "reason", "bound_px",
   "probes"}}` for results.json's top-level `calibration` key (the worst probe of each
@@ -75,6 +75,8 @@ from typing import Any
 import numpy as np
 
 from . import exrbuf, resolved
+from .manifest import EntryError, render_reason, run_path
+from .results import Entry
 
 ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
@@ -710,18 +712,14 @@ def probe_scenes(manifest: Mapping[str, Any], scenes: Collection[str] | None = N
 
 
 def _reason(render: Mapping[str, Any]) -> str:
-    from . import compare  # lazy: compare imports this module
-
-    return compare._render_reason(render)
+    return render_reason(render)
 
 
 def _run_path(run: Path, rel: Any, what: str) -> Path:
-    """compare.run_path, with its error as a CalibrationError."""
-    from . import compare  # lazy: compare imports this module
-
+    """manifest.run_path, with its error as a CalibrationError."""
     try:
-        return compare.run_path(run, rel, what)
-    except compare.EntryError as exc:
+        return run_path(run, rel, what)
+    except EntryError as exc:
         raise CalibrationError(str(exc)) from None
 
 
@@ -810,17 +808,13 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str) -
 
 
 def entry(cal: Calibration) -> dict[str, Any]:
-    """The results.json entry of one measurement (compare.base_entry's shape, buffer "camera")."""
-    from . import compare  # lazy: compare imports this module
-
-    e = compare.base_entry(cal.scene, cal.backend, BUFFER, cal.render)
-    e["status"] = cal.status
-    e["reason"] = cal.reason
-    e["pixels"] = cal.pixels
-    e["compared_pixels"] = cal.pixels
-    e["tolerance"] = cal.bound_text
-    e.update(cal.fields())
-    return compare.blank_if_not_compared(e)
+    """The results.json entry of one measurement (a `results.Entry`, buffer "camera")."""
+    e = Entry.for_render(cal.scene, cal.backend, BUFFER, cal.render, status=cal.status, reason=cal.reason)
+    e.pixels = cal.pixels
+    e.compared_pixels = cal.pixels
+    e.tolerance = cal.bound_text
+    e.extra = cal.fields()
+    return e.blank_if_not_compared().to_json()
 
 
 _STATUS_RANK = {"fail": 0, "error": 1, "pass": 2, "skipped": 3}
@@ -861,7 +855,7 @@ def summarize(measurements: Sequence[Calibration]) -> dict[str, dict[str, Any]]:
 def calibrate_run(run: Path, manifest: Mapping[str, Any], scenes: Collection[str] | None = None) -> CalibrationReport:
     """Measure every backend's camera on the run's probe scenes (module docstring).
 
-    `manifest` is RUN/manifest.json as loaded (compare.load_manifest). Probes are its scenes
+    `manifest` is RUN/manifest.json as loaded (manifest.load_manifest). Probes are its scenes
     with `"role": "calibration"`, or exactly `scenes` when given. No probe: an empty report.
     """
     run = Path(run)

@@ -1,13 +1,14 @@
 """`python -m rendiff_harness compare --run RUN [--expectations FILE]`: buffers -> results.json.
 
-Reads RUN/manifest.json (docs/run-format.md, written by `rendiff check`), compares every
-backend's buffers with the reference's (`reference`, normally "raster") for the `id` and
-`Z` buffers, writes RUN/results.json atomically and RUN/scenes/<scene>/diff/*.png, and
-prints a compact table. The Rust side decides pass/fail from results.json, so this exits
-0 whenever it could write results; 2 when the manifest (or the expectations file, or
-results.json itself) cannot be read/written, with one line naming the file.
+Reads RUN/manifest.json (docs/run-format.md, written by `rendiff check`; manifest.py), compares
+every backend's buffers with the reference's (`reference`, normally "raster"), writes
+RUN/results.json atomically (results.py) and RUN/scenes/<scene>/diff/*.png, and prints a
+compact table. The Rust side decides pass/fail from results.json, so this exits 0 whenever it
+could write results; 2 when the manifest (or the expectations file, or results.json itself)
+cannot be read/written, with one line naming the file.
 
-What is compared (docs/DESIGN.md "Comparing"):
+What is compared (docs/DESIGN.md "Comparing"); `BUFFER_TABLE` below says, per buffer, when it
+applies, which function compares it and which fields its entry has:
 
 * `id`: id.prim read exactly as u32. A mismatch is a pixel whose prim differs
   (background 0xFFFFFFFF is a value). Each mismatch is *edge* when the pixel center lies
@@ -18,6 +19,8 @@ What is compared (docs/DESIGN.md "Comparing"):
   that is an ID edge mismatch counts as edge, elsewhere as interior. Depth is compared
   where both sides hit the same prim, against the backend's tolerance model
   (tolerance.py); pixels beyond it are interior mismatches.
+* `N` (where the backend writes normals, and the reference's own): against the winding
+  convention N = normalize((b-a) x (c-a)) of the prim the backend's id.prim names.
 * `RGB` (scenes that require `lambert`, `emission` or `global_illumination` only):
   radiance.py. Deterministic renders (no var.* channels): |a - b| <= abs + rel |b| with
   the test backend's precision (tolerance.rgb_model); failing pixels at ID edge
@@ -39,7 +42,6 @@ What is compared (docs/DESIGN.md "Comparing"):
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
@@ -47,258 +49,42 @@ import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import atomic, diffimages, expectations, exrbuf, lighting, radiance, resolved, tolerance, verify, vocab
+from . import diffimages, expectations, exrbuf, lighting, radiance, tolerance, verify, vocab
+from .manifest import MANIFEST_FORMAT as MANIFEST_FORMAT
+from .manifest import EntryError as EntryError
+from .manifest import ManifestError as ManifestError
+from .manifest import Reference as Reference
+from .manifest import declared_buffers, read_test_buffers, render_info, render_reason
+from .manifest import load_manifest as load_manifest
+from .manifest import load_reference as load_reference
+from .manifest import run_path as run_path
+from .results import NUMERIC_FIELDS as NUMERIC_FIELDS
+from .results import RESULTS_FORMAT as RESULTS_FORMAT
+from .results import RGB_FIELDS as RGB_FIELDS
+from .results import Entry, document, finite
+from .results import base_entry as base_entry
+from .results import blank_if_not_compared as blank_if_not_compared
+from .results import format_table as format_table
+from .results import write_results as write_results
+from .vocab import Buffer, Status
 
-MANIFEST_FORMAT = "rendiff-manifest/1"
-RESULTS_FORMAT = "rendiff-results/1"
-BUFFERS = ("id", "Z")
-SHADED_BUFFERS = ("id", "Z", "RGB")
 SHADING_FEATURES = frozenset(f.value for f in vocab.SHADED_FEATURES)
 CACHED_REFERENCE_BACKEND = "mitsuba_ref"
-RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean")
 BACKGROUND_ID = exrbuf.BACKGROUND_ID
 EXAMPLES = 3  # example pixels quoted in a failure's reason
 EXIT_OK, EXIT_ERROR = 0, 2
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
 
 
-class ManifestError(Exception):
-    """manifest.json cannot be used at all; the message names the file."""
-
-
-class EntryError(Exception):
-    """One scene/backend cannot be compared; becomes `error` entries with this reason."""
-
-
-# --------------------------------------------------------------------------- manifest
-
-
-def load_manifest(run: Path) -> dict[str, Any]:
-    """Read and structurally validate RUN/manifest.json; ManifestError names the file."""
-    path = run / "manifest.json"
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ManifestError(f"{path}: missing (run `rendiff check` first)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ManifestError(f"{path}: unreadable: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise ManifestError(f"{path}: not valid JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise ManifestError(f"{path}: must be a JSON object")
-    if data.get("format") != MANIFEST_FORMAT:
-        raise ManifestError(f"{path}: format is {data.get('format')!r}, expected {MANIFEST_FORMAT!r}")
-    reference = data.get("reference", "raster")
-    if not isinstance(reference, str) or not reference:
-        raise ManifestError(f"{path}: 'reference' must be a backend name, got {reference!r}")
-    scenes = data.get("scenes")
-    if not isinstance(scenes, list):
-        raise ManifestError(f"{path}: 'scenes' must be a list")
-    for i, sc in enumerate(scenes):
-        if not isinstance(sc, dict) or not isinstance(sc.get("scene"), str) or not sc["scene"]:
-            raise ManifestError(f"{path}: scenes[{i}] must be an object with a 'scene' name")
-        renders = sc.get("renders", [])
-        if not isinstance(renders, list):
-            raise ManifestError(f"{path}: scenes[{i}] ({sc['scene']}): 'renders' must be a list")
-        for j, r in enumerate(renders):
-            if not isinstance(r, dict) or not isinstance(r.get("backend"), str) or not r["backend"]:
-                raise ManifestError(
-                    f"{path}: scenes[{i}] ({sc['scene']}).renders[{j}] must be an object with a 'backend' name"
-                )
-            if r.get("status") not in ("ok", "skipped", "error"):
-                raise ManifestError(
-                    f"{path}: scenes[{i}] ({sc['scene']}).renders[{j}] ({r['backend']}): "
-                    f"status must be ok, skipped or error, got {r.get('status')!r}"
-                )
-    return data
-
-
-def run_path(run: Path, rel: Any, what: str) -> Path:
-    """A manifest path (relative to RUN, never escaping it) as a real path; EntryError if bad."""
-    if not isinstance(rel, str) or not rel:
-        raise EntryError(f"{what}: no path in manifest.json")
-    p = Path(rel)
-    if p.is_absolute() or ".." in p.parts:
-        raise EntryError(f"{what}: path {rel!r} in manifest.json must be relative to the run folder")
-    return run / p
-
-
-# --------------------------------------------------------------------------- entries
-
-
-def _finite(x: float) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any]) -> dict[str, Any]:
-    """A results.json entry with every field present and the render's time/version/command.
-
-    Counts start at 0; `blank_if_not_compared` nulls them when the entry ends skipped/error.
-    """
-    t = render.get("time_s")
-    return {
-        "scene": scene,
-        "backend": backend,
-        "buffer": buffer,
-        "status": "error",
-        "reason": "",
-        "pixels": 0,
-        "edge_mismatches": 0,
-        "tie_mismatches": 0,
-        "crack_mismatches": 0,
-        "interior_mismatches": 0,
-        "mask_mismatches": 0,
-        "max_abs_error": 0.0,
-        "mean_abs_error": 0.0,
-        "max_rel_error": 0.0,
-        "compared_pixels": 0,
-        "tolerance": "",
-        "bound": None,
-        "time_s": _finite(t) if isinstance(t, (int, float)) and not isinstance(t, bool) else None,
-        "version": render.get("version") if isinstance(render.get("version"), str) else None,
-        "command": render.get("command") if isinstance(render.get("command"), str) else None,
-        "images": {},
-    }
-
-
-NUMERIC_FIELDS = (
-    "pixels",
-    "edge_mismatches",
-    "tie_mismatches",
-    "crack_mismatches",
-    "interior_mismatches",
-    "mask_mismatches",
-    "max_abs_error",
-    "mean_abs_error",
-    "max_rel_error",
-    "compared_pixels",
-)
-
-
-def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
-    """Skipped and error entries carry null counts: "not compared", never "0 mismatches"."""
-    if entry["status"] in ("skipped", "error"):
-        for k in NUMERIC_FIELDS:
-            entry[k] = None
-        if entry["buffer"] == "RGB":
-            for k in RGB_FIELDS:
-                entry[k] = None
-    return entry
-
-
 def is_shaded(requires: Any) -> bool:
     """A scene whose buffers include radiance (docs/radiance.md)."""
     return isinstance(requires, (list, tuple, set, frozenset)) and vocab.needs_shading(requires)
-
-
-def buffers_for(scene_entry: Mapping[str, Any]) -> tuple[str, ...]:
-    return SHADED_BUFFERS if is_shaded(scene_entry.get("requires")) else BUFFERS
-
-
-def rgb_entry(scene: str, backend: str, render: Mapping[str, Any]) -> dict[str, Any]:
-    e = base_entry(scene, backend, "RGB", render)
-    e.update(mode=None, failing_pixels=0, min_p=None, alpha=None, cluster_failures=None, flip_mean=None, flip_note="")
-    return e
-
-
-def status_entries(
-    scene: str, render: Mapping[str, Any], status: str, reason: str, buffers: Sequence[str] = BUFFERS
-) -> list[dict[str, Any]]:
-    out = []
-    for buf in buffers:
-        if buf == "RGB":
-            e = rgb_entry(scene, str(render.get("backend", "?")), render)
-            e["status"] = status
-            e["reason"] = reason
-            out.append(e)
-            continue
-        e = base_entry(scene, str(render.get("backend", "?")), buf, render)
-        e["status"] = status
-        e["reason"] = reason
-        out.append(e)
-    return out
-
-
-def _render_reason(render: Mapping[str, Any]) -> str:
-    if render.get("status") == "skipped":
-        return str(render.get("reason") or "skipped (no reason given)")
-    return str(render.get("message") or render.get("reason") or "error (no message given)")
-
-
-# --------------------------------------------------------------------------- reference data
-
-
-@dataclass
-class Reference:
-    scene: resolved.ResolvedScene
-    buffers: dict[str, np.ndarray]
-    shape: tuple[int, int]
-    _normals: np.ndarray | None = field(default=None, repr=False)
-    attrs: dict[str, Any] = field(default_factory=dict)
-    path: Path | None = None
-    topology_cache: dict[str, Any] = field(default_factory=dict, repr=False)
-
-    def unit_normals(self) -> np.ndarray:
-        """(N, 3) float64 unit normals of every triangle (zero for degenerate ones)."""
-        if self._normals is None:
-            t = self.scene.triangles.astype(np.float64)
-            n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-            length = np.linalg.norm(n, axis=1)
-            with np.errstate(all="ignore"):
-                self._normals = np.where(length[:, None] > 0, n / np.where(length > 0, length, 1.0)[:, None], 0.0)
-        return self._normals
-
-    def ray_cos(self, rows: np.ndarray, cols: np.ndarray, prims: np.ndarray) -> np.ndarray:
-        """|cos| between the pixel rays and the triangles' normals, (K,) float64 in [0, 1]."""
-        cam = self.scene.camera
-        w, h = cam.width, cam.height
-        sx = (2.0 * (cols + 0.5) / w - 1.0) * cam.tan_half_vfov * (w / h)
-        sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
-        d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
-        n = self.unit_normals()[prims.astype(np.int64)]
-        cos: np.ndarray = np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
-        return cos
-
-
-def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) -> Reference:
-    """Resolved scene + reference buffers for one scene; EntryError with the reason otherwise."""
-    name = scene_entry["scene"]
-    refs = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference]
-    if not refs:
-        raise EntryError(f"reference {reference} has no render for scene {name} in manifest.json")
-    ref = refs[0]
-    if ref.get("status") != "ok":
-        raise EntryError(f"reference {reference} {ref.get('status')}: {_render_reason(ref)}")
-    try:
-        scene = resolved.load(run_path(run, scene_entry.get("resolved"), "resolved scene"))
-    except EntryError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - SceneError or a malformed scene.json
-        raise EntryError(f"cannot load the resolved scene: {type(exc).__name__}: {exc}") from None
-    exr = run_path(run, ref.get("exr"), f"reference {reference} EXR")
-    try:
-        buffers = exrbuf.read_buffers(exr)
-    except exrbuf.BufferError as exc:
-        raise EntryError(f"reference {reference} unreadable: {exc}") from None
-    try:
-        attrs = dict(exrbuf.read_attrs(exr))
-    except exrbuf.BufferError:
-        attrs = {}
-    cam = scene.camera
-    shape = (cam.height, cam.width)
-    for key, arr in buffers.items():
-        if arr.shape[:2] != shape:
-            raise EntryError(
-                f"reference {reference} {exr}: {key} is {arr.shape[1]}x{arr.shape[0]}, "
-                f"the scene's camera is {cam.width}x{cam.height}"
-            )
-    return Reference(scene, buffers, shape, attrs=attrs, path=exr)
 
 
 # --------------------------------------------------------------------------- ID comparison
@@ -453,7 +239,7 @@ def compare_ids(
             explanations.insert(
                 0,
                 {
-                    "class": "interior",
+                    "class": vocab.MismatchClass.INTERIOR,
                     "ref_prim": None,
                     "test_prim": None,
                     "pixels": int(oi.size),
@@ -529,7 +315,7 @@ def depth_context(
     return tolerance.DepthContext(
         z_ref=z_ref,
         cos=cos,
-        info=_info(render),
+        info=render_info(render),
         attrs=attrs,
         pixel_size=pixel_size(ref),
         point_norm=point_norm(ref, rows, cols, z_ref),
@@ -549,7 +335,7 @@ def depth_tolerance_fn(
         ctx = tolerance.DepthContext(
             z_ref=z,
             cos=cos,
-            info=_info(render),
+            info=render_info(render),
             attrs=attrs,
             pixel_size=pixel_size(ref),
             point_norm=np.abs(z) + eye_norm(ref),
@@ -659,187 +445,7 @@ def compare_depth(
     )
 
 
-def _info(render: Mapping[str, Any]) -> Mapping[str, Any]:
-    info = render.get("info")
-    return info if isinstance(info, dict) else {}
-
-
-# --------------------------------------------------------------------------- one backend
-
-
-def _declared_buffers(render: Mapping[str, Any]) -> set[str] | None:
-    b = render.get("buffers")
-    if isinstance(b, list) and all(isinstance(x, str) for x in b):
-        return set(b)
-    return None
-
-
-def _apply_verdict(entry: dict[str, Any], exps: expectations.Expectations, details: list[str]) -> None:
-    exp = exps.lookup(entry["scene"], entry["backend"], entry["buffer"])
-    counts = {k: int(entry.get(k) or 0) for k in expectations.COUNT_KEYS}
-    declared = exps.declared(entry["backend"], "crack")
-    verdict = expectations.evaluate(counts, exp, cracks_allowed=declared is not None)
-    entry["status"] = verdict.status
-    if exp is not None:
-        entry["bound"] = exp.bound_json()
-    parts = [verdict.reason] if verdict.reason else []
-    if verdict.status in (vocab.Status.FAIL, vocab.Status.EXPECTED_FAIL, vocab.Status.UNEXPECTED_PASS):
-        parts += details
-    if declared is not None and int(entry.get("crack_mismatches") or 0) > 0:
-        parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
-    entry["reason"] = "; ".join(parts)
-
-
-def _add_reason(entry: dict[str, Any], note: str) -> None:
-    entry["reason"] = f"{entry['reason']}; {note}" if entry["reason"] else note
-
-
-def compare_backend(
-    run: Path,
-    scene_name: str,
-    render: Mapping[str, Any],
-    ref: Reference,
-    exps: expectations.Expectations,
-    images: bool,
-) -> list[dict[str, Any]]:
-    """The entries (id, Z, and RGB for shaded scenes) for one ok render of one backend."""
-    backend = render["backend"]
-    model = tolerance.model_for(backend)
-    exr = run_path(run, render.get("exr"), f"{backend} EXR")
-    try:
-        test = exrbuf.read_buffers(exr)
-    except exrbuf.BufferError as exc:
-        raise EntryError(f"{backend} buffers unreadable: {exc}") from None
-    try:
-        attrs: Mapping[str, Any] = exrbuf.read_attrs(exr)
-    except exrbuf.BufferError:
-        attrs = {}
-    for key, arr in test.items():
-        if arr.shape[:2] != ref.shape:
-            raise EntryError(
-                f"{exr}: {key} is {arr.shape[1]}x{arr.shape[0]}, the reference is {ref.shape[1]}x{ref.shape[0]}"
-            )
-    declared = _declared_buffers(render)
-    pixels = ref.shape[0] * ref.shape[1]
-    diff_dir = None
-    if images and _SAFE_NAME.match(scene_name) and _SAFE_NAME.match(backend):
-        diff_dir = run / "scenes" / scene_name / "diff"
-    out: list[dict[str, Any]] = []
-
-    # ---- id
-    e_id = base_entry(scene_name, backend, "id", render)
-    e_id["pixels"] = pixels
-    id_res: IdResult | None = None
-    if "id.prim" not in test:
-        e_id["status"] = "skipped" if declared is None or "id" not in declared else "error"
-        e_id["reason"] = (
-            f"{backend} does not produce id"
-            if e_id["status"] == "skipped"
-            else f"{exr}: manifest lists buffer id but the EXR has no id.prim channel"
-        )
-    elif "id.prim" not in ref.buffers:
-        e_id["reason"] = "reference has no id.prim channel"
-    else:
-        id_res = compare_ids(ref, test, model, depth_tol=depth_tolerance_fn(ref, model, render, attrs), backend=backend)
-        e_id["edge_mismatches"] = id_res.edge
-        e_id["tie_mismatches"] = id_res.tie
-        e_id["crack_mismatches"] = id_res.crack
-        e_id["interior_mismatches"] = id_res.interior
-        e_id["tolerance"] = id_res.tolerance
-        e_id["explanations"] = id_res.explanations
-        _apply_verdict(e_id, exps, id_res.details)
-        if not model.known:
-            _add_reason(e_id, f"no precision model for {backend} in tolerance.py: compared exactly")
-        if diff_dir is not None:
-            path = diff_dir / f"{backend}.id.png"
-            try:
-                diffimages.write_id_diff(
-                    path, ref.buffers["id.prim"], test["id.prim"], id_res.edge_mask, id_res.interior_mask
-                )
-                e_id["images"] = {"heat": path.relative_to(run).as_posix()}
-            except diffimages.DiffImageError as exc:
-                _add_reason(e_id, f"diff image not written: {exc}")
-    out.append(e_id)
-
-    # ---- Z
-    e_z = base_entry(scene_name, backend, "Z", render)
-    e_z["pixels"] = pixels
-    if "Z" not in test:
-        e_z["status"] = "skipped" if declared is None or "Z" not in declared else "error"
-        e_z["reason"] = (
-            f"{backend} does not produce Z"
-            if e_z["status"] == "skipped"
-            else f"{exr}: manifest lists buffer Z but the EXR has no Z channel"
-        )
-    elif "Z" not in ref.buffers:
-        e_z["reason"] = "reference has no Z channel"
-    else:
-        try:
-            z_res = compare_depth(
-                ref,
-                test,
-                model,
-                render,
-                attrs,
-                id_res.edge_mask if id_res is not None else None,
-                id_res.classes if id_res is not None else None,
-            )
-        except tolerance.ToleranceError as exc:
-            e_z["reason"] = str(exc)
-            z_res = None
-        if z_res is not None:
-            e_z["edge_mismatches"] = z_res.edge
-            e_z["tie_mismatches"] = z_res.tie
-            e_z["crack_mismatches"] = z_res.crack
-            e_z["interior_mismatches"] = z_res.interior
-            e_z["mask_mismatches"] = z_res.mask
-            e_z["compared_pixels"] = z_res.compared
-            e_z["max_abs_error"] = _finite(z_res.max_abs)
-            e_z["mean_abs_error"] = _finite(z_res.mean_abs)
-            e_z["max_rel_error"] = _finite(z_res.max_rel)
-            e_z["tolerance"] = z_res.tolerance
-            _apply_verdict(e_z, exps, z_res.details)
-            if diff_dir is not None:
-                path = diff_dir / f"{backend}.Z.png"
-                try:
-                    diffimages.write_depth_diff(path, ref.buffers["Z"], test["Z"], z_res.max_abs)
-                    e_z["images"] = {"heat": path.relative_to(run).as_posix()}
-                except diffimages.DiffImageError as exc:
-                    _add_reason(e_z, f"diff image not written: {exc}")
-    out.append(e_z)
-
-    # ---- N (where the backend writes normals)
-    if "N" in test:
-        out.append(compare_normals(scene_name, backend, render, ref, test, exps))
-
-    # ---- RGB
-    if is_shaded(ref.scene.requires):
-        e_rgb = rgb_entry(scene_name, backend, render)
-        e_rgb["pixels"] = pixels
-        own = str(render.get("reason") or "")
-        if "RGB" not in test:
-            e_rgb["status"] = "skipped" if declared is None or "RGB" not in declared else "error"
-            e_rgb["reason"] = (
-                (own or f"{backend} does not produce RGB")
-                if e_rgb["status"] == "skipped"
-                else f"{exr}: manifest lists buffer RGB but the EXR has no R,G,B channels"
-            )
-        elif "RGB" not in ref.buffers:
-            e_rgb["reason"] = "reference has no R,G,B channels (the scene requires shading)"
-        else:
-            try:
-                res = compare_rgb(ref, test, attrs, backend, render, id_res.edge_mask if id_res is not None else None)
-            except (tolerance.ToleranceError, radiance.RadianceError) as exc:
-                e_rgb["reason"] = str(exc)
-                res = None
-            if res is not None:
-                fill_rgb_entry(e_rgb, res, ref.buffers["RGB"], test["RGB"])
-                _apply_verdict(e_rgb, exps, res.details)
-                for note in res.notes:
-                    _add_reason(e_rgb, note)
-                _rgb_image(e_rgb, run, diff_dir, backend, res)
-        out.append(e_rgb)
-    return out
+# --------------------------------------------------------------------------- normal comparison
 
 
 def compare_normals(
@@ -849,23 +455,30 @@ def compare_normals(
     ref: Reference,
     buffers: Mapping[str, np.ndarray],
     exps: expectations.Expectations,
-) -> dict[str, Any]:
-    """A backend's N against the documented winding convention: N = normalize((b-a) x (c-a)).
+) -> Entry:
+    """A backend's N (or the reference's own) against the winding convention: see `judge_normals`."""
+    e = Entry.for_render(scene_name, backend, Buffer.N, render, N_FIELDS)
+    e.pixels = ref.pixels
+    judged = judge_normals(ref, backend, buffers, e)
+    if judged is not None:
+        e.apply_verdict(exps, judged.details)
+    return e
+
+
+def judge_normals(ref: Reference, backend: str, buffers: Mapping[str, np.ndarray], e: Entry) -> Judged | None:
+    """N against the documented winding convention: N = normalize((b-a) x (c-a)).
 
     Judged at every pixel where the backend's own id.prim names a triangle (its
     visibility is judged by its id entry), so the reference's normals are checked too:
     a flipped, unnormalized or wrong-triangle normal is an interior mismatch.
     """
-    e = base_entry(scene_name, backend, "N", render)
     h, w = ref.shape
-    e["pixels"] = h * w
-    e["max_angle_rad"] = None
     n = buffers.get("N")
     ids = buffers.get("id.prim")
     if n is None or ids is None:
-        e["status"] = "skipped"
-        e["reason"] = f"{backend} writes no N" if n is None else f"{backend} writes N but no id.prim to judge it by"
-        return e
+        e.status = Status.SKIPPED
+        e.reason = f"{backend} writes no N" if n is None else f"{backend} writes N but no id.prim to judge it by"
+        return None
     prims = ids.ravel()
     valid = np.flatnonzero(prims.astype(np.uint64) < np.uint64(ref.scene.triangle_count))
     tris = ref.scene.triangles[prims[valid].astype(np.int64)].astype(np.float64)
@@ -885,12 +498,12 @@ def compare_normals(
     tol, text = tolerance.normal_tolerance(backend, np.where(np.isfinite(cond), cond, np.inf))
     unit_ok = np.abs(got_len - 1.0) <= 4.0 * tolerance.F32_U + tol
     bad = ~(angle <= tol) | ~unit_ok
-    e["compared_pixels"] = int(valid.size)
-    e["interior_mismatches"] = int(bad.sum())
-    e["max_angle_rad"] = (
+    e.compared_pixels = int(valid.size)
+    e.interior_mismatches = int(bad.sum())
+    e.max_angle_rad = (
         float(angle.max()) if valid.size and np.isfinite(angle.max()) else (0.0 if not valid.size else None)
     )
-    e["tolerance"] = f"N: {text}; |N| = 1 within 4 * 2^-24; facing per the winding (b-a) x (c-a)"
+    e.tolerance = f"N: {text}; |N| = 1 within 4 * 2^-24; facing per the winding (b-a) x (c-a)"
     details = []
     if bad.any():
         k = np.nonzero(bad)[0][:EXAMPLES]
@@ -901,9 +514,9 @@ def compare_normals(
         flipped = int(np.count_nonzero(bad & (cosang < 0)))
         details.append(f"{int(bad.sum())} normals off, {flipped} of them facing the other way; e.g. {ex}")
         first = valid[k[0]]
-        e["explanations"] = [
+        e.explanations = [
             {
-                "class": "interior",
+                "class": vocab.MismatchClass.INTERIOR,
                 "ref_prim": int(prims[first]),
                 "test_prim": int(prims[first]),
                 "pixels": int(bad.sum()),
@@ -912,8 +525,10 @@ def compare_normals(
                 + (" (flipped)" if cosang[k[0]] < 0 else ""),
             }
         ]
-    _apply_verdict(e, exps, details)
-    return e
+    return Judged(details)
+
+
+# --------------------------------------------------------------------------- radiance comparison
 
 
 def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:
@@ -932,14 +547,14 @@ def compare_rgb(
     a, b = test["RGB"], ref.buffers["RGB"]
     var_a, var_b = test.get("var"), ref.buffers.get("var")
     if var_a is not None or var_b is not None:
-        test_attrs = {**_info(render), **attrs}
+        test_attrs = {**render_info(render), **attrs}
         res = radiance.compare_statistical(
             b,
             var_b,
             _side_dof(ref.attrs) if var_b is not None else math.inf,
             a,
             var_a,
-            _side_dof(attrs, _info(render)) if var_a is not None else math.inf,
+            _side_dof(attrs, render_info(render)) if var_a is not None else math.inf,
             ref_n=radiance.samples_per_pixel(ref.attrs),
             test_n=radiance.samples_per_pixel(test_attrs),
         )
@@ -947,7 +562,7 @@ def compare_rgb(
             side = backend if var_a is None else "the reference"
             res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
         return res
-    model = tolerance.rgb_model(backend, b, attrs, _info(render))
+    model = tolerance.rgb_model(backend, b, attrs, render_info(render))
     shadow_edges: radiance.ShadowEdges | None = None
     scene = ref.scene
     if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
@@ -969,33 +584,277 @@ def compare_rgb(
     return radiance.compare_deterministic(b, a, model.abs_tol, model.rel, text, id_edge_mask, shadow_edges)
 
 
-def fill_rgb_entry(e: dict[str, Any], res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> None:
-    e["mode"] = res.mode
-    e["edge_mismatches"] = res.edge
-    e["interior_mismatches"] = res.interior
-    e["failing_pixels"] = res.failing_pixels
-    e["compared_pixels"] = res.pixels
-    e["max_abs_error"] = _finite(res.max_abs)
-    e["mean_abs_error"] = _finite(res.mean_abs)
-    e["max_rel_error"] = _finite(res.max_rel)
-    e["tolerance"] = res.tolerance
-    e["min_p"] = None if res.min_p is None else float(res.min_p)
-    e["alpha"] = res.alpha
-    e["cluster_failures"] = res.cluster_failures
-    flip, note = radiance.flip_mean(ref_rgb, test_rgb)
-    e["flip_mean"] = flip
-    e["flip_note"] = note
+def record_rgb(e: Entry, res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> Judged:
+    """Fill an RGB entry from radiance.py's result (FLIP too); the heat map shows |a-b|/tol."""
+    e.mode = res.mode
+    e.edge_mismatches = res.edge
+    e.interior_mismatches = res.interior
+    e.failing_pixels = res.failing_pixels
+    e.compared_pixels = res.pixels
+    e.max_abs_error = finite(res.max_abs)
+    e.mean_abs_error = finite(res.mean_abs)
+    e.max_rel_error = finite(res.max_rel)
+    e.tolerance = res.tolerance
+    e.min_p = None if res.min_p is None else float(res.min_p)
+    e.alpha = res.alpha
+    e.cluster_failures = res.cluster_failures
+    e.flip_mean, e.flip_note = radiance.flip_mean(ref_rgb, test_rgb)
 
-
-def _rgb_image(e: dict[str, Any], run: Path, diff_dir: Path | None, backend: str, res: radiance.RgbResult) -> None:
-    if diff_dir is None:
-        return
-    path = diff_dir / f"{backend}.RGB.png"
-    try:
+    def heat_map(path: Path) -> None:
         diffimages.write_rgb_diff(path, res.score, res.edge_mask, res.fail_mask & ~res.edge_mask)
-        e["images"] = {"heat": path.relative_to(run).as_posix()}
+
+    return Judged(res.details, res.notes, heat_map)
+
+
+# --------------------------------------------------------------------------- the buffer table
+
+
+@dataclass
+class BackendRender:
+    """One ok render of one backend, read and ready to compare buffer by buffer."""
+
+    run: Path
+    scene: str
+    backend: str
+    render: Mapping[str, Any]
+    ref: Reference
+    test: Mapping[str, np.ndarray]
+    attrs: Mapping[str, Any]
+    exr: Path
+    model: tolerance.Model
+    declared: set[str] | None  # the buffers the manifest says it wrote (None: it does not say)
+    diff_dir: Path | None  # where heat maps go (None: none are written)
+    id_result: IdResult | None = None  # the id comparison, once done (Z and RGB use its classes)
+
+
+@dataclass
+class Judged:
+    """A buffer compared, its counts already in its entry: what the verdict and the heat map need."""
+
+    details: list[str]  # examples of mismatches, for the reason of a failing verdict
+    notes: list[str] = field(default_factory=list)  # always added to the reason, after the verdict
+    heat_map: Callable[[Path], None] | None = None  # writes the diff PNG at the path given
+
+
+Judge = Callable[[BackendRender, Entry], Judged | None]
+"""Compares one buffer of a render and fills the entry's counts; None: the entry is final
+(its reason says why it was not compared)."""
+
+
+def judge_ids(r: BackendRender, e: Entry) -> Judged:
+    res = compare_ids(
+        r.ref, r.test, r.model, depth_tol=depth_tolerance_fn(r.ref, r.model, r.render, r.attrs), backend=r.backend
+    )
+    r.id_result = res
+    e.edge_mismatches = res.edge
+    e.tie_mismatches = res.tie
+    e.crack_mismatches = res.crack
+    e.interior_mismatches = res.interior
+    e.tolerance = res.tolerance
+    e.explanations = res.explanations
+    notes = [] if r.model.known else [f"no precision model for {r.backend} in tolerance.py: compared exactly"]
+    ref_ids, test_ids = r.ref.buffers["id.prim"], r.test["id.prim"]
+
+    def heat_map(path: Path) -> None:
+        diffimages.write_id_diff(path, ref_ids, test_ids, res.edge_mask, res.interior_mask)
+
+    return Judged(res.details, notes, heat_map)
+
+
+def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
+    ids = r.id_result
+    try:
+        res = compare_depth(
+            r.ref,
+            r.test,
+            r.model,
+            r.render,
+            r.attrs,
+            ids.edge_mask if ids is not None else None,
+            ids.classes if ids is not None else None,
+        )
+    except tolerance.ToleranceError as exc:
+        e.reason = str(exc)
+        return None
+    e.edge_mismatches = res.edge
+    e.tie_mismatches = res.tie
+    e.crack_mismatches = res.crack
+    e.interior_mismatches = res.interior
+    e.mask_mismatches = res.mask
+    e.compared_pixels = res.compared
+    e.max_abs_error = finite(res.max_abs)
+    e.mean_abs_error = finite(res.mean_abs)
+    e.max_rel_error = finite(res.max_rel)
+    e.tolerance = res.tolerance
+    ref_z, test_z = r.ref.buffers["Z"], r.test["Z"]
+
+    def heat_map(path: Path) -> None:
+        diffimages.write_depth_diff(path, ref_z, test_z, res.max_abs)
+
+    return Judged(res.details, heat_map=heat_map)
+
+
+def judge_rendered_normals(r: BackendRender, e: Entry) -> Judged | None:
+    return judge_normals(r.ref, r.backend, r.test, e)
+
+
+def judge_rgb(r: BackendRender, e: Entry) -> Judged | None:
+    ids = r.id_result
+    try:
+        res = compare_rgb(r.ref, r.test, r.attrs, r.backend, r.render, ids.edge_mask if ids is not None else None)
+    except (tolerance.ToleranceError, radiance.RadianceError) as exc:
+        e.reason = str(exc)
+        return None
+    return record_rgb(e, res, r.ref.buffers["RGB"], r.test["RGB"])
+
+
+class When(StrEnum):
+    """When a buffer has an entry for a render."""
+
+    ALWAYS = "always"  # every render of every scene
+    SHADED = "shaded"  # scenes that require shading (vocab.SHADED_FEATURES)
+    WRITTEN = "written"  # renders whose EXR has the buffer's channel
+
+
+@dataclass(frozen=True)
+class BufferSpec:
+    """How one buffer is compared: a row of `BUFFER_TABLE`."""
+
+    buffer: Buffer
+    when: When
+    channel: str  # the exrbuf key that holds it, in the test EXR (and the reference's)
+    channel_text: str  # that channel in "the EXR has no ..." when a declared buffer lacks it
+    ref_missing: str | None  # the reason when the reference lacks `channel`; None: not read from the reference
+    judge: Judge
+    fields: tuple[str, ...] = ()  # its entry's own fields after `images` (results.Entry.own_fields)
+    skip_reason_from_render: bool = False  # a skipped entry gives the render's own reason, if any
+
+
+N_FIELDS = ("max_angle_rad", "explanations")
+RGB_ENTRY_FIELDS = ("mode", "failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean", "flip_note")
+
+BUFFER_TABLE: tuple[BufferSpec, ...] = (
+    BufferSpec(
+        Buffer.ID,
+        When.ALWAYS,
+        "id.prim",
+        "id.prim channel",
+        "reference has no id.prim channel",
+        judge_ids,
+        fields=("explanations",),
+    ),
+    BufferSpec(Buffer.Z, When.ALWAYS, "Z", "Z channel", "reference has no Z channel", judge_depth),
+    BufferSpec(Buffer.N, When.WRITTEN, "N", "N channel", None, judge_rendered_normals, fields=N_FIELDS),
+    BufferSpec(
+        Buffer.RGB,
+        When.SHADED,
+        "RGB",
+        "R,G,B channels",
+        "reference has no R,G,B channels (the scene requires shading)",
+        judge_rgb,
+        fields=RGB_ENTRY_FIELDS,
+        skip_reason_from_render=True,
+    ),
+)
+"""Every buffer compared, in the order of its entries for each render."""
+
+BUFFER_FIELDS: dict[str, tuple[str, ...]] = {spec.buffer: spec.fields for spec in BUFFER_TABLE}
+BUFFERS = tuple(spec.buffer for spec in BUFFER_TABLE if spec.when == When.ALWAYS)
+"""The entries of a render that was not compared (skipped, error) in a scene without shading."""
+SHADED_BUFFERS = tuple(spec.buffer for spec in BUFFER_TABLE if spec.when in (When.ALWAYS, When.SHADED))
+"""The same in a scene that requires shading."""
+
+
+def applies(spec: BufferSpec, r: BackendRender) -> bool:
+    if spec.when == When.SHADED:
+        return is_shaded(r.ref.scene.requires)
+    if spec.when == When.WRITTEN:
+        return spec.channel in r.test
+    return True
+
+
+def compare_buffer(spec: BufferSpec, r: BackendRender, exps: expectations.Expectations) -> Entry:
+    """One buffer's entry: skipped/error when a side lacks it, else compared and judged."""
+    e = Entry.for_render(r.scene, r.backend, spec.buffer, r.render, spec.fields)
+    e.pixels = r.ref.pixels
+    if spec.channel not in r.test:
+        if r.declared is not None and spec.buffer in r.declared:
+            e.reason = f"{r.exr}: manifest lists buffer {spec.buffer} but the EXR has no {spec.channel_text}"
+        else:
+            e.status = Status.SKIPPED
+            own = str(r.render.get("reason") or "") if spec.skip_reason_from_render else ""
+            e.reason = own or f"{r.backend} does not produce {spec.buffer}"
+    elif spec.ref_missing is not None and spec.channel not in r.ref.buffers:
+        e.reason = spec.ref_missing
+    else:
+        judged = spec.judge(r, e)
+        if judged is not None:
+            finish(e, judged, exps, r.run, r.diff_dir)
+    return e
+
+
+def finish(e: Entry, judged: Judged, exps: expectations.Expectations, run: Path, diff_dir: Path | None) -> None:
+    """The verdict, the notes, and the heat map RUN/scenes/<scene>/diff/<backend>.<buffer>.png."""
+    e.apply_verdict(exps, judged.details)
+    for note in judged.notes:
+        e.add_reason(note)
+    if diff_dir is None or judged.heat_map is None:
+        return
+    path = diff_dir / f"{e.backend}.{e.buffer}.png"
+    try:
+        judged.heat_map(path)
+        e.images = {"heat": path.relative_to(run).as_posix()}
     except diffimages.DiffImageError as exc:
-        _add_reason(e, f"diff image not written: {exc}")
+        e.add_reason(f"diff image not written: {exc}")
+
+
+# --------------------------------------------------------------------------- one backend
+
+
+def compare_backend(
+    run: Path,
+    scene_name: str,
+    render: Mapping[str, Any],
+    ref: Reference,
+    exps: expectations.Expectations,
+    images: bool,
+) -> list[Entry]:
+    """The entries of one ok render of one backend: one per applicable row of BUFFER_TABLE."""
+    backend = render["backend"]
+    model = tolerance.model_for(backend)
+    got = read_test_buffers(run, render, ref)
+    diff_dir = None
+    if images and _SAFE_NAME.match(scene_name) and _SAFE_NAME.match(backend):
+        diff_dir = run / "scenes" / scene_name / "diff"
+    r = BackendRender(
+        run,
+        scene_name,
+        backend,
+        render,
+        ref,
+        got.buffers,
+        got.attrs,
+        got.exr,
+        model,
+        declared_buffers(render),
+        diff_dir,
+    )
+    return [compare_buffer(spec, r, exps) for spec in BUFFER_TABLE if applies(spec, r)]
+
+
+def buffers_for(scene_entry: Mapping[str, Any]) -> tuple[str, ...]:
+    return SHADED_BUFFERS if is_shaded(scene_entry.get("requires")) else BUFFERS
+
+
+def status_entries(
+    scene: str, render: Mapping[str, Any], status: str, reason: str, buffers: Sequence[str] = BUFFERS
+) -> list[Entry]:
+    """A render that was not compared: one entry per buffer, each with its status and reason."""
+    backend = str(render.get("backend", "?"))
+    return [
+        Entry.for_render(scene, backend, buf, render, BUFFER_FIELDS.get(buf, ()), status=status, reason=reason)
+        for buf in buffers
+    ]
 
 
 # --------------------------------------------------------------------------- one scene
@@ -1008,7 +867,7 @@ def compare_scene(
     exps: expectations.Expectations,
     images: bool = True,
     references_dir: Path | None = None,
-) -> list[dict[str, Any]]:
+) -> list[Entry]:
     name = scene_entry["scene"]
     renders = [r for r in scene_entry.get("renders", []) if r.get("backend") != reference]
     bufs = buffers_for(scene_entry)
@@ -1017,125 +876,133 @@ def compare_scene(
     except EntryError as exc:
         out = []
         own_ref = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference]
-        if not renders or (own_ref and own_ref[0].get("status") == "error"):
+        if not renders or (own_ref and own_ref[0].get("status") == vocab.RenderStatus.ERROR):
             # The scene itself failed (it could not be loaded, or the reference could not
             # render it): one `scene` entry, so a broken scene can never look like a pass.
-            e = base_entry(name, reference, "scene", own_ref[0] if own_ref else {})
-            e["status"] = "error"
-            e["reason"] = str(exc)
-            out.append(e)
+            out.append(Entry.for_render(name, reference, Buffer.SCENE, own_ref[0] if own_ref else {}, reason=str(exc)))
         for r in renders:
-            own = "" if r.get("status") == "ok" else f" ({r['backend']} itself {r.get('status')}: {_render_reason(r)})"
-            out += status_entries(name, r, "error", f"{exc}{own}", bufs)
-        return [blank_if_not_compared(e) for e in out]
+            own = (
+                ""
+                if r.get("status") == vocab.RenderStatus.OK
+                else f" ({r['backend']} itself {r.get('status')}: {render_reason(r)})"
+            )
+            out += status_entries(name, r, Status.ERROR, f"{exc}{own}", bufs)
+        return [e.blank_if_not_compared() for e in out]
     if is_shaded(ref.scene.requires):
         bufs = SHADED_BUFFERS
-    results: list[dict[str, Any]] = []
+    results: list[Entry] = []
     if "N" in ref.buffers:  # the reference's own normals, against the winding convention
         own = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference][0]
         results.append(compare_normals(name, reference, own, ref, ref.buffers, exps))
     for r in renders:
         status = r.get("status")
-        if status in ("skipped", "error"):
-            results += status_entries(name, r, status, _render_reason(r), bufs)
+        if status in (vocab.RenderStatus.SKIPPED, vocab.RenderStatus.ERROR):
+            results += status_entries(name, r, status, render_reason(r), bufs)
             continue
         try:
             results += compare_backend(run, name, r, ref, exps, images)
         except EntryError as exc:
-            results += status_entries(name, r, "error", str(exc), bufs)
+            results += status_entries(name, r, Status.ERROR, str(exc), bufs)
         except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
             traceback.print_exc(file=sys.stderr)
             results += status_entries(
-                name, r, "error", f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}", bufs
+                name, r, Status.ERROR, f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}", bufs
             )
-    if references_dir is not None and "global_illumination" in ref.scene.requires:
+    if references_dir is not None and vocab.Feature.GLOBAL_ILLUMINATION in ref.scene.requires:
         results.append(compare_cached_reference(run, name, ref, references_dir, exps, images))
-    return [blank_if_not_compared(e) for e in results]
+    return [e.blank_if_not_compared() for e in results]
 
 
 def compare_cached_reference(
     run: Path, name: str, ref: Reference, references_dir: Path, exps: expectations.Expectations, images: bool
-) -> dict[str, Any]:
+) -> Entry:
     """The reference render's RGB against the cached Mitsuba reference DIR/<name>.exr (references.py)."""
     from . import references
 
     exr = references_dir / f"{name}.exr"
     render = {"backend": CACHED_REFERENCE_BACKEND, "command": references.regenerate_command(ref.scene.directory, exr)}
-    e = rgb_entry(name, CACHED_REFERENCE_BACKEND, render)
-    e["pixels"] = ref.shape[0] * ref.shape[1]
+    e = Entry.for_render(name, CACHED_REFERENCE_BACKEND, Buffer.RGB, render, RGB_ENTRY_FIELDS)
+    e.pixels = ref.pixels
     try:
         cached = references.load(exr, ref.scene)
     except references.ReferenceError as exc:
-        e["reason"] = str(exc)
+        e.reason = str(exc)
         return e
-    e["version"] = cached.provenance.get("renderer")
+    e.version = cached.provenance.get("renderer")
     if "RGB" not in ref.buffers:
-        e["reason"] = "reference has no R,G,B channels (the scene requires shading)"
+        e.reason = "reference has no R,G,B channels (the scene requires shading)"
         return e
     test = {"RGB": cached.rgb, "var": cached.var}
     try:
         res = compare_rgb(ref, test, cached.attrs, CACHED_REFERENCE_BACKEND, render, None)
     except (tolerance.ToleranceError, radiance.RadianceError) as exc:
-        e["reason"] = str(exc)
+        e.reason = str(exc)
         return e
-    fill_rgb_entry(e, res, ref.buffers["RGB"], cached.rgb)
-    _apply_verdict(e, exps, res.details)
-    for note in res.notes:
-        _add_reason(e, note)
+    judged = record_rgb(e, res, ref.buffers["RGB"], cached.rgb)
     diff_dir = run / "scenes" / name / "diff" if images and _SAFE_NAME.match(name) else None
-    _rgb_image(e, run, diff_dir, CACHED_REFERENCE_BACKEND, res)
+    finish(e, judged, exps, run, diff_dir)
     return e
 
 
-# --------------------------------------------------------------------------- output
+# --------------------------------------------------------------------------- a run
 
 
-def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json") -> Path:
-    """Write RUN/<name> (default results.json) atomically (temp file in RUN + os.replace)."""
-    path = run / name
-    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
-    atomic.write_text_atomically(path, text, prefix=".results.", suffix=".json.tmp")
-    return path
+def calibrate(
+    run: Path, manifest: Mapping[str, Any], results: list[Entry]
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Camera calibration from the run's probe scenes (calibration.py): returns the summary
+    for results.json's `calibration` and the `camera` entries that follow `results`.
 
+    A backend whose camera fails calibration has a convention error in its exporter, not a
+    renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
+    say so, by name, instead of fails blamed on the renderer.
+    """
+    from . import calibration
 
-def format_table(results: Sequence[Mapping[str, Any]]) -> str:
-    """A compact, fixed-width table: one row per entry, then a count per status."""
-    header = ("scene", "backend", "buf", "status", "edge", "interior", "mask", "max_rel", "reason")
-    rows = []
-    for r in results:
-        compared = r["status"] not in ("skipped", "error")
-        rel = r.get("max_rel_error")
-        if r["buffer"] == "RGB" and r.get("mode") == "statistical":
-            rel = None  # the means' relative difference is noise here; min_p is in results.json
-        rows.append(
-            (
-                str(r["scene"]),
-                str(r["backend"]),
-                str(r["buffer"]),
-                str(r["status"]),
-                str(r["edge_mismatches"]) if compared else "-",
-                str(r["interior_mismatches"]) if compared else "-",
-                str(r["mask_mismatches"]) if compared and r["buffer"] == "Z" else "-",
-                f"{rel:.2g}" if compared and r["buffer"] in ("Z", "RGB") and rel is not None else "-",
-                _short(str(r.get("reason", ""))),
-            )
+    try:
+        rep = calibration.calibrate_run(run, manifest)
+    except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
+        traceback.print_exc(file=sys.stderr)
+        e = Entry.for_render(
+            "calibration",
+            str(manifest.get("reference", "raster")),
+            Buffer.CAMERA,
+            {},
+            reason=f"internal error in calibration (a rendiff bug): {type(exc).__name__}: {exc}",
         )
-    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(8)]
-    lines = []
-    for row in [header, *rows]:
-        cells = [row[i].ljust(widths[i]) if i < 4 else row[i].rjust(widths[i]) for i in range(8)]
-        lines.append("  ".join(cells + [row[8]]).rstrip())
-    counts: dict[str, int] = {}
-    for r in results:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
-    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no entries"
-    lines.append(f"{len(results)} entries: {summary}")
-    return "\n".join(lines)
+        return {}, [e.blank_if_not_compared().to_json()]
+    probes = {str(sc["scene"]) for sc in manifest["scenes"] if sc.get("role") == "calibration"}
+    bad = {b: v for b, v in rep.summary.items() if v.get("status") == Status.FAIL}
+    for e in results:
+        cal = bad.get(e.backend)
+        if cal is None or e.scene in probes or e.status not in (Status.FAIL, Status.UNEXPECTED_PASS):
+            continue
+        e.status = Status.ERROR
+        e.reason = f"not judged: {e.backend}'s camera failed calibration ({cal.get('reason', '')}); was: {e.reason}"
+    return rep.summary, rep.entries
 
 
-def _short(text: str, limit: int = 90) -> str:
-    text = text.replace("\n", " ")
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+def run_compare(
+    run: Path,
+    expectations_path: str | Path | None,
+    images: bool = True,
+    references_dir: str | Path | None = None,
+) -> dict[str, Any]:
+    """Compare everything in RUN and write results.json; returns the results document.
+
+    Raises ManifestError / expectations.ExpectationsError for unusable inputs.
+    """
+    manifest = load_manifest(run)
+    exps = expectations.load(expectations_path)
+    reference = manifest.get("reference", "raster")
+    refs = Path(references_dir) if references_dir is not None else None
+    entries: list[Entry] = []
+    for sc in manifest["scenes"]:
+        entries += compare_scene(run, sc, reference, exps, images, refs)
+    summary, camera = calibrate(run, manifest, entries)
+    doc = document(reference, summary, expectations_path, exps.unused(), [e.to_json() for e in entries] + camera)
+    write_results(run, doc)
+    return doc
 
 
 # --------------------------------------------------------------------------- CLI
@@ -1158,72 +1025,6 @@ def build_parser() -> argparse.ArgumentParser:
         "global-illumination scenes are also compared with them, as backend mitsuba_ref",
     )
     return p
-
-
-def calibrate(run: Path, manifest: Mapping[str, Any], results: list[dict[str, Any]]) -> dict[str, Any]:
-    """Camera calibration from the run's probe scenes (calibration.py): adds the `camera`
-    entries to `results` and returns the summary for results.json's `calibration`.
-
-    A backend whose camera fails calibration has a convention error in its exporter, not a
-    renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
-    say so, by name, instead of fails blamed on the renderer.
-    """
-    from . import calibration
-
-    try:
-        rep = calibration.calibrate_run(run, manifest)
-    except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
-        traceback.print_exc(file=sys.stderr)
-        e = base_entry("calibration", str(manifest.get("reference", "raster")), "camera", {})
-        e["status"] = "error"
-        e["reason"] = f"internal error in calibration (a rendiff bug): {type(exc).__name__}: {exc}"
-        results.append(blank_if_not_compared(e))
-        return {}
-    probes = {str(sc["scene"]) for sc in manifest["scenes"] if sc.get("role") == "calibration"}
-    bad = {b: v for b, v in rep.summary.items() if v.get("status") == "fail"}
-    for e in results:
-        cal = bad.get(e["backend"])
-        if cal is None or e["scene"] in probes or e["status"] not in (vocab.Status.FAIL, vocab.Status.UNEXPECTED_PASS):
-            continue
-        e["status"] = "error"
-        e["reason"] = (
-            f"not judged: {e['backend']}'s camera failed calibration ({cal.get('reason', '')}); was: {e['reason']}"
-        )
-    results.extend(rep.entries)
-    return rep.summary
-
-
-def run_compare(
-    run: Path,
-    expectations_path: str | Path | None,
-    images: bool = True,
-    references_dir: str | Path | None = None,
-) -> dict[str, Any]:
-    """Compare everything in RUN and write results.json; returns the results document.
-
-    Raises ManifestError / expectations.ExpectationsError for unusable inputs.
-    """
-    manifest = load_manifest(run)
-    exps = expectations.load(expectations_path)
-    reference = manifest.get("reference", "raster")
-    refs = Path(references_dir) if references_dir is not None else None
-    results: list[dict[str, Any]] = []
-    for sc in manifest["scenes"]:
-        results += compare_scene(run, sc, reference, exps, images, refs)
-    summary = calibrate(run, manifest, results)
-    unused = exps.unused()
-    doc = {
-        "format": RESULTS_FORMAT,
-        "reference": reference,
-        "calibration": summary,
-        "expectations": str(expectations_path) if expectations_path is not None else None,
-        "unused_expectations": [
-            {"entry": e.index, "scene": e.scene, "backend": e.backend, "buffer": e.buffer} for e in unused
-        ],
-        "results": results,
-    }
-    write_results(run, doc)
-    return doc
 
 
 def main(argv: Sequence[str] | None = None) -> int:

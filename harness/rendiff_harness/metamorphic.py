@@ -46,6 +46,8 @@ from typing import Any
 import numpy as np
 
 from . import classify, compare, expectations, exrbuf, resolved, tolerance
+from .manifest import EntryError, ManifestError, load_manifest, load_reference, render_info, render_reason, run_path
+from .results import finite, write_results
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
@@ -193,7 +195,7 @@ def summed_model(
 ) -> tolerance.Model:
     """The backend's own model for each side, each with its render's parameters, summed."""
     m = tolerance.model_for(backend)
-    base_info, var_info = compare._info(base_render), compare._info(var_render)
+    base_info, var_info = render_info(base_render), render_info(var_render)
 
     def depth(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
         tb, text_b = m.depth(replace(ctx, info=base_info, attrs=base_attrs))
@@ -340,16 +342,16 @@ def compare_case(
             return all_as("error", f"{backend} did not render the {side} scene {name}")
         if r.get("status") != "ok":
             status = "skipped" if r.get("status") == "skipped" else "error"
-            return all_as(status, f"{side} scene {name}: {compare._render_reason(r)}")
+            return all_as(status, f"{side} scene {name}: {render_reason(r)}")
         renders[side] = r
     try:
-        ref = compare.load_reference(run, scenes[case.base], backend)
-        var_scene = resolved.load(compare.run_path(run, scenes[case.variant].get("resolved"), "variant resolved scene"))
-        exr = compare.run_path(run, renders["variant"].get("exr"), f"{backend} variant EXR")
+        ref = load_reference(run, scenes[case.base], backend)
+        var_scene = resolved.load(run_path(run, scenes[case.variant].get("resolved"), "variant resolved scene"))
+        exr = run_path(run, renders["variant"].get("exr"), f"{backend} variant EXR")
         test_raw = exrbuf.read_buffers(exr)
         var_attrs: Mapping[str, Any] = exrbuf.read_attrs(exr)
         base_attrs: Mapping[str, Any] = ref.attrs
-    except compare.EntryError as exc:
+    except EntryError as exc:
         return all_as("error", str(exc))
     except (resolved.SceneError, exrbuf.BufferError) as exc:
         return all_as("error", str(exc))
@@ -381,8 +383,8 @@ def compare_case(
         interior_mismatches=z.interior,
         mask_mismatches=z.mask,
         compared_pixels=z.compared,
-        max_abs_error=compare._finite(z.max_abs),
-        max_rel_error=compare._finite(z.max_rel),
+        max_abs_error=finite(z.max_abs),
+        max_rel_error=finite(z.max_rel),
         tolerance=z.tolerance,
     )
     _verdict(e_z, exps, z.details)
@@ -408,7 +410,7 @@ def _check_maps(case: Case, base: resolved.ResolvedScene, variant: resolved.Reso
 
 def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None, out: Path) -> dict[str, Any]:
     """Every case on every backend that rendered the base scene; writes OUT and returns the document."""
-    manifest = compare.load_manifest(run)
+    manifest = load_manifest(run)
     cases = load_spec(spec)
     exps = load_expectations(expectations_path)
     scenes = {sc["scene"]: sc for sc in manifest["scenes"]}
@@ -427,7 +429,7 @@ def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None,
         ],
         "results": results,
     }
-    compare.write_results(out.parent, doc, out.name)
+    write_results(out.parent, doc, out.name)
     return doc
 
 
@@ -481,7 +483,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERROR
     try:
         doc = run_metamorphic(run, Path(args.spec), args.expectations, out)
-    except (SpecError, compare.ManifestError, expectations.ExpectationsError) as exc:
+    except (SpecError, ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness metamorphic: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except OSError as exc:

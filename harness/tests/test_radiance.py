@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from rendiff_harness import lighting, radiance, resolved, tolerance
+from rendiff_harness.backends import povray
 from rendiff_harness.backends import pyrender_backend as pb
 
 H, W = 32, 32
@@ -195,7 +196,7 @@ def test_shadow_edge_callback_moves_failures_to_edge() -> None:
 def test_povray_tolerance_is_half_a_code_of_each_pass() -> None:
     ref = np.full((2, 2, 3), 0.3)
     tol = tolerance.rgb_model("povray", ref, {"rgb_scale": 2.0, "emission_scale": "1.0"}, {})
-    assert tol.abs_tol == pytest.approx(3.0 / 65535 / 2) and tol.rel == tolerance.POVRAY_RGB_REL
+    assert tol.abs_tol == pytest.approx(3.0 / 65535 / 2) and tol.rel == povray.POVRAY_RGB_REL
     with pytest.raises(tolerance.ToleranceError):
         tolerance.rgb_model("povray", ref, {}, {})
     # info from the manifest works too (nested under "radiance" as the backend returns it)

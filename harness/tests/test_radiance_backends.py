@@ -242,7 +242,7 @@ def test_pyrender_lambert_shader_matches_closed_form(tmp_path: Path, case: str) 
         f"pyrender {case}: max code error {np.abs(c_got - c_exact).max():.4f}, "
         f"brightest code {r['info']['radiance']['max_code']}"
     )
-    assert np.abs(c_got - c_exact).max() <= 0.5 + tolerance.PYRENDER_CODE_SLACK
+    assert np.abs(c_got - c_exact).max() <= 0.5 + pb.PYRENDER_CODE_SLACK
     assert r["info"]["radiance"]["max_code"] < 255
 
 

@@ -56,7 +56,7 @@ Unit mapping, exactly as emitted:
   with 4x the scale (at most 3 times; recorded in info). The EXR attributes carry
   `rgb_scale`, `emission_scale` and `rgb_encoding = "png16-linear"`; the comparison's
   tolerance is (S + S_e)/65535/2 absolute (half a code of each pass) plus a relative
-  term for POV-Ray's float32 colour arithmetic (tolerance.py).
+  term for POV-Ray's float32 colour arithmetic (`rgb_tolerance`).
 
 Quality settings (speed/accuracy knobs; `rendiff bench knobs`)
 --------------------------------------------------------------
@@ -83,10 +83,11 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -94,6 +95,17 @@ from .. import exrbuf
 from ..children import die_with_parent
 from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
+from ..tolerance import (
+    F32_U,
+    DepthContext,
+    EdgeContext,
+    Model,
+    RgbTolerance,
+    ToleranceError,
+    exposure_scale,
+    param,
+    shift_depth,
+)
 
 NAME = "povray"
 FEATURES: frozenset[str] = frozenset(
@@ -793,3 +805,110 @@ def _radiance(
         rgb[~hit] = 0.0
     info["flags"] = settings.flags()
     return _Shading(rgb.astype(np.float32), info, passes, scales["rgb_scale"], scales["emission_scale"])
+
+
+# --------------------------------------------------------------------------- precision model
+#
+# How far this backend may legitimately differ from the reference; tolerance.py
+# (`model_for`, `rgb_model`) looks these up by the backend's NAME and holds the shared
+# machinery (contexts, `Model`, grazing and position-shift helpers).
+
+POVRAY_RGB_REL = 1e-5
+
+
+def povray_plane_error(point_norm: np.ndarray, extent: np.ndarray | float = 0.0) -> np.ndarray:
+    """Offset e of POV-Ray's mesh2 plane from the true one at a point X, world units.
+
+    POV-Ray keeps each mesh triangle's unit normal n and plane offset d = n.P1 in single
+    precision (`SnglVector3d` normals, `SNGL Distance`; source/core/shape/mesh.h) and
+    intersects with t = (d - n.O) / (n.D) in double. Rounding n to f32 moves each
+    component by <= u|n_i| (u = 2^-24), so n.X moves by <= u|X| (Cauchy-Schwarz, |n| = 1);
+    rounding d moves it by <= u|d| <= u|X - P1| + u|X|. Whether d is computed from the
+    rounded or the unrounded normal, the plane's offset at X is within
+    u (|X| + |P1|) + u|X| <= u (3|X| + extent), with extent >= |X - P1| the triangle's
+    longest edge. It grows with the distance from the origin, not with depth.
+    """
+    error: np.ndarray = F32_U * (3.0 * np.abs(point_norm) + extent)
+    return error
+
+
+def povray_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """POV-Ray: 32-bit fixed point, single-precision plane offsets, two f32 roundings.
+
+    The depth pass encodes planar depth as 32-bit fixed point split over two 16-bit PNG
+    channels; one step is R / (65536 * 65535) ~ R / 2^32 (`depth_step`, written by the
+    backend into info and the EXR attributes). The plane's offset error e at the hit point
+    (`povray_plane_error`) moves the hit along the ray by e / |cos|, and planar depth by
+    at most that (D.f <= |D|), and never beyond the triangle's own depth span (the hit
+    stays on it; `shift_depth`). Both sides' Z are stored as f32: 2 x 2^-24 |Z|. When
+    `depth_step` is missing it is derived as R / 2^32 with R = `depth_range` if present,
+    else from the reference's largest depth times the backend's margin 1+2^-6.
+    """
+    step = param(ctx, "depth_step")
+    source = "depth_step from the render"
+    if step is None:
+        r = param(ctx, "depth_range")
+        source = "R/2^32 with R = depth_range from the render"
+        if r is None:
+            zmax = float(np.max(np.abs(ctx.z_ref))) if ctx.z_ref.size else 1.0
+            r = zmax * (1.0 + 2.0**-6)
+            source = "R/2^32 with R estimated from the reference's largest depth (render gave no depth_step)"
+        step = r / 65536.0 / 65535.0
+    point = ctx.point_norm if ctx.point_norm is not None else np.abs(ctx.z_ref)
+    extent = ctx.extent if ctx.extent is not None else 0.0
+    plane = povray_plane_error(point, extent)
+    slope = shift_depth(ctx, plane)
+    tol = step + slope + 2.0 * F32_U * np.abs(ctx.z_ref)
+    text = (
+        f"povray: |dZ| <= depth_step ({step:.3g}, {source}; 32-bit fixed point) "
+        "+ min(e / |cos|, the triangle's depth span), e = 2^-24 (3|X| + extent) "
+        "(mesh2 keeps plane normal and offset in f32; "
+        "|X| = hit point's distance from the origin) + 2^-23 Z (both sides stored as f32)"
+    )
+    return tol, text
+
+
+def povray_edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+    """POV-Ray's inside test runs on the hit point, which its f32 plane moves along the ray.
+
+    A hit moved by e / |cos| along the ray lands up to e / |cos| off the plane; its
+    dominant-axis projection then shifts sideways by at most sqrt(3) e / |cos| x |cos|
+    = sqrt(3) e, which a point at depth z sees as sqrt(3) e / (z pixel) px.
+    """
+    e = povray_plane_error(ctx.point_norm)
+    with np.errstate(all="ignore"):
+        px = np.sqrt(3.0) * e / (np.abs(ctx.z) * ctx.pixel_size)
+    return np.where(np.isfinite(px), px, 0.0), "sqrt(3) 2^-24 3|X| / (z pixel) (f32 plane offset moves the hit)"
+
+
+PRECISION = Model(
+    "povray",
+    1e-3,
+    "POV-Ray mesh2 stores f32 vertices and picks its own tie winners for centers on edges; "
+    "measured differences lie within ~1e-6 of an edge",
+    povray_depth,
+    edge_extra=povray_edge,
+    position=lambda offset, eye, point: povray_plane_error(point),
+)
+"""tolerance.Model of POV-Ray: edge band 1e-3 px (measured) + the f32 plane's sideways shift, depth above."""
+
+
+def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    """POV-Ray: two 16-bit linear passes, L = S k/65535 + S_e k_e/65535 (backends/povray.py).
+
+    Each pass rounds to the nearest code (measured: max 0.502 codes on a point-lit plane,
+    the excess being POV-Ray's float32 colour arithmetic), so abs = (S + S_e)/65535/2;
+    rel 1e-5 covers the float32 arithmetic (measured 3e-8) and both sides' f32 storage.
+    """
+    s = exposure_scale(attrs, info, "rgb_scale")
+    se = exposure_scale(attrs, info, "emission_scale")
+    if s is None or se is None:
+        raise ToleranceError(
+            "povray render gives no exposure scales (rendiff:rgb_scale / rendiff:emission_scale): RGB tolerance unknown"
+        )
+    abs_tol = (s + se) / 65535.0 / 2.0
+    text = (
+        f"povray: |dL| <= (S {s:.6g} + S_e {se:.6g})/65535/2 = {abs_tol:.3g} (half a code of each 16-bit linear pass) "
+        f"+ {POVRAY_RGB_REL:g}*|L| (float32 colour arithmetic)"
+    )
+    return RgbTolerance(abs_tol, POVRAY_RGB_REL, text)

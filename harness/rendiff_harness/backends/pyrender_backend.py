@@ -51,7 +51,7 @@ docs/radiance.md's local shading from the uniforms pyrender binds itself:
   so the brightest pixel is about code 252; a pass that reaches 255 on a hit pixel is
   rendered again with 4x the scale. Attributes: rgb_scale = S, rgb_encoding =
   "png8-gamma2.2" (8-bit, gamma 2.2), so the comparison's tolerance is half a code value
-  through the inverse transfer at the reference's value (tolerance.py).
+  through the inverse transfer at the reference's value (`rgb_tolerance`).
 * pyrender binds at most MAX_N_LIGHTS (4) lights of each kind; more are refused.
 """
 
@@ -61,6 +61,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 from types import ModuleType
@@ -71,6 +72,19 @@ import numpy.typing as npt
 
 from ..errors import BackendError, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
+from ..tolerance import (
+    F32_U,
+    MAX_REL,
+    DepthContext,
+    Model,
+    RgbTolerance,
+    ToleranceError,
+    exposure_scale,
+    param,
+    position_edge,
+    position_error,
+    shift_depth,
+)
 
 NAME = "pyrender"
 FEATURES = frozenset(
@@ -657,3 +671,99 @@ def render(
     exrbuf.write_buffers(out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], RGB=rgb, attrs=attrs)
     info["timings_s"]["write"] = time.perf_counter() - t0
     return info
+
+
+# --------------------------------------------------------------------------- precision model
+#
+# How far this backend may legitimately differ from the reference; tolerance.py
+# (`model_for`, `rgb_model`) looks these up by the backend's NAME and holds the shared
+# machinery (contexts, `Model`, grazing and position-shift helpers).
+
+
+def f32_view_transform(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
+    """GL (pyrender): the vertex shader takes each vertex X to eye space with an f32 4x4 view
+    matrix (unit rotation rows, translation about |eye|): each component is a 4-term dot
+    product, off by <= 4u (|X| + |eye|) (gamma_4), sqrt(3) of that on the vector."""
+    tol: np.ndarray = 4.0 * math.sqrt(3.0) * F32_U * (np.abs(point) + eye_norm)
+    return tol
+
+
+def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """pyrender: the backend's own 24-bit depth-buffer model at the GL planes it chose.
+
+    GL stores window depth in 24 bits; its resolution at depth z is
+    z^2 (f-n)/(f n) 2^-24 for GL planes n, f. The backend picks n, f per scene and writes
+    them as `znear`/`zfar` (info and EXR attributes); its `depth_tolerance(z, n, f)`
+    (4 steps + 1 f32 ulp, measured) is used as is. Without the planes the tolerance is
+    unknown (the scene's own near would be far too loose), so the comparison errors.
+    """
+    znear, zfar = param(ctx, "znear"), param(ctx, "zfar")
+    if znear is None or zfar is None or not (0.0 < znear < zfar):
+        raise ToleranceError(
+            "pyrender render gives no valid GL planes (znear/zfar in its info or EXR attributes "
+            f"rendiff:znear/rendiff:zfar; got znear={znear}, zfar={zfar}): depth tolerance unknown"
+        )
+    tol = np.asarray(depth_tolerance(ctx.z_ref, znear, zfar), dtype=np.float64)
+    # Slope term: llvmpipe snaps vertices to a 1/256 px grid (GL subpixel precision), which
+    # moves the triangle's plane sideways by up to sqrt(2)/256 px. Depth then changes by the
+    # plane's screen-space slope times that shift; on a plane z(sx) with unit normal n,
+    # |dz/dsx| = z |n.r| / |n.d| <= z / |cos| per image-plane unit, i.e. z * pixel_size / |cos|
+    # per pixel. Capped like the other grazing-angle models.
+    snap = np.sqrt(2.0) / 256.0
+    slope = np.abs(ctx.z_ref) * np.minimum(ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL)
+    tol = tol + slope + shift_depth(ctx, position_error(ctx, f32_view_transform))
+    text = (
+        f"pyrender: |dZ| <= pyrender_backend.depth_tolerance(z, znear={znear:.6g}, zfar={zfar:.6g}) "
+        "(4 steps of the 24-bit GL depth buffer z^2(f-n)/(f n)2^-24 + 1 f32 ulp) "
+        f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping) "
+        "+ min(4 sqrt(3) 2^-24 (|X| + |eye|) / |cos|, depth span) (f32 view transform of the vertices)"
+    )
+    return tol, text
+
+
+# llvmpipe snaps vertices to a 1/256 px grid (8 subpixel bits); rounding to nearest moves
+# each coordinate by <= 2^-9 px, so a vertex moves by <= sqrt(2) * 2^-9 px. A point of an
+# edge is a convex combination of its endpoints, so the edge moves by no more than that.
+# Pixel centers (k + 0.5) lie on the grid, so the fixed-point edge function itself is exact:
+# only centers within this distance of the true edge can change side.
+PYRENDER_EDGE_PX = math.sqrt(2.0) * 2.0**-9  # 2.76e-3 px; measured max 2.1e-3 px
+
+PRECISION = Model(
+    "pyrender",
+    PYRENDER_EDGE_PX,
+    "GL fixed-point rasterization: llvmpipe snaps vertices to 1/256 px, moving an edge by "
+    "<= sqrt(2)*2^-9 px; measured max 2.1e-3 px",
+    pyrender_depth,
+    edge_extra=position_edge(f32_view_transform, "4 sqrt(3) 2^-24 (|X| + |eye|) (f32 view transform)"),
+    position=f32_view_transform,
+)
+"""tolerance.Model of pyrender: the 1/256 px vertex snap + the f32 view transform, depth above."""
+
+
+PYRENDER_RGB_REL = 1e-5
+PYRENDER_CODE_SLACK = 0.01
+
+
+def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    """pyrender: 8-bit (L/S)^(1/2.2) from rendiff's Lambert shader (backends/pyrender_backend.py).
+
+    GL rounds to the nearest code (measured: max 0.49997 codes), so at the reference value
+    b, with c = 255 (b/S)^(1/2.2), the decoded value may be off by
+    S (((c + 0.5 + 0.01)/255)^2.2 - (c/255)^2.2): half a code through the inverse transfer
+    (the larger, upper side), plus 0.01 code for the shader's float32 arithmetic at a
+    rounding boundary; plus rel 1e-5.
+    """
+    s = exposure_scale(attrs, info, "rgb_scale")
+    if s is None:
+        raise ToleranceError("pyrender render gives no exposure scale (rendiff:rgb_scale): RGB tolerance unknown")
+    gamma = 2.2
+    b = np.clip(np.abs(np.asarray(ref, dtype=np.float64)) / s if s > 0 else np.zeros_like(ref), 0.0, 1.0)
+    c = 255.0 * b ** (1.0 / gamma)
+    hi = np.minimum((c + 0.5 + PYRENDER_CODE_SLACK) / 255.0, 1.0)
+    abs_tol = s * (hi**gamma - (c / 255.0) ** gamma)
+    text = (
+        f"pyrender: |dL| <= S*(((c+0.5+{PYRENDER_CODE_SLACK:g})/255)^2.2 - (c/255)^2.2), c = 255 (L/S)^(1/2.2), "
+        f"S {s:.6g} (half an 8-bit code through the inverse gamma-2.2 transfer at the reference's value; "
+        f"+{PYRENDER_CODE_SLACK:g} code for float32 shading) + {PYRENDER_RGB_REL:g}*|L|"
+    )
+    return RgbTolerance(abs_tol, PYRENDER_RGB_REL, text)

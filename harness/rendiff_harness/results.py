@@ -1,0 +1,278 @@
+"""RUN/results.json: one typed record per verdict (`Entry`), the document, writing it, the table.
+
+Every entry has the fields of `Entry` up to `images` (`COMMON_FIELDS`, docs/run-format.md),
+then the fields only its buffer has (`Entry.own_fields`, from compare.py's buffer table:
+`explanations` on id and N, `max_angle_rad` on N, the radiance fields on RGB), then any
+further fields (`Entry.extra`: calibration's measurements on `camera` entries).
+`Entry.to_json()` is the entry exactly as results.json holds it.
+
+Skipped and error entries carry null counts (`blank_if_not_compared`): "not compared",
+never "0 mismatches".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from . import atomic, expectations, vocab
+from .vocab import Buffer, Status
+
+RESULTS_FORMAT = "rendiff-results/1"
+
+COMMON_FIELDS = (
+    "scene",
+    "backend",
+    "buffer",
+    "status",
+    "reason",
+    "pixels",
+    "edge_mismatches",
+    "tie_mismatches",
+    "crack_mismatches",
+    "interior_mismatches",
+    "mask_mismatches",
+    "max_abs_error",
+    "mean_abs_error",
+    "max_rel_error",
+    "compared_pixels",
+    "tolerance",
+    "bound",
+    "time_s",
+    "version",
+    "command",
+    "images",
+)
+"""The fields every entry has, in results.json's order."""
+
+NUMERIC_FIELDS = (
+    "pixels",
+    "edge_mismatches",
+    "tie_mismatches",
+    "crack_mismatches",
+    "interior_mismatches",
+    "mask_mismatches",
+    "max_abs_error",
+    "mean_abs_error",
+    "max_rel_error",
+    "compared_pixels",
+)
+"""The counts and errors that are null on an entry that was not compared."""
+
+RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean")
+"""The RGB fields that are null on an RGB entry that was not compared."""
+
+OPTIONAL_FIELDS = frozenset({"explanations"})
+"""Buffer fields written only when set (id: when compared; N: when some normal is off)."""
+
+NOT_COMPARED = (Status.SKIPPED, Status.ERROR)
+
+
+def finite(x: float) -> float | None:
+    """x as a float, or None when it is inf or nan (results.json holds no non-finite numbers)."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+@dataclass
+class Entry:
+    """One results.json entry: a (scene, backend, buffer) verdict and what it was judged on."""
+
+    scene: str
+    backend: str
+    buffer: str
+    status: str = Status.ERROR
+    reason: str = ""
+    pixels: int | None = 0
+    edge_mismatches: int | None = 0
+    tie_mismatches: int | None = 0
+    crack_mismatches: int | None = 0
+    interior_mismatches: int | None = 0
+    mask_mismatches: int | None = 0
+    max_abs_error: float | None = 0.0
+    mean_abs_error: float | None = 0.0
+    max_rel_error: float | None = 0.0
+    compared_pixels: int | None = 0
+    tolerance: str = ""
+    bound: Any = None
+    time_s: float | None = None
+    version: str | None = None
+    command: str | None = None
+    images: dict[str, str] = field(default_factory=dict)
+    # Buffer-specific fields: written after `images`, those in `own_fields` only, in that order.
+    own_fields: tuple[str, ...] = field(default=(), repr=False)
+    max_angle_rad: float | None = None  # N
+    explanations: list[dict[str, Any]] | None = None  # id, N (OPTIONAL_FIELDS)
+    mode: str | None = None  # RGB: "deterministic" | "statistical"
+    failing_pixels: int | None = 0
+    min_p: float | None = None
+    alpha: float | None = None
+    cluster_failures: int | None = None
+    flip_mean: float | None = None
+    flip_note: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)  # written last (calibration's measured fields)
+
+    @classmethod
+    def for_render(
+        cls,
+        scene: str,
+        backend: str,
+        buffer: str,
+        render: Mapping[str, Any],
+        own_fields: tuple[str, ...] = (),
+        *,
+        status: str = Status.ERROR,
+        reason: str = "",
+    ) -> Entry:
+        """An entry with the render's time/version/command; counts start at 0, status `error`.
+
+        `blank_if_not_compared` nulls the counts when the entry ends skipped/error.
+        """
+        t = render.get("time_s")
+        version = render.get("version")
+        command = render.get("command")
+        return cls(
+            scene,
+            backend,
+            buffer,
+            status=status,
+            reason=reason,
+            time_s=finite(t) if isinstance(t, (int, float)) and not isinstance(t, bool) else None,
+            version=version if isinstance(version, str) else None,
+            command=command if isinstance(command, str) else None,
+            own_fields=own_fields,
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The entry as results.json holds it: COMMON_FIELDS, then own_fields, then extra."""
+        out = {name: getattr(self, name) for name in COMMON_FIELDS}
+        for name in self.own_fields:
+            value = getattr(self, name)
+            if value is None and name in OPTIONAL_FIELDS:
+                continue
+            out[name] = value
+        out.update(self.extra)
+        return out
+
+    def add_reason(self, note: str) -> None:
+        self.reason = f"{self.reason}; {note}" if self.reason else note
+
+    def blank_if_not_compared(self) -> Entry:
+        """Skipped and error entries carry null counts: "not compared", never "0 mismatches"."""
+        if self.status in NOT_COMPARED:
+            for k in NUMERIC_FIELDS:
+                setattr(self, k, None)
+            if self.buffer == Buffer.RGB:
+                for k in RGB_FIELDS:
+                    setattr(self, k, None)
+        return self
+
+    def apply_verdict(self, exps: expectations.Expectations, details: list[str]) -> None:
+        """Status, bound and reason from the counts and the matching expectation (expectations.py).
+
+        `details` (examples of mismatches) join the reason of a failing or surprising verdict.
+        """
+        exp = exps.lookup(self.scene, self.backend, self.buffer)
+        counts = {k: int(getattr(self, k) or 0) for k in expectations.COUNT_KEYS}
+        declared = exps.declared(self.backend, vocab.MismatchClass.CRACK)
+        verdict = expectations.evaluate(counts, exp, cracks_allowed=declared is not None)
+        self.status = verdict.status
+        if exp is not None:
+            self.bound = exp.bound_json()
+        parts = [verdict.reason] if verdict.reason else []
+        if verdict.status in (Status.FAIL, Status.EXPECTED_FAIL, Status.UNEXPECTED_PASS):
+            parts += details
+        if declared is not None and int(self.crack_mismatches or 0) > 0:
+            parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
+        self.reason = "; ".join(parts)
+
+
+def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any]) -> dict[str, Any]:
+    """`Entry.for_render(...).to_json()`: a results.json entry with every common field present."""
+    return Entry.for_render(scene, backend, buffer, render).to_json()
+
+
+def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
+    """`Entry.blank_if_not_compared` for an entry already in its JSON form."""
+    if entry["status"] in NOT_COMPARED:
+        for k in NUMERIC_FIELDS:
+            entry[k] = None
+        if entry["buffer"] == Buffer.RGB:
+            for k in RGB_FIELDS:
+                entry[k] = None
+    return entry
+
+
+# --------------------------------------------------------------------------- the document
+
+
+def document(
+    reference: str,
+    calibration: Mapping[str, Any],
+    expectations_path: str | Path | None,
+    unused: Sequence[expectations.Expectation],
+    results: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """RUN/results.json's top level (docs/run-format.md)."""
+    return {
+        "format": RESULTS_FORMAT,
+        "reference": reference,
+        "calibration": calibration,
+        "expectations": str(expectations_path) if expectations_path is not None else None,
+        "unused_expectations": [
+            {"entry": e.index, "scene": e.scene, "backend": e.backend, "buffer": e.buffer} for e in unused
+        ],
+        "results": results,
+    }
+
+
+def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json") -> Path:
+    """Write RUN/<name> (default results.json) atomically (temp file in RUN + os.replace)."""
+    path = run / name
+    text = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    atomic.write_text_atomically(path, text, prefix=".results.", suffix=".json.tmp")
+    return path
+
+
+def format_table(results: Sequence[Mapping[str, Any]]) -> str:
+    """A compact, fixed-width table: one row per entry, then a count per status."""
+    header = ("scene", "backend", "buf", "status", "edge", "interior", "mask", "max_rel", "reason")
+    rows = []
+    for r in results:
+        compared = r["status"] not in NOT_COMPARED
+        rel = r.get("max_rel_error")
+        if r["buffer"] == Buffer.RGB and r.get("mode") == "statistical":
+            rel = None  # the means' relative difference is noise here; min_p is in results.json
+        rows.append(
+            (
+                str(r["scene"]),
+                str(r["backend"]),
+                str(r["buffer"]),
+                str(r["status"]),
+                str(r["edge_mismatches"]) if compared else "-",
+                str(r["interior_mismatches"]) if compared else "-",
+                str(r["mask_mismatches"]) if compared and r["buffer"] == Buffer.Z else "-",
+                f"{rel:.2g}" if compared and r["buffer"] in (Buffer.Z, Buffer.RGB) and rel is not None else "-",
+                _short(str(r.get("reason", ""))),
+            )
+        )
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(8)]
+    lines = []
+    for row in [header, *rows]:
+        cells = [row[i].ljust(widths[i]) if i < 4 else row[i].rjust(widths[i]) for i in range(8)]
+        lines.append("  ".join(cells + [row[8]]).rstrip())
+    counts: dict[str, int] = {}
+    for r in results:
+        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no entries"
+    lines.append(f"{len(results)} entries: {summary}")
+    return "\n".join(lines)
+
+
+def _short(text: str, limit: int = 90) -> str:
+    text = text.replace("\n", " ")
+    return text if len(text) <= limit else text[: limit - 3] + "..."
