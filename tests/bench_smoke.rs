@@ -146,6 +146,35 @@ fn peers_writes_throughput_ratios() {
         true
     );
     assert!(record.get("goals").is_some());
+    // With Embree: every configuration kept, the fastest named, the core's ratio against it.
+    let embree = rows[0]["embree"].as_object().expect("embree rows");
+    if !embree.is_empty() {
+        assert_eq!(
+            embree.len(),
+            24,
+            "6 query paths x 2 context flags x 2 scene flags"
+        );
+        for key in ["embree single", "embree packet8", "embree_robust single"] {
+            assert!(embree.contains_key(key), "{key}: earlier records' keys");
+        }
+        for (k, v) in embree {
+            assert_ne!(v["same_keys_as_embree_single"], false, "{k}");
+        }
+        let best = rows[0]["embree_best"]["name"].as_str().expect("best named");
+        let fastest = embree
+            .values()
+            .filter_map(|v| v["mrays_per_s"].as_f64())
+            .fold(0.0, f64::max);
+        assert_eq!(embree[best]["mrays_per_s"].as_f64(), Some(fastest));
+        assert_eq!(rows[0]["ratios"]["embree_best"], best);
+        assert!(rows[0]["ratios"]["core_over_embree_best"]
+            .as_f64()
+            .is_some_and(|x| x > 0.0));
+        assert!(rows[0]["ratios"]["core_trace_over_embree_single"]
+            .as_f64()
+            .is_some());
+        assert!(record["goals"]["core_trace_vs_embree_best"].is_array());
+    }
 }
 
 #[test]

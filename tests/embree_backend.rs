@@ -12,7 +12,7 @@
 mod common_scenes;
 
 use glam::DVec3;
-use rendiff::backends::embree::{self, EmbreeError, EmbreeMode, EmbreeQuery};
+use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
 use rendiff::camera::Camera;
 use rendiff::frame::Frame;
 use rendiff::raster;
@@ -504,12 +504,15 @@ fn bench_million() {
                 .build()
                 .unwrap();
             for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
-                for query in [EmbreeQuery::Single, EmbreeQuery::Packet8] {
+                for (query, coherence) in EmbreeQuery::ALL
+                    .into_iter()
+                    .flat_map(|q| EmbreeCoherence::ALL.map(|c| (q, c)))
+                {
                     // Best of 3 runs.
                     let mut best: Option<embree::EmbreeTimings> = None;
                     for _ in 0..3 {
                         let (_, t) = pool
-                            .install(|| embree::render_timed(&s, mode, query))
+                            .install(|| embree::render_timed_with(&s, mode, query, coherence))
                             .unwrap();
                         if best.is_none_or(|b| t.trace_seconds < b.trace_seconds) {
                             best = Some(t);
@@ -518,10 +521,11 @@ fn bench_million() {
                     let t = best.unwrap();
                     let mrays = t.rays as f64 / t.trace_seconds / 1e6;
                     eprintln!(
-                        "{w}x{h} threads {threads} {:14} {:8}: device {:6.1} ms, build {:6.1} ms, \
+                        "{w}x{h} threads {threads} {:14} {:9} {:10}: device {:6.1} ms, build {:6.1} ms, \
                          trace {:7.1} ms = {:6.2} Mrays/s ({:5.2} per thread)",
                         mode.name(),
-                        format!("{query:?}"),
+                        query.name(),
+                        coherence.name(),
                         t.device_seconds * 1e3,
                         t.build_seconds * 1e3,
                         t.trace_seconds * 1e3,
@@ -594,17 +598,108 @@ shape = {{ kind = "triangles", vertices = [{}] }}
             "raster near {near} far {far}"
         );
         for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
-            for query in [EmbreeQuery::Single, EmbreeQuery::Packet8] {
-                let (e, t) = embree::render_timed(&s, mode, query).unwrap();
-                let what = format!("near {near} far {far} {} {query:?}", mode.name());
-                assert!(e.z.iter().all(|&z| z == want), "{what}: {:?}", &e.z[..4]);
-                // Objects, not prims: the quads' diagonals pass through pixel centers (ties).
-                assert_eq!(e.object, r.object, "{what}");
-                if want == 4.0 && near < 3.0 * (1.0 + 1e-6) {
-                    // The widened tnear let Embree report the front quad; it was re-traced.
-                    assert!(t.rays > e.z.len() as u64, "{what}: no re-trace counted");
+            // Every path, so the re-trace from each packet and stream layout is exercised.
+            for query in EmbreeQuery::ALL {
+                for coherence in EmbreeCoherence::ALL {
+                    let (e, t) = embree::render_timed_with(&s, mode, query, coherence).unwrap();
+                    let what = format!(
+                        "near {near} far {far} {} {} {}",
+                        mode.name(),
+                        query.name(),
+                        coherence.name()
+                    );
+                    assert!(e.z.iter().all(|&z| z == want), "{what}: {:?}", &e.z[..4]);
+                    // Objects, not prims: the quads' diagonals pass through pixel centers (ties).
+                    assert_eq!(e.object, r.object, "{what}");
+                    if want == 4.0 && near < 3.0 * (1.0 + 1e-6) {
+                        // The widened tnear let Embree report the front quad; it was re-traced.
+                        assert!(t.rays > e.z.len() as u64, "{what}: no re-trace counted");
+                    }
                 }
             }
         }
     }
+}
+
+/// Every query path (rtcIntersect1/4/8/16, the 1M and NM streams) with both
+/// intersect-context flags gives the keys of the reference path (single rays,
+/// incoherent context): `id.prim` and Z bit for bit. The paths differ in how
+/// rays are batched, not in which rays are traced or how hits become keys, so
+/// `bench peers` may compare the core with whichever is fastest.
+#[test]
+fn every_query_and_context_gives_the_single_ray_keys() {
+    if !embree_available() {
+        return;
+    }
+    let resized = |name: &str, w: u32, h: u32| {
+        let mut s = scene(name);
+        let c = &s.camera;
+        s.camera = Camera::new(c.eye, c.look_at, c.up, c.vfov_deg, w, h, c.near, c.far).unwrap();
+        s
+    };
+    // Near and far cutting through the sphere: hits next to both planes.
+    let mut clipped = scene("icosphere");
+    let d = clipped.camera.eye.length();
+    with_near_far(&mut clipped, d - 0.6, d + 0.3);
+    let cases = [
+        ("three_triangles", scene("three_triangles")),
+        ("icosphere", scene("icosphere")),
+        // Odd sizes: partial tiles, masked lanes, a short last strip, and a
+        // row wider than one stream call (STREAM_RAYS / 4 pixels).
+        ("icosphere 37x29", resized("icosphere", 37, 29)),
+        ("icosphere 301x7", resized("icosphere", 301, 7)),
+        ("icosphere clipped", clipped),
+    ];
+    for (name, s) in &cases {
+        for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+            let want = run(s, mode, EmbreeQuery::Single);
+            assert!(want.prim.iter().any(|&p| p != u32::MAX), "{name}: empty");
+            for query in EmbreeQuery::ALL {
+                for coherence in EmbreeCoherence::ALL {
+                    let what = format!(
+                        "{name} {} {} {}",
+                        mode.name(),
+                        query.name(),
+                        coherence.name()
+                    );
+                    let (e, t) = embree::render_timed_with(s, mode, query, coherence)
+                        .unwrap_or_else(|err| panic!("{what}: {err}"));
+                    assert_eq!(e.renderer, mode.name(), "{what}");
+                    assert!(t.rays >= e.prim.len() as u64, "{what}: {} rays", t.rays);
+                    let prim = (0..e.prim.len())
+                        .filter(|&i| e.prim[i] != want.prim[i])
+                        .count();
+                    let z = (0..e.z.len())
+                        .filter(|&i| e.z[i].to_bits() != want.z[i].to_bits())
+                        .count();
+                    assert_eq!(
+                        (prim, z),
+                        (0, 0),
+                        "{what}: id.prim / Z bits differ at (prim, z) px"
+                    );
+                }
+            }
+        }
+    }
+    // The default entry points are unchanged: single rays and 4x2 packets, incoherent.
+    let s = &cases[1].1;
+    let single = embree::render(s, EmbreeMode::Default).unwrap();
+    let packets = embree::render_packets(s, EmbreeMode::Default).unwrap();
+    let want = run(s, EmbreeMode::Default, EmbreeQuery::Single);
+    assert_eq!(
+        (single.prim.clone(), packets.prim.clone()),
+        (want.prim.clone(), want.prim)
+    );
+    assert_eq!(EmbreeQuery::default(), EmbreeQuery::Single);
+    assert_eq!(EmbreeCoherence::default(), EmbreeCoherence::Incoherent);
+}
+
+#[test]
+fn embree_reports_its_native_packet_support() {
+    if !embree_available() {
+        return;
+    }
+    let f = embree::features().unwrap();
+    // Every Embree 3 build has SSE, hence native 4-wide packets.
+    assert!(f.native_ray4, "{f:?}");
 }

@@ -4,7 +4,7 @@
 //! the same way (warm-up, then the median of `runs`).
 
 use super::{timed, Timed};
-use crate::backends::embree::{self, EmbreeError, EmbreeMode, EmbreeQuery};
+use crate::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
 use crate::frame::Frame;
 use crate::raster::{self, RasterOptions};
 use crate::scene::resolve::ResolvedScene;
@@ -97,18 +97,31 @@ pub struct EmbreeStats {
 }
 
 /// Runs Embree once untimed, then `runs` times, on rayon's current pool
-/// (Embree's device gets the same thread count).
+/// (Embree's device gets the same thread count), with Embree's default
+/// (incoherent) intersect context.
 pub fn embree(
     scene: &ResolvedScene,
     mode: EmbreeMode,
     query: EmbreeQuery,
     runs: usize,
 ) -> Result<(Frame, EmbreeStats), EmbreeError> {
-    let (mut frame, _) = embree::render_timed(scene, mode, query)?;
+    embree_with(scene, mode, query, EmbreeCoherence::Incoherent, runs)
+}
+
+/// Like [`embree`] with the intersect-context flag chosen too, so `bench
+/// peers` can time every configuration and compare the core with the fastest.
+pub fn embree_with(
+    scene: &ResolvedScene,
+    mode: EmbreeMode,
+    query: EmbreeQuery,
+    coherence: EmbreeCoherence,
+    runs: usize,
+) -> Result<(Frame, EmbreeStats), EmbreeError> {
+    let (mut frame, _) = embree::render_timed_with(scene, mode, query, coherence)?;
     let (mut dev, mut build, mut tr, mut both) = (vec![], vec![], vec![], vec![]);
     let mut rays = 0;
     for _ in 0..runs.max(1) {
-        let (f, t) = embree::render_timed(scene, mode, query)?;
+        let (f, t) = embree::render_timed_with(scene, mode, query, coherence)?;
         dev.push(t.device_seconds);
         build.push(t.build_seconds);
         tr.push(t.trace_seconds);
@@ -129,11 +142,49 @@ pub fn embree(
     ))
 }
 
-/// A short name for an Embree configuration.
+/// A short name for an Embree configuration with the default (incoherent)
+/// context: "embree single", "embree_robust packet8", ... (the keys earlier
+/// records and pages use).
 pub fn embree_name(mode: EmbreeMode, query: EmbreeQuery) -> String {
-    let q = match query {
-        EmbreeQuery::Single => "single",
-        EmbreeQuery::Packet8 => "packet8",
-    };
-    format!("{} {q}", mode.name())
+    embree_name_with(mode, query, EmbreeCoherence::Incoherent)
+}
+
+/// A short name for an Embree configuration: [`embree_name`]'s, with
+/// " coherent" appended for the coherent context, so incoherent names stay
+/// those of earlier records.
+pub fn embree_name_with(
+    mode: EmbreeMode,
+    query: EmbreeQuery,
+    coherence: EmbreeCoherence,
+) -> String {
+    match coherence {
+        EmbreeCoherence::Incoherent => format!("{} {}", mode.name(), query.name()),
+        EmbreeCoherence::Coherent => format!("{} {} coherent", mode.name(), query.name()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embree_names_keep_the_earlier_keys() {
+        let (d, r) = (EmbreeMode::Default, EmbreeMode::Robust);
+        assert_eq!(embree_name(d, EmbreeQuery::Single), "embree single");
+        assert_eq!(embree_name(d, EmbreeQuery::Packet8), "embree packet8");
+        assert_eq!(embree_name(r, EmbreeQuery::Single), "embree_robust single");
+        assert_eq!(
+            embree_name_with(d, EmbreeQuery::Packet16, EmbreeCoherence::Coherent),
+            "embree packet16 coherent"
+        );
+        // Every configuration has its own name.
+        let mut names = std::collections::BTreeSet::new();
+        for m in [d, r] {
+            for q in EmbreeQuery::ALL {
+                for c in EmbreeCoherence::ALL {
+                    assert!(names.insert(embree_name_with(m, q, c)));
+                }
+            }
+        }
+    }
 }

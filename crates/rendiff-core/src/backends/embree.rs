@@ -72,15 +72,139 @@ impl EmbreeMode {
     }
 }
 
-/// How rays are handed to Embree: one at a time (the reference path) or in
-/// packets of eight (for throughput measurements).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How rays are handed to Embree. `Single` is the reference path (the check
+/// and the agreement tests run it); the others exist so that benchmarks can
+/// measure Embree at its best, through every entry point Embree offers for
+/// primary rays. Packets and streams are filled with screen-space tiles, so
+/// the rays Embree traces together are neighbours (coherent).
+///
+/// Every variant traces the same f32 rays and turns hits into keys the same
+/// way, so all produce the keys of `Single` (tests/embree_backend.rs checks it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum EmbreeQuery {
-    /// `rtcIntersect1` per pixel.
+    /// `rtcIntersect1` per pixel, rows in parallel.
     #[default]
     Single,
+    /// `rtcIntersect4` on 2x2 pixel tiles (masked at the image border).
+    Packet4,
     /// `rtcIntersect8` on 4x2 pixel tiles (masked at the image border).
     Packet8,
+    /// `rtcIntersect16` on 4x4 pixel tiles (masked at the image border).
+    Packet16,
+    /// `rtcIntersect1M`: an array of `RTCRayHit` (stride 80 bytes) over
+    /// 4-row strips in 4x4-tile order, up to [`STREAM_RAYS`] rays per call,
+    /// so that the packets Embree forms from consecutive rays are tiles.
+    Stream1M,
+    /// `rtcIntersectNM` with N = 8: an array of 4x2-tile `RTCRayHit8`
+    /// packets over 2-row strips, up to [`STREAM_RAYS`] rays per call (lanes
+    /// outside the image are inactive: tnear > tfar).
+    StreamNM8,
+}
+
+/// Rays per stream call (`rtcIntersect1M`, `rtcIntersectNM`): 80 KiB of ray
+/// and hit data, small enough to stay in L2 cache between writing the rays
+/// and reading the hits, large enough that the call overhead vanishes.
+pub const STREAM_RAYS: usize = 1024;
+
+impl EmbreeQuery {
+    /// Every query path, the reference (`Single`) first.
+    pub const ALL: [EmbreeQuery; 6] = [
+        EmbreeQuery::Single,
+        EmbreeQuery::Packet4,
+        EmbreeQuery::Packet8,
+        EmbreeQuery::Packet16,
+        EmbreeQuery::Stream1M,
+        EmbreeQuery::StreamNM8,
+    ];
+
+    /// Short name for reports and JSON keys ("single", "packet8", ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            EmbreeQuery::Single => "single",
+            EmbreeQuery::Packet4 => "packet4",
+            EmbreeQuery::Packet8 => "packet8",
+            EmbreeQuery::Packet16 => "packet16",
+            EmbreeQuery::Stream1M => "stream1M",
+            EmbreeQuery::StreamNM8 => "streamNM8",
+        }
+    }
+
+    /// The Embree function this path calls, so reports name what was measured.
+    pub fn entry_point(self) -> &'static str {
+        match self {
+            EmbreeQuery::Single => "rtcIntersect1",
+            EmbreeQuery::Packet4 => "rtcIntersect4",
+            EmbreeQuery::Packet8 => "rtcIntersect8",
+            EmbreeQuery::Packet16 => "rtcIntersect16",
+            EmbreeQuery::Stream1M => "rtcIntersect1M",
+            EmbreeQuery::StreamNM8 => "rtcIntersectNM (N=8)",
+        }
+    }
+
+    /// How pixels are grouped into one call, for reports.
+    pub fn layout(self) -> &'static str {
+        match self {
+            EmbreeQuery::Single => "one pixel per call, rows in parallel",
+            EmbreeQuery::Packet4 => "2x2 tiles, 2-row strips in parallel",
+            EmbreeQuery::Packet8 => "4x2 tiles, 2-row strips in parallel",
+            EmbreeQuery::Packet16 => "4x4 tiles, 4-row strips in parallel",
+            EmbreeQuery::Stream1M => {
+                "1024 RTCRayHit in 4x4-tile order per call, 4-row strips in parallel"
+            }
+            EmbreeQuery::StreamNM8 => {
+                "128 4x2-tile RTCRayHit8 packets per call, 2-row strips in parallel"
+            }
+        }
+    }
+}
+
+/// The `RTCIntersectContext` flag rays are traced with. Embree's documentation
+/// asks for `COHERENT` when the rays of a packet or stream are coherent, as
+/// primary rays of neighbouring pixels are; Embree may then switch to
+/// traversal made for such rays. `Incoherent` is what `rtcInitIntersectContext`
+/// sets, and what [`render`], [`render_packets`] and the check use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum EmbreeCoherence {
+    /// `RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT` (Embree's default).
+    #[default]
+    Incoherent,
+    /// `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`.
+    Coherent,
+}
+
+impl EmbreeCoherence {
+    /// Both flags, the default first.
+    pub const ALL: [EmbreeCoherence; 2] = [EmbreeCoherence::Incoherent, EmbreeCoherence::Coherent];
+
+    /// Short name for reports ("incoherent", "coherent").
+    pub fn name(self) -> &'static str {
+        match self {
+            EmbreeCoherence::Incoherent => "incoherent",
+            EmbreeCoherence::Coherent => "coherent",
+        }
+    }
+
+    fn flags(self) -> u32 {
+        match self {
+            EmbreeCoherence::Incoherent => ffi::INTERSECT_CONTEXT_FLAG_INCOHERENT,
+            EmbreeCoherence::Coherent => ffi::INTERSECT_CONTEXT_FLAG_COHERENT,
+        }
+    }
+}
+
+/// Which ray-query features this Embree build has natively (device
+/// properties), so a benchmark can say whether a packet size it measured is
+/// native or emulated by Embree.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct EmbreeFeatures {
+    /// `RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED`.
+    pub native_ray4: bool,
+    /// `RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED`.
+    pub native_ray8: bool,
+    /// `RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED`.
+    pub native_ray16: bool,
+    /// `RTC_DEVICE_PROPERTY_RAY_STREAM_SUPPORTED`.
+    pub ray_stream: bool,
 }
 
 /// Why an Embree render did not happen. `Unavailable` means "skip this backend",
@@ -123,6 +247,22 @@ pub fn version() -> Result<String, EmbreeError> {
     Ok(format!("Embree {major}.{minor}.{patch}"))
 }
 
+/// The native packet sizes and stream support of the loaded library.
+pub fn features() -> Result<EmbreeFeatures, EmbreeError> {
+    let api = api()?;
+    let device = Device::new(api, 1)?;
+    // SAFETY: `device.raw` is a live device; property queries have no other preconditions.
+    let prop = |p| unsafe { (api.get_device_property)(device.raw, p) } != 0;
+    let f = EmbreeFeatures {
+        native_ray4: prop(ffi::DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED),
+        native_ray8: prop(ffi::DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
+        native_ray16: prop(ffi::DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED),
+        ray_stream: prop(ffi::DEVICE_PROPERTY_RAY_STREAM_SUPPORTED),
+    };
+    device.check("rtcGetDeviceProperty")?;
+    Ok(f)
+}
+
 /// Renders depth and IDs with `rtcIntersect1` per pixel (the reference path):
 /// rows in parallel on rayon's current pool, device `threads=N` matching it.
 /// `Frame::seconds` covers device creation, BVH build and tracing.
@@ -130,19 +270,32 @@ pub fn render(scene: &ResolvedScene, mode: EmbreeMode) -> Result<Frame, EmbreeEr
     render_timed(scene, mode, EmbreeQuery::Single).map(|(f, _)| f)
 }
 
-/// Like [`render`] but with `rtcIntersect8` on 4x2 tiles: Embree's faster
-/// coherent path, measured separately because its results may differ from the
-/// single-ray path in ROBUST mode.
+/// Like [`render`] but with `rtcIntersect8` on 4x2 tiles (incoherent context,
+/// as [`render`]): Embree's packet path, kept as its own entry point because
+/// its results could differ from the single-ray path in ROBUST mode. For
+/// every query path and both context flags see [`render_timed_with`].
 pub fn render_packets(scene: &ResolvedScene, mode: EmbreeMode) -> Result<Frame, EmbreeError> {
     render_timed(scene, mode, EmbreeQuery::Packet8).map(|(f, _)| f)
 }
 
-/// Renders with the chosen query path and returns the timing split as well
-/// (for benchmarks that separate BVH build from tracing).
+/// Renders with the chosen query path and Embree's default (incoherent)
+/// context, and returns the timing split as well (for benchmarks that
+/// separate BVH build from tracing).
 pub fn render_timed(
     scene: &ResolvedScene,
     mode: EmbreeMode,
     query: EmbreeQuery,
+) -> Result<(Frame, EmbreeTimings), EmbreeError> {
+    render_timed_with(scene, mode, query, EmbreeCoherence::Incoherent)
+}
+
+/// Like [`render_timed`] with the intersect-context flag chosen too: the
+/// benchmarks try every query path with both flags to find Embree's fastest.
+pub fn render_timed_with(
+    scene: &ResolvedScene,
+    mode: EmbreeMode,
+    query: EmbreeQuery,
+    coherence: EmbreeCoherence,
 ) -> Result<(Frame, EmbreeTimings), EmbreeError> {
     let start = Instant::now();
     let api = api()?;
@@ -157,29 +310,34 @@ pub fn render_timed(
     let rays = RayGen::new(cam);
     let mut keys = vec![NO_HIT; cam.pixel_count()];
     let w = cam.width as usize;
+    let flags = coherence.flags();
+    let ctx = || ffi::IntersectContext::new(flags);
     let retraces: u64 = match query {
-        EmbreeQuery::Single => keys
-            .par_chunks_mut(w)
-            .enumerate()
-            .map(|(y, row)| {
-                let mut ctx = ffi::IntersectContext::new();
-                let mut n = 0;
-                for (x, k) in row.iter_mut().enumerate() {
-                    let (key, extra) = built.trace1(&rays, &mut ctx, x as u32, y as u32);
-                    *k = key;
-                    n += extra;
-                }
-                n
-            })
-            .sum(),
-        EmbreeQuery::Packet8 => keys
-            .par_chunks_mut(2 * w)
-            .enumerate()
-            .map(|(ty, rows)| {
-                let mut ctx = ffi::IntersectContext::new();
-                built.trace_rows8(&rays, &mut ctx, 2 * ty as u32, rows)
-            })
-            .sum(),
+        EmbreeQuery::Single => strips(&mut keys, w, 1, |y, row| {
+            let mut ctx = ctx();
+            let mut n = 0;
+            for (x, k) in row.iter_mut().enumerate() {
+                let (key, extra) = built.trace1(&rays, &mut ctx, x as u32, y);
+                *k = key;
+                n += extra;
+            }
+            n
+        }),
+        EmbreeQuery::Packet4 => strips(&mut keys, w, 2, |y0, rows| {
+            built.trace_packets(&rays, &mut ctx(), api.intersect4, 2, y0, rows)
+        }),
+        EmbreeQuery::Packet8 => strips(&mut keys, w, 2, |y0, rows| {
+            built.trace_packets(&rays, &mut ctx(), api.intersect8, 4, y0, rows)
+        }),
+        EmbreeQuery::Packet16 => strips(&mut keys, w, 4, |y0, rows| {
+            built.trace_packets(&rays, &mut ctx(), api.intersect16, 4, y0, rows)
+        }),
+        EmbreeQuery::Stream1M => strips(&mut keys, w, 4, |y0, rows| {
+            built.trace_stream1(&rays, &mut ctx(), y0, rows)
+        }),
+        EmbreeQuery::StreamNM8 => strips(&mut keys, w, 2, |y0, rows| {
+            built.trace_stream_n::<8>(&rays, &mut ctx(), 4, y0, rows)
+        }),
     };
     let trace_seconds = t_trace.elapsed().as_secs_f64();
     drop(built);
@@ -202,6 +360,20 @@ pub fn render_timed(
     ))
 }
 
+/// Splits the key buffer into strips of `h` rows (`w` pixels each) traced in
+/// parallel by `trace(first_row, strip)`; returns the summed re-traces.
+fn strips(
+    keys: &mut [u64],
+    w: usize,
+    h: usize,
+    trace: impl Fn(u32, &mut [u64]) -> u64 + Sync + Send,
+) -> u64 {
+    keys.par_chunks_mut(h * w)
+        .enumerate()
+        .map(|(i, rows)| trace((i * h) as u32, rows))
+        .sum()
+}
+
 /// Per-render constants that turn the core's pixel rays into Embree rays.
 struct RayGen<'a> {
     cam: &'a Camera,
@@ -212,6 +384,7 @@ struct RayGen<'a> {
 }
 
 /// One pixel's ray in Embree's precision, with its depth conversion.
+#[derive(Clone, Copy)]
 struct EmbreeRay {
     dir: [f32; 3],
     /// `D32·forward`: planar depth per unit of `t`.
@@ -291,12 +464,14 @@ struct Api {
     commit_geometry: unsafe extern "C" fn(ffi::Geometry),
     release_geometry: unsafe extern "C" fn(ffi::Geometry),
     intersect1: unsafe extern "C" fn(ffi::Scene, *mut ffi::IntersectContext, *mut ffi::RayHit),
-    intersect8: unsafe extern "C" fn(
-        *const ffi::Valid8,
-        ffi::Scene,
-        *mut ffi::IntersectContext,
-        *mut ffi::RayHit8,
-    ),
+    intersect4: ffi::IntersectN<4>,
+    intersect8: ffi::IntersectN<8>,
+    intersect16: ffi::IntersectN<16>,
+    intersect1m:
+        unsafe extern "C" fn(ffi::Scene, *mut ffi::IntersectContext, *mut ffi::RayHit, u32, usize),
+    /// `rtcIntersectNM`: the packets' type (`RTCRayHitN`) is opaque in C.
+    intersect_nm:
+        unsafe extern "C" fn(ffi::Scene, *mut ffi::IntersectContext, *mut c_void, u32, u32, usize),
     /// Never dropped (the `Api` lives in a static), so the pointers above stay valid.
     _lib: Library,
 }
@@ -351,7 +526,11 @@ fn load() -> Result<Api, String> {
         commit_geometry: sym!("rtcCommitGeometry"),
         release_geometry: sym!("rtcReleaseGeometry"),
         intersect1: sym!("rtcIntersect1"),
+        intersect4: sym!("rtcIntersect4"),
         intersect8: sym!("rtcIntersect8"),
+        intersect16: sym!("rtcIntersect16"),
+        intersect1m: sym!("rtcIntersect1M"),
+        intersect_nm: sym!("rtcIntersectNM"),
         _lib: lib,
     })
 }
@@ -590,8 +769,128 @@ impl BuiltScene {
         }
     }
 
-    /// Traces rows `y0` and `y0 + 1` (those present in `rows`) in 4x2 packets.
-    fn trace_rows8(
+    /// Key of one ray traced on a packet or stream path, from Embree's hit.
+    /// A hit in front of `near` after rounding (rare) is redone on the
+    /// single-ray path, which re-traces from beyond it; returns the key and
+    /// the extra rays traced.
+    #[allow(clippy::too_many_arguments)]
+    fn resolve(
+        &self,
+        gen: &RayGen,
+        ctx: &mut ffi::IntersectContext,
+        r: &EmbreeRay,
+        geom_id: u32,
+        prim_id: u32,
+        tfar: f32,
+        x: u32,
+        y: u32,
+    ) -> (u64, u64) {
+        if geom_id == ffi::INVALID_GEOMETRY_ID {
+            return (NO_HIT, 0);
+        }
+        let z = gen.depth(r, tfar);
+        match gen.depth_in_range(z) {
+            std::cmp::Ordering::Equal => (hit_key(z, prim_id), 0),
+            std::cmp::Ordering::Greater => (NO_HIT, 0),
+            std::cmp::Ordering::Less => {
+                let (k, e) = self.trace1(gen, ctx, x, y);
+                (k, e + 1)
+            }
+        }
+    }
+
+    /// Fills `packet` with the tile of `tile_w` x `N / tile_w` pixels whose
+    /// top-left pixel is (x0, y0); lane `i` is pixel `(i % tile_w, i / tile_w)`
+    /// of the tile. Lanes outside the image (x >= width or row >= `nrows`)
+    /// stay empty (tnear > tfar) and come back as `None`.
+    fn fill_packet<const N: usize>(
+        gen: &RayGen,
+        packet: &mut ffi::RayHitN<N>,
+        tile_w: u32,
+        x0: u32,
+        y0: u32,
+        nrows: u32,
+    ) -> [Option<EmbreeRay>; N] {
+        let w = gen.cam.width;
+        std::array::from_fn(|lane| {
+            let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
+            (x < w && dy < nrows).then(|| {
+                let r = gen.ray(x, y0 + dy);
+                packet.set(lane, gen.org, r.dir, r.tnear, r.tfar);
+                r
+            })
+        })
+    }
+
+    /// Writes the keys of a traced tile (see [`BuiltScene::fill_packet`]) into
+    /// `rows`, the strip starting at row `y0`; returns the extra rays traced.
+    #[allow(clippy::too_many_arguments)]
+    fn store_packet<const N: usize>(
+        &self,
+        gen: &RayGen,
+        ctx: &mut ffi::IntersectContext,
+        packet: &ffi::RayHitN<N>,
+        rays: &[Option<EmbreeRay>; N],
+        tile_w: u32,
+        x0: u32,
+        y0: u32,
+        rows: &mut [u64],
+    ) -> u64 {
+        let w = gen.cam.width;
+        let mut extra = 0;
+        for (lane, r) in rays.iter().enumerate() {
+            let Some(r) = r else { continue };
+            let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
+            let (key, e) = self.resolve(
+                gen,
+                ctx,
+                r,
+                packet.hit.geom_id[lane],
+                packet.hit.prim_id[lane],
+                packet.ray.tfar[lane],
+                x,
+                y0 + dy,
+            );
+            rows[(dy * w + x) as usize] = key;
+            extra += e;
+        }
+        extra
+    }
+
+    /// Traces the strip `rows` (starting at row `y0`, `N / tile_w` rows or
+    /// fewer at the bottom) in packets of `N` rays on `tile_w`-wide tiles
+    /// with `rtcIntersect4/8/16`, masking lanes outside the image.
+    fn trace_packets<const N: usize>(
+        &self,
+        gen: &RayGen,
+        ctx: &mut ffi::IntersectContext,
+        intersect: ffi::IntersectN<N>,
+        tile_w: u32,
+        y0: u32,
+        rows: &mut [u64],
+    ) -> u64 {
+        let w = gen.cam.width;
+        let nrows = (rows.len() / w as usize) as u32;
+        let mut extra = 0;
+        for x0 in (0..w).step_by(tile_w as usize) {
+            let mut packet = ffi::RayHitN::<N>::empty();
+            let rays = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
+            let valid = ffi::Valid(rays.map(|r| if r.is_some() { -1 } else { 0 }));
+            // SAFETY: the scene is committed and live; `intersect` is the
+            // rtcIntersect<N> matching `N` (typed by `IntersectN<N>`); `valid`
+            // and `packet` are 64-byte aligned with the RTCRayHit<N> layout
+            // (checked in `ffi::layout`); invalid lanes are masked.
+            unsafe { intersect(&valid, self.raw, ctx, &mut packet) };
+            extra += self.store_packet(gen, ctx, &packet, &rays, tile_w, x0, y0, rows);
+        }
+        extra
+    }
+
+    /// Traces the strip `rows` (starting at row `y0`, at most 4 rows) with
+    /// `rtcIntersect1M`: streams of up to [`STREAM_RAYS`] `RTCRayHit`, laid
+    /// out tile by tile (4x4 pixels, row-major inside a tile) so that the
+    /// packets Embree forms from consecutive rays are compact tiles.
+    fn trace_stream1(
         &self,
         gen: &RayGen,
         ctx: &mut ffi::IntersectContext,
@@ -600,45 +899,96 @@ impl BuiltScene {
     ) -> u64 {
         let w = gen.cam.width;
         let nrows = (rows.len() / w as usize) as u32;
+        let block_w = (STREAM_RAYS / 16 * 4) as u32;
+        let mut stream: Vec<ffi::RayHit> = Vec::with_capacity(STREAM_RAYS);
+        let mut pixels: Vec<(u32, u32, EmbreeRay)> = Vec::with_capacity(STREAM_RAYS);
         let mut extra = 0;
-        for x0 in (0..w).step_by(4) {
-            let mut valid = ffi::Valid8([0; 8]);
-            let mut packet = ffi::RayHit8::empty();
-            let mut planar = [0.0f64; 8];
-            let mut rays: [Option<EmbreeRay>; 8] = Default::default();
-            for lane in 0..8 {
-                let (x, dy) = (x0 + lane as u32 % 4, lane as u32 / 4);
-                if x >= w || dy >= nrows {
-                    continue;
-                }
-                let r = gen.ray(x, y0 + dy);
-                valid.0[lane] = -1;
-                packet.set(lane, gen.org, r.dir, r.tnear, r.tfar);
-                planar[lane] = r.planar;
-                rays[lane] = Some(r);
-            }
-            // SAFETY: the scene is committed and live; `valid` and `packet` are
-            // 32-byte aligned RTCRayHit8-layout structs; invalid lanes are masked.
-            unsafe { (self.device.api.intersect8)(&valid, self.raw, ctx, &mut packet) };
-            for (lane, r) in rays.iter().enumerate() {
-                let Some(r) = r else { continue };
-                let (x, dy) = (x0 + lane as u32 % 4, lane as u32 / 4);
-                let key = if packet.hit.geom_id[lane] == ffi::INVALID_GEOMETRY_ID {
-                    NO_HIT
-                } else {
-                    let z = gen.depth(r, packet.ray.tfar[lane]);
-                    match gen.depth_in_range(z) {
-                        std::cmp::Ordering::Equal => hit_key(z, packet.hit.prim_id[lane]),
-                        std::cmp::Ordering::Greater => NO_HIT,
-                        // Rare: redo this pixel on the single-ray path.
-                        std::cmp::Ordering::Less => {
-                            let (k, e) = self.trace1(gen, ctx, x, y0 + dy);
-                            extra += e + 1;
-                            k
-                        }
+        for bx in (0..w).step_by(block_w as usize) {
+            stream.clear();
+            pixels.clear();
+            for x0 in (bx..w.min(bx + block_w)).step_by(4) {
+                for dy in 0..nrows {
+                    for x in x0..w.min(x0 + 4) {
+                        let r = gen.ray(x, y0 + dy);
+                        stream.push(ffi::RayHit::new(gen.org, r.dir, r.tnear, r.tfar));
+                        pixels.push((x, dy, r));
                     }
-                };
+                }
+            }
+            // SAFETY: the scene is committed and live; `stream` holds
+            // `stream.len()` (<= STREAM_RAYS) initialized, 16-byte aligned
+            // RTCRayHit at a stride of their size (80 bytes, checked in
+            // `ffi::layout`), read and written by Embree during the call only.
+            unsafe {
+                (self.device.api.intersect1m)(
+                    self.raw,
+                    ctx,
+                    stream.as_mut_ptr(),
+                    stream.len() as u32,
+                    std::mem::size_of::<ffi::RayHit>(),
+                )
+            };
+            for (rh, &(x, dy, r)) in stream.iter().zip(&pixels) {
+                let (key, e) = self.resolve(
+                    gen,
+                    ctx,
+                    &r,
+                    rh.hit.geom_id,
+                    rh.hit.prim_id,
+                    rh.ray.tfar,
+                    x,
+                    y0 + dy,
+                );
                 rows[(dy * w + x) as usize] = key;
+                extra += e;
+            }
+        }
+        extra
+    }
+
+    /// Traces the strip `rows` (starting at row `y0`, `N / tile_w` rows or
+    /// fewer) with `rtcIntersectNM`: streams of up to [`STREAM_RAYS`] / `N`
+    /// packets of `N` rays on `tile_w`-wide tiles; lanes outside the image are
+    /// inactive (tnear > tfar), as the stream API has no valid mask.
+    fn trace_stream_n<const N: usize>(
+        &self,
+        gen: &RayGen,
+        ctx: &mut ffi::IntersectContext,
+        tile_w: u32,
+        y0: u32,
+        rows: &mut [u64],
+    ) -> u64 {
+        let w = gen.cam.width;
+        let nrows = (rows.len() / w as usize) as u32;
+        let per_call = (STREAM_RAYS / N).max(1);
+        let tiles: Vec<u32> = (0..w).step_by(tile_w as usize).collect();
+        let mut packets: Vec<ffi::RayHitN<N>> = Vec::with_capacity(per_call);
+        let mut rays: Vec<[Option<EmbreeRay>; N]> = Vec::with_capacity(per_call);
+        let mut extra = 0;
+        for chunk in tiles.chunks(per_call) {
+            packets.clear();
+            rays.clear();
+            for &x0 in chunk {
+                let mut p = ffi::RayHitN::<N>::empty();
+                rays.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
+                packets.push(p);
+            }
+            // SAFETY: the scene is committed and live; `packets` holds
+            // `packets.len()` initialized RTCRayHit<N>-layout packets (64-byte
+            // aligned, checked in `ffi::layout`) at a stride of their size;
+            // unused lanes have tnear > tfar, which the stream API skips.
+            unsafe {
+                (self.device.api.intersect_nm)(
+                    self.raw,
+                    ctx,
+                    packets.as_mut_ptr().cast(),
+                    N as u32,
+                    packets.len() as u32,
+                    std::mem::size_of::<ffi::RayHitN<N>>(),
+                )
+            };
+            for ((p, r), &x0) in packets.iter().zip(&rays).zip(chunk) {
+                extra += self.store_packet(gen, ctx, p, r, tile_w, x0, y0, rows);
             }
         }
         extra
@@ -716,6 +1066,10 @@ mod ffi {
     pub const DEVICE_PROPERTY_VERSION_MAJOR: u32 = 1;
     pub const DEVICE_PROPERTY_VERSION_MINOR: u32 = 2;
     pub const DEVICE_PROPERTY_VERSION_PATCH: u32 = 3;
+    pub const DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED: u32 = 32;
+    pub const DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED: u32 = 33;
+    pub const DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED: u32 = 34;
+    pub const DEVICE_PROPERTY_RAY_STREAM_SUPPORTED: u32 = 35;
     pub const DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED: u32 = 65;
     pub const ERROR_NONE: u32 = 0;
     pub const SCENE_FLAG_NONE: u32 = 0;
@@ -727,7 +1081,8 @@ mod ffi {
     pub const FORMAT_UINT3: u32 = 0x5003;
     pub const FORMAT_FLOAT3: u32 = 0x9003;
     pub const INVALID_GEOMETRY_ID: u32 = u32::MAX;
-    const INTERSECT_CONTEXT_FLAG_INCOHERENT: u32 = 0;
+    pub const INTERSECT_CONTEXT_FLAG_INCOHERENT: u32 = 0;
+    pub const INTERSECT_CONTEXT_FLAG_COHERENT: u32 = 1;
 
     /// The `RTCError` enum's names, for messages.
     pub fn error_name(code: u32) -> String {
@@ -752,10 +1107,11 @@ mod ffi {
     }
 
     impl IntersectContext {
-        /// `rtcInitIntersectContext`, which is inline in the header.
-        pub fn new() -> Self {
+        /// `rtcInitIntersectContext` (inline in the header), then `flags`
+        /// (`INTERSECT_CONTEXT_FLAG_*`) instead of its INCOHERENT.
+        pub fn new(flags: u32) -> Self {
             IntersectContext {
-                flags: INTERSECT_CONTEXT_FLAG_INCOHERENT,
+                flags,
                 filter: None,
                 inst_id: [INVALID_GEOMETRY_ID],
             }
@@ -818,70 +1174,74 @@ mod ffi {
         }
     }
 
-    /// `struct RTCRay8` (32-byte aligned, structure of arrays).
-    #[repr(C, align(32))]
-    pub struct Ray8 {
-        pub org_x: [f32; 8],
-        pub org_y: [f32; 8],
-        pub org_z: [f32; 8],
-        pub tnear: [f32; 8],
-        pub dir_x: [f32; 8],
-        pub dir_y: [f32; 8],
-        pub dir_z: [f32; 8],
-        pub time: [f32; 8],
-        pub tfar: [f32; 8],
-        pub mask: [u32; 8],
-        pub id: [u32; 8],
-        pub flags: [u32; 8],
+    /// `struct RTCRay4/8/16` (structure of arrays). Aligned to 64 bytes for
+    /// every `N`: C aligns them to 16/32/64 bytes, and for N = 4, 8, 16 every
+    /// array field is 4N bytes and the struct 12 * 4N, a multiple of 64, so
+    /// the stricter alignment adds no padding and keeps C's layout.
+    #[repr(C, align(64))]
+    pub struct RayN<const N: usize> {
+        pub org_x: [f32; N],
+        pub org_y: [f32; N],
+        pub org_z: [f32; N],
+        pub tnear: [f32; N],
+        pub dir_x: [f32; N],
+        pub dir_y: [f32; N],
+        pub dir_z: [f32; N],
+        pub time: [f32; N],
+        pub tfar: [f32; N],
+        pub mask: [u32; N],
+        pub id: [u32; N],
+        pub flags: [u32; N],
     }
 
-    /// `struct RTCHit8` (32-byte aligned).
-    #[repr(C, align(32))]
-    pub struct Hit8 {
-        pub ng_x: [f32; 8],
-        pub ng_y: [f32; 8],
-        pub ng_z: [f32; 8],
-        pub u: [f32; 8],
-        pub v: [f32; 8],
-        pub prim_id: [u32; 8],
-        pub geom_id: [u32; 8],
-        pub inst_id: [[u32; 8]; 1],
+    /// `struct RTCHit4/8/16` (8 arrays of N: a multiple of 64 bytes too).
+    #[repr(C, align(64))]
+    pub struct HitN<const N: usize> {
+        pub ng_x: [f32; N],
+        pub ng_y: [f32; N],
+        pub ng_z: [f32; N],
+        pub u: [f32; N],
+        pub v: [f32; N],
+        pub prim_id: [u32; N],
+        pub geom_id: [u32; N],
+        pub inst_id: [[u32; N]; 1],
     }
 
-    /// `struct RTCRayHit8`.
-    #[repr(C, align(32))]
-    pub struct RayHit8 {
-        pub ray: Ray8,
-        pub hit: Hit8,
+    /// `struct RTCRayHit4/8/16`, and one packet of `rtcIntersectNM`'s `RTCRayHitN`.
+    #[repr(C, align(64))]
+    pub struct RayHitN<const N: usize> {
+        pub ray: RayN<N>,
+        pub hit: HitN<N>,
     }
 
-    impl RayHit8 {
-        /// All lanes empty (tnear > tfar, so even an unmasked lane would miss).
+    impl<const N: usize> RayHitN<N> {
+        /// All lanes empty (tnear > tfar, so even an unmasked lane would miss,
+        /// and the stream API treats the lane as inactive).
         pub fn empty() -> Self {
-            RayHit8 {
-                ray: Ray8 {
-                    org_x: [0.0; 8],
-                    org_y: [0.0; 8],
-                    org_z: [0.0; 8],
-                    tnear: [1.0; 8],
-                    dir_x: [0.0; 8],
-                    dir_y: [0.0; 8],
-                    dir_z: [1.0; 8],
-                    time: [0.0; 8],
-                    tfar: [0.0; 8],
-                    mask: [u32::MAX; 8],
-                    id: [0; 8],
-                    flags: [0; 8],
+            RayHitN {
+                ray: RayN {
+                    org_x: [0.0; N],
+                    org_y: [0.0; N],
+                    org_z: [0.0; N],
+                    tnear: [1.0; N],
+                    dir_x: [0.0; N],
+                    dir_y: [0.0; N],
+                    dir_z: [1.0; N],
+                    time: [0.0; N],
+                    tfar: [0.0; N],
+                    mask: [u32::MAX; N],
+                    id: [0; N],
+                    flags: [0; N],
                 },
-                hit: Hit8 {
-                    ng_x: [0.0; 8],
-                    ng_y: [0.0; 8],
-                    ng_z: [0.0; 8],
-                    u: [0.0; 8],
-                    v: [0.0; 8],
-                    prim_id: [INVALID_GEOMETRY_ID; 8],
-                    geom_id: [INVALID_GEOMETRY_ID; 8],
-                    inst_id: [[INVALID_GEOMETRY_ID; 8]; 1],
+                hit: HitN {
+                    ng_x: [0.0; N],
+                    ng_y: [0.0; N],
+                    ng_z: [0.0; N],
+                    u: [0.0; N],
+                    v: [0.0; N],
+                    prim_id: [INVALID_GEOMETRY_ID; N],
+                    geom_id: [INVALID_GEOMETRY_ID; N],
+                    inst_id: [[INVALID_GEOMETRY_ID; N]; 1],
                 },
             }
         }
@@ -895,9 +1255,15 @@ mod ffi {
         }
     }
 
-    /// The `valid` mask of `rtcIntersect8`: -1 traces the lane, 0 skips it.
-    #[repr(C, align(32))]
-    pub struct Valid8(pub [i32; 8]);
+    /// The `valid` mask of `rtcIntersect4/8/16`: -1 traces the lane, 0 skips
+    /// it. Aligned like the packet (64 bytes covers C's 16/32/64).
+    #[repr(C, align(64))]
+    pub struct Valid<const N: usize>(pub [i32; N]);
+
+    /// `rtcIntersect4/8/16`, typed so that a packet of N rays can only go to
+    /// the function for N.
+    pub type IntersectN<const N: usize> =
+        unsafe extern "C" fn(*const Valid<N>, Scene, *mut IntersectContext, *mut RayHitN<N>);
 
     #[cfg(test)]
     mod layout {
@@ -912,11 +1278,25 @@ mod ffi {
             assert_eq!(offset_of!(RayHit, hit), 48);
             assert_eq!(offset_of!(Ray, tfar), 32);
             assert_eq!(offset_of!(Hit, prim_id), 20);
-            assert_eq!(size_of::<Ray8>(), 12 * 32);
-            assert_eq!(size_of::<Hit8>(), 8 * 32);
-            assert_eq!(offset_of!(RayHit8, hit), 12 * 32);
-            assert_eq!(offset_of!(Hit8, geom_id), 6 * 32);
-            assert_eq!(align_of::<RayHit8>(), 32);
+            assert_eq!(align_of::<RayHit>(), 16);
+            // RTCRayHit4/8/16: fields of 4N bytes, no padding anywhere.
+            fn packet<const N: usize>() {
+                let a = 4 * N;
+                assert_eq!(size_of::<RayN<N>>(), 12 * a, "RTCRay{N}");
+                assert_eq!(offset_of!(RayN<N>, tfar), 8 * a, "RTCRay{N}");
+                assert_eq!(offset_of!(RayN<N>, flags), 11 * a, "RTCRay{N}");
+                assert_eq!(size_of::<HitN<N>>(), 8 * a, "RTCHit{N}");
+                assert_eq!(offset_of!(HitN<N>, prim_id), 5 * a, "RTCHit{N}");
+                assert_eq!(offset_of!(HitN<N>, geom_id), 6 * a, "RTCHit{N}");
+                assert_eq!(offset_of!(RayHitN<N>, hit), 12 * a, "RTCRayHit{N}");
+                assert_eq!(size_of::<RayHitN<N>>(), 20 * a, "RTCRayHit{N}");
+                assert!(align_of::<RayHitN<N>>() >= a.min(64), "RTCRayHit{N}");
+                assert!(align_of::<Valid<N>>() >= a.min(64), "valid{N}");
+                assert_eq!(std::mem::offset_of!(Valid<N>, 0), 0);
+            }
+            packet::<4>();
+            packet::<8>();
+            packet::<16>();
             assert_eq!(size_of::<IntersectContext>(), 24);
             assert_eq!(offset_of!(IntersectContext, inst_id), 16);
         }
