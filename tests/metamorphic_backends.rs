@@ -277,10 +277,14 @@ fn write_family(dir: &Path, spec: &Path) -> Result<Vec<PathBuf>, String> {
 
 /// Runs the family through `rendiff check`, then the harness's metamorphic comparison.
 fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
-    let spec = run_dir.join("metamorphic-spec.json");
-    std::fs::create_dir_all(run_dir).map_err(|e| e.to_string())?;
-    let scenes = write_family(&run_dir.join("scene-files"), &spec)?;
-    let none = run_dir.join("no-expectations.toml");
+    // The inputs live beside the run folder: `check` replaces the run folder
+    // with the finished run, so nothing it did not write may be kept in it.
+    let inputs = run_dir.with_file_name("metamorphic-inputs");
+    let _ = std::fs::remove_dir_all(&inputs);
+    std::fs::create_dir_all(&inputs).map_err(|e| e.to_string())?;
+    let spec = inputs.join("metamorphic-spec.json");
+    let scenes = write_family(&inputs.join("scene-files"), &spec)?;
+    let none = inputs.join("no-expectations.toml");
     std::fs::write(
         &none,
         "# the relations are judged by the metamorphic comparison\n",
