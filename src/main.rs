@@ -98,8 +98,7 @@ enum Command {
     /// Writes RUN/manifest.json, the buffers, diff images and RUN/results.json.
     /// Exit 1 if any comparison fails or errors.
     Check {
-        /// Scene files or folders (default: scenes and the real-asset corpus scenes/corpus).
-        #[arg(default_values = ["scenes", "scenes/corpus"])]
+        /// Scene files or folders (default: rendiff's scenes and the real-asset corpus scenes/corpus).
         scenes: Vec<PathBuf>,
         /// Run folder.
         #[arg(short, long, default_value = "reports/runs/latest")]
@@ -110,15 +109,16 @@ enum Command {
         /// Seconds before an external renderer is killed.
         #[arg(long, default_value_t = 600)]
         timeout: u64,
-        /// Known divergences with their bounds.
-        #[arg(long, default_value = "tests/expectations.toml")]
-        expectations: PathBuf,
+        /// Known divergences with their bounds (default: rendiff's tests/expectations.toml).
+        #[arg(long)]
+        expectations: Option<PathBuf>,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
-        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes.
-        #[arg(long, default_value = "tests/references")]
-        references: PathBuf,
+        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes
+        /// (default: rendiff's tests/references).
+        #[arg(long)]
+        references: Option<PathBuf>,
         /// Seed of the core's path tracer.
         #[arg(long, default_value_t = rendiff::check::CHECK_SEED)]
         seed: u64,
@@ -128,9 +128,10 @@ enum Command {
         /// Deliberately wrong core shading, for testing the statistical gate's power.
         #[arg(long, value_parser = named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
-        /// Folder of camera calibration probe scenes, rendered first on every backend.
-        #[arg(long, default_value = "scenes/calibration")]
-        calibration: PathBuf,
+        /// Folder of camera calibration probe scenes, rendered first on every
+        /// backend (default: rendiff's scenes/calibration).
+        #[arg(long)]
+        calibration: Option<PathBuf>,
         /// Render no calibration probes (the comparison then measures no camera).
         #[arg(long, conflicts_with = "calibration")]
         no_calibration: bool,
@@ -157,12 +158,13 @@ enum Command {
         /// The merged run folder.
         #[arg(short, long, default_value = "reports/runs/latest")]
         output: PathBuf,
-        /// Known divergences with their bounds.
-        #[arg(long, default_value = "tests/expectations.toml")]
-        expectations: PathBuf,
-        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes.
-        #[arg(long, default_value = "tests/references")]
-        references: PathBuf,
+        /// Known divergences with their bounds (default: rendiff's tests/expectations.toml).
+        #[arg(long)]
+        expectations: Option<PathBuf>,
+        /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes
+        /// (default: rendiff's tests/references).
+        #[arg(long)]
+        references: Option<PathBuf>,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -460,10 +462,23 @@ fn run(cli: Cli) -> Result<ExitCode> {
             references,
             quiet,
         } => {
+            let root = rendiff::check::find_root()?;
+            let own = |p: Option<PathBuf>, rel: &str| -> Result<PathBuf> {
+                Ok(std::path::absolute(
+                    p.unwrap_or_else(|| rendiff::check::in_root(&root, rel)),
+                )?)
+            };
+            let expectations = own(expectations, "tests/expectations.toml")?;
+            let references = own(references, "tests/references")?;
+            let output = std::path::absolute(&output)?;
+            let runs = runs
+                .iter()
+                .map(std::path::absolute)
+                .collect::<std::io::Result<Vec<_>>>()?;
             let opts = rendiff::check::CheckOptions {
                 scenes: Vec::new(),
                 run_dir: output.clone(),
-                root: std::env::current_dir()?,
+                root,
                 only: None,
                 timeout: std::time::Duration::from_secs(600),
                 expectations,
@@ -559,6 +574,26 @@ fn run(cli: Cli) -> Result<ExitCode> {
             jobs,
         } => {
             let jobs = jobs.unwrap_or_else(rendiff::check::default_jobs);
+            // rendiff's own files come from its checkout, wherever this runs;
+            // the harness runs there, so every path it gets is absolute.
+            let root = rendiff::check::find_root()?;
+            let own = |p: Option<PathBuf>, rel: &str| -> Result<PathBuf> {
+                Ok(std::path::absolute(
+                    p.unwrap_or_else(|| rendiff::check::in_root(&root, rel)),
+                )?)
+            };
+            let expectations = own(expectations, "tests/expectations.toml")?;
+            let references = own(references, "tests/references")?;
+            let calibration = own(calibration, "scenes/calibration")?;
+            let output = std::path::absolute(&output)?;
+            let scenes = if scenes.is_empty() {
+                vec![
+                    rendiff::check::in_root(&root, "scenes"),
+                    rendiff::check::in_root(&root, "scenes/corpus"),
+                ]
+            } else {
+                scenes
+            };
             let mut scenes = rendiff::check::collect_scenes(&scenes)?;
             if let Some(shard) = shard {
                 use rendiff::check::shard;
@@ -583,7 +618,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let opts = rendiff::check::CheckOptions {
                 scenes,
                 run_dir: output.clone(),
-                root: std::env::current_dir()?,
+                root,
                 only,
                 timeout: std::time::Duration::from_secs(timeout),
                 expectations,

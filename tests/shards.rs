@@ -101,3 +101,44 @@ fn merged_shards_give_the_verdicts_of_one_run() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("in two shards"));
 }
+
+/// `rendiff check` from a folder outside the checkout, on the user's own
+/// scene: rendiff's harness, probes and expectations come from its checkout,
+/// the run goes where the user said.
+#[test]
+fn check_runs_from_any_folder() {
+    let t = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::copy(
+        root.join("scenes/three_triangles.toml"),
+        t.path().join("mine.toml"),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(t.path())
+        .env("RENDIFF_HOME", root)
+        .args([
+            "check",
+            "mine.toml",
+            "--only",
+            "trace",
+            "--quiet",
+            "-o",
+            "out",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let results = std::fs::read_to_string(t.path().join("out/results.json")).unwrap();
+    assert!(results.contains("\"mine\""), "the user's scene was checked");
+    assert!(results.contains("camera_near"), "rendiff's probes ran");
+    // A wrong RENDIFF_HOME is one clear line.
+    let o = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(t.path())
+        .env("RENDIFF_HOME", t.path())
+        .args(["check", "mine.toml", "-o", "out2"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not a rendiff checkout"));
+}

@@ -154,6 +154,45 @@ pub struct CheckOutcome {
     pub results: Results,
 }
 
+/// Where rendiff's own files live (the Python harness and its venv, the
+/// calibration probes, expectations and references), so that `rendiff check`
+/// works from any folder: `RENDIFF_HOME` if set; else the current folder if it
+/// is a rendiff checkout; else the checkout this binary was built from (what
+/// `cargo install --path .` leaves). The error names the variable to set.
+pub fn find_root() -> Result<PathBuf> {
+    let is_root = |p: &Path| p.join("harness/rendiff_harness").is_dir();
+    if let Some(home) = std::env::var_os("RENDIFF_HOME") {
+        let home = PathBuf::from(home);
+        if !is_root(&home) {
+            bail!(
+                "RENDIFF_HOME={}: not a rendiff checkout (no harness/rendiff_harness)",
+                home.display()
+            );
+        }
+        return Ok(std::path::absolute(&home)?);
+    }
+    let cwd = std::env::current_dir().context("cannot read the current folder")?;
+    if is_root(&cwd) {
+        return Ok(cwd);
+    }
+    let built = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    if is_root(&built) {
+        return Ok(built);
+    }
+    bail!(
+        "cannot find rendiff's harness (harness/rendiff_harness): run from the rendiff checkout or set RENDIFF_HOME to it"
+    )
+}
+
+/// `rel` (one of rendiff's own files) inside `root`: relative as given when
+/// the root is the current folder (tidy paths in records), absolute otherwise.
+pub fn in_root(root: &Path, rel: &str) -> PathBuf {
+    match std::env::current_dir() {
+        Ok(cwd) if cwd == root => PathBuf::from(rel),
+        _ => root.join(rel),
+    }
+}
+
 /// The Python interpreter of the project's venv (override with `RENDIFF_PYTHON`).
 pub fn python(root: &Path) -> PathBuf {
     std::env::var_os("RENDIFF_PYTHON")
