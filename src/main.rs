@@ -463,13 +463,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             quiet,
         } => {
             let root = rendiff::check::find_root()?;
-            let own = |p: Option<PathBuf>, rel: &str| -> Result<PathBuf> {
-                Ok(std::path::absolute(
-                    p.unwrap_or_else(|| rendiff::check::in_root(&root, rel)),
-                )?)
-            };
-            let expectations = own(expectations, "tests/expectations.toml")?;
-            let references = own(references, "tests/references")?;
+            let expectations = own_file(&root, expectations, "tests/expectations.toml")?;
+            let references = own_file(&root, references, "tests/references")?;
             let output = std::path::absolute(&output)?;
             let runs = runs
                 .iter()
@@ -489,22 +484,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 jobs: 1,
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
-            let (table, tally) = rendiff::check::summary(&outcome.results);
-            println!("{table}");
-            println!(
-                "merge: {} shard runs, {} ok, {} failing, {} skipped -> {}",
-                runs.len(),
-                tally.ok,
-                tally.failed,
-                tally.skipped,
-                output.join("results.json").display()
-            );
-            write_report(&output);
-            Ok(if tally.failed > 0 {
-                ExitCode::from(1)
-            } else {
-                ExitCode::SUCCESS
-            })
+            let what = format!("merge of {} shard runs", runs.len());
+            Ok(finish_run(&what, &outcome, &output))
         }
         Command::Vocab { json } => {
             let v = rendiff::vocab::json();
@@ -577,14 +558,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             // rendiff's own files come from its checkout, wherever this runs;
             // the harness runs there, so every path it gets is absolute.
             let root = rendiff::check::find_root()?;
-            let own = |p: Option<PathBuf>, rel: &str| -> Result<PathBuf> {
-                Ok(std::path::absolute(
-                    p.unwrap_or_else(|| rendiff::check::in_root(&root, rel)),
-                )?)
-            };
-            let expectations = own(expectations, "tests/expectations.toml")?;
-            let references = own(references, "tests/references")?;
-            let calibration = own(calibration, "scenes/calibration")?;
+            let expectations = own_file(&root, expectations, "tests/expectations.toml")?;
+            let references = own_file(&root, references, "tests/references")?;
+            let calibration = own_file(&root, calibration, "scenes/calibration")?;
             let output = std::path::absolute(&output)?;
             let scenes = if scenes.is_empty() {
                 vec![
@@ -634,22 +610,37 @@ fn run(cli: Cli) -> Result<ExitCode> {
             };
             // On failure the run folder keeps its INCOMPLETE marker: no report.
             let outcome = rendiff::check::run(&opts)?;
-            let (table, tally) = rendiff::check::summary(&outcome.results);
-            println!("{table}");
-            println!(
-                "check: {} ok, {} failing, {} skipped -> {}",
-                tally.ok,
-                tally.failed,
-                tally.skipped,
-                output.join("results.json").display()
-            );
-            write_report(&output);
-            Ok(if tally.failed > 0 {
-                ExitCode::from(1)
-            } else {
-                ExitCode::SUCCESS
-            })
+            Ok(finish_run("check", &outcome, &output))
         }
+    }
+}
+
+/// One of rendiff's own files: as the user gave it, else `rel` in its
+/// checkout ([`rendiff::check::in_root`]); absolute, because the harness runs
+/// in the checkout, not in the user's folder.
+fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
+    Ok(std::path::absolute(
+        given.unwrap_or_else(|| rendiff::check::in_root(root, rel)),
+    )?)
+}
+
+/// The end of `check` and `merge`: the verdict table, the tally, the report;
+/// exit 1 when any verdict fails.
+fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
+    let (table, tally) = rendiff::check::summary(&outcome.results);
+    println!("{table}");
+    println!(
+        "{what}: {} ok, {} failing, {} skipped -> {}",
+        tally.ok,
+        tally.failed,
+        tally.skipped,
+        output.join("results.json").display()
+    );
+    write_report(output);
+    if tally.failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
     }
 }
 

@@ -89,7 +89,7 @@ fn merged_shards_give_the_verdicts_of_one_run() {
     let (one, two) = (shard_scenes(&shard_runs[0]), shard_scenes(&shard_runs[1]));
     assert_eq!(one.len() + two.len(), SCENES.len());
     assert!(one.iter().all(|s| !two.contains(s)));
-    // The merged run is gated like any other.
+    // The merged run is a finished run: report (like gate and bless) reads it.
     let g = rendiff(&["report"], &[&merged]);
     assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
     // The same shard twice is refused.

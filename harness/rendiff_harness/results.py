@@ -49,18 +49,7 @@ COMMON_FIELDS = (
 )
 """The fields every entry has, in results.json's order."""
 
-NUMERIC_FIELDS = (
-    "pixels",
-    "edge_mismatches",
-    "tie_mismatches",
-    "crack_mismatches",
-    "interior_mismatches",
-    "mask_mismatches",
-    "max_abs_error",
-    "mean_abs_error",
-    "max_rel_error",
-    "compared_pixels",
-)
+NUMERIC_FIELDS = COMMON_FIELDS[COMMON_FIELDS.index("pixels") : COMMON_FIELDS.index("compared_pixels") + 1]
 """The counts and errors that are null on an entry that was not compared."""
 
 RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean")

@@ -69,7 +69,7 @@ pub struct RenderOptions {
     /// A deliberate shading error (detection-power tests only).
     pub bias: Option<Bias>,
     /// Stop when this passes (`check --timeout`): the result is then partial,
-    /// and [`timed_out`] says so.
+    /// which the caller detects with [`crate::deadline::past`].
     pub deadline: Option<Instant>,
 }
 
@@ -98,11 +98,6 @@ impl std::fmt::Display for NotRendered {
             NotRendered::Failed(why) => f.write_str(why),
         }
     }
-}
-
-/// True when a render with these options was cut short by its deadline.
-pub fn timed_out(opts: &RenderOptions) -> bool {
-    crate::deadline::past(opts.deadline)
 }
 
 /// Renders `scene` with `backend` on rayon's current pool. The core shades a
