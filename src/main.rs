@@ -144,10 +144,18 @@ enum Command {
         /// run folder's previous run, if any).
         #[arg(long, requires = "shard")]
         shard_costs: Option<PathBuf>,
-        /// External renders of a scene run this many at a time (default: the
-        /// cores; 1 runs them one after another).
+        /// External renders run this many at a time, across scenes (default:
+        /// the cores; 1 runs them one after another).
         #[arg(long, value_parser = parse_threads)]
         jobs: Option<usize>,
+        /// Start a fresh harness process for every external render instead of
+        /// long-lived workers (slower; for comparison and debugging).
+        #[arg(long)]
+        no_workers: bool,
+        /// Estimated peak memory of the external renders in flight, in MiB
+        /// (default: half of the memory available; a render bigger than it runs alone).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
+        memory_budget: Option<u64>,
     },
     /// Joins shard runs (`check --shard K/N`) into one run folder, compares it
     /// once and writes its report: the verdicts one machine would give.
@@ -482,6 +490,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 core: rendiff::check::CoreShading::default(),
                 calibration: None,
                 jobs: 1,
+                workers: true,
+                memory_budget: rendiff::check::pool::default_memory_budget(),
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
             let what = format!("merge of {} shard runs", runs.len());
@@ -553,6 +563,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             shard,
             shard_costs,
             jobs,
+            no_workers,
+            memory_budget,
         } => {
             let jobs = jobs.unwrap_or_else(rendiff::check::default_jobs);
             // rendiff's own files come from its checkout, wherever this runs;
@@ -607,6 +619,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
                 calibration: (!no_calibration).then_some(calibration),
                 jobs,
+                workers: !no_workers,
+                memory_budget: memory_budget
+                    .map_or_else(rendiff::check::pool::default_memory_budget, |mib| mib << 20),
             };
             // On failure the run folder keeps its INCOMPLETE marker: no report.
             let outcome = rendiff::check::run(&opts)?;

@@ -25,11 +25,33 @@ if [ "$3" = "render" ]; then
     partial) printf 'half an EXR' > "$out"; echo "renderer died mid-write" >&2; exit 1 ;;
   esac
 fi
+if [ "$3" = "serve" ]; then
+  # The long-lived worker (harness worker.py): one JSON request per line.
+  while IFS= read -r line; do
+    out=$(printf '%s' "$line" | sed -n 's/.*"--out","\([^"]*\)".*/\1/p')
+    case "$line" in
+      *'"--backend","hang"'*) exec sleep 600 ;;
+      *'"--backend","forkhang"'*) sleep 600 & echo $! > "$FAKE_PIDS/forkhang.pid"; wait ;;
+      *'"--backend","crash"'*) kill -SEGV $$ ;;
+      *'"--backend","liar"'*) printf '%s\n' '{"code":0,"stdout":"{\"status\":\"ok\"}\n","stderr":""}' ;;
+      *'"--backend","partial"'*) printf 'half an EXR' > "$out"
+        printf '%s\n' '{"code":1,"stdout":"","stderr":"renderer died mid-write\n"}' ;;
+    esac
+  done
+  exit 0
+fi
 exec "$REAL_PYTHON" "$@"
 "#;
 
+/// Through the long-lived harness workers (the default) and through a
+/// process per render (`--no-workers`), faults are reported alike.
 #[test]
 fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
+    broken_renderers(&[]);
+    broken_renderers(&["--no-workers"]);
+}
+
+fn broken_renderers(mode: &[&str]) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let real = root.join(".venv/bin/python");
     assert!(
@@ -57,8 +79,9 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
             "--timeout",
             "1",
             "--quiet",
-            "-o",
         ])
+        .args(mode)
+        .arg("-o")
         .arg(&run)
         .output()
         .unwrap();

@@ -43,6 +43,8 @@ fn main() {
             // leaves is what `rendiff gate` holds against the baseline.
             calibration: Some(root.join("scenes/calibration")),
             jobs: check::default_jobs(),
+            workers: true,
+            memory_budget: check::pool::default_memory_budget(),
         };
         match check::run(&opts) {
             Err(e) => {

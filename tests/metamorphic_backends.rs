@@ -303,6 +303,8 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
         // No calibration probes: each backend is compared with itself, so its camera offset cancels.
         calibration: None,
         jobs: check::default_jobs(),
+        workers: true,
+        memory_budget: check::pool::default_memory_budget(),
     };
     check::run(&opts).map_err(|e| format!("rendiff check failed: {e:#}"))?;
     let out = run_dir.join("metamorphic.json");

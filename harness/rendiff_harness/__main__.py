@@ -1,4 +1,4 @@
-"""Command line: `python -m rendiff_harness {info,render,compare,reference,metamorphic} ...`.
+"""Command line: `python -m rendiff_harness {info,render,serve,compare,reference,metamorphic} ...`.
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -174,12 +174,20 @@ def cmd_metamorphic(args: argparse.Namespace) -> int:
     return int(metamorphic_main(list(args.rest)) or 0)
 
 
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
+    from .worker import serve
+
+    return serve(main)
+
+
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "info": cmd_info,
     "render": cmd_render,
     "compare": cmd_compare,
     "reference": cmd_reference,
     "metamorphic": cmd_metamorphic,
+    "serve": cmd_serve,
 }
 
 
@@ -275,6 +283,11 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("scalar_rgb", "llvm_ad_rgb"),
         default=None,
         help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19)",
+    )
+    sub.add_parser(
+        "serve",
+        help="answer render requests, one JSON line each on stdin, until stdin closes (worker.py; "
+        "`rendiff check` keeps one such worker per backend and job slot)",
     )
     p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)

@@ -43,11 +43,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import multiprocessing
 import re
 import sys
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -982,11 +984,73 @@ def calibrate(
     return rep.summary, rep.entries
 
 
+_PROCESS_EXPECTATIONS: dict[str, expectations.Expectations] = {}
+"""A comparing process's own copy of the expectations, loaded once per process (`_scene_task`)."""
+
+
+def _scene_task(
+    run: Path,
+    scene_entry: Mapping[str, Any],
+    reference: str,
+    expectations_path: str | Path | None,
+    images: bool,
+    references_dir: Path | None,
+) -> tuple[list[Entry], set[int]]:
+    """One scene in a pool process: its entries and the expectations it used."""
+    key = str(expectations_path)
+    if key not in _PROCESS_EXPECTATIONS:
+        _PROCESS_EXPECTATIONS[key] = expectations.load(expectations_path)
+    exps = _PROCESS_EXPECTATIONS[key]
+    exps.used.clear()
+    entries = compare_scene(run, scene_entry, reference, exps, images, references_dir)
+    return entries, set(exps.used)
+
+
+def _scene_cost(scene_entry: Mapping[str, Any]) -> float:
+    """How long a scene took to render (all backends): its comparison grows with the same size."""
+    return float(sum(float(r.get("time_s") or 0.0) for r in scene_entry.get("renders", [])))
+
+
+def compare_scenes(
+    run: Path,
+    scenes: Sequence[Mapping[str, Any]],
+    reference: str,
+    expectations_path: str | Path | None,
+    exps: expectations.Expectations,
+    images: bool,
+    references_dir: Path | None,
+    jobs: int,
+) -> list[Entry]:
+    """Every scene's entries, in manifest order. Scenes are independent, so with `jobs` > 1
+    they are compared in that many processes (fresh interpreters: `spawn`, never a fork of a
+    process holding OpenImageIO's threads), the costliest first; `exps.used` gathers what
+    each process matched, so unused expectations are reported as in a sequential run."""
+    if jobs <= 1 or len(scenes) <= 1:
+        out: list[Entry] = []
+        for sc in scenes:
+            out += compare_scene(run, sc, reference, exps, images, references_dir)
+        return out
+    order = sorted(range(len(scenes)), key=lambda i: -_scene_cost(scenes[i]))
+    done: dict[int, list[Entry]] = {}
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(jobs, len(scenes)), mp_context=context) as pool:
+        futures = {
+            i: pool.submit(_scene_task, run, scenes[i], reference, expectations_path, images, references_dir)
+            for i in order
+        }
+        for i, future in futures.items():
+            entries, used = future.result()
+            done[i] = entries
+            exps.used |= used
+    return [e for i in range(len(scenes)) for e in done[i]]
+
+
 def run_compare(
     run: Path,
     expectations_path: str | Path | None,
     images: bool = True,
     references_dir: str | Path | None = None,
+    jobs: int = 1,
 ) -> dict[str, Any]:
     """Compare everything in RUN and write results.json; returns the results document.
 
@@ -996,9 +1060,7 @@ def run_compare(
     exps = expectations.load(expectations_path)
     reference = manifest.get("reference", "raster")
     refs = Path(references_dir) if references_dir is not None else None
-    entries: list[Entry] = []
-    for sc in manifest["scenes"]:
-        entries += compare_scene(run, sc, reference, exps, images, refs)
+    entries = compare_scenes(run, manifest["scenes"], reference, expectations_path, exps, images, refs, jobs)
     summary, camera = calibrate(run, manifest, entries)
     doc = document(reference, summary, expectations_path, exps.unused(), [e.to_json() for e in entries] + camera)
     write_results(run, doc)
@@ -1019,6 +1081,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-images", action="store_true", help="do not write diff PNGs")
     p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="compare this many scenes at a time, in processes of their own (default 1: all in this "
+        "process; `rendiff check` passes its --jobs)",
+    )
+    p.add_argument(
         "--references",
         default=None,
         help="folder of cached Mitsuba references (<scene>.exr + <scene>.json, e.g. tests/references): "
@@ -1038,7 +1107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"rendiff_harness compare: {run}: run folder does not exist", file=sys.stderr)
         return EXIT_ERROR
     try:
-        doc = run_compare(run, args.expectations, images=not args.no_images, references_dir=args.references)
+        doc = run_compare(
+            run, args.expectations, images=not args.no_images, references_dir=args.references, jobs=max(args.jobs, 1)
+        )
     except (ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness compare: {exc}", file=sys.stderr)
         return EXIT_ERROR

@@ -637,3 +637,23 @@ def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:
     assert list(res) == [("broken", "raster", "scene")]
     e = res[("broken", "raster", "scene")]
     assert e["status"] == "error" and "camera.vfov" in e["reason"]
+
+
+def test_scenes_compared_in_processes_give_the_same_results(tmp_path: Path) -> None:
+    # Two scenes: `--jobs 2` compares them in two spawned processes; the document, the
+    # unused-expectation list included, must be what one process writes.
+    run, _ = build_run(tmp_path)
+    exps = tmp_path / "exps.toml"
+    exps.write_text(
+        '[[expect]]\nscene = "quads"\nbackend = "povray"\nbuffer = "id"\nstatus = "expected_fail"\n'
+        'reason = "known"\n\n[[expect]]\nscene = "nowhere"\nbackend = "povray"\nbuffer = "id"\n'
+        'status = "expected_fail"\nreason = "never matched"\n'
+    )
+    docs = []
+    for jobs in ("1", "2"):
+        assert compare.main(["--run", str(run), "--no-images", "--expectations", str(exps), "--jobs", jobs]) == 0
+        doc = _strict_json(run / "results.json")
+        docs.append(doc)
+    assert len({r["scene"] for r in docs[0]["results"]}) >= 2
+    assert docs[0] == docs[1]
+    assert [u["scene"] for u in docs[1]["unused_expectations"]] == ["nowhere"]

@@ -5,6 +5,7 @@
 use super::crossover::{self, CrossoverOptions};
 use super::knobs::{self, KnobsOptions, SceneSpec};
 use super::peers::{self, PeersOptions};
+use super::scale::{self, ScaleOptions};
 use super::stability::{self, StabilityOptions};
 use super::variance::{self, VarianceOptions};
 use super::{Common, Output};
@@ -148,6 +149,20 @@ pub enum BenchCommand {
         /// Worker threads (default: all CPUs).
         #[arg(long)]
         threads: Option<usize>,
+    },
+    /// The main job's wall time: a process per render one at a time, the
+    /// default (workers and the job pool), and N shards then merged
+    /// (`scale.json`; one run of each whole check unless --runs).
+    Scale {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Shard counts to measure.
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+        shards: Vec<u32>,
+        /// Scene files or folders (default: the main job's, scenes/ and scenes/corpus/).
+        #[arg(long = "scene")]
+        scenes: Vec<PathBuf>,
     },
     /// Scene families at numerical extremes through `rendiff check`: where each renderer breaks, and how.
     Stability {
@@ -313,6 +328,34 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 threads: threads.unwrap_or_else(super::cpus).max(1),
             };
             ("crossover", c, crossover::run(&opts)?)
+        }
+        BenchCommand::Scale {
+            common,
+            shards,
+            scenes,
+        } => {
+            let explicit_runs = common.runs.is_some();
+            let mut c = common.common()?;
+            if !explicit_runs {
+                c.runs = 1; // each run is a whole check of minutes
+            }
+            let quick = c.quick;
+            let scenes = if quick {
+                vec![
+                    c.root.join("scenes/three_triangles.toml"),
+                    c.root.join("scenes/icosphere.toml"),
+                ]
+            } else if scenes.is_empty() {
+                vec![c.root.join("scenes"), c.root.join("scenes/corpus")]
+            } else {
+                scenes
+            };
+            let opts = ScaleOptions {
+                common: c.clone(),
+                shards: if quick { vec![1, 2] } else { shards },
+                scenes,
+            };
+            ("scale", c, scale::run(&opts)?)
         }
         BenchCommand::Stability { common, only } => {
             let c = common.common()?;

@@ -27,6 +27,7 @@ pub mod pareto;
 pub mod peers;
 pub mod plot;
 pub mod radiance;
+pub mod scale;
 pub mod spp;
 pub mod stability;
 pub mod variance;

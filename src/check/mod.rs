@@ -14,9 +14,11 @@
 pub mod isolated;
 use crate::vocab::Feature;
 pub mod manifest;
+pub mod pool;
 pub mod process;
 pub mod run_folder;
 pub mod shard;
+pub mod worker;
 
 use crate::backends::embree::{self, EmbreeMode};
 use crate::exr_io::{frame_attrs, write_frame_with};
@@ -88,40 +90,20 @@ pub struct CheckOptions {
     /// Folder of calibration probe scenes (`*.toml`), rendered first on every
     /// backend and recorded with `role: "calibration"`; `None` renders none.
     pub calibration: Option<PathBuf>,
-    /// External renders of one scene run this many at a time (their start-up
-    /// dominates and is single-threaded); 1 runs them one after another.
+    /// External renders run this many at a time, across scenes (pool.rs);
+    /// 1 runs them one after another.
     pub jobs: usize,
+    /// External renders go to long-lived harness workers (worker.rs), one
+    /// per backend and job slot; false starts a process per render.
+    pub workers: bool,
+    /// Estimated peak bytes of external renders in flight at most
+    /// ([`pool::render_memory`]); [`pool::default_memory_budget`] by default.
+    pub memory_budget: u64,
 }
 
 /// The default of `--jobs`: the cores this process may use.
 pub fn default_jobs() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
-}
-
-/// Runs `f` on every item, at most `jobs` at a time, on scoped threads; the
-/// results come back in item order (so records and messages keep the
-/// sequential run's order).
-fn run_pool<T: Sync, R: Send>(jobs: usize, items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    let jobs = jobs.clamp(1, items.len().max(1));
-    let next = AtomicUsize::new(0);
-    let out: std::sync::Mutex<Vec<Option<R>>> =
-        std::sync::Mutex::new((0..items.len()).map(|_| None).collect());
-    std::thread::scope(|s| {
-        for _ in 0..jobs {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(item) = items.get(i) else { break };
-                let r = f(item);
-                out.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
-            });
-        }
-    });
-    out.into_inner()
-        .unwrap_or_else(|e| e.into_inner())
-        .into_iter()
-        .map(|r| r.expect("every item ran"))
-        .collect()
 }
 
 /// How the core shades in a check run (the reference for radiance).
@@ -460,6 +442,8 @@ fn render_and_compare(
     let exe = "rendiff";
     let version = format!("rendiff {}", env!("CARGO_PKG_VERSION"));
     let mut scenes = Vec::new();
+    // Per scene, what its external renders need (folder, size); None when it did not load.
+    let mut pending: Vec<Option<ExternalScene>> = Vec::new();
     for (si, (scene_path, role)) in jobs.iter().enumerate() {
         let name = stem(scene_path);
         let rel_dir = format!("scenes/{name}");
@@ -496,6 +480,7 @@ fn render_and_compare(
                     ..RenderRecord::default()
                 });
                 scenes.push(runs);
+                pending.push(None);
                 continue;
             }
         };
@@ -600,28 +585,90 @@ fn render_and_compare(
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
             runs.renders.push(rec);
         }
-        match &externals {
-            Err(e) => runs.renders.push(RenderRecord {
-                backend: "harness".into(),
-                status: "error".into(),
-                message: e.clone(),
-                ..RenderRecord::default()
-            }),
-            Ok(list) => {
-                // Independent processes: run side by side (`--jobs`), record in order.
-                let todo: Vec<&HarnessBackend> =
-                    list.iter().filter(|b| wanted(opts, &b.name)).collect();
-                let jobs = if isolate.is_some() { 1 } else { opts.jobs };
-                let recs = run_pool(jobs, &todo, |b| {
-                    external(opts, b, &runs, &dir, &rel_dir, &scratch, isolate)
+        pending.push(Some(ExternalScene {
+            dir,
+            rel_dir,
+            triangles: scene.triangles.len() as u64,
+        }));
+        scenes.push(runs);
+    }
+    // Then every external render of every scene, side by side in the job pool
+    // (pool.rs); the core's renders above had the cores to themselves.
+    match &externals {
+        Err(e) => {
+            for (runs, _) in scenes.iter_mut().zip(&pending).filter(|(_, p)| p.is_some()) {
+                runs.renders.push(RenderRecord {
+                    backend: "harness".into(),
+                    status: "error".into(),
+                    message: e.clone(),
+                    ..RenderRecord::default()
                 });
-                for (b, rec) in todo.iter().zip(recs) {
-                    say(opts, format!("  {:<14} {}", b.name, describe(&rec)));
-                    runs.renders.push(rec);
-                }
             }
         }
-        scenes.push(runs);
+        Ok(list) => {
+            let tasks: Vec<(usize, &HarnessBackend)> = pending
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.is_some())
+                .flat_map(|(si, _)| {
+                    list.iter()
+                        .filter(|b| wanted(opts, &b.name))
+                        .map(move |b| (si, b))
+                })
+                .collect();
+            let size = |&(si, b): &(usize, &HarnessBackend)| {
+                let triangles = pending[si].as_ref().map_or(0, |p| p.triangles);
+                pool::render_memory(&b.name, triangles)
+            };
+            // Longest first: the biggest scenes, and within a size POV-Ray
+            // (two runs with fixed polling sleeps), then pyrender, then Mitsuba.
+            let cost = |&(si, b): &(usize, &HarnessBackend)| {
+                let triangles = pending[si].as_ref().map_or(0, |p| p.triangles) as f64;
+                let rank = match b.name.as_str() {
+                    "povray" => 3.0,
+                    "pyrender" => 2.0,
+                    "mitsuba" => 1.0,
+                    _ => 0.0,
+                };
+                triangles + rank / 4.0
+            };
+            let pool_opts = pool::PoolOptions {
+                // A measuring run (`isolate`) renders one at a time, so that
+                // each peak is the render's own.
+                jobs: if isolate.is_some() { 1 } else { opts.jobs },
+                memory_budget: opts.memory_budget,
+            };
+            let done = std::sync::atomic::AtomicUsize::new(0);
+            let total = tasks.len();
+            let recs = pool::run(
+                pool_opts,
+                &tasks,
+                cost,
+                size,
+                |i| {
+                    (opts.workers && isolate.is_none())
+                        .then(|| worker::Slot::new(scratch.join(format!("workers/slot{i}"))))
+                },
+                |slot, &(si, b)| {
+                    let p = pending[si].as_ref().expect("tasks are loaded scenes");
+                    let rec = external(opts, b, &scenes[si], p, &scratch, isolate, slot.as_mut());
+                    let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                    say(
+                        opts,
+                        format!(
+                            "  [{k}/{total}] {} {:<10} {}",
+                            scenes[si].scene,
+                            b.name,
+                            describe(&rec)
+                        ),
+                    );
+                    rec
+                },
+            );
+            for ((si, _), rec) in tasks.iter().zip(recs) {
+                scenes[*si].renders.push(rec);
+            }
+        }
     }
     // Commands name the published run folder, not the staging folder.
     let (staged, shown) = (
@@ -649,15 +696,29 @@ fn render_and_compare(
     Ok(CheckOutcome { manifest, results })
 }
 
+/// What a loaded scene's external renders need.
+struct ExternalScene {
+    /// `RUN/scenes/<stem>`: holds `resolved/` and receives the EXRs.
+    dir: PathBuf,
+    /// The same, relative to the run folder.
+    rel_dir: String,
+    /// Triangles of the resolved scene, for the pool's estimates.
+    triangles: u64,
+}
+
+/// One external render through the harness: on `slot`'s long-lived worker
+/// when there is one, else in a process of its own (measured under
+/// `measure`, the rendiff binary, in a measuring run).
 fn external(
     opts: &CheckOptions,
     b: &HarnessBackend,
     runs: &SceneRuns,
-    dir: &Path,
-    rel_dir: &str,
+    scene: &ExternalScene,
     scratch: &Path,
     measure: Option<&Path>,
+    slot: Option<&mut worker::Slot>,
 ) -> RenderRecord {
+    let (dir, rel_dir) = (&scene.dir, scene.rel_dir.as_str());
     let mut rec = RenderRecord {
         backend: b.name.clone(),
         version: b.version.clone().unwrap_or_default(),
@@ -716,9 +777,17 @@ fn external(
     // covers in-process renderers (pyrender, Mitsuba) that hang.
     let limit = opts.timeout + opts.timeout.min(Duration::from_secs(30));
     let work = scratch.join(format!("{}-{}", runs.scene, b.name));
-    let outcome = match measure {
-        Some(helper) => process::run_measured(cmd, limit, &work, helper),
-        None => run_with_timeout(cmd, limit, &work),
+    let outcome = match (measure, slot) {
+        (Some(helper), _) => process::run_measured(cmd, limit, &work, helper),
+        (None, Some(slot)) => {
+            let serve = || {
+                let mut c = harness_command(&opts.root);
+                c.arg("serve");
+                c
+            };
+            slot.request(&b.name, serve, &args, limit)
+        }
+        (None, None) => run_with_timeout(cmd, limit, &work),
     };
     match outcome {
         Err(e) => {
@@ -794,7 +863,8 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
         .arg("--run")
         .arg(&opts.run_dir)
         .arg("--expectations")
-        .arg(&opts.expectations);
+        .arg(&opts.expectations)
+        .args(["--jobs", &opts.jobs.to_string()]);
     if let Some(r) = &opts.references {
         cmd.arg("--references").arg(r);
     }
@@ -1091,6 +1161,8 @@ mod tests {
             core: CoreShading::default(),
             calibration: Some(probes.clone()),
             jobs: 1,
+            workers: true,
+            memory_budget: pool::default_memory_budget(),
         };
         let jobs = scene_jobs(&opts).unwrap();
         let got: Vec<(String, &str)> = jobs.iter().map(|(p, r)| (stem(p), *r)).collect();

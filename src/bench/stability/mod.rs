@@ -163,6 +163,8 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         // probes would only add their renders to a long run.
         calibration: None,
         jobs: 1,
+        workers: true,
+        memory_budget: check::pool::default_memory_budget(),
     };
     eprintln!(
         "stability: {} scenes through rendiff check ({})",

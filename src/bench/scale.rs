@@ -1,0 +1,241 @@
+//! `rendiff bench scale`: what the main job (`rendiff check` on the starter
+//! scenes and the corpus) costs, and what each way of spreading it buys, in
+//! one run on one machine:
+//!
+//! * a process per render, one render at a time (`--no-workers --jobs 1`):
+//!   how `check` ran before the job pool and the workers;
+//! * the default: long-lived harness workers, `--jobs` = the cores;
+//! * N shards (`--shard K/N`, dealt by the default run's recorded costs) run
+//!   one after another, then `merge`: the slowest shard plus the merge is the
+//!   wall time N machines would take at best (each would also pay its own
+//!   set-up), so T(default) / that is an upper bound of the speed-up;
+//! * time per scene per renderer, from the default run's manifest.
+//!
+//! Each configuration is a whole `check` (minutes), run as a child process of
+//! this binary, after one untimed default run that warms the caches. Nothing
+//! here asserts a time.
+
+use super::page::{self, Page};
+use super::{environment, finish_environment, median, Common, Output, Scratch};
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// What `bench scale` runs.
+#[derive(Debug, Clone)]
+pub struct ScaleOptions {
+    /// Runs, output folder, root.
+    pub common: Common,
+    /// Shard counts to measure (1 is the default run itself).
+    pub shards: Vec<u32>,
+    /// Scene files or folders (default: the main job's, `scenes` and `scenes/corpus`).
+    pub scenes: Vec<PathBuf>,
+}
+
+/// One timed `rendiff check` (or `merge`): wall seconds, and the exit status
+/// it gave (1 means a verdict failed, which is measured all the same).
+struct Timing {
+    seconds: f64,
+    code: Option<i32>,
+}
+
+fn rendiff(args: &[String]) -> Result<Timing> {
+    let exe = std::env::current_exe().context("cannot find the rendiff binary")?;
+    let t = Instant::now();
+    let out = Command::new(&exe)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .with_context(|| format!("cannot run {}", exe.display()))?;
+    let code = out.status.code();
+    if !matches!(code, Some(0) | Some(1)) {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let tail: Vec<&str> = err.lines().rev().take(4).collect();
+        bail!(
+            "rendiff {} failed ({:?}): {}",
+            args.join(" "),
+            code,
+            tail.into_iter().rev().collect::<Vec<_>>().join(" | ")
+        );
+    }
+    Ok(Timing {
+        seconds: t.elapsed().as_secs_f64(),
+        code,
+    })
+}
+
+fn check_args(opts: &ScaleOptions, out: &Path, extra: &[&str]) -> Vec<String> {
+    let mut a = vec!["check".to_string(), "--quiet".into()];
+    a.extend(opts.scenes.iter().map(|s| s.display().to_string()));
+    a.extend(["--timeout".into(), opts.common.timeout_s.to_string()]);
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a.extend(["-o".into(), out.display().to_string()]);
+    a
+}
+
+/// Times `args` `runs` times; the median and every run.
+fn timed(runs: usize, args: &[String]) -> Result<(f64, Vec<f64>, Option<i32>)> {
+    let mut times = Vec::new();
+    let mut code = None;
+    for _ in 0..runs.max(1) {
+        let t = rendiff(args)?;
+        times.push(t.seconds);
+        code = t.code;
+    }
+    Ok((median(&times), times, code))
+}
+
+/// Seconds per scene per renderer in a run's manifest.
+fn per_scene(run: &Path) -> Result<Value> {
+    let path = run.join("manifest.json");
+    let m: Value = serde_json::from_str(
+        &std::fs::read_to_string(&path).with_context(|| format!("{}", path.display()))?,
+    )
+    .with_context(|| format!("{}: unreadable", path.display()))?;
+    let mut out = serde_json::Map::new();
+    for s in m["scenes"].as_array().into_iter().flatten() {
+        let mut row = serde_json::Map::new();
+        for r in s["renders"].as_array().into_iter().flatten() {
+            if let (Some(b), Some(t)) = (r["backend"].as_str(), r["time_s"].as_f64()) {
+                row.insert(b.to_string(), json!(t));
+            }
+        }
+        if let Some(name) = s["scene"].as_str() {
+            out.insert(name.to_string(), Value::Object(row));
+        }
+    }
+    Ok(Value::Object(out))
+}
+
+/// Runs the benchmark.
+pub fn run(opts: &ScaleOptions) -> Result<Output> {
+    let scratch = Scratch::new("scale")?;
+    let runs = opts.common.runs;
+    let mut record = json!({
+        "benchmark": "scale",
+        "environment": environment(),
+        "scenes": opts.scenes.iter().map(|s| s.display().to_string()).collect::<Vec<_>>(),
+        "jobs": super::cpus(),
+        "runs": runs,
+    });
+    let main_run = scratch.path().join("default");
+    eprintln!("scale: warm-up (one default check run, untimed)");
+    rendiff(&check_args(opts, &main_run, &[]))?;
+
+    let mut configs = Vec::new();
+    let plans: [(&str, &str, &[&str]); 2] = [
+        (
+            "process_per_render_sequential",
+            "a harness process per render, one at a time (--no-workers --jobs 1)",
+            &["--no-workers", "--jobs", "1"],
+        ),
+        (
+            "default",
+            "long-lived workers, --jobs = the cores (the default)",
+            &[],
+        ),
+    ];
+    for (name, what, extra) in plans {
+        eprintln!("scale: {what}");
+        let out = scratch.path().join(name);
+        let (m, all, code) = timed(runs, &check_args(opts, &out, extra))?;
+        configs.push(
+            json!({"name": name, "what": what, "median_s": m, "runs_s": all, "exit_code": code}),
+        );
+    }
+    let before = configs[0]["median_s"].as_f64().unwrap_or(f64::NAN);
+    let after = configs[1]["median_s"].as_f64().unwrap_or(f64::NAN);
+    record["configurations"] = json!(configs);
+    record["speedup_default_over_sequential"] = json!(before / after);
+    record["per_scene_s"] = per_scene(&scratch.path().join("default"))?;
+
+    let mut shard_rows = Vec::new();
+    for &n in &opts.shards {
+        let n = n.max(1);
+        let mut times = Vec::new();
+        let mut runs_dirs = Vec::new();
+        for k in 1..=n {
+            let out = scratch.path().join(format!("shards{n}-{k}"));
+            let spec = format!("{k}/{n}");
+            let costs = main_run.display().to_string();
+            let args = check_args(opts, &out, &["--shard", &spec, "--shard-costs", &costs]);
+            eprintln!("scale: shard {spec}");
+            times.push(rendiff(&args)?.seconds);
+            runs_dirs.push(out);
+        }
+        let merged = scratch.path().join(format!("merged{n}"));
+        let mut margs = vec!["merge".to_string()];
+        margs.extend(runs_dirs.iter().map(|d| d.display().to_string()));
+        margs.extend(["-o".into(), merged.display().to_string()]);
+        let merge_s = rendiff(&margs)?.seconds;
+        let slowest = times.iter().cloned().fold(0.0, f64::max);
+        shard_rows.push(json!({
+            "shards": n,
+            "shard_s": times,
+            "merge_s": merge_s,
+            "sum_s": times.iter().sum::<f64>() + merge_s,
+            "slowest_plus_merge_s": slowest + merge_s,
+            "speedup_bound": after / (slowest + merge_s),
+        }));
+    }
+    record["shards"] = json!(shard_rows);
+    finish_environment(&mut record);
+    let html = html(&record);
+    Ok(Output {
+        record,
+        html,
+        svgs: Vec::new(),
+    })
+}
+
+fn html(r: &Value) -> String {
+    let mut p = Page::new("rendiff bench scale: the main job's wall time");
+    p.para("Each row is a whole `rendiff check` of the main job's scenes on this machine, in one benchmark run.");
+    let rows: Vec<Vec<String>> = r["configurations"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|c| {
+            vec![
+                c["what"].as_str().unwrap_or("").to_string(),
+                page::num(c["median_s"].as_f64(), 1),
+            ]
+        })
+        .collect();
+    p.table(&["configuration", "wall s (median)"], &rows);
+    p.para(&format!(
+        "Speed-up of the default over a process per render, one at a time: {}x.",
+        page::num(r["speedup_default_over_sequential"].as_f64(), 2)
+    ));
+    p.heading("Shards run one after another, then merged");
+    let rows: Vec<Vec<String>> = r["shards"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|s| {
+            vec![
+                s["shards"].to_string(),
+                page::compact(&s["shard_s"]),
+                page::num(s["merge_s"].as_f64(), 1),
+                page::num(s["slowest_plus_merge_s"].as_f64(), 1),
+                page::num(s["speedup_bound"].as_f64(), 2),
+            ]
+        })
+        .collect();
+    p.table(
+        &[
+            "shards",
+            "each shard s",
+            "merge s",
+            "slowest + merge s",
+            "speed-up bound",
+        ],
+        &rows,
+    );
+    p.note("The speed-up bound is the default run's time over the slowest shard plus the merge: what N machines could give at best.");
+    p.environment(&r["environment"]);
+    p.finish()
+}
