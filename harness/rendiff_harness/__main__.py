@@ -5,7 +5,9 @@ one JSON line on stdout for results, messages on stderr, and exit codes
 0 = rendered, 2 = error (backend failed or unavailable, bad input),
 3 = skipped (the backend cannot model a feature the scene requires; with
 `render --visibility-only`, only a missing visibility feature skips, a missing
-shading feature drops RGB alone: registry.plan).
+shading feature drops RGB alone: registry.plan; or a renderer declared by a command
+exited 3, command_renderers.py). Renderers declared in the file RENDIFF_RENDERERS names
+are listed and run like the built-in backends; a malformed file fails every command.
 Expected failures print one line naming the backend and the problem, never a
 traceback; a traceback means a bug in rendiff.
 """
@@ -23,8 +25,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import exrbuf, registry, resolved
-from .errors import BackendError
+from . import command_renderers, exrbuf, registry, resolved
+from .errors import BackendError, BackendSkipped
 
 EXIT_OK, EXIT_ERROR, EXIT_SKIPPED = 0, 2, 3
 
@@ -50,6 +52,9 @@ def _describe(backend: registry.Backend) -> dict[str, Any]:
         "buffers": sorted(backend.buffers),
         "available": reason is None,
         "reason": reason,
+        "declared_in": str(backend.module.spec.source)
+        if isinstance(backend.module, command_renderers.CommandBackend)
+        else None,
     }
 
 
@@ -65,6 +70,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         features = ", ".join(row["features"]) or "-"
         buffers = ", ".join(row["buffers"]) or "-"
         print(f"    features: {features}   buffers: {buffers}")
+        if row["declared_in"]:
+            print(f"    declared in {row['declared_in']}")
     return EXIT_OK
 
 
@@ -125,6 +132,9 @@ def cmd_render(args: argparse.Namespace) -> int:
             options[registry.VISIBILITY_ONLY] = True
         info = backend.render(scene, out, workdir, float(args.timeout), **options, **settings)
         elapsed = time.monotonic() - t0
+    except BackendSkipped as exc:  # the renderer declined (a command renderer's exit 3)
+        print(json.dumps({"backend": backend.name, "status": "skipped", "reason": str(exc), "missing": []}))
+        return EXIT_SKIPPED
     except BackendError as exc:  # includes BackendUnavailable
         msg = str(exc)
         return _fail(msg if msg.startswith(f"{backend.name}:") else f"{backend.name}: {msg}")
@@ -304,6 +314,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        # Renderers declared in RENDIFF_RENDERERS: a malformed file fails every command clearly.
+        command_renderers.from_env()
+    except command_renderers.RenderersError as exc:
+        return _fail(str(exc))
     if argv[:1] == ["compare"]:
         # compare.py owns its own options; argparse.REMAINDER would reject "--run".
         return cmd_compare(argparse.Namespace(rest=argv[1:]))

@@ -74,7 +74,7 @@ from typing import Any
 
 import numpy as np
 
-from . import exrbuf, resolved
+from . import command_renderers, exrbuf, resolved
 from .manifest import EntryError, render_reason, run_path
 from .results import Entry
 
@@ -325,11 +325,40 @@ MODELS: dict[str, Model] = {
 }
 
 
+def declared_model(r: command_renderers.Renderer) -> Model:
+    """A renderer declared by a command: its declared numbers, as errors of each pixel's equation.
+
+    A planar depth off by depth_absolute + depth_relative Z (over |cos| with depth_grazing) is a
+    relative error of depth_absolute / Z + depth_relative; edge_px bounds how far from the
+    pixel center it may sample (edge_px pixels on the image plane); Z is stored as f32 (2^-24).
+    """
+    p = r.precision
+    rel = p.depth_relative or 0.0
+    edge = p.edge_px or 0.0
+
+    def model(px: ProbePixels) -> ErrorBudget:
+        if p.depth_grazing:
+            relative = np.minimum(rel / np.maximum(px.cos, 1e-300), 1e-3) if rel > 0 else np.zeros_like(px.z)
+        else:
+            relative = np.full(px.z.shape, rel)
+        return ErrorBudget(
+            px.depth_rel(relative + p.depth_absolute / px.z + F32_U) + px.sample(edge * px.pixel),
+            f"declared by the user in {r.declared}: depth {p.depth_absolute:g} + {rel:g} Z"
+            + (" / |cos|" if p.depth_grazing else "")
+            + f", samples within edge_px {edge:g} px of the pixel center; Z stored as f32 (2^-24)",
+        )
+
+    return model
+
+
 def model_for(backend: str) -> tuple[Model, bool]:
     """The backend's precision model, and whether it has one (else strict: exact f32 depth)."""
     model = MODELS.get(backend)
     if model is not None:
         return model, True
+    declared = command_renderers.find(backend)
+    if declared is not None:
+        return declared_model(declared), True
     return core_model, False
 
 

@@ -21,3 +21,11 @@ class BackendUnavailable(BackendError):
 
     The message must say what to install, so that the report is actionable.
     """
+
+
+class BackendSkipped(BackendError):
+    """The renderer itself declined the scene (a command renderer's exit status 3).
+
+    The message is the reason, e.g. "no Vulkan adapter"; `render` reports it as *skipped*
+    (exit 3, the skip line on stdout), never as an error.
+    """

@@ -19,6 +19,11 @@ Modules are imported lazily and one failing import never hides the others: an
 ImportError (a missing Python package, typically) turns that backend into an
 *unavailable* one whose reason says what is missing, so `info` and the report
 can still list it.
+
+Renderers declared by a command (command_renderers.py: the TOML file that the environment
+variable RENDIFF_RENDERERS names) join the list after the modules, as `Backend`s whose
+module is a `command_renderers.CommandBackend`; `all_backends`, `get` and `known_names`
+raise `command_renderers.RenderersError` (one line) when that file is malformed.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
-from . import vocab
+from . import command_renderers, vocab
 from .backends import MEMBERS, BackendModule
 from .errors import BackendError, BackendUnavailable
 from .resolved import ResolvedScene
@@ -134,8 +139,13 @@ def load(module_name: str) -> Backend:
     return Backend(module_name, backend, None)
 
 
+def command_backends() -> list[Backend]:
+    """The renderers declared in RENDIFF_RENDERERS (none when unset); RenderersError if malformed."""
+    return [Backend(f"command:{c.NAME}", c, None) for c in command_renderers.backends()]
+
+
 def all_backends() -> list[Backend]:
-    return [load(m) for m in BACKEND_MODULES]
+    return [load(m) for m in BACKEND_MODULES] + command_backends()
 
 
 def get(name: str) -> Backend:
@@ -143,7 +153,7 @@ def get(name: str) -> Backend:
     for module_name in BACKEND_MODULES:
         if name == module_name or name == module_name.removesuffix("_backend"):
             return load(module_name)
-    for backend in all_backends():  # a module whose NAME differs from its file name
+    for backend in all_backends():  # a module whose NAME differs from its file name; a declared one
         if backend.name == name:
             return backend
     raise KeyError(name)
@@ -202,6 +212,7 @@ __all__ = [
     "Plan",
     "VISIBILITY_FEATURES",
     "all_backends",
+    "command_backends",
     "get",
     "known_names",
     "load",

@@ -23,6 +23,9 @@ as `PRECISION` (a `Model`) and `rgb_tolerance`, with the derivations in their do
 `model_for` and `rgb_model` look them up by backend name; this module holds the shared
 machinery (the contexts, `Model`, `param`, and the grazing and position-shift helpers).
 
+Renderers declared by a command (command_renderers.py) bring their own numbers: their model
+is built here from the `[renderer.precision]` they declare (`declared_model`, `DeclaredPrecision`).
+
 Backends without a model are compared exactly (`edge_px = 0`, depth tolerance 0),
 and the tolerance text says so: a new backend fails loudly until its model is written.
 """
@@ -36,6 +39,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
+
+from . import command_renderers
 
 MAX_REL = 1e-3
 """Cap on every relative depth tolerance (reached only within ~1/1000 of edge-on)."""
@@ -268,11 +273,58 @@ if TYPE_CHECKING:
 
 
 def backend_precision(backend: str) -> BackendPrecision | None:
-    """The module holding `backend`'s precision model, imported on first use; None: not an external one."""
+    """The module holding `backend`'s precision model, imported on first use (a declared renderer's
+    `DeclaredPrecision`); None: not an external one."""
     module = PRECISION_MODULES.get(backend)
     if module is None:
-        return None
+        declared = command_renderers.find(backend)
+        return None if declared is None else DeclaredPrecision(declared)
     return cast(BackendPrecision, importlib.import_module(f".backends.{module}", __package__))
+
+
+# --------------------------------------------------------------------------- declared renderers
+
+
+def declared_model(r: command_renderers.Renderer) -> Model:
+    """The `Model` of a renderer declared by a command, from the numbers it declares, nothing else.
+
+    Edge: `edge_px` (0 when it writes no ids). Depth: |dZ| <= depth_absolute + depth_relative Z,
+    the relative term over |cos| (capped at MAX_REL Z) when `depth_grazing` is set.
+    """
+    p = r.precision
+    rel, absolute, grazing = p.depth_relative or 0.0, p.depth_absolute, p.depth_grazing
+
+    def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+        if grazing:
+            tol = absolute + relative_grazing(ctx, rel)
+            term = f"Z*min({rel:g}/|cos|, {MAX_REL:g})"
+        else:
+            tol = absolute + rel * np.abs(ctx.z_ref)
+            term = f"{rel:g}*Z"
+        return np.asarray(tol, dtype=np.float64), f"|dZ| <= {absolute:g} + {term}, declared by the user in {r.declared}"
+
+    if p.edge_px is None:
+        edge, reason = 0.0, f"{r.declared} writes no ids"
+    else:
+        edge, reason = p.edge_px, f"edge_px declared by the user in {r.declared}"
+    return Model(r.name, edge, reason, depth)
+
+
+class DeclaredPrecision:
+    """A declared renderer's precision in the shape of a backend module's (`BackendPrecision`)."""
+
+    def __init__(self, renderer: command_renderers.Renderer) -> None:
+        self.renderer = renderer
+        self.PRECISION = declared_model(renderer)
+
+    def rgb_tolerance(self, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+        p = self.renderer.precision
+        rel = p.rgb_relative or 0.0
+        return RgbTolerance(
+            p.rgb_absolute,
+            rel,
+            f"|dL| <= {p.rgb_absolute:g} + {rel:g}*|L|, declared by the user in {self.renderer.declared}",
+        )
 
 
 def model_for(backend: str) -> Model:
@@ -309,10 +361,16 @@ def normal_tolerance(backend: str, cond: np.ndarray) -> tuple[np.ndarray, str]:
     `geo_normal`) rounds the edges (<= u |e| each: 2u |e1||e2| on the cross product), each
     cross component (two products and a difference: 3u |e1||e2|, sqrt(3) of that on the
     vector) and normalizes and stores (about 3u + sqrt(3) u): angle <= 8u cond + 6u.
+    A renderer declared by a command gets the angle it declares (`normal_relative`).
     """
     if backend in CORE_NORMAL_BACKENDS:
         tol = np.full(cond.shape, 4.0 * F32_U)
         return tol, "angle <= 4 * 2^-24 (f64 cross product of the f32 vertices, unit vector rounded to f32)"
+    declared = command_renderers.find(backend)
+    if declared is not None and declared.precision.normal_relative is not None:
+        angle = declared.precision.normal_relative
+        text = f"angle <= {angle:g} rad (normal_relative), declared by the user in {declared.declared}"
+        return np.full(cond.shape, angle), text
     tol = 8.0 * F32_U * cond + 6.0 * F32_U
     return tol, (
         "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "

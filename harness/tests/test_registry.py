@@ -110,7 +110,10 @@ def test_info_json(capsys: pytest.CaptureFixture[str]) -> None:
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["backends"]}
     assert set(rows) >= {"povray"}
     for row in rows.values():
-        assert set(row) == {"name", "module", "version", "features", "buffers", "available", "reason"}
+        keys = {"name", "module", "version", "features", "buffers", "available", "reason", "declared_in"}
+        assert set(row) == keys
+        # None for the built-in ones; a declared renderer's file (tests/test_command_renderers.py)
+        assert row["declared_in"] is None or row["module"].startswith("command:")
         assert row["available"] == (row["reason"] is None)
 
 

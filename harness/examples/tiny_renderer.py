@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""A complete renderer for rendiff in one file: the worked example of docs/your-renderer.md.
+
+    python tiny_renderer.py SCENE_DIR OUT.exr
+
+It reads the resolved scene that `rendiff export` writes (docs/resolved-scene.md), casts one
+ray through each pixel center, and writes Z, id.prim, id.object and N to OUT.exr. Each
+triangle is tested against the pixels of its projected bounding box (every pixel when a
+vertex is behind the near plane): it is a teaching renderer, not a fast one.
+
+Arithmetic, from which its declared precision follows (renderers.toml beside it):
+
+* t = n.(a - eye) / n.d per pixel in float64, the planar depth (d is not normalized), rounded
+  to float32 once: it can differ from the core's f32 value by one f32 step, 2^-23 Z;
+* coverage: the hit point P = eye + t d is inside when the three float64 edge functions
+  ((b - a) x (P - a)).n etc. are all >= 0 or all <= 0 (closed edges: a center exactly on a
+  shared edge is covered by both triangles, and the lower prim_id wins, not the top-left
+  rule: the verifier's *edge* class allows that); float64 rounding moves an edge by far
+  less than 1e-6 px;
+* N = normalize((b - a) x (c - a)) in float64, rounded to float32: angle <= 4 2^-24.
+
+Exit status: 0 with OUT.exr written; 3 (skipped) with the reason on the last stderr line
+when it cannot run here; anything else is an error.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+try:
+    import numpy as np
+except ImportError:
+    print("numpy is not installed", file=sys.stderr)
+    sys.exit(3)
+
+# The harness's EXR writer (float32 Z and N, exact uint32 ids); any OpenEXR writer will do.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from rendiff_harness import exrbuf  # noqa: E402
+
+BACKGROUND = 0xFFFFFFFF
+
+
+def render(scene_dir: Path, out: Path) -> None:
+    meta = json.loads((scene_dir / "scene.json").read_text())
+    cam = meta["camera"]
+    w, h = cam["width"], cam["height"]
+    eye, fwd, right, up = (np.array(cam[k], dtype=np.float64) for k in ("eye", "forward", "right", "up_ortho"))
+    near = cam["near"]
+    far = np.inf if cam["far"] is None else cam["far"]
+    tan_half = cam["tan_half_vfov"]
+    files = meta["files"]
+    tris = np.fromfile(scene_dir / files["triangles"], dtype="<f4").reshape(-1, 3, 3).astype(np.float64)
+    objects = np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
+
+    # Pixel rays exactly as docs/DESIGN.md defines them: x right, y down, centers at +0.5.
+    sx = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * tan_half * w / h
+    sy = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * tan_half
+    d = fwd + sx[None, :, None] * right + sy[:, None, None] * up  # (H, W, 3)
+
+    z = np.full((h, w), np.inf)
+    prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
+    normal = np.zeros((h, w, 3))
+    for i, (a, b, c) in enumerate(tris):
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n)
+        if length == 0.0:
+            continue  # zero-area triangles are never visible
+        rows, cols = window(np.array([a, b, c]), eye, fwd, right, up, tan_half, w, h, near)
+        dd = d[rows, cols]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.dot(a - eye, n) / (dd @ n)
+        p = eye + t[..., None] * dd
+        e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
+        inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+        zc = z[rows, cols]
+        hit = inside & np.isfinite(t) & (t >= near) & (t <= far) & (t < zc)  # equal depth: lower prim wins
+        z[rows, cols] = np.where(hit, t, zc)
+        prim[rows, cols] = np.where(hit, i, prim[rows, cols])
+        normal[rows, cols] = np.where(hit[..., None], n / length, normal[rows, cols])
+    seen = prim != BACKGROUND
+    obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
+    obj[seen] = objects[prim[seen]]
+    exrbuf.write_buffers(
+        out, Z=z.astype(np.float32), prim=prim, obj=obj, N=normal.astype(np.float32), attrs={"renderer": "tiny"}
+    )
+
+
+def window(
+    v: np.ndarray,
+    eye: np.ndarray,
+    fwd: np.ndarray,
+    right: np.ndarray,
+    up: np.ndarray,
+    tan_half: float,
+    w: int,
+    h: int,
+    near: float,
+) -> tuple[slice, slice]:
+    """The pixels a triangle can cover: its projected bounding box plus a pixel, or all of them."""
+    depth = (v - eye) @ fwd
+    if depth.min() <= near:
+        return slice(0, h), slice(0, w)
+    px = ((v - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0 - 0.5
+    py = (1.0 - (v - eye) @ up / depth / tan_half) * h / 2.0 - 0.5
+    x0, x1 = int(np.clip(np.floor(px.min()) - 1, 0, w)), int(np.clip(np.ceil(px.max()) + 2, 0, w))
+    y0, y1 = int(np.clip(np.floor(py.min()) - 1, 0, h)), int(np.clip(np.ceil(py.max()) + 2, 0, h))
+    return slice(y0, y1), slice(x0, x1)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        sys.exit("usage: tiny_renderer.py SCENE_DIR OUT.exr")
+    render(Path(sys.argv[1]), Path(sys.argv[2]))
