@@ -148,6 +148,10 @@ enum Command {
         /// the cores; 1 runs them one after another).
         #[arg(long, value_parser = parse_threads)]
         jobs: Option<usize>,
+        /// Your own renderers, declared by command in a TOML file
+        /// (docs/your-renderer.md); they run beside the built-in ones.
+        #[arg(long)]
+        renderers: Option<PathBuf>,
         /// Start a fresh harness process for every external render instead of
         /// long-lived workers (slower; for comparison and debugging).
         #[arg(long)]
@@ -176,6 +180,10 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// The renderers file the shard runs used (docs/your-renderer.md):
+        /// their declared precision judges their renders.
+        #[arg(long)]
+        renderers: Option<PathBuf>,
     },
     /// Benchmarks: speed against accuracy (knobs), against other renderers (peers),
     /// raster vs trace by triangle size (crossover), numerical extremes (stability).
@@ -469,6 +477,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             references,
             quiet,
+            renderers,
         } => {
             let root = rendiff::check::find_root()?;
             let expectations = own_file(&root, expectations, "tests/expectations.toml")?;
@@ -489,8 +498,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 references: Some(references),
                 core: rendiff::check::CoreShading::default(),
                 calibration: None,
-                jobs: 1,
+                jobs: rendiff::check::default_jobs(),
                 workers: true,
+                renderers: renderers_file(renderers)?,
                 memory_budget: rendiff::check::pool::default_memory_budget(),
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
@@ -563,6 +573,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             shard,
             shard_costs,
             jobs,
+            renderers,
             no_workers,
             memory_budget,
         } => {
@@ -620,6 +631,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 calibration: (!no_calibration).then_some(calibration),
                 jobs,
                 workers: !no_workers,
+                renderers: renderers_file(renderers)?,
                 memory_budget: memory_budget
                     .map_or_else(rendiff::check::pool::default_memory_budget, |mib| mib << 20),
             };
@@ -628,6 +640,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(finish_run("check", &outcome, &output))
         }
     }
+}
+
+/// The `--renderers` file, made absolute and checked to exist here, so that
+/// a typo is one clear line and the harness (which runs in rendiff's
+/// checkout) finds it.
+fn renderers_file(file: Option<PathBuf>) -> Result<Option<PathBuf>> {
+    let Some(file) = file else { return Ok(None) };
+    let abs = std::path::absolute(&file)?;
+    if !abs.is_file() {
+        anyhow::bail!("{}: renderers file not found", file.display());
+    }
+    Ok(Some(abs))
 }
 
 /// One of rendiff's own files: as the user gave it, else `rel` in its

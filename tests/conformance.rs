@@ -44,6 +44,7 @@ fn main() {
             calibration: Some(root.join("scenes/calibration")),
             jobs: check::default_jobs(),
             workers: true,
+            renderers: None,
             memory_budget: check::pool::default_memory_budget(),
         };
         match check::run(&opts) {

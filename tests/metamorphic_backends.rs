@@ -304,6 +304,7 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
         calibration: None,
         jobs: check::default_jobs(),
         workers: true,
+        renderers: None,
         memory_budget: check::pool::default_memory_budget(),
     };
     check::run(&opts).map_err(|e| format!("rendiff check failed: {e:#}"))?;

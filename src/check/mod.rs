@@ -96,6 +96,9 @@ pub struct CheckOptions {
     /// External renders go to long-lived harness workers (worker.rs), one
     /// per backend and job slot; false starts a process per render.
     pub workers: bool,
+    /// The user's renderers file (`--renderers`, docs/your-renderer.md),
+    /// absolute: its renderers join the harness's built-in ones.
+    pub renderers: Option<PathBuf>,
     /// Estimated peak bytes of external renders in flight at most
     /// ([`pool::render_memory`]); [`pool::default_memory_budget`] by default.
     pub memory_budget: u64,
@@ -182,11 +185,20 @@ pub fn python(root: &Path) -> PathBuf {
         .unwrap_or_else(|| root.join(".venv/bin/python"))
 }
 
-fn harness_command(root: &Path) -> Command {
+/// The environment variable that names the user's renderers file for the
+/// harness (harness `command_renderers.py`, docs/your-renderer.md).
+pub const RENDERERS_ENV: &str = "RENDIFF_RENDERERS";
+
+fn harness_command(opts: &CheckOptions) -> Command {
+    let root = &opts.root;
     let mut cmd = Command::new(python(root));
     cmd.current_dir(root)
         .env("PYTHONPATH", root.join("harness"))
         .args(["-m", "rendiff_harness"]);
+    match &opts.renderers {
+        Some(file) => cmd.env(RENDERERS_ENV, file),
+        None => cmd.env_remove(RENDERERS_ENV),
+    };
     cmd
 }
 
@@ -203,7 +215,8 @@ struct HarnessBackend {
 
 /// Asks the Python harness which backends it has. An error here means the harness
 /// itself is not installed; the message says how to fix it.
-fn harness_backends(root: &Path, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
+fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
+    let root = &opts.root;
     let py = python(root);
     if !py.exists() {
         return Err(format!(
@@ -211,7 +224,7 @@ fn harness_backends(root: &Path, scratch: &Path) -> Result<Vec<HarnessBackend>, 
             py.display()
         ));
     }
-    let mut cmd = harness_command(root);
+    let mut cmd = harness_command(opts);
     cmd.args(["info", "--json"]);
     let o = run_with_timeout(cmd, Duration::from_secs(120), scratch)
         .map_err(|e| format!("cannot run the Python harness: {e:#}"))?;
@@ -413,6 +426,16 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
         bail!("no scenes to check");
     }
     let jobs = scene_jobs(opts)?;
+    if let Some(file) = &opts.renderers {
+        // A user's renderers file is checked before anything runs: a typo in
+        // it is one line naming it, not an error on every scene.
+        let probe = std::env::temp_dir().join(format!("rendiff-renderers-{}", std::process::id()));
+        let listed = harness_backends(opts, &probe);
+        let _ = std::fs::remove_dir_all(&probe);
+        if let Err(e) = listed {
+            bail!("{}: {e}", file.display());
+        }
+    }
     // Everything is written to a staging folder that replaces the run folder
     // once results.json exists (run_folder.rs): never a half-old run.
     let staging = run_folder::Staging::begin(&opts.run_dir)?;
@@ -435,7 +458,7 @@ fn render_and_compare(
 ) -> Result<CheckOutcome> {
     let run_dir = &opts.run_dir;
     let scratch = run_dir.join("scratch");
-    let externals = harness_backends(&opts.root, &scratch.join("info"));
+    let externals = harness_backends(opts, &scratch.join("info"));
     if let Err(e) = &externals {
         say(opts, format!("warning: {e}"));
     }
@@ -766,12 +789,18 @@ fn external(
         "rendiff_harness".into(),
     ];
     words.extend(args.iter().cloned());
+    let declared = opts.renderers.as_ref().map_or(String::new(), |f| {
+        format!(
+            "{RENDERERS_ENV}={} ",
+            process::shell_quote(&f.display().to_string())
+        )
+    });
     rec.command = format!(
-        "PYTHONPATH={} {}",
+        "{declared}PYTHONPATH={} {}",
         process::shell_quote(&opts.root.join("harness").display().to_string()),
         shell_line(&words)
     );
-    let mut cmd = harness_command(&opts.root);
+    let mut cmd = harness_command(opts);
     cmd.args(&args);
     // The harness enforces the timeout on its own subprocesses; this one also
     // covers in-process renderers (pyrender, Mitsuba) that hang.
@@ -781,7 +810,7 @@ fn external(
         (Some(helper), _) => process::run_measured(cmd, limit, &work, helper),
         (None, Some(slot)) => {
             let serve = || {
-                let mut c = harness_command(&opts.root);
+                let mut c = harness_command(opts);
                 c.arg("serve");
                 c
             };
@@ -858,7 +887,7 @@ fn external(
 fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
     let results_path = opts.run_dir.join("results.json");
     let _ = std::fs::remove_file(&results_path);
-    let mut cmd = harness_command(&opts.root);
+    let mut cmd = harness_command(opts);
     cmd.arg("compare")
         .arg("--run")
         .arg(&opts.run_dir)
@@ -1162,6 +1191,7 @@ mod tests {
             calibration: Some(probes.clone()),
             jobs: 1,
             workers: true,
+            renderers: None,
             memory_budget: pool::default_memory_budget(),
         };
         let jobs = scene_jobs(&opts).unwrap();

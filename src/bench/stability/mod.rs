@@ -164,6 +164,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         calibration: None,
         jobs: 1,
         workers: true,
+        renderers: None,
         memory_budget: check::pool::default_memory_budget(),
     };
     eprintln!(
