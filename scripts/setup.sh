@@ -3,7 +3,8 @@
 #
 #   scripts/setup.sh            # as root (CI), or as a user with passwordless sudo
 #
-# 1. apt: povray, libembree-dev, libosmesa6, chromium (the report's browser test)
+# 1. apt: povray, libembree-dev, libosmesa6, chromium (the report's browser test),
+#    mesa-vulkan-drivers + libvulkan1 (lavapipe, software Vulkan, for rendiff-wgpu)
 #    (+ libllvm19 when the archive has it, for
 #    Mitsuba's optional llvm variant; + python3-venv when venv cannot bootstrap pip).
 #    `apt-get update` runs only when something is missing.
@@ -20,7 +21,7 @@ VENV="$REPO/.venv"
 REQS="$REPO/harness/requirements.txt"
 STAMP="$VENV/.rendiff-stamp"
 EXTRA_PINS=(PyOpenGL==3.1.10 pytest==8.4.2)
-APT_PACKAGES=(povray libembree-dev libosmesa6 chromium)
+APT_PACKAGES=(povray libembree-dev libosmesa6 chromium mesa-vulkan-drivers libvulkan1)
 OPTIONAL_APT=(libllvm19) # Mitsuba llvm_ad_rgb only; scalar_rgb works without it
 
 STEP="start"
