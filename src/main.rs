@@ -666,8 +666,8 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 /// The end of `check` and `merge`: the verdict table, the tally, the report;
 /// exit 1 when any verdict fails.
 fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
-    let (table, tally) = rendiff::check::summary(&outcome.results);
-    println!("{table}");
+    let tally = rendiff::check::tally(&outcome.results);
+    print!("{}", outcome.table);
     println!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,

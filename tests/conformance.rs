@@ -55,7 +55,7 @@ fn main() {
                 })]
             }
             Ok(outcome) => {
-                eprintln!("{}", check::summary(&outcome.results).0);
+                eprintln!("{}", outcome.table);
                 eprintln!("run folder: {}", run_dir.display());
                 outcome
                     .results

@@ -1121,5 +1121,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unused:
         listed = ", ".join(f"{u['entry']} ({u['scene']}/{u['backend']}/{u['buffer']})" for u in unused)
         print(f"note: expectations matched by no compared result: {listed}", file=sys.stderr)
-    print(f"results: {run / 'results.json'} ({time.monotonic() - t0:.1f} s)")
+    # stdout holds the verdict table alone (`rendiff check` prints it); this line is a message.
+    print(f"results: {run / 'results.json'} ({time.monotonic() - t0:.1f} s)", file=sys.stderr)
     return EXIT_OK

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from . import classify, compare, expectations, exrbuf, resolved, tolerance
+from . import results as results_table
 from .manifest import EntryError, ManifestError, load_manifest, load_reference, render_info, render_reason, run_path
 from .results import finite, write_results
 
@@ -439,31 +440,23 @@ def _cell(r: Mapping[str, Any], k: str) -> str:
 
 
 def format_table(results: Sequence[Mapping[str, Any]]) -> str:
+    """One row per relation, backend and buffer, in the layout of the verdict table
+    (`results.fixed_width`), then a count per status."""
     header = ("relation", "backend", "buf", "status", "edge", "interior", "mask", "max_rel")
-    rows = [header]
-    for r in results:
-        rows.append(
-            (
-                r["relation"],
-                r["backend"],
-                r["buffer"],
-                r["status"],
-                _cell(r, "edge_mismatches"),
-                _cell(r, "interior_mismatches"),
-                _cell(r, "mask_mismatches") if r["buffer"] == "Z" else "-",
-                _cell(r, "max_rel_error") if r["buffer"] == "Z" else "-",
-            )
+    rows = [
+        (
+            r["relation"],
+            r["backend"],
+            r["buffer"],
+            r["status"],
+            _cell(r, "edge_mismatches"),
+            _cell(r, "interior_mismatches"),
+            _cell(r, "mask_mismatches") if r["buffer"] == "Z" else "-",
+            _cell(r, "max_rel_error") if r["buffer"] == "Z" else "-",
         )
-    widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
-    lines = [
-        "  ".join(c.ljust(widths[i]) if i < 4 else c.rjust(widths[i]) for i, c in enumerate(row)).rstrip()
-        for row in rows
+        for r in results
     ]
-    counts: dict[str, int] = {}
-    for r in results:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
-    lines.append(f"{len(results)} entries: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none"))
-    return "\n".join(lines)
+    return "\n".join([*results_table.fixed_width(header, rows, range(4, 8)), results_table.count_line(results)])
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import json
 import math
+import unicodedata
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from . import atomic, expectations, vocab
-from .vocab import Buffer, Status
+from .vocab import FAILING_STATUSES, Buffer, Status
 
 RESULTS_FORMAT = "rendiff-results/1"
 
@@ -227,12 +228,52 @@ def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json")
     return path
 
 
-def format_table(results: Sequence[Mapping[str, Any]]) -> str:
-    """A compact, fixed-width table: one row per entry, then a count per status."""
-    header = ("scene", "backend", "buf", "status", "edge", "interior", "mask", "max_rel", "reason")
-    rows = []
+def fixed_width(header: Sequence[str], rows: Sequence[Sequence[str]], numeric: range) -> list[str]:
+    """Rows as aligned text: columns in `numeric` right-aligned, others left-aligned, the last
+    column, when it is free text, not padded. The one table layout of the project: `rendiff check`'s
+    verdict table (`format_table`) and the metamorphic table use it."""
+    n = len(header)
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(n)]
+    lines = []
+    for row in [header, *rows]:
+        cells = [
+            row[i]
+            if i == n - 1 and i not in numeric
+            else row[i].rjust(widths[i])
+            if i in numeric
+            else row[i].ljust(widths[i])
+            for i in range(n)
+        ]
+        lines.append("  ".join(cells).rstrip())
+    return lines
+
+
+def count_line(results: Sequence[Mapping[str, Any]], what: str = "entries") -> str:
+    """`N entries: fail 1, pass 3`: the count per status under a table."""
+    counts: dict[str, int] = {}
     for r in results:
+        counts[str(r["status"])] = counts.get(str(r["status"]), 0) + 1
+    return f"{len(results)} {what}: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")
+
+
+def _table_order(r: Mapping[str, Any]) -> tuple[bool, bool, str, str, str]:
+    """Failures first, then skips, then the rest, each by scene, backend and buffer."""
+    return (r["status"] not in FAILING_STATUSES, r["status"] != Status.SKIPPED, r["scene"], r["backend"], r["buffer"])
+
+
+def format_table(results: Sequence[Mapping[str, Any]]) -> str:
+    """The verdict table `rendiff check`, `merge` and `compare` print: one row per entry,
+    failures first, then a count per status. Mismatch counts by class (docs/verifier.md), Z's
+    mask mismatches and the largest relative error where they mean something, and the reason."""
+    header = ("scene", "backend", "buf", "status", "edge", "tie", "crack", "interior", "mask", "max_rel", "note")
+    rows = []
+    for r in sorted(results, key=_table_order):
         compared = r["status"] not in NOT_COMPARED
+
+        def count(key: str, r: Mapping[str, Any] = r, compared: bool = compared) -> str:
+            v = r.get(key)
+            return str(v) if compared and isinstance(v, int) else "-"
+
         rel = r.get("max_rel_error")
         if r["buffer"] == Buffer.RGB and r.get("mode") == "statistical":
             rel = None  # the means' relative difference is noise here; min_p is in results.json
@@ -242,26 +283,21 @@ def format_table(results: Sequence[Mapping[str, Any]]) -> str:
                 str(r["backend"]),
                 str(r["buffer"]),
                 str(r["status"]),
-                str(r["edge_mismatches"]) if compared else "-",
-                str(r["interior_mismatches"]) if compared else "-",
-                str(r["mask_mismatches"]) if compared and r["buffer"] == Buffer.Z else "-",
+                count("edge_mismatches"),
+                count("tie_mismatches"),
+                count("crack_mismatches"),
+                count("interior_mismatches"),
+                count("mask_mismatches") if r["buffer"] == Buffer.Z else "-",
                 f"{rel:.2g}" if compared and r["buffer"] in (Buffer.Z, Buffer.RGB) and rel is not None else "-",
-                _short(str(r.get("reason", ""))),
+                _short(str(r.get("reason", "")).split("\n", 1)[0]),
             )
         )
-    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(8)]
-    lines = []
-    for row in [header, *rows]:
-        cells = [row[i].ljust(widths[i]) if i < 4 else row[i].rjust(widths[i]) for i in range(8)]
-        lines.append("  ".join(cells + [row[8]]).rstrip())
-    counts: dict[str, int] = {}
-    for r in results:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
-    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "no entries"
-    lines.append(f"{len(results)} entries: {summary}")
-    return "\n".join(lines)
+    return "\n".join([*fixed_width(header, rows, range(4, 10)), count_line(results)])
 
 
 def _short(text: str, limit: int = 90) -> str:
-    text = text.replace("\n", " ")
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+    """A verdict's reason for the table: control characters escaped (reasons carry renderers'
+    stderr, which may hold any text, terminal escapes included), cut to `limit` characters
+    with "..." when longer."""
+    clean = "".join(c.encode("unicode_escape").decode("ascii") if unicodedata.category(c) == "Cc" else c for c in text)
+    return clean if len(clean) <= limit else clean[: limit - 3] + "..."

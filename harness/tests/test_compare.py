@@ -298,8 +298,9 @@ def test_table_on_stdout(compared: Any) -> None:
     lines = out.splitlines()
     assert lines[0].split()[:4] == ["scene", "backend", "buf", "status"]
     assert any(ln.split()[:4] == ["quads", "povray", "id", "fail"] for ln in lines)
-    assert any("entries:" in ln for ln in lines)
-    assert "results.json" in lines[-1]
+    # stdout is the table alone (rendiff check prints it as it is); the count line ends it.
+    assert "entries:" in lines[-1]
+    assert not any("results.json" in ln for ln in lines)
 
 
 def _run_with(tmp_path: Path, toml: str) -> dict[tuple[str, str, str], dict[str, Any]]:
@@ -657,3 +658,22 @@ def test_scenes_compared_in_processes_give_the_same_results(tmp_path: Path) -> N
     assert len({r["scene"] for r in docs[0]["results"]}) >= 2
     assert docs[0] == docs[1]
     assert [u["scene"] for u in docs[1]["unused_expectations"]] == ["nowhere"]
+
+
+def test_the_verdict_table_puts_failures_first_and_escapes_reasons() -> None:
+    from rendiff_harness import results
+
+    def row(scene: str, status: str, reason: str = "") -> dict[str, Any]:
+        return {"scene": scene, "backend": "b", "buffer": "id", "status": status, "reason": reason}
+
+    # 86 ASCII characters, then multi-byte ones across the cut; a bell and an escape.
+    long = "x" * 86 + "ééé✓✓✓ and more text to pass ninety characters"
+    table = results.format_table(
+        [row("a", "pass"), row("b", "skipped", "why"), row("c", "fail", long), row("d", "error", "bell\x07 esc\x1b")]
+    )
+    lines = table.splitlines()
+    assert [line.split()[0] for line in lines[1:5]] == ["c", "d", "b", "a"]
+    note = lines[1].split("  ")[-1]
+    assert note.endswith("...") and len(note) == 90 and "é" in note
+    assert lines[2].endswith("bell\\x07 esc\\x1b")
+    assert lines[-1] == "4 entries: error 1, fail 1, pass 1, skipped 1"

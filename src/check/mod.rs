@@ -137,6 +137,8 @@ pub struct CheckOutcome {
     pub manifest: Manifest,
     /// How it compared.
     pub results: Results,
+    /// The verdict table, as the comparison printed it.
+    pub table: String,
 }
 
 /// Where rendiff's own files live (the Python harness and its venv, the
@@ -715,8 +717,12 @@ fn render_and_compare(
         std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
         Ok(())
     })?;
-    let results = compare(opts, &scratch)?;
-    Ok(CheckOutcome { manifest, results })
+    let (results, table) = compare(opts, &scratch)?;
+    Ok(CheckOutcome {
+        manifest,
+        results,
+        table,
+    })
 }
 
 /// What a loaded scene's external renders need.
@@ -884,7 +890,9 @@ fn external(
     rec
 }
 
-fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
+/// Runs the harness's comparison: results.json, and the verdict table it
+/// prints on stdout (its one formatter, `results.format_table`).
+fn compare(opts: &CheckOptions, scratch: &Path) -> Result<(Results, String)> {
     let results_path = opts.run_dir.join("results.json");
     let _ = std::fs::remove_file(&results_path);
     let mut cmd = harness_command(opts);
@@ -899,9 +907,6 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
     }
     let o = run_with_timeout(cmd, Duration::from_secs(1800), &scratch.join("compare"))
         .context("cannot run the comparison (python -m rendiff_harness compare)")?;
-    if !opts.quiet {
-        eprint!("{}", o.stdout);
-    }
     if o.timed_out || o.code != Some(0) {
         bail!(
             "the comparison failed ({}): {}\nrun scripts/setup.sh if the Python harness is missing",
@@ -911,7 +916,9 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<Results> {
     }
     let text = std::fs::read_to_string(&results_path)
         .with_context(|| format!("{}: comparison wrote no results", results_path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{}: unreadable", results_path.display()))
+    let results = serde_json::from_str(&text)
+        .with_context(|| format!("{}: unreadable", results_path.display()))?;
+    Ok((results, o.stdout))
 }
 
 /// The run's scenes in order, each with its manifest `role`: the calibration
@@ -999,18 +1006,11 @@ pub struct Tally {
     pub skipped: usize,
 }
 
-/// A table of every verdict, failures first, and the tally. Columns are as
-/// wide as their widest cell (scene names run long), and the edge/tie/crack
-/// counts are the verifier's allowed classes, interior its failures.
-pub fn summary(results: &Results) -> (String, Tally) {
-    let mut rows: Vec<&manifest::ResultEntry> = results.results.iter().collect();
-    rows.sort_by_key(|r| (!r.is_failure(), r.status != "skipped", r.key()));
+/// The tally of a run's verdicts. The verdict table itself has one
+/// formatter, the harness's (`results.format_table`), printed by `compare`.
+pub fn tally(results: &Results) -> Tally {
     let mut t = Tally::default();
-    let mut cells: Vec<[String; 9]> = vec![[
-        "scene", "backend", "buf", "status", "edge", "tie", "crack", "interior", "note",
-    ]
-    .map(String::from)];
-    for r in rows {
+    for r in &results.results {
         if r.is_failure() {
             t.failed += 1;
         } else if r.status == "skipped" {
@@ -1018,46 +1018,8 @@ pub fn summary(results: &Results) -> (String, Tally) {
         } else {
             t.ok += 1;
         }
-        let n = |k: &str| {
-            r.details
-                .get(k)
-                .and_then(|v| v.as_u64())
-                .map(|v| v.to_string())
-                .unwrap_or_else(|| "-".into())
-        };
-        cells.push([
-            r.scene.clone(),
-            r.backend.clone(),
-            r.buffer.clone(),
-            r.status.clone(),
-            n("edge_mismatches"),
-            n("tie_mismatches"),
-            n("crack_mismatches"),
-            n("interior_mismatches"),
-            short_note(r.reason.lines().next().unwrap_or("")),
-        ]);
     }
-    let mut width = [0usize; 9];
-    for row in &cells {
-        for (w, c) in width.iter_mut().zip(row) {
-            *w = (*w).max(c.chars().count());
-        }
-    }
-    let mut s = String::new();
-    for row in &cells {
-        let mut line = String::new();
-        for (i, c) in row.iter().enumerate() {
-            let pad = width[i].saturating_sub(c.chars().count());
-            match i {
-                8 => line.push_str(c),
-                4..=7 => line.push_str(&format!("{}{c}  ", " ".repeat(pad))),
-                _ => line.push_str(&format!("{c}{}  ", " ".repeat(pad))),
-            }
-        }
-        s.push_str(line.trim_end());
-        s.push('\n');
-    }
-    (s, t)
+    t
 }
 
 /// The record of a backend skipped because it cannot model what the scene requires.
@@ -1070,48 +1032,9 @@ fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
     }
 }
 
-/// The first 87 characters of a verdict's reason for the table, "..." when cut, and
-/// control characters escaped: reasons carry renderers' stderr, which may hold any
-/// text (a byte-index cut inside a multi-byte character used to panic here).
-fn short_note(line: &str) -> String {
-    let clean: String = line
-        .chars()
-        .flat_map(|c| {
-            if c.is_control() {
-                c.escape_debug().collect::<Vec<_>>()
-            } else {
-                vec![c]
-            }
-        })
-        .collect();
-    if clean.chars().count() <= 90 {
-        return clean;
-    }
-    let mut cut: String = clean.chars().take(87).collect();
-    cut.push_str("...");
-    cut
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn table_notes_cut_on_character_boundaries_and_escape_controls() {
-        // 86 ASCII bytes, then multi-byte characters across the old byte cut at 87.
-        let reason = format!(
-            "{}ééé✓✓✓ and more text to pass ninety characters",
-            "x".repeat(86)
-        );
-        let note = short_note(&reason);
-        assert!(
-            note.ends_with("...") && note.chars().count() == 90,
-            "{note}"
-        );
-        assert!(note.starts_with(&"x".repeat(86)) && note.contains('é'));
-        assert_eq!(short_note("bell\u{7} esc\u{1b}"), "bell\\u{7} esc\\u{1b}");
-        assert_eq!(short_note("short"), "short");
-    }
 
     fn req(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()

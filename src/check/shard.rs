@@ -227,9 +227,13 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         run_dir: staging.dir.clone(),
         ..opts.clone()
     };
-    let results = super::compare(&staged, &staging.dir.join("scratch"))?;
+    let (results, table) = super::compare(&staged, &staging.dir.join("scratch"))?;
     staging.publish()?;
-    Ok(CheckOutcome { manifest, results })
+    Ok(CheckOutcome {
+        manifest,
+        results,
+        table,
+    })
 }
 
 #[cfg(test)]
