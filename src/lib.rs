@@ -12,7 +12,7 @@ pub use rendiff_core::{
     shade, trace, visibility, vocab,
 };
 
-pub mod bench;
+pub mod args;
 pub mod check;
 pub mod diff;
 pub mod gate;

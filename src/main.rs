@@ -5,7 +5,6 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rendiff::backends::embree::EmbreeMode;
 use rendiff::exr_io::{frame_attrs, write_frame_with};
-use rendiff::names::Named;
 use rendiff::progress::LazyProgress;
 use rendiff::render::{Backend, NotRendered, RenderOptions, Rendered};
 use rendiff::scene::resolve::ResolvedScene;
@@ -53,13 +52,13 @@ enum Command {
         #[arg(short, long)]
         output: Option<PathBuf>,
         /// Worker threads (default: all cores; at most 4 per core).
-        #[arg(long, value_parser = parse_threads)]
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
         threads: Option<usize>,
         /// BVH build quality for the tracer.
-        #[arg(long, value_parser = named::<BvhQuality>(), default_value = "medium")]
+        #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "medium")]
         bvh: BvhQuality,
         /// How the tracer's pixel rays walk the BVH (same buffers either way).
-        #[arg(long, value_parser = named::<trace::TraceKernel>(), default_value = "packets")]
+        #[arg(long, value_parser = rendiff::args::named::<trace::TraceKernel>(), default_value = "packets")]
         kernel: trace::TraceKernel,
         /// Skip the PNG previews.
         #[arg(long)]
@@ -74,7 +73,7 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Deliberately wrong shading, for testing the statistical gate's power.
-        #[arg(long, value_parser = named::<rendiff::shade::Bias>(), hide = true)]
+        #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
     },
     /// List scenes in a folder with the features they require.
@@ -126,7 +125,7 @@ enum Command {
         #[arg(long, value_parser = parse_spp)]
         spp: Option<u32>,
         /// Deliberately wrong core shading, for testing the statistical gate's power.
-        #[arg(long, value_parser = named::<rendiff::shade::Bias>(), hide = true)]
+        #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
         /// Folder of camera calibration probe scenes, rendered first on every
         /// backend (default: rendiff's scenes/calibration).
@@ -146,7 +145,7 @@ enum Command {
         shard_costs: Option<PathBuf>,
         /// External renders run this many at a time, across scenes (default:
         /// the cores; 1 runs them one after another).
-        #[arg(long, value_parser = parse_threads)]
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
         jobs: Option<usize>,
         /// Your own renderers, declared by command in a TOML file
         /// (docs/your-renderer.md); they run beside the built-in ones.
@@ -185,34 +184,15 @@ enum Command {
         #[arg(long)]
         renderers: Option<PathBuf>,
     },
-    /// Benchmarks: speed against accuracy (knobs), against other renderers (peers),
-    /// raster vs trace by triangle size (crossover), numerical extremes (stability).
-    ///
-    /// Without a subcommand: raster and trace on one scene (median of runs after a
-    /// warm-up), as JSON. Each subcommand writes JSON, HTML and SVG to reports/bench/.
-    #[command(args_conflicts_with_subcommands = true)]
+    /// Benchmarks (knobs, peers, crossover, scale, stability, variance, or raster
+    /// and trace on one scene): runs `rendiff-bench` from beside this binary
+    /// (`cargo build --release -p rendiff-bench`) with the same arguments;
+    /// `rendiff bench --help` lists them.
+    #[command(disable_help_flag = true)]
     Bench {
-        /// What to benchmark (default: raster and trace on SCENE).
-        #[command(subcommand)]
-        what: Option<rendiff::bench::cli::BenchCommand>,
-        /// Scene file (TOML).
-        #[arg(default_value = "scenes/million.toml")]
-        scene: PathBuf,
-        /// Resolution override, e.g. 1920x1080.
-        #[arg(long, value_parser = rendiff::bench::knobs::parse_size)]
-        size: Option<(u32, u32)>,
-        /// Thread counts, comma-separated.
-        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = parse_threads)]
-        threads: Vec<usize>,
-        /// Timed runs per configuration.
-        #[arg(long, default_value_t = 3)]
-        runs: usize,
-        /// BVH build quality.
-        #[arg(long, value_parser = named::<BvhQuality>(), default_value = "medium")]
-        bvh: BvhQuality,
-        /// Output JSON file.
-        #[arg(short, long, default_value = "reports/bench/core.json")]
-        output: PathBuf,
+        /// Arguments of `rendiff-bench`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
     },
     /// Compare two buffer EXRs, every buffer bit for bit (IDs, depth, normals,
     /// radiance). Exit 1 on any difference, 2 when they share no buffer.
@@ -275,14 +255,6 @@ enum Command {
         #[arg(long)]
         allow_scene_changes: bool,
     },
-}
-
-/// A clap parser for a core enum: its names are the core's ([`Named`]), so the
-/// core needs no command-line library and each name is written once.
-fn named<T: Named + Clone>() -> impl clap::builder::TypedValueParser<Value = T> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(T::ALL.iter().map(|v| v.name()))
-        .map(|s| T::from_name(&s).expect("clap accepted only listed names"))
 }
 
 fn main() -> ExitCode {
@@ -526,37 +498,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let code = rendiff::check::process::peak_rss_main(&report, &command)?;
             Ok(ExitCode::from(u8::try_from(code).unwrap_or(255)))
         }
-        Command::Bench {
-            what: Some(what), ..
-        } => {
-            rendiff::bench::cli::run(what)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Bench {
-            what: None,
-            scene,
-            size,
-            threads,
-            runs,
-            bvh,
-            output,
-        } => {
-            let resolved = load_scene(&scene)?;
-            let opts = rendiff::bench::BenchOptions {
-                size,
-                threads,
-                runs: runs.max(1),
-                bvh,
-            };
-            let record = rendiff::bench::run(&resolved, &scene.display().to_string(), &opts)?;
-            let text = serde_json::to_string_pretty(&record)?;
-            rendiff::exr_io::write_atomically(&output, |tmp| {
-                std::fs::write(tmp, &text)?;
-                Ok(())
-            })?;
-            println!("{text}");
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::Bench { args } => bench(&args),
         Command::Check {
             scenes,
             output,
@@ -642,6 +584,27 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+/// `rendiff bench ...`: the benchmarks are a workspace member of their own
+/// (crates/rendiff-bench), run as the `rendiff-bench` binary found beside
+/// this one; its exit status is passed on.
+fn bench(args: &[std::ffi::OsString]) -> Result<ExitCode> {
+    let exe = std::env::current_exe().context("cannot find the rendiff binary")?;
+    let bench = exe.with_file_name("rendiff-bench");
+    if !bench.is_file() {
+        anyhow::bail!(
+            "{}: not built; the benchmarks are their own binary: cargo build --release -p rendiff-bench",
+            bench.display()
+        );
+    }
+    let status = std::process::Command::new(&bench)
+        .args(args)
+        .status()
+        .with_context(|| format!("cannot run {}", bench.display()))?;
+    Ok(ExitCode::from(
+        status.code().map_or(2, |c| c.clamp(0, 255) as u8),
+    ))
+}
+
 /// The `--renderers` file, made absolute and checked to exist here, so that
 /// a typo is one clear line and the harness (which runs in rendiff's
 /// checkout) finds it.
@@ -699,25 +662,6 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);
 /// exit 1 on any difference, 0 when identical, 2 (an error) when the files
 /// share no buffer.
-/// More worker threads than this per core only adds switching (and `--threads
-/// 100000` once started 2661 threads and stalled the machine).
-const MAX_THREADS_PER_CORE: usize = 4;
-
-/// `--threads N`: 1 to 4 per core of this machine, checked before any thread starts.
-fn parse_threads(s: &str) -> std::result::Result<usize, String> {
-    let n: usize = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a thread count"))?;
-    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-    let max = MAX_THREADS_PER_CORE * cores;
-    if n == 0 || n > max {
-        return Err(format!(
-            "{n} threads: give 1 to {max} ({MAX_THREADS_PER_CORE} per core on {cores} cores)"
-        ));
-    }
-    Ok(n)
-}
-
 /// `--spp N`: the scene file's own limit (`scene::check_spp`), before any rendering.
 fn parse_spp(s: &str) -> std::result::Result<u32, String> {
     let n: u32 = s

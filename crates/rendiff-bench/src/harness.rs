@@ -4,8 +4,8 @@
 //! `time_s` and the backend's sub-timings (`info`). A missing venv or a failing
 //! renderer becomes a recorded reason, never a failed benchmark.
 
-use crate::check::process::run_with_timeout;
-use crate::scene::resolve::ResolvedScene;
+use rendiff::check::process::run_with_timeout;
+use rendiff::scene::resolve::ResolvedScene;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -38,7 +38,7 @@ pub struct Harness {
 impl Harness {
     /// The harness if its Python exists, else why not (recorded as the skip reason).
     pub fn find(root: &Path, timeout: Duration, scratch: &Path) -> Result<Harness, String> {
-        let py = crate::check::python(root);
+        let py = rendiff::check::python(root);
         if !py.exists() {
             return Err(format!(
                 "Python harness not installed ({} is missing): run scripts/setup.sh",
@@ -55,7 +55,7 @@ impl Harness {
     /// Exports `scene` to `dir/resolved` for the harness to read.
     pub fn export(&self, scene: &ResolvedScene, dir: &Path) -> Result<PathBuf, String> {
         let out = dir.join("resolved");
-        crate::scene::export::export(scene, &out).map_err(|e| format!("export failed: {e:#}"))?;
+        rendiff::scene::export::export(scene, &out).map_err(|e| format!("export failed: {e:#}"))?;
         Ok(out)
     }
 
@@ -84,7 +84,7 @@ impl Harness {
         seed: Option<u64>,
         settings: &[String],
     ) -> Result<HarnessRun, String> {
-        let mut cmd = Command::new(crate::check::python(&self.root));
+        let mut cmd = Command::new(rendiff::check::python(&self.root));
         cmd.current_dir(&self.root)
             .env("PYTHONPATH", self.root.join("harness"))
             .args(["-m", "rendiff_harness", "render", "--backend", backend])
@@ -107,7 +107,7 @@ impl Harness {
         if o.timed_out {
             return Err(format!("{backend}: timed out after {} s", limit.as_secs()));
         }
-        if o.code == Some(crate::check::isolated::EXIT_SKIPPED) {
+        if o.code == Some(rendiff::check::isolated::EXIT_SKIPPED) {
             let reason = last_json_line(&o.stdout)
                 .and_then(|v| v.get("reason").and_then(Value::as_str).map(String::from))
                 .unwrap_or_else(|| "no reason given".into());

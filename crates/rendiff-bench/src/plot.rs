@@ -4,8 +4,8 @@
 //! label escaping and colors are the report's own, so every label from a
 //! scene or a renderer goes through [`escape`].
 
-use crate::report::html::escape;
-use crate::report::svg::backend_color;
+use rendiff::report::html::escape;
+use rendiff::report::svg::backend_color;
 use std::fmt::Write;
 
 /// One configuration on a time-vs-error plot.

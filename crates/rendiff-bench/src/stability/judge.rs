@@ -4,11 +4,11 @@
 //! lower id) for coplanar overlaps, z-fighting and geometry next to the eye.
 
 use super::families::Layout;
-use crate::exr_io::Buffers;
-use crate::frame::{Frame, BACKGROUND_ID};
-use crate::predicate::exact_sign;
-use crate::scene::resolve::ResolvedScene;
-use crate::visibility::{Counters, TriEdges};
+use rendiff::exr_io::Buffers;
+use rendiff::frame::{Frame, BACKGROUND_ID};
+use rendiff::predicate::exact_sign;
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::visibility::{Counters, TriEdges};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 

@@ -1,24 +1,24 @@
 //! The core path tracer's variance of the mean is calibrated: across
 //! independent seeds, the empirical variance of each pixel's mean matches the
 //! renders' own estimates (the balanced ratio over pixels, see
-//! `rendiff::bench::variance_stats::Calibration`), and an estimate halved or
+//! `rendiff_bench::variance_stats::Calibration`), and an estimate halved or
 //! doubled through the bias hook is rejected. Deterministic seeds; the
 //! threshold |z| > 5 is a two-sided test with false-alarm rate 5.7e-7 when z is
 //! standard normal, which `rendiff bench variance` checks on 64 disjoint seed
 //! blocks (its record's `quick_test`: sd 0.92, max |z| 2.8); a halved or
 //! doubled estimate gives |z| near 67, so the power is not in doubt.
 
-use rendiff::bench::variance::{calibration_z, TEST_FIRST_SEED, TEST_SEEDS, TEST_SPP, TEST_Z};
 use rendiff::exr_io::read_radiance;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use rendiff::shade::Bias;
 use rendiff::trace::{BvhQuality, TraceBvh};
+use rendiff_bench::variance::{calibration_z, TEST_FIRST_SEED, TEST_SEEDS, TEST_SPP, TEST_Z};
 use std::path::Path;
 
 /// The scene, its BVH and the cached reference's variance (the balanced ratio's weights).
 fn cornell() -> (ResolvedScene, TraceBvh, Vec<[f32; 3]>) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
     let scene = ResolvedScene::resolve(&Scene::load(&root.join("scenes/cornell_gi.toml")).unwrap())
         .unwrap();
     let bvh = TraceBvh::build(&scene, BvhQuality::Medium);

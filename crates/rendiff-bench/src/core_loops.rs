@@ -3,10 +3,10 @@
 //! operation counts, as JSON. Kept as the quick single-scene measurement; the
 //! subcommands (knobs, peers, crossover, stability) build on the same helpers.
 
-use crate::raster::{self, RasterOptions};
-use crate::scene::resolve::ResolvedScene;
-use crate::trace::{self, BvhQuality, TraceBvh};
 use anyhow::{Context, Result};
+use rendiff::raster::{self, RasterOptions};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::{self, BvhQuality, TraceBvh};
 use serde_json::{json, Value};
 
 /// What to measure.

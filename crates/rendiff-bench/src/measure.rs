@@ -4,11 +4,11 @@
 //! the same way (warm-up, then the median of `runs`).
 
 use super::{timed, Timed};
-use crate::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
-use crate::frame::Frame;
-use crate::raster::{self, RasterOptions};
-use crate::scene::resolve::ResolvedScene;
-use crate::trace::{self, BvhQuality, TraceBvh};
+use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
+use rendiff::frame::Frame;
+use rendiff::raster::{self, RasterOptions};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::{self, BvhQuality, TraceBvh};
 use serde_json::{json, Value};
 
 /// The core rasterizer, timed whole (binning included: it has no separate build).

@@ -3,16 +3,18 @@
 //! inline SVG, standalone SVG files). Speed is never asserted here: the
 //! numbers of a quick run mean nothing; only the shape of the output does.
 
-use rendiff::bench::pareto;
+use rendiff_bench::pareto;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-/// Runs `rendiff bench <what> --quick -o DIR` from the repository root and returns the JSON record.
+/// Runs `rendiff-bench <what> --quick -o DIR` (what `rendiff bench` runs) from the
+/// repository root and returns the JSON record.
 fn bench(what: &str, dir: &Path) -> Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_rendiff"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["bench", what, "--quick", "-o"])
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let out = Command::new(env!("CARGO_BIN_EXE_rendiff-bench"))
+        .current_dir(root)
+        .args([what, "--quick", "-o"])
         .arg(dir)
         .output()
         .expect("rendiff runs");
@@ -249,4 +251,25 @@ fn variance_writes_calibration_split_and_the_quick_tests_power() {
     let power = record["quick_test"]["power"].as_array().expect("power");
     assert_eq!(power.len(), 2);
     assert!(power.iter().all(|p| p["rejected"] == true));
+}
+
+#[test]
+fn scale_times_the_main_job_and_its_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("scale", dir.path());
+    let configs = record["configurations"].as_array().unwrap();
+    assert_eq!(configs.len(), 2);
+    for c in configs {
+        assert!(c["median_s"].as_f64().is_some_and(|t| t > 0.0), "{c}");
+    }
+    assert!(record["speedup_default_over_sequential"].as_f64().is_some());
+    let shards = record["shards"].as_array().unwrap();
+    assert_eq!(shards[0]["shards"], 2);
+    assert_eq!(shards[0]["shard_s"].as_array().unwrap().len(), 2);
+    // Per scene and renderer, from the default run's manifest.
+    let per = record["per_scene_s"].as_object().unwrap();
+    assert!(
+        per["three_triangles"]["povray"].as_f64().is_some(),
+        "{per:?}"
+    );
 }

@@ -16,6 +16,7 @@
 //! here asserts a time.
 
 use super::page::{self, Page};
+use super::plot;
 use super::{environment, finish_environment, median, Common, Output, Scratch};
 use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
@@ -42,7 +43,7 @@ struct Timing {
 }
 
 fn rendiff(args: &[String]) -> Result<Timing> {
-    let exe = std::env::current_exe().context("cannot find the rendiff binary")?;
+    let exe = super::rendiff_binary()?;
     let t = Instant::now();
     let out = Command::new(&exe)
         .args(args)
@@ -183,15 +184,58 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     }
     record["shards"] = json!(shard_rows);
     finish_environment(&mut record);
-    let html = html(&record);
+    let svg = shards_plot(&record);
+    let html = html(&record, &svg);
     Ok(Output {
         record,
         html,
-        svgs: Vec::new(),
+        svgs: vec![("shards".into(), svg)],
     })
 }
 
-fn html(r: &Value) -> String {
+/// Wall time against the number of shards: the slowest shard plus the merge
+/// (what N machines take), the sum (one machine, shard after shard), and the
+/// unsharded default for reference.
+fn shards_plot(r: &Value) -> String {
+    let rows: Vec<&Value> = r["shards"].as_array().into_iter().flatten().collect();
+    let at = |key: &str| -> Vec<(f64, f64)> {
+        rows.iter()
+            .filter_map(|s| Some((s["shards"].as_f64()?, s[key].as_f64()?)))
+            .collect()
+    };
+    let default_s = r["configurations"][1]["median_s"]
+        .as_f64()
+        .unwrap_or(f64::NAN);
+    let series = [
+        plot::Series {
+            name: "slowest shard + merge".into(),
+            points: at("slowest_plus_merge_s"),
+            dashed: false,
+        },
+        plot::Series {
+            name: "all shards + merge".into(),
+            points: at("sum_s"),
+            dashed: true,
+        },
+        plot::Series {
+            name: "one run (default)".into(),
+            points: rows
+                .iter()
+                .filter_map(|s| Some((s["shards"].as_f64()?, default_s)))
+                .collect(),
+            dashed: true,
+        },
+    ];
+    plot::lines(
+        "The main job split into shards",
+        "shards",
+        "wall seconds",
+        &series,
+        &[],
+    )
+}
+
+fn html(r: &Value, svg: &str) -> String {
     let mut p = Page::new("rendiff bench scale: the main job's wall time");
     p.para("Each row is a whole `rendiff check` of the main job's scenes on this machine, in one benchmark run.");
     let rows: Vec<Vec<String>> = r["configurations"]
@@ -235,6 +279,7 @@ fn html(r: &Value) -> String {
         ],
         &rows,
     );
+    p.svg(svg, Some("scale-shards.svg"));
     p.note("The speed-up bound is the default run's time over the slowest shard plus the merge: what N machines could give at best.");
     p.environment(&r["environment"]);
     p.finish()

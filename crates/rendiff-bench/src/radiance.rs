@@ -6,11 +6,11 @@
 use anyhow::{bail, Result};
 use std::path::Path;
 
-pub use crate::exr_io::RgbImage;
+pub use rendiff::exr_io::RgbImage;
 
 /// Reads `R,G,B` (and `var.*` when stored) from an EXR; an error when there is no radiance.
 pub fn read_rgb(path: &Path) -> Result<RgbImage> {
-    crate::exr_io::read_radiance(path)?
+    rendiff::exr_io::read_radiance(path)?
         .ok_or_else(|| anyhow::anyhow!("{}: no R,G,B channels", path.display()))
 }
 
@@ -21,7 +21,7 @@ pub fn gi_scene_and_reference(
     scene: &Path,
     reference: &Path,
     what: &str,
-) -> Result<(crate::scene::resolve::ResolvedScene, RgbImage)> {
+) -> Result<(rendiff::scene::resolve::ResolvedScene, RgbImage)> {
     let resolved = super::load_scene(scene)?;
     if !resolved.requires.contains("global_illumination") {
         bail!(

@@ -2,14 +2,15 @@
 //! scene families pushed to large offsets and scales, tiny near planes,
 //! sub-pixel and sliver triangles, grazing views and geometry next to the eye.
 
+#[path = "../../../tests/common_scenes.rs"]
 mod common_scenes;
 
 use common_scenes::*;
 use glam::{DVec3, Vec3};
-use rendiff::bench::stability::{families, judge};
 use rendiff::camera::Camera;
 use rendiff::scene::generators::{grid, icosphere};
 use rendiff::scene::resolve::{ResolvedScene, Tri};
+use rendiff_bench::stability::{families, judge};
 
 fn to_f32(t: &[[DVec3; 3]], scale: f64, offset: DVec3) -> Vec<Tri> {
     t.iter()

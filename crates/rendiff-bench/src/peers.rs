@@ -21,14 +21,14 @@ use super::knobs::SceneSpec;
 use super::page::{num, Page};
 use super::spp::{core_path, mitsuba_path, MitsubaRun};
 use super::{measure, radiance, visibility_error, Common};
-use crate::backends::embree::{self, EmbreeCoherence, EmbreeMode, EmbreeQuery};
-use crate::camera::Camera;
-use crate::exr_io::read_buffers;
-use crate::report::svg::{backend_color, time_bars, Bar};
-use crate::scene::resolve::ResolvedScene;
-use crate::trace::{BvhQuality, TraceKernel};
 use anyhow::Result;
 use glam::{DVec3, Vec3};
+use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeMode, EmbreeQuery};
+use rendiff::camera::Camera;
+use rendiff::exr_io::read_buffers;
+use rendiff::report::svg::{backend_color, time_bars, Bar};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::{BvhQuality, TraceKernel};
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -85,7 +85,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
                 // The reference path (single rays, incoherent context) comes
                 // first; every other path must reproduce its keys.
-                let mut reference: Option<crate::frame::Frame> = None;
+                let mut reference: Option<rendiff::frame::Frame> = None;
                 for query in EmbreeQuery::ALL {
                     for coherence in EmbreeCoherence::ALL {
                         let name = measure::embree_name_with(mode, query, coherence);
@@ -266,7 +266,7 @@ fn goals(record: &Value) -> Value {
 fn pyrender(
     h: &Harness,
     scene: &ResolvedScene,
-    core: &super::Timed<crate::frame::Frame>,
+    core: &super::Timed<rendiff::frame::Frame>,
     runs: usize,
 ) -> Value {
     let dir = h.scratch.join("pyrender");

@@ -352,7 +352,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             };
             let opts = ScaleOptions {
                 common: c.clone(),
-                shards: if quick { vec![1, 2] } else { shards },
+                shards: if quick { vec![2] } else { shards },
                 scenes,
             };
             ("scale", c, scale::run(&opts)?)

@@ -11,12 +11,12 @@
 use super::page::{num, Page};
 use super::plot::{lines, Series};
 use super::{measure, visibility_error, Common};
-use crate::camera::Camera;
-use crate::scene::generators::grid;
-use crate::scene::resolve::ResolvedScene;
-use crate::trace::BvhQuality;
 use anyhow::Result;
 use glam::DVec3;
+use rendiff::camera::Camera;
+use rendiff::scene::generators::grid;
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::BvhQuality;
 use serde_json::{json, Value};
 
 /// What `bench crossover` measures.
@@ -342,7 +342,7 @@ mod tests {
     fn grid_fills_the_image() {
         let s = grid_scene(2, 8, false).unwrap();
         assert_eq!(s.triangles.len(), 8);
-        let f = crate::raster::render(&s, Default::default(), &|_| {});
+        let f = rendiff::raster::render(&s, Default::default(), &|_| {});
         assert!(f.prim.iter().all(|&p| p != u32::MAX));
     }
 }

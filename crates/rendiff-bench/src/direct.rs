@@ -16,11 +16,11 @@
 use super::harness::{number_at, Harness, HarnessRun};
 use super::knobs::{point, Group, SceneSpec};
 use super::radiance::{self, RgbImage};
-use crate::raster::{self, RasterOptions};
-use crate::scene::resolve::ResolvedScene;
-use crate::shade::{self, ShadeOptions};
-use crate::trace::{BvhQuality, TraceBvh};
 use anyhow::{bail, Result};
+use rendiff::raster::{self, RasterOptions};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::shade::{self, ShadeOptions};
+use rendiff::trace::{BvhQuality, TraceBvh};
 use serde_json::{json, Value};
 use std::path::Path;
 use std::time::Duration;

@@ -22,11 +22,11 @@
 use super::page::{num, Page};
 use super::plot::{scatter, ScatterPoint};
 use super::{measure, pareto, visibility_error, Common};
-use crate::backends::embree::{EmbreeError, EmbreeMode, EmbreeQuery};
-use crate::predicate::Precision;
-use crate::scene::resolve::ResolvedScene;
-use crate::trace::{BvhQuality, TraceBvh};
 use anyhow::{Context, Result};
+use rendiff::backends::embree::{EmbreeError, EmbreeMode, EmbreeQuery};
+use rendiff::predicate::Precision;
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::{BvhQuality, TraceBvh};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;

@@ -2,7 +2,7 @@
 //!
 //! Parameterized scene families (translation offsets, scales, near/far
 //! ratios, slivers, grazing views) are written as TOML into a temporary
-//! folder and run through `rendiff check` itself ([`crate::check::run`]), so
+//! folder and run through `rendiff check` itself ([`rendiff::check::run`]), so
 //! every backend sees exactly what a user's scene would give it. For each
 //! renderer and family the table names the first parameter value where it
 //! breaks, and how: a render error, interior ID mismatches (edge mismatches are
@@ -16,12 +16,12 @@ pub mod memory;
 use super::page::Page;
 use super::plot::{matrix, Cell};
 use super::Common;
-use crate::check::{self, manifest::ResultEntry, manifest::SceneRuns, CheckOptions};
-use crate::exr_io::read_buffers;
-use crate::raster::{self, RasterOptions};
-use crate::scene::resolve::ResolvedScene;
 use anyhow::{Context, Result};
 pub use families::{families, Family, Judge, Member};
+use rendiff::check::{self, manifest::ResultEntry, manifest::SceneRuns, CheckOptions};
+use rendiff::exr_io::read_buffers;
+use rendiff::raster::{self, RasterOptions};
+use rendiff::scene::resolve::ResolvedScene;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -790,7 +790,7 @@ mod tests {
         for f in families(false) {
             for m in f.members.iter().filter(|m| m.triangles.is_none()) {
                 let p = dir.path().join(format!("{}.toml", m.name));
-                let s = crate::scene::Scene::parse(&p, &m.toml)
+                let s = rendiff::scene::Scene::parse(&p, &m.toml)
                     .unwrap_or_else(|e| panic!("{}: {e}", m.name));
                 ResolvedScene::resolve(&s).unwrap_or_else(|e| panic!("{}: {e}", m.name));
             }

@@ -35,12 +35,27 @@ pub mod variance_stats;
 
 pub use core_loops::{run, BenchOptions};
 
-use crate::frame::Frame;
-use crate::scene::resolve::ResolvedScene;
 use anyhow::{Context, Result};
+use rendiff::frame::Frame;
+use rendiff::scene::resolve::ResolvedScene;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// The `rendiff` binary beside this one (both are built into one target
+/// folder): benchmarks that time or isolate whole `rendiff` commands run it.
+pub fn rendiff_binary() -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("cannot find the running binary")?;
+    let bin = exe.with_file_name("rendiff");
+    if bin.is_file() {
+        Ok(bin)
+    } else {
+        anyhow::bail!(
+            "{}: not built (cargo build --release -p rendiff)",
+            bin.display()
+        )
+    }
+}
 
 /// Options every subcommand shares.
 #[derive(Debug, Clone)]
@@ -114,7 +129,7 @@ pub fn resized(scene: &ResolvedScene, w: u32, h: u32) -> Result<ResolvedScene> {
 
 /// Loads and resolves a scene file.
 pub fn load_scene(path: &Path) -> Result<ResolvedScene> {
-    let scene = crate::scene::Scene::load(path)?;
+    let scene = rendiff::scene::Scene::load(path)?;
     Ok(ResolvedScene::resolve(&scene)?)
 }
 
@@ -228,7 +243,7 @@ impl VisError {
 
 /// Compares `test` with `reference` (same size): IDs exactly, depth bit for bit and relatively.
 pub fn visibility_error(reference: &Frame, test: &Frame) -> VisError {
-    let d = crate::compare_depth(&reference.z, &test.z);
+    let d = rendiff::compare_depth(&reference.z, &test.z);
     VisError {
         id_mismatches: reference
             .prim
@@ -267,7 +282,7 @@ pub fn write_outputs(
     let mut written = Vec::new();
     let mut put = |name: String, bytes: Vec<u8>| -> Result<()> {
         let path = dir.join(name);
-        crate::exr_io::write_atomically(&path, |tmp| {
+        rendiff::exr_io::write_atomically(&path, |tmp| {
             std::fs::write(tmp, &bytes)?;
             Ok(())
         })?;

@@ -4,8 +4,8 @@
 //! come from a scene, a renderer or a command line is escaped here, and only
 //! SVG made by [`super::plot`] (itself escaped) is inserted as markup.
 
-use crate::report::html::{escape, page, url};
 use anyhow::Result;
+use rendiff::report::html::{escape, page, url};
 use serde_json::Value;
 use std::fmt::Write;
 use std::path::Path;
@@ -74,7 +74,8 @@ impl Page {
 
     /// A command to reproduce the page.
     pub fn command(&mut self, cmd: &str) -> &mut Self {
-        self.body.push_str(&crate::report::html::command_block(cmd));
+        self.body
+            .push_str(&rendiff::report::html::command_block(cmd));
         self
     }
 
@@ -187,7 +188,7 @@ pub fn write_index(dir: &Path) -> Result<()> {
     }
     p.body.push_str("</ul>");
     let html = p.finish();
-    crate::exr_io::write_atomically(&dir.join("index.html"), |tmp| {
+    rendiff::exr_io::write_atomically(&dir.join("index.html"), |tmp| {
         std::fs::write(tmp, html)?;
         Ok(())
     })

@@ -6,8 +6,8 @@
 //! says so with the projection.
 
 use super::families::Family;
-use crate::check::{self, manifest::SceneRuns, CheckOptions};
 use anyhow::Result;
+use rendiff::check::{self, manifest::SceneRuns, CheckOptions};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -32,7 +32,8 @@ pub fn run(
     template: &CheckOptions,
     run_root: &Path,
 ) -> (Vec<SizeRun>, Value) {
-    let bin = std::env::current_exe().ok();
+    // The isolated renders run `rendiff render` and `rendiff peak-rss`: the tool's binary.
+    let bin = super::super::rendiff_binary().ok();
     let mut dropped: Vec<(String, String)> = Vec::new();
     let mut last: Vec<(String, f64, f64)> = Vec::new(); // (backend, rss, seconds) at the previous size
     let mut runs = Vec::new();

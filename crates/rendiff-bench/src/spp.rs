@@ -9,11 +9,11 @@
 use super::harness::{number_at, Harness};
 use super::knobs::{point, stem, Group, KnobsOptions};
 use super::radiance::{self, RgbImage};
-use crate::raster::{self, RasterOptions};
-use crate::scene::resolve::ResolvedScene;
-use crate::shade::{self, ShadeOptions};
-use crate::trace::{BvhQuality, TraceBvh};
 use anyhow::Result;
+use rendiff::raster::{self, RasterOptions};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::shade::{self, ShadeOptions};
+use rendiff::trace::{BvhQuality, TraceBvh};
 use serde_json::{json, Value};
 use std::path::Path;
 use std::time::Duration;
