@@ -25,10 +25,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import command_renderers, exrbuf, registry, resolved
+from . import command_renderers, exrbuf, registry, resolved, vocab
 from .errors import BackendError, BackendSkipped
 
-EXIT_OK, EXIT_ERROR, EXIT_SKIPPED = 0, 2, 3
+EXIT_OK, EXIT_ERROR = 0, 2
+EXIT_SKIPPED = vocab.EXIT_SKIPPED
 
 
 def _fail(message: str) -> int:

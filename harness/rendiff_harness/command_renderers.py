@@ -58,7 +58,7 @@ if TYPE_CHECKING:
 
 ENV_VAR = "RENDIFF_RENDERERS"
 """The environment variable naming the renderers file (an absolute path)."""
-EXIT_SKIP = 3
+EXIT_SKIP = vocab.EXIT_SKIPPED
 """A renderer's exit status for "cannot render this here" (the reason on its last stderr line)."""
 PLACEHOLDERS = ("scene", "out", "width", "height")
 BUFFERS = ("Z", "id", "N", "RGB")

@@ -85,7 +85,12 @@ class MismatchClass(StrEnum):
     INTERIOR = "interior"
 
 
-def as_json() -> dict[str, list[str]]:
+EXIT_SKIPPED = 3
+"""Exit status of a skipped render (Rust's `vocab::EXIT_SKIPPED`): the harness's `render`, and
+every command renderer (docs/your-renderer.md)."""
+
+
+def as_json() -> dict[str, list[str] | int]:
     """The vocabulary in the shape of ``rendiff vocab --json``."""
     return {
         "features": [f.value for f in Feature],
@@ -96,4 +101,5 @@ def as_json() -> dict[str, list[str]]:
         "render_statuses": [s.value for s in RenderStatus],
         "buffers": [b.value for b in Buffer],
         "mismatch_classes": [c.value for c in MismatchClass],
+        "exit_skipped": EXIT_SKIPPED,
     }

@@ -10,8 +10,8 @@ use std::path::Path;
 use std::process::Command;
 
 /// Exit code of `rendiff render` when the renderer is unavailable or cannot
-/// model the scene (the harness's convention): the render is skipped, not failed.
-pub const EXIT_SKIPPED: i32 = 3;
+/// model the scene: the render is skipped, not failed (one home: `vocab`).
+pub use crate::vocab::EXIT_SKIPPED;
 
 /// One render to run in a child.
 pub struct Job<'a> {

@@ -171,6 +171,13 @@ words! {
     }
 }
 
+/// The exit status of a render that was *skipped* (the renderer cannot model
+/// what the scene needs, or cannot run here, e.g. no Vulkan adapter), as
+/// opposed to 0 (rendered) and any other status (failed): `rendiff render`,
+/// the harness's `render` and every command renderer (docs/your-renderer.md)
+/// speak it.
+pub const EXIT_SKIPPED: i32 = 3;
+
 /// The whole vocabulary as JSON (`rendiff vocab --json`), for the harness's
 /// drift test.
 pub fn json() -> serde_json::Value {
@@ -184,6 +191,7 @@ pub fn json() -> serde_json::Value {
         "render_statuses": RenderStatus::names(),
         "buffers": Buffer::names(),
         "mismatch_classes": MismatchClass::names(),
+        "exit_skipped": EXIT_SKIPPED,
     })
 }
 
