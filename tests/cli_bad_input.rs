@@ -108,7 +108,10 @@ fn expect_failure_with(toml: &str, setup: impl FnOnce(&Path), must_mention: &[&s
     );
     let stderr = check_failure(&res, must_mention);
     assert!(
-        stderr.contains("bad.toml") || must_mention.iter().any(|m| m.ends_with(".obj")),
+        stderr.contains("bad.toml")
+            || must_mention
+                .iter()
+                .any(|m| m.ends_with(".obj") || m.ends_with(".gltf")),
         "file not named: {stderr}"
     );
     assert!(!out.exists(), "an output file was written");
@@ -174,6 +177,40 @@ fn missing_mesh_file() {
         &s,
         &[],
         &["objects[0].mesh", "nope.obj", "cannot be opened"],
+    );
+}
+
+/// A glTF whose one buffer has the given uri (a single triangle, 36 bytes).
+fn gltf_with_buffer(uri: &str) -> String {
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+           "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+           "buffers": [{{"uri": {uri:?}, "byteLength": 36}}],
+           "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+           "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                           "min": [0, 0, 0], "max": [1, 1, 0]}}]}}"#
+    )
+}
+
+#[test]
+fn gltf_buffers_missing_or_outside_the_scene_folder() {
+    let s =
+        format!("requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"m.gltf\"\n");
+    let gltf = gltf_with_buffer("m.bin");
+    expect_failure(
+        &s,
+        &[("scenes/m.gltf", &gltf)],
+        &["m.gltf", "objects[0].mesh", "buffer 0 (m.bin) is missing"],
+    );
+    let gltf = gltf_with_buffer("../m.bin");
+    expect_failure(
+        &s,
+        &[("scenes/m.gltf", &gltf), ("m.bin", &"\0".repeat(36))],
+        &[
+            "m.gltf",
+            "objects[0].mesh",
+            "buffer 0 (../m.bin) contains \"..\"",
+        ],
     );
 }
 

@@ -69,8 +69,16 @@ impl Camera {
     /// Builds the camera from a validated spec; `scene_size` scales the default near plane.
     /// Errors are (field, problem).
     pub fn from_spec(spec: &CameraSpec, scene_size: f64) -> Result<Camera, (String, String)> {
-        let eye = DVec3::from(spec.eye);
-        let look_at = DVec3::from(spec.look_at);
+        let pose = |field: &str| format!("camera.{field}");
+        let missing = |f: &str| {
+            (
+                pose(f),
+                "missing (a glTF camera must be mapped first)".into(),
+            )
+        };
+        let eye = DVec3::from(spec.eye.ok_or_else(|| missing("eye"))?);
+        let look_at = DVec3::from(spec.look_at.ok_or_else(|| missing("look_at"))?);
+        let vfov = spec.vfov.ok_or_else(|| missing("vfov"))?;
         let size = if scene_size > 0.0 && scene_size.is_finite() {
             scene_size
         } else {
@@ -90,8 +98,8 @@ impl Camera {
         Self::new(
             eye,
             look_at,
-            DVec3::from(spec.up),
-            spec.vfov,
+            DVec3::from(spec.up_or_default()),
+            vfov,
             spec.width,
             spec.height,
             near,

@@ -6,6 +6,7 @@
 
 pub mod export;
 pub mod generators;
+pub mod gltf;
 pub mod obj;
 pub mod resolve;
 
@@ -135,26 +136,51 @@ impl Default for IntegratorSpec {
     }
 }
 
-/// Pinhole camera as docs/DESIGN.md defines it.
+/// Pinhole camera as docs/DESIGN.md defines it: either its pose (`eye`,
+/// `look_at`, `up`, `vfov`) or `gltf`, a camera taken from one object's glTF
+/// file (then the pose keys are absent); the image size always comes from here.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
-    pub eye: [f64; 3],
-    pub look_at: [f64; 3],
-    #[serde(default = "default_up")]
-    pub up: [f64; 3],
-    /// Vertical field of view in degrees, strictly between 0 and 180.
-    pub vfov: f64,
+    /// Center of projection; required unless `gltf` is given.
+    pub eye: Option<[f64; 3]>,
+    /// A point on the view axis; required unless `gltf` is given.
+    pub look_at: Option<[f64; 3]>,
+    /// Roll reference; default +y (see [`CameraSpec::up_or_default`]).
+    pub up: Option<[f64; 3]>,
+    /// Vertical field of view in degrees, strictly between 0 and 180;
+    /// required unless `gltf` is given.
+    pub vfov: Option<f64>,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
-    /// Nearest visible planar depth; default 1e-4 x scene size.
+    /// Nearest visible planar depth; default 1e-4 x scene size (or the glTF
+    /// camera's znear, see docs/resolved-scene.md).
     pub near: Option<f64>,
-    /// Farthest visible planar depth; default +infinity.
+    /// Farthest visible planar depth; default +infinity (or the glTF camera's zfar).
     pub far: Option<f64>,
+    /// Take the pose and field of view from a glTF file's camera instead.
+    pub gltf: Option<GltfCameraSpec>,
 }
 
-fn default_up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
+impl CameraSpec {
+    /// `up`, or +y when the scene leaves it out (the default every scene had).
+    pub fn up_or_default(&self) -> [f64; 3] {
+        self.up.unwrap_or([0.0, 1.0, 0.0])
+    }
+}
+
+/// `camera.gltf = { object = "...", camera = "..." }`: which scene object's
+/// glTF file holds the camera, and which of its cameras (a scene's camera can
+/// then come with the model it was authored for).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GltfCameraSpec {
+    /// Name of the scene object whose `mesh` is the `.gltf`/`.glb` file.
+    pub object: String,
+    /// Node name or camera name; the first camera node (traversal order) when absent.
+    pub camera: Option<String>,
 }
 
 /// A diffuse material: albedo and emitted radiance.
@@ -177,7 +203,8 @@ fn default_albedo() -> [f64; 3] {
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
     pub name: String,
-    /// OBJ file, relative to the scene's folder (never outside it).
+    /// OBJ or glTF (`.gltf`, `.glb`) file, relative to the scene's folder
+    /// (never outside it).
     pub mesh: Option<String>,
     /// A built-in generator; exactly one of `mesh` and `shape` is given.
     pub shape: Option<generators::Shape>,
@@ -563,6 +590,130 @@ fn toml_problem(text: &str, e: &toml::de::Error) -> String {
     )
 }
 
+/// Checks a camera pose (eye, look_at, up, vfov): finite, in range, a defined
+/// view direction and roll. Scene validation calls it on the TOML's pose, and
+/// resolution on the pose mapped from a glTF camera.
+pub fn validate_pose(path: &Path, c: &CameraSpec) -> Result<(), SceneError> {
+    let missing = |field: &str| {
+        SceneError::new(
+            path,
+            format!("camera.{field}"),
+            "missing: give eye, look_at and vfov (up is optional), \
+             or take the camera from a glTF file with camera.gltf = { object = \"...\" }",
+        )
+    };
+    let eye = c.eye.ok_or_else(|| missing("eye"))?;
+    let look_at = c.look_at.ok_or_else(|| missing("look_at"))?;
+    let vfov = c.vfov.ok_or_else(|| missing("vfov"))?;
+    let up = c.up_or_default();
+    for (field, v) in [
+        ("camera.eye", &eye),
+        ("camera.look_at", &look_at),
+        ("camera.up", &up),
+    ] {
+        finite3(path, field, v)?;
+        if v.iter().any(|x| x.abs() > MAX_CAMERA_COORDINATE) {
+            return Err(SceneError::new(
+                path,
+                field,
+                format!(
+                    "coordinates out of range: {v:?} exceeds the limit of {MAX_CAMERA_COORDINATE:e} \
+                     in magnitude (f32's range, where all geometry lives)"
+                ),
+            ));
+        }
+    }
+    if !(vfov.is_finite() && vfov > 0.0 && vfov < 180.0) {
+        return Err(SceneError::new(
+            path,
+            "camera.vfov",
+            format!(
+                "vertical field of view must be strictly between 0 and 180 degrees, got {}",
+                vfov
+            ),
+        ));
+    }
+    let f = [
+        look_at[0] - eye[0],
+        look_at[1] - eye[1],
+        look_at[2] - eye[2],
+    ];
+    let flen = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    if !flen.is_finite() {
+        return Err(SceneError::new(
+            path,
+            "camera.look_at",
+            "coordinates out of range: the distance from eye to look_at overflows",
+        ));
+    }
+    if flen <= 0.0 {
+        let problem = if f.iter().all(|x| *x == 0.0) {
+            "look_at equals eye: the view direction is undefined"
+        } else {
+            "look_at is too close to eye (the distance underflows): the view direction is undefined"
+        };
+        return Err(SceneError::new(path, "camera.look_at", problem));
+    }
+    let ulen = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt();
+    let cross = [
+        f[1] * up[2] - f[2] * up[1],
+        f[2] * up[0] - f[0] * up[2],
+        f[0] * up[1] - f[1] * up[0],
+    ];
+    let clen = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+    let parallel = ulen.is_nan() || ulen <= 0.0 || clen.is_nan() || clen <= 1e-9 * flen * ulen;
+    if parallel {
+        return Err(SceneError::new(
+            path,
+            "camera.up",
+            "up is zero or parallel to the view direction: the camera's roll is undefined",
+        ));
+    }
+    Ok(())
+}
+
+/// `camera.gltf` excludes the pose keys and must name an object whose mesh is
+/// a glTF file.
+fn validate_camera_source(path: &Path, s: &SceneFile) -> Result<(), SceneError> {
+    let c = &s.camera;
+    let Some(g) = &c.gltf else {
+        return Ok(());
+    };
+    if c.eye.is_some() || c.look_at.is_some() || c.up.is_some() || c.vfov.is_some() {
+        return Err(SceneError::new(
+            path,
+            "camera.gltf",
+            "give either `gltf` or the pose (`eye`, `look_at`, `up`, `vfov`), not both",
+        ));
+    }
+    let named: Vec<&ObjectSpec> = s.objects.iter().filter(|o| o.name == g.object).collect();
+    match named.as_slice() {
+        [o] if o.mesh.as_deref().is_some_and(gltf::is_gltf_path) => Ok(()),
+        [_] => Err(SceneError::new(
+            path,
+            "camera.gltf.object",
+            format!(
+                "object {:?} has no glTF mesh (a .gltf or .glb file) to take the camera from",
+                g.object
+            ),
+        )),
+        [] => Err(SceneError::new(
+            path,
+            "camera.gltf.object",
+            format!("no object named {:?}", g.object),
+        )),
+        _ => Err(SceneError::new(
+            path,
+            "camera.gltf.object",
+            format!(
+                "{} objects are named {:?}; name one uniquely",
+                named.len(),
+                g.object
+            ),
+        )),
+    }
+}
+
 fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> {
     let mut requires = BTreeSet::new();
     for (i, r) in s.requires.iter().enumerate() {
@@ -580,22 +731,9 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
     }
     validate_feature_pairs(path, s, &requires)?;
     let c = &s.camera;
-    for (field, v) in [
-        ("camera.eye", &c.eye),
-        ("camera.look_at", &c.look_at),
-        ("camera.up", &c.up),
-    ] {
-        finite3(path, field, v)?;
-        if v.iter().any(|x| x.abs() > MAX_CAMERA_COORDINATE) {
-            return Err(SceneError::new(
-                path,
-                field,
-                format!(
-                    "coordinates out of range: {v:?} exceeds the limit of {MAX_CAMERA_COORDINATE:e} \
-                     in magnitude (f32's range, where all geometry lives)"
-                ),
-            ));
-        }
+    validate_camera_source(path, s)?;
+    if c.gltf.is_none() {
+        validate_pose(path, c)?;
     }
     if c.width == 0 || c.height == 0 {
         return Err(SceneError::new(
@@ -627,52 +765,6 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
                  (64 Mpixel, e.g. 8192x8192)",
                 c.width, c.height
             ),
-        ));
-    }
-    if !(c.vfov.is_finite() && c.vfov > 0.0 && c.vfov < 180.0) {
-        return Err(SceneError::new(
-            path,
-            "camera.vfov",
-            format!(
-                "vertical field of view must be strictly between 0 and 180 degrees, got {}",
-                c.vfov
-            ),
-        ));
-    }
-    let f = [
-        c.look_at[0] - c.eye[0],
-        c.look_at[1] - c.eye[1],
-        c.look_at[2] - c.eye[2],
-    ];
-    let flen = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    if !flen.is_finite() {
-        return Err(SceneError::new(
-            path,
-            "camera.look_at",
-            "coordinates out of range: the distance from eye to look_at overflows",
-        ));
-    }
-    if flen <= 0.0 {
-        let problem = if f.iter().all(|x| *x == 0.0) {
-            "look_at equals eye: the view direction is undefined"
-        } else {
-            "look_at is too close to eye (the distance underflows): the view direction is undefined"
-        };
-        return Err(SceneError::new(path, "camera.look_at", problem));
-    }
-    let ulen = (c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]).sqrt();
-    let cross = [
-        f[1] * c.up[2] - f[2] * c.up[1],
-        f[2] * c.up[0] - f[0] * c.up[2],
-        f[0] * c.up[1] - f[1] * c.up[0],
-    ];
-    let clen = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
-    let parallel = ulen.is_nan() || ulen <= 0.0 || clen.is_nan() || clen <= 1e-9 * flen * ulen;
-    if parallel {
-        return Err(SceneError::new(
-            path,
-            "camera.up",
-            "up is zero or parallel to the view direction: the camera's roll is undefined",
         ));
     }
     if let Some(n) = c.near {

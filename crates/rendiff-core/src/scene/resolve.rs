@@ -4,6 +4,7 @@
 //! `object_id` and vertex values mean the same thing everywhere.
 
 use super::generators::Tri64;
+use super::gltf::{camera_spec, is_gltf_path, load_gltf, CameraRequest};
 use super::obj::{confined_path, load_obj};
 use super::{LightSpec, Scene, SceneError};
 use crate::camera::Camera;
@@ -18,7 +19,8 @@ pub type Tri = [Vec3; 3];
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ObjectInfo {
     /// Name from the scene file (untrusted text); for an OBJ with several
-    /// `o`/`g` groups, `<scene object name>/<group name>`, one object per group.
+    /// `o`/`g` groups, `<scene object name>/<group name>`, one object per group;
+    /// for a glTF file, `<scene object name>/<node label>`, one per mesh node.
     pub name: String,
     /// Index into `materials`.
     pub material: u32,
@@ -127,15 +129,52 @@ impl ResolvedScene {
         let mut budget =
             super::MAX_SCENE_TRIANGLES.saturating_sub(super::shape_triangles(&scene.file));
         let mut meshes = Vec::with_capacity(scene.file.objects.len());
+        let mut gltf_camera = None;
         for (si, o) in scene.file.objects.iter().enumerate() {
             meshes.push(match &o.mesh {
+                Some(rel) if is_gltf_path(rel) => {
+                    let mesh_field = format!("objects[{si}].mesh");
+                    let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
+                    let request = match &scene.file.camera.gltf {
+                        Some(g) if g.object == o.name => match &g.camera {
+                            Some(name) => CameraRequest::Named(name),
+                            None => CameraRequest::First,
+                        },
+                        _ => CameraRequest::None,
+                    };
+                    let file = load_gltf(&full, &scene.dir, &mesh_field, budget, request)?;
+                    let n: usize = file.nodes.iter().map(|g| g.triangles.len()).sum();
+                    budget = budget.saturating_sub(n as u64);
+                    if let Some(c) = file.camera {
+                        gltf_camera = Some((c, si, full.clone()));
+                    }
+                    // One rendiff object per mesh node, always under
+                    // `<object>/<node label>` (docs/resolved-scene.md).
+                    let parts = file
+                        .nodes
+                        .into_iter()
+                        .map(|n| (format!("{}/{}", o.name, n.label), n.triangles))
+                        .collect();
+                    Some((parts, full))
+                }
                 Some(rel) => {
                     let mesh_field = format!("objects[{si}].mesh");
                     let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
                     let groups = load_obj(&full, &mesh_field, budget)?;
                     let n: usize = groups.iter().map(|g| g.triangles.len()).sum();
                     budget = budget.saturating_sub(n as u64);
-                    Some((groups, full))
+                    // One rendiff object per OBJ `o`/`g` group (file order); a
+                    // single-group OBJ stays one object under the scene's name.
+                    let parts: Vec<(String, Vec<Tri64>)> = if groups.len() == 1 {
+                        let g = groups.into_iter().next().expect("one group");
+                        vec![(o.name.clone(), g.triangles)]
+                    } else {
+                        groups
+                            .into_iter()
+                            .map(|g| (format!("{}/{}", o.name, g.name), g.triangles))
+                            .collect()
+                    };
+                    Some((parts, full))
                 }
                 None => None,
             });
@@ -148,21 +187,10 @@ impl ResolvedScene {
         let mut objects = Vec::new();
         for ((si, o), mesh) in scene.file.objects.iter().enumerate().zip(meshes) {
             let field = format!("objects[{si}]");
-            // One rendiff object per OBJ `o`/`g` group (file order); a generator
-            // or a single-group OBJ stays one object under the scene's name.
+            // A mesh file's parts (OBJ groups, glTF mesh nodes) were named when
+            // it was read; a generator is one object under the scene's name.
             let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (mesh, &o.shape) {
-                (Some((groups, full)), _) => {
-                    let parts = if groups.len() == 1 {
-                        let g = groups.into_iter().next().expect("one group");
-                        vec![(o.name.clone(), g.triangles)]
-                    } else {
-                        groups
-                            .into_iter()
-                            .map(|g| (format!("{}/{}", o.name, g.name), g.triangles))
-                            .collect()
-                    };
-                    (parts, full)
-                }
+                (Some((parts, full)), _) => (parts, full),
                 (None, Some(shape)) => (vec![(o.name.clone(), shape.triangles())], path.clone()),
                 (None, None) => unreachable!("validated: mesh or shape"),
             };
@@ -219,7 +247,28 @@ impl ResolvedScene {
                 });
             }
         }
-        let camera = Camera::from_spec(&scene.file.camera, scene_size(&triangles))
+        let spec = match gltf_camera {
+            // The glTF camera, placed by its object's transform like the
+            // object's triangles, then checked like a pose written in the TOML.
+            Some((c, si, file)) => {
+                let (m, tr) = transform_matrix(&scene.file.objects[si].transform);
+                let spec = camera_spec(&c, m, tr, &scene.file.camera)
+                    .map_err(|p| SceneError::new(&file, "camera.gltf", p))?;
+                super::validate_pose(&file, &spec).map_err(|e| {
+                    SceneError::new(
+                        &file,
+                        "camera.gltf",
+                        format!(
+                            "the glTF camera maps to an invalid {}: {}",
+                            e.field, e.problem
+                        ),
+                    )
+                })?;
+                spec
+            }
+            None => scene.file.camera.clone(),
+        };
+        let camera = Camera::from_spec(&spec, scene_size(&triangles))
             .map_err(|(field, problem)| SceneError::new(path, field, problem))?;
         Ok(ResolvedScene {
             name: scene.name.clone(),
@@ -368,6 +417,187 @@ shape = { kind = "three_triangles" }
             );
             assert_eq!(r.object_ids, vec![0, 0, 0, 1, 1, 2, 2, 2], "{tag}");
         }
+    }
+
+    /// Writes `files` and the scene text into a fresh folder and resolves it.
+    fn resolve_files(files: &[(&str, &[u8])], toml: &str) -> Result<ResolvedScene, SceneError> {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, bytes) in files {
+            std::fs::write(dir.path().join(name), bytes).unwrap();
+        }
+        let scene = dir.path().join("s.toml");
+        std::fs::write(&scene, toml).unwrap();
+        ResolvedScene::resolve(&super::super::Scene::load(&scene)?)
+    }
+
+    /// A glTF (JSON + .bin) with one node holding the given triangles
+    /// (non-indexed), named `node`, under `matrix` (column-major) if given.
+    fn gltf_of(tris: &[[[f32; 3]; 3]], matrix: Option<[f64; 16]>) -> (String, Vec<u8>) {
+        let bin: Vec<u8> = tris
+            .iter()
+            .flatten()
+            .flatten()
+            .flat_map(|c| c.to_le_bytes())
+            .collect();
+        let all = || tris.iter().flatten();
+        let min: Vec<f32> = (0..3)
+            .map(|k| all().map(|v| v[k]).fold(f32::MAX, f32::min))
+            .collect();
+        let max: Vec<f32> = (0..3)
+            .map(|k| all().map(|v| v[k]).fold(f32::MIN, f32::max))
+            .collect();
+        let matrix = matrix.map_or(String::new(), |m| format!(r#", "matrix": {m:?}"#));
+        let json = format!(
+            r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}],
+               "nodes": [{{"mesh": 0, "name": "node"{matrix}}}],
+               "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+               "buffers": [{{"uri": "m.bin", "byteLength": {n}}}],
+               "bufferViews": [{{"buffer": 0, "byteLength": {n}}}],
+               "accessors": [{{"bufferView": 0, "componentType": 5126, "count": {c},
+                               "type": "VEC3", "min": {min:?}, "max": {max:?}}}]}}"#,
+            n = bin.len(),
+            c = tris.len() * 3,
+        );
+        (json, bin)
+    }
+
+    const HEADER: &str = r#"
+requires = ["depth", "ids"]
+[camera]
+eye = [0.0, 0.0, 5.0]
+look_at = [0.0, 0.0, 0.0]
+vfov = 45.0
+width = 8
+height = 6
+"#;
+
+    #[test]
+    fn obj_and_gltf_of_the_same_triangles_resolve_bit_identically() {
+        // Values that are not short decimals, a negative zero, and an object
+        // transform that rotates, scales and translates: both paths must give
+        // the same f32 bits.
+        let tris: Vec<[[f32; 3]; 3]> = vec![
+            [[0.1, -0.0, 0.3], [1.7, 0.2, -0.45], [0.3, 1.1, 0.77]],
+            [
+                [-2.5e-3, 3.25, 1e-7],
+                [1.0 / 3.0, 2.0, 0.5],
+                [0.9, -1.3, 2.2],
+            ],
+        ];
+        let obj: String = tris
+            .iter()
+            .flatten()
+            .map(|v| format!("v {:?} {:?} {:?}\n", v[0], v[1], v[2]))
+            .chain(["f 1 2 3\nf 4 5 6\n".to_string()])
+            .collect();
+        let (json, bin) = gltf_of(&tris, None);
+        let object = |mesh: &str| {
+            format!(
+                "{HEADER}[[objects]]\nname = \"m\"\nmesh = \"{mesh}\"\n\
+                 transform = {{ scale = [1.5, 0.7, 2.0], rotate = [10.0, 33.0, -71.0], translate = [0.25, -3.0, 1e3] }}\n"
+            )
+        };
+        let a = resolve_files(&[("m.obj", obj.as_bytes())], &object("m.obj")).unwrap();
+        let b = resolve_files(
+            &[("m.gltf", json.as_bytes()), ("m.bin", &bin)],
+            &object("m.gltf"),
+        )
+        .unwrap();
+        let bits = |r: &ResolvedScene| -> Vec<u32> {
+            r.triangles
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_array().map(f32::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(&a), bits(&b));
+        assert_eq!(a.objects[0].name, "m");
+        assert_eq!(b.objects[0].name, "m/node");
+    }
+
+    #[test]
+    fn gltf_nodes_become_objects_and_zero_area_is_refused_as_for_obj() {
+        let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let (json, bin) = gltf_of(
+            &[tri, tri],
+            Some([
+                1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0, 1.0,
+            ]),
+        );
+        let files: [(&str, &[u8]); 2] = [("m.gltf", json.as_bytes()), ("m.bin", &bin)];
+        let text = format!(
+            "{HEADER}[[objects]]\nname = \"gen\"\nshape = {{ kind = \"three_triangles\" }}\n\
+             [[objects]]\nname = \"model\"\nmesh = \"m.gltf\"\n"
+        );
+        let r = resolve_files(&files, &text).unwrap();
+        let s = |n: &str, a, b| (n.to_string(), a, b);
+        assert_eq!(summary(&r), vec![s("gen", 0, 3), s("model/node", 3, 2)]);
+        assert_eq!(r.triangles[3][1], Vec3::new(3.0, 0.0, 0.0));
+
+        let flat = [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2.0, 2.0, 2.0]];
+        let (json, bin) = gltf_of(&[tri, flat], None);
+        let files: [(&str, &[u8]); 2] = [("m.gltf", json.as_bytes()), ("m.bin", &bin)];
+        let e = resolve_files(&files, &text).unwrap_err().to_string();
+        assert!(
+            e.contains("m.gltf: objects[1]: triangle 1 has zero area"),
+            "{e}"
+        );
+        let ok = text.replace(
+            "mesh = \"m.gltf\"",
+            "mesh = \"m.gltf\"\nallow_degenerate = true",
+        );
+        let r = resolve_files(&files, &ok).unwrap();
+        assert_eq!(r.degenerate, vec![false, false, false, false, true]);
+    }
+
+    #[test]
+    fn the_scene_camera_can_come_from_the_gltf_file() {
+        let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let (json, bin) = gltf_of(&[tri], None);
+        let json = json.replacen(
+            r#""nodes": [{"#,
+            r#""cameras": [{"type": "perspective", "perspective": {"yfov": 0.7, "znear": 0.01, "aspectRatio": 1.0}}],
+               "nodes": [{"camera": 0, "translation": [0.5, 0.5, 3]}, {"#,
+            1,
+        )
+        // Node 0 is now the camera, node 1 the mesh: both are roots.
+        .replace(r#""scenes": [{"nodes": [0]}]"#, r#""scenes": [{"nodes": [0, 1]}]"#);
+        let files: [(&str, &[u8]); 2] = [("m.gltf", json.as_bytes()), ("m.bin", &bin)];
+        let text = |size: &str| {
+            format!(
+                "requires = [\"depth\", \"ids\"]\n[camera]\n{size}\ngltf = {{ object = \"model\" }}\n\
+                 [[objects]]\nname = \"model\"\nmesh = \"m.gltf\"\n\
+                 transform = {{ translate = [0.0, 0.0, -1.0] }}\n"
+            )
+        };
+        let r = resolve_files(&files, &text("width = 16\nheight = 16")).unwrap();
+        let c = &r.camera;
+        assert_eq!(c.eye, DVec3::new(0.5, 0.5, 2.0));
+        assert_eq!(c.forward, DVec3::NEG_Z);
+        assert_eq!(c.vfov_deg, f64::from(0.7f32).to_degrees());
+        assert_eq!(c.near, f64::from(0.01f32));
+        assert_eq!(c.far, f64::INFINITY);
+        assert_eq!(r.objects[0].name, "model/node");
+        let e = resolve_files(&files, &text("width = 16\nheight = 9"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("m.gltf: camera.gltf: camera 0 (node 0) has aspectRatio 1"),
+            "{e}"
+        );
+        let both = text("width = 16\nheight = 16\nvfov = 40.0");
+        let e = resolve_files(&files, &both).unwrap_err().to_string();
+        assert!(e.contains("camera.gltf: give either"), "{e}");
+        let e = resolve_files(
+            &files,
+            &text("width = 16\nheight = 16").replace("object = \"model\"", "object = \"x\""),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("camera.gltf.object: no object named \"x\""),
+            "{e}"
+        );
     }
 
     #[test]

@@ -1,0 +1,1417 @@
+//! glTF 2.0 loading (`.gltf` JSON with its buffers, or a binary `.glb`),
+//! confined to the scene's folder like OBJ meshes.
+//!
+//! The `gltf` crate parses and validates the JSON (every index reference in
+//! range, known enum values); everything that touches bytes is done here, so
+//! that each error names the file and the problem in one line and no input can
+//! panic: the GLB container is split here (the crate's own GLB reader
+//! underflows on a short header), buffers are read here (relative file names
+//! inside the scene's folder, or base64 `data:` URIs; never images), and
+//! accessors are read here with every byte range checked. Only geometry is
+//! read: positions, indices, primitive modes, the node hierarchy and, when the
+//! scene asks for it, one perspective camera. Materials, textures, normals,
+//! animations and extensions that do not change geometry are ignored; skins
+//! and non-zero morph weights are refused (the geometry would not be the one a
+//! glTF viewer shows). The rules and the naming are documented in
+//! docs/resolved-scene.md.
+
+use super::generators::Tri64;
+use super::{read_regular_file, SceneError, MAX_MESH_FILE_BYTES, MAX_SCENE_TRIANGLES};
+use glam::{DMat3, DMat4, DQuat, DVec3};
+use gltf::json;
+use gltf::json::accessor::{ComponentType, Type as AccType};
+use gltf::json::mesh::{Mode, Semantic};
+use gltf::json::validation::Checked;
+use std::path::{Component, Path};
+
+/// True when a mesh path names a glTF file (`.gltf` or `.glb`, any case):
+/// the scene's `mesh` key takes OBJ and glTF alike, told apart by extension.
+pub fn is_gltf_path(rel: &str) -> bool {
+    let ext = Path::new(rel)
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    matches!(ext.as_deref(), Some("gltf" | "glb"))
+}
+
+/// One glTF node with a mesh, flattened: it becomes one rendiff object.
+#[derive(Debug, Clone)]
+pub struct GltfMeshNode {
+    /// The node's label: its name, or its index when it has none (or shares
+    /// its name with another mesh node: then `<name>#<index>`), untrusted text.
+    pub label: String,
+    /// Its triangles in the file's world space (node hierarchy applied in
+    /// f64, not rounded), primitives in order, each in index order.
+    pub triangles: Vec<Tri64>,
+}
+
+/// The camera the scene asked for, as the file states it (not yet mapped onto
+/// rendiff's camera: the scene object's transform and the image size are
+/// needed for that, see [`camera_spec`]).
+#[derive(Debug, Clone)]
+pub struct GltfCamera {
+    /// Index of the node that places the camera.
+    pub node: usize,
+    /// Index into the file's `cameras`.
+    pub camera: usize,
+    /// The node's world matrix in the file (f64).
+    pub world: DMat4,
+    /// Vertical field of view in radians, as stored (f32).
+    pub yfov: f32,
+    /// Width / height, when the file states it.
+    pub aspect: Option<f32>,
+    /// Near clipping distance in the camera node's space.
+    pub znear: f32,
+    /// Far clipping distance in the camera node's space (infinite when absent).
+    pub zfar: Option<f32>,
+}
+
+/// Which camera of the file to return, if any.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CameraRequest<'a> {
+    /// The scene does not take its camera from this file.
+    None,
+    /// The first camera node in traversal order.
+    First,
+    /// The camera node whose node name or camera name is this.
+    Named(&'a str),
+}
+
+/// What a glTF file contributes to a scene.
+#[derive(Debug, Clone)]
+pub struct GltfFile {
+    /// Mesh nodes in traversal order (see [`load_gltf`]).
+    pub nodes: Vec<GltfMeshNode>,
+    /// The requested camera ([`CameraRequest::None`] gives `None`).
+    pub camera: Option<GltfCamera>,
+}
+
+/// Splits a GLB container into its JSON chunk and optional BIN chunk, or says
+/// what is wrong with it. Chunks after the first two are ignored, as the
+/// glTF specification requires for unknown chunks.
+fn split_glb(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
+    let u32_at = |at: usize| -> u32 {
+        u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+    };
+    if bytes.len() < 12 {
+        return Err(format!(
+            "bad GLB header: the file has {} bytes, fewer than the 12-byte header",
+            bytes.len()
+        ));
+    }
+    if &bytes[..4] != b"glTF" {
+        return Err(format!(
+            "bad GLB header: the file starts with {:?}, not \"glTF\"",
+            String::from_utf8_lossy(&bytes[..4])
+        ));
+    }
+    let version = u32_at(4);
+    if version != 2 {
+        return Err(format!(
+            "bad GLB header: version {version}, only version 2 is supported"
+        ));
+    }
+    let length = u32_at(8) as usize;
+    if length != bytes.len() {
+        return Err(format!(
+            "bad GLB header: it states a length of {length} bytes, the file has {}",
+            bytes.len()
+        ));
+    }
+    let mut at = 12usize;
+    let mut chunks: Vec<([u8; 4], &[u8])> = Vec::new();
+    while at < bytes.len() && chunks.len() < 2 {
+        if bytes.len() - at < 8 {
+            return Err(format!("GLB chunk {} header is truncated", chunks.len()));
+        }
+        let len = u32_at(at) as usize;
+        let ty = [bytes[at + 4], bytes[at + 5], bytes[at + 6], bytes[at + 7]];
+        let start = at + 8;
+        if len > bytes.len() - start {
+            return Err(format!(
+                "GLB chunk {} ({}) states {len} bytes, only {} are left in the file",
+                chunks.len(),
+                String::from_utf8_lossy(&ty).trim_end_matches('\0'),
+                bytes.len() - start
+            ));
+        }
+        chunks.push((ty, &bytes[start..start + len]));
+        at = start + len;
+    }
+    match chunks.first() {
+        Some((ty, json)) if *ty == *b"JSON" => {
+            let bin = chunks
+                .get(1)
+                .filter(|(ty, _)| ty == b"BIN\0")
+                .map(|(_, b)| *b);
+            Ok((json, bin))
+        }
+        _ => Err("GLB file does not start with a JSON chunk".into()),
+    }
+}
+
+/// Decodes standard base64 (RFC 4648, `=` padding optional), refusing any
+/// other character.
+fn base64_decode(text: &str) -> Result<Vec<u8>, String> {
+    let body = text.trim_end_matches('=');
+    if text.len() - body.len() > 2 {
+        return Err("bad base64 padding".into());
+    }
+    let mut out = Vec::with_capacity(body.len() / 4 * 3 + 3);
+    let (mut acc, mut bits) = (0u32, 0u32);
+    for (i, c) in body.bytes().enumerate() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return Err(format!("invalid base64 character at offset {i}")),
+        };
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    if bits >= 6 {
+        return Err("truncated base64 data".into());
+    }
+    Ok(out)
+}
+
+/// Percent-decodes a URI reference into a relative path (UTF-8), or None when
+/// an escape is malformed or not UTF-8.
+fn percent_decode(uri: &str) -> Option<String> {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// Reads buffer `i`'s bytes (exactly its byteLength): the GLB BIN chunk, a
+/// base64 `data:` URI, or a relative file next to the glTF file that must stay
+/// inside `scene_dir` (no `..`, no absolute path, no scheme, no symlink out).
+fn load_buffer(
+    file: &Path,
+    scene_dir: &Path,
+    i: usize,
+    b: &json::buffer::Buffer,
+    bin: Option<&[u8]>,
+    left: u64,
+) -> Result<Vec<u8>, String> {
+    let want = b.byte_length.0;
+    if want > left {
+        return Err(format!(
+            "buffer {i} has a byteLength of {want} bytes; with the file's other buffers that is \
+             more than the limit of {MAX_MESH_FILE_BYTES} bytes (1 GiB) per glTF file"
+        ));
+    }
+    let want = want as usize;
+    let (bytes, what): (Vec<u8>, String) = match b.uri.as_deref() {
+        None => {
+            let bin = bin.ok_or_else(|| {
+                format!("buffer {i} has no uri and the file has no GLB BIN chunk")
+            })?;
+            (bin.to_vec(), format!("buffer {i} (GLB BIN chunk)"))
+        }
+        Some(uri)
+            if uri
+                .get(..5)
+                .is_some_and(|h| h.eq_ignore_ascii_case("data:")) =>
+        {
+            let (head, data) = uri
+                .split_once(',')
+                .ok_or_else(|| format!("buffer {i}: data: URI without a comma"))?;
+            if !head.to_ascii_lowercase().ends_with(";base64") {
+                return Err(format!(
+                    "buffer {i}: only base64 data: URIs are supported, got {:?}",
+                    super::printable(head, 60)
+                ));
+            }
+            if data.len() as u64 / 4 * 3 > left + 3 {
+                return Err(format!(
+                    "buffer {i}: its data: URI is larger than the limit of {MAX_MESH_FILE_BYTES} bytes"
+                ));
+            }
+            let bytes = base64_decode(data).map_err(|p| format!("buffer {i}: data: URI: {p}"))?;
+            (bytes, format!("buffer {i} (data: URI)"))
+        }
+        Some(uri) => {
+            let shown = super::printable(uri, 80);
+            let rel = percent_decode(uri).ok_or_else(|| {
+                format!("buffer {i} ({shown}): malformed percent-escape in the uri")
+            })?;
+            let scheme = rel
+                .split_once(':')
+                .is_some_and(|(s, _)| !s.is_empty() && !s.contains('/'));
+            if scheme {
+                return Err(format!(
+                    "buffer {i} ({shown}): only relative file names and base64 data: URIs are supported"
+                ));
+            }
+            let p = Path::new(&rel);
+            if rel.is_empty()
+                || rel.starts_with('/')
+                || rel.contains('\\')
+                || p.is_absolute()
+                || p.components()
+                    .any(|c| matches!(c, Component::Prefix(_) | Component::RootDir))
+            {
+                return Err(format!(
+                    "buffer {i} ({shown}) must be a relative path inside the scene's folder"
+                ));
+            }
+            if p.components().any(|c| matches!(c, Component::ParentDir)) {
+                return Err(format!(
+                    "buffer {i} ({shown}) contains \"..\"; buffers must stay inside the scene's folder"
+                ));
+            }
+            let joined = file.parent().unwrap_or(Path::new(".")).join(p);
+            let full = match joined.canonicalize() {
+                Ok(f) => f,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    return Err(format!("buffer {i} ({shown}) is missing"))
+                }
+                Err(e) => return Err(format!("buffer {i} ({shown}) cannot be opened: {e}")),
+            };
+            let dir = scene_dir
+                .canonicalize()
+                .map_err(|e| format!("cannot resolve the scene folder: {e}"))?;
+            if !full.starts_with(&dir) {
+                return Err(format!(
+                    "buffer {i} ({shown}) points outside the scene's folder {}",
+                    dir.display()
+                ));
+            }
+            let bytes = read_regular_file(&full, MAX_MESH_FILE_BYTES)
+                .map_err(|p| format!("buffer {i} ({shown}) {p}"))?;
+            (bytes, format!("buffer {i} ({shown})"))
+        }
+    };
+    if bytes.len() < want {
+        return Err(format!(
+            "{what} is truncated: {} bytes, its byteLength is {want}",
+            bytes.len()
+        ));
+    }
+    let mut bytes = bytes;
+    bytes.truncate(want);
+    Ok(bytes)
+}
+
+/// Bytes per component of a glTF component type.
+fn component_size(c: ComponentType) -> usize {
+    match c {
+        ComponentType::I8 | ComponentType::U8 => 1,
+        ComponentType::I16 | ComponentType::U16 => 2,
+        ComponentType::U32 | ComponentType::F32 => 4,
+    }
+}
+
+/// Reads the accessor's elements (`count` x `elem` bytes, packed) from its
+/// buffer view (zeros without one), with the sparse substitution applied;
+/// every range is checked against its view and buffer.
+fn accessor_bytes(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    ai: usize,
+    elem: usize,
+) -> Result<Vec<u8>, String> {
+    let acc = root
+        .accessors
+        .get(ai)
+        .ok_or_else(|| format!("accessor {ai} does not exist"))?;
+    let count = acc.count.0;
+    let total = count
+        .checked_mul(elem as u64)
+        .filter(|n| *n <= MAX_MESH_FILE_BYTES)
+        .ok_or_else(|| {
+            format!("accessor {ai} has {count} elements, more than a glTF file may hold")
+        })? as usize;
+    let count = count as usize;
+    // (offset, length) of a buffer view within its buffer, checked.
+    let view_bytes = |vi: usize| -> Result<&[u8], String> {
+        let v = root
+            .buffer_views
+            .get(vi)
+            .ok_or_else(|| format!("bufferView {vi} does not exist"))?;
+        let bi = v.buffer.value();
+        let buf = buffers
+            .get(bi)
+            .ok_or_else(|| format!("bufferView {vi}: buffer {bi} does not exist"))?;
+        let off = v.byte_offset.map_or(0, |o| o.0);
+        let end = off.checked_add(v.byte_length.0);
+        match end {
+            Some(end) if end <= buf.len() as u64 => Ok(&buf[off as usize..end as usize]),
+            _ => Err(format!(
+                "bufferView {vi} (bytes {off}..{}) lies outside buffer {bi} ({} bytes)",
+                off.saturating_add(v.byte_length.0),
+                buf.len()
+            )),
+        }
+    };
+    let mut out = vec![0u8; total];
+    if let Some(vi) = acc.buffer_view.as_ref().map(|v| v.value()) {
+        let data = view_bytes(vi)?;
+        let stride = root.buffer_views[vi].byte_stride.map_or(elem, |s| s.0);
+        if stride < elem {
+            return Err(format!(
+                "accessor {ai}: bufferView {vi} has byteStride {stride}, less than the element size {elem}"
+            ));
+        }
+        let off = acc.byte_offset.map_or(0, |o| o.0) as usize;
+        if count > 0 {
+            let need = (count as u64 - 1)
+                .checked_mul(stride as u64)
+                .and_then(|n| n.checked_add(off as u64))
+                .and_then(|n| n.checked_add(elem as u64));
+            if need.is_none_or(|n| n > data.len() as u64) {
+                return Err(format!(
+                    "accessor {ai} ({count} elements from byte {off}, stride {stride}) reads past \
+                     the end of bufferView {vi} ({} bytes)",
+                    data.len()
+                ));
+            }
+            for k in 0..count {
+                let s = off + k * stride;
+                out[k * elem..(k + 1) * elem].copy_from_slice(&data[s..s + elem]);
+            }
+        }
+    }
+    if let Some(sp) = &acc.sparse {
+        let n = sp.count.0 as usize;
+        if n > count {
+            return Err(format!(
+                "accessor {ai}: sparse count {n} exceeds the accessor's count {count}"
+            ));
+        }
+        let isize = match sp.indices.component_type {
+            Checked::Valid(json::accessor::IndexComponentType(c))
+                if matches!(
+                    c,
+                    ComponentType::U8 | ComponentType::U16 | ComponentType::U32
+                ) =>
+            {
+                component_size(c)
+            }
+            _ => {
+                return Err(format!(
+                    "accessor {ai}: sparse indices must be unsigned bytes, shorts or ints"
+                ))
+            }
+        };
+        let range = |vi: usize, off: u64, len: usize, what: &str| -> Result<&[u8], String> {
+            let data = view_bytes(vi)?;
+            let end = off.checked_add(len as u64);
+            match end {
+                Some(end) if end <= data.len() as u64 => Ok(&data[off as usize..end as usize]),
+                _ => Err(format!(
+                    "accessor {ai}: sparse {what} read past the end of bufferView {vi}"
+                )),
+            }
+        };
+        let idx = range(
+            sp.indices.buffer_view.value(),
+            sp.indices.byte_offset.0,
+            n * isize,
+            "indices",
+        )?;
+        let vals = range(
+            sp.values.buffer_view.value(),
+            sp.values.byte_offset.0,
+            n * elem,
+            "values",
+        )?;
+        for k in 0..n {
+            let ib = &idx[k * isize..(k + 1) * isize];
+            let t = match isize {
+                1 => ib[0] as usize,
+                2 => u16::from_le_bytes([ib[0], ib[1]]) as usize,
+                _ => u32::from_le_bytes([ib[0], ib[1], ib[2], ib[3]]) as usize,
+            };
+            if t >= count {
+                return Err(format!(
+                    "accessor {ai}: sparse index {t} out of range (count {count})"
+                ));
+            }
+            out[t * elem..(t + 1) * elem].copy_from_slice(&vals[k * elem..(k + 1) * elem]);
+        }
+    }
+    Ok(out)
+}
+
+/// The accessor's element count (for budgeting before anything is read).
+fn accessor_count(root: &json::Root, ai: usize) -> Result<u64, String> {
+    root.accessors
+        .get(ai)
+        .map(|a| a.count.0)
+        .ok_or_else(|| format!("accessor {ai} does not exist"))
+}
+
+/// Reads a POSITION accessor (float VEC3) as f64 points, refusing NaN and Inf.
+fn read_positions(root: &json::Root, buffers: &[Vec<u8>], ai: usize) -> Result<Vec<DVec3>, String> {
+    let acc = &root.accessors[ai];
+    let ok = matches!(
+        acc.component_type,
+        Checked::Valid(json::accessor::GenericComponentType(ComponentType::F32))
+    ) && matches!(acc.type_, Checked::Valid(AccType::Vec3));
+    if !ok {
+        return Err(format!(
+            "accessor {ai} (POSITION) must be float VEC3 (quantized positions are not supported)"
+        ));
+    }
+    let bytes = accessor_bytes(root, buffers, ai, 12)?;
+    let mut out = Vec::with_capacity(bytes.len() / 12);
+    for (k, e) in bytes.chunks_exact(12).enumerate() {
+        let f = |o: usize| f32::from_le_bytes([e[o], e[o + 1], e[o + 2], e[o + 3]]);
+        let v = [f(0), f(4), f(8)];
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(format!(
+                "accessor {ai} (POSITION) element {k} is not finite (NaN or Inf): {v:?}"
+            ));
+        }
+        out.push(DVec3::new(v[0].into(), v[1].into(), v[2].into()));
+    }
+    Ok(out)
+}
+
+/// Reads an index accessor (unsigned SCALAR) and checks every index against
+/// the vertex count.
+fn read_indices(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    ai: usize,
+    vertices: usize,
+) -> Result<Vec<u32>, String> {
+    let acc = &root.accessors[ai];
+    let size = match (acc.component_type, acc.type_) {
+        (
+            Checked::Valid(json::accessor::GenericComponentType(c)),
+            Checked::Valid(AccType::Scalar),
+        ) if matches!(
+            c,
+            ComponentType::U8 | ComponentType::U16 | ComponentType::U32
+        ) =>
+        {
+            component_size(c)
+        }
+        _ => {
+            return Err(format!(
+                "accessor {ai} (indices) must be an unsigned byte, short or int SCALAR"
+            ))
+        }
+    };
+    let bytes = accessor_bytes(root, buffers, ai, size)?;
+    let mut out = Vec::with_capacity(bytes.len() / size);
+    for e in bytes.chunks_exact(size) {
+        let i = match size {
+            1 => u32::from(e[0]),
+            2 => u32::from(u16::from_le_bytes([e[0], e[1]])),
+            _ => u32::from_le_bytes([e[0], e[1], e[2], e[3]]),
+        };
+        if i as usize >= vertices {
+            return Err(format!(
+                "accessor {ai} index {i} out of range (vertex count {vertices})"
+            ));
+        }
+        out.push(i);
+    }
+    Ok(out)
+}
+
+/// Triangles a primitive makes from `n` vertex references, or the reason it
+/// makes none (a mode that is not a surface).
+fn triangle_count(mode: Mode, n: u64, where_: &str) -> Result<u64, String> {
+    match mode {
+        Mode::Triangles if n.is_multiple_of(3) => Ok(n / 3),
+        Mode::Triangles => Err(format!(
+            "{where_} has {n} vertex references, not a multiple of 3 (mode TRIANGLES)"
+        )),
+        Mode::TriangleStrip | Mode::TriangleFan => Ok(n.saturating_sub(2)),
+        other => Err(format!(
+            "{where_} has mode {}; rendiff renders triangles only (TRIANGLES, \
+             TRIANGLE_STRIP, TRIANGLE_FAN)",
+            match other {
+                Mode::Points => "POINTS",
+                Mode::Lines => "LINES",
+                Mode::LineLoop => "LINE_LOOP",
+                _ => "LINE_STRIP",
+            }
+        )),
+    }
+}
+
+/// The node's local matrix in f64: `matrix` (column-major, must be affine) or
+/// T * R * S with the rotation quaternion normalized in f64.
+fn local_matrix(n: &json::scene::Node, ni: usize) -> Result<DMat4, String> {
+    if let Some(m) = n.matrix {
+        if m.iter().any(|x| !x.is_finite()) {
+            return Err(format!("node {ni} has a non-finite matrix"));
+        }
+        if m[3] != 0.0 || m[7] != 0.0 || m[11] != 0.0 || m[15] != 1.0 {
+            return Err(format!(
+                "node {ni}'s matrix is not affine (its last row is {:?}, not [0, 0, 0, 1])",
+                [m[3], m[7], m[11], m[15]]
+            ));
+        }
+        return Ok(DMat4::from_cols_array(&m.map(f64::from)));
+    }
+    let t = n.translation.unwrap_or([0.0; 3]);
+    let r = n.rotation.unwrap_or_default().0;
+    let s = n.scale.unwrap_or([1.0; 3]);
+    if t.iter().chain(&r).chain(&s).any(|x| !x.is_finite()) {
+        return Err(format!(
+            "node {ni} has a non-finite translation, rotation or scale"
+        ));
+    }
+    let q = DQuat::from_xyzw(r[0].into(), r[1].into(), r[2].into(), r[3].into());
+    let len = q.length();
+    if len.is_nan() || len <= 0.0 {
+        return Err(format!("node {ni}'s rotation quaternion is zero"));
+    }
+    Ok(DMat4::from_scale_rotation_translation(
+        DVec3::from(s.map(f64::from)),
+        q / len,
+        DVec3::from(t.map(f64::from)),
+    ))
+}
+
+/// Loads a glTF 2.0 file (`.gltf` or `.glb`, told apart by the GLB magic;
+/// a `.glb` without it is refused) as its mesh nodes and, if asked, a camera.
+///
+/// The scene used is the file's `scene`, else its first; its nodes are
+/// visited depth first, pre-order, roots and children in the order the file
+/// lists them; each node with a mesh is one [`GltfMeshNode`] in that order,
+/// its primitives in order. World matrices are products of the local ones in
+/// f64. TRIANGLE_STRIP and TRIANGLE_FAN are converted as the glTF
+/// specification defines them; other non-triangle modes are refused. A node
+/// whose world matrix has a negative determinant gets its triangles' winding
+/// reversed (glTF's rule). The file, its buffers and all its triangles are
+/// held to [`MAX_MESH_FILE_BYTES`] and `budget` (the triangles the scene has
+/// left of [`MAX_SCENE_TRIANGLES`]) before geometry is read.
+pub fn load_gltf(
+    file: &Path,
+    scene_dir: &Path,
+    field: &str,
+    budget: u64,
+    camera: CameraRequest<'_>,
+) -> Result<GltfFile, SceneError> {
+    let err = |p: String| SceneError::new(file, field, p);
+    let bytes =
+        read_regular_file(file, MAX_MESH_FILE_BYTES).map_err(|p| err(format!("mesh file {p}")))?;
+    let is_glb_ext = file
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let (json_bytes, bin) = if is_glb_ext || bytes.starts_with(b"glTF") {
+        split_glb(&bytes).map_err(err)?
+    } else {
+        (&bytes[..], None)
+    };
+    let root =
+        json::Root::from_slice(json_bytes).map_err(|e| err(format!("malformed glTF JSON: {e}")))?;
+    let doc = gltf::Document::from_json(root).map_err(|e| {
+        err(match e {
+            gltf::Error::Validation(list) => {
+                let more = match list.len() {
+                    0 | 1 => String::new(),
+                    n => format!(" (and {} more problems)", n - 1),
+                };
+                match list.first() {
+                    Some((path, json::validation::Error::Unsupported)) => format!(
+                        "invalid glTF: {path}: the file requires an extension rendiff's glTF \
+                         reader does not support{more}"
+                    ),
+                    Some((path, e)) => format!("invalid glTF: {path}: {e}{more}"),
+                    None => "invalid glTF".into(),
+                }
+            }
+            other => format!("invalid glTF: {other}"),
+        })
+    })?;
+    let root = doc.as_json();
+    // Buffers, all of them, each exactly its byteLength.
+    let mut left = MAX_MESH_FILE_BYTES.saturating_sub(bytes.len() as u64);
+    let mut buffers = Vec::with_capacity(root.buffers.len());
+    for (i, b) in root.buffers.iter().enumerate() {
+        let data = load_buffer(file, scene_dir, i, b, bin, left).map_err(err)?;
+        left = left.saturating_sub(data.len() as u64);
+        buffers.push(data);
+    }
+    drop(bytes);
+    // The scene's node tree, depth first, pre-order.
+    let scene = root
+        .scene
+        .map(|s| s.value())
+        .or(if root.scenes.is_empty() {
+            None
+        } else {
+            Some(0)
+        })
+        .ok_or_else(|| err("the glTF file has no scene".into()))?;
+    let roots = &root
+        .scenes
+        .get(scene)
+        .ok_or_else(|| err(format!("scene {scene} does not exist")))?
+        .nodes;
+    let mut visited = vec![false; root.nodes.len()];
+    let mut stack: Vec<(usize, DMat4)> = roots
+        .iter()
+        .rev()
+        .map(|n| (n.value(), DMat4::IDENTITY))
+        .collect();
+    let mut mesh_nodes: Vec<(usize, DMat4, usize)> = Vec::new();
+    let mut camera_nodes: Vec<(usize, DMat4, usize)> = Vec::new();
+    while let Some((ni, parent)) = stack.pop() {
+        let node = root
+            .nodes
+            .get(ni)
+            .ok_or_else(|| err(format!("node {ni} does not exist")))?;
+        if std::mem::replace(&mut visited[ni], true) {
+            return Err(err(format!(
+                "node {ni} is reached twice from scene {scene}: the node hierarchy must be a tree"
+            )));
+        }
+        let world = parent * local_matrix(node, ni).map_err(err)?;
+        if let Some(m) = &node.mesh {
+            if node.skin.is_some() {
+                return Err(err(format!(
+                    "node {ni} has a skin; rendiff reads static geometry only"
+                )));
+            }
+            mesh_nodes.push((ni, world, m.value()));
+        }
+        if let Some(c) = &node.camera {
+            camera_nodes.push((ni, world, c.value()));
+        }
+        for c in node.children.iter().flatten().rev() {
+            stack.push((c.value(), world));
+        }
+    }
+    // Count first, against the budget, before any geometry is read.
+    let mut count = 0u64;
+    for &(ni, _, mi) in &mesh_nodes {
+        let mesh = root
+            .meshes
+            .get(mi)
+            .ok_or_else(|| err(format!("mesh {mi} does not exist")))?;
+        if mesh.weights.iter().flatten().any(|w| *w != 0.0) {
+            return Err(err(format!(
+                "mesh {mi} (node {ni}) has non-zero morph weights; rendiff reads static geometry only"
+            )));
+        }
+        for (pi, p) in mesh.primitives.iter().enumerate() {
+            let where_ = format!("mesh {mi} primitive {pi}");
+            let Checked::Valid(mode) = p.mode else {
+                return Err(err(format!("{where_} has an invalid mode")));
+            };
+            let pos = p
+                .attributes
+                .get(&Checked::Valid(Semantic::Positions))
+                .ok_or_else(|| err(format!("{where_} has no POSITION attribute")))?;
+            let refs = match &p.indices {
+                Some(i) => accessor_count(root, i.value()),
+                None => accessor_count(root, pos.value()),
+            }
+            .map_err(err)?;
+            count = count.saturating_add(triangle_count(mode, refs, &where_).map_err(err)?);
+        }
+    }
+    if count > budget {
+        return Err(err(format!(
+            "glTF file has {count} triangles; with the scene's other objects ({} triangles) \
+             that is more than the limit of {MAX_SCENE_TRIANGLES} (64 Mi) per scene",
+            MAX_SCENE_TRIANGLES.saturating_sub(budget)
+        )));
+    }
+    if mesh_nodes.is_empty() {
+        return Err(err(format!("glTF scene {scene} has no node with a mesh")));
+    }
+    // Labels: the node's name, its index when unnamed, `<name>#<index>` when shared.
+    let name_of = |ni: usize| {
+        root.nodes[ni]
+            .name
+            .as_deref()
+            .filter(|s| !s.is_empty())
+            .map(str::to_string)
+    };
+    let mut nodes = Vec::with_capacity(mesh_nodes.len());
+    for &(ni, world, mi) in &mesh_nodes {
+        let label = match name_of(ni) {
+            Some(name) => {
+                let shared = mesh_nodes
+                    .iter()
+                    .filter(|(o, _, _)| name_of(*o).as_deref() == Some(name.as_str()))
+                    .count()
+                    > 1;
+                if shared {
+                    format!("{name}#{ni}")
+                } else {
+                    name
+                }
+            }
+            None => ni.to_string(),
+        };
+        let identity = world == DMat4::IDENTITY;
+        let flip = world.determinant() < 0.0;
+        let mut triangles = Vec::new();
+        for p in &root.meshes[mi].primitives {
+            let Checked::Valid(mode) = p.mode else {
+                unreachable!("checked while counting")
+            };
+            let pa = p.attributes[&Checked::Valid(Semantic::Positions)].value();
+            let pos = read_positions(root, &buffers, pa).map_err(err)?;
+            let idx: Vec<u32> = match &p.indices {
+                Some(i) => read_indices(root, &buffers, i.value(), pos.len()).map_err(err)?,
+                None => (0..pos.len() as u32).collect(),
+            };
+            let at = |k: u32| {
+                let v = pos[k as usize];
+                if identity {
+                    v
+                } else {
+                    world.transform_point3(v)
+                }
+            };
+            let mut push = |a: u32, b: u32, c: u32| {
+                let t = [at(a), at(b), at(c)];
+                triangles.push(if flip { [t[0], t[2], t[1]] } else { t });
+            };
+            match mode {
+                Mode::Triangles => idx.chunks_exact(3).for_each(|f| push(f[0], f[1], f[2])),
+                Mode::TriangleStrip => {
+                    for i in 0..idx.len().saturating_sub(2) {
+                        if i % 2 == 0 {
+                            push(idx[i], idx[i + 1], idx[i + 2]);
+                        } else {
+                            push(idx[i], idx[i + 2], idx[i + 1]);
+                        }
+                    }
+                }
+                Mode::TriangleFan => {
+                    for i in 0..idx.len().saturating_sub(2) {
+                        push(idx[i + 1], idx[i + 2], idx[0]);
+                    }
+                }
+                _ => unreachable!("refused while counting"),
+            }
+        }
+        nodes.push(GltfMeshNode { label, triangles });
+    }
+    let camera = match camera {
+        CameraRequest::None => None,
+        request => Some(pick_camera(root, &camera_nodes, request).map_err(err)?),
+    };
+    Ok(GltfFile { nodes, camera })
+}
+
+/// The requested camera among the scene's camera nodes (traversal order).
+fn pick_camera(
+    root: &json::Root,
+    camera_nodes: &[(usize, DMat4, usize)],
+    request: CameraRequest<'_>,
+) -> Result<GltfCamera, String> {
+    let (ni, world, ci) = match request {
+        CameraRequest::Named(name) => {
+            let hits: Vec<_> = camera_nodes
+                .iter()
+                .filter(|(ni, _, ci)| {
+                    root.nodes[*ni].name.as_deref() == Some(name)
+                        || root.cameras.get(*ci).and_then(|c| c.name.as_deref()) == Some(name)
+                })
+                .collect();
+            match hits.as_slice() {
+                [one] => **one,
+                [] => {
+                    return Err(format!(
+                        "no camera node or camera named {:?} in the glTF scene",
+                        super::printable(name, 80)
+                    ))
+                }
+                _ => {
+                    return Err(format!(
+                        "{} camera nodes match the name {:?}; name the node instead",
+                        hits.len(),
+                        super::printable(name, 80)
+                    ))
+                }
+            }
+        }
+        _ => *camera_nodes
+            .first()
+            .ok_or("the glTF scene has no camera node")?,
+    };
+    let cam = root
+        .cameras
+        .get(ci)
+        .ok_or_else(|| format!("camera {ci} does not exist"))?;
+    let persp = match (cam.type_, &cam.perspective) {
+        (Checked::Valid(json::camera::Type::Perspective), Some(p)) => p,
+        (Checked::Valid(json::camera::Type::Orthographic), _) => {
+            return Err(format!(
+                "camera {ci} (node {ni}) is orthographic; rendiff's camera is a pinhole \
+                 (perspective only)"
+            ))
+        }
+        _ => {
+            return Err(format!(
+                "camera {ci} (node {ni}) has no perspective projection"
+            ))
+        }
+    };
+    Ok(GltfCamera {
+        node: ni,
+        camera: ci,
+        world,
+        yfov: persp.yfov,
+        aspect: persp.aspect_ratio,
+        znear: persp.znear,
+        zfar: persp.zfar,
+    })
+}
+
+/// Relative tolerance for the camera's frame being a rotation times a uniform
+/// scale, and for `aspectRatio` agreeing with width/height: a file stores both
+/// in f32 (about 6e-8) after a decimal text of 7 or more digits; anything
+/// further off is a different camera, refused rather than approximated.
+pub const CAMERA_MATCH_TOLERANCE: f64 = 1e-6;
+
+/// Maps the file's camera onto rendiff's pinhole camera, with the scene
+/// object's transform (`m`, `tr`) applied after the camera node's world
+/// matrix, or says why it cannot be mapped exactly.
+///
+/// eye = the node's origin; look_at = eye + the node's -Z axis (normalized);
+/// up = its +Y axis (normalized); vfov = yfov in degrees (f64). The frame must
+/// be a rotation times a uniform scale `s` (no shear, no mirror), within
+/// [`CAMERA_MATCH_TOLERANCE`]; `aspectRatio`, when present, must equal
+/// width / height within that tolerance (rendiff's pixels are square and the
+/// image is never stretched). Unless the scene sets them, near = s * znear and
+/// far = s * zfar (none: infinite).
+pub fn camera_spec(
+    cam: &GltfCamera,
+    m: DMat3,
+    tr: DVec3,
+    spec: &super::CameraSpec,
+) -> Result<super::CameraSpec, String> {
+    let world = cam.world;
+    let lin = m * DMat3::from_mat4(world);
+    let eye = m * world.w_axis.truncate() + tr;
+    let f = lin * DVec3::NEG_Z;
+    let u = lin * DVec3::Y;
+    let r = lin * DVec3::X;
+    let (lf, lu, lr) = (f.length(), u.length(), r.length());
+    let who = format!("camera {} (node {})", cam.camera, cam.node);
+    let tol = CAMERA_MATCH_TOLERANCE;
+    let finite = eye.is_finite() && [lf, lu, lr].iter().all(|x| x.is_finite() && *x > 0.0);
+    if !finite {
+        return Err(format!("{who}: its transform is degenerate or not finite"));
+    }
+    let uniform = (lf - lu).abs() <= tol * lf && (lr - lu).abs() <= tol * lu;
+    let orthogonal = f.dot(u).abs() <= tol * lf * lu
+        && f.dot(r).abs() <= tol * lf * lr
+        && u.dot(r).abs() <= tol * lu * lr;
+    if !(uniform && orthogonal) {
+        return Err(format!(
+            "{who}: its transform (with the object's) is not a rotation times a uniform scale, \
+             so the view cannot be mapped onto a pinhole camera exactly"
+        ));
+    }
+    if r.cross(u).dot(f) >= 0.0 {
+        return Err(format!(
+            "{who}: its transform (with the object's) mirrors the view; rendiff's camera \
+             cannot be mirrored"
+        ));
+    }
+    let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+    if let Some(a) = cam.aspect {
+        let want = w / h;
+        let a = f64::from(a);
+        let off = (a - want).abs();
+        if off.is_nan() || off > tol * want {
+            return Err(format!(
+                "{who} has aspectRatio {a}, but the image is {}x{} (aspect {want}); set \
+                 camera.width/height to match (rendiff never stretches the picture)",
+                spec.width, spec.height
+            ));
+        }
+    }
+    let yfov = f64::from(cam.yfov);
+    if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f64::consts::PI) {
+        return Err(format!(
+            "{who} has yfov {yfov} radians; it must be strictly between 0 and pi"
+        ));
+    }
+    let znear = f64::from(cam.znear);
+    if !(znear.is_finite() && znear > 0.0) {
+        return Err(format!(
+            "{who} has znear {znear}; it must be finite and > 0"
+        ));
+    }
+    let zfar = cam.zfar.map(f64::from);
+    if let Some(z) = zfar {
+        if z.is_nan() || z <= znear {
+            return Err(format!(
+                "{who} has zfar {z}; it must be greater than znear {znear}"
+            ));
+        }
+    }
+    let dir = f / lf;
+    Ok(super::CameraSpec {
+        eye: Some(eye.to_array()),
+        look_at: Some((eye + dir).to_array()),
+        up: Some((u / lu).to_array()),
+        vfov: Some(yfov.to_degrees()),
+        width: spec.width,
+        height: spec.height,
+        near: spec.near.or(Some(znear * lu)),
+        far: spec.far.or(zfar.map(|z| z * lu)),
+        gltf: None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// A small glTF written by the test: accessor 0 = u16 indices (when
+    /// any), accessor 1 = f32 VEC3 positions, mesh 0 = one primitive of
+    /// `mode`; `nodes`/`roots`/`cameras` are JSON text.
+    struct Doc {
+        positions: Vec<[f32; 3]>,
+        indices: Option<Vec<u16>>,
+        mode: u32,
+        nodes: String,
+        roots: String,
+        cameras: String,
+        uri: Option<String>,
+        byte_length: Option<usize>,
+    }
+
+    impl Doc {
+        fn tri() -> Doc {
+            Doc {
+                positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                indices: Some(vec![0, 1, 2]),
+                mode: 4,
+                nodes: r#"[{"mesh": 0, "name": "tri"}]"#.into(),
+                roots: "[0]".into(),
+                cameras: "[]".into(),
+                uri: Some("m.bin".into()),
+                byte_length: None,
+            }
+        }
+
+        fn index_bytes(&self) -> usize {
+            self.indices
+                .as_ref()
+                .map_or(0, |i| (i.len() * 2).div_ceil(4) * 4)
+        }
+
+        fn bin(&self) -> Vec<u8> {
+            let mut b = Vec::new();
+            for i in self.indices.iter().flatten() {
+                b.extend_from_slice(&i.to_le_bytes());
+            }
+            b.resize(self.index_bytes(), 0);
+            for p in &self.positions {
+                for c in p {
+                    b.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            b
+        }
+
+        fn json(&self) -> String {
+            let ib = self.index_bytes();
+            let pb = self.positions.len() * 12;
+            let uri = match &self.uri {
+                Some(u) => format!(r#""uri": {u:?}, "#),
+                None => String::new(),
+            };
+            let (views, accessors, indices) = match &self.indices {
+                Some(i) => (
+                    format!(
+                        r#"{{"buffer": 0, "byteOffset": 0, "byteLength": {}}},
+                           {{"buffer": 0, "byteOffset": {ib}, "byteLength": {pb}}}"#,
+                        i.len() * 2
+                    ),
+                    format!(
+                        r#"{{"bufferView": 0, "componentType": 5123, "count": {}, "type": "SCALAR"}},
+                           {{"bufferView": 1, "componentType": 5126, "count": {}, "type": "VEC3"}}"#,
+                        i.len(),
+                        self.positions.len()
+                    ),
+                    r#", "indices": 0"#,
+                ),
+                None => (
+                    format!(r#"{{"buffer": 0, "byteOffset": 0, "byteLength": {pb}}}"#),
+                    format!(
+                        r#"{{"bufferView": 0, "componentType": 5126, "count": {}, "type": "VEC3"}}"#,
+                        self.positions.len()
+                    ),
+                    "",
+                ),
+            };
+            let pos = if self.indices.is_some() { 1 } else { 0 };
+            // POSITION's min and max are required by the specification (and the crate).
+            let bound = |f: fn(f32, f32) -> f32| {
+                let b = (0..3).map(|k| {
+                    let v = self
+                        .positions
+                        .iter()
+                        .map(|p| p[k])
+                        .fold(self.positions[0][k], f);
+                    if v.is_finite() {
+                        v.to_string()
+                    } else {
+                        "0".into()
+                    }
+                });
+                b.collect::<Vec<_>>().join(", ")
+            };
+            let accessors = accessors.replacen(
+                r#""type": "VEC3""#,
+                &format!(
+                    r#""type": "VEC3", "min": [{}], "max": [{}]"#,
+                    bound(f32::min),
+                    bound(f32::max)
+                ),
+                1,
+            );
+            format!(
+                r#"{{"asset": {{"version": "2.0"}}, "scene": 0,
+                   "scenes": [{{"nodes": {roots}}}],
+                   "nodes": {nodes},
+                   "cameras": {cameras},
+                   "meshes": [{{"primitives": [{{"attributes": {{"POSITION": {pos}}}{indices}, "mode": {mode}}}]}}],
+                   "buffers": [{{{uri}"byteLength": {len}}}],
+                   "bufferViews": [{views}],
+                   "accessors": [{accessors}]}}"#,
+                roots = self.roots,
+                nodes = self.nodes,
+                cameras = self.cameras,
+                mode = self.mode,
+                len = self.byte_length.unwrap_or(ib + pb),
+            )
+        }
+
+        /// Writes `m.gltf` and `m.bin` into `dir`.
+        fn write(&self, dir: &Path) -> PathBuf {
+            std::fs::write(dir.join("m.bin"), self.bin()).unwrap();
+            let p = dir.join("m.gltf");
+            std::fs::write(&p, self.json()).unwrap();
+            p
+        }
+
+        /// The same document as a GLB (buffer 0 is the BIN chunk).
+        fn glb(&self) -> Vec<u8> {
+            let mut json = Doc {
+                uri: None,
+                nodes: self.nodes.clone(),
+                roots: self.roots.clone(),
+                cameras: self.cameras.clone(),
+                indices: self.indices.clone(),
+                positions: self.positions.clone(),
+                ..*self
+            }
+            .json()
+            .into_bytes();
+            while !json.len().is_multiple_of(4) {
+                json.push(b' ');
+            }
+            let bin = self.bin();
+            let mut out = Vec::new();
+            out.extend_from_slice(b"glTF");
+            out.extend_from_slice(&2u32.to_le_bytes());
+            out.extend_from_slice(&((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+            out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+            out.extend_from_slice(b"JSON");
+            out.extend_from_slice(&json);
+            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+            out.extend_from_slice(b"BIN\0");
+            out.extend_from_slice(&bin);
+            out
+        }
+    }
+
+    fn load(p: &Path, dir: &Path) -> Result<GltfFile, SceneError> {
+        load_gltf(
+            p,
+            dir,
+            "objects[0].mesh",
+            MAX_SCENE_TRIANGLES,
+            CameraRequest::None,
+        )
+    }
+
+    fn load_err(p: &Path, dir: &Path) -> String {
+        let e = load(p, dir).expect_err("loaded").to_string();
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(e.contains(&*p.display().to_string()), "{e}");
+        e
+    }
+
+    fn close(a: DVec3, b: [f64; 3]) -> bool {
+        (a - DVec3::from(b)).abs().max_element() < 1e-6
+    }
+
+    #[test]
+    fn node_hierarchy_is_applied_in_traversal_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut d = Doc::tri();
+        // Root 0 (translated) with children 1 (rotated 90 deg about z, scaled
+        // by 2) and 2 (a matrix: translate y by 5); root 3 has no name.
+        let s = std::f32::consts::FRAC_1_SQRT_2;
+        d.nodes = format!(
+            r#"[{{"name": "base", "translation": [10, 0, 0], "children": [1, 2]}},
+                {{"name": "arm", "mesh": 0, "rotation": [0, 0, {s}, {s}], "scale": [2, 2, 2]}},
+                {{"name": "lifted", "mesh": 0,
+                  "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,5,0,1]}},
+                {{"mesh": 0}}]"#
+        );
+        d.roots = "[3, 0]".into();
+        let f = load(&d.write(dir.path()), dir.path()).unwrap();
+        let labels: Vec<&str> = f.nodes.iter().map(|n| n.label.as_str()).collect();
+        assert_eq!(labels, ["3", "arm", "lifted"]);
+        let t = &f.nodes[1].triangles[0];
+        assert!(close(t[0], [10.0, 0.0, 0.0]), "{t:?}");
+        assert!(close(t[1], [10.0, 2.0, 0.0]), "{t:?}");
+        assert!(close(t[2], [8.0, 0.0, 0.0]), "{t:?}");
+        let t = &f.nodes[2].triangles[0];
+        assert_eq!(t[1], DVec3::new(11.0, 5.0, 0.0));
+        // The unnamed root is untransformed: its vertices are the file's.
+        assert_eq!(f.nodes[0].triangles[0][1], DVec3::new(1.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn a_mirroring_node_reverses_the_winding() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"mesh": 0, "scale": [-1, 1, 1]}]"#.into();
+        let f = load(&d.write(dir.path()), dir.path()).unwrap();
+        let t = f.nodes[0].triangles[0];
+        assert_eq!(t, [DVec3::ZERO, DVec3::Y, DVec3::NEG_X]);
+    }
+
+    #[test]
+    fn strips_fans_non_indexed_glb_and_data_uris_load() {
+        let dir = tempfile::tempdir().unwrap();
+        let quad = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let mut d = Doc::tri();
+        d.positions = quad.clone();
+        d.indices = None;
+        d.mode = 5; // TRIANGLE_STRIP: (0 1 2), (1 3 2)
+        let f = load(&d.write(dir.path()), dir.path()).unwrap();
+        let v = |i: usize| DVec3::from(quad[i].map(f64::from));
+        assert_eq!(
+            f.nodes[0].triangles,
+            vec![[v(0), v(1), v(2)], [v(1), v(3), v(2)]]
+        );
+        d.mode = 6; // TRIANGLE_FAN: (1 2 0), (2 3 0)
+        let f = load(&d.write(dir.path()), dir.path()).unwrap();
+        assert_eq!(
+            f.nodes[0].triangles,
+            vec![[v(1), v(2), v(0)], [v(2), v(3), v(0)]]
+        );
+
+        let d = Doc::tri();
+        let p = dir.path().join("m.glb");
+        std::fs::write(&p, d.glb()).unwrap();
+        let f = load(&p, dir.path()).unwrap();
+        assert_eq!(f.nodes[0].triangles[0][2], DVec3::Y);
+
+        let mut d = Doc::tri();
+        let b64 = {
+            const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+            let mut s = String::new();
+            for c in d.bin().chunks(3) {
+                let n = c
+                    .iter()
+                    .enumerate()
+                    .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
+                for k in 0..=c.len() {
+                    s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+                }
+            }
+            while !s.len().is_multiple_of(4) {
+                s.push('=');
+            }
+            s
+        };
+        d.uri = Some(format!("data:application/octet-stream;base64,{b64}"));
+        let p = dir.path().join("embedded.gltf");
+        std::fs::write(&p, d.json()).unwrap();
+        let f = load(&p, dir.path()).unwrap();
+        assert_eq!(f.nodes[0].triangles[0][1], DVec3::X);
+    }
+
+    #[test]
+    fn bad_input_gives_one_line_naming_file_and_problem() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path();
+        let p = Doc::tri().write(path);
+        std::fs::remove_file(path.join("m.bin")).unwrap();
+        assert!(load_err(&p, path).contains("buffer 0 (m.bin) is missing"));
+
+        let mut d = Doc::tri();
+        d.indices = Some(vec![0, 1, 912]);
+        assert!(load_err(&d.write(path), path)
+            .contains("accessor 0 index 912 out of range (vertex count 3)"));
+
+        let mut d = Doc::tri();
+        d.positions[1][1] = f32::NAN;
+        assert!(load_err(&d.write(path), path)
+            .contains("accessor 1 (POSITION) element 1 is not finite"));
+
+        std::fs::write(path.parent().unwrap().join("x.bin"), Doc::tri().bin()).unwrap();
+        let mut d = Doc::tri();
+        d.uri = Some("../x.bin".into());
+        assert!(load_err(&d.write(path), path).contains("contains \"..\""));
+        d.uri = Some(path.join("m.bin").display().to_string());
+        assert!(load_err(&d.write(path), path).contains("must be a relative path"));
+        d.uri = Some("file:///etc/passwd".into());
+        assert!(load_err(&d.write(path), path).contains("only relative file names"));
+
+        let mut d = Doc::tri();
+        d.byte_length = Some(1000);
+        assert!(load_err(&d.write(path), path)
+            .contains("buffer 0 (m.bin) is truncated: 44 bytes, its byteLength is 1000"));
+
+        let mut d = Doc::tri();
+        d.mode = 1;
+        assert!(load_err(&d.write(path), path).contains("mesh 0 primitive 0 has mode LINES"));
+
+        let p = path.join("broken.gltf");
+        std::fs::write(&p, "{\"asset\": {\"version\": \"2.0\"},\n\"nodes\": [}").unwrap();
+        assert!(load_err(&p, path).contains("malformed glTF JSON"));
+
+        let p = path.join("bad.glb");
+        let mut glb = Doc::tri().glb();
+        glb[4] = 1;
+        std::fs::write(&p, &glb).unwrap();
+        assert!(load_err(&p, path).contains("bad GLB header: version 1"));
+        std::fs::write(&p, b"{\"asset\": {}}").unwrap();
+        assert!(load_err(&p, path).contains("bad GLB header"));
+        std::fs::write(&p, b"glTF\x02\0\0\0\x04\0\0\0").unwrap();
+        assert!(load_err(&p, path).contains("bad GLB header"));
+    }
+
+    #[test]
+    fn hostile_values_are_errors_not_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path();
+        let d = Doc::tri();
+        let json = d.json().replacen(
+            r#""bufferView": 1, "componentType""#,
+            r#""bufferView": 1, "byteOffset": 18446744073709551615, "componentType""#,
+            1,
+        );
+        std::fs::write(path.join("m.bin"), d.bin()).unwrap();
+        let p = path.join("off.gltf");
+        std::fs::write(&p, json).unwrap();
+        assert!(load_err(&p, path).contains("reads past the end of bufferView 1"));
+
+        let mut d = Doc::tri();
+        d.uri = Some("ééé.bin".into());
+        assert!(load_err(&d.write(path), path).contains("(ééé.bin) is missing"));
+
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"children": [1]}, {"mesh": 0, "children": [0]}]"#.into();
+        assert!(load_err(&d.write(path), path).contains("node 0 is reached twice"));
+
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"mesh": 0, "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,1, 0,0,0,1]}]"#.into();
+        assert!(load_err(&d.write(path), path).contains("node 0's matrix is not affine"));
+    }
+
+    #[test]
+    fn no_panic_on_truncated_or_mangled_glb() {
+        let dir = tempfile::tempdir().unwrap();
+        let glb = Doc::tri().glb();
+        let p = dir.path().join("t.glb");
+        for n in 0..glb.len() {
+            std::fs::write(&p, &glb[..n]).unwrap();
+            assert!(load(&p, dir.path()).is_err(), "prefix of {n} bytes loaded");
+        }
+        for i in 0..glb.len() {
+            let mut g = glb.clone();
+            g[i] ^= 0xff;
+            std::fs::write(&p, &g).unwrap();
+            let _ = load(&p, dir.path());
+        }
+    }
+
+    #[test]
+    fn cameras_map_or_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut d = Doc::tri();
+        d.cameras = r#"[{"type": "perspective", "name": "main",
+                         "perspective": {"yfov": 0.5, "znear": 0.1, "aspectRatio": 1.5}},
+                        {"type": "orthographic",
+                         "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.1, "zfar": 9}}]"#
+            .into();
+        d.nodes = r#"[{"mesh": 0}, {"camera": 0, "name": "cam", "translation": [0, 0, 4]},
+                      {"camera": 1, "name": "ortho"}]"#
+            .into();
+        d.roots = "[0, 1, 2]".into();
+        let p = d.write(dir.path());
+        let get = |r| {
+            load_gltf(&p, dir.path(), "objects[0].mesh", MAX_SCENE_TRIANGLES, r)
+                .map(|f| f.camera.expect("camera"))
+        };
+        let spec = |w, h| super::super::CameraSpec {
+            eye: None,
+            look_at: None,
+            up: None,
+            vfov: None,
+            width: w,
+            height: h,
+            near: None,
+            far: None,
+            gltf: None,
+        };
+        let c = get(CameraRequest::First).unwrap();
+        assert_eq!(c.node, 1);
+        let (m, tr) = (
+            DMat3::from_diagonal(DVec3::splat(2.0)),
+            DVec3::new(1.0, 0.0, 0.0),
+        );
+        let s = camera_spec(&c, m, tr, &spec(96, 64)).unwrap();
+        assert_eq!(s.eye, Some([1.0, 0.0, 8.0]));
+        assert_eq!(s.look_at, Some([1.0, 0.0, 7.0]));
+        assert_eq!(s.up, Some([0.0, 1.0, 0.0]));
+        assert_eq!(s.vfov, Some(f64::from(0.5f32).to_degrees()));
+        assert_eq!(s.near, Some(f64::from(0.1f32) * 2.0));
+        assert_eq!(s.far, None);
+        assert_eq!(get(CameraRequest::Named("main")).unwrap().node, 1);
+        let e = camera_spec(&c, DMat3::IDENTITY, DVec3::ZERO, &spec(64, 64)).unwrap_err();
+        assert!(e.contains("aspectRatio 1.5"), "{e}");
+        let squash = DMat3::from_diagonal(DVec3::new(1.0, 2.0, 1.0));
+        let e = camera_spec(&c, squash, DVec3::ZERO, &spec(96, 64)).unwrap_err();
+        assert!(e.contains("not a rotation times a uniform scale"), "{e}");
+        let mirror = DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0));
+        let e = camera_spec(&c, mirror, DVec3::ZERO, &spec(96, 64)).unwrap_err();
+        assert!(e.contains("mirrors"), "{e}");
+        let e = get(CameraRequest::Named("ortho")).unwrap_err().to_string();
+        assert!(e.contains("orthographic"), "{e}");
+        let e = get(CameraRequest::Named("nope")).unwrap_err().to_string();
+        assert!(e.contains("no camera node or camera named \"nope\""), "{e}");
+    }
+}
