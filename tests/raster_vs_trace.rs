@@ -107,6 +107,13 @@ proptest! {
         // Without coverage counts the tracer prunes, in 4x2 packets and in single rays.
         assert_identical("random scene (packets)", &r, &trace_kernel(&scene, TraceKernel::Packets));
         assert_identical("random scene (single rays)", &r, &trace_kernel(&scene, TraceKernel::SingleRays));
+        // The raster's edge-function fast path against its pure predicate path.
+        let exact = rendiff::raster::render_exact(&scene, rendiff::raster::RasterOptions { count_coverage: true, deadline: None }, &|_| {});
+        assert_identical("random scene (raster without fast path)", &r, &exact);
+        prop_assert_eq!(&r.coverage, &exact.coverage, "coverage counts differ from the pure predicate path");
+        let mut counts = r.counters;
+        counts.fast_decided = 0;
+        prop_assert_eq!(counts, exact.counters, "operation counts differ from the pure predicate path");
     }
 }
 

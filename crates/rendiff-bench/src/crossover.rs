@@ -279,6 +279,7 @@ fn table(p: &mut Page, rows: &Value) {
                 num(f("bvh_build_s"), 4),
                 c("raster_counters", "triangle_setups"),
                 c("raster_counters", "coverage_tests"),
+                c("raster_counters", "fast_decided"),
                 c("trace_counters", "coverage_tests"),
                 c("trace_counters", "bvh_nodes_visited"),
                 format!(
@@ -300,6 +301,7 @@ fn table(p: &mut Page, rows: &Value) {
             "BVH build s",
             "raster setups",
             "raster coverage tests",
+            "of which decided by the edge-function fast path",
             "trace coverage tests",
             "BVH nodes visited",
             "exact fallbacks raster / trace",

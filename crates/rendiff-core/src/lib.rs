@@ -20,6 +20,7 @@ pub mod names;
 pub mod pending;
 pub mod predicate;
 pub mod raster;
+pub mod raster_edges;
 pub mod render;
 pub mod scene;
 pub mod shade;

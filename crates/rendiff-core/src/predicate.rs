@@ -6,7 +6,7 @@ use glam::DVec3;
 
 /// Shewchuk's `o3derrboundA = (7 + 56 eps) eps`, eps = 2^-53: if |det| exceeds
 /// this times the permanent, the float sign is the exact sign.
-const O3D_ERRBOUND_A: f64 = (7.0 + 56.0 * f64::EPSILON / 2.0) * (f64::EPSILON / 2.0);
+pub(crate) const O3D_ERRBOUND_A: f64 = (7.0 + 56.0 * f64::EPSILON / 2.0) * (f64::EPSILON / 2.0);
 
 /// An edge `(a, b)` seen from the eye: the plane through eye, a and b.
 /// `n = (a - eye) x (b - eye)`; the orientation of a point P is `n . (P - eye)`.

@@ -34,6 +34,12 @@ pub struct Counters {
     pub triangle_setups: u64,
     /// Ray-box tests (trace only): nodes tested per ray; a packet counts each live lane.
     pub bvh_nodes_visited: u64,
+    /// Raster only: coverage tests its edge-function fast path (`raster_edges`)
+    /// decided without calling the orientation predicate; the other
+    /// `coverage_tests - fast_decided` called it (and `exact_fallbacks` counts
+    /// its exact arithmetic). Absent in older records, hence the default.
+    #[serde(default)]
+    pub fast_decided: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -44,6 +50,7 @@ impl std::ops::AddAssign for Counters {
         self.ties += o.ties;
         self.triangle_setups += o.triangle_setups;
         self.bvh_nodes_visited += o.bvh_nodes_visited;
+        self.fast_decided += o.fast_decided;
     }
 }
 

@@ -1,0 +1,602 @@
+//! The rasterizer's fast path: edge functions evaluated for eight pixels at a
+//! time, deciding coverage where a proven error bound vouches for every sign
+//! needed, and leaving every other pixel to [`crate::visibility`]'s exact
+//! predicate.
+//!
+//! # What is evaluated
+//!
+//! For edge `k` (a->b, b->c, c->a) the value is the predicate filter's own
+//! determinant, `det = Dx nx + Dy ny + Dz nz` (left to right, no FMA), with
+//! `n = (a - e) x (b - e)` the f64 [`EdgePlane`] normal and `D = P - e` the
+//! pixel ray's rounded direction. It is evaluated directly per pixel from the
+//! tile's f64 directions (no incremental stepping, so no accumulation error),
+//! one 8-pixel chunk of a tile row at a time, in a loop the compiler
+//! vectorizes (256-bit when the CPU has AVX2).
+//!
+//! # The bound ([`FAST_EDGE_BOUND`])
+//!
+//! Let `u = 2^-53` and `E = N . (P - e)` the exact value (N from exact
+//! differences), whose sign is the orientation. Expanded, `E` is a sum of six
+//! terms `+-(P_i - e_i)(a_j - e_j)(b_k - e_k)`. The computed `det` carries
+//! each term through at most 8 roundings: three differences (`D_i`, `ad_j`,
+//! `bd_k`), the product `ad_j bd_k`, the subtraction forming `n_i`, the
+//! product `D_i n_i`, and two additions (the last term only one). So
+//! `det = sum t (1 + th_t)` with `|th_t| <= g8 = 8u / (1 - 8u)`, and
+//! `|det - E| <= g8 S*`, `S* = sum |t|`. Replacing exact values by computed
+//! ones, `|x| <= |fl(x)| / (1 - u)` per rounding: three differences, then
+//! `perm_i = fl(|fl(ad_j bd_k)| + |fl(ad_k bd_j)|)` (two roundings), then the
+//! tile's `S = fl(fl(fl(Mx permx) + fl(My permy)) + fl(Mz permz))` with
+//! `M_i >= |D_i|` the tile's largest direction component (three roundings), so
+//! `S* <= S / (1 - u)^8`. The bound `B = fl(9u S) >= 9u S (1 - u)`, hence
+//! `|det - E| <= B (8/9) / ((1 - 8u)(1 - u)^9) < B`: when `det > B` the
+//! orientation is positive, when `-det > B` negative; otherwise the pixel
+//! goes to the exact predicate. (As for Shewchuk's filter, the rounding model
+//! assumes no underflow or overflow; a non-finite `B` decides nothing, and
+//! the next paragraph makes the fast path never less safe than that filter.)
+//!
+//! # Why the raster's output cannot change
+//!
+//! The filter in [`EdgePlane::sign_with`] computes the same `det` from the
+//! same operands and compares it with `b = fl(o3derrboundA fl(sum |D_i|
+//! perm_i))`, `o3derrboundA = 7u + 56u^2 < 9u`. Round-to-nearest is monotone,
+//! all operands are non-negative and `M_i >= |D_i|`, so `B >= b` for every
+//! pixel of the tile (a NaN `B` decides nothing; a finite `B` implies a finite
+//! `b`). So a sign the fast path gives is one the filter would have returned
+//! at once, without exact arithmetic or the tie rule: coverage, depth, IDs and
+//! every operation count are those of the pure predicate path
+//! ([`crate::raster::render_exact`]); tests compare the two bit for bit.
+
+use crate::camera::{Camera, PixelRay};
+use crate::predicate::EdgePlane;
+use crate::visibility::{TriDepth, TriEdges};
+use glam::DVec3;
+
+/// Unit roundoff of f64.
+const U: f64 = f64::EPSILON / 2.0;
+
+/// The fast path's coefficient on the tile permanent `S` (see the module
+/// documentation for the derivation): 9u, above the 8u (plus second-order
+/// terms) the evaluation can err by, and above the predicate filter's
+/// `7u + 56u^2`, so every sign it gives is one the filter gives too.
+pub const FAST_EDGE_BOUND: f64 = 9.0 * U;
+
+// Every sign the fast path gives must be one the predicate's filter gives (module documentation).
+const _: () = assert!(FAST_EDGE_BOUND >= crate::predicate::O3D_ERRBOUND_A);
+
+/// Pixels per chunk: one evaluation step (two 256-bit vectors of f64).
+pub const CHUNK: usize = 8;
+
+/// How a chunk of 8 comparisons becomes 8 mask bits: plain Rust everywhere
+/// ([`Portable`]), one `vcmppd` + `vmovmskpd` per half where the CPU has AVX2
+/// ([`Avx2`]). Both give the same bits (a test checks it).
+pub trait Lanes: Copy {
+    /// Bit `j` set where `a[j] > b` (false for NaN).
+    fn gt(self, a: &[f64; CHUNK], b: f64) -> u32;
+}
+
+/// [`Lanes`] in plain Rust, for any CPU.
+#[derive(Debug, Clone, Copy)]
+pub struct Portable;
+
+impl Lanes for Portable {
+    #[inline(always)]
+    fn gt(self, a: &[f64; CHUNK], b: f64) -> u32 {
+        (0..CHUNK).fold(0, |m, j| m | (u32::from(a[j] > b) << j))
+    }
+}
+
+/// Proof that the running CPU has AVX2 and POPCNT: only [`Avx2::detect`] makes one.
+#[cfg(target_arch = "x86_64")]
+#[derive(Debug, Clone, Copy)]
+pub struct Avx2(());
+
+#[cfg(target_arch = "x86_64")]
+impl Avx2 {
+    /// The token, when the CPU has AVX2 and POPCNT.
+    #[inline]
+    pub fn detect() -> Option<Avx2> {
+        (std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("popcnt"))
+            .then_some(Avx2(()))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx2 {
+    #[inline(always)]
+    fn gt(self, a: &[f64; CHUNK], b: f64) -> u32 {
+        use std::arch::x86_64::{
+            _mm256_cmp_pd, _mm256_loadu_pd, _mm256_movemask_pd, _mm256_set1_pd, _CMP_GT_OQ,
+        };
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
+        // the loads read the 8 f64 of the array borrowed here, 4 at a time.
+        unsafe {
+            let b = _mm256_set1_pd(b);
+            let lo = _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(a.as_ptr()), b);
+            let hi = _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(a.as_ptr().add(4)), b);
+            (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32
+        }
+    }
+}
+
+/// The pixel rays of one tile, by component (structure of arrays with a fixed
+/// row stride, so 8 lanes from any column of a row are one slice), and the largest magnitude of
+/// each direction component over the tile (for the bound). Every value is
+/// [`Camera::pixel_ray`]'s, bit for bit: it is computed by the same
+/// [`Camera::screen_ray`] from the same `sx` and `sy`.
+#[derive(Debug, Clone)]
+pub struct TileRays {
+    /// Columns in the tile.
+    width: usize,
+    /// Row stride in pixels: the width plus `CHUNK - 1` padding lanes, so a
+    /// chunk may start at any column (a small triangle's box then needs one chunk per row).
+    stride: usize,
+    /// `sx` per column (padding lanes repeat the last column).
+    sx: Vec<f64>,
+    /// `sy` per row.
+    sy: Vec<f64>,
+    /// The camera's eye, forward, right and up: `P` is recomputed from them
+    /// for the few pixels that need it (the exact predicate).
+    basis: [DVec3; 4],
+    /// `D = P - eye` per component.
+    d: [Vec<f64>; 3],
+    /// `1 / D` per component.
+    inv: [Vec<f64>; 3],
+    /// `D . forward`.
+    planar: Vec<f64>,
+    /// `max |D_i|` over the tile's pixels, per component.
+    max_abs: [f64; 3],
+}
+
+impl TileRays {
+    /// The rays of the `tw` x `th` tile whose top-left pixel is `(x0, y0)`:
+    /// [`Camera::screen_ray`]'s arithmetic written per component over a row,
+    /// so that it vectorizes (padding lanes repeat the last column).
+    pub fn new(cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) -> TileRays {
+        let (width, rows) = (tw as usize, th as usize);
+        let stride = width + CHUNK - 1;
+        let n = stride * rows;
+        let empty = || Vec::with_capacity(n);
+        let mut t = TileRays {
+            width,
+            stride,
+            sx: (0..stride)
+                .map(|lx| cam.screen_x(x0 + (lx as u32).min(tw - 1)))
+                .collect(),
+            sy: (0..th).map(|ly| cam.screen_y(y0 + ly)).collect(),
+            basis: [cam.eye, cam.forward, cam.right, cam.up_ortho],
+            d: [empty(), empty(), empty()],
+            inv: [empty(), empty(), empty()],
+            planar: empty(),
+            max_abs: [0.0; 3],
+        };
+        let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
+        for ly in 0..rows {
+            let sy = t.sy[ly];
+            let row = ly * stride..(ly + 1) * stride;
+            for k in 0..3 {
+                // Camera::screen_ray: P = eye + ((forward + right sx) + up sy),
+                // D = P - eye, 1 / D, component by component.
+                t.d[k].extend(
+                    t.sx.iter()
+                        .map(|&sx| (e[k] + ((f[k] + r[k] * sx) + u[k] * sy)) - e[k]),
+                );
+                let d = &t.d[k][row.clone()];
+                t.inv[k].extend(d.iter().map(|&d| 1.0 / d));
+                for &v in &d[..width] {
+                    // NaN-propagating max: a NaN direction leaves a NaN bound (decides nothing).
+                    let a = v.abs();
+                    if a > t.max_abs[k] || a.is_nan() {
+                        t.max_abs[k] = a;
+                    }
+                }
+            }
+            let [dx, dy, dz] = [0, 1, 2].map(|k| &t.d[k][row.clone()]);
+            // DVec3::dot(D, forward).
+            t.planar
+                .extend((0..stride).map(|lx| dx[lx] * f.x + dy[lx] * f.y + dz[lx] * f.z));
+        }
+        t
+    }
+
+    /// Builds the tile from given directions (tests of the edge functions).
+    #[cfg(test)]
+    fn from_dirs(dirs: &[[f64; 3]], tw: usize, th: usize) -> TileRays {
+        let stride = tw + CHUNK - 1;
+        let mut d = [(); 3].map(|_| vec![0.0; stride * th]);
+        let mut max_abs = [0f64; 3];
+        for (i, v) in dirs.iter().enumerate() {
+            for k in 0..3 {
+                d[k][(i / tw) * stride + i % tw] = v[k];
+                max_abs[k] = max_abs[k].max(v[k].abs());
+            }
+        }
+        TileRays {
+            width: tw,
+            stride,
+            sx: vec![0.0; stride],
+            sy: vec![0.0; th],
+            basis: [DVec3::ZERO; 4],
+            inv: d.clone(),
+            planar: d[0].clone(),
+            d,
+            max_abs,
+        }
+    }
+
+    /// The ray of pixel `(lx, ly)` of the tile, as [`Camera::pixel_ray`] gives it.
+    #[inline(always)]
+    pub fn ray(&self, lx: usize, ly: usize) -> PixelRay {
+        let at = ly * self.stride + lx;
+        let v = |a: &[Vec<f64>; 3]| DVec3::new(a[0][at], a[1][at], a[2][at]);
+        let [e, f, r, u] = self.basis;
+        // As in `new`: Camera::screen_ray's P, component by component.
+        let (sx, sy) = (self.sx[lx], self.sy[ly]);
+        let p = |k: usize| e[k] + ((f[k] + r[k] * sx) + u[k] * sy);
+        PixelRay {
+            p: DVec3::new(p(0), p(1), p(2)),
+            dir: v(&self.d),
+            inv_dir: v(&self.inv),
+            planar: self.planar[at],
+        }
+    }
+
+    /// Columns in the tile.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+}
+
+/// [`TriDepth::depth`] for the 8 lanes of a chunk, operation for operation
+/// (same operands, same order, `f64::max`/`min`, one rounding to f32), so each
+/// lane's depth is bit for bit the scalar one; written lane-parallel so that
+/// it vectorizes. The slab test's eye-relative box bounds are per triangle.
+#[derive(Debug, Clone, Copy)]
+pub struct ChunkDepth {
+    /// The plane normal.
+    normal: [f64; 3],
+    /// `normal . (a - eye)`.
+    num: f64,
+    /// `bounds.lo - eye`, per axis (the slab test's `b.lo[k] - origin[k]`).
+    lo: [f64; 3],
+    /// `bounds.hi - eye`, per axis.
+    hi: [f64; 3],
+    /// Per axis: a ray with `D_k = 0` misses the box (the eye is outside its slab).
+    zero_misses: [bool; 3],
+}
+
+impl ChunkDepth {
+    /// Takes the scalar depth function's per-triangle data.
+    pub fn new(cam: &Camera, d: &TriDepth) -> ChunkDepth {
+        let (eye, b) = (cam.eye, &d.bounds);
+        ChunkDepth {
+            normal: d.normal.to_array(),
+            num: d.num,
+            lo: [0, 1, 2].map(|k| b.lo[k] - eye[k]),
+            hi: [0, 1, 2].map(|k| b.hi[k] - eye[k]),
+            zero_misses: [0, 1, 2].map(|k| eye[k] < b.lo[k] || eye[k] > b.hi[k]),
+        }
+    }
+
+    /// Depths of the 8 lanes from column `col` of tile row `row`, and the
+    /// mask of lanes where [`TriDepth::depth`] is `Some`.
+    #[inline(always)]
+    pub fn depths(
+        &self,
+        cam: &Camera,
+        rays: &TileRays,
+        row: usize,
+        col: usize,
+    ) -> ([f32; CHUNK], u32) {
+        let at = row * rays.stride + col;
+        let lane = |a: &Vec<f64>| -> [f64; CHUNK] { a[at..at + CHUNK].try_into().unwrap() };
+        let d = [lane(&rays.d[0]), lane(&rays.d[1]), lane(&rays.d[2])];
+        let inv = [lane(&rays.inv[0]), lane(&rays.inv[1]), lane(&rays.inv[2])];
+        let planar = lane(&rays.planar);
+        let mut z = [0f32; CHUNK];
+        let mut ok = 0u32;
+        for j in 0..CHUNK {
+            // DVec3::dot: x*x' + y*y' + z*z', left to right.
+            let denom =
+                self.normal[0] * d[0][j] + self.normal[1] * d[1][j] + self.normal[2] * d[2][j];
+            let valid = denom != 0.0 && denom.is_finite();
+            // visibility::slab_od with origin = eye.
+            let mut tmin = f64::NEG_INFINITY;
+            let mut tmax = f64::INFINITY;
+            let mut empty = false;
+            for k in 0..3 {
+                let dk = d[k][j];
+                let zero = dk == 0.0;
+                empty |= zero & self.zero_misses[k];
+                let t0 = self.lo[k] * inv[k][j];
+                let t1 = self.hi[k] * inv[k][j];
+                let (a, bb) = if dk > 0.0 { (t0, t1) } else { (t1, t0) };
+                let (nmin, nmax) = (tmin.max(a), tmax.min(bb));
+                tmin = if zero { tmin } else { nmin };
+                tmax = if zero { tmax } else { nmax };
+            }
+            let (lo, hi) = if empty {
+                (f64::INFINITY, f64::NEG_INFINITY)
+            } else {
+                (tmin, tmax)
+            };
+            let t = (self.num / denom).max(lo).min(hi.max(lo));
+            let zj = (t * planar[j]) as f32;
+            let zf = f64::from(zj);
+            z[j] = zj;
+            ok |= u32::from(valid & (zf >= cam.near) & (zf <= cam.far)) << j;
+        }
+        (z, ok)
+    }
+}
+
+/// One triangle's edge functions over one tile: the f64 normals of its
+/// [`TriEdges`] and each edge's bound `B` (module documentation).
+#[derive(Debug, Clone, Copy)]
+pub struct FastEdges {
+    /// Edge normals, as the predicate's filter uses them.
+    n: [[f64; 3]; 3],
+    /// `B` per edge: a sign is taken only where `|det| > B`.
+    bound: [f64; 3],
+}
+
+/// Sign masks of one chunk: bit `j` of `pos[k]` (`neg[k]`) set when edge `k`
+/// is certainly positive (negative) at lane `j`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ChunkSigns {
+    /// Certainly positive, per edge.
+    pub pos: [u32; 3],
+    /// Certainly negative, per edge.
+    pub neg: [u32; 3],
+}
+
+impl ChunkSigns {
+    /// Lanes [`crate::visibility::covers_by`] would reject from certain signs
+    /// alone (the first two opposite, or the first two agreeing and the third
+    /// opposite): exactly the signs it would ask for are certain.
+    #[inline(always)]
+    pub fn rejected(&self) -> u32 {
+        let [p0, p1, p2] = self.pos;
+        let [n0, n1, n2] = self.neg;
+        (p0 & n1) | (n0 & p1) | (p0 & p1 & n2) | (n0 & n1 & p2)
+    }
+
+    /// Lanes covered back-facing (all three signs certainly positive).
+    #[inline(always)]
+    pub fn inside_pos(&self) -> u32 {
+        self.pos[0] & self.pos[1] & self.pos[2]
+    }
+
+    /// Lanes covered front-facing (all three signs certainly negative).
+    #[inline(always)]
+    pub fn inside_neg(&self) -> u32 {
+        self.neg[0] & self.neg[1] & self.neg[2]
+    }
+
+    /// Edge `k`'s certain sign at lane `j`, 0 when it must go to the predicate.
+    #[inline(always)]
+    pub fn sign(&self, k: usize, j: usize) -> i8 {
+        ((self.pos[k] >> j) & 1) as i8 - ((self.neg[k] >> j) & 1) as i8
+    }
+}
+
+impl FastEdges {
+    /// Sets up a triangle's edges over a tile.
+    #[inline]
+    pub fn new(edges: &TriEdges, dirs: &TileRays) -> FastEdges {
+        let m = dirs.max_abs;
+        let f = |e: &EdgePlane| {
+            let s = m[0] * e.perm.x + m[1] * e.perm.y + m[2] * e.perm.z;
+            FAST_EDGE_BOUND * s
+        };
+        FastEdges {
+            n: edges.0.map(|e| e.n.to_array()),
+            bound: [f(&edges.0[0]), f(&edges.0[1]), f(&edges.0[2])],
+        }
+    }
+
+    /// Certain signs of the three edges at the 8 pixels from column `col` of
+    /// tile row `row` (lane `j` is the pixel at column `col + j`; lanes past
+    /// the tile's width are padding, to be masked off).
+    #[inline(always)]
+    pub fn chunk<L: Lanes>(&self, l: L, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
+        let at = row * dirs.stride + col;
+        let dx: &[f64; CHUNK] = dirs.d[0][at..at + CHUNK].try_into().unwrap();
+        let dy: &[f64; CHUNK] = dirs.d[1][at..at + CHUNK].try_into().unwrap();
+        let dz: &[f64; CHUNK] = dirs.d[2][at..at + CHUNK].try_into().unwrap();
+        let mut out = ChunkSigns::default();
+        for k in 0..3 {
+            let [nx, ny, nz] = self.n[k];
+            // The filter's expression, operand for operand (EdgePlane::sign_with).
+            let det: [f64; CHUNK] = std::array::from_fn(|j| dx[j] * nx + dy[j] * ny + dz[j] * nz);
+            let neg: [f64; CHUNK] = det.map(|d| -d);
+            out.pos[k] = l.gt(&det, self.bound[k]);
+            out.neg[k] = l.gt(&neg, self.bound[k]);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::exact_sign;
+    use crate::predicate::tests::lcg;
+    use glam::DVec3;
+
+    /// Both [`Lanes`] give the same bits, for equal values, infinities, NaN and signed zeros.
+    #[test]
+    fn lane_masks_agree() {
+        let vals = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            1e-300,
+        ];
+        let mut s = 5u64;
+        for _ in 0..2000 {
+            let a: [f64; CHUNK] =
+                std::array::from_fn(|_| vals[((lcg(&mut s) + 1.0) * 4.0) as usize % 8]);
+            let b = vals[((lcg(&mut s) + 1.0) * 4.0) as usize % 8];
+            let want: u32 = (0..CHUNK).map(|j| u32::from(a[j] > b) << j).sum();
+            assert_eq!(Portable.gt(&a, b), want);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = Avx2::detect() {
+                assert_eq!(avx.gt(&a, b), want, "{a:?} > {b}");
+            }
+        }
+    }
+
+    /// Every ray of a tile is [`Camera::pixel_ray`]'s, bit for bit, borders included.
+    #[test]
+    fn tile_rays_are_the_cameras() {
+        let cams = [
+            Camera::new(
+                DVec3::new(0.3, 0.7, 2.1),
+                DVec3::new(0.1, -0.2, 0.0),
+                DVec3::Y,
+                50.0,
+                45,
+                37,
+                1e-3,
+                1.0,
+            ),
+            Camera::new(
+                DVec3::Z * 1e7,
+                DVec3::ZERO,
+                DVec3::X,
+                90.0,
+                33,
+                33,
+                1e-3,
+                1.0,
+            ),
+        ];
+        for cam in cams.map(Result::unwrap) {
+            for (x0, y0) in [(0, 0), (32, 32), (32, 0)] {
+                let (tw, th) = ((cam.width - x0).min(32), (cam.height - y0).min(32));
+                let t = TileRays::new(&cam, x0, y0, tw, th);
+                for ly in 0..th {
+                    for lx in 0..tw {
+                        let (a, b) = (
+                            t.ray(lx as usize, ly as usize),
+                            cam.pixel_ray(x0 + lx, y0 + ly),
+                        );
+                        let bits = |r: PixelRay| {
+                            [r.p, r.dir, r.inv_dir].map(|v| v.to_array().map(f64::to_bits))
+                        };
+                        assert_eq!(bits(a), bits(b), "pixel ({}, {})", x0 + lx, y0 + ly);
+                        assert_eq!(a.planar.to_bits(), b.planar.to_bits());
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bound_covers_the_derived_evaluation_error() {
+        assert!(FAST_EDGE_BOUND * (1.0 - 8.0 * U) * (1.0 - U).powi(9) > 8.0 * U);
+    }
+
+    /// Directions of a tile whose rays point (nearly) into edge planes: a
+    /// third of the lanes exactly on the plane through the eye and both
+    /// endpoints (up to the rounding of `D`), a third within a few ulps, the
+    /// rest generic. Every certain sign is the exact one and agrees with the
+    /// predicate's filter, near-plane lanes are left undecided, and clear
+    /// lanes are decided.
+    #[test]
+    fn certain_signs_are_exact_and_near_plane_lanes_are_deferred() {
+        let mut s = 3u64;
+        let (mut deferred, mut near, mut decided, mut clear) = (0, 0, 0, 0);
+        for case in 0..3000 {
+            let scale = [1.0, 1e-3, 1e4, 3e7][case % 4];
+            let eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * scale;
+            let v = |s: &mut u64| {
+                eye + DVec3::new(lcg(s), lcg(s), lcg(s) - 2.0) * scale.max(1.0) + DVec3::splat(0.1)
+            };
+            let [a, b, c] = [v(&mut s), v(&mut s), v(&mut s)].map(|p| p.as_vec3().as_dvec3());
+            let tri = [a, b, c].map(|p| p.as_vec3());
+            let cam = crate::camera::Camera::new(
+                eye,
+                eye - DVec3::Z,
+                DVec3::Y,
+                60.0,
+                8,
+                8,
+                1e-3,
+                f64::INFINITY,
+            )
+            .unwrap();
+            let edges = TriEdges::new(&cam, &tri);
+            let mut points = Vec::new();
+            for j in 0..CHUNK {
+                let (p, q) = [(a, b), (b, c), (c, a)][j % 3];
+                let (sa, sb) = (lcg(&mut s).abs() + 0.1, lcg(&mut s).abs() + 0.1);
+                let on = eye + ((p - eye) * sa + (q - eye) * sb) / (sa + sb);
+                let pt = match j % 3 {
+                    0 => on,
+                    1 => {
+                        let ulps = (lcg(&mut s) * 4.0).round();
+                        DVec3::new(on.x + ulps * on.x.abs() * f64::EPSILON, on.y, on.z)
+                    }
+                    _ => eye + DVec3::new(lcg(&mut s), lcg(&mut s), -1.0),
+                };
+                points.push(pt);
+            }
+            let pts: Vec<[f64; 3]> = points.iter().map(|p| (*p - eye).to_array()).collect();
+            let dirs = TileRays::from_dirs(&pts, CHUNK, 1);
+            let fast = FastEdges::new(&edges, &dirs);
+            let signs = fast.chunk(Portable, &dirs, 0, 0);
+            for (j, p) in points.iter().enumerate() {
+                for k in 0..3 {
+                    let e = &edges.0[k];
+                    let got = signs.sign(k, j);
+                    let mut fb = 0;
+                    let filter = e.sign(eye, *p, *p - eye, &mut fb);
+                    if got != 0 {
+                        assert_eq!(got, exact_sign(e.a, e.b, *p, eye), "case {case} lane {j}");
+                        assert_eq!((got, fb), (filter, 0), "case {case} lane {j}");
+                    }
+                    if j % 3 != 2 && k == j % 3 {
+                        near += 1;
+                        deferred += usize::from(got == 0);
+                    }
+                    if j % 3 == 2 && fb == 0 {
+                        clear += 1;
+                        decided += usize::from(got != 0);
+                    }
+                }
+            }
+        }
+        assert!(
+            deferred * 10 >= near * 9,
+            "only {deferred} of {near} near-plane signs deferred"
+        );
+        assert!(
+            decided * 100 >= clear * 95,
+            "decided {decided} of {clear} clear signs"
+        );
+    }
+
+    #[test]
+    fn chunk_masks_read_the_right_lanes() {
+        // A 10-wide tile: stride 17, so row 1 starts at 17 and columns 10..17 are padding.
+        let dirs: Vec<[f64; 3]> = (0..20)
+            .map(|i| [if i % 2 == 0 { 1.0 } else { -1.0 }, 0.0, -1.0])
+            .collect();
+        let t = TileRays::from_dirs(&dirs, 10, 2);
+        let eye = glam::DVec3::ZERO;
+        let e = EdgePlane::new(eye, DVec3::new(0.0, -1.0, -1.0), DVec3::new(0.0, 1.0, -1.0));
+        let edges = TriEdges([e; 3]);
+        let f = FastEdges::new(&edges, &t);
+        let c0 = f.chunk(Portable, &t, 1, 0);
+        let c1 = f.chunk(Portable, &t, 1, 8);
+        // Row 1 holds rays 10..20: lane j has x = +1 when 10 + j is even.
+        assert_eq!(c0.pos[0] | c0.neg[0], 0xff);
+        assert_eq!(c0.pos[0], 0b0101_0101 ^ if e.n.x > 0.0 { 0 } else { 0xff });
+        assert_eq!(c1.pos[0] | c1.neg[0], 0b11, "padding lanes decide nothing");
+    }
+}
