@@ -21,6 +21,69 @@ fn rendiff(dir: &Path) -> Command {
     c
 }
 
+/// A user's glTF scene (two mesh nodes under a translated parent, the
+/// camera a node of the file, the buffer in a .bin beside it).
+fn write_gltf_scene(dir: &Path) {
+    let mut bin: Vec<u8> = Vec::new();
+    let quad = [
+        [-1.0f32, -1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ];
+    let tri = [[-0.5f32, -0.5, 0.0], [0.5, -0.5, 0.0], [0.0, 0.5, 0.0]];
+    for v in quad.iter().chain(tri.iter()) {
+        for c in v {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    std::fs::write(dir.join("model.bin"), &bin).unwrap();
+    let gltf = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 3]}],
+        "nodes": [
+            {"name": "group", "translation": [0.2, 0.0, 0.0], "children": [1, 2]},
+            {"name": "quad", "mesh": 0},
+            {"name": "tri", "mesh": 1, "translation": [0.0, 0.0, 0.5],
+             "rotation": [0.0, 0.0, 0.382_683_43, 0.923_879_5]},
+            {"name": "cam", "camera": 0, "translation": [0.0, 0.0, 5.0]}
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0}, "indices": 2}]},
+            {"primitives": [{"attributes": {"POSITION": 1}}]}
+        ],
+        "buffers": [{"uri": "model.bin", "byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 84, "byteLength": 12}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-1.0, -1.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [-0.5, -0.5, 0.0], "max": [0.5, 0.5, 0.0]},
+            {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ]
+    });
+    std::fs::write(dir.join("model.gltf"), gltf.to_string()).unwrap();
+    std::fs::write(
+        dir.join("my_scene.toml"),
+        "requires = [\"depth\", \"ids\"]\n\n[camera]\nwidth = 96\nheight = 72\n\
+         gltf = { object = \"model\", camera = \"cam\" }\n\n\
+         [[objects]]\nname = \"model\"\nmesh = \"model.gltf\"\n",
+    )
+    .unwrap();
+}
+
+/// The issue's user story: in an empty folder outside the checkout, a
+/// renderer of one's own (declared in renderers.toml) and a glTF scene;
+/// `rendiff check` gives calibration figures, verdicts and a report.
 #[test]
 fn a_declared_renderer_is_calibrated_and_judged_from_any_folder() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -28,10 +91,10 @@ fn a_declared_renderer_is_calibrated_and_judged_from_any_folder() {
     for f in ["renderers.toml", "tiny_renderer.py"] {
         std::fs::copy(root.join("harness/examples").join(f), dir.path().join(f)).unwrap();
     }
-    let scene = root.join("scenes/three_triangles.toml");
+    write_gltf_scene(dir.path());
     let out = rendiff(dir.path())
         .arg("check")
-        .arg(&scene)
+        .arg("my_scene.toml")
         .args(["--renderers", "renderers.toml", "--only", "tiny", "--quiet"])
         .args(["-o", "run"])
         .output()
@@ -54,8 +117,28 @@ fn a_declared_renderer_is_calibrated_and_judged_from_any_folder() {
             .to_string()
     };
     for buffer in ["id", "Z", "N"] {
-        assert_eq!(of("three_triangles", buffer), "pass", "{buffer}");
+        assert_eq!(of("my_scene", buffer), "pass", "{buffer}");
     }
+    // Both glTF mesh nodes became objects, named after their nodes.
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("run/scenes/my_scene/resolved/scene.json"))
+            .unwrap(),
+    )
+    .unwrap();
+    let names: Vec<&str> = manifest["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["model/quad", "model/tri"]);
+    assert!(dir.path().join("run/report/index.html").is_file());
+    // The calibration figures are in results.json for the user's renderer.
+    assert!(
+        results["calibration"]["tiny"]["offset_x_px"].is_number(),
+        "{}",
+        results["calibration"]
+    );
     // Calibrated on both probes, like a built-in backend.
     assert_eq!(of("camera_near", "camera"), "pass");
     assert_eq!(of("camera_far", "camera"), "pass");
