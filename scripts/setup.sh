@@ -9,8 +9,9 @@
 #    Mitsuba's optional llvm variant; + python3-venv when venv cannot bootstrap pip).
 #    `apt-get update` runs only when something is missing.
 # 2. .venv in the repo root with harness/requirements.txt, then PyOpenGL==3.1.10 and
-#    pytest. PyOpenGL is installed *after* pyrender on purpose: pyrender pins 3.1.0,
-#    which breaks OSMesa; pip's "dependency conflict" message about it is expected.
+#    pytest, then the harness itself (pip install -e harness). PyOpenGL is installed
+#    *after* pyrender on purpose: pyrender pins 3.1.0, which breaks OSMesa; pip's
+#    "dependency conflict" message about it is expected.
 #    pip is skipped when .venv/.rendiff-stamp matches the hash of those inputs.
 #
 # Quick (a few seconds) when everything is present. Safe to run repeatedly.
@@ -118,7 +119,7 @@ fi
 
 step "checking Python packages"
 [[ -f "$REQS" ]] || { echo "setup.sh: $REQS not found (run from a complete checkout)" >&2; exit 1; }
-want="$({ cat "$REQS"; printf '%s\n' "${EXTRA_PINS[@]}"; "$VENV/bin/python" -V; } | sha256sum | cut -d' ' -f1)"
+want="$({ cat "$REQS" "$REPO/harness/pyproject.toml"; printf '%s\n' "${EXTRA_PINS[@]}"; "$VENV/bin/python" -V; } | sha256sum | cut -d' ' -f1)"
 have="$(cat "$STAMP" 2>/dev/null || true)"
 if [[ "$want" == "$have" ]]; then
     note "up to date (stamp matches $REQS + ${EXTRA_PINS[*]})"
@@ -139,11 +140,17 @@ else
     grep -v -e "dependency resolver does not currently" -e "dependency conflicts" -e "requires PyOpenGL==3.1.0" \
         "$pip_log" || true
     rm -f "$pip_log"
+    # The harness itself, as a package of the venv (editable: the checkout's code), so that
+    # `.venv/bin/python -m rendiff_harness` works from any folder.
+    step "pip install -e harness (rendiff's Python package)" "'$VENV/bin/pip install --no-deps -e $REPO/harness'"
+    "$VENV/bin/python" -m pip install --disable-pip-version-check --progress-bar off -q --no-deps -e "$REPO/harness"
     echo "$want" >"$STAMP"
 fi
 
 step "smoke test: import numpy, OpenImageIO" "delete $STAMP and re-run to reinstall the Python packages"
 "$VENV/bin/python" -c 'import numpy, OpenImageIO' >/dev/null
+(cd / && "$VENV/bin/python" -c 'import rendiff_harness') ||
+    { echo "setup.sh: rendiff_harness is not installed in $VENV; delete $STAMP and re-run" >&2; exit 1; }
 
 # ---------------------------------------------------------------- summary
 if ((${#MANUAL_APT[@]} > 0)); then
