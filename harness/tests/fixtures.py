@@ -8,11 +8,26 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def rendiff_binary() -> Path | None:
+    """The built `rendiff` (release first), in $CARGO_TARGET_DIR or the checkout's target/; None
+    when neither has one (tests that need it skip, saying so). scripts/test.sh builds it first."""
+    targets = [Path(t) for t in (os.environ.get("CARGO_TARGET_DIR"),) if t] + [REPO / "target"]
+    for target in targets:
+        for build in ("release", "debug"):
+            p = target / build / "rendiff"
+            if p.is_file():
+                return p
+    return None
 
 
 def _normalize(v: np.ndarray) -> np.ndarray:

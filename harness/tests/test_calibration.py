@@ -350,11 +350,7 @@ def test_summary_shows_a_failing_probe_else_the_tightest_bound() -> None:
 
 
 def _rendiff() -> Path | None:
-    for build in ("release", "debug"):
-        p = REPO / "target" / build / "rendiff"
-        if p.is_file():
-            return p
-    return None
+    return fixtures.rendiff_binary()
 
 
 @pytest.mark.skipif(_rendiff() is None, reason="rendiff binary not built (cargo build --release)")

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
+import fixtures
 from fixtures import write_scene
 from rendiff_harness import calibration, command_renderers, compare, exrbuf, registry, resolved, tolerance
 from rendiff_harness.__main__ import main as harness_main
@@ -30,7 +31,8 @@ from rendiff_harness.command_renderers import ENV_VAR, RenderersError
 from rendiff_harness.errors import BackendError, BackendSkipped
 
 HARNESS = Path(__file__).resolve().parents[1]
-RENDIFF = Path("/work/main/target/release/rendiff")
+RENDIFF = fixtures.rendiff_binary()
+NOT_BUILT = "rendiff binary not built (cargo build --release -p rendiff; scripts/test.sh does)"
 PY = json.dumps(sys.executable)
 BG = exrbuf.BACKGROUND_ID
 
@@ -620,7 +622,7 @@ def test_programs_relative_to_the_file_and_a_missing_program(
 # --------------------------------------------------------------------------- with the rendiff binary
 
 
-@pytest.mark.skipif(not RENDIFF.is_file(), reason=f"{RENDIFF} not built (cargo build --release in /work/main)")
+@pytest.mark.skipif(RENDIFF is None, reason=NOT_BUILT)
 def test_the_cores_own_answer_through_a_command_passes_every_buffer(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -752,7 +754,7 @@ def test_the_worked_example_renders_the_fixture_and_passes(tmp_path: Path, monke
         assert results[("tiny", buf)]["status"] == "pass", results[("tiny", buf)]
 
 
-@pytest.mark.skipif(not RENDIFF.is_file(), reason=f"{RENDIFF} not built (cargo build --release in /work/main)")
+@pytest.mark.skipif(RENDIFF is None, reason=NOT_BUILT)
 def test_the_worked_example_agrees_with_the_core_at_its_declared_precision(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
