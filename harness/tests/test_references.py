@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
+import fixtures
 from rendiff_harness import __main__ as cli
 from rendiff_harness import exrbuf, radiance, references, resolved
 from rendiff_harness.backends import mitsuba_backend as mb
@@ -153,11 +154,7 @@ def test_committed_references_are_intact(exr: Path) -> None:
 
 
 def _rendiff() -> Path | None:
-    for build in ("release", "debug"):
-        p = REPO / "target" / build / "rendiff"
-        if p.is_file():
-            return p
-    return None
+    return fixtures.rendiff_binary()
 
 
 @needs_mitsuba
