@@ -8,10 +8,11 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 scripts/setup.sh
-# Tests that drive the release binary (the harness's end-to-end tests, rendiff-wgpu
-# against the core) find it in target/release; built first so that none skips.
-echo "==> cargo build --release -p rendiff"
-cargo build --release -p rendiff
+# Tests that drive the release binaries (the harness's end-to-end tests, rendiff-wgpu
+# against the core, the conformance run, which runs rendiff-wgpu like the main job)
+# find them in target/release; built first so that none skips.
+echo "==> cargo build --release -p rendiff -p rendiff-wgpu"
+cargo build --release -p rendiff -p rendiff-wgpu
 echo "==> Python harness tests"
 (cd harness && ../.venv/bin/python -m pytest -q tests)
 echo "==> cargo test"

@@ -1,6 +1,7 @@
 //! Cross-renderer conformance: every scene in scenes/ (and scenes/corpus/),
 //! after the camera calibration probes of scenes/calibration/, on every backend (core
-//! trace, Embree default and robust, POV-Ray, pyrender, Mitsuba 3), compared
+//! trace, Embree default and robust, POV-Ray, pyrender, Mitsuba 3, and
+//! rendiff-wgpu through renderers/wgpu.toml as in the main job), compared
 //! with the core's raster output. One test per (scene, backend, buffer), so a
 //! failure names exactly what broke; skipped combinations show as ignored with
 //! their reason in the name, never as passes.
@@ -28,6 +29,20 @@ fn main() {
         if root.join("scenes/corpus").is_dir() {
             folders.push(root.join("scenes/corpus"));
         }
+        // rendiff-wgpu joins as in the main job (scripts/check.sh): declared in
+        // renderers/wgpu.toml and found on PATH in the build's release folder,
+        // which scripts/test.sh builds first. Without it, its verdicts are
+        // errors that say it is not on PATH.
+        let release = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .parent()
+            .expect("the target folder holds tmp/")
+            .join("release");
+        let path = std::env::var_os("PATH").unwrap_or_default();
+        let path =
+            std::env::join_paths(std::iter::once(release).chain(std::env::split_paths(&path)))
+                .expect("PATH entries join");
+        // Before any thread starts: nothing reads the environment concurrently.
+        std::env::set_var("PATH", path);
         let opts = CheckOptions {
             scenes: check::collect_scenes(&folders).expect("scene folders are readable"),
             run_dir: run_dir.clone(),
@@ -44,7 +59,7 @@ fn main() {
             calibration: Some(root.join("scenes/calibration")),
             jobs: check::default_jobs(),
             workers: true,
-            renderers: None,
+            renderers: Some(root.join("renderers/wgpu.toml")),
             memory_budget: check::pool::default_memory_budget(),
         };
         match check::run(&opts) {
