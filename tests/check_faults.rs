@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 const FAKE_PYTHON: &str = r#"#!/bin/bash
 # Stands in for the venv's python: fakes three broken backends, delegates the rest.
 if [ "$3" = "info" ]; then
-  b='"version":"0","features":["depth","ids"],"buffers":["Z","id"],"available":true,"reason":null'
+  b='"version":"0","features":["depth","ids"],"buffers":["Z","id"],"peak_memory":[1000000,100],"available":true,"reason":null'
   echo "{\"backends\":[{\"name\":\"hang\",$b},{\"name\":\"crash\",$b},{\"name\":\"liar\",$b},{\"name\":\"partial\",$b},{\"name\":\"forkhang\",$b}]}"
   exit 0
 fi

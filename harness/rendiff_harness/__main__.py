@@ -51,6 +51,7 @@ def _describe(backend: registry.Backend) -> dict[str, Any]:
         "version": version,
         "features": sorted(backend.features),
         "buffers": sorted(backend.buffers),
+        "peak_memory": list(backend.peak_memory),
         "available": reason is None,
         "reason": reason,
         "declared_in": str(backend.module.spec.source)

@@ -77,14 +77,13 @@ import numpy as np
 from . import command_renderers, exrbuf, resolved
 from .manifest import EntryError, render_reason, run_path
 from .results import Entry
+from .tolerance import F32_U, MAX_REL
 
 ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
 BUFFER = "camera"
 """The results.json `buffer` of a calibration entry."""
 BACKGROUND_ID = exrbuf.BACKGROUND_ID
-F32_U = 2.0**-24
-"""Unit roundoff of f32: rounding to nearest moves a value by at most this times its size."""
 F64_U = 2.0**-53
 MIN_PIXELS = 64
 """Fewer usable pixels than this cannot identify the nine entries of G with any precision."""
@@ -338,7 +337,7 @@ def declared_model(r: command_renderers.Renderer) -> Model:
 
     def model(px: ProbePixels) -> ErrorBudget:
         if p.depth_grazing:
-            relative = np.minimum(rel / np.maximum(px.cos, 1e-300), 1e-3) if rel > 0 else np.zeros_like(px.z)
+            relative = np.minimum(rel / np.maximum(px.cos, 1e-300), MAX_REL) if rel > 0 else np.zeros_like(px.z)
         else:
             relative = np.full(px.z.shape, rel)
         return ErrorBudget(

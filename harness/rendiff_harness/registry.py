@@ -59,6 +59,9 @@ VISIBILITY_FEATURES = frozenset(f.value for f in vocab.VISIBILITY_FEATURES)
 """The features the visibility buffers (Z, id, N) need; every other feature is a shading one
 (needed by RGB only). From `vocab` (which mirrors Rust's `vocab::Feature::VISIBILITY`)."""
 VISIBILITY_BUFFERS = frozenset({"Z", "id", "N"})
+UNMEASURED_MEMORY = (400 * 2**20, 2000)
+"""Peak memory assumed for a backend that declares none (a renderer declared by command): a
+generous guess above every measured backend's (`PEAK_MEMORY` in backends/)."""
 VISIBILITY_ONLY = "visibility_only"
 """The render() keyword that asks a backend for its visibility buffers only."""
 
@@ -84,6 +87,15 @@ class Backend:
     @property
     def buffers(self) -> frozenset[str]:
         return frozenset(self.module.BUFFERS) if self.module is not None else frozenset()
+
+    @property
+    def peak_memory(self) -> tuple[int, int]:
+        """(fixed bytes, bytes per triangle) of a render at its peak: the module's measured
+        `PEAK_MEMORY`, else `UNMEASURED_MEMORY`. `rendiff check` budgets memory with it."""
+        declared = getattr(self.module, "PEAK_MEMORY", None) if self.module is not None else None
+        if isinstance(declared, tuple) and len(declared) == 2:
+            return int(declared[0]), int(declared[1])
+        return UNMEASURED_MEMORY
 
     def unavailable_reason(self) -> str | None:
         """None when the backend can render here, else an actionable reason."""

@@ -110,7 +110,7 @@ def test_info_json(capsys: pytest.CaptureFixture[str]) -> None:
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["backends"]}
     assert set(rows) >= {"povray"}
     for row in rows.values():
-        keys = {"name", "module", "version", "features", "buffers", "available", "reason", "declared_in"}
+        keys = {"name", "module", "version", "features", "buffers", "peak_memory", "available", "reason", "declared_in"}
         assert set(row) == keys
         # None for the built-in ones; a declared renderer's file (tests/test_command_renderers.py)
         assert row["declared_in"] is None or row["module"].startswith("command:")
@@ -224,3 +224,15 @@ def test_compare_is_wired(capsys: pytest.CaptureFixture[str]) -> None:
         pytest.skip("compare.py exists; its own tests cover it")
     assert cli.main(["compare", "a.exr", "b.exr"]) == 2
     assert "compare not available yet" in capsys.readouterr().err
+
+
+def test_every_shipped_backend_declares_its_measured_peak_memory() -> None:
+    # check/pool.rs budgets memory with these; a backend without a measurement gets the guess.
+    for name in registry.BACKEND_MODULES:
+        backend = registry.load(name)
+        assert backend.module is not None, backend.import_error
+        fixed, per_triangle = backend.peak_memory
+        assert backend.peak_memory != registry.UNMEASURED_MEMORY, name
+        assert 0 < fixed < registry.UNMEASURED_MEMORY[0] and 0 < per_triangle < registry.UNMEASURED_MEMORY[1]
+    missing = registry.Backend("gone", None, "not installed")
+    assert missing.peak_memory == registry.UNMEASURED_MEMORY

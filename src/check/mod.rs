@@ -212,6 +212,10 @@ struct HarnessBackend {
     features: Vec<String>,
     buffers: Vec<String>,
     available: bool,
+    /// (fixed bytes, bytes per triangle) at a render's peak, as the backend
+    /// declares it (`PEAK_MEMORY` beside it in the harness, else the
+    /// harness's `UNMEASURED_MEMORY`); the pool's budget.
+    peak_memory: (u64, u64),
     reason: Option<String>,
 }
 
@@ -643,20 +647,11 @@ fn render_and_compare(
                 .collect();
             let size = |&(si, b): &(usize, &HarnessBackend)| {
                 let triangles = pending[si].as_ref().map_or(0, |p| p.triangles);
-                pool::render_memory(&b.name, triangles)
+                pool::render_memory(b.peak_memory, triangles)
             };
-            // Longest first: the biggest scenes, and within a size POV-Ray
-            // (two runs with fixed polling sleeps), then pyrender, then Mitsuba.
-            let cost = |&(si, b): &(usize, &HarnessBackend)| {
-                let triangles = pending[si].as_ref().map_or(0, |p| p.triangles) as f64;
-                let rank = match b.name.as_str() {
-                    "povray" => 3.0,
-                    "pyrender" => 2.0,
-                    "mitsuba" => 1.0,
-                    _ => 0.0,
-                };
-                triangles + rank / 4.0
-            };
+            // Biggest first (the estimate grows with the scene's triangles),
+            // so that a large scene does not finish alone at the end.
+            let cost = |t: &(usize, &HarnessBackend)| size(t) as f64;
             let pool_opts = pool::PoolOptions {
                 // A measuring run (`isolate`) renders one at a time, so that
                 // each peak is the render's own.

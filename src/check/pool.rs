@@ -17,25 +17,11 @@ use std::sync::{Condvar, Mutex};
 pub type Bytes = u64;
 
 /// Peak resident memory of one external render of a scene with `triangles`
-/// triangles: an upper estimate from measurements (GNU time's max RSS of a
-/// one-shot `rendiff_harness render`, 2026-11-25): a fixed part for the
-/// interpreter and the backend's libraries, and a part per triangle for the
-/// copies of the mesh the backend keeps (the resolved arrays, the renderer's
-/// own scene, POV-Ray's SDL text). Measured on three_triangles and on
-/// `million` (1,310,722 triangles): POV-Ray 64 MiB and 1.05 GiB, the largest
-/// being one POV-Ray process, counted twice since its ID and depth passes run
-/// side by side (1,720 B/triangle); pyrender 200 MiB and 651 MiB
-/// (361 B/triangle); Mitsuba 108 MiB and 382 MiB (219 B/triangle). A renderer
-/// without a measurement gets a generous guess.
-pub fn render_memory(backend: &str, triangles: u64) -> Bytes {
-    const MIB: u64 = 1 << 20;
-    let (fixed, per_triangle) = match backend {
-        "povray" => (70 * MIB, 1800),
-        "pyrender" => (210 * MIB, 400),
-        "mitsuba" => (120 * MIB, 250),
-        _ => (400 * MIB, 2000),
-    };
-    fixed + per_triangle * triangles
+/// triangles, from the backend's declaration `(fixed bytes, bytes per
+/// triangle)`: each harness backend measures its own (`PEAK_MEMORY` beside
+/// it, reported by `info --json`), so this module names no renderer.
+pub fn render_memory((fixed, per_triangle): (u64, u64), triangles: u64) -> Bytes {
+    fixed.saturating_add(per_triangle.saturating_mul(triangles))
 }
 
 /// The default memory budget: half of what the system reports available

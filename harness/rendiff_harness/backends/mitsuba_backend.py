@@ -125,6 +125,10 @@ FEATURES = frozenset(
     }
 )
 BUFFERS = frozenset({"Z", "id", "N", "RGB"})
+PEAK_MEMORY = (120 * 2**20, 250)
+"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
+memory budget (check/pool.rs): GNU time's max RSS, 108 MiB on three_triangles and 382 MiB on
+`million` (1,310,722 triangles: 219 B per triangle), rounded up."""
 SHADING_FEATURES = frozenset({"lambert", "emission", "global_illumination"})
 VARIANCE_PASSES = 64
 TWO_SIDED_EMITTER_OFFSET_REL = 1e-5

@@ -122,6 +122,11 @@ FEATURES: frozenset[str] = frozenset(
     }
 )
 BUFFERS: frozenset[str] = frozenset({"Z", "id", "RGB"})
+PEAK_MEMORY = (70 * 2**20, 1800)
+"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
+memory budget (check/pool.rs): GNU time's max RSS, 64 MiB on three_triangles and 1.05 GiB on
+`million` (1,310,722 triangles) for one POV-Ray process, counted twice since the ID and depth
+passes run side by side (1,720 B per triangle), rounded up."""
 SHADING_FEATURES = frozenset({"lambert", "emission"})
 EXPOSURE_MARGIN = 1.0 + 2.0**-6
 """Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""

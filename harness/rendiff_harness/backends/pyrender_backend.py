@@ -91,6 +91,10 @@ FEATURES = frozenset(
     {"depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadowless", "two_sided"}
 )
 BUFFERS = frozenset({"Z", "id", "RGB"})
+PEAK_MEMORY = (210 * 2**20, 400)
+"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
+memory budget (check/pool.rs): GNU time's max RSS, 200 MiB on three_triangles and 651 MiB on
+`million` (1,310,722 triangles: 361 B per triangle), rounded up."""
 SHADING_FEATURES = frozenset({"lambert", "emission"})
 SHADER_DIR = Path(__file__).with_name("pyrender_shaders")
 RGB_GAMMA = 2.2
