@@ -112,6 +112,10 @@ pub enum BenchCommand {
         /// Throughput scene, PATH or PATH@WxH (--quick: icosphere@64x48).
         #[arg(long, default_value = "scenes/million.toml@1920x1080")]
         scene: SceneSpec,
+        /// A real scanned mesh measured the same way, PATH or PATH@WxH
+        /// (default: scenes/corpus/nefertiti_scan.toml@1920x1080; --quick: none unless given).
+        #[arg(long)]
+        scanned_scene: Option<SceneSpec>,
         /// Thread counts for trace and raster throughput.
         #[arg(long, value_delimiter = ',', default_value = "1,2")]
         threads: Vec<usize>,
@@ -286,6 +290,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Peers {
             common,
             scene,
+            scanned_scene,
             threads,
             gi_scene,
             reference,
@@ -303,6 +308,15 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                         .map_err(anyhow::Error::msg)?
                 } else {
                     scene
+                },
+                scanned_scene: match scanned_scene {
+                    Some(s) => Some(s),
+                    None if quick => None,
+                    None => Some(
+                        "scenes/corpus/nefertiti_scan.toml@1920x1080"
+                            .parse()
+                            .map_err(anyhow::Error::msg)?,
+                    ),
                 },
                 threads: if quick { vec![1] } else { threads },
                 gi_scene,

@@ -40,6 +40,10 @@ pub struct PeersOptions {
     pub common: Common,
     /// Throughput scene (default: million at 1920x1080).
     pub scene: SceneSpec,
+    /// A real scanned mesh whose trace throughput is measured the same way
+    /// (default: the Nefertiti scan at 1920x1080): a tracer tuned to the
+    /// million grid's regular triangles must show it holds on a real mesh.
+    pub scanned_scene: Option<SceneSpec>,
     /// Thread counts for the trace and raster throughput.
     pub threads: Vec<usize>,
     /// Global-illumination scene for the equal-time comparison.
@@ -59,7 +63,6 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
     let environment = super::environment();
     let scene = opts.scene.load()?;
     let cam = &scene.camera;
-    let pixels = cam.pixel_count() as f64;
     let runs = opts.common.runs;
     eprintln!(
         "peers: {} at {}x{} ({} triangles)",
@@ -68,92 +71,23 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
         cam.height,
         scene.triangles.len()
     );
-    let mut per_threads = Vec::new();
-    for &threads in &opts.threads {
-        let pool = super::pool(threads)?;
-        let row = pool.install(|| -> Value {
-            // Whole renders (keys plus the frame's buffers) for the record, and
-            // the queries alone for Mrays/s, as Embree's trace_s times them.
-            let core = measure::trace(&scene, BvhQuality::Medium, runs);
-            let packets = measure::trace_queries(&scene, &core.build.last, TraceKernel::Packets, runs);
-            let single = measure::trace_queries(&scene, &core.build.last, TraceKernel::SingleRays, runs);
-            let raster = measure::raster(&scene, runs);
-            let core_mrays = pixels / packets.median_s / 1e6;
-            let single_mrays = pixels / single.median_s / 1e6;
-            let mut embree = Map::new();
-            let mut skipped = Vec::new();
-            for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
-                // The reference path (single rays, incoherent context) comes
-                // first; every other path must reproduce its keys.
-                let mut reference: Option<rendiff::frame::Frame> = None;
-                for query in EmbreeQuery::ALL {
-                    for coherence in EmbreeCoherence::ALL {
-                        let name = measure::embree_name_with(mode, query, coherence);
-                        eprintln!("peers: {threads} thread(s), {name}");
-                        match measure::embree_with(&scene, mode, query, coherence, runs) {
-                            Ok((f, st)) => {
-                                let mrays = st.rays as f64 / st.trace_s / 1e6;
-                                let vs_single = reference.as_ref().map(|r| visibility_error(r, &f));
-                                embree.insert(
-                                    name,
-                                    json!({"mode": mode.name(), "query": query.name(),
-                                           "entry_point": query.entry_point(), "layout": query.layout(),
-                                           "context": coherence.name(),
-                                           "timing": st, "mrays_per_s": mrays,
-                                           "core_over_embree": core_mrays / mrays,
-                                           "core_single_rays_over_embree": single_mrays / mrays,
-                                           "vs_core_raster": visibility_error(&raster.last, &f),
-                                           "vs_embree_single": vs_single,
-                                           "same_keys_as_embree_single": vs_single.map(|e| e.identical())}),
-                                );
-                                if (query, coherence)
-                                    == (EmbreeQuery::Single, EmbreeCoherence::Incoherent)
-                                {
-                                    reference = Some(f);
-                                }
-                            }
-                            Err(e) => skipped.push(json!({"what": name, "reason": e.to_string()})),
-                        }
-                    }
-                }
-            }
-            let best = fastest(&embree, None).map(|(k, v)| best_json(k, v, core_mrays, single_mrays));
-            let best_robust = fastest(&embree, Some(EmbreeMode::Robust.name()))
-                .map(|(k, v)| best_json(k, v, core_mrays, single_mrays));
-            let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
-            let ratio1 =
-                |k: &str| embree.get(k).and_then(|v| v["core_single_rays_over_embree"].as_f64());
-            let field = |b: &Option<Value>, k: &str| b.as_ref().map_or(Value::Null, |b| b[k].clone());
-            json!({
-                "threads": threads,
-                "core_trace": {"kernel": "packets (8x4)", "mrays_per_s": core_mrays,
-                               "queries": packets.json(), "timing": core.json(),
-                               "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()
-                                   && visibility_error(&raster.last, &packets.last).identical()},
-                "core_trace_single_rays": {"mrays_per_s": single_mrays, "queries": single.json(),
-                               "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},
-                "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,
-                                "counters": raster.last.counters},
-                "embree": embree,
-                "embree_best": best,
-                "embree_best_robust": best_robust,
-                "ratios": {
-                    "core_trace_over_embree_single": ratio("embree single"),
-                    "core_trace_over_embree_packet8": ratio("embree packet8"),
-                    "core_trace_over_embree_robust_single": ratio("embree_robust single"),
-                    "core_single_rays_over_embree_single": ratio1("embree single"),
-                    "core_single_rays_over_embree_packet8": ratio1("embree packet8"),
-                    "embree_best": field(&best, "name"),
-                    "core_over_embree_best": field(&best, "core_over_embree_best"),
-                    "core_single_rays_over_embree_best": field(&best, "core_single_rays_over_embree_best"),
-                    "embree_best_robust": field(&best_robust, "name"),
-                    "core_over_embree_best_robust": field(&best_robust, "core_over_embree_best"),
-                },
-                "skipped": skipped,
-            })
-        });
-        per_threads.push(row);
-    }
+    let per_threads = throughput(&scene, &opts.threads, runs)?;
+    let scanned = match &opts.scanned_scene {
+        Some(spec) => {
+            let s = spec.load()?;
+            eprintln!(
+                "peers: scanned mesh {} at {}x{} ({} triangles)",
+                spec.path.display(),
+                s.camera.width,
+                s.camera.height,
+                s.triangles.len()
+            );
+            json!({"scene": spec.path, "width": s.camera.width, "height": s.camera.height,
+                   "triangles": s.triangles.len(),
+                   "trace_throughput": throughput(&s, &opts.threads, runs)?})
+        }
+        None => json!({"skipped": "no scanned scene (--quick without --scanned-scene)"}),
+    };
     let externals = if opts.no_external {
         Err("external renderers off (--quick or --no-external)".to_string())
     } else {
@@ -194,6 +128,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             "embree_best": "highest Mrays/s over every Embree row (entry point x context flag x scene flags) at that thread count",
         },
         "trace_throughput": per_threads,
+        "scanned_mesh": scanned,
         "raster_vs_pyrender": pyrender,
         "path_tracing_equal_time": equal_time,
     });
@@ -206,6 +141,99 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
         html,
         svgs: vec![("times".into(), svg)],
     })
+}
+
+/// Trace throughput per thread count on one scene: the core's packet and
+/// single-ray kernels (queries alone, then whole renders), its raster, and
+/// every Embree configuration, each row with its ratios.
+fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Result<Vec<Value>> {
+    let pixels = scene.camera.pixel_count() as f64;
+    let mut per_threads = Vec::new();
+    for &threads in thread_counts {
+        let pool = super::pool(threads)?;
+        per_threads.push(pool.install(|| -> Value {
+    // Whole renders (keys plus the frame's buffers) for the record, and
+        // the queries alone for Mrays/s, as Embree's trace_s times them.
+        let core = measure::trace(scene, BvhQuality::Medium, runs);
+        let packets = measure::trace_queries(scene, &core.build.last, TraceKernel::Packets, runs);
+        let single = measure::trace_queries(scene, &core.build.last, TraceKernel::SingleRays, runs);
+        let raster = measure::raster(scene, runs);
+        let core_mrays = pixels / packets.median_s / 1e6;
+        let single_mrays = pixels / single.median_s / 1e6;
+        let mut embree = Map::new();
+        let mut skipped = Vec::new();
+        for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+            // The reference path (single rays, incoherent context) comes
+            // first; every other path must reproduce its keys.
+            let mut reference: Option<rendiff::frame::Frame> = None;
+            for query in EmbreeQuery::ALL {
+                for coherence in EmbreeCoherence::ALL {
+                    let name = measure::embree_name_with(mode, query, coherence);
+                    eprintln!("peers: {threads} thread(s), {name}");
+                    match measure::embree_with(scene, mode, query, coherence, runs) {
+                        Ok((f, st)) => {
+                            let mrays = st.rays as f64 / st.trace_s / 1e6;
+                            let vs_single = reference.as_ref().map(|r| visibility_error(r, &f));
+                            embree.insert(
+                                name,
+                                json!({"mode": mode.name(), "query": query.name(),
+                                       "entry_point": query.entry_point(), "layout": query.layout(),
+                                       "context": coherence.name(),
+                                       "timing": st, "mrays_per_s": mrays,
+                                       "core_over_embree": core_mrays / mrays,
+                                       "core_single_rays_over_embree": single_mrays / mrays,
+                                       "vs_core_raster": visibility_error(&raster.last, &f),
+                                       "vs_embree_single": vs_single,
+                                       "same_keys_as_embree_single": vs_single.map(|e| e.identical())}),
+                            );
+                            if (query, coherence)
+                                == (EmbreeQuery::Single, EmbreeCoherence::Incoherent)
+                            {
+                                reference = Some(f);
+                            }
+                        }
+                        Err(e) => skipped.push(json!({"what": name, "reason": e.to_string()})),
+                    }
+                }
+            }
+        }
+        let best = fastest(&embree, None).map(|(k, v)| best_json(k, v, core_mrays, single_mrays));
+        let best_robust = fastest(&embree, Some(EmbreeMode::Robust.name()))
+            .map(|(k, v)| best_json(k, v, core_mrays, single_mrays));
+        let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
+        let ratio1 =
+            |k: &str| embree.get(k).and_then(|v| v["core_single_rays_over_embree"].as_f64());
+        let field = |b: &Option<Value>, k: &str| b.as_ref().map_or(Value::Null, |b| b[k].clone());
+        json!({
+            "threads": threads,
+            "core_trace": {"kernel": "packets (8x4)", "mrays_per_s": core_mrays,
+                           "queries": packets.json(), "timing": core.json(),
+                           "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()
+                               && visibility_error(&raster.last, &packets.last).identical()},
+            "core_trace_single_rays": {"mrays_per_s": single_mrays, "queries": single.json(),
+                           "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},
+            "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,
+                            "counters": raster.last.counters},
+            "embree": embree,
+            "embree_best": best,
+            "embree_best_robust": best_robust,
+            "ratios": {
+                "core_trace_over_embree_single": ratio("embree single"),
+                "core_trace_over_embree_packet8": ratio("embree packet8"),
+                "core_trace_over_embree_robust_single": ratio("embree_robust single"),
+                "core_single_rays_over_embree_single": ratio1("embree single"),
+                "core_single_rays_over_embree_packet8": ratio1("embree packet8"),
+                "embree_best": field(&best, "name"),
+                "core_over_embree_best": field(&best, "core_over_embree_best"),
+                "core_single_rays_over_embree_best": field(&best, "core_single_rays_over_embree_best"),
+                "embree_best_robust": field(&best_robust, "name"),
+                "core_over_embree_best_robust": field(&best_robust, "core_over_embree_best"),
+            },
+            "skipped": skipped,
+        })
+        }));
+    }
+    Ok(per_threads)
 }
 
 /// The fastest Embree row (highest Mrays/s), optionally of one mode only.
@@ -246,21 +274,28 @@ fn goals(record: &Value) -> Value {
         .iter()
         .map(|r| json!({"threads": r["threads"], "core_trace_over_embree_single": r["ratios"]["core_trace_over_embree_single"]}))
         .collect();
-    let best: Vec<Value> = t
-        .iter()
-        .map(|r| {
-            json!({"threads": r["threads"], "embree_best": r["embree_best"]["name"],
-                   "embree_best_mrays_per_s": r["embree_best"]["mrays_per_s"],
-                   "core_trace_mrays_per_s": r["core_trace"]["mrays_per_s"],
-                   "core_over_embree_best": r["embree_best"]["core_over_embree_best"]})
-        })
+    let best: Vec<Value> = t.iter().map(best_goal).collect();
+    let scanned: Vec<Value> = record["scanned_mesh"]["trace_throughput"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(best_goal)
         .collect();
     json!({
         "core_trace_vs_embree_single_ray": single,
         "core_trace_vs_embree_best": best,
+        "core_trace_vs_embree_best_scanned_mesh": scanned,
         "core_raster_vs_llvmpipe_speedup": record["raster_vs_pyrender"]["speedup_core_over_pyrender_pass"],
         "equal_time_error_ratio_mitsuba_over_core": record["path_tracing_equal_time"]["rmse_ratio_mitsuba_over_core"],
     })
+}
+
+/// One thread count's core-vs-Embree-best goal row.
+fn best_goal(r: &Value) -> Value {
+    json!({"threads": r["threads"], "embree_best": r["embree_best"]["name"],
+           "embree_best_mrays_per_s": r["embree_best"]["mrays_per_s"],
+           "core_trace_mrays_per_s": r["core_trace"]["mrays_per_s"],
+           "core_over_embree_best": r["embree_best"]["core_over_embree_best"]})
 }
 
 fn pyrender(
@@ -480,96 +515,20 @@ fn page(record: &Value, svg: &str) -> String {
         super::page::compact(&c["embree_version"]),
         super::page::compact(&c["embree_features"])
     ));
-    let mut rows = Vec::new();
-    for r in record["trace_throughput"].as_array().into_iter().flatten() {
-        let th = super::page::compact(&r["threads"]);
-        rows.push(vec![
-            th.clone(),
-            "core trace".into(),
-            num(r["core_trace"]["mrays_per_s"].as_f64(), 4),
-            "1".into(),
-            num(r["core_trace"]["timing"]["build"]["median_s"].as_f64(), 3),
-            format!(
-                "raster == trace: {}",
-                r["core_trace"]["raster_equals_trace"]
-            ),
-        ]);
-        // Every Embree row, fastest first; the best is marked.
-        let mut variants: Vec<(&String, &Value)> =
-            r["embree"].as_object().into_iter().flatten().collect();
-        variants.sort_by(|a, b| {
-            let m = |v: &Value| v["mrays_per_s"].as_f64().unwrap_or(f64::NEG_INFINITY);
-            m(b.1).total_cmp(&m(a.1))
-        });
-        let best = r["embree_best"]["name"].as_str();
-        for (k, v) in variants {
-            let same = match v["same_keys_as_embree_single"].as_bool() {
-                Some(true) => "same keys as single".to_string(),
-                Some(false) => format!(
-                    "DIFFERS from single at {} px",
-                    v["vs_embree_single"]["id_mismatches"]
-                ),
-                None => "the reference path".to_string(),
-            };
-            rows.push(vec![
-                th.clone(),
-                if Some(k.as_str()) == best {
-                    format!("{k} (best, {})", super::page::compact(&v["entry_point"]))
-                } else {
-                    format!("{k} ({})", super::page::compact(&v["entry_point"]))
-                },
-                num(v["mrays_per_s"].as_f64(), 4),
-                num(v["core_over_embree"].as_f64(), 3),
-                num(v["timing"]["build_s"].as_f64(), 3),
-                format!(
-                    "ID mismatches vs core {}, hit/miss {}, max Z rel {}; {same}",
-                    v["vs_core_raster"]["id_mismatches"],
-                    v["vs_core_raster"]["mask_mismatches"],
-                    num(v["vs_core_raster"]["max_z_rel"].as_f64(), 3)
-                ),
-            ]);
-        }
-        if let Some(name) = best {
-            let ratio = r["embree_best"]["core_over_embree_best"].as_f64();
-            let verdict = match ratio {
-                Some(x) if x >= 1.0 => "the core is faster than Embree at its best",
-                Some(_) => "the core is SLOWER than Embree at its best",
-                None => "no ratio",
-            };
-            p.note(&format!(
-                "{th} thread(s): Embree's fastest configuration is {name} at {} Mrays/s; \
-                 core trace / Embree best = {}: {verdict}. Fastest robust: {} at {} Mrays/s.",
-                num(r["embree_best"]["mrays_per_s"].as_f64(), 4),
-                num(ratio, 3),
-                super::page::compact(&r["embree_best_robust"]["name"]),
-                num(r["embree_best_robust"]["mrays_per_s"].as_f64(), 4),
-            ));
-        }
-        p.note(&format!(
-            "{th} thread(s): core Mrays/s time the ray queries up to per-pixel hit keys, \
-             as Embree's trace_s does; the whole core render, filling the depth, ID, \
-             object-ID and normal buffers too, took {} s.",
-            num(r["core_trace"]["timing"]["trace"]["median_s"].as_f64(), 4)
+    throughput_table(&mut p, &record["trace_throughput"]);
+    let sc = &record["scanned_mesh"];
+    if let Some(why) = sc["skipped"].as_str() {
+        p.note(&format!("scanned mesh: not measured: {why}"));
+    } else {
+        p.heading(&format!(
+            "trace throughput on a real scanned mesh: {} at {}x{} ({} triangles)",
+            super::page::compact(&sc["scene"]),
+            sc["width"],
+            sc["height"],
+            sc["triangles"]
         ));
-        for s in r["skipped"].as_array().into_iter().flatten() {
-            p.note(&format!(
-                "{}: {}",
-                super::page::compact(&s["what"]),
-                super::page::compact(&s["reason"])
-            ));
-        }
+        throughput_table(&mut p, &sc["trace_throughput"]);
     }
-    p.table(
-        &[
-            "threads",
-            "renderer",
-            "Mrays/s",
-            "core / this",
-            "BVH build s",
-            "agreement",
-        ],
-        &rows,
-    );
     p.heading("raster: core vs pyrender (llvmpipe), depth + IDs");
     let pr = &record["raster_vs_pyrender"];
     if let Some(why) = pr["skipped"].as_str() {
@@ -659,4 +618,99 @@ fn page(record: &Value, svg: &str) -> String {
     );
     p.environment(&record["environment"]);
     p.finish()
+}
+
+/// The throughput table of one scene (every Embree row, fastest first, with
+/// the core's ratio) and its notes.
+fn throughput_table(p: &mut Page, per_threads: &Value) {
+    let mut rows = Vec::new();
+    for r in per_threads.as_array().into_iter().flatten() {
+        let th = super::page::compact(&r["threads"]);
+        rows.push(vec![
+            th.clone(),
+            "core trace".into(),
+            num(r["core_trace"]["mrays_per_s"].as_f64(), 4),
+            "1".into(),
+            num(r["core_trace"]["timing"]["build"]["median_s"].as_f64(), 3),
+            format!(
+                "raster == trace: {}",
+                r["core_trace"]["raster_equals_trace"]
+            ),
+        ]);
+        // Every Embree row, fastest first; the best is marked.
+        let mut variants: Vec<(&String, &Value)> =
+            r["embree"].as_object().into_iter().flatten().collect();
+        variants.sort_by(|a, b| {
+            let m = |v: &Value| v["mrays_per_s"].as_f64().unwrap_or(f64::NEG_INFINITY);
+            m(b.1).total_cmp(&m(a.1))
+        });
+        let best = r["embree_best"]["name"].as_str();
+        for (k, v) in variants {
+            let same = match v["same_keys_as_embree_single"].as_bool() {
+                Some(true) => "same keys as single".to_string(),
+                Some(false) => format!(
+                    "DIFFERS from single at {} px",
+                    v["vs_embree_single"]["id_mismatches"]
+                ),
+                None => "the reference path".to_string(),
+            };
+            rows.push(vec![
+                th.clone(),
+                if Some(k.as_str()) == best {
+                    format!("{k} (best, {})", super::page::compact(&v["entry_point"]))
+                } else {
+                    format!("{k} ({})", super::page::compact(&v["entry_point"]))
+                },
+                num(v["mrays_per_s"].as_f64(), 4),
+                num(v["core_over_embree"].as_f64(), 3),
+                num(v["timing"]["build_s"].as_f64(), 3),
+                format!(
+                    "ID mismatches vs core {}, hit/miss {}, max Z rel {}; {same}",
+                    v["vs_core_raster"]["id_mismatches"],
+                    v["vs_core_raster"]["mask_mismatches"],
+                    num(v["vs_core_raster"]["max_z_rel"].as_f64(), 3)
+                ),
+            ]);
+        }
+        if let Some(name) = best {
+            let ratio = r["embree_best"]["core_over_embree_best"].as_f64();
+            let verdict = match ratio {
+                Some(x) if x >= 1.0 => "the core is faster than Embree at its best",
+                Some(_) => "the core is SLOWER than Embree at its best",
+                None => "no ratio",
+            };
+            p.note(&format!(
+                "{th} thread(s): Embree's fastest configuration is {name} at {} Mrays/s; \
+                 core trace / Embree best = {}: {verdict}. Fastest robust: {} at {} Mrays/s.",
+                num(r["embree_best"]["mrays_per_s"].as_f64(), 4),
+                num(ratio, 3),
+                super::page::compact(&r["embree_best_robust"]["name"]),
+                num(r["embree_best_robust"]["mrays_per_s"].as_f64(), 4),
+            ));
+        }
+        p.note(&format!(
+            "{th} thread(s): core Mrays/s time the ray queries up to per-pixel hit keys, \
+             as Embree's trace_s does; the whole core render, filling the depth, ID, \
+             object-ID and normal buffers too, took {} s.",
+            num(r["core_trace"]["timing"]["trace"]["median_s"].as_f64(), 4)
+        ));
+        for s in r["skipped"].as_array().into_iter().flatten() {
+            p.note(&format!(
+                "{}: {}",
+                super::page::compact(&s["what"]),
+                super::page::compact(&s["reason"])
+            ));
+        }
+    }
+    p.table(
+        &[
+            "threads",
+            "renderer",
+            "Mrays/s",
+            "core / this",
+            "BVH build s",
+            "agreement",
+        ],
+        &rows,
+    );
 }

@@ -11,10 +11,17 @@ use std::process::Command;
 /// Runs `rendiff-bench <what> --quick -o DIR` (what `rendiff bench` runs) from the
 /// repository root and returns the JSON record.
 fn bench(what: &str, dir: &Path) -> Value {
+    bench_with(what, dir, &[])
+}
+
+/// [`bench`] with extra arguments after `--quick`.
+fn bench_with(what: &str, dir: &Path, extra: &[&str]) -> Value {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let out = Command::new(env!("CARGO_BIN_EXE_rendiff-bench"))
         .current_dir(root)
-        .args([what, "--quick", "-o"])
+        .args([what, "--quick"])
+        .args(extra)
+        .arg("-o")
         .arg(dir)
         .output()
         .expect("rendiff runs");
@@ -129,7 +136,30 @@ fn knobs_writes_groups_with_a_non_dominated_pareto_front() {
 #[test]
 fn peers_writes_throughput_ratios() {
     let dir = tempfile::tempdir().unwrap();
-    let record = bench("peers", dir.path());
+    // A small real scan stands in for the default 100k-triangle one.
+    let record = bench_with(
+        "peers",
+        dir.path(),
+        &[
+            "--scanned-scene",
+            "scenes/corpus/demosthenes_scan.toml@48x36",
+        ],
+    );
+    let scanned = &record["scanned_mesh"];
+    assert_eq!(scanned["triangles"], 16_719, "{scanned}");
+    let srows = scanned["trace_throughput"]
+        .as_array()
+        .expect("scanned rows");
+    assert_eq!(srows[0]["core_trace"]["raster_equals_trace"], true);
+    assert!(srows[0]["core_trace"]["mrays_per_s"]
+        .as_f64()
+        .is_some_and(|x| x > 0.0));
+    assert_eq!(
+        record["goals"]["core_trace_vs_embree_best_scanned_mesh"]
+            .as_array()
+            .map(Vec::len),
+        Some(srows.len())
+    );
     let rows = record["trace_throughput"].as_array().expect("rows");
     assert!(!rows.is_empty());
     assert!(rows[0]["core_trace"]["mrays_per_s"]
