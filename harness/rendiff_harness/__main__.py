@@ -294,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--variant",
         choices=("scalar_rgb", "llvm_ad_rgb"),
         default=None,
-        help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19)",
+        help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs libLLVM 19: DRJIT_LIBLLVM_PATH or Debian's)",
     )
     sub.add_parser(
         "serve",

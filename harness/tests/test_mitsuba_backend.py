@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -173,11 +174,23 @@ def test_variant_defaults_to_scalar_rgb(monkeypatch: pytest.MonkeyPatch) -> None
 def test_llvm_variant_needs_an_llvm_path(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv(mb.VARIANT_ENV, "llvm_ad_rgb")
     monkeypatch.delenv(mb.LLVM_PATH_ENV, raising=False)
+    monkeypatch.setattr(mb, "DEBIAN_LIBLLVM19", tmp_path / "no-libllvm19.so")
     with pytest.raises(BackendUnavailable, match="DRJIT_LIBLLVM_PATH"):
         mb.selected_variant()
     monkeypatch.setenv(mb.LLVM_PATH_ENV, str(tmp_path / "missing.so"))
     with pytest.raises(BackendUnavailable, match="libllvm19"):
         mb.selected_variant()
+
+
+def test_llvm_variant_finds_debians_libllvm19(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Without DRJIT_LIBLLVM_PATH the Debian library is used, and exported for drjit's import."""
+    lib = tmp_path / "libLLVM.so.19.1"
+    lib.write_bytes(b"")
+    monkeypatch.setenv(mb.VARIANT_ENV, "llvm_ad_rgb")
+    monkeypatch.delenv(mb.LLVM_PATH_ENV, raising=False)
+    monkeypatch.setattr(mb, "DEBIAN_LIBLLVM19", lib)
+    assert mb.selected_variant() == "llvm_ad_rgb"
+    assert os.environ[mb.LLVM_PATH_ENV] == str(lib)
 
 
 def test_unknown_variant_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -77,7 +77,7 @@ pub struct KnobsArgs {
         allow_hyphen_values = true
     )]
     pub mitsuba_max_depth: Vec<i32>,
-    /// Mitsuba variants beside the default scalar_rgb (llvm_ad_rgb needs DRJIT_LIBLLVM_PATH naming libLLVM 19).
+    /// Mitsuba variants beside the default scalar_rgb (llvm_ad_rgb needs libLLVM 19: DRJIT_LIBLLVM_PATH, else Debian's libllvm19).
     #[arg(long, value_delimiter = ',', default_value = "llvm_ad_rgb",
           value_parser = ["scalar_rgb", "llvm_ad_rgb"])]
     pub mitsuba_variant: Vec<String>,

@@ -140,6 +140,9 @@ DEFAULT_VARIANT = "scalar_rgb"
 LLVM_VARIANT = "llvm_ad_rgb"
 VARIANT_ENV = "RENDIFF_MITSUBA_VARIANT"
 LLVM_PATH_ENV = "DRJIT_LIBLLVM_PATH"
+# Where Debian's libllvm19 (installed by scripts/setup.sh) puts the library llvm_ad_rgb needs;
+# used when DRJIT_LIBLLVM_PATH is unset, so Mitsuba's fast CPU variant works without set-up.
+DEBIAN_LIBLLVM19 = Path("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 FAR_FACTOR = 2.0
 AOVS = "z:depth,pi:prim_index,ng:geo_normal"
 # Measured |Z - float64 reference| / Z <= 6e-7 (f32 ray setup + intersection); 1e-5 leaves room
@@ -156,10 +159,12 @@ def depth_tolerance(z: npt.ArrayLike, near: float | None = None, far: float | No
 
 
 def selected_variant() -> str:
-    """scalar_rgb unless RENDIFF_MITSUBA_VARIANT=llvm_ad_rgb (needs DRJIT_LIBLLVM_PATH).
+    """scalar_rgb unless RENDIFF_MITSUBA_VARIANT=llvm_ad_rgb (needs libLLVM 19).
 
     llvm_ad_rgb aborts the whole process (SIGABRT in LLVM instruction selection) with
-    Debian's libLLVM 15/16, so it is opt-in and requires an explicit libLLVM 19 path.
+    Debian's libLLVM 15/16, which drjit may find first, so it is opt-in and runs only with
+    libLLVM 19: DRJIT_LIBLLVM_PATH, else Debian's libllvm19 (set in the environment here,
+    before drjit is imported, which reads it then).
     """
     variant = os.environ.get(VARIANT_ENV, "").strip() or DEFAULT_VARIANT
     if variant not in (DEFAULT_VARIANT, LLVM_VARIANT):
@@ -168,6 +173,8 @@ def selected_variant() -> str:
         )
     if variant == LLVM_VARIANT:
         lib = os.environ.get(LLVM_PATH_ENV, "")
+        if not lib and DEBIAN_LIBLLVM19.is_file():
+            lib = os.environ[LLVM_PATH_ENV] = str(DEBIAN_LIBLLVM19)
         if not lib or not Path(lib).is_file():
             raise BackendUnavailable(
                 f"{VARIANT_ENV}={LLVM_VARIANT} needs {LLVM_PATH_ENV} naming libLLVM 19 "
