@@ -7,6 +7,14 @@
 //! Times and operation counts are recorded per size, the crossover sizes are
 //! interpolated (with and without the BVH build), and raster == trace is
 //! checked at every size.
+//!
+//! Each loop is timed three ways: its visibility pass alone (hit keys per
+//! pixel: `raster_keys_s`, `trace_keys_s`, as `bench peers` times the
+//! tracer's queries), the frame assembly both share (keys to depth, ID and
+//! normal buffers: `assembly_s`, one figure as it is the same code on the
+//! same keys), and the whole frame (`raster_s`, `trace_s`). The crossover
+//! sizes are interpolated on the visibility passes (the like-for-like
+//! comparison of the two loops) and on whole frames.
 
 use super::page::{num, Page};
 use super::plot::{lines, Series};
@@ -16,7 +24,7 @@ use glam::DVec3;
 use rendiff::camera::Camera;
 use rendiff::scene::generators::grid;
 use rendiff::scene::resolve::ResolvedScene;
-use rendiff::trace::BvhQuality;
+use rendiff::trace::{BvhQuality, TraceKernel};
 use serde_json::{json, Value};
 
 /// What `bench crossover` measures.
@@ -75,10 +83,17 @@ pub fn crossings(xs: &[f64], a: &[f64], b: &[f64]) -> Vec<f64> {
     out
 }
 
-/// Times both loops on one grid and records their operation counts.
+/// Times both loops on one grid (visibility pass, shared assembly, whole
+/// frame) and records their operation counts.
 fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
+    // Each loop's phases back to back (its frames, then its pass alone), so
+    // that one loop's allocations (an 8M-triangle BVH) do not sit in the
+    // middle of the other's measurements.
     let r = measure::raster(scene, runs);
+    let rk = measure::raster_keys(scene, runs);
+    let asm = measure::assembly(scene, &rk.last, runs);
     let t = measure::trace(scene, BvhQuality::Medium, runs);
+    let tk = measure::trace_queries(scene, &t.build.last, TraceKernel::Packets, runs);
     let tris = scene.triangles.len() as f64;
     let px = f64::from(size) * f64::from(size);
     json!({
@@ -87,13 +102,20 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
         "pixels_per_triangle": px / tris,
         "raster_s": r.median_s,
         "trace_s": t.trace.median_s,
+        "raster_keys_s": rk.median_s,
+        "trace_keys_s": tk.median_s,
+        "assembly_s": asm.median_s,
+        "trace_keys_total_s": t.build.median_s + tk.median_s,
+        "raster_keys_runs_s": rk.runs_s,
+        "trace_keys_runs_s": tk.runs_s,
         "bvh_build_s": t.build.median_s,
         "trace_total_s": t.total_s(),
         "raster_runs_s": r.runs_s,
         "trace_runs_s": t.trace.runs_s,
         "raster_counters": r.last.counters,
         "trace_counters": t.trace.last.counters,
-        "raster_equals_trace": visibility_error(&r.last, &t.trace.last).identical(),
+        "raster_equals_trace": visibility_error(&r.last, &t.trace.last).identical()
+            && visibility_error(&rk.last, &tk.last).identical(),
     })
 }
 
@@ -123,8 +145,10 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             .collect()
     };
     let tris = col("triangles");
-    let with_build = crossings(&tris, &col("raster_s"), &col("trace_total_s"));
-    let trace_only = crossings(&tris, &col("raster_s"), &col("trace_s"));
+    let with_build = crossings(&tris, &col("raster_keys_s"), &col("trace_keys_total_s"));
+    let trace_only = crossings(&tris, &col("raster_keys_s"), &col("trace_keys_s"));
+    let frames_with_build = crossings(&tris, &col("raster_s"), &col("trace_total_s"));
+    let frames_trace_only = crossings(&tris, &col("raster_s"), &col("trace_s"));
     let mut record = json!({
         "benchmark": "crossover",
         "environment": environment,
@@ -133,6 +157,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             "size": [opts.size, opts.size], "nx": opts.nx, "threads": opts.threads,
             "runs": runs, "quick": opts.common.quick, "bvh": "medium",
             "timing": "median of `runs` timed runs after one untimed warm-up",
+            "phases": "raster_keys_s / trace_keys_s: each loop's visibility pass alone (hit keys per pixel; the tracer's packet kernel through a built BVH); assembly_s: keys to depth, ID and normal buffers, shared code timed once; raster_s / trace_s: whole frames (pass + assembly); bvh_build_s apart",
         },
         "rows": rows,
         "aligned_rows": aligned_rows,
@@ -140,6 +165,9 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
         "crossover_triangles": {
             "raster_vs_trace_with_build": with_build,
             "raster_vs_trace_without_build": trace_only,
+            "whole_frames_with_build": frames_with_build,
+            "whole_frames_without_build": frames_trace_only,
+            "compared": "visibility passes (keys); whole_frames_*: frames including the shared assembly",
         },
         "raster_equals_trace_everywhere": rows.iter().chain(&aligned_rows).all(|r| r["raster_equals_trace"] == json!(true)),
     });
@@ -178,12 +206,15 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
         "triangles (screen-filling grid)",
         "seconds",
         &[
-            series("raster", "raster_s", false),
-            series("trace + BVH build", "trace_total_s", false),
-            series("trace only", "trace_s", true),
+            series("raster visibility pass", "raster_keys_s", false),
+            series("trace pass + BVH build", "trace_keys_total_s", false),
+            series("trace pass only", "trace_keys_s", true),
             series("BVH build", "bvh_build_s", true),
-            aligned_series("raster, pixel-aligned grid", "raster_s"),
-            aligned_series("trace only, pixel-aligned grid", "trace_s"),
+            series("frame assembly (shared)", "assembly_s", true),
+            series("raster whole frame", "raster_s", true),
+            series("trace whole frame", "trace_s", true),
+            aligned_series("raster pass, pixel-aligned grid", "raster_keys_s"),
+            aligned_series("trace pass only, pixel-aligned grid", "trace_keys_s"),
         ],
         &marks,
     );
@@ -243,10 +274,12 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
 fn page(record: &Value, svgs: &[(String, String)]) -> String {
     let mut p = Page::new("rendiff bench crossover: raster vs trace as triangles shrink");
     p.para(&format!(
-        "{}. Times are medians after a warm-up. Crossover (interpolated, triangles): with the BVH build {}; tracing alone {}. Raster == trace at every size: {}.",
+        "{}. Times are medians after a warm-up. Each loop's visibility pass (hit keys per pixel) is timed alone, the frame assembly both loops share (keys to depth, ID and normal buffers) apart, and whole frames too. Crossover of the visibility passes (interpolated, triangles): with the BVH build {}; tracing alone {}. Of whole frames: with the build {}; tracing alone {}. Raster == trace at every size: {}.",
         super::page::compact(&record["config"]["scene"]),
         list(&record["crossover_triangles"]["raster_vs_trace_with_build"]),
         list(&record["crossover_triangles"]["raster_vs_trace_without_build"]),
+        list(&record["crossover_triangles"]["whole_frames_with_build"]),
+        list(&record["crossover_triangles"]["whole_frames_without_build"]),
         record["raster_equals_trace_everywhere"]
     ))
     .command("rendiff bench crossover");
@@ -274,6 +307,9 @@ fn table(p: &mut Page, rows: &Value) {
                 super::page::compact(&r["nx"]),
                 super::page::compact(&r["triangles"]),
                 num(f("pixels_per_triangle"), 3),
+                num(f("raster_keys_s"), 4),
+                num(f("trace_keys_s"), 4),
+                num(f("assembly_s"), 4),
                 num(f("raster_s"), 4),
                 num(f("trace_s"), 4),
                 num(f("bvh_build_s"), 4),
@@ -296,8 +332,11 @@ fn table(p: &mut Page, rows: &Value) {
             "nx",
             "triangles",
             "px/triangle",
-            "raster s",
-            "trace s",
+            "raster pass s",
+            "trace pass s",
+            "assembly s (shared)",
+            "raster frame s",
+            "trace frame s",
             "BVH build s",
             "raster setups",
             "raster coverage tests",
@@ -338,6 +377,24 @@ mod tests {
         assert_eq!(c.len(), 1);
         assert!(c[0] > 100.0 && c[0] < 10000.0);
         assert!(crossings(&x, &a, &a.map(|v| v * 2.0)).is_empty());
+    }
+
+    /// Every phase is recorded, and the passes agree with the frames.
+    #[test]
+    fn rows_time_passes_assembly_and_frames() {
+        let s = grid_scene(2, 16, false).unwrap();
+        let r = row(&s, 2, 16, 1);
+        for k in [
+            "raster_keys_s",
+            "trace_keys_s",
+            "assembly_s",
+            "raster_s",
+            "trace_s",
+            "bvh_build_s",
+        ] {
+            assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {}", r[k]);
+        }
+        assert_eq!(r["raster_equals_trace"], json!(true));
     }
 
     #[test]

@@ -18,6 +18,38 @@ pub fn raster(scene: &ResolvedScene, runs: usize) -> Timed<Frame> {
     })
 }
 
+/// The raster's visibility pass alone (binning, coverage, depth test: hit
+/// keys per pixel), the frame's buffers filled afterwards, untimed: the phase
+/// [`trace_queries`] times for the tracer, so the two loops compare like with
+/// like. The frame of the last run comes back for checks.
+pub fn raster_keys(scene: &ResolvedScene, runs: usize) -> Timed<Frame> {
+    let t = timed(runs, || {
+        raster::render_keys(scene, RasterOptions::default(), &|_| {})
+    });
+    Timed {
+        median_s: t.median_s,
+        runs_s: t.runs_s,
+        last: t.last.into_frame(scene, t.median_s),
+    }
+}
+
+/// Frame assembly alone: the depth, ID and normal buffers from per-pixel hit
+/// keys ([`Frame::from_keys`]), the step both loops share after their
+/// visibility pass. The keys are rebuilt from `frame` (its depth and prim
+/// buffers hold them exactly).
+pub fn assembly(scene: &ResolvedScene, frame: &Frame, runs: usize) -> Timed<Frame> {
+    use rendiff::visibility::{hit_key, NO_HIT};
+    let keys: Vec<u64> = frame
+        .z
+        .iter()
+        .zip(&frame.prim)
+        .map(|(&z, &p)| if p == u32::MAX { NO_HIT } else { hit_key(z, p) })
+        .collect();
+    timed(runs, || {
+        Frame::from_keys(scene, &keys, None, frame.counters, &frame.renderer, 0.0)
+    })
+}
+
 /// The core tracer: BVH build and tracing timed apart.
 pub struct TraceTimes {
     /// BVH build (obvhs plus refit), timed.

@@ -2,20 +2,33 @@
 //! of each triangle's bounding box, keeping the nearest hit in a z-buffer.
 //!
 //! Triangles are clipped against the near plane only to find a conservative
-//! screen bounding box and binned into tiles; tiles render in parallel. The
+//! screen bounding box, with a margin derived from the rounding errors
+//! ([`crate::raster_bounds`]: a triangle smaller than a pixel usually gets
+//! none), and binned into tiles, in parallel and in triangle order; bands of
+//! tiles render in parallel straight into the image's key buffer. The
 //! decision per pixel is [`crate::visibility`]'s, exactly as in the tracer:
 //! the edge-function fast path ([`crate::raster_edges`]) settles only the
-//! signs the predicate's own filter would settle at once (8 pixels at a time),
-//! and [`render_exact`] keeps the pure predicate loop to test it against.
+//! signs the predicate's own filter would settle at once (8 pixels at a time,
+//! or a whole 8x8 block when its corners prove it), boxes of a few pixels ask
+//! the predicate directly, a triangle that cannot beat any key in its box is
+//! skipped ([`crate::raster_hiz`]), and [`render_exact`] keeps the pure
+//! predicate loop to test it against (same boxes, same skipping, so the same
+//! buffers and counts).
+//!
+//! Counts: `triangle_setups` and `coverage_tests` count the work done, so a
+//! triangle with an empty box or skipped as hidden adds to neither.
 
 use crate::camera::{Camera, PixelRay};
 use crate::frame::Frame;
+use crate::predicate::{EdgePlane, O3D_ERRBOUND_A};
+use crate::raster_bins::{Binned, Bins};
+use crate::raster_bounds::BoxMargin;
 #[cfg(target_arch = "x86_64")]
 use crate::raster_edges::Avx2;
-use crate::raster_edges::{ChunkDepth, FastEdges, Lanes, Portable, TileRays, CHUNK};
+use crate::raster_edges::{ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileRays, CHUNK};
+use crate::raster_hiz::TileDepthBound;
 use crate::scene::resolve::{ResolvedScene, Tri};
 use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
-use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -36,67 +49,11 @@ pub struct PixelRect {
 }
 
 /// Conservative pixel bounding box of the part of a triangle at planar depth
-/// at least `near` (Sutherland-Hodgman clip against the near plane, then
-/// projection), grown by one pixel against rounding. `None` when nothing can be visible.
+/// at least `near` (clipped against the near plane, then projected), grown by
+/// the rounding margin [`crate::raster_bounds`] derives. `None` when no
+/// pixel can be covered. (Renders set the camera's constants up once.)
 pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
-    let zmin = cam.near * (1.0 - 1e-6);
-    let pts: [DVec3; 3] = t.map(|v| cam.to_camera(v.as_dvec3()));
-    // Clipping a triangle by one plane leaves at most 4 vertices (no allocation).
-    let mut poly = [DVec3::ZERO; 4];
-    let mut len = 0;
-    for i in 0..3 {
-        let (p, q) = (pts[i], pts[(i + 1) % 3]);
-        let (pin, qin) = (p.z >= zmin, q.z >= zmin);
-        if pin {
-            poly[len] = p;
-            len += 1;
-        }
-        if pin != qin {
-            let s = (zmin - p.z) / (q.z - p.z);
-            let mut m = p + (q - p) * s;
-            m.z = m.z.max(zmin);
-            poly[len] = m;
-            len += 1;
-        }
-    }
-    let poly = &poly[..len];
-    if poly.is_empty() {
-        return None;
-    }
-    if cam.far.is_finite() && poly.iter().all(|p| p.z > cam.far * (1.0 + 1e-6)) {
-        return None;
-    }
-    let (mut xmin, mut ymin) = (f64::INFINITY, f64::INFINITY);
-    let (mut xmax, mut ymax) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
-    for p in poly {
-        let (px, py) = cam.camera_to_pixel(*p);
-        if !px.is_finite() || !py.is_finite() {
-            // Projection overflowed: fall back to the whole screen.
-            return Some(PixelRect {
-                x0: 0,
-                y0: 0,
-                x1: cam.width - 1,
-                y1: cam.height - 1,
-            });
-        }
-        xmin = xmin.min(px);
-        xmax = xmax.max(px);
-        ymin = ymin.min(py);
-        ymax = ymax.max(py);
-    }
-    // Pixel k's center is k + 0.5; keep a one-pixel margin for rounding.
-    let lo = |v: f64, n: u32| (v - 1.5).floor().max(0.0).min(f64::from(n)) as u32;
-    let hi = |v: f64, n: u32| (v + 0.5).ceil().min(f64::from(n) - 1.0);
-    let (x1, y1) = (hi(xmax, cam.width), hi(ymax, cam.height));
-    if x1 < 0.0 || y1 < 0.0 {
-        return None;
-    }
-    let (x0, y0) = (lo(xmin, cam.width), lo(ymin, cam.height));
-    let (x1, y1) = (x1 as u32, y1 as u32);
-    if x0 > x1 || y0 > y1 {
-        return None;
-    }
-    Some(PixelRect { x0, y0, x1, y1 })
+    BoxMargin::new(cam).bounds(cam, t)
 }
 
 /// Options for one raster render.
@@ -116,7 +73,9 @@ pub fn render(
     opts: RasterOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
-    render_impl(scene, opts, true, progress)
+    let start = Instant::now();
+    let k = render_keys(scene, opts, progress);
+    k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
 /// [`render`] without the edge-function fast path: every bounding-box pixel
@@ -128,120 +87,192 @@ pub fn render_exact(
     opts: RasterOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
-    render_impl(scene, opts, false, progress)
+    let start = Instant::now();
+    let k = keys_impl(scene, opts, Mode::new(&scene.camera, false), progress);
+    k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
-fn render_impl(
+/// The raster's visibility pass alone: per-pixel nearest hit keys, before the
+/// frame's buffers are filled from them (the tracer's [`crate::trace::trace_keys`]
+/// stops at the same point, so benchmarks can time the two loops like for like).
+#[derive(Debug, Clone)]
+pub struct RasterKeys {
+    /// Nearest hit key per pixel, row-major ([`NO_HIT`] for background).
+    pub keys: Vec<u64>,
+    /// Per-pixel (front, back) coverage counts, when asked for.
+    pub coverage: Option<Vec<[u16; 2]>>,
+    /// What the visibility pass cost.
+    pub counters: Counters,
+}
+
+impl RasterKeys {
+    /// The raster frame these keys make (`seconds`: what the caller timed).
+    pub fn into_frame(self, scene: &ResolvedScene, seconds: f64) -> Frame {
+        Frame::from_keys(
+            scene,
+            &self.keys,
+            self.coverage,
+            self.counters,
+            "raster",
+            seconds,
+        )
+    }
+}
+
+/// [`render`]'s visibility pass (binning, coverage, depth test) without the
+/// frame's buffers.
+pub fn render_keys(
     scene: &ResolvedScene,
     opts: RasterOptions,
-    fast: bool,
     progress: &(dyn Fn(u64) + Sync),
-) -> Frame {
-    let start = Instant::now();
+) -> RasterKeys {
+    keys_impl(scene, opts, Mode::new(&scene.camera, true), progress)
+}
+
+/// How [`keys_impl`] works: the fast path or the pure predicate, box
+/// margins (`None`: every triangle gets the whole image, the reference tight
+/// boxes must not lose pixels against), early depth rejection (tests turn it
+/// off, or scale its bound).
+#[derive(Debug, Clone, Copy)]
+struct Mode {
+    /// The edge-function fast path.
+    fast: bool,
+    /// Box margins.
+    margin: Option<BoxMargin>,
+    /// Skip hidden triangles ([`crate::raster_hiz`]); never while counting coverage.
+    hiz: bool,
+    /// Multiplies the depth bound (tests).
+    hiz_factor: f64,
+}
+
+impl Mode {
+    /// What renders use: tight boxes, hidden triangles skipped.
+    fn new(cam: &Camera, fast: bool) -> Mode {
+        Mode {
+            fast,
+            margin: Some(BoxMargin::new(cam)),
+            hiz: true,
+            hiz_factor: 1.0,
+        }
+    }
+}
+
+/// The visibility pass.
+fn keys_impl(
+    scene: &ResolvedScene,
+    opts: RasterOptions,
+    mode: Mode,
+    progress: &(dyn Fn(u64) + Sync),
+) -> RasterKeys {
+    let margin = mode.margin;
+    let mode = Mode {
+        hiz: mode.hiz && !opts.count_coverage,
+        ..mode
+    };
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
-    let rects: Vec<Option<PixelRect>> = scene
-        .triangles
-        .par_iter()
-        .zip(scene.degenerate.par_iter())
-        .map(|(t, &deg)| if deg { None } else { screen_bounds(cam, t) })
-        .collect();
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); (tiles_x * tiles_y) as usize];
-    for (prim, r) in rects.iter().enumerate() {
-        if let Some(r) = r {
-            for ty in r.y0 / TILE..=r.y1 / TILE {
-                for tx in r.x0 / TILE..=r.x1 / TILE {
-                    bins[(ty * tiles_x + tx) as usize].push(prim as u32);
-                }
-            }
-        }
-    }
-    let tiles: Vec<TileOut> = bins
-        .par_iter()
-        .enumerate()
-        .map(|(ti, bin)| {
-            let tx = ti as u32 % tiles_x;
-            let ty = ti as u32 / tiles_x;
-            // Past the deadline a tile renders nothing (background, right size).
-            let bin = if crate::deadline::past(opts.deadline) {
-                &[][..]
-            } else {
-                &bin[..]
-            };
-            let out = render_tile(scene, &rects, bin, tx * TILE, ty * TILE, opts, fast);
-            progress(1);
-            out
-        })
-        .collect();
+    let bins = Bins::new(scene, margin, tiles_x, tiles_y);
+    let band = (w * TILE) as usize;
     let mut keys = vec![NO_HIT; cam.pixel_count()];
-    let mut coverage = opts
-        .count_coverage
-        .then(|| vec![[0u16; 2]; cam.pixel_count()]);
-    let mut counters = Counters::default();
-    for (ti, (tkeys, tcov, tc)) in tiles.into_iter().enumerate() {
-        counters += tc;
-        let x0 = (ti as u32 % tiles_x) * TILE;
-        let y0 = (ti as u32 / tiles_x) * TILE;
-        let tw = TILE.min(w - x0);
-        let th = TILE.min(h - y0);
-        for ly in 0..th {
-            for lx in 0..tw {
-                let dst = ((y0 + ly) * w + x0 + lx) as usize;
-                let src = (ly * tw + lx) as usize;
-                keys[dst] = tkeys[src];
-                if let Some(cov) = coverage.as_mut() {
-                    cov[dst] = tcov[src];
+    let mut coverage = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
+    let mut cov_bands: Vec<&mut [[u16; 2]]> = if opts.count_coverage {
+        coverage.chunks_mut(band).collect()
+    } else {
+        (0..tiles_y).map(|_| &mut [][..]).collect()
+    };
+    let counters = keys
+        .par_chunks_mut(band)
+        .zip(cov_bands.par_iter_mut())
+        .enumerate()
+        .map(|(ty, (kband, cband))| {
+            let mut c = Counters::default();
+            let mut bin = Vec::new();
+            for tx in 0..tiles_x {
+                bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
+                // Past the deadline a tile renders nothing (background).
+                if !bin.is_empty() && !crate::deadline::past(opts.deadline) {
+                    let mut out = TileOut {
+                        keys: &mut kband[..],
+                        cov: &mut cband[..],
+                        stride: w as usize,
+                        x0: (tx * TILE) as usize,
+                    };
+                    let (x0, y0) = (tx * TILE, ty as u32 * TILE);
+                    render_tile(scene, &bin, x0, y0, mode, &mut out, &mut c);
                 }
             }
-        }
-    }
-    Frame::from_keys(
-        scene,
-        &keys,
-        coverage,
+            progress(u64::from(tiles_x));
+            c
+        })
+        .reduce(Counters::default, |mut a, b| {
+            a += b;
+            a
+        });
+    RasterKeys {
+        keys,
+        coverage: opts.count_coverage.then_some(coverage),
         counters,
-        "raster",
-        start.elapsed().as_secs_f64(),
-    )
+    }
 }
 
-/// One tile's keys, coverage counts and operation counts.
-type TileOut = (Vec<u64>, Vec<[u16; 2]>, Counters);
+/// Where one tile writes: its band of tile rows in the image's key (and
+/// coverage) buffers, the image's row stride and the tile's first column.
+struct TileOut<'a> {
+    /// The band's keys, `stride` per row.
+    keys: &'a mut [u64],
+    /// The band's coverage counts (empty when not counted).
+    cov: &'a mut [[u16; 2]],
+    /// Pixels per image row.
+    stride: usize,
+    /// The tile's first column.
+    x0: usize,
+}
 
-/// Renders one tile; on x86-64 CPUs with AVX2 the same code runs compiled for
-/// 256-bit vectors (the fast path's 8-lane loops vectorize; the arithmetic is
-/// unchanged, as Rust never contracts a*b+c into an FMA by itself).
+impl TileOut<'_> {
+    /// Buffer index of tile pixel `(lx, ly)`.
+    #[inline(always)]
+    fn at(&self, lx: usize, ly: usize) -> usize {
+        ly * self.stride + self.x0 + lx
+    }
+}
+
+/// Renders one tile's bin into `out`; on x86-64 CPUs with AVX2 the same code
+/// runs compiled for 256-bit vectors (the fast path's 8-lane loops vectorize;
+/// the arithmetic is unchanged, as Rust never contracts a*b+c into an FMA by itself).
+#[allow(clippy::too_many_arguments)]
 fn render_tile(
     scene: &ResolvedScene,
-    rects: &[Option<PixelRect>],
-    bin: &[u32],
+    bin: &[Binned],
     x0: u32,
     y0: u32,
-    opts: RasterOptions,
-    fast: bool,
-) -> TileOut {
+    mode: Mode,
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(avx2) = Avx2::detect().filter(|_| fast) {
+    if let Some(avx2) = Avx2::detect().filter(|_| mode.fast) {
         // SAFETY: the token proves the CPU has AVX2 and POPCNT.
-        return unsafe { render_tile_avx2(avx2, scene, rects, bin, x0, y0, opts) };
+        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, c) };
     }
-    render_tile_body(Portable, scene, rects, bin, x0, y0, opts, fast)
+    render_tile_body(Portable, scene, bin, x0, y0, mode, out, c)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,popcnt")]
+#[allow(clippy::too_many_arguments)]
 fn render_tile_avx2(
     avx2: Avx2,
     scene: &ResolvedScene,
-    rects: &[Option<PixelRect>],
-    bin: &[u32],
+    bin: &[Binned],
     x0: u32,
     y0: u32,
-    opts: RasterOptions,
-) -> TileOut {
-    render_tile_body(avx2, scene, rects, bin, x0, y0, opts, true)
+    mode: Mode,
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
+    render_tile_body(avx2, scene, bin, x0, y0, mode, out, c)
 }
 
 /// Depth test and key update for a pixel the triangle covers with `facing`.
@@ -270,156 +301,302 @@ fn record_hit(
     }
 }
 
+/// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
+/// triangle's box is found full of hits (most tiles of big triangles never need it).
+struct LazyBound<F> {
+    /// Skipping is on.
+    on: bool,
+    /// Multiplies the bound (tests).
+    factor: f64,
+    /// Computed yet, and its value.
+    bound: Option<Option<TileDepthBound>>,
+    /// Computes it.
+    make: F,
+}
+
+impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
+    /// A bound for a tile whose rays `make` lists.
+    #[inline(always)]
+    fn new(mode: Mode, make: F) -> Self {
+        LazyBound {
+            on: mode.hiz,
+            factor: mode.hiz_factor,
+            bound: None,
+            make,
+        }
+    }
+
+    /// True when triangle `prim` can change no key in its box `[lx0, lx1,
+    /// ly0, ly1]` of the tile: its lowest possible key is no smaller than
+    /// every key there (none of which may then be background).
+    #[inline(always)]
+    fn hidden(
+        &mut self,
+        cam: &Camera,
+        t: &Tri,
+        prim: u32,
+        out: &TileOut,
+        [lx0, lx1, ly0, ly1]: [usize; 4],
+    ) -> bool {
+        if !self.on {
+            return false;
+        }
+        let rows = || {
+            (ly0..=ly1).map(|ly| {
+                let row = out.at(lx0, ly);
+                &out.keys[row..=row + (lx1 - lx0)]
+            })
+        };
+        if rows().any(|r| r.contains(&NO_HIT)) {
+            return false;
+        }
+        let (make, factor) = (&mut self.make, self.factor);
+        let bound = self
+            .bound
+            .get_or_insert_with(|| make().map(|b| b.scaled(factor)));
+        let Some(b) = bound else {
+            return false;
+        };
+        let low = b.lowest_key(cam, t, prim);
+        low != 0 && rows().all(|r| r.iter().all(|&k| k <= low))
+    }
+}
+
+/// Boxes of at most this many pixels skip the fast path's per-tile edge and
+/// depth setup and ask the predicate and [`TriDepth::depth`] directly (what
+/// [`render_exact`] does everywhere, so nothing can differ): for triangles
+/// of about a pixel, the setup costs more than it saves.
+const SMALL_BOX: usize = 4;
+
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn render_tile_body<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
-    rects: &[Option<PixelRect>],
-    bin: &[u32],
+    bin: &[Binned],
     x0: u32,
     y0: u32,
-    opts: RasterOptions,
-    fast: bool,
-) -> TileOut {
+    mode: Mode,
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
     let cam = &scene.camera;
     let tw = TILE.min(cam.width - x0);
     let th = TILE.min(cam.height - y0);
-    let n = (tw * th) as usize;
-    let mut keys = vec![NO_HIT; n];
-    let mut cov = if opts.count_coverage {
-        vec![[0u16; 2]; n]
-    } else {
-        Vec::new()
-    };
-    let mut c = Counters::default();
-    if bin.is_empty() {
-        return (keys, cov, c);
-    }
-    if fast {
-        fast_tile(
-            l,
-            scene,
-            rects,
-            bin,
-            (x0, y0, tw, th),
-            &mut keys,
-            &mut cov,
-            &mut c,
-        );
-        return (keys, cov, c);
+    if mode.fast {
+        fast_tile(l, scene, bin, (x0, y0, tw, th), mode, out, c);
+        return;
     }
     // The pure predicate path: every bounding-box pixel asks `visibility`.
     let rays: Vec<PixelRay> = (0..th)
         .flat_map(|ly| (0..tw).map(move |lx| (lx, ly)))
         .map(|(lx, ly)| cam.pixel_ray(x0 + lx, y0 + ly))
         .collect();
-    for &prim in bin {
-        let r = rects[prim as usize].expect("binned triangles have bounds");
+    let mut hiz = LazyBound::new(mode, || {
+        let k = TileDepthBound::axis(cam);
+        let planar: Vec<f64> = rays.iter().map(|r| r.planar).collect();
+        let dk: Vec<f64> = rays.iter().map(|r| r.dir[k]).collect();
+        TileDepthBound::new(k, &planar, &dk)
+    });
+    for &Binned { prim, rect } in bin {
         let t = &scene.triangles[prim as usize];
+        let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
+        if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+            continue;
+        }
         c.triangle_setups += 1;
         let edges = TriEdges::new(cam, t);
         let mut depth: Option<TriDepth> = None;
-        let (ax, bx) = (r.x0.max(x0), r.x1.min(x0 + tw - 1));
-        let (ay, by) = (r.y0.max(y0), r.y1.min(y0 + th - 1));
-        for y in ay..=by {
-            for x in ax..=bx {
-                let li = ((y - y0) * tw + (x - x0)) as usize;
-                let ray = &rays[li];
-                let facing = edges.covers(cam, ray, &mut c);
+        for ly in ly0..=ly1 {
+            for lx in lx0..=lx1 {
+                let ray = &rays[ly * tw as usize + lx];
+                let facing = edges.covers(cam, ray, c);
                 if facing != 0 {
-                    let cv = cov.get_mut(li);
-                    record_hit(cam, t, prim, ray, facing, &mut depth, &mut keys[li], cv);
+                    let at = out.at(lx, ly);
+                    let cv = out.cov.get_mut(at);
+                    record_hit(cam, t, prim, ray, facing, &mut depth, &mut out.keys[at], cv);
                 }
             }
         }
     }
-    (keys, cov, c)
 }
 
 /// The fast path over one tile (`(x0, y0, tw, th)`): per triangle, its edge
 /// functions decide 8 pixels of a row at a time where their bound allows
 /// ([`crate::raster_edges`]); undecided pixels go to the predicate exactly as
 /// [`TriEdges::covers`] would ask it; covered pixels get their depth 8 at a
-/// time from the same arithmetic as [`TriDepth::depth`].
+/// time from the same arithmetic as [`TriDepth::depth`]. Boxes of at most
+/// [`SMALL_BOX`] pixels take the predicate path directly.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn fast_tile<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
-    rects: &[Option<PixelRect>],
-    bin: &[u32],
+    bin: &[Binned],
     (x0, y0, tw, th): (u32, u32, u32, u32),
-    keys: &mut [u64],
-    cov: &mut [[u16; 2]],
+    mode: Mode,
+    out: &mut TileOut,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
     let rays = TileRays::new(cam, x0, y0, tw, th);
-    let width = rays.width();
-    for &prim in bin {
-        let r = rects[prim as usize].expect("binned triangles have bounds");
+    let mut hiz = LazyBound::new(mode, || rays.depth_bound(cam));
+    for &Binned { prim, rect } in bin {
         let t = &scene.triangles[prim as usize];
+        let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
+        if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+            continue;
+        }
         c.triangle_setups += 1;
+        if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
+            small_box(cam, t, prim, &rays, [lx0, lx1, ly0, ly1], out, c);
+            continue;
+        }
         let edges = TriEdges::new(cam, t);
         let f = FastEdges::new(&edges, &rays);
         let mut depth: Option<ChunkDepth> = None;
-        let (lx0, lx1) = (
-            (r.x0.max(x0) - x0) as usize,
-            (r.x1.min(x0 + tw - 1) - x0) as usize,
-        );
-        let (ly0, ly1) = (
-            (r.y0.max(y0) - y0) as usize,
-            (r.y1.min(y0 + th - 1) - y0) as usize,
-        );
-        for ly in ly0..=ly1 {
-            // Chunks of 8 lanes start at the box's first column (any column:
-            // `TileRays` pads its rows), so a box 8 pixels wide takes one per row.
-            for base in (lx0..=lx1).step_by(CHUNK) {
-                let span: u32 = (1u32 << ((lx1 - base).min(CHUNK - 1) + 1)) - 1;
-                let sg = f.chunk(l, &rays, ly, base);
-                let rejected = sg.rejected() & span;
-                let (mut back, mut front) = (sg.inside_pos() & span, sg.inside_neg() & span);
-                let inside = back | front;
-                // What `covers_by` would count for the lanes settled here.
-                let decided = u64::from((rejected | inside).count_ones());
-                c.coverage_tests += decided;
-                c.fast_decided += decided;
-                c.covered += u64::from(inside.count_ones());
-                let mut unsure = span & !rejected & !inside;
-                while unsure != 0 {
-                    let j = unsure.trailing_zeros() as usize;
-                    unsure &= unsure - 1;
-                    let ray = rays.ray(base + j, ly);
-                    // Certain signs stand (they are the predicate's own);
-                    // the rest go to the predicate, in `covers_by`'s order.
-                    let facing = covers_by(c, |k, c| match sg.sign(k, j) {
-                        0 => edge_sign(cam, &edges.0[k], &ray, c),
-                        s => s,
-                    });
-                    back |= u32::from(facing > 0) << j;
-                    front |= u32::from(facing < 0) << j;
-                }
-                if back | front == 0 {
-                    continue;
-                }
-                let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-                let (z, ok) = d.depths(cam, &rays, ly, base);
-                let mut m = (back | front) & ok;
-                while m != 0 {
-                    let j = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let li = ly * width + base + j;
-                    let k = hit_key(z[j], prim);
-                    if k < keys[li] {
-                        keys[li] = k;
-                    }
-                    if let Some(cv) = cov.get_mut(li) {
-                        let slot = usize::from((back >> j) & 1 == 1);
-                        cv[slot] = cv[slot].saturating_add(1);
-                    }
+        // Boxes at least a chunk wide take chunks aligned to the tile's 8x8
+        // blocks, so that whole blocks can be decided at once; narrower ones
+        // take one chunk per row from their first column (any column:
+        // `TileRays` pads its rows).
+        let wide = lx1 - lx0 + 1 >= CHUNK;
+        let first = if wide { lx0 & !(CHUNK - 1) } else { lx0 };
+        for by in ly0 / CHUNK..=ly1 / CHUNK {
+            let (r0, r1) = ((by * CHUNK).max(ly0), (by * CHUNK + CHUNK - 1).min(ly1));
+            let full_rows = r1 - r0 == CHUNK - 1;
+            for base in (first..=lx1).step_by(CHUNK) {
+                let (a, b) = (lx0.saturating_sub(base), (lx1 - base).min(CHUNK - 1));
+                let span: u32 = ((1u32 << (b + 1)) - 1) & !((1u32 << a) - 1);
+                // A block inside the box whose certain signs settle all of it.
+                let block = (full_rows && span == 0xff)
+                    .then(|| f.block(&rays, r0, base))
+                    .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff);
+                for ly in r0..=r1 {
+                    let sg = match block {
+                        Some(g) => g,
+                        None => f.chunk(l, &rays, ly, base),
+                    };
+                    let at = (ly, base, span);
+                    let d = &mut depth;
+                    chunk_hits(cam, t, prim, &edges, &rays, sg, at, d, out, c);
                 }
             }
+        }
+    }
+}
+
+/// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as
+/// [`TriEdges::covers`] asks it, with each edge plane set up only when a
+/// pixel first needs it and the predicate's own f64 filter
+/// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
+/// evaluated here, so only the signs it cannot settle call it (which then
+/// counts its exact fallbacks and ties as always). Depth by [`TriDepth::depth`].
+#[inline(always)]
+fn small_box(
+    cam: &Camera,
+    t: &Tri,
+    prim: u32,
+    rays: &TileRays,
+    [lx0, lx1, ly0, ly1]: [usize; 4],
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
+    let v = t.map(|v| v.as_dvec3());
+    let mut planes: [Option<EdgePlane>; 3] = [None; 3];
+    let mut depth: Option<TriDepth> = None;
+    for ly in ly0..=ly1 {
+        for lx in lx0..=lx1 {
+            let d = rays.dir(lx, ly);
+            let facing = covers_by(c, |k, c| {
+                let e =
+                    planes[k].get_or_insert_with(|| EdgePlane::new(cam.eye, v[k], v[(k + 1) % 3]));
+                let det = d.x * e.n.x + d.y * e.n.y + d.z * e.n.z;
+                let bound = O3D_ERRBOUND_A
+                    * (d.x.abs() * e.perm.x + d.y.abs() * e.perm.y + d.z.abs() * e.perm.z);
+                if det > bound {
+                    1
+                } else if -det > bound {
+                    -1
+                } else {
+                    edge_sign(cam, e, &rays.ray(lx, ly), c)
+                }
+            });
+            if facing != 0 {
+                let at = out.at(lx, ly);
+                let cv = out.cov.get_mut(at);
+                let ray = rays.ray(lx, ly);
+                record_hit(
+                    cam,
+                    t,
+                    prim,
+                    &ray,
+                    facing,
+                    &mut depth,
+                    &mut out.keys[at],
+                    cv,
+                );
+            }
+        }
+    }
+}
+
+/// One chunk of a triangle's box: lanes `span` of tile row `ly` from column
+/// `base`, with certain signs `sg` (from the chunk or its whole block).
+/// Settled lanes are counted as [`covers_by`] would count them, the rest ask
+/// the predicate in its order; covered lanes get their depth 8 at a time and
+/// update the keys (and coverage counts).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn chunk_hits(
+    cam: &Camera,
+    t: &Tri,
+    prim: u32,
+    edges: &TriEdges,
+    rays: &TileRays,
+    sg: ChunkSigns,
+    (ly, base, span): (usize, usize, u32),
+    depth: &mut Option<ChunkDepth>,
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
+    let rejected = sg.rejected() & span;
+    let (mut back, mut front) = (sg.inside_pos() & span, sg.inside_neg() & span);
+    let inside = back | front;
+    // What `covers_by` would count for the lanes settled here.
+    let decided = u64::from((rejected | inside).count_ones());
+    c.coverage_tests += decided;
+    c.fast_decided += decided;
+    c.covered += u64::from(inside.count_ones());
+    let mut unsure = span & !rejected & !inside;
+    while unsure != 0 {
+        let j = unsure.trailing_zeros() as usize;
+        unsure &= unsure - 1;
+        let ray = rays.ray(base + j, ly);
+        // Certain signs stand (they are the predicate's own);
+        // the rest go to the predicate, in `covers_by`'s order.
+        let facing = covers_by(c, |k, c| match sg.sign(k, j) {
+            0 => edge_sign(cam, &edges.0[k], &ray, c),
+            s => s,
+        });
+        back |= u32::from(facing > 0) << j;
+        front |= u32::from(facing < 0) << j;
+    }
+    if back | front == 0 {
+        return;
+    }
+    let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+    let (z, ok) = d.depths(cam, rays, ly, base);
+    let mut m = (back | front) & ok;
+    let row = out.at(base, ly);
+    while m != 0 {
+        let j = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let k = hit_key(z[j], prim);
+        if k < out.keys[row + j] {
+            out.keys[row + j] = k;
+        }
+        if let Some(cv) = out.cov.get_mut(row + j) {
+            let slot = usize::from((back >> j) & 1 == 1);
+            cv[slot] = cv[slot].saturating_add(1);
         }
     }
 }
@@ -612,5 +789,170 @@ mod tests {
                 &ResolvedScene::from_triangles(cam, tris),
             );
         }
+    }
+
+    /// Buffers of two key sets (the keys decide z, prim and the rest).
+    fn same_keys(a: &RasterKeys, b: &RasterKeys) -> bool {
+        a.keys == b.keys && a.coverage == b.coverage
+    }
+
+    /// Scenes whose vertices sit on pixel-center rays (so box edges fall on
+    /// pixel centers, up to rounding) at offsets up to 1e7, tilted cameras,
+    /// triangles crossing the near plane and behind the eye, and tiny ones.
+    fn box_scenes() -> Vec<(String, ResolvedScene)> {
+        let mut out = Vec::new();
+        for (k, off) in [0.0, 1e3, 12345.678, 1e7].into_iter().enumerate() {
+            let o = DVec3::new(off, -off, off);
+            for (w, h) in [(33, 33), (40, 24)] {
+                let cams = [
+                    camera(o + DVec3::Z, o, 90.0, w, h),
+                    camera(
+                        o + DVec3::new(0.3, 0.7, 2.1),
+                        o + DVec3::new(0.1, -0.2, 0.0),
+                        50.0,
+                        w,
+                        h,
+                    ),
+                ];
+                for (ci, cam) in cams.into_iter().enumerate() {
+                    let mut tris = adversarial(&cam, 5 + k as u64 * 7 + u64::from(w), 40);
+                    // Tiny triangles around pixel centers: most cover no center.
+                    let mut s = 11 + k as u64;
+                    for _ in 0..60 {
+                        let (x, y) = (
+                            ((lcg(&mut s) * 0.5 + 0.5) * f64::from(w)) as u32 % w,
+                            ((lcg(&mut s) * 0.5 + 0.5) * f64::from(h)) as u32 % h,
+                        );
+                        let p = on_ray(&cam, x, y, 1.5).as_dvec3();
+                        let d = 1e-2 * (1.0 + off.abs()).sqrt() * 1e-2;
+                        let v =
+                            |s: &mut u64| (p + DVec3::new(lcg(s), lcg(s), lcg(s)) * d).as_vec3();
+                        tris.push([v(&mut s), v(&mut s), v(&mut s)]);
+                    }
+                    let what = format!("offset {off}, {w}x{h}, camera {ci}");
+                    out.push((what, ResolvedScene::from_triangles(cam, tris)));
+                }
+            }
+        }
+        out
+    }
+
+    /// Tight boxes ([`crate::raster_bounds`]) against whole-image boxes: the
+    /// same keys and coverage counts, so no box lost a pixel; and with the
+    /// margin multiplied by 0 some box does lose one (the margin is needed,
+    /// and this test would notice a wrong one).
+    #[test]
+    fn tight_boxes_lose_no_pixel() {
+        let mut lost_without_margin = 0;
+        for (what, scene) in box_scenes() {
+            let opts = RasterOptions {
+                count_coverage: true,
+                deadline: None,
+            };
+            let exact = Mode::new(&scene.camera, false);
+            let whole = keys_impl(
+                &scene,
+                opts,
+                Mode {
+                    margin: None,
+                    ..exact
+                },
+                &|_| {},
+            );
+            let tight = render_keys(&scene, opts, &|_| {});
+            assert!(
+                same_keys(&whole, &tight),
+                "{what}: a tight box lost a pixel"
+            );
+            let m = BoxMargin::new(&scene.camera).scaled(0.0);
+            let bare = keys_impl(
+                &scene,
+                opts,
+                Mode {
+                    margin: Some(m),
+                    ..exact
+                },
+                &|_| {},
+            );
+            lost_without_margin += usize::from(!same_keys(&whole, &bare));
+            assert!(
+                tight.counters.coverage_tests < whole.counters.coverage_tests,
+                "{what}: boxes did not shrink"
+            );
+        }
+        assert!(lost_without_margin > 0, "no scene needs the margin");
+    }
+
+    /// Layers of triangles nearly facing the camera, 0.4% apart in depth,
+    /// drawn back to front and front to back, under an exact and a tilted
+    /// camera at offsets up to 1e7, plus the adversarial scenes: hidden
+    /// triangles abound.
+    fn layered_scenes() -> Vec<(String, ResolvedScene)> {
+        let mut out = box_scenes();
+        for (k, off) in [0.0, 1e3, 1e7].into_iter().enumerate() {
+            let o = DVec3::new(off, -off, off);
+            let cams = [
+                camera(o + DVec3::Z * 3.0, o, 60.0, 37, 29),
+                camera(o + DVec3::new(0.4, -1.1, 3.0), o, 45.0, 48, 40),
+                camera(o + DVec3::new(-3.0, 0.2, 0.1), o, 50.0, 40, 40),
+            ];
+            for (ci, cam) in cams.into_iter().enumerate() {
+                let mut s = 7 + k as u64 * 13 + ci as u64;
+                // A screen-filling wall facing the camera just behind the
+                // nearest layers: what they hide behind is all known.
+                let wall = cam.eye + cam.forward * (2.5 * 1.006);
+                let (r, u) = (cam.right * 100.0, cam.up_ortho * 100.0);
+                let mut tris = vec![[wall - r - u, wall + r - u, wall + u].map(|v| v.as_vec3())];
+                for order in [1.0, -1.0] {
+                    for i in 0..12 {
+                        let t = 1.0 + order * 0.004 * f64::from(i);
+                        let (x, y) = (
+                            ((lcg(&mut s) * 0.5 + 0.5) * 30.0) as u32,
+                            ((lcg(&mut s) * 0.5 + 0.5) * 25.0) as u32,
+                        );
+                        let c = cam.eye + cam.pixel_ray(x, y).dir * (2.5 * t);
+                        // Every other triangle parallel to the image plane.
+                        let tilt = if i % 2 == 0 { 0.0 } else { 0.05 };
+                        let v = |s: &mut u64| {
+                            let (a, b) = (lcg(s), lcg(s));
+                            let w = cam.right * a + cam.up_ortho * b + cam.forward * lcg(s) * tilt;
+                            (c + w * 1.5).as_vec3()
+                        };
+                        tris.push([v(&mut s), v(&mut s), v(&mut s)]);
+                    }
+                }
+                let what = format!("layers, offset {off}, camera {ci}");
+                out.push((what, ResolvedScene::from_triangles(cam, tris)));
+            }
+        }
+        out
+    }
+
+    /// Skipping hidden triangles ([`crate::raster_hiz`]) changes no buffer,
+    /// in the fast and the predicate path, and skips some; with the depth
+    /// bound 1% too high some buffer changes (the bound is tight enough to
+    /// matter and this test would notice a wrong one).
+    #[test]
+    fn hidden_triangles_are_skipped_exactly() {
+        let (mut skipped, mut broken) = (0, 0);
+        let opts = RasterOptions::default();
+        for (what, scene) in layered_scenes() {
+            for fast in [true, false] {
+                let on = Mode::new(&scene.camera, fast);
+                let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {});
+                let with = keys_impl(&scene, opts, on, &|_| {});
+                assert!(same_keys(&off, &with), "{what}: skipping changed a key");
+                skipped += off.counters.triangle_setups - with.counters.triangle_setups;
+                let high = Mode {
+                    hiz_factor: 1.01,
+                    ..on
+                };
+                let wrong = keys_impl(&scene, opts, high, &|_| {});
+                broken += usize::from(!same_keys(&off, &wrong));
+            }
+            fast_equals_exact(&what, &scene);
+        }
+        assert!(skipped > 100, "only {skipped} setups skipped");
+        assert!(broken > 0, "a bound 1% too high broke nothing");
     }
 }

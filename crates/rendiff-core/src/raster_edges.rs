@@ -46,6 +46,30 @@
 //! every operation count are those of the pure predicate path
 //! ([`crate::raster::render_exact`]); tests compare the two bit for bit.
 
+//!
+//! # Whole 8x8 blocks ([`FastEdges::block`])
+//!
+//! Let `E(p) = N . δ_p` be the exact orientation at pixel `p`, `δ_p = P_p - e`
+//! exactly. The ideal direction `g_p = f + r sx_p + u sy_p` (exact screen
+//! coordinates of the center, the camera's f64 basis) is affine in the
+//! pixel's column and row, so `G(p) = N . g_p` is too, and over an 8x8 block
+//! `G(p) >= min G(corners)` (the block is the convex hull of its corner
+//! centers). The pixel ray's rounding moves `δ` off `g` by `|δ_j - g_j| <=
+//! η_j = 16U H_j`, `H_j = |e_j| + |f_j| + |r_j| A + |u_j| T` (A = aspect
+//! tan, T = tan(vfov / 2)): the screen coordinates carry at most `4U A`,
+//! `4U T`, the sum `f + r sx + u sy` three roundings, `P = e + d` one, in all
+//! `9U H_j + O(U²)`. With `ρ = Σ_j |N_j| η_j` (and `|N_j| <= 2 perm_j`),
+//! `E(p) >= min_c E(c) - 2ρ`, and `E(c) > det_c - B` at each corner. So when
+//! every corner's `det` exceeds `B_block = 3B + 4 Σ_j perm_j η_j`, `E(p) > 2B`
+//! at every pixel of the block, hence `det_p > E(p) - B > B`: the sign is the
+//! one the chunk test above gives at `p`, and (as `B >= b`) the one the
+//! predicate's filter gives, without exact arithmetic or the tie rule.
+//! Likewise for `-det`. A block whose certain signs reject or cover all its
+//! pixels by [`ChunkSigns`]' rules is thereby decided exactly as its 64
+//! pixels would be one by one, with the same counts.
+//! `tests::block_signs_hold_at_every_pixel` checks the claim pixel by pixel
+//! on edges through block corners, and that a block bound of 0 breaks it.
+
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
 use crate::visibility::{TriDepth, TriEdges};
@@ -145,17 +169,21 @@ pub struct TileRays {
     planar: Vec<f64>,
     /// `max |D_i|` over the tile's pixels, per component.
     max_abs: [f64; 3],
+    /// `η_j`: how far a pixel's `P - e` may lie from its ideal direction
+    /// (module documentation, whole blocks).
+    eta: [f64; 3],
 }
 
 impl TileRays {
     /// The rays of the `tw` x `th` tile whose top-left pixel is `(x0, y0)`:
     /// [`Camera::screen_ray`]'s arithmetic written per component over a row,
     /// so that it vectorizes (padding lanes repeat the last column).
+    #[inline(always)]
     pub fn new(cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) -> TileRays {
         let (width, rows) = (tw as usize, th as usize);
         let stride = width + CHUNK - 1;
         let n = stride * rows;
-        let empty = || Vec::with_capacity(n);
+        let zeros = || vec![0.0; n];
         let mut t = TileRays {
             width,
             stride,
@@ -164,36 +192,45 @@ impl TileRays {
                 .collect(),
             sy: (0..th).map(|ly| cam.screen_y(y0 + ly)).collect(),
             basis: [cam.eye, cam.forward, cam.right, cam.up_ortho],
-            d: [empty(), empty(), empty()],
-            inv: [empty(), empty(), empty()],
-            planar: empty(),
+            d: [zeros(), zeros(), zeros()],
+            inv: [zeros(), zeros(), zeros()],
+            planar: zeros(),
             max_abs: [0.0; 3],
+            eta: [0.0; 3],
         };
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
+        // The camera's private aspect tan, by the same expression.
+        let a = cam.tan_half_vfov * (f64::from(cam.width) / f64::from(cam.height));
+        t.eta = [0, 1, 2].map(|k| {
+            16.0 * U * (e[k].abs() + f[k].abs() + r[k].abs() * a + u[k].abs() * cam.tan_half_vfov)
+        });
         for ly in 0..rows {
             let sy = t.sy[ly];
             let row = ly * stride..(ly + 1) * stride;
             for k in 0..3 {
                 // Camera::screen_ray: P = eye + ((forward + right sx) + up sy),
                 // D = P - eye, 1 / D, component by component.
-                t.d[k].extend(
-                    t.sx.iter()
-                        .map(|&sx| (e[k] + ((f[k] + r[k] * sx) + u[k] * sy)) - e[k]),
-                );
-                let d = &t.d[k][row.clone()];
-                t.inv[k].extend(d.iter().map(|&d| 1.0 / d));
+                let (ek, fk, rk, uk) = (e[k], f[k], r[k], u[k]);
+                let d = &mut t.d[k][row.clone()];
+                for (d, &sx) in d.iter_mut().zip(&t.sx) {
+                    *d = (ek + ((fk + rk * sx) + uk * sy)) - ek;
+                }
+                for (i, &d) in t.inv[k][row.clone()].iter_mut().zip(d.iter()) {
+                    *i = 1.0 / d;
+                }
+                let mut m = t.max_abs[k];
                 for &v in &d[..width] {
                     // NaN-propagating max: a NaN direction leaves a NaN bound (decides nothing).
                     let a = v.abs();
-                    if a > t.max_abs[k] || a.is_nan() {
-                        t.max_abs[k] = a;
-                    }
+                    m = if a > m || a.is_nan() { a } else { m };
                 }
+                t.max_abs[k] = m;
             }
             let [dx, dy, dz] = [0, 1, 2].map(|k| &t.d[k][row.clone()]);
             // DVec3::dot(D, forward).
-            t.planar
-                .extend((0..stride).map(|lx| dx[lx] * f.x + dy[lx] * f.y + dz[lx] * f.z));
+            for (lx, p) in t.planar[row.clone()].iter_mut().enumerate() {
+                *p = dx[lx] * f.x + dy[lx] * f.y + dz[lx] * f.z;
+            }
         }
         t
     }
@@ -220,6 +257,8 @@ impl TileRays {
             planar: d[0].clone(),
             d,
             max_abs,
+            // Unknown rays: no block is ever decided whole.
+            eta: [f64::NAN; 3],
         }
     }
 
@@ -238,6 +277,21 @@ impl TileRays {
             inv_dir: v(&self.inv),
             planar: self.planar[at],
         }
+    }
+
+    /// The tile's early depth bound ([`crate::raster_hiz`]); padding lanes
+    /// repeat real pixels, so they change nothing.
+    #[inline(always)]
+    pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
+        let k = crate::raster_hiz::TileDepthBound::axis(cam);
+        crate::raster_hiz::TileDepthBound::new(k, &self.planar, &self.d[k])
+    }
+
+    /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
+    #[inline(always)]
+    pub fn dir(&self, lx: usize, ly: usize) -> DVec3 {
+        let at = ly * self.stride + lx;
+        DVec3::new(self.d[0][at], self.d[1][at], self.d[2][at])
     }
 
     /// Columns in the tile.
@@ -337,6 +391,9 @@ pub struct FastEdges {
     n: [[f64; 3]; 3],
     /// `B` per edge: a sign is taken only where `|det| > B`.
     bound: [f64; 3],
+    /// `B_block` per edge: a block's sign is taken only where every corner's
+    /// `|det|` exceeds it, with one sign.
+    block: [f64; 3],
 }
 
 /// Sign masks of one chunk: bit `j` of `pos[k]` (`neg[k]`) set when edge `k`
@@ -388,10 +445,50 @@ impl FastEdges {
             let s = m[0] * e.perm.x + m[1] * e.perm.y + m[2] * e.perm.z;
             FAST_EDGE_BOUND * s
         };
+        let bound = [f(&edges.0[0]), f(&edges.0[1]), f(&edges.0[2])];
+        let eta = dirs.eta;
+        let block = [0, 1, 2].map(|k| {
+            let p = edges.0[k].perm;
+            3.0 * bound[k] + 4.0 * (p.x * eta[0] + p.y * eta[1] + p.z * eta[2])
+        });
         FastEdges {
             n: edges.0.map(|e| e.n.to_array()),
-            bound: [f(&edges.0[0]), f(&edges.0[1]), f(&edges.0[2])],
+            bound,
+            block,
         }
+    }
+
+    /// The same edges with the block bound multiplied by `factor` (tests: 0 must break).
+    #[cfg(test)]
+    fn block_scaled(mut self, factor: f64) -> FastEdges {
+        self.block = self.block.map(|b| b * factor);
+        self
+    }
+
+    /// Certain signs of the three edges over the whole 8x8 block whose
+    /// top-left pixel is `(col, row)` of the tile (module documentation):
+    /// each mask is all 8 lanes or none, and holds in every row of the
+    /// block; the caller needs the block inside the tile.
+    #[inline(always)]
+    pub fn block(&self, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
+        let c = [
+            row * dirs.stride + col,
+            row * dirs.stride + col + CHUNK - 1,
+            (row + CHUNK - 1) * dirs.stride + col,
+            (row + CHUNK - 1) * dirs.stride + col + CHUNK - 1,
+        ];
+        let mut out = ChunkSigns::default();
+        for k in 0..3 {
+            let [nx, ny, nz] = self.n[k];
+            let det = c.map(|at| dirs.d[0][at] * nx + dirs.d[1][at] * ny + dirs.d[2][at] * nz);
+            let b = self.block[k];
+            // NaN fails both.
+            let pos = det.iter().all(|&d| d > b);
+            let neg = det.iter().all(|&d| -d > b);
+            out.pos[k] = if pos { 0xff } else { 0 };
+            out.neg[k] = if neg { 0xff } else { 0 };
+        }
+        out
     }
 
     /// Certain signs of the three edges at the 8 pixels from column `col` of
@@ -598,5 +695,77 @@ mod tests {
         assert_eq!(c0.pos[0] | c0.neg[0], 0xff);
         assert_eq!(c0.pos[0], 0b0101_0101 ^ if e.n.x > 0.0 { 0 } else { 0xff });
         assert_eq!(c1.pos[0] | c1.neg[0], 0b11, "padding lanes decide nothing");
+    }
+
+    /// Edges through block corners (vertices on the corner pixels' rays, so
+    /// corner values are within rounding of 0), at offsets up to 1e7 under
+    /// exact and tilted cameras: wherever a block's sign is certain, every
+    /// pixel's chunk sign is that sign; some blocks are decided; and with a
+    /// block bound of 0 some block claims a sign a pixel does not have.
+    #[test]
+    fn block_signs_hold_at_every_pixel() {
+        let mut s = 21u64;
+        let (mut decided, mut broken) = (0, 0);
+        for (k, off) in [0.0, 1e3, 12345.678, 1e7].into_iter().enumerate() {
+            let o = DVec3::new(off, -off, off);
+            let cams = [
+                Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 32, 32, 1e-3, f64::INFINITY),
+                Camera::new(
+                    o + DVec3::new(0.3, 0.7, 2.1),
+                    o + DVec3::new(0.1, -0.2, 0.0),
+                    DVec3::Y,
+                    50.0,
+                    32,
+                    32,
+                    1e-3,
+                    f64::INFINITY,
+                ),
+            ];
+            for cam in cams.map(Result::unwrap) {
+                let rays = TileRays::new(&cam, 0, 0, 32, 32);
+                let on = |x: u32, y: u32, t: f64| (cam.eye + cam.pixel_ray(x, y).dir * t).as_vec3();
+                for case in 0..150 {
+                    // Two corners of one block (or of two), a third vertex anywhere.
+                    let (bx, by) = ((case % 4) * 8, ((case / 4) % 4) * 8);
+                    let corner = |i: u32| (bx + (i % 2) * 7, by + (i / 2) * 7);
+                    let (p, q) = (corner(case % 4), corner((case / 4 + 1 + case % 4) % 4));
+                    let q = if p == q { (q.0 ^ 7, q.1) } else { q };
+                    let t = |s: &mut u64| 1.0 + 0.5 * (lcg(s) + 1.0) + k as f64 * 0.0;
+                    let r = (
+                        ((lcg(&mut s) + 1.0) * 16.0) as u32 % 32,
+                        ((lcg(&mut s) + 1.0) * 16.0) as u32 % 32,
+                    );
+                    let tri = [
+                        on(p.0, p.1, t(&mut s)),
+                        on(q.0, q.1, t(&mut s)),
+                        on(r.0, r.1, t(&mut s)),
+                    ];
+                    let edges = TriEdges::new(&cam, &tri);
+                    let fast = FastEdges::new(&edges, &rays);
+                    for (f, factor) in [(fast, 1.0), (fast.block_scaled(0.0), 0.0)] {
+                        for (row, col) in (0..16).map(|b| ((b / 4) * 8, (b % 4) * 8)) {
+                            let blk = f.block(&rays, row, col);
+                            let mut holds = true;
+                            for ly in row..row + 8 {
+                                let sg = fast.chunk(Portable, &rays, ly, col);
+                                for e in 0..3 {
+                                    holds &= sg.pos[e] & blk.pos[e] == blk.pos[e];
+                                    holds &= sg.neg[e] & blk.neg[e] == blk.neg[e];
+                                }
+                            }
+                            if factor == 1.0 {
+                                assert!(holds, "offset {off} case {case} block ({col}, {row})");
+                                decided +=
+                                    usize::from(blk.pos.iter().chain(&blk.neg).any(|&m| m != 0));
+                            } else {
+                                broken += usize::from(!holds);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(decided > 1000, "only {decided} blocks decided");
+        assert!(broken > 0, "a block bound of 0 broke nothing");
     }
 }

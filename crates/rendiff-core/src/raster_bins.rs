@@ -1,0 +1,115 @@
+//! The rasterizer's binning: every triangle's conservative box
+//! ([`crate::raster_bounds`]), then the triangles each tile must consider,
+//! in parallel and in triangle order (the keys are the same in any order,
+//! but the operation counts of early depth rejection are not).
+
+use crate::raster::{PixelRect, TILE};
+use crate::raster_bounds::BoxMargin;
+use crate::scene::resolve::ResolvedScene;
+use rayon::prelude::*;
+
+/// A triangle in a tile's bin, with the part of its box in the tile (tile
+/// coordinates, `[lx0, lx1, ly0, ly1]` inclusive; [`TILE`] fits a byte), so
+/// that the tile loop reads only the triangle itself.
+#[derive(Debug, Clone, Copy)]
+pub struct Binned {
+    /// The triangle.
+    pub prim: u32,
+    /// Its box within the tile.
+    pub rect: [u8; 4],
+}
+
+const _: () = assert!(TILE <= 256);
+
+/// Triangles binned into tiles, in parallel and deterministically: chunks of
+/// consecutive triangles each sort their (triangle, tile) pairs by tile
+/// (counting sort, keeping triangle order), and a tile's bin is its run in
+/// every chunk, chunk after chunk: triangles in index order, as one serial
+/// pass would bin them (keys and counts depend on that order).
+pub struct Bins {
+    /// Per chunk: its entries sorted by tile, and where each tile's run starts
+    /// (one more offset than tiles).
+    chunks: Vec<(Vec<Binned>, Vec<u32>)>,
+}
+
+impl Bins {
+    /// Triangles per chunk.
+    const GRAIN: usize = 4096;
+
+    /// Bounds ([`crate::raster_bounds`]) and bins of every triangle.
+    pub fn new(
+        scene: &ResolvedScene,
+        margin: Option<BoxMargin>,
+        tiles_x: u32,
+        tiles_y: u32,
+    ) -> Bins {
+        let cam = &scene.camera;
+        let (w, h) = (cam.width, cam.height);
+        let tiles = (tiles_x * tiles_y) as usize;
+        let chunks = scene
+            .triangles
+            .par_chunks(Self::GRAIN)
+            .zip(scene.degenerate.par_chunks(Self::GRAIN))
+            .enumerate()
+            .map(|(ci, (tris, deg))| {
+                let mut rects = vec![None; tris.len()];
+                crate::raster_bounds::bounds_into(cam, tris, deg, margin, &mut rects);
+                let tiles_of = |r: PixelRect| {
+                    (r.y0 / TILE..=r.y1 / TILE)
+                        .flat_map(move |ty| (r.x0 / TILE..=r.x1 / TILE).map(move |tx| (tx, ty)))
+                };
+                let mut start = vec![0u32; tiles + 1];
+                for &r in rects.iter().flatten() {
+                    for (tx, ty) in tiles_of(r) {
+                        start[(ty * tiles_x + tx) as usize + 1] += 1;
+                    }
+                }
+                for i in 0..tiles {
+                    start[i + 1] += start[i];
+                }
+                let mut next = start.clone();
+                let empty = Binned {
+                    prim: 0,
+                    rect: [0; 4],
+                };
+                let mut entries = vec![empty; start[tiles] as usize];
+                for (i, r) in rects.iter().enumerate() {
+                    let &Some(r) = r else { continue };
+                    let prim = (ci * Self::GRAIN + i) as u32;
+                    for (tx, ty) in tiles_of(r) {
+                        let (x0, y0) = (tx * TILE, ty * TILE);
+                        let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
+                        let slot = &mut next[(ty * tiles_x + tx) as usize];
+                        entries[*slot as usize] = Binned {
+                            prim,
+                            rect: clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8),
+                        };
+                        *slot += 1;
+                    }
+                }
+                (entries, start)
+            })
+            .collect();
+        Bins { chunks }
+    }
+
+    /// Tile `i`'s bin, in triangle order, into `bin` (cleared first).
+    pub fn tile(&self, i: usize, bin: &mut Vec<Binned>) {
+        bin.clear();
+        for (entries, start) in &self.chunks {
+            bin.extend_from_slice(&entries[start[i] as usize..start[i + 1] as usize]);
+        }
+    }
+}
+
+/// The part of triangle `prim`'s box inside the tile at `(x0, y0)` of size
+/// `tw` x `th`, in tile coordinates: `(lx0, lx1, ly0, ly1)`, inclusive.
+#[inline(always)]
+pub fn clip_to_tile(r: PixelRect, x0: u32, y0: u32, tw: u32, th: u32) -> [usize; 4] {
+    [
+        (r.x0.max(x0) - x0) as usize,
+        (r.x1.min(x0 + tw - 1) - x0) as usize,
+        (r.y0.max(y0) - y0) as usize,
+        (r.y1.min(y0 + th - 1) - y0) as usize,
+    ]
+}
