@@ -366,6 +366,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     "  coverage tests {}, covered {}, exact fallbacks {}, ties {}, triangle setups {}, BVH nodes visited {}",
                     c.coverage_tests, c.covered, c.exact_fallbacks, c.ties, c.triangle_setups, c.bvh_nodes_visited
                 );
+                if c.fast_decided + c.hidden_skipped > 0 {
+                    println!(
+                        "  decided by edge functions {}, triangle-tile pairs skipped as hidden {}",
+                        c.fast_decided, c.hidden_skipped
+                    );
+                }
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -402,6 +402,7 @@ fn render_tile_body<L: Lanes>(
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+            c.hidden_skipped += 1;
             continue;
         }
         c.triangle_setups += 1;
@@ -444,6 +445,7 @@ fn fast_tile<L: Lanes>(
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+            c.hidden_skipped += 1;
             continue;
         }
         c.triangle_setups += 1;
@@ -942,7 +944,14 @@ mod tests {
                 let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {});
                 let with = keys_impl(&scene, opts, on, &|_| {});
                 assert!(same_keys(&off, &with), "{what}: skipping changed a key");
-                skipped += off.counters.triangle_setups - with.counters.triangle_setups;
+                // The counter says exactly what was skipped.
+                assert_eq!(off.counters.hidden_skipped, 0, "{what}");
+                assert_eq!(
+                    off.counters.triangle_setups - with.counters.triangle_setups,
+                    with.counters.hidden_skipped,
+                    "{what}: hidden_skipped"
+                );
+                skipped += with.counters.hidden_skipped;
                 let high = Mode {
                     hiz_factor: 1.01,
                     ..on

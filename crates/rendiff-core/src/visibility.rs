@@ -40,6 +40,12 @@ pub struct Counters {
     /// its exact arithmetic). Absent in older records, hence the default.
     #[serde(default)]
     pub fast_decided: u64,
+    /// Raster only: triangle-tile pairs skipped whole because no pixel of
+    /// the triangle's box in that tile could beat the keys already there
+    /// (`raster_hiz`); they add no setup and no coverage test. Absent in
+    /// older records, hence the default.
+    #[serde(default)]
+    pub hidden_skipped: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -51,6 +57,7 @@ impl std::ops::AddAssign for Counters {
         self.triangle_setups += o.triangle_setups;
         self.bvh_nodes_visited += o.bvh_nodes_visited;
         self.fast_decided += o.fast_decided;
+        self.hidden_skipped += o.hidden_skipped;
     }
 }
 
