@@ -6,9 +6,12 @@
 //! triangles and grown by [`grow_box`], so pruning is conservative: a box is
 //! skipped only when its nearest possible key is worse than the best hit.
 
+mod nodes;
 mod packet;
 mod primary;
+mod rect;
 mod rows;
+mod timing;
 
 use crate::camera::{Camera, PixelRay};
 use crate::frame::Frame;
@@ -18,6 +21,7 @@ use crate::visibility::{
     covers_by, edge_sign, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
 };
 use glam::Vec3;
+use nodes::Nodes32;
 use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
 use primary::{LeafTri, Node32, Ray32};
 use rayon::prelude::*;
@@ -78,10 +82,13 @@ pub struct TraceBvh {
     /// World-space f64 boxes, for shading's general rays.
     nodes: Vec<Node>,
     prims: Vec<u32>,
-    /// The same tree as eye-relative f32 boxes, for pixel rays ([`primary`]).
-    nodes32: Vec<Node32>,
+    /// The same tree as eye-relative f32 boxes, for pixel rays ([`primary`]),
+    /// laid out for traversal ([`nodes`]).
+    nodes32: Nodes32,
     /// Per-prim edge data in `prims` order, for pixel rays.
     leaves: Vec<LeafTri>,
+    /// Per-prim pixel rectangles in `prims` order, for packets ([`rect`]).
+    rects: Vec<rect::PixelRect>,
     /// Seconds spent in obvhs's builder plus our refit.
     pub build_seconds: f64,
 }
@@ -98,8 +105,9 @@ impl TraceBvh {
             return TraceBvh {
                 nodes: Vec::new(),
                 prims: Vec::new(),
-                nodes32: Vec::new(),
+                nodes32: Nodes32::empty(),
                 leaves: Vec::new(),
+                rects: Vec::new(),
                 build_seconds: 0.0,
             };
         }
@@ -158,19 +166,28 @@ impl TraceBvh {
                 count: nd.prim_count,
             })
             .collect();
-        let nodes32 = nodes
+        let nodes32: Vec<Node32> = nodes
             .iter()
             .map(|n| Node32::new(cam.eye, &n.bounds, n.first, n.count))
             .collect();
-        let leaves = prims
+        let nodes32 = Nodes32::new(&nodes32);
+        let slack = rect::RectSlack::new(cam);
+        let (leaves, rects) = prims
             .par_iter()
-            .map(|&p| LeafTri::new(cam.eye, &scene.triangles[p as usize], p))
-            .collect();
+            .map(|&p| {
+                let t = &scene.triangles[p as usize];
+                (
+                    LeafTri::new(cam.eye, t, p),
+                    rect::PixelRect::new(cam, &slack, t),
+                )
+            })
+            .unzip();
         TraceBvh {
             nodes,
             prims,
             nodes32,
             leaves,
+            rects,
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }
@@ -198,16 +215,16 @@ impl TraceBvh {
         let count_all = coverage.is_some();
         stack.clear();
         c.bvh_nodes_visited += 1;
-        let (t0, _, miss) = self.nodes32[0].slab(&r.inv);
+        let (t0, _, miss) = self.nodes32.get(Nodes32::ROOT).slab(&r.inv);
         if miss {
             return best;
         }
-        stack.push((0, t0));
+        stack.push((Nodes32::ROOT, t0));
         while let Some((ni, tmin)) = stack.pop() {
             if !count_all && lower_key(tmin, ray) > best {
                 continue;
             }
-            let node = &self.nodes32[ni as usize];
+            let node = self.nodes32.get(ni);
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
                     let leaf = &self.leaves[k as usize];
@@ -231,7 +248,7 @@ impl TraceBvh {
             for (j, kid) in kids.iter_mut().enumerate() {
                 let id = node.first + j as u32;
                 c.bvh_nodes_visited += 1;
-                let (a, _, miss) = self.nodes32[id as usize].slab(&r.inv);
+                let (a, _, miss) = self.nodes32.get(id).slab(&r.inv);
                 *kid = (id, a, miss);
             }
             // Push the farther child first so the nearer one is popped first.
@@ -381,7 +398,11 @@ pub fn trace_keys(
 ) -> TracedKeys {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    let mut keys = vec![NO_HIT; cam.pixel_count()];
+    // The packet loop writes every key (a band cut off by the deadline is
+    // filled with NO_HIT), so its buffer starts as fresh zero pages: no serial
+    // fill before the parallel loop, which then touches each page first.
+    let packets = !opts.count_coverage && opts.kernel == TraceKernel::Packets;
+    let mut keys = vec![if packets { 0 } else { NO_HIT }; cam.pixel_count()];
     let mut cov = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
     let counters: Counters = if opts.count_coverage {
         keys.par_chunks_mut(w)
@@ -425,13 +446,14 @@ pub fn trace_keys(
             .map(|(band, rows)| {
                 let mut c = Counters::default();
                 if crate::deadline::past(opts.deadline) {
+                    rows.fill(NO_HIT);
                     return c;
                 }
                 let mut stack = Vec::with_capacity(64);
                 let y0 = band * packet::PH;
                 for x0 in (0..w).step_by(packet::PW) {
                     let pk = bvh.trace_packet(scene, x0, y0, &mut c, &mut stack);
-                    for (i, &k) in pk.best.iter().enumerate() {
+                    for (i, &k) in pk.iter().enumerate() {
                         let (x, dy) = (x0 + i % packet::PW, i / packet::PW);
                         if x < w && dy * w < rows.len() {
                             rows[dy * w + x] = k;

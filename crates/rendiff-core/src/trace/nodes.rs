@@ -1,0 +1,224 @@
+//! The eye-relative node array in the order traversal reads it.
+//!
+//! obvhs stores a node's two children side by side, but the pair may straddle
+//! two cache lines and subtrees are spread over the array. Traversal tests
+//! both children of a node together (it orders them by their centers), so
+//! here the tree is laid out again depth first with every sibling pair in one
+//! 64-byte line ([`NodePair`]), and the traversal can prefetch a pushed
+//! node's children (or a leaf's triangles) long before it pops it: on the
+//! million-triangle scene most of the kernel's stalls were those loads.
+//!
+//! The layout also merges small subtrees (up to [`MERGE_MAX`] prims, when
+//! their prims are adjacent) into one leaf under the subtree root's box. That
+//! is conservative: the root's box contains every box below it, so a lane
+//! that reached a triangle before still reaches it, and coverage and depth
+//! decide the rest exactly as before. Packets cull a leaf's triangles by
+//! their pixel rectangles ([`super::rect`]), which costs less than the box
+//! tests and stack traffic of the merged levels (3% on the million scene).
+
+use super::primary::Node32;
+
+/// Largest leaf made by merging a subtree: testing a few more triangles'
+/// pixel rectangles costs less than the box tests and stack traffic of the
+/// levels it replaces.
+const MERGE_MAX: u32 = 16;
+
+/// Two sibling nodes in one cache line.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+struct NodePair([Node32; 2]);
+
+/// The eye-relative tree, siblings paired. Node indices are as in
+/// [`Node32::first`]; the root is [`Nodes32::ROOT`] (slot 1 of pair 0, whose
+/// slot 0 is unused), so every sibling pair starts at an even index.
+pub(crate) struct Nodes32 {
+    pairs: Vec<NodePair>,
+}
+
+impl Nodes32 {
+    /// Index of the root node.
+    pub const ROOT: u32 = 1;
+
+    /// A tree with no nodes.
+    pub fn empty() -> Nodes32 {
+        Nodes32 { pairs: Vec::new() }
+    }
+
+    /// Lays `nodes` (children of inner node `i` at `nodes[i].first` and the
+    /// next index, root at 0) out depth first, siblings paired.
+    pub fn new(nodes: &[Node32]) -> Nodes32 {
+        if nodes.is_empty() {
+            return Nodes32::empty();
+        }
+        let mut pairs = vec![NodePair([nodes[0]; 2]); nodes.len().div_ceil(2) + 1];
+        let mut next = 2u32;
+        // (old index, new index)
+        let mut stack = vec![(0u32, Nodes32::ROOT)];
+        let span = prim_spans(nodes);
+        while let Some((old, new)) = stack.pop() {
+            let mut n = nodes[old as usize];
+            // A small subtree whose prims are adjacent becomes one leaf under
+            // its root's box (which contains every box below it).
+            if let Some((first, count)) = span[old as usize] {
+                if count <= MERGE_MAX {
+                    (n.first, n.count) = (first, count);
+                }
+            }
+            if n.count == 0 {
+                let c = n.first;
+                n.first = next;
+                stack.push((c + 1, next + 1));
+                stack.push((c, next));
+                next += 2;
+            }
+            pairs[new as usize / 2].0[new as usize % 2] = n;
+        }
+        pairs.truncate(next as usize / 2);
+        Nodes32 { pairs }
+    }
+
+    /// True when the tree has no nodes.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.pairs.is_empty()
+    }
+
+    /// Node `i`.
+    #[inline(always)]
+    pub fn get(&self, i: u32) -> &Node32 {
+        &self.pairs[i as usize / 2].0[i as usize % 2]
+    }
+
+    /// Asks the CPU to start loading node `i`'s children (one line).
+    #[inline(always)]
+    pub fn prefetch_children(&self, n: &Node32) {
+        if let Some(p) = self.pairs.get(n.first as usize / 2) {
+            prefetch(p);
+        }
+    }
+}
+
+/// Per node, the prims under it as one range `(first, count)`, when they
+/// are adjacent in prim order.
+fn prim_spans(nodes: &[Node32]) -> Vec<Option<(u32, u32)>> {
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut stack = vec![0u32];
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let n = &nodes[i as usize];
+        if n.count == 0 {
+            stack.push(n.first);
+            stack.push(n.first + 1);
+        }
+    }
+    let mut span = vec![None; nodes.len()];
+    for &i in order.iter().rev() {
+        let n = &nodes[i as usize];
+        span[i as usize] = if n.count > 0 {
+            Some((n.first, n.count))
+        } else {
+            match (span[n.first as usize], span[n.first as usize + 1]) {
+                (Some((fa, ca)), Some((fb, cb))) if fb == fa + ca => Some((fa, ca + cb)),
+                (Some((fa, ca)), Some((fb, cb))) if fa == fb + cb => Some((fb, ca + cb)),
+                _ => None,
+            }
+        };
+    }
+    span
+}
+
+/// Asks the CPU to start loading the cache line holding `*p` (a hint: no
+/// effect on results, and a no-op off x86-64).
+#[inline(always)]
+pub(crate) fn prefetch<T>(p: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        // SAFETY: SSE is part of the x86-64 baseline, and a prefetch of a
+        // valid reference's address reads nothing the program can observe.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((p as *const T).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every node keeps its box, and every node reaches the same prims (a
+    /// merged leaf holds exactly its old subtree's), with siblings in one
+    /// 64-byte pair.
+    #[test]
+    fn relayout_keeps_the_tree() {
+        const _: () = assert!(8 <= MERGE_MAX && MERGE_MAX < 25);
+        use crate::visibility::RayBox;
+        use glam::DVec3;
+        // 0 -> (1, 2), 2 -> (3, 4), 4 -> (5, 6), 6 -> (7, 8); prims:
+        // 1: 0..17, 3: 17..18, 5: 18..20, 7: 20..23, 8: 30..32 (not adjacent).
+        let kids = [
+            (1, 0),
+            (0, 17),
+            (3, 0),
+            (17, 1),
+            (5, 0),
+            (18, 2),
+            (7, 0),
+            (20, 3),
+            (30, 2),
+        ];
+        let old: Vec<Node32> = kids
+            .iter()
+            .enumerate()
+            .map(|(i, &(first, count))| {
+                let b = RayBox {
+                    lo: DVec3::splat(i as f64),
+                    hi: DVec3::splat(i as f64 + 1.0),
+                };
+                Node32::new(DVec3::ZERO, &b, first, count)
+            })
+            .collect();
+        fn prims_old(old: &[Node32], o: u32) -> Vec<u32> {
+            let n = old[o as usize];
+            if n.count > 0 {
+                (n.first..n.first + n.count).collect()
+            } else {
+                let mut v = prims_old(old, n.first);
+                v.extend(prims_old(old, n.first + 1));
+                v.sort();
+                v
+            }
+        }
+        let new = Nodes32::new(&old);
+        fn walk(old: &[Node32], new: &Nodes32, o: u32, n: u32, leaves: &mut usize) {
+            let (a, b) = (old[o as usize], *new.get(n));
+            assert_eq!(a.bounds(0), b.bounds(0));
+            if b.count > 0 {
+                *leaves += 1;
+                let got: Vec<u32> = (b.first..b.first + b.count).collect();
+                assert_eq!(got, prims_old(old, o));
+                assert!(a.count > 0 || b.count <= MERGE_MAX);
+            } else {
+                assert_eq!(a.count, 0);
+                assert_eq!(b.first % 2, 0);
+                walk(old, new, a.first, b.first, leaves);
+                walk(old, new, a.first + 1, b.first + 1, leaves);
+            }
+        }
+        let mut leaves = 0;
+        walk(&old, &new, 0, Nodes32::ROOT, &mut leaves);
+        // No subtree's prims are adjacent (30..32 breaks every range that
+        // reaches 8), so the tree keeps its five leaves.
+        assert_eq!(leaves, 5);
+        assert_eq!(std::mem::size_of::<NodePair>(), 64);
+        assert_eq!(std::mem::align_of::<NodePair>(), 64);
+        // With the far leaf adjacent, the whole right subtree (17..25, 8
+        // prims) merges; the root (25 prims) does not.
+        let mut adj = old.clone();
+        adj[8].first = 23;
+        let new = Nodes32::new(&adj);
+        let mut leaves = 0;
+        walk(&adj, &new, 0, Nodes32::ROOT, &mut leaves);
+        assert_eq!(leaves, 2);
+    }
+}

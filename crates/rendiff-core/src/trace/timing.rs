@@ -1,0 +1,76 @@
+//! A manual timing loop for the packet kernel (`#[ignore]`d: no timed
+//! assertions). Run with
+//! `TRACE_SCENE=scenes/million.toml TRACE_SIZE=1920x1080 cargo test --release
+//! -p rendiff-core trace::timing -- --ignored --nocapture`; it prints the BVH
+//! build time, the keys-only Mrays/s per thread count, and a hash of the keys
+//! (so two builds of the kernel can be compared bit for bit).
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::resolve::ResolvedScene;
+    use crate::trace::{trace_keys, BvhQuality, TraceBvh, TraceOptions};
+    use std::time::Instant;
+
+    fn median(v: &mut [f64]) -> f64 {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    }
+
+    /// Prints build time, Mrays/s and a key hash for one scene.
+    #[test]
+    #[ignore]
+    fn time_packet_kernel() {
+        let env = |k: &str, d: &str| std::env::var(k).unwrap_or_else(|_| d.to_string());
+        let path = env("TRACE_SCENE", "scenes/million.toml");
+        let size = env("TRACE_SIZE", "1920x1080");
+        let runs: usize = env("TRACE_RUNS", "5").parse().unwrap();
+        let threads: Vec<usize> = env("TRACE_THREADS", "1,2")
+            .split(',')
+            .map(|t| t.parse().unwrap())
+            .collect();
+        let (w, h) = size.split_once('x').unwrap();
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../..")
+            .join(&path);
+        let s = crate::scene::Scene::load(&file).unwrap();
+        let scene = ResolvedScene::resolve(&s)
+            .unwrap()
+            .resized(w.parse().unwrap(), h.parse().unwrap())
+            .unwrap();
+        let pixels = scene.camera.pixel_count() as f64;
+        for &t in &threads {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut builds = Vec::new();
+                let mut bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+                for _ in 0..3 {
+                    let st = Instant::now();
+                    bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+                    builds.push(st.elapsed().as_secs_f64());
+                }
+                let opts = TraceOptions::default();
+                let mut keys = trace_keys(&scene, &bvh, opts, &|_| {});
+                let mut times = Vec::new();
+                for _ in 0..runs {
+                    let st = Instant::now();
+                    keys = trace_keys(&scene, &bvh, opts, &|_| {});
+                    times.push(st.elapsed().as_secs_f64());
+                }
+                let hash = keys.keys.iter().fold(0xcbf29ce484222325u64, |h, &k| {
+                    (h ^ k).wrapping_mul(0x100000001b3)
+                });
+                let med = median(&mut times);
+                println!(
+                    "TIMING {path} {size} threads={t} build_s={:.4} trace_s={med:.4} mrays={:.2} hash={hash:016x} nodes={} cov={}",
+                    median(&mut builds),
+                    pixels / med / 1e6,
+                    keys.counters.bvh_nodes_visited,
+                    keys.counters.coverage_tests,
+                );
+            });
+        }
+    }
+}
