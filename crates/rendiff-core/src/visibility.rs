@@ -22,7 +22,9 @@ use glam::{DVec3, Vec3};
 /// Operation counts of one render: the lesson's "same image, different work".
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Counters {
-    /// Pixel-triangle coverage predicate evaluations (raster: per bbox pixel; trace: per candidate).
+    /// Pixel-triangle coverage decisions made (raster: per pixel of a triangle's box in a tile,
+    /// boxes proven empty and triangles skipped as hidden adding none; trace: per candidate ray,
+    /// a packet's lanes outside the triangle's pixel rectangle adding none).
     pub coverage_tests: u64,
     /// Coverage tests that found the pixel covered.
     pub covered: u64,
@@ -30,7 +32,7 @@ pub struct Counters {
     pub exact_fallbacks: u64,
     /// Orientations that were exactly zero and went to the tie rule.
     pub ties: u64,
-    /// Triangle setups (raster: per triangle and tile it touches).
+    /// Triangle setups (raster: per triangle and tile its box touches, hidden skips excluded).
     pub triangle_setups: u64,
     /// Ray-box tests (trace only): nodes tested per ray; a packet counts each live lane.
     pub bvh_nodes_visited: u64,
