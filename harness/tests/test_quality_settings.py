@@ -193,6 +193,7 @@ def test_mitsuba_llvm_variant_without_libllvm_fails_clearly(
 ) -> None:
     monkeypatch.setenv(mb.VARIANT_ENV, mb.DEFAULT_VARIANT)  # restored afterwards: --variant sets it
     monkeypatch.delenv(mb.LLVM_PATH_ENV, raising=False)
+    monkeypatch.setattr(mb, "DEBIAN_LIBLLVM19", tmp_path / "no-libllvm19.so")  # as on a machine without it
     mb._probe.cache_clear()
     try:
         scene = cases.cornell(tmp_path / "s", width=8, height=8)
