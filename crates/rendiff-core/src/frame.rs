@@ -141,3 +141,32 @@ mod tests {
         }
     }
 }
+
+/// One visibility pass's answer, per-pixel nearest hit keys, before the
+/// frame's buffers are filled from them. The raster and the tracer both stop
+/// here, so benchmarks can time the two loops like for like.
+#[derive(Debug, Clone)]
+pub struct PixelKeys {
+    /// Nearest hit key per pixel, row-major ([`NO_HIT`] for background).
+    pub keys: Vec<u64>,
+    /// Per-pixel (front, back) coverage counts, when asked for.
+    pub coverage: Option<Vec<[u16; 2]>>,
+    /// What the pass cost.
+    pub counters: Counters,
+    /// Which loop made them ("raster", "trace"), for the frame's record.
+    pub renderer: &'static str,
+}
+
+impl PixelKeys {
+    /// The frame these keys make (`seconds`: what the caller timed).
+    pub fn into_frame(self, scene: &ResolvedScene, seconds: f64) -> Frame {
+        Frame::from_keys(
+            scene,
+            &self.keys,
+            self.coverage,
+            self.counters,
+            self.renderer,
+            seconds,
+        )
+    }
+}

@@ -19,7 +19,7 @@
 //! triangle with an empty box or skipped as hidden adds to neither.
 
 use crate::camera::{Camera, PixelRay};
-use crate::frame::Frame;
+use crate::frame::{Frame, PixelKeys};
 use crate::predicate::{EdgePlane, O3D_ERRBOUND_A};
 use crate::raster_bins::{Binned, Bins};
 use crate::raster_bounds::BoxMargin;
@@ -92,32 +92,9 @@ pub fn render_exact(
     k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
-/// The raster's visibility pass alone: per-pixel nearest hit keys, before the
-/// frame's buffers are filled from them (the tracer's [`crate::trace::trace_keys`]
-/// stops at the same point, so benchmarks can time the two loops like for like).
-#[derive(Debug, Clone)]
-pub struct RasterKeys {
-    /// Nearest hit key per pixel, row-major ([`NO_HIT`] for background).
-    pub keys: Vec<u64>,
-    /// Per-pixel (front, back) coverage counts, when asked for.
-    pub coverage: Option<Vec<[u16; 2]>>,
-    /// What the visibility pass cost.
-    pub counters: Counters,
-}
-
-impl RasterKeys {
-    /// The raster frame these keys make (`seconds`: what the caller timed).
-    pub fn into_frame(self, scene: &ResolvedScene, seconds: f64) -> Frame {
-        Frame::from_keys(
-            scene,
-            &self.keys,
-            self.coverage,
-            self.counters,
-            "raster",
-            seconds,
-        )
-    }
-}
+/// The raster's visibility pass alone (the tracer's [`crate::trace::trace_keys`]
+/// stops at the same point).
+pub type RasterKeys = PixelKeys;
 
 /// [`render`]'s visibility pass (binning, coverage, depth test) without the
 /// frame's buffers.
@@ -210,10 +187,11 @@ fn keys_impl(
             a += b;
             a
         });
-    RasterKeys {
+    PixelKeys {
         keys,
         coverage: opts.count_coverage.then_some(coverage),
         counters,
+        renderer: "raster",
     }
 }
 

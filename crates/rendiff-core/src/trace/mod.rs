@@ -14,7 +14,7 @@ mod rows;
 mod timing;
 
 use crate::camera::{Camera, PixelRay};
-use crate::frame::Frame;
+use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{
@@ -364,28 +364,7 @@ pub fn render_with_bvh(
 }
 
 /// The ray queries' answers, before the frame's buffers are filled from them.
-pub struct TracedKeys {
-    /// Nearest hit key per pixel, row-major ([`NO_HIT`] for background).
-    pub keys: Vec<u64>,
-    /// Per-pixel (front, back) coverage counts, when asked for.
-    pub coverage: Option<Vec<[u16; 2]>>,
-    /// What the queries cost.
-    pub counters: Counters,
-}
-
-impl TracedKeys {
-    /// The trace frame these keys make (`seconds`: what the caller timed).
-    pub fn into_frame(self, scene: &ResolvedScene, seconds: f64) -> Frame {
-        Frame::from_keys(
-            scene,
-            &self.keys,
-            self.coverage,
-            self.counters,
-            "trace",
-            seconds,
-        )
-    }
-}
+pub type TracedKeys = PixelKeys;
 
 /// Traces every pixel and stops at the per-pixel hit keys: the part of a
 /// render that answers ray queries, which the throughput benchmark compares
@@ -465,10 +444,11 @@ pub fn trace_keys(
             })
             .reduce(Counters::default, sum)
     };
-    TracedKeys {
+    PixelKeys {
         keys,
         coverage: opts.count_coverage.then_some(cov),
         counters,
+        renderer: "trace",
     }
 }
 
