@@ -5,7 +5,7 @@
 
 use super::{timed, Timed};
 use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
-use rendiff::frame::Frame;
+use rendiff::frame::{Frame, PixelKeys};
 use rendiff::raster::{self, RasterOptions};
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::trace::{self, BvhQuality, TraceBvh};
@@ -23,9 +23,15 @@ pub fn raster(scene: &ResolvedScene, runs: usize) -> Timed<Frame> {
 /// [`trace_queries`] times for the tracer, so the two loops compare like with
 /// like. The frame of the last run comes back for checks.
 pub fn raster_keys(scene: &ResolvedScene, runs: usize) -> Timed<Frame> {
-    let t = timed(runs, || {
+    timed_keys(scene, runs, || {
         raster::render_keys(scene, RasterOptions::default(), &|_| {})
-    });
+    })
+}
+
+/// Times a visibility pass (either loop's) and turns the last run's keys
+/// into its frame, untimed, for checks.
+fn timed_keys(scene: &ResolvedScene, runs: usize, pass: impl FnMut() -> PixelKeys) -> Timed<Frame> {
+    let t = timed(runs, pass);
     Timed {
         median_s: t.median_s,
         runs_s: t.runs_s,
@@ -103,12 +109,7 @@ pub fn trace_queries(
         kernel,
         ..trace::TraceOptions::default()
     };
-    let t = timed(runs, || trace::trace_keys(scene, bvh, opts, &|_| {}));
-    Timed {
-        median_s: t.median_s,
-        runs_s: t.runs_s,
-        last: t.last.into_frame(scene, t.median_s),
-    }
+    timed_keys(scene, runs, || trace::trace_keys(scene, bvh, opts, &|_| {}))
 }
 
 /// Embree's phases, medians over the timed runs.

@@ -92,17 +92,13 @@ pub fn render_exact(
     k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
-/// The raster's visibility pass alone (the tracer's [`crate::trace::trace_keys`]
-/// stops at the same point).
-pub type RasterKeys = PixelKeys;
-
 /// [`render`]'s visibility pass (binning, coverage, depth test) without the
 /// frame's buffers.
 pub fn render_keys(
     scene: &ResolvedScene,
     opts: RasterOptions,
     progress: &(dyn Fn(u64) + Sync),
-) -> RasterKeys {
+) -> PixelKeys {
     keys_impl(scene, opts, Mode::new(&scene.camera, true), progress)
 }
 
@@ -140,7 +136,7 @@ fn keys_impl(
     opts: RasterOptions,
     mode: Mode,
     progress: &(dyn Fn(u64) + Sync),
-) -> RasterKeys {
+) -> PixelKeys {
     let margin = mode.margin;
     let mode = Mode {
         hiz: mode.hiz && !opts.count_coverage,
@@ -772,7 +768,7 @@ mod tests {
     }
 
     /// Buffers of two key sets (the keys decide z, prim and the rest).
-    fn same_keys(a: &RasterKeys, b: &RasterKeys) -> bool {
+    fn same_keys(a: &PixelKeys, b: &PixelKeys) -> bool {
         a.keys == b.keys && a.coverage == b.coverage
     }
 

@@ -363,9 +363,6 @@ pub fn render_with_bvh(
     t.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
-/// The ray queries' answers, before the frame's buffers are filled from them.
-pub type TracedKeys = PixelKeys;
-
 /// Traces every pixel and stops at the per-pixel hit keys: the part of a
 /// render that answers ray queries, which the throughput benchmark compares
 /// with Embree's `rtcIntersect*` loop (that also stops at keys).
@@ -374,7 +371,7 @@ pub fn trace_keys(
     bvh: &TraceBvh,
     opts: TraceOptions,
     progress: &(dyn Fn(u64) + Sync),
-) -> TracedKeys {
+) -> PixelKeys {
     let cam = &scene.camera;
     let w = cam.width as usize;
     // The packet loop writes every key (a band cut off by the deadline is
