@@ -20,9 +20,7 @@ use super::page::{num, Page};
 use super::plot::{lines, Series};
 use super::{measure, visibility_error, Common};
 use anyhow::Result;
-use glam::DVec3;
-use rendiff::camera::Camera;
-use rendiff::scene::generators::grid;
+use rendiff::scene::generators::crossover_grid;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::trace::{BvhQuality, TraceKernel};
 use serde_json::{json, Value};
@@ -40,33 +38,9 @@ pub struct CrossoverOptions {
     pub threads: usize,
 }
 
-/// The grid at z = 0 seen from (0, 0, 1) with a 90° field of view, covering
-/// the whole image whatever `nx`. `aligned`: exactly [-1, 1]², so grid lines,
-/// diagonals and (at nx = size) vertices pass through pixel centers: every
-/// such center is a tie for the exact predicate. Otherwise the grid overhangs
-/// the image by small non-dyadic margins and ties are rare: the generic case.
+/// The sweep's scene ([`rendiff::scene::generators::crossover_grid`]).
 pub fn grid_scene(nx: u32, size: u32, aligned: bool) -> Result<ResolvedScene> {
-    let cam = Camera::new(
-        DVec3::new(0.0, 0.0, 1.0),
-        DVec3::ZERO,
-        DVec3::Y,
-        90.0,
-        size,
-        size,
-        1e-3,
-        f64::INFINITY,
-    )
-    .map_err(anyhow::Error::msg)?;
-    let (min, max) = if aligned {
-        ([-1.0, -1.0], [1.0, 1.0])
-    } else {
-        ([-1.012_34, -1.017_1], [1.023_45, 1.008_9])
-    };
-    let tris = grid(min, max, nx, nx)
-        .iter()
-        .map(|t| t.map(|v| v.as_vec3()))
-        .collect();
-    Ok(ResolvedScene::from_triangles(cam, tris))
+    crossover_grid(nx, size, aligned).map_err(anyhow::Error::msg)
 }
 
 /// Where `a - b` changes sign between consecutive rows, interpolated in log-log space.

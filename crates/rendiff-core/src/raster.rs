@@ -560,9 +560,23 @@ fn chunk_hits(
         return;
     }
     let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-    let (z, ok) = d.depths(cam, rays, ly, base);
+    let (z, ok) = d.depths(cam, rays, ly, base, back | front);
     let mut m = (back | front) & ok;
     let row = out.at(base, ly);
+    if span == 0xff && out.cov.is_empty() {
+        // All 8 lanes lie in the box (so in the tile): one branch-free
+        // min per lane, lanes without a hit offering NO_HIT (which changes nothing).
+        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
+        for (j, key) in keys.iter_mut().enumerate() {
+            let k = if (m >> j) & 1 == 1 {
+                hit_key(z[j], prim)
+            } else {
+                NO_HIT
+            };
+            *key = (*key).min(k);
+        }
+        return;
+    }
     while m != 0 {
         let j = m.trailing_zeros() as usize;
         m &= m - 1;

@@ -161,14 +161,16 @@ pub struct TileRays {
     /// The camera's eye, forward, right and up: `P` is recomputed from them
     /// for the few pixels that need it (the exact predicate).
     basis: [DVec3; 4],
-    /// `D = P - eye` per component.
+    /// `D = P - eye` per component. (`1 / D` is computed where needed, by
+    /// the same `1.0 / D`: most depths never need it, see [`ChunkDepth`].)
     d: [Vec<f64>; 3],
-    /// `1 / D` per component.
-    inv: [Vec<f64>; 3],
     /// `D . forward`.
     planar: Vec<f64>,
     /// `max |D_i|` over the tile's pixels, per component.
     max_abs: [f64; 3],
+    /// Some direction component is subnormal: its reciprocal may overflow,
+    /// so [`ChunkDepth`] takes no shortcut in this tile.
+    subnormal: bool,
     /// `η_j`: how far a pixel's `P - e` may lie from its ideal direction
     /// (module documentation, whole blocks).
     eta: [f64; 3],
@@ -193,9 +195,9 @@ impl TileRays {
             sy: (0..th).map(|ly| cam.screen_y(y0 + ly)).collect(),
             basis: [cam.eye, cam.forward, cam.right, cam.up_ortho],
             d: [zeros(), zeros(), zeros()],
-            inv: [zeros(), zeros(), zeros()],
             planar: zeros(),
             max_abs: [0.0; 3],
+            subnormal: false,
             eta: [0.0; 3],
         };
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
@@ -209,22 +211,29 @@ impl TileRays {
             let row = ly * stride..(ly + 1) * stride;
             for k in 0..3 {
                 // Camera::screen_ray: P = eye + ((forward + right sx) + up sy),
-                // D = P - eye, 1 / D, component by component.
+                // D = P - eye, component by component.
                 let (ek, fk, rk, uk) = (e[k], f[k], r[k], u[k]);
                 let d = &mut t.d[k][row.clone()];
                 for (d, &sx) in d.iter_mut().zip(&t.sx) {
                     *d = (ek + ((fk + rk * sx) + uk * sy)) - ek;
                 }
-                for (i, &d) in t.inv[k][row.clone()].iter_mut().zip(d.iter()) {
-                    *i = 1.0 / d;
+                // Lane-parallel (so that it vectorizes): the largest |D_k|,
+                // whether any is NaN (a NaN direction leaves a NaN bound,
+                // which decides nothing) or subnormal. Padding lanes repeat
+                // the last column, so the whole row may be scanned.
+                let old = t.max_abs[k];
+                let (mut m, mut nan, mut tiny) = ([0.0; CHUNK], old.is_nan(), false);
+                for c in d.chunks(CHUNK) {
+                    for (j, &v) in c.iter().enumerate() {
+                        let a = v.abs();
+                        m[j] = if a > m[j] { a } else { m[j] };
+                        nan |= a.is_nan();
+                        tiny |= (a < f64::MIN_POSITIVE) & (a != 0.0);
+                    }
                 }
-                let mut m = t.max_abs[k];
-                for &v in &d[..width] {
-                    // NaN-propagating max: a NaN direction leaves a NaN bound (decides nothing).
-                    let a = v.abs();
-                    m = if a > m || a.is_nan() { a } else { m };
-                }
-                t.max_abs[k] = m;
+                let m = m.into_iter().fold(old, f64::max);
+                t.max_abs[k] = if nan { f64::NAN } else { m };
+                t.subnormal |= tiny;
             }
             let [dx, dy, dz] = [0, 1, 2].map(|k| &t.d[k][row.clone()]);
             // DVec3::dot(D, forward).
@@ -253,10 +262,10 @@ impl TileRays {
             sx: vec![0.0; stride],
             sy: vec![0.0; th],
             basis: [DVec3::ZERO; 4],
-            inv: d.clone(),
             planar: d[0].clone(),
             d,
             max_abs,
+            subnormal: false,
             // Unknown rays: no block is ever decided whole.
             eta: [f64::NAN; 3],
         }
@@ -274,7 +283,7 @@ impl TileRays {
         PixelRay {
             p: DVec3::new(p(0), p(1), p(2)),
             dir: v(&self.d),
-            inv_dir: v(&self.inv),
+            inv_dir: v(&self.d).recip(),
             planar: self.planar[at],
         }
     }
@@ -300,10 +309,43 @@ impl TileRays {
     }
 }
 
-/// [`TriDepth::depth`] for the 8 lanes of a chunk, operation for operation
-/// (same operands, same order, `f64::max`/`min`, one rounding to f32), so each
-/// lane's depth is bit for bit the scalar one; written lane-parallel so that
-/// it vectorizes. The slab test's eye-relative box bounds are per triangle.
+/// [`TriDepth::depth`] for the 8 lanes of a chunk, bit for bit, written
+/// lane-parallel so that it vectorizes.
+///
+/// # Skipping the slab clamp where it cannot bite
+///
+/// The depth function clamps `t = num / denom` into the triangle's slab
+/// interval `[lo, hi]`; where `lo <= t <= hi` the clamp returns `t` itself,
+/// and the slab (three reciprocals `1 / D_k`, six products) changes nothing.
+/// That is proven per lane with products alone: with `L_k = fl(b.lo_k - e_k)`,
+/// `H_k = fl(b.hi_k - e_k)`, `M_k = max(|L_k|, |H_k|)` and `q = fl(t D_k)`,
+/// the lane is settled when, on every axis, `fl(L_k + 8u M_k) <= q <=
+/// fl(H_k - 8u M_k)` (`u = 2^-53`; NaN and infinities fail). Guards keep
+/// every rounding relative: `|t| <= 1e300` (no overflow in `L_k / D_k`),
+/// `8u M_k >= 1e-280` (else the axis never passes) and no subnormal
+/// direction component in the tile (whose reciprocal could overflow).
+///
+/// Why: take `D_k > 0` (the slab's `t0 = fl(L_k fl(1 / D_k))` is then its
+/// lower bound, `t1` its upper). `t0 = (L_k / D_k)(1 + θ)`, `|θ| <= 2u + u²`,
+/// so `t0 <= t` follows from `t D_k >= L_k + 2.0001u |L_k|`. Now `q` lies
+/// within `[L_k, H_k]`, so `|q| <= M_k` and `t D_k >= q - 1.0001u M_k`; the
+/// threshold is at least `L_k + 8u M_k - 1.0001u M_k` (its own rounding,
+/// `|L_k + 8u M_k| <= 1.0001 M_k`), hence `t D_k >= L_k + 5.99u M_k`, enough.
+/// `t <= t1` and the case `D_k < 0` (bounds swapped, inequalities through
+/// `H_k`) are the same argument mirrored. On an axis with `D_k = 0` the slab
+/// skips the axis unless the eye lies outside it, and `q = 0` inside the
+/// thresholds puts it strictly inside (`L_k < 0 < H_k`). So `lo <= t <= hi`
+/// and the clamp is the identity (`f64::max`/`min` of equal-or-ordered
+/// values). The box is grown by `2^-48 = 32u` of the same magnitudes
+/// ([`crate::visibility::grow_box`]), so a hit inside the triangle's f32
+/// box passes unless `t` itself is off by more than about `20u` (grazing
+/// planes); a lane that fails takes the slab as written.
+/// `tests::chunk_depths_are_the_scalar_ones` checks lanes that take either
+/// path, and that thresholds `1e-6 M_k` outside the box break it. (A clamp
+/// that moves `t` by less than the f32 rounding of the depth changes no
+/// output, so thresholds within about `1e-9 M_k` of the box, the `8u M_k`
+/// margin among them, cannot be told apart by outputs: the proof above is
+/// what carries the margin.)
 #[derive(Debug, Clone, Copy)]
 pub struct ChunkDepth {
     /// The plane normal.
@@ -316,23 +358,62 @@ pub struct ChunkDepth {
     hi: [f64; 3],
     /// Per axis: a ray with `D_k = 0` misses the box (the eye is outside its slab).
     zero_misses: [bool; 3],
+    /// Per axis, `fl(L_k + 8u M_k)`: `t D_k` above it cannot be clamped from below.
+    clamp_free_lo: [f64; 3],
+    /// Per axis, `fl(H_k - 8u M_k)`: `t D_k` below it cannot be clamped from above.
+    clamp_free_hi: [f64; 3],
 }
+
+/// The margin of [`ChunkDepth`]'s clamp-free test, in units of `M_k`.
+const CLAMP_FREE_MARGIN: f64 = 8.0 * U;
+
+/// Largest `|t|` the clamp-free test accepts: far from overflow in `L_k / D_k`.
+const CLAMP_FREE_MAX_T: f64 = 1e300;
+
+/// Smallest margin `8u M_k` the clamp-free test uses: far above the
+/// subnormal range, so the roundings it absorbs are relative ones.
+const CLAMP_FREE_MIN_MARGIN: f64 = 1e-280;
 
 impl ChunkDepth {
     /// Takes the scalar depth function's per-triangle data.
     pub fn new(cam: &Camera, d: &TriDepth) -> ChunkDepth {
+        Self::with_margin(cam, d, CLAMP_FREE_MARGIN)
+    }
+
+    /// [`ChunkDepth::new`] with another clamp-free margin (tests: 0 must break).
+    fn with_margin(cam: &Camera, d: &TriDepth, margin: f64) -> ChunkDepth {
         let (eye, b) = (cam.eye, &d.bounds);
+        let lo = [0, 1, 2].map(|k| b.lo[k] - eye[k]);
+        let hi = [0, 1, 2].map(|k| b.hi[k] - eye[k]);
+        let m = [0, 1, 2].map(|k| margin * lo[k].abs().max(hi[k].abs()));
+        // A margin near underflow (or NaN) settles nothing: empty thresholds.
+        let usable = |k: usize| m[k].abs() >= CLAMP_FREE_MIN_MARGIN || margin == 0.0;
         ChunkDepth {
             normal: d.normal.to_array(),
             num: d.num,
-            lo: [0, 1, 2].map(|k| b.lo[k] - eye[k]),
-            hi: [0, 1, 2].map(|k| b.hi[k] - eye[k]),
+            lo,
+            hi,
             zero_misses: [0, 1, 2].map(|k| eye[k] < b.lo[k] || eye[k] > b.hi[k]),
+            clamp_free_lo: [0, 1, 2].map(|k| {
+                if usable(k) {
+                    lo[k] + m[k]
+                } else {
+                    f64::INFINITY
+                }
+            }),
+            clamp_free_hi: [0, 1, 2].map(|k| {
+                if usable(k) {
+                    hi[k] - m[k]
+                } else {
+                    f64::NEG_INFINITY
+                }
+            }),
         }
     }
 
     /// Depths of the 8 lanes from column `col` of tile row `row`, and the
-    /// mask of lanes where [`TriDepth::depth`] is `Some`.
+    /// mask of lanes where [`TriDepth::depth`] is `Some`; exact for the
+    /// lanes in `need` (the others may take the shortcut unproven).
     #[inline(always)]
     pub fn depths(
         &self,
@@ -340,29 +421,62 @@ impl ChunkDepth {
         rays: &TileRays,
         row: usize,
         col: usize,
+        need: u32,
     ) -> ([f32; CHUNK], u32) {
         let at = row * rays.stride + col;
         let lane = |a: &Vec<f64>| -> [f64; CHUNK] { a[at..at + CHUNK].try_into().unwrap() };
         let d = [lane(&rays.d[0]), lane(&rays.d[1]), lane(&rays.d[2])];
-        let inv = [lane(&rays.inv[0]), lane(&rays.inv[1]), lane(&rays.inv[2])];
         let planar = lane(&rays.planar);
+        // DVec3::dot: x*x' + y*y' + z*z', left to right.
+        let denom: [f64; CHUNK] = std::array::from_fn(|j| {
+            self.normal[0] * d[0][j] + self.normal[1] * d[1][j] + self.normal[2] * d[2][j]
+        });
+        let t_raw = denom.map(|v| self.num / v);
+        let mut free = [true; CHUNK];
+        for (k, dk) in d.iter().enumerate() {
+            for j in 0..CHUNK {
+                let q = t_raw[j] * dk[j];
+                free[j] &= (q >= self.clamp_free_lo[k]) & (q <= self.clamp_free_hi[k]);
+            }
+        }
+        for j in 0..CHUNK {
+            // No overflow in the slab's products (see above).
+            free[j] &= t_raw[j].abs() <= CLAMP_FREE_MAX_T;
+        }
+        let free = (0..CHUNK).fold(0u32, |m, j| m | (u32::from(free[j]) << j));
+        let t = if need & !free == 0 && !rays.subnormal {
+            t_raw
+        } else {
+            self.clamped(d, denom)
+        };
         let mut z = [0f32; CHUNK];
         let mut ok = 0u32;
         for j in 0..CHUNK {
-            // DVec3::dot: x*x' + y*y' + z*z', left to right.
-            let denom =
-                self.normal[0] * d[0][j] + self.normal[1] * d[1][j] + self.normal[2] * d[2][j];
-            let valid = denom != 0.0 && denom.is_finite();
-            // visibility::slab_od with origin = eye.
+            let valid = denom[j] != 0.0 && denom[j].is_finite();
+            let zj = (t[j] * planar[j]) as f32;
+            let zf = f64::from(zj);
+            z[j] = zj;
+            ok |= u32::from(valid & (zf >= cam.near) & (zf <= cam.far)) << j;
+        }
+        (z, ok)
+    }
+
+    /// `t` clamped into the slab interval as [`TriDepth::depth`] does it
+    /// (`visibility::slab_od` with origin = eye), for lanes the shortcut
+    /// does not settle.
+    #[inline(always)]
+    fn clamped(&self, d: [[f64; CHUNK]; 3], denom: [f64; CHUNK]) -> [f64; CHUNK] {
+        std::array::from_fn(|j| {
             let mut tmin = f64::NEG_INFINITY;
             let mut tmax = f64::INFINITY;
             let mut empty = false;
-            for k in 0..3 {
-                let dk = d[k][j];
+            for (k, dk) in d.iter().enumerate() {
+                let dk = dk[j];
+                let inv = 1.0 / dk;
                 let zero = dk == 0.0;
                 empty |= zero & self.zero_misses[k];
-                let t0 = self.lo[k] * inv[k][j];
-                let t1 = self.hi[k] * inv[k][j];
+                let t0 = self.lo[k] * inv;
+                let t1 = self.hi[k] * inv;
                 let (a, bb) = if dk > 0.0 { (t0, t1) } else { (t1, t0) };
                 let (nmin, nmax) = (tmin.max(a), tmax.min(bb));
                 tmin = if zero { tmin } else { nmin };
@@ -373,13 +487,8 @@ impl ChunkDepth {
             } else {
                 (tmin, tmax)
             };
-            let t = (self.num / denom).max(lo).min(hi.max(lo));
-            let zj = (t * planar[j]) as f32;
-            let zf = f64::from(zj);
-            z[j] = zj;
-            ok |= u32::from(valid & (zf >= cam.near) & (zf <= cam.far)) << j;
-        }
-        (z, ok)
+            (self.num / denom[j]).max(lo).min(hi.max(lo))
+        })
     }
 }
 
@@ -767,5 +876,126 @@ mod tests {
         }
         assert!(decided > 1000, "only {decided} blocks decided");
         assert!(broken > 0, "a block bound of 0 broke nothing");
+    }
+
+    /// Runs [`ChunkDepth::depths`] (clamp-free margin `margin`) over every
+    /// lane of a tile for each triangle and compares it with
+    /// [`TriDepth::depth`]; returns (lanes that took the shortcut, lanes that
+    /// took the slab, lanes that differ).
+    fn chunk_depth_trial(cam: &Camera, tris: &[[glam::Vec3; 3]], margin: f64) -> [usize; 3] {
+        let (tw, th) = (cam.width.min(32), cam.height.min(32));
+        let rays = TileRays::new(cam, 0, 0, tw, th);
+        let mut out = [0; 3];
+        for t in tris {
+            let scalar = TriDepth::new(cam, t);
+            let d = ChunkDepth::with_margin(cam, &scalar, margin);
+            for row in 0..th as usize {
+                for col in (0..tw as usize).step_by(CHUNK) {
+                    // One lane at a time, so each lane's path is known.
+                    for j in 0..CHUNK.min(tw as usize - col) {
+                        let (z, ok) = d.depths(cam, &rays, row, col, 1 << j);
+                        let want = scalar.depth(cam, &cam.pixel_ray((col + j) as u32, row as u32));
+                        let got = ((ok >> j) & 1 == 1).then_some(z[j]);
+                        let at = row * rays.stride + col + j;
+                        let dir = [0, 1, 2].map(|k| rays.d[k][at]);
+                        let denom =
+                            d.normal[0] * dir[0] + d.normal[1] * dir[1] + d.normal[2] * dir[2];
+                        let t_raw = d.num / denom;
+                        let free = (0..3).all(|k| {
+                            let q = t_raw * dir[k];
+                            q >= d.clamp_free_lo[k] && q <= d.clamp_free_hi[k]
+                        }) && t_raw.abs() <= CLAMP_FREE_MAX_T;
+                        out[usize::from(!free)] += 1;
+                        out[2] += usize::from(got.map(f32::to_bits) != want.map(f32::to_bits));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Triangles for the clamp-free test: random ones, axis-aligned ones
+    /// (a box of zero extent on one axis, grown by rounding only) and
+    /// grazing ones (nearly edge-on to the eye, where `t` is ill-conditioned
+    /// and the clamp bites).
+    fn clamp_trial_triangles(cam: &Camera, seed: u64, n: usize) -> Vec<[glam::Vec3; 3]> {
+        let mut s = seed;
+        let mut tris = Vec::new();
+        for i in 0..n {
+            let r = |s: &mut u64| lcg(s);
+            let p = |s: &mut u64, depth: f64| {
+                let x = (r(s) * 0.5 + 0.5) * f64::from(cam.width.min(32));
+                let y = (r(s) * 0.5 + 0.5) * f64::from(cam.height.min(32));
+                let ray = cam.pixel_ray(x as u32, y as u32);
+                cam.eye + ray.dir * depth * (1.0 + 0.01 * r(s))
+            };
+            let (a, b) = (p(&mut s, 2.0), p(&mut s, 3.0));
+            let c = match i % 3 {
+                0 => p(&mut s, 2.5),
+                1 => {
+                    // Same z as a and b: flat in z (after rounding to f32).
+                    let mut c = p(&mut s, 2.5);
+                    c.z = a.z;
+                    let b = DVec3::new(b.x, b.y, a.z);
+                    tris.push([a, b, c].map(|v| v.as_vec3()));
+                    continue;
+                }
+                // Nearly edge-on: c continues a along its own ray.
+                _ => cam.eye + (a - cam.eye) * (1.5 + r(&mut s)) + DVec3::splat(1e-9 * r(&mut s)),
+            };
+            tris.push([a, b, c].map(|v| v.as_vec3()));
+        }
+        tris
+    }
+
+    /// Lanes that take the clamp-free shortcut and lanes that take the slab
+    /// both give [`TriDepth::depth`] bit for bit, on plain, axis-aligned and
+    /// grazing triangles, under exact and tilted cameras, near the origin
+    /// and far from it; and thresholds placed outside the box by a relative
+    /// `1e-6` (an unsound shortcut) are caught.
+    #[test]
+    fn chunk_depths_are_the_scalar_ones() {
+        let (mut free, mut slab) = (0, 0);
+        for (k, off) in [0.0, 1e3, 12345.678].into_iter().enumerate() {
+            let o = DVec3::new(off, -off, off);
+            let cams = [
+                Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 32, 32, 1e-3, f64::INFINITY),
+                Camera::new(
+                    o + DVec3::new(0.3, 0.7, 2.1),
+                    o + DVec3::new(0.1, -0.2, 0.0),
+                    DVec3::Y,
+                    50.0,
+                    40,
+                    24,
+                    1e-3,
+                    f64::INFINITY,
+                ),
+            ];
+            for (c, cam) in cams.into_iter().map(Result::unwrap).enumerate() {
+                let tris = clamp_trial_triangles(&cam, 11 + (k * 2 + c) as u64, 60);
+                let [f, sl, differ] = chunk_depth_trial(&cam, &tris, CLAMP_FREE_MARGIN);
+                assert_eq!(differ, 0, "offset {off}, camera {c}: {differ} lanes differ");
+                free += f;
+                slab += sl;
+            }
+        }
+        assert!(
+            free > 10_000 && slab > 1_000,
+            "{free} shortcut lanes, {slab} slab lanes"
+        );
+        let cam = Camera::new(
+            DVec3::Z,
+            DVec3::ZERO,
+            DVec3::Y,
+            90.0,
+            32,
+            32,
+            1e-3,
+            f64::INFINITY,
+        )
+        .unwrap();
+        let tris = clamp_trial_triangles(&cam, 5, 60);
+        let [_, _, differ] = chunk_depth_trial(&cam, &tris, -1e-6);
+        assert!(differ > 0, "thresholds outside the box broke nothing");
     }
 }

@@ -259,6 +259,42 @@ pub fn grid(min: [f64; 2], max: [f64; 2], nx: u32, ny: u32) -> Vec<Tri64> {
     out
 }
 
+/// The crossover bench's scene (`rendiff bench crossover`, and the raster and
+/// trace timing loops): an `nx` x `nx` grid at z = 0 seen from (0, 0, 1) with
+/// a 90° field of view, covering the whole `size` x `size` image whatever
+/// `nx`. `aligned`: exactly [-1, 1]², so grid lines, diagonals and (at nx =
+/// size) vertices pass through pixel centers: every such center is a tie for
+/// the exact predicate. Otherwise the grid overhangs the image by small
+/// non-dyadic margins and ties are rare: the generic case.
+pub fn crossover_grid(
+    nx: u32,
+    size: u32,
+    aligned: bool,
+) -> Result<crate::scene::resolve::ResolvedScene, String> {
+    let cam = crate::camera::Camera::new(
+        DVec3::new(0.0, 0.0, 1.0),
+        DVec3::ZERO,
+        DVec3::Y,
+        90.0,
+        size,
+        size,
+        1e-3,
+        f64::INFINITY,
+    )?;
+    let (min, max) = if aligned {
+        ([-1.0, -1.0], [1.0, 1.0])
+    } else {
+        ([-1.012_34, -1.017_1], [1.023_45, 1.008_9])
+    };
+    let tris = grid(min, max, nx, nx)
+        .iter()
+        .map(|t| t.map(|v| v.as_vec3()))
+        .collect();
+    Ok(crate::scene::resolve::ResolvedScene::from_triangles(
+        cam, tris,
+    ))
+}
+
 /// Closed axis-aligned box; outward counter-clockwise winding unless `inward`.
 pub fn cube(min: DVec3, max: DVec3, inward: bool) -> Vec<Tri64> {
     let v = |x: usize, y: usize, z: usize| {
