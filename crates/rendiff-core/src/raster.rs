@@ -210,6 +210,20 @@ impl TileOut<'_> {
     fn at(&self, lx: usize, ly: usize) -> usize {
         ly * self.stride + self.x0 + lx
     }
+
+    /// A hit with key `k` at buffer index `at`, covered with `facing`
+    /// (+1 back, -1 front): the nearer key stays, and the hit is counted
+    /// when coverage is.
+    #[inline(always)]
+    fn offer(&mut self, at: usize, k: u64, facing: i8) {
+        if k < self.keys[at] {
+            self.keys[at] = k;
+        }
+        if let Some(cv) = self.cov.get_mut(at) {
+            let slot = usize::from(facing > 0);
+            cv[slot] = cv[slot].saturating_add(1);
+        }
+    }
 }
 
 /// Renders one tile's bin into `out`; on x86-64 CPUs with AVX2 the same code
@@ -247,32 +261,6 @@ fn render_tile_avx2(
     c: &mut Counters,
 ) {
     render_tile_body(avx2, scene, bin, x0, y0, mode, out, c)
-}
-
-/// Depth test and key update for a pixel the triangle covers with `facing`.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn record_hit(
-    cam: &Camera,
-    t: &Tri,
-    prim: u32,
-    ray: &PixelRay,
-    facing: i8,
-    depth: &mut Option<TriDepth>,
-    key: &mut u64,
-    cov: Option<&mut [u16; 2]>,
-) {
-    let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
-    if let Some(z) = d.depth(cam, ray) {
-        let k = hit_key(z, prim);
-        if k < *key {
-            *key = k;
-        }
-        if let Some(cov) = cov {
-            let slot = usize::from(facing > 0);
-            cov[slot] = cov[slot].saturating_add(1);
-        }
-    }
 }
 
 /// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
@@ -387,9 +375,10 @@ fn render_tile_body<L: Lanes>(
                 let ray = &rays[ly * tw as usize + lx];
                 let facing = edges.covers(cam, ray, c);
                 if facing != 0 {
-                    let at = out.at(lx, ly);
-                    let cv = out.cov.get_mut(at);
-                    record_hit(cam, t, prim, ray, facing, &mut depth, &mut out.keys[at], cv);
+                    let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
+                    if let Some(z) = d.depth(cam, ray) {
+                        out.offer(out.at(lx, ly), hit_key(z, prim), facing);
+                    }
                 }
             }
         }
@@ -465,7 +454,8 @@ fn fast_tile<L: Lanes>(
 /// pixel first needs it and the predicate's own f64 filter
 /// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
 /// evaluated here, so only the signs it cannot settle call it (which then
-/// counts its exact fallbacks and ties as always). Depth by [`TriDepth::depth`].
+/// counts its exact fallbacks and ties as always). Depth by
+/// [`ChunkDepth::depth_at`], [`TriDepth::depth`] bit for bit.
 #[inline(always)]
 fn small_box(
     cam: &Camera,
@@ -478,7 +468,7 @@ fn small_box(
 ) {
     let v = t.map(|v| v.as_dvec3());
     let mut planes: [Option<EdgePlane>; 3] = [None; 3];
-    let mut depth: Option<TriDepth> = None;
+    let mut depth: Option<ChunkDepth> = None;
     for ly in ly0..=ly1 {
         for lx in lx0..=lx1 {
             let d = rays.dir(lx, ly);
@@ -497,19 +487,10 @@ fn small_box(
                 }
             });
             if facing != 0 {
-                let at = out.at(lx, ly);
-                let cv = out.cov.get_mut(at);
-                let ray = rays.ray(lx, ly);
-                record_hit(
-                    cam,
-                    t,
-                    prim,
-                    &ray,
-                    facing,
-                    &mut depth,
-                    &mut out.keys[at],
-                    cv,
-                );
+                let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+                if let Some(z) = d.depth_at(cam, rays, lx, ly) {
+                    out.offer(out.at(lx, ly), hit_key(z, prim), facing);
+                }
             }
         }
     }
@@ -580,14 +561,8 @@ fn chunk_hits(
     while m != 0 {
         let j = m.trailing_zeros() as usize;
         m &= m - 1;
-        let k = hit_key(z[j], prim);
-        if k < out.keys[row + j] {
-            out.keys[row + j] = k;
-        }
-        if let Some(cv) = out.cov.get_mut(row + j) {
-            let slot = usize::from((back >> j) & 1 == 1);
-            cv[slot] = cv[slot].saturating_add(1);
-        }
+        let facing = if (back >> j) & 1 == 1 { 1 } else { -1 };
+        out.offer(row + j, hit_key(z[j], prim), facing);
     }
 }
 

@@ -220,20 +220,26 @@ impl TileRays {
                 // Lane-parallel (so that it vectorizes): the largest |D_k|,
                 // whether any is NaN (a NaN direction leaves a NaN bound,
                 // which decides nothing) or subnormal. Padding lanes repeat
-                // the last column, so the whole row may be scanned.
-                let old = t.max_abs[k];
-                let (mut m, mut nan, mut tiny) = ([0.0; CHUNK], old.is_nan(), false);
-                for c in d.chunks(CHUNK) {
+                // the last column, so they may be left out.
+                let (mut m, mut nan, mut tiny) = ([0.0; CHUNK], [false; CHUNK], [false; CHUNK]);
+                let mut lanes = |c: &[f64]| {
                     for (j, &v) in c.iter().enumerate() {
                         let a = v.abs();
                         m[j] = if a > m[j] { a } else { m[j] };
-                        nan |= a.is_nan();
-                        tiny |= (a < f64::MIN_POSITIVE) & (a != 0.0);
+                        nan[j] |= a.is_nan();
+                        tiny[j] |= (a < f64::MIN_POSITIVE) & (a != 0.0);
                     }
+                };
+                let mut whole = d[..width].chunks_exact(CHUNK);
+                for c in &mut whole {
+                    lanes(<&[f64; CHUNK]>::try_from(c).unwrap());
                 }
+                lanes(whole.remainder());
+                let old = t.max_abs[k];
                 let m = m.into_iter().fold(old, f64::max);
+                let nan = old.is_nan() || nan.contains(&true);
                 t.max_abs[k] = if nan { f64::NAN } else { m };
-                t.subnormal |= tiny;
+                t.subnormal |= tiny.contains(&true);
             }
             let [dx, dy, dz] = [0, 1, 2].map(|k| &t.d[k][row.clone()]);
             // DVec3::dot(D, forward).
@@ -426,32 +432,55 @@ impl ChunkDepth {
         let at = row * rays.stride + col;
         let lane = |a: &Vec<f64>| -> [f64; CHUNK] { a[at..at + CHUNK].try_into().unwrap() };
         let d = [lane(&rays.d[0]), lane(&rays.d[1]), lane(&rays.d[2])];
-        let planar = lane(&rays.planar);
+        self.lanes(cam, d, lane(&rays.planar), need, rays.subnormal)
+    }
+
+    /// [`TriDepth::depth`] of tile pixel `(lx, ly)` (boxes of a few pixels).
+    #[inline(always)]
+    pub fn depth_at(&self, cam: &Camera, rays: &TileRays, lx: usize, ly: usize) -> Option<f32> {
+        let at = ly * rays.stride + lx;
+        let d = [0, 1, 2].map(|k| [rays.d[k][at]]);
+        let (z, ok) = self.lanes(cam, d, [rays.planar[at]], 1, rays.subnormal);
+        (ok == 1).then_some(z[0])
+    }
+
+    /// The depth function over `N` lanes of directions `d` and planar
+    /// factors `planar`, exact for the lanes in `need`; `subnormal`: some
+    /// direction of the tile is subnormal (no shortcut).
+    #[inline(always)]
+    fn lanes<const N: usize>(
+        &self,
+        cam: &Camera,
+        d: [[f64; N]; 3],
+        planar: [f64; N],
+        need: u32,
+        subnormal: bool,
+    ) -> ([f32; N], u32) {
         // DVec3::dot: x*x' + y*y' + z*z', left to right.
-        let denom: [f64; CHUNK] = std::array::from_fn(|j| {
+        let denom: [f64; N] = std::array::from_fn(|j| {
             self.normal[0] * d[0][j] + self.normal[1] * d[1][j] + self.normal[2] * d[2][j]
         });
         let t_raw = denom.map(|v| self.num / v);
-        let mut free = [true; CHUNK];
+        let mut free = [true; N];
         for (k, dk) in d.iter().enumerate() {
-            for j in 0..CHUNK {
+            for j in 0..N {
                 let q = t_raw[j] * dk[j];
                 free[j] &= (q >= self.clamp_free_lo[k]) & (q <= self.clamp_free_hi[k]);
             }
         }
-        for j in 0..CHUNK {
+        for j in 0..N {
             // No overflow in the slab's products (see above).
             free[j] &= t_raw[j].abs() <= CLAMP_FREE_MAX_T;
         }
-        let free = (0..CHUNK).fold(0u32, |m, j| m | (u32::from(free[j]) << j));
-        let t = if need & !free == 0 && !rays.subnormal {
+        let free = (0..N).fold(0u32, |m, j| m | (u32::from(free[j]) << j));
+        let t = if need & !free == 0 && !subnormal {
             t_raw
         } else {
             self.clamped(d, denom)
         };
-        let mut z = [0f32; CHUNK];
+        let mut z = [0f32; N];
         let mut ok = 0u32;
-        for j in 0..CHUNK {
+        for j in 0..N {
             let valid = denom[j] != 0.0 && denom[j].is_finite();
             let zj = (t[j] * planar[j]) as f32;
             let zf = f64::from(zj);
@@ -465,7 +494,7 @@ impl ChunkDepth {
     /// (`visibility::slab_od` with origin = eye), for lanes the shortcut
     /// does not settle.
     #[inline(always)]
-    fn clamped(&self, d: [[f64; CHUNK]; 3], denom: [f64; CHUNK]) -> [f64; CHUNK] {
+    fn clamped<const N: usize>(&self, d: [[f64; N]; 3], denom: [f64; N]) -> [f64; N] {
         std::array::from_fn(|j| {
             let mut tmin = f64::NEG_INFINITY;
             let mut tmax = f64::INFINITY;
