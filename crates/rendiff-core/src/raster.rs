@@ -162,6 +162,7 @@ fn keys_impl(
         .map(|(ty, (kband, cband))| {
             let mut c = Counters::default();
             let mut bin = Vec::new();
+            let mut rays = TileRays::default();
             for tx in 0..tiles_x {
                 bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
                 // Past the deadline a tile renders nothing (background).
@@ -173,7 +174,7 @@ fn keys_impl(
                         x0: (tx * TILE) as usize,
                     };
                     let (x0, y0) = (tx * TILE, ty as u32 * TILE);
-                    render_tile(scene, &bin, x0, y0, mode, &mut out, &mut c);
+                    render_tile(scene, &bin, x0, y0, mode, &mut out, &mut rays, &mut c);
                 }
             }
             progress(u64::from(tiles_x));
@@ -237,14 +238,15 @@ fn render_tile(
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
+    rays: &mut TileRays,
     c: &mut Counters,
 ) {
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = Avx2::detect().filter(|_| mode.fast) {
         // SAFETY: the token proves the CPU has AVX2 and POPCNT.
-        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, c) };
+        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, rays, c) };
     }
-    render_tile_body(Portable, scene, bin, x0, y0, mode, out, c)
+    render_tile_body(Portable, scene, bin, x0, y0, mode, out, rays, c)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -258,9 +260,10 @@ fn render_tile_avx2(
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
+    rays: &mut TileRays,
     c: &mut Counters,
 ) {
-    render_tile_body(avx2, scene, bin, x0, y0, mode, out, c)
+    render_tile_body(avx2, scene, bin, x0, y0, mode, out, rays, c)
 }
 
 /// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
@@ -340,24 +343,26 @@ fn render_tile_body<L: Lanes>(
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
+    rays: &mut TileRays,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
     let tw = TILE.min(cam.width - x0);
     let th = TILE.min(cam.height - y0);
     if mode.fast {
-        fast_tile(l, scene, bin, (x0, y0, tw, th), mode, out, c);
+        rays.fill(cam, x0, y0, tw, th);
+        fast_tile(l, scene, bin, mode, out, rays, c);
         return;
     }
     // The pure predicate path: every bounding-box pixel asks `visibility`.
-    let rays: Vec<PixelRay> = (0..th)
+    let pixel_rays: Vec<PixelRay> = (0..th)
         .flat_map(|ly| (0..tw).map(move |lx| (lx, ly)))
         .map(|(lx, ly)| cam.pixel_ray(x0 + lx, y0 + ly))
         .collect();
     let mut hiz = LazyBound::new(mode, || {
         let k = TileDepthBound::axis(cam);
-        let planar: Vec<f64> = rays.iter().map(|r| r.planar).collect();
-        let dk: Vec<f64> = rays.iter().map(|r| r.dir[k]).collect();
+        let planar: Vec<f64> = pixel_rays.iter().map(|r| r.planar).collect();
+        let dk: Vec<f64> = pixel_rays.iter().map(|r| r.dir[k]).collect();
         TileDepthBound::new(k, &planar, &dk)
     });
     for &Binned { prim, rect } in bin {
@@ -372,7 +377,7 @@ fn render_tile_body<L: Lanes>(
         let mut depth: Option<TriDepth> = None;
         for ly in ly0..=ly1 {
             for lx in lx0..=lx1 {
-                let ray = &rays[ly * tw as usize + lx];
+                let ray = &pixel_rays[ly * tw as usize + lx];
                 let facing = edges.covers(cam, ray, c);
                 if facing != 0 {
                     let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
@@ -385,7 +390,7 @@ fn render_tile_body<L: Lanes>(
     }
 }
 
-/// The fast path over one tile (`(x0, y0, tw, th)`): per triangle, its edge
+/// The fast path over one tile (whose `rays` are filled): per triangle, its edge
 /// functions decide 8 pixels of a row at a time where their bound allows
 /// ([`crate::raster_edges`]); undecided pixels go to the predicate exactly as
 /// [`TriEdges::covers`] would ask it; covered pixels get their depth 8 at a
@@ -396,13 +401,12 @@ fn fast_tile<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
     bin: &[Binned],
-    (x0, y0, tw, th): (u32, u32, u32, u32),
     mode: Mode,
     out: &mut TileOut,
+    rays: &TileRays,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
-    let rays = TileRays::new(cam, x0, y0, tw, th);
     let mut hiz = LazyBound::new(mode, || rays.depth_bound(cam));
     for &Binned { prim, rect } in bin {
         let t = &scene.triangles[prim as usize];
@@ -413,11 +417,11 @@ fn fast_tile<L: Lanes>(
         }
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
-            small_box(cam, t, prim, &rays, [lx0, lx1, ly0, ly1], out, c);
+            small_box(cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
         }
         let edges = TriEdges::new(cam, t);
-        let f = FastEdges::new(&edges, &rays);
+        let f = FastEdges::new(&edges, rays);
         let mut depth: Option<ChunkDepth> = None;
         // Boxes at least a chunk wide take chunks aligned to the tile's 8x8
         // blocks, so that whole blocks can be decided at once; narrower ones
@@ -433,16 +437,16 @@ fn fast_tile<L: Lanes>(
                 let span: u32 = ((1u32 << (b + 1)) - 1) & !((1u32 << a) - 1);
                 // A block inside the box whose certain signs settle all of it.
                 let block = (full_rows && span == 0xff)
-                    .then(|| f.block(&rays, r0, base))
+                    .then(|| f.block(rays, r0, base))
                     .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff);
                 for ly in r0..=r1 {
                     let sg = match block {
                         Some(g) => g,
-                        None => f.chunk(l, &rays, ly, base),
+                        None => f.chunk(l, rays, ly, base),
                     };
                     let at = (ly, base, span);
                     let d = &mut depth;
-                    chunk_hits(cam, t, prim, &edges, &rays, sg, at, d, out, c);
+                    chunk_hits(cam, t, prim, &edges, rays, sg, at, d, out, c);
                 }
             }
         }

@@ -147,7 +147,7 @@ impl Lanes for Avx2 {
 /// each direction component over the tile (for the bound). Every value is
 /// [`Camera::pixel_ray`]'s, bit for bit: it is computed by the same
 /// [`Camera::screen_ray`] from the same `sx` and `sy`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct TileRays {
     /// Columns in the tile.
     width: usize,
@@ -182,24 +182,32 @@ impl TileRays {
     /// so that it vectorizes (padding lanes repeat the last column).
     #[inline(always)]
     pub fn new(cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) -> TileRays {
+        let mut t = TileRays::default();
+        t.fill(cam, x0, y0, tw, th);
+        t
+    }
+
+    /// [`TileRays::new`] into this one's buffers (a band of tiles reuses
+    /// them: no allocation or zeroing per tile; start from `default()`).
+    #[inline(always)]
+    pub fn fill(&mut self, cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) {
         let (width, rows) = (tw as usize, th as usize);
         let stride = width + CHUNK - 1;
         let n = stride * rows;
-        let zeros = || vec![0.0; n];
-        let mut t = TileRays {
-            width,
-            stride,
-            sx: (0..stride)
-                .map(|lx| cam.screen_x(x0 + (lx as u32).min(tw - 1)))
-                .collect(),
-            sy: (0..th).map(|ly| cam.screen_y(y0 + ly)).collect(),
-            basis: [cam.eye, cam.forward, cam.right, cam.up_ortho],
-            d: [zeros(), zeros(), zeros()],
-            planar: zeros(),
-            max_abs: [0.0; 3],
-            subnormal: false,
-            eta: [0.0; 3],
-        };
+        let t = self;
+        t.width = width;
+        t.stride = stride;
+        t.sx.clear();
+        t.sx.extend((0..stride).map(|lx| cam.screen_x(x0 + (lx as u32).min(tw - 1))));
+        t.sy.clear();
+        t.sy.extend((0..th).map(|ly| cam.screen_y(y0 + ly)));
+        t.basis = [cam.eye, cam.forward, cam.right, cam.up_ortho];
+        for v in t.d.iter_mut().chain([&mut t.planar]) {
+            // Every lane is written below; old values only avoid zeroing.
+            v.resize(n, 0.0);
+        }
+        t.max_abs = [0.0; 3];
+        t.subnormal = false;
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
         // The camera's private aspect tan, by the same expression.
         let a = cam.tan_half_vfov * (f64::from(cam.width) / f64::from(cam.height));
@@ -247,7 +255,6 @@ impl TileRays {
                 *p = dx[lx] * f.x + dy[lx] * f.y + dz[lx] * f.z;
             }
         }
-        t
     }
 
     /// Builds the tile from given directions (tests of the edge functions).
