@@ -306,13 +306,16 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
         if !self.on {
             return false;
         }
-        let rows = || {
-            (ly0..=ly1).map(|ly| {
+        // The largest key in the box: NO_HIT (the largest key) when a pixel is empty.
+        let highest = (ly0..=ly1)
+            .map(|ly| {
                 let row = out.at(lx0, ly);
-                &out.keys[row..=row + (lx1 - lx0)]
+                out.keys[row..=row + (lx1 - lx0)]
+                    .iter()
+                    .fold(0, |m, &k| m.max(k))
             })
-        };
-        if rows().any(|r| r.contains(&NO_HIT)) {
+            .fold(0, u64::max);
+        if highest == NO_HIT {
             return false;
         }
         let (make, factor) = (&mut self.make, self.factor);
@@ -323,7 +326,7 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
             return false;
         };
         let low = b.lowest_key(cam, t, prim);
-        low != 0 && rows().all(|r| r.iter().all(|&k| k <= low))
+        low != 0 && highest <= low
     }
 }
 

@@ -395,9 +395,14 @@ impl ChunkDepth {
 
     /// [`ChunkDepth::new`] with another clamp-free margin (tests: 0 must break).
     fn with_margin(cam: &Camera, d: &TriDepth, margin: f64) -> ChunkDepth {
-        let (eye, b) = (cam.eye, &d.bounds);
-        let lo = [0, 1, 2].map(|k| b.lo[k] - eye[k]);
-        let hi = [0, 1, 2].map(|k| b.hi[k] - eye[k]);
+        // Arrays, not glam's run-time component index (a match per access).
+        let (eye, blo, bhi) = (
+            cam.eye.to_array(),
+            d.bounds.lo.to_array(),
+            d.bounds.hi.to_array(),
+        );
+        let lo = [0, 1, 2].map(|k| blo[k] - eye[k]);
+        let hi = [0, 1, 2].map(|k| bhi[k] - eye[k]);
         let m = [0, 1, 2].map(|k| margin * lo[k].abs().max(hi[k].abs()));
         // A margin near underflow (or NaN) settles nothing: empty thresholds.
         let usable = |k: usize| m[k].abs() >= CLAMP_FREE_MIN_MARGIN || margin == 0.0;
@@ -406,7 +411,7 @@ impl ChunkDepth {
             num: d.num,
             lo,
             hi,
-            zero_misses: [0, 1, 2].map(|k| eye[k] < b.lo[k] || eye[k] > b.hi[k]),
+            zero_misses: [0, 1, 2].map(|k| eye[k] < blo[k] || eye[k] > bhi[k]),
             clamp_free_lo: [0, 1, 2].map(|k| {
                 if usable(k) {
                     lo[k] + m[k]

@@ -116,8 +116,9 @@ impl TileDepthBound {
     #[inline(always)]
     pub fn lowest_key(&self, cam: &Camera, t: &Tri, prim: u32) -> u64 {
         let k = self.axis;
-        let e = cam.eye[k];
-        let (a, b, c) = (f64::from(t[0][k]), f64::from(t[1][k]), f64::from(t[2][k]));
+        // Arrays, not glam's run-time component index (a match per access).
+        let e = cam.eye.to_array()[k];
+        let [a, b, c] = t.map(|v| f64::from(v.to_array()[k]));
         let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
         // The face entered first, relative to the eye, signed along the ray.
         let v = if self.negative { e - hi } else { lo - e };
