@@ -353,7 +353,7 @@ fn render_tile_body<L: Lanes>(
     let tw = TILE.min(cam.width - x0);
     let th = TILE.min(cam.height - y0);
     if mode.fast {
-        rays.fill(cam, x0, y0, tw, th);
+        rays.fill(l, cam, x0, y0, tw, th);
         fast_tile(l, scene, bin, mode, out, rays, c);
         return;
     }
@@ -449,7 +449,7 @@ fn fast_tile<L: Lanes>(
                     };
                     let at = (ly, base, span);
                     let d = &mut depth;
-                    chunk_hits(cam, t, prim, &edges, rays, sg, at, d, out, c);
+                    chunk_hits(l, cam, t, prim, &edges, rays, sg, at, d, out, c);
                 }
             }
         }
@@ -510,7 +510,8 @@ fn small_box(
 /// update the keys (and coverage counts).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn chunk_hits(
+fn chunk_hits<L: Lanes>(
+    l: L,
     cam: &Camera,
     t: &Tri,
     prim: u32,
@@ -548,7 +549,7 @@ fn chunk_hits(
         return;
     }
     let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-    let (z, ok) = d.depths(cam, rays, ly, base, back | front);
+    let (z, ok) = d.depths(l, cam, rays, ly, base, back | front);
     let mut m = (back | front) & ok;
     let row = out.at(base, ly);
     if span == 0xff && out.cov.is_empty() {

@@ -54,6 +54,17 @@
 //! whole image. `tests::tight_boxes_lose_no_pixel` renders with these boxes
 //! and with whole-image boxes and checks the buffers are identical; with
 //! `μ = 0` it fails.
+//!
+//! # Four at a time
+//!
+//! [`bounds_into`] (the binning) takes the common case, no vertex needing
+//! clipping, four triangles at a time (`BoxMargin::bounds4`, one triangle
+//! per f64 lane, in AVX2 where the CPU has it): each lane performs exactly
+//! the operations of [`BoxMargin::bounds`]' no-clipping path in the same
+//! order, with `f64::max`/`min`'s NaN rule and no fused multiply-add, so
+//! its boxes are the same bit for bit; a lane that needs clipping goes to
+//! [`BoxMargin::bounds`] itself. `tests::batched_bounds_match_scalar`
+//! checks both paths against it triangle by triangle.
 
 use crate::camera::Camera;
 use crate::raster::PixelRect;
@@ -253,10 +264,431 @@ impl BoxMargin {
     }
 }
 
+/// Four-lane f64 arithmetic for [`BoxMargin::bounds4`]: each operation is
+/// the scalar IEEE one lane by lane (no fused operations), in plain Rust
+/// ([`Plain4`]) or AVX2 intrinsics (`Avx2`); a test checks both against
+/// [`BoxMargin::bounds`]. Lane `j` belongs to triangle `j` of the batch.
+trait Lanes4: Copy {
+    /// Four f64.
+    type V: Copy;
+    /// `v` in every lane.
+    fn splat(self, v: f64) -> Self::V;
+    /// Component `c` of vertex `i` of each triangle, widened to f64.
+    fn load(self, t: &[Tri; 4], i: usize, c: usize) -> Self::V;
+    /// `a + b`.
+    fn add(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `a - b`.
+    fn sub(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `a * b`.
+    fn mul(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `a / b`.
+    fn div(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `f64::max(a, b)` (a NaN operand gives the other).
+    fn max(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `f64::min(a, b)` (a NaN operand gives the other).
+    fn min(self, a: Self::V, b: Self::V) -> Self::V;
+    /// `f64::abs`.
+    fn abs(self, a: Self::V) -> Self::V;
+    /// `f64::ceil`.
+    fn ceil(self, a: Self::V) -> Self::V;
+    /// `f64::floor`.
+    fn floor(self, a: Self::V) -> Self::V;
+    /// Bit `j` set where `a >= b` (false for NaN).
+    fn ge(self, a: Self::V, b: Self::V) -> u32;
+    /// Bit `j` set where `a < b` (false for NaN).
+    fn lt(self, a: Self::V, b: Self::V) -> u32;
+    /// Bit `j` set where `a > b` (false for NaN).
+    fn gt(self, a: Self::V, b: Self::V) -> u32;
+    /// The lanes.
+    fn array(self, a: Self::V) -> [f64; 4];
+}
+
+/// [`Lanes4`] in plain Rust, for any CPU.
+#[derive(Debug, Clone, Copy)]
+struct Plain4;
+
+/// Bits of a four-lane test.
+#[inline(always)]
+fn bits4(a: [f64; 4], b: [f64; 4], f: impl Fn(f64, f64) -> bool) -> u32 {
+    u32::from(f(a[0], b[0]))
+        | u32::from(f(a[1], b[1])) << 1
+        | u32::from(f(a[2], b[2])) << 2
+        | u32::from(f(a[3], b[3])) << 3
+}
+
+/// A four-lane operation.
+#[inline(always)]
+fn zip4(a: [f64; 4], b: [f64; 4], f: impl Fn(f64, f64) -> f64) -> [f64; 4] {
+    [f(a[0], b[0]), f(a[1], b[1]), f(a[2], b[2]), f(a[3], b[3])]
+}
+
+impl Lanes4 for Plain4 {
+    type V = [f64; 4];
+    #[inline(always)]
+    fn splat(self, v: f64) -> [f64; 4] {
+        [v; 4]
+    }
+    #[inline(always)]
+    fn load(self, t: &[Tri; 4], i: usize, c: usize) -> [f64; 4] {
+        [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]].map(f64::from)
+    }
+    #[inline(always)]
+    fn add(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, |a, b| a + b)
+    }
+    #[inline(always)]
+    fn sub(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, |a, b| a - b)
+    }
+    #[inline(always)]
+    fn mul(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, |a, b| a * b)
+    }
+    #[inline(always)]
+    fn div(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, |a, b| a / b)
+    }
+    #[inline(always)]
+    fn max(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, f64::max)
+    }
+    #[inline(always)]
+    fn min(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        zip4(a, b, f64::min)
+    }
+    #[inline(always)]
+    fn abs(self, a: [f64; 4]) -> [f64; 4] {
+        zip4(a, a, |a, _| a.abs())
+    }
+    #[inline(always)]
+    fn ceil(self, a: [f64; 4]) -> [f64; 4] {
+        zip4(a, a, |a, _| a.ceil())
+    }
+    #[inline(always)]
+    fn floor(self, a: [f64; 4]) -> [f64; 4] {
+        zip4(a, a, |a, _| a.floor())
+    }
+    #[inline(always)]
+    fn ge(self, a: [f64; 4], b: [f64; 4]) -> u32 {
+        bits4(a, b, |a, b| a >= b)
+    }
+    #[inline(always)]
+    fn lt(self, a: [f64; 4], b: [f64; 4]) -> u32 {
+        bits4(a, b, |a, b| a < b)
+    }
+    #[inline(always)]
+    fn gt(self, a: [f64; 4], b: [f64; 4]) -> u32 {
+        bits4(a, b, |a, b| a > b)
+    }
+    #[inline(always)]
+    fn array(self, a: [f64; 4]) -> [f64; 4] {
+        a
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2_lanes {
+    //! [`Lanes4`] in AVX2 intrinsics.
+    use super::{Lanes4, Tri};
+    use crate::raster_edges::Avx2;
+    use std::arch::x86_64::*;
+
+    // SAFETY (every `unsafe` below): an `Avx2` exists only on a CPU with
+    // AVX2 (`Avx2::detect`), and the only memory access is the store into
+    // an array borrowed here.
+    impl Lanes4 for Avx2 {
+        type V = __m256d;
+        #[inline(always)]
+        fn splat(self, v: f64) -> __m256d {
+            unsafe { _mm256_set1_pd(v) }
+        }
+        #[inline(always)]
+        fn load(self, t: &[Tri; 4], i: usize, c: usize) -> __m256d {
+            // Widening f32 to f64 is exact, as `f64::from`.
+            let v = [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]];
+            unsafe { _mm256_cvtps_pd(_mm_set_ps(v[3], v[2], v[1], v[0])) }
+        }
+        #[inline(always)]
+        fn add(self, a: __m256d, b: __m256d) -> __m256d {
+            unsafe { _mm256_add_pd(a, b) }
+        }
+        #[inline(always)]
+        fn sub(self, a: __m256d, b: __m256d) -> __m256d {
+            unsafe { _mm256_sub_pd(a, b) }
+        }
+        #[inline(always)]
+        fn mul(self, a: __m256d, b: __m256d) -> __m256d {
+            unsafe { _mm256_mul_pd(a, b) }
+        }
+        #[inline(always)]
+        fn div(self, a: __m256d, b: __m256d) -> __m256d {
+            unsafe { _mm256_div_pd(a, b) }
+        }
+        #[inline(always)]
+        fn max(self, a: __m256d, b: __m256d) -> __m256d {
+            // `maxpd(b, a)` is `b > a ? b : a` (so `a` when `b` is NaN);
+            // the blend gives `b` when `a` is NaN: `f64::max`. (Of +0 and -0
+            // it gives `a`; either would do, the boxes depend on values only.)
+            unsafe {
+                let nan = _mm256_cmp_pd::<_CMP_UNORD_Q>(a, a);
+                _mm256_blendv_pd(_mm256_max_pd(b, a), b, nan)
+            }
+        }
+        #[inline(always)]
+        fn min(self, a: __m256d, b: __m256d) -> __m256d {
+            // As `max`, with `minpd(b, a) = b < a ? b : a`: `f64::min`.
+            unsafe {
+                let nan = _mm256_cmp_pd::<_CMP_UNORD_Q>(a, a);
+                _mm256_blendv_pd(_mm256_min_pd(b, a), b, nan)
+            }
+        }
+        #[inline(always)]
+        fn abs(self, a: __m256d) -> __m256d {
+            unsafe { _mm256_and_pd(a, _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX))) }
+        }
+        #[inline(always)]
+        fn ceil(self, a: __m256d) -> __m256d {
+            unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
+        }
+        #[inline(always)]
+        fn floor(self, a: __m256d) -> __m256d {
+            unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
+        }
+        #[inline(always)]
+        fn ge(self, a: __m256d, b: __m256d) -> u32 {
+            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(a, b)) as u32 }
+        }
+        #[inline(always)]
+        fn lt(self, a: __m256d, b: __m256d) -> u32 {
+            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(a, b)) as u32 }
+        }
+        #[inline(always)]
+        fn gt(self, a: __m256d, b: __m256d) -> u32 {
+            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(a, b)) as u32 }
+        }
+        #[inline(always)]
+        fn array(self, a: __m256d) -> [f64; 4] {
+            let mut out = [0.0; 4];
+            unsafe { _mm256_storeu_pd(out.as_mut_ptr(), a) };
+            out
+        }
+    }
+}
+
+/// Four lanes of [`Lanes4`] `L`, with the arithmetic operators (a scalar
+/// operand stands for itself in every lane), so that [`BoxMargin::bounds4`]
+/// reads as [`BoxMargin::bounds`].
+#[derive(Clone, Copy)]
+struct F4<L: Lanes4>(L::V, L);
+
+impl<L: Lanes4> F4<L> {
+    /// `f64::max` lane by lane.
+    #[inline(always)]
+    fn max(self, o: F4<L>) -> F4<L> {
+        F4(self.1.max(self.0, o.0), self.1)
+    }
+    /// `f64::min` lane by lane.
+    #[inline(always)]
+    fn min(self, o: F4<L>) -> F4<L> {
+        F4(self.1.min(self.0, o.0), self.1)
+    }
+    /// `f64::abs` lane by lane.
+    #[inline(always)]
+    fn abs(self) -> F4<L> {
+        F4(self.1.abs(self.0), self.1)
+    }
+    /// `f64::is_finite` lane by lane (as std: `|x| < ∞`), as bits.
+    #[inline(always)]
+    fn is_finite(self) -> u32 {
+        let l = self.1;
+        l.lt(l.abs(self.0), l.splat(f64::INFINITY))
+    }
+}
+
+/// Lane-wise `+ - * /` between [`F4`]s and with scalars on either side.
+macro_rules! f4_op {
+    ($tr:ident, $f:ident) => {
+        impl<L: Lanes4> std::ops::$tr for F4<L> {
+            type Output = F4<L>;
+            #[inline(always)]
+            fn $f(self, o: F4<L>) -> F4<L> {
+                F4(self.1.$f(self.0, o.0), self.1)
+            }
+        }
+        impl<L: Lanes4> std::ops::$tr<f64> for F4<L> {
+            type Output = F4<L>;
+            #[inline(always)]
+            fn $f(self, o: f64) -> F4<L> {
+                F4(self.1.$f(self.0, self.1.splat(o)), self.1)
+            }
+        }
+        impl<L: Lanes4> std::ops::$tr<F4<L>> for f64 {
+            type Output = F4<L>;
+            #[inline(always)]
+            fn $f(self, o: F4<L>) -> F4<L> {
+                F4(o.1.$f(o.1.splat(self), o.0), o.1)
+            }
+        }
+    };
+}
+f4_op!(Add, add);
+f4_op!(Sub, sub);
+f4_op!(Mul, mul);
+f4_op!(Div, div);
+
+/// The largest of three, as [`BoxMargin::bounds`] takes it (left to right).
+#[inline(always)]
+fn max3<L: Lanes4>(v: [F4<L>; 3]) -> F4<L> {
+    v[0].max(v[1]).max(v[2])
+}
+
+/// The smallest of three, as [`BoxMargin::bounds`] takes it (left to right).
+#[inline(always)]
+fn min3<L: Lanes4>(v: [F4<L>; 3]) -> F4<L> {
+    v[0].min(v[1]).min(v[2])
+}
+
+/// One axis of [`BoxMargin::finish`] for four triangles
+/// ([`BoxMargin::axis4`]), lane `j` in bit or element `j`.
+struct Axis4 {
+    /// The rounded ends and `μ` are finite (else: the whole image).
+    finite: u32,
+    /// The clamped ends are empty (else: no pixel).
+    empty: u32,
+    /// The clamped first pixel index.
+    lo: [f64; 4],
+    /// The clamped last pixel index.
+    hi: [f64; 4],
+}
+
+/// Vertex `i` of four triangles in camera space, as [`BoxMargin::bounds`]
+/// computes it: `x`, `y`, `z` (glam's `dot`: left to right) and `|q|_1`
+/// (`element_sum`: left to right) of `q = v - e`.
+#[inline(always)]
+fn vertex4<L: Lanes4>(l: L, cam: &Camera, t: &[Tri; 4], i: usize) -> [F4<L>; 4] {
+    let (e, r, u, f) = (cam.eye, cam.right, cam.up_ortho, cam.forward);
+    let qx = F4(l.load(t, i, 0), l) - e.x;
+    let qy = F4(l.load(t, i, 1), l) - e.y;
+    let qz = F4(l.load(t, i, 2), l) - e.z;
+    [
+        qx * r.x + qy * r.y + qz * r.z,
+        qx * u.x + qy * u.y + qz * u.z,
+        qx * f.x + qy * f.y + qz * f.z,
+        qx.abs() + qy.abs() + qz.abs(),
+    ]
+}
+
+impl BoxMargin {
+    /// [`BoxMargin::bounds`] of four triangles at once (the binning's hot
+    /// loop), for the common case that needs no clipping: writes triangle
+    /// `j`'s box to `out[j]`, or leaves `out[j]` alone and sets bit `j` of
+    /// the result when the triangle needs the scalar path (clipping, a depth
+    /// not known to a relative 1/2, a NaN depth). Each lane performs exactly
+    /// the scalar no-clipping path's operations, in the same order on the
+    /// same operands ([`Lanes4`]), then `finish`'s checks in its order, so
+    /// the boxes are the same bit for bit.
+    #[inline(always)]
+    fn bounds4<L: Lanes4>(
+        &self,
+        l: L,
+        cam: &Camera,
+        t: &[Tri; 4],
+        out: &mut [Option<PixelRect>; 4],
+    ) -> u32 {
+        let p = [
+            vertex4(l, cam, t, 0),
+            vertex4(l, cam, t, 1),
+            vertex4(l, cam, t, 2),
+        ];
+        let zmin = l.splat(cam.near * (1.0 - 1e-6));
+        let far = l.splat(cam.far * (1.0 + 1e-6));
+        let (mut kept, mut beyond) = (0b1111, if cam.far.is_finite() { 0b1111 } else { 0 });
+        for pi in &p {
+            kept &= l.ge(pi[2].0, zmin) & l.lt((16.0 * U * pi[3]).0, pi[2].0);
+            beyond &= l.gt(pi[2].0, far);
+        }
+        let iz = [1.0 / p[0][2], 1.0 / p[1][2], 1.0 / p[2][2]];
+        let sx = [p[0][0] * iz[0], p[1][0] * iz[1], p[2][0] * iz[2]];
+        let sy = [p[0][1] * iz[0], p[1][1] * iz[1], p[2][1] * iz[2]];
+        let (s0, h0, s1, h1) = (self.scale[0], self.half[0], self.scale[1], self.half[1]);
+        let px = [sx[0] * s0 + h0, sx[1] * s0 + h0, sx[2] * s0 + h0];
+        let py = [h1 - sy[0] * s1, h1 - sy[1] * s1, h1 - sy[2] * s1];
+        let mi = max3([p[0][3] * iz[0], p[1][3] * iz[1], p[2][3] * iz[2]]);
+        let sm = [
+            max3([sx[0].abs(), sx[1].abs(), sx[2].abs()]),
+            max3([sy[0].abs(), sy[1].abs(), sy[2].abs()]),
+        ];
+        let x = self.axis4(cam, 0, min3(px), max3(px), mi, sm[0]);
+        let y = self.axis4(cam, 1, min3(py), max3(py), mi, sm[1]);
+        // The common case, both axes finite, and the lanes left to `bounds`.
+        let common = kept & !beyond & x.finite & y.finite;
+        let empty = x.empty | y.empty;
+        for (j, o) in out.iter_mut().enumerate() {
+            let rect = PixelRect {
+                x0: x.lo[j] as u32,
+                y0: y.lo[j] as u32,
+                x1: x.hi[j] as u32,
+                y1: y.hi[j] as u32,
+            };
+            let bit = 1 << j;
+            if common & bit != 0 {
+                *o = (empty & bit == 0).then_some(rect);
+            } else if kept & bit != 0 {
+                // `bounds`' far test, then `finish`'s tests in its order.
+                *o = if beyond & bit != 0 || x.finite & x.empty & bit != 0 {
+                    None
+                } else if (x.finite & y.finite & bit) == 0 {
+                    Some(PixelRect {
+                        x0: 0,
+                        y0: 0,
+                        x1: cam.width - 1,
+                        y1: cam.height - 1,
+                    })
+                } else {
+                    (empty & bit == 0).then_some(rect)
+                };
+            }
+        }
+        !kept & 0b1111
+    }
+
+    /// `bounds`' error `err` and [`BoxMargin::finish`]'s steps for axis `k`
+    /// of four triangles, from their projected extents `[lo, hi]`, largest
+    /// `|q|_1 / z` `mi` and largest `|s|` `sm`.
+    #[inline(always)]
+    fn axis4<L: Lanes4>(
+        &self,
+        cam: &Camera,
+        k: usize,
+        lo: F4<L>,
+        hi: F4<L>,
+        mi: F4<L>,
+        sm: F4<L>,
+    ) -> Axis4 {
+        let l = lo.1;
+        let err = self.scale[k] * 8.0 * U * (mi * (1.0 + sm) + sm)
+            + 4.0 * U * (lo.abs().max(hi.abs()) + 2.0 * self.half[k]);
+        let mu = self.factor * (self.center[k] + 2.0 * err);
+        let a = F4(l.ceil((lo - mu - 0.5).0), l);
+        let b = F4(l.floor((hi + mu - 0.5).0), l);
+        let finite = a.is_finite() & b.is_finite() & mu.is_finite();
+        let last = f64::from([cam.width, cam.height][k]) - 1.0;
+        let (a, b) = (l.max(a.0, l.splat(0.0)), l.min(b.0, l.splat(last)));
+        Axis4 {
+            finite,
+            empty: l.gt(a, b),
+            lo: l.array(a),
+            hi: l.array(b),
+        }
+    }
+}
+
 /// [`BoxMargin::bounds`] of each triangle of `tris` into `out` (`None` for
-/// degenerate ones, and the whole image for all when `margin` is `None`); on
-/// x86-64 CPUs with AVX2 compiled for it (rounding to integers is then one
-/// instruction; the arithmetic is the same).
+/// degenerate ones, and the whole image for all when `margin` is `None`):
+/// the binning's first step. Four triangles at a time through
+/// `BoxMargin::bounds4` (the scalar [`BoxMargin::bounds`] for lanes that
+/// need clipping), in AVX2 on x86-64 CPUs that have it (the arithmetic is
+/// the same).
 pub fn bounds_into(
     cam: &Camera,
     tris: &[Tri],
@@ -265,44 +697,310 @@ pub fn bounds_into(
     out: &mut [Option<PixelRect>],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if crate::raster_edges::Avx2::detect().is_some() {
+    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
         // SAFETY: the CPU has AVX2 (just detected).
-        return unsafe { bounds_avx2(cam, tris, degenerate, margin, out) };
+        return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out) };
     }
-    bounds_chunk(cam, tris, degenerate, margin, out)
+    bounds_chunk(Plain4, cam, tris, degenerate, margin, out)
 }
 
+/// [`bounds_chunk`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn bounds_avx2(
+    avx2: crate::raster_edges::Avx2,
     cam: &Camera,
     tris: &[Tri],
     deg: &[bool],
     margin: Option<BoxMargin>,
     out: &mut [Option<PixelRect>],
 ) {
-    bounds_chunk(cam, tris, deg, margin, out)
+    bounds_chunk(avx2, cam, tris, deg, margin, out)
 }
 
+/// [`bounds_into`] with the lanes `l`.
 #[inline(always)]
-fn bounds_chunk(
+fn bounds_chunk<L: Lanes4>(
+    l: L,
     cam: &Camera,
     tris: &[Tri],
     deg: &[bool],
     margin: Option<BoxMargin>,
     out: &mut [Option<PixelRect>],
 ) {
-    let whole = PixelRect {
-        x0: 0,
-        y0: 0,
-        x1: cam.width - 1,
-        y1: cam.height - 1,
-    };
-    for ((o, t), &d) in out.iter_mut().zip(tris).zip(deg) {
-        *o = match (d, &margin) {
-            (true, _) => None,
-            (false, Some(m)) => m.bounds(cam, t),
-            (false, None) => Some(whole),
+    let n = out.len().min(tris.len()).min(deg.len());
+    let (out, tris, deg) = (&mut out[..n], &tris[..n], &deg[..n]);
+    let Some(m) = margin else {
+        let whole = PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: cam.width - 1,
+            y1: cam.height - 1,
         };
+        for (o, &d) in out.iter_mut().zip(deg) {
+            *o = (!d).then_some(whole);
+        }
+        return;
+    };
+    let (mut o4, mut t4, mut d4) = (
+        out.chunks_exact_mut(4),
+        tris.chunks_exact(4),
+        deg.chunks_exact(4),
+    );
+    for ((o, t), d) in (&mut o4).zip(&mut t4).zip(&mut d4) {
+        let (o, t): (&mut [_; 4], &[Tri; 4]) = (o.try_into().unwrap(), t.try_into().unwrap());
+        let scalar = m.bounds4(l, cam, t, o);
+        for j in 0..4 {
+            if d[j] {
+                o[j] = None;
+            } else if scalar & (1 << j) != 0 {
+                o[j] = m.bounds(cam, &t[j]);
+            }
+        }
+    }
+    let rest = o4
+        .into_remainder()
+        .iter_mut()
+        .zip(t4.remainder())
+        .zip(d4.remainder());
+    for ((o, t), &d) in rest {
+        *o = if d { None } else { m.bounds(cam, t) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// Uniform in [0, 1) (xorshift64*).
+    fn rand(s: &mut u64) -> f64 {
+        *s ^= *s >> 12;
+        *s ^= *s << 25;
+        *s ^= *s >> 27;
+        (s.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// A point within `r` of `c` in each coordinate.
+    fn near(s: &mut u64, c: DVec3, r: f64) -> DVec3 {
+        c + DVec3::new(rand(s) - 0.5, rand(s) - 0.5, rand(s) - 0.5) * (2.0 * r)
+    }
+
+    /// The cameras: exact 90°, tilted non-dyadic, far from the origin, a
+    /// finite far plane, a tiny near plane, a full-HD image.
+    fn cameras() -> Vec<Camera> {
+        let inf = f64::INFINITY;
+        let o = DVec3::new(1e7, -1e7, 1e7);
+        let cam = |e: DVec3, at: DVec3, vfov, w, h, n, f| {
+            Camera::new(e, at, DVec3::Y, vfov, w, h, n, f).unwrap()
+        };
+        vec![
+            cam(DVec3::Z * 3.0, DVec3::ZERO, 90.0, 64, 48, 1e-3, inf),
+            cam(
+                DVec3::new(0.4, -1.1, 3.0),
+                DVec3::new(0.1, 0.2, -0.3),
+                47.3,
+                61,
+                37,
+                1e-3,
+                inf,
+            ),
+            cam(o + DVec3::new(0.4, -1.1, 3.0), o, 45.0, 50, 40, 1e-3, inf),
+            cam(
+                DVec3::new(-3.0, 0.2, 0.1),
+                DVec3::ZERO,
+                50.0,
+                40,
+                40,
+                0.5,
+                4.0,
+            ),
+            cam(
+                DVec3::new(0.3, 0.7, 2.0),
+                DVec3::ZERO,
+                60.0,
+                33,
+                65,
+                1e-9,
+                inf,
+            ),
+            cam(
+                DVec3::new(0.0, 1.2, 3.2),
+                DVec3::Y * 0.1,
+                45.0,
+                1920,
+                1080,
+                1e-3,
+                inf,
+            ),
+        ]
+    }
+
+    /// Every kind of triangle the binning meets, in random order.
+    fn triangles(cam: &Camera, seed: u64, n: usize) -> Vec<Tri> {
+        let mut s = seed | 1;
+        let s = &mut s;
+        let (e, f) = (cam.eye, cam.forward);
+        let depth = if cam.far.is_finite() { cam.far } else { 20.0 };
+        let mut out = Vec::with_capacity(n);
+        while out.len() < n {
+            let kind = (rand(s) * 10.0) as u32;
+            let c = near(s, cam.look_at, 2.0);
+            let t: [DVec3; 3] = match kind {
+                // Random, around what the camera looks at.
+                0 => [near(s, c, 1.0), near(s, c, 1.0), near(s, c, 1.0)],
+                // Sub-pixel.
+                1 => {
+                    let r = 1e-3 * rand(s);
+                    [near(s, c, r), near(s, c, r), near(s, c, r)]
+                }
+                // Huge.
+                2 => [near(s, c, 1e4), near(s, c, 1e4), near(s, c, 1e3)],
+                // Behind the eye.
+                3 => {
+                    let b = e - f * (0.5 + rand(s));
+                    [near(s, b, 0.3), near(s, b, 0.3), near(s, b, 0.3)]
+                }
+                // Crossing or touching the near plane.
+                4 => {
+                    let z = cam.near
+                        * [1.0, 1.0 - 1e-6, 1.0 + 1e-9, 4.0 * rand(s) - 2.0]
+                            [(rand(s) * 4.0) as usize];
+                    let a = e + f * z + near(s, DVec3::ZERO, cam.near);
+                    [a, near(s, c, 0.5), near(s, c, 0.5)]
+                }
+                // Around the far plane (or far away).
+                5 => {
+                    let b = e + f * depth * (0.9 + 0.2 * rand(s));
+                    let r = 0.05 * depth;
+                    [near(s, b, r), near(s, b, r), near(s, b, r)]
+                }
+                // Degenerate but finite: a point, a segment.
+                6 => {
+                    let d = near(s, DVec3::ZERO, 0.1);
+                    if rand(s) < 0.5 {
+                        [c; 3]
+                    } else {
+                        [c, c + d, c + d * 2.0]
+                    }
+                }
+                // Straddling the image's borders: on the border pixels' rays.
+                7 | 8 => {
+                    let (w, h) = (cam.width - 1, cam.height - 1);
+                    let (x, y) = match (rand(s) * 4.0) as u32 {
+                        0 => (0, (rand(s) * f64::from(h)) as u32),
+                        1 => (w, (rand(s) * f64::from(h)) as u32),
+                        2 => ((rand(s) * f64::from(w)) as u32, 0),
+                        _ => ((rand(s) * f64::from(w)) as u32, h),
+                    };
+                    let p = e + cam.pixel_ray(x, y).dir * (0.5 + 4.0 * rand(s));
+                    let r = [1e-4, 1e-2, 0.5][(rand(s) * 3.0) as usize];
+                    [near(s, p, r), near(s, p, r), near(s, p, r)]
+                }
+                // In front, spread over the view at any depth.
+                _ => {
+                    let p = e + f * (cam.near + 10.0 * rand(s)) + near(s, DVec3::ZERO, 3.0);
+                    let r = 0.1 * rand(s);
+                    [near(s, p, r), near(s, p, r), near(s, p, r)]
+                }
+            };
+            out.push(t.map(|v| v.as_vec3()));
+        }
+        out
+    }
+
+    /// The batched path ([`bounds_into`], portable and AVX2) gives every
+    /// triangle exactly [`BoxMargin::bounds`]' box, under every camera,
+    /// margin factor, degenerate flag and batch remainder; and the batched
+    /// lanes really do most of the work.
+    #[test]
+    fn batched_bounds_match_scalar() {
+        for (ci, cam) in cameras().iter().enumerate() {
+            let tris = triangles(cam, 0x9e37_79b9 + ci as u64, 20_000);
+            let deg: Vec<bool> = (0..tris.len()).map(|i| i % 17 == 5).collect();
+            let base = BoxMargin::new(cam);
+            for margin in [
+                Some(base),
+                Some(base.scaled(0.0)),
+                Some(base.scaled(3.0)),
+                None,
+            ] {
+                let whole = PixelRect {
+                    x0: 0,
+                    y0: 0,
+                    x1: cam.width - 1,
+                    y1: cam.height - 1,
+                };
+                let want: Vec<_> = (0..tris.len())
+                    .map(|i| match (deg[i], margin) {
+                        (true, _) => None,
+                        (false, Some(m)) => m.bounds(cam, &tris[i]),
+                        (false, None) => Some(whole),
+                    })
+                    .collect();
+                for len in [tris.len(), tris.len() - 1, tris.len() - 3, 2] {
+                    let (t, d) = (&tris[..len], &deg[..len]);
+                    let mut got = vec![Some(whole); len];
+                    bounds_chunk(Plain4, cam, t, d, margin, &mut got);
+                    assert_eq!(got, want[..len], "portable, camera {ci}");
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+                        let mut got = vec![Some(whole); len];
+                        // SAFETY: the CPU has AVX2 (just detected).
+                        unsafe { bounds_avx2(avx2, cam, t, d, margin, &mut got) };
+                        assert_eq!(got, want[..len], "AVX2, camera {ci}");
+                    }
+                    let mut got = vec![None; len];
+                    bounds_into(cam, t, d, margin, &mut got);
+                    assert_eq!(got, want[..len], "bounds_into, camera {ci}");
+                }
+            }
+            // Most lanes are decided by the batch, not left to `bounds`.
+            let mut batched = 0;
+            for t in tris.chunks_exact(4) {
+                let mut o = [None; 4];
+                batched += 4 - base
+                    .bounds4(Plain4, cam, t.try_into().unwrap(), &mut o)
+                    .count_ones();
+            }
+            assert!(
+                batched as usize > tris.len() / 2,
+                "camera {ci}: {batched} batched"
+            );
+        }
+    }
+
+    /// Lanes with NaN or infinite coordinates give the scalar boxes too.
+    #[test]
+    fn non_finite_lanes_match_scalar() {
+        let cam = &cameras()[1];
+        let m = BoxMargin::new(cam);
+        let good = [
+            Vec3::new(0.1, 0.2, 0.0),
+            Vec3::new(0.3, 0.1, 0.0),
+            Vec3::new(0.2, 0.4, 0.1),
+        ];
+        let mut tris = Vec::new();
+        for bad in [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN_POSITIVE,
+        ] {
+            for k in 0..9 {
+                let mut t = good;
+                t[k / 3][k % 3] = bad;
+                tris.extend([good, t, good, good]);
+            }
+        }
+        let deg = vec![false; tris.len()];
+        let want: Vec<_> = tris.iter().map(|t| m.bounds(cam, t)).collect();
+        let mut got = vec![None; tris.len()];
+        bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got);
+        assert_eq!(got, want);
+        let mut got = vec![None; tris.len()];
+        bounds_into(cam, &tris, &deg, Some(m), &mut got);
+        assert_eq!(got, want);
     }
 }

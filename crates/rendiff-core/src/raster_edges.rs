@@ -96,6 +96,57 @@ pub const CHUNK: usize = 8;
 pub trait Lanes: Copy {
     /// Bit `j` set where `a[j] > b` (false for NaN).
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32;
+
+    /// Over `v`: the largest `|v_i|` that is not NaN (0 when none), whether
+    /// some `v_i` is NaN or infinite, and whether some is subnormal (a tile
+    /// row's direction components, for [`TileRays`]).
+    #[inline(always)]
+    fn row_stats(self, v: &[f64]) -> RowStats {
+        row_stats_scalar(v)
+    }
+
+    /// [`ChunkDepth`]'s shortcut over 8 lanes in wide registers: the
+    /// depths, the mask of lanes with a depth, and the mask of lanes the
+    /// clamp-free test settles (whose depths alone are meaningful); `None`
+    /// where there is no such code (the lane loop then does it all).
+    #[inline(always)]
+    fn clamp_free_depths(
+        self,
+        _cd: &ChunkDepth,
+        _cam: &Camera,
+        _d: [&[f64; CHUNK]; 3],
+        _planar: &[f64; CHUNK],
+    ) -> Option<([f32; CHUNK], u32, u32)> {
+        None
+    }
+}
+
+/// What [`Lanes::row_stats`] finds in a row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RowStats {
+    /// The largest magnitude that is not NaN.
+    pub max: f64,
+    /// Some value is NaN or infinite.
+    pub non_finite: bool,
+    /// Some value is subnormal.
+    pub subnormal: bool,
+}
+
+/// [`Lanes::row_stats`] one value at a time.
+#[inline(always)]
+fn row_stats_scalar(v: &[f64]) -> RowStats {
+    let mut out = RowStats {
+        max: 0.0,
+        non_finite: false,
+        subnormal: false,
+    };
+    for &x in v {
+        let a = x.abs();
+        out.max = if a > out.max { a } else { out.max };
+        out.non_finite |= !a.is_finite();
+        out.subnormal |= a != 0.0 && a < f64::MIN_POSITIVE;
+    }
+    out
 }
 
 /// [`Lanes`] in plain Rust, for any CPU.
@@ -140,6 +191,105 @@ impl Lanes for Avx2 {
             (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32
         }
     }
+
+    #[inline(always)]
+    fn row_stats(self, v: &[f64]) -> RowStats {
+        use std::arch::x86_64::*;
+        let mut quads = v.chunks_exact(4);
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; each load reads
+        // the 4 f64 of a chunk of `v`, the stores 4 f64 into local arrays.
+        let (mut out, rest) = unsafe {
+            let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+            let (zero, one) = (_mm256_setzero_pd(), _mm256_set1_pd(1.0));
+            let inf = _mm256_set1_pd(f64::INFINITY);
+            let (mut max, mut min_nz, mut bad) = (zero, one, zero);
+            for q in &mut quads {
+                let a = _mm256_and_pd(_mm256_loadu_pd(q.as_ptr()), abs_mask);
+                // maxpd(a, max) returns `max` where `a` is NaN.
+                max = _mm256_max_pd(a, max);
+                // Zeros count as 1 (not subnormal); NaN compares false.
+                let nz = _mm256_blendv_pd(a, one, _mm256_cmp_pd::<_CMP_EQ_OQ>(a, zero));
+                min_nz = _mm256_min_pd(nz, min_nz);
+                // Not below infinity: NaN or infinite.
+                bad = _mm256_or_pd(bad, _mm256_cmp_pd::<_CMP_NLT_UQ>(a, inf));
+            }
+            let mut m = [0.0; 4];
+            let mut n = [0.0; 4];
+            _mm256_storeu_pd(m.as_mut_ptr(), max);
+            _mm256_storeu_pd(n.as_mut_ptr(), min_nz);
+            let out = RowStats {
+                max: m.into_iter().fold(0.0, |x, y| if y > x { y } else { x }),
+                non_finite: _mm256_movemask_pd(bad) != 0,
+                subnormal: n.iter().any(|&x| x < f64::MIN_POSITIVE),
+            };
+            (out, quads.remainder())
+        };
+        let r = row_stats_scalar(rest);
+        out.max = if r.max > out.max { r.max } else { out.max };
+        out.non_finite |= r.non_finite;
+        out.subnormal |= r.subnormal;
+        out
+    }
+
+    #[inline(always)]
+    fn clamp_free_depths(
+        self,
+        cd: &ChunkDepth,
+        cam: &Camera,
+        d: [&[f64; CHUNK]; 3],
+        planar: &[f64; CHUNK],
+    ) -> Option<([f32; CHUNK], u32, u32)> {
+        use std::arch::x86_64::*;
+        let mut z = [0f32; CHUNK];
+        let (mut ok, mut free) = (0u32, 0u32);
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the loads read
+        // 4 f64 of the borrowed 8-lane arrays, the stores write 4 f32 of `z`.
+        // Each lane is `ChunkDepth::lanes`' arithmetic, operation for
+        // operation (mul, add, div, compares; `cvtpd2ps` rounds to nearest
+        // like `as f32`, `cvtps2pd` is exact).
+        unsafe {
+            let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+            let n = cd.normal.map(|v| _mm256_set1_pd(v));
+            let num = _mm256_set1_pd(cd.num);
+            let lo = cd.clamp_free_lo.map(|v| _mm256_set1_pd(v));
+            let hi = cd.clamp_free_hi.map(|v| _mm256_set1_pd(v));
+            let max_t = _mm256_set1_pd(CLAMP_FREE_MAX_T);
+            let (zero, inf) = (_mm256_setzero_pd(), _mm256_set1_pd(f64::INFINITY));
+            let (near, far) = (_mm256_set1_pd(cam.near), _mm256_set1_pd(cam.far));
+            for h in 0..2 {
+                let dk = d.map(|a| _mm256_loadu_pd(a.as_ptr().add(4 * h)));
+                // DVec3::dot: x*x' + y*y' + z*z', left to right.
+                let denom = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(n[0], dk[0]), _mm256_mul_pd(n[1], dk[1])),
+                    _mm256_mul_pd(n[2], dk[2]),
+                );
+                let t = _mm256_div_pd(num, denom);
+                let mut f = _mm256_cmp_pd::<_CMP_LE_OQ>(_mm256_and_pd(t, abs_mask), max_t);
+                for k in 0..3 {
+                    let q = _mm256_mul_pd(t, dk[k]);
+                    f = _mm256_and_pd(f, _mm256_cmp_pd::<_CMP_GE_OQ>(q, lo[k]));
+                    f = _mm256_and_pd(f, _mm256_cmp_pd::<_CMP_LE_OQ>(q, hi[k]));
+                }
+                let valid = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_NEQ_OQ>(denom, zero),
+                    _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_and_pd(denom, abs_mask), inf),
+                );
+                let zs = _mm256_cvtpd_ps(_mm256_mul_pd(
+                    t,
+                    _mm256_loadu_pd(planar.as_ptr().add(4 * h)),
+                ));
+                _mm_storeu_ps(z.as_mut_ptr().add(4 * h), zs);
+                let zf = _mm256_cvtps_pd(zs);
+                let in_range = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_GE_OQ>(zf, near),
+                    _mm256_cmp_pd::<_CMP_LE_OQ>(zf, far),
+                );
+                ok |= (_mm256_movemask_pd(_mm256_and_pd(valid, in_range)) as u32) << (4 * h);
+                free |= (_mm256_movemask_pd(f) as u32) << (4 * h);
+            }
+        }
+        Some((z, ok, free))
+    }
 }
 
 /// The pixel rays of one tile, by component (structure of arrays with a fixed
@@ -183,14 +333,14 @@ impl TileRays {
     #[inline(always)]
     pub fn new(cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) -> TileRays {
         let mut t = TileRays::default();
-        t.fill(cam, x0, y0, tw, th);
+        t.fill(Portable, cam, x0, y0, tw, th);
         t
     }
 
     /// [`TileRays::new`] into this one's buffers (a band of tiles reuses
     /// them: no allocation or zeroing per tile; start from `default()`).
     #[inline(always)]
-    pub fn fill(&mut self, cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) {
+    pub fn fill<L: Lanes>(&mut self, l: L, cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) {
         let (width, rows) = (tw as usize, th as usize);
         let stride = width + CHUNK - 1;
         let n = stride * rows;
@@ -225,34 +375,23 @@ impl TileRays {
                 for (d, &sx) in d.iter_mut().zip(&t.sx) {
                     *d = (ek + ((fk + rk * sx) + uk * sy)) - ek;
                 }
-                // Lane-parallel (so that it vectorizes): the largest |D_k|,
-                // whether any is NaN (a NaN direction leaves a NaN bound,
-                // which decides nothing) or subnormal. Padding lanes repeat
-                // the last column, so they may be left out.
-                let (mut m, mut nan, mut tiny) = ([0.0; CHUNK], [false; CHUNK], [false; CHUNK]);
-                let mut lanes = |c: &[f64]| {
-                    for (j, &v) in c.iter().enumerate() {
-                        let a = v.abs();
-                        m[j] = if a > m[j] { a } else { m[j] };
-                        nan[j] |= a.is_nan();
-                        tiny[j] |= (a < f64::MIN_POSITIVE) & (a != 0.0);
-                    }
-                };
-                let mut whole = d[..width].chunks_exact(CHUNK);
-                for c in &mut whole {
-                    lanes(<&[f64; CHUNK]>::try_from(c).unwrap());
-                }
-                lanes(whole.remainder());
+                // Padding lanes repeat the last column, so they may be left out.
+                let r = l.row_stats(&d[..width]);
+                // A NaN or infinite direction leaves a NaN bound, which
+                // decides nothing (as an infinite one would).
                 let old = t.max_abs[k];
-                let m = m.into_iter().fold(old, f64::max);
-                let nan = old.is_nan() || nan.contains(&true);
-                t.max_abs[k] = if nan { f64::NAN } else { m };
-                t.subnormal |= tiny.contains(&true);
+                t.max_abs[k] = if r.non_finite || old.is_nan() {
+                    f64::NAN
+                } else {
+                    old.max(r.max)
+                };
+                t.subnormal |= r.subnormal;
             }
-            let [dx, dy, dz] = [0, 1, 2].map(|k| &t.d[k][row.clone()]);
+            let [dx, dy, dz] = &t.d;
+            let (dx, dy, dz) = (&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]);
             // DVec3::dot(D, forward).
-            for (lx, p) in t.planar[row.clone()].iter_mut().enumerate() {
-                *p = dx[lx] * f.x + dy[lx] * f.y + dz[lx] * f.z;
+            for (((p, &x), &y), &z) in t.planar[row.clone()].iter_mut().zip(dx).zip(dy).zip(dz) {
+                *p = x * f.x + y * f.y + z * f.z;
             }
         }
     }
@@ -433,8 +572,9 @@ impl ChunkDepth {
     /// mask of lanes where [`TriDepth::depth`] is `Some`; exact for the
     /// lanes in `need` (the others may take the shortcut unproven).
     #[inline(always)]
-    pub fn depths(
+    pub fn depths<L: Lanes>(
         &self,
+        l: L,
         cam: &Camera,
         rays: &TileRays,
         row: usize,
@@ -442,9 +582,19 @@ impl ChunkDepth {
         need: u32,
     ) -> ([f32; CHUNK], u32) {
         let at = row * rays.stride + col;
-        let lane = |a: &Vec<f64>| -> [f64; CHUNK] { a[at..at + CHUNK].try_into().unwrap() };
-        let d = [lane(&rays.d[0]), lane(&rays.d[1]), lane(&rays.d[2])];
-        self.lanes(cam, d, lane(&rays.planar), need, rays.subnormal)
+        fn lane(a: &[f64], at: usize) -> &[f64; CHUNK] {
+            a[at..at + CHUNK].try_into().unwrap()
+        }
+        let d = [0, 1, 2].map(|k| lane(&rays.d[k], at));
+        let planar = lane(&rays.planar, at);
+        if !rays.subnormal {
+            if let Some((z, ok, free)) = l.clamp_free_depths(self, cam, d, planar) {
+                if need & !free == 0 {
+                    return (z, ok);
+                }
+            }
+        }
+        self.lanes(cam, d.map(|v| *v), *planar, need, rays.subnormal)
     }
 
     /// [`TriDepth::depth`] of tile pixel `(lx, ly)` (boxes of a few pixels).
@@ -630,7 +780,10 @@ impl FastEdges {
         let mut out = ChunkSigns::default();
         for k in 0..3 {
             let [nx, ny, nz] = self.n[k];
-            let det = c.map(|at| dirs.d[0][at] * nx + dirs.d[1][at] * ny + dirs.d[2][at] * nz);
+            let mut det = [0.0; 4];
+            for (det, &at) in det.iter_mut().zip(&c) {
+                *det = dirs.d[0][at] * nx + dirs.d[1][at] * ny + dirs.d[2][at] * nz;
+            }
             let b = self.block[k];
             // NaN fails both.
             let pos = det.iter().all(|&d| d > b);
@@ -695,6 +848,58 @@ mod tests {
                 assert_eq!(avx.gt(&a, b), want, "{a:?} > {b}");
             }
         }
+    }
+
+    /// Both [`Lanes`] give the same row statistics, whatever the length
+    /// (whole and partial vectors), with zeros, subnormals, infinities and NaN.
+    #[test]
+    fn row_stats_agree() {
+        let vals = [
+            0.0,
+            -0.0,
+            1.5,
+            -3.0,
+            f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE / 4.0,
+            -f64::MIN_POSITIVE / 2.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            7e300,
+        ];
+        let mut s = 9u64;
+        let mut seen = [false; 3];
+        for len in 0..40 {
+            for _ in 0..200 {
+                // Mostly ordinary values, so each flag is sometimes unset.
+                let v: Vec<f64> = (0..len)
+                    .map(|_| {
+                        let r = lcg(&mut s);
+                        if r > -0.9 {
+                            r * 2.0
+                        } else {
+                            vals[((lcg(&mut s) + 1.0) * 5.5) as usize % vals.len()]
+                        }
+                    })
+                    .collect();
+                let want = row_stats_scalar(&v);
+                assert_eq!(Portable.row_stats(&v), want);
+                #[cfg(target_arch = "x86_64")]
+                if let Some(avx) = Avx2::detect() {
+                    assert_eq!(avx.row_stats(&v), want, "{v:?}");
+                }
+                let finite_max = v
+                    .iter()
+                    .map(|x| x.abs())
+                    .filter(|a| !a.is_nan())
+                    .fold(0.0, f64::max);
+                assert_eq!(want.max, finite_max);
+                seen[0] |= want.non_finite;
+                seen[1] |= want.subnormal;
+                seen[2] |= !want.non_finite && !want.subnormal;
+            }
+        }
+        assert_eq!(seen, [true; 3]);
     }
 
     /// Every ray of a tile is [`Camera::pixel_ray`]'s, bit for bit, borders included.
@@ -934,7 +1139,13 @@ mod tests {
                 for col in (0..tw as usize).step_by(CHUNK) {
                     // One lane at a time, so each lane's path is known.
                     for j in 0..CHUNK.min(tw as usize - col) {
-                        let (z, ok) = d.depths(cam, &rays, row, col, 1 << j);
+                        let (z, ok) = d.depths(Portable, cam, &rays, row, col, 1 << j);
+                        #[cfg(target_arch = "x86_64")]
+                        if let Some(avx) = Avx2::detect() {
+                            let wide = d.depths(avx, cam, &rays, row, col, 1 << j);
+                            assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
+                            assert_eq!(wide.1 & (1 << j), ok & (1 << j));
+                        }
                         let want = scalar.depth(cam, &cam.pixel_ray((col + j) as u32, row as u32));
                         let got = ((ok >> j) & 1 == 1).then_some(z[j]);
                         let at = row * rays.stride + col + j;
