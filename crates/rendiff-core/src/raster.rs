@@ -148,7 +148,9 @@ fn keys_impl(
     let tiles_y = h.div_ceil(TILE);
     let bins = Bins::new(scene, margin, tiles_x, tiles_y);
     let band = (w * TILE) as usize;
-    let mut keys = vec![NO_HIT; cam.pixel_count()];
+    // Fresh zero pages, each band filling its own with NO_HIT: no serial
+    // fill before the parallel loop (as the tracer's key buffer).
+    let mut keys = vec![0u64; cam.pixel_count()];
     let mut coverage = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
     let mut cov_bands: Vec<&mut [[u16; 2]]> = if opts.count_coverage {
         coverage.chunks_mut(band).collect()
@@ -160,6 +162,7 @@ fn keys_impl(
         .zip(cov_bands.par_iter_mut())
         .enumerate()
         .map(|(ty, (kband, cband))| {
+            kband.fill(NO_HIT);
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
@@ -306,17 +309,17 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
         if !self.on {
             return false;
         }
-        // The largest key in the box: NO_HIT (the largest key) when a pixel is empty.
-        let highest = (ly0..=ly1)
-            .map(|ly| {
-                let row = out.at(lx0, ly);
-                out.keys[row..=row + (lx1 - lx0)]
-                    .iter()
-                    .fold(0, |m, &k| m.max(k))
-            })
-            .fold(0, u64::max);
-        if highest == NO_HIT {
-            return false;
+        // The largest key in the box, row by row: NO_HIT (the largest key)
+        // as soon as a row has an empty pixel.
+        let mut highest = 0;
+        for ly in ly0..=ly1 {
+            let row = out.at(lx0, ly);
+            highest = out.keys[row..=row + (lx1 - lx0)]
+                .iter()
+                .fold(highest, |m, &k| m.max(k));
+            if highest == NO_HIT {
+                return false;
+            }
         }
         let (make, factor) = (&mut self.make, self.factor);
         let bound = self
@@ -442,6 +445,18 @@ fn fast_tile<L: Lanes>(
                 let block = (full_rows && span == 0xff)
                     .then(|| f.block(rays, r0, base))
                     .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff);
+                if block.is_some_and(|g| g.rejected() == 0) && out.cov.is_empty() {
+                    let d =
+                        depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+                    if covered_block(l, cam, prim, rays, d, (r0, base), out) {
+                        // What 64 settled, covered lanes count (`chunk_hits`).
+                        let n = (CHUNK * CHUNK) as u64;
+                        c.coverage_tests += n;
+                        c.fast_decided += n;
+                        c.covered += n;
+                        continue;
+                    }
+                }
                 for ly in r0..=r1 {
                     let sg = match block {
                         Some(g) => g,
@@ -454,6 +469,44 @@ fn fast_tile<L: Lanes>(
             }
         }
     }
+}
+
+/// An 8x8 block (top-left tile pixel `(base, r0)`) the triangle covers
+/// whole, by certain signs: the depths of its 64 pixels computed before any
+/// is tested (so their divisions overlap), and the keys updated, when the
+/// clamp-free shortcut settles every one of them ([`ChunkDepth`]); false,
+/// with nothing written, when some lane needs the slab (the caller then
+/// takes the block row by row).
+#[inline(always)]
+fn covered_block<L: Lanes>(
+    l: L,
+    cam: &Camera,
+    prim: u32,
+    rays: &TileRays,
+    d: &ChunkDepth,
+    (r0, base): (usize, usize),
+    out: &mut TileOut,
+) -> bool {
+    let mut z = [[0f32; CHUNK]; CHUNK];
+    let (mut ok, mut free) = ([0u32; CHUNK], 0xffu32);
+    for (i, (z, ok)) in z.iter_mut().zip(&mut ok).enumerate() {
+        match d.clamp_free(l, cam, rays, r0 + i, base) {
+            Some((zi, oki, fi)) => {
+                (*z, *ok) = (zi, oki);
+                free &= fi;
+            }
+            None => return false,
+        }
+    }
+    if free != 0xff {
+        return false;
+    }
+    for (i, (z, &ok)) in z.iter().zip(&ok).enumerate() {
+        let row = out.at(base, r0 + i);
+        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
+        l.min_keys(keys, z, ok, prim);
+    }
+    true
 }
 
 /// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as
@@ -553,17 +606,9 @@ fn chunk_hits<L: Lanes>(
     let mut m = (back | front) & ok;
     let row = out.at(base, ly);
     if span == 0xff && out.cov.is_empty() {
-        // All 8 lanes lie in the box (so in the tile): one branch-free
-        // min per lane, lanes without a hit offering NO_HIT (which changes nothing).
+        // All 8 lanes lie in the box (so in the tile): the z-buffer test 8 at a time.
         let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
-        for (j, key) in keys.iter_mut().enumerate() {
-            let k = if (m >> j) & 1 == 1 {
-                hit_key(z[j], prim)
-            } else {
-                NO_HIT
-            };
-            *key = (*key).min(k);
-        }
+        l.min_keys(keys, &z, m, prim);
         return;
     }
     while m != 0 {

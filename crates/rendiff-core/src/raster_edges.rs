@@ -72,7 +72,7 @@
 
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
-use crate::visibility::{TriDepth, TriEdges};
+use crate::visibility::{hit_key, TriDepth, TriEdges, NO_HIT};
 use glam::DVec3;
 
 /// Unit roundoff of f64.
@@ -118,6 +118,20 @@ pub trait Lanes: Copy {
         _planar: &[f64; CHUNK],
     ) -> Option<([f32; CHUNK], u32, u32)> {
         None
+    }
+
+    /// Each key of `keys` lowered to `hit_key(z[j], prim)` where lane `j`
+    /// of `hits` is set and that key is smaller (the z-buffer test, 8 at a time).
+    #[inline(always)]
+    fn min_keys(self, keys: &mut [u64; CHUNK], z: &[f32; CHUNK], hits: u32, prim: u32) {
+        for (j, key) in keys.iter_mut().enumerate() {
+            let k = if (hits >> j) & 1 == 1 {
+                hit_key(z[j], prim)
+            } else {
+                NO_HIT
+            };
+            *key = (*key).min(k);
+        }
     }
 }
 
@@ -290,6 +304,34 @@ impl Lanes for Avx2 {
         }
         Some((z, ok, free))
     }
+
+    #[inline(always)]
+    fn min_keys(self, keys: &mut [u64; CHUNK], z: &[f32; CHUNK], hits: u32, prim: u32) {
+        use std::arch::x86_64::*;
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
+        // stay within the borrowed arrays (4 u64 or 4 f32 at a time).
+        unsafe {
+            let sign = _mm256_set1_epi64x(i64::MIN);
+            let low = _mm256_set1_epi64x(i64::from(prim));
+            let no_hit = _mm256_set1_epi64x(-1);
+            let lane_bit = _mm256_setr_epi64x(1, 2, 4, 8);
+            for h in 0..2 {
+                // hit_key: the f32 bits above, the prim below.
+                let bits = _mm_loadu_si128(z.as_ptr().add(4 * h).cast());
+                let new =
+                    _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low);
+                let sel = _mm256_set1_epi64x(i64::from((hits >> (4 * h)) & 0xf));
+                let hit = _mm256_cmpeq_epi64(_mm256_and_si256(sel, lane_bit), lane_bit);
+                let new = _mm256_blendv_epi8(no_hit, new, hit);
+                let p = keys.as_mut_ptr().add(4 * h).cast::<__m256i>();
+                let old = _mm256_loadu_si256(p);
+                // Unsigned comparison as signed, with the top bits flipped.
+                let old_bigger =
+                    _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
+                _mm256_storeu_si256(p, _mm256_blendv_epi8(old, new, old_bigger));
+            }
+        }
+    }
 }
 
 /// The pixel rays of one tile, by component (structure of arrays with a fixed
@@ -301,7 +343,8 @@ impl Lanes for Avx2 {
 pub struct TileRays {
     /// Columns in the tile.
     width: usize,
-    /// Row stride in pixels: the width plus `CHUNK - 1` padding lanes, so a
+    /// Row stride in pixels: the width plus at least `CHUNK - 1` padding lanes
+    /// (rounded up to whole 4-lane vectors), so a
     /// chunk may start at any column (a small triangle's box then needs one chunk per row).
     stride: usize,
     /// `sx` per column (padding lanes repeat the last column).
@@ -342,7 +385,8 @@ impl TileRays {
     #[inline(always)]
     pub fn fill<L: Lanes>(&mut self, l: L, cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) {
         let (width, rows) = (tw as usize, th as usize);
-        let stride = width + CHUNK - 1;
+        // At least CHUNK - 1 padding lanes, rounded up to whole 4-lane vectors.
+        let stride = (width + CHUNK - 1).next_multiple_of(4);
         let n = stride * rows;
         let t = self;
         t.width = width;
@@ -375,17 +419,6 @@ impl TileRays {
                 for (d, &sx) in d.iter_mut().zip(&t.sx) {
                     *d = (ek + ((fk + rk * sx) + uk * sy)) - ek;
                 }
-                // Padding lanes repeat the last column, so they may be left out.
-                let r = l.row_stats(&d[..width]);
-                // A NaN or infinite direction leaves a NaN bound, which
-                // decides nothing (as an infinite one would).
-                let old = t.max_abs[k];
-                t.max_abs[k] = if r.non_finite || old.is_nan() {
-                    f64::NAN
-                } else {
-                    old.max(r.max)
-                };
-                t.subnormal |= r.subnormal;
             }
             let [dx, dy, dz] = &t.d;
             let (dx, dy, dz) = (&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]);
@@ -393,6 +426,14 @@ impl TileRays {
             for (((p, &x), &y), &z) in t.planar[row.clone()].iter_mut().zip(dx).zip(dy).zip(dz) {
                 *p = x * f.x + y * f.y + z * f.z;
             }
+        }
+        for k in 0..3 {
+            // The whole tile at once: padding lanes repeat real pixels.
+            let r = l.row_stats(&t.d[k]);
+            // A NaN or infinite direction leaves a NaN bound, which
+            // decides nothing (as an infinite one would).
+            t.max_abs[k] = if r.non_finite { f64::NAN } else { r.max };
+            t.subnormal |= r.subnormal;
         }
     }
 
@@ -595,6 +636,27 @@ impl ChunkDepth {
             }
         }
         self.lanes(cam, d.map(|v| *v), *planar, need, rays.subnormal)
+    }
+
+    /// The wide shortcut alone ([`Lanes::clamp_free_depths`]) over the 8
+    /// lanes from column `col` of tile row `row`: depths, lanes with a
+    /// depth, lanes it settles; `None` where it cannot run.
+    #[inline(always)]
+    pub fn clamp_free<L: Lanes>(
+        &self,
+        l: L,
+        cam: &Camera,
+        rays: &TileRays,
+        row: usize,
+        col: usize,
+    ) -> Option<([f32; CHUNK], u32, u32)> {
+        if rays.subnormal {
+            return None;
+        }
+        let at = row * rays.stride + col;
+        let d = [0, 1, 2].map(|k| <&[f64; CHUNK]>::try_from(&rays.d[k][at..at + CHUNK]).unwrap());
+        let planar = (&rays.planar[at..at + CHUNK]).try_into().unwrap();
+        l.clamp_free_depths(self, cam, d, planar)
     }
 
     /// [`TriDepth::depth`] of tile pixel `(lx, ly)` (boxes of a few pixels).
