@@ -12,7 +12,9 @@
 mod common_scenes;
 
 use glam::DVec3;
-use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
+use rendiff::backends::embree::{
+    self, EmbreeBuild, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery,
+};
 use rendiff::camera::Camera;
 use rendiff::frame::Frame;
 use rendiff::raster;
@@ -28,6 +30,15 @@ const Z_REL_TOL: f64 = 1e-5;
 
 /// True when Embree can be used; panics (test failure) when it cannot, unless
 /// the environment explicitly allows running without it.
+/// Every query path, context flag and build quality the benchmarks time.
+fn every_path() -> impl Iterator<Item = (EmbreeQuery, EmbreeCoherence, EmbreeBuild)> {
+    EmbreeQuery::ALL.into_iter().flat_map(|q| {
+        EmbreeCoherence::ALL
+            .into_iter()
+            .flat_map(move |c| EmbreeBuild::ALL.map(move |b| (q, c, b)))
+    })
+}
+
 fn embree_available() -> bool {
     match embree::version() {
         Ok(_) => true,
@@ -512,7 +523,10 @@ fn bench_million() {
                     let mut best: Option<embree::EmbreeTimings> = None;
                     for _ in 0..3 {
                         let (_, t) = pool
-                            .install(|| embree::render_timed_with(&s, mode, query, coherence))
+                            .install(|| {
+                                let build = EmbreeBuild::Medium;
+                                embree::render_timed_with(&s, mode, build, query, coherence)
+                            })
                             .unwrap();
                         if best.is_none_or(|b| t.trace_seconds < b.trace_seconds) {
                             best = Some(t);
@@ -599,22 +613,21 @@ shape = {{ kind = "triangles", vertices = [{}] }}
         );
         for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
             // Every path, so the re-trace from each packet and stream layout is exercised.
-            for query in EmbreeQuery::ALL {
-                for coherence in EmbreeCoherence::ALL {
-                    let (e, t) = embree::render_timed_with(&s, mode, query, coherence).unwrap();
-                    let what = format!(
-                        "near {near} far {far} {} {} {}",
-                        mode.name(),
-                        query.name(),
-                        coherence.name()
-                    );
-                    assert!(e.z.iter().all(|&z| z == want), "{what}: {:?}", &e.z[..4]);
-                    // Objects, not prims: the quads' diagonals pass through pixel centers (ties).
-                    assert_eq!(e.object, r.object, "{what}");
-                    if want == 4.0 && near < 3.0 * (1.0 + 1e-6) {
-                        // The widened tnear let Embree report the front quad; it was re-traced.
-                        assert!(t.rays > e.z.len() as u64, "{what}: no re-trace counted");
-                    }
+            for (query, coherence, build) in every_path() {
+                let (e, t) = embree::render_timed_with(&s, mode, build, query, coherence).unwrap();
+                let what = format!(
+                    "near {near} far {far} {} {} {} {}",
+                    mode.name(),
+                    query.name(),
+                    coherence.name(),
+                    build.name()
+                );
+                assert!(e.z.iter().all(|&z| z == want), "{what}: {:?}", &e.z[..4]);
+                // Objects, not prims: the quads' diagonals pass through pixel centers (ties).
+                assert_eq!(e.object, r.object, "{what}");
+                if want == 4.0 && near < 3.0 * (1.0 + 1e-6) {
+                    // The widened tnear let Embree report the front quad; it was re-traced.
+                    assert!(t.rays > e.z.len() as u64, "{what}: no re-trace counted");
                 }
             }
         }
@@ -622,8 +635,9 @@ shape = {{ kind = "triangles", vertices = [{}] }}
 }
 
 /// Every query path (rtcIntersect1/4/8/16, the 1M and NM streams) with both
-/// intersect-context flags gives the keys of the reference path (single rays,
-/// incoherent context): `id.prim` and Z bit for bit. The paths differ in how
+/// intersect-context flags and both build qualities gives the keys of the
+/// reference path (single rays, incoherent context, medium build): `id.prim`
+/// and Z bit for bit. The paths differ in how
 /// rays are batched, not in which rays are traced or how hits become keys, so
 /// `bench peers` may compare the core with whichever is fastest.
 #[test]
@@ -654,30 +668,29 @@ fn every_query_and_context_gives_the_single_ray_keys() {
         for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
             let want = run(s, mode, EmbreeQuery::Single);
             assert!(want.prim.iter().any(|&p| p != u32::MAX), "{name}: empty");
-            for query in EmbreeQuery::ALL {
-                for coherence in EmbreeCoherence::ALL {
-                    let what = format!(
-                        "{name} {} {} {}",
-                        mode.name(),
-                        query.name(),
-                        coherence.name()
-                    );
-                    let (e, t) = embree::render_timed_with(s, mode, query, coherence)
-                        .unwrap_or_else(|err| panic!("{what}: {err}"));
-                    assert_eq!(e.renderer, mode.name(), "{what}");
-                    assert!(t.rays >= e.prim.len() as u64, "{what}: {} rays", t.rays);
-                    let prim = (0..e.prim.len())
-                        .filter(|&i| e.prim[i] != want.prim[i])
-                        .count();
-                    let z = (0..e.z.len())
-                        .filter(|&i| e.z[i].to_bits() != want.z[i].to_bits())
-                        .count();
-                    assert_eq!(
-                        (prim, z),
-                        (0, 0),
-                        "{what}: id.prim / Z bits differ at (prim, z) px"
-                    );
-                }
+            for (query, coherence, build) in every_path() {
+                let what = format!(
+                    "{name} {} {} {} {}",
+                    mode.name(),
+                    query.name(),
+                    coherence.name(),
+                    build.name()
+                );
+                let (e, t) = embree::render_timed_with(s, mode, build, query, coherence)
+                    .unwrap_or_else(|err| panic!("{what}: {err}"));
+                assert_eq!(e.renderer, mode.name(), "{what}");
+                assert!(t.rays >= e.prim.len() as u64, "{what}: {} rays", t.rays);
+                let prim = (0..e.prim.len())
+                    .filter(|&i| e.prim[i] != want.prim[i])
+                    .count();
+                let z = (0..e.z.len())
+                    .filter(|&i| e.z[i].to_bits() != want.z[i].to_bits())
+                    .count();
+                assert_eq!(
+                    (prim, z),
+                    (0, 0),
+                    "{what}: id.prim / Z bits differ at (prim, z) px"
+                );
             }
         }
     }

@@ -4,7 +4,9 @@
 //! the same way (warm-up, then the median of `runs`).
 
 use super::{timed, Timed};
-use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery};
+use rendiff::backends::embree::{
+    self, EmbreeBuild, EmbreeCoherence, EmbreeError, EmbreeMode, EmbreeQuery,
+};
 use rendiff::frame::{Frame, PixelKeys};
 use rendiff::raster::{self, RasterOptions};
 use rendiff::scene::resolve::ResolvedScene;
@@ -138,23 +140,24 @@ pub fn embree(
     query: EmbreeQuery,
     runs: usize,
 ) -> Result<(Frame, EmbreeStats), EmbreeError> {
-    embree_with(scene, mode, query, EmbreeCoherence::Incoherent, runs)
+    let config = (mode, EmbreeBuild::Medium);
+    embree_with(scene, config, query, EmbreeCoherence::Incoherent, runs)
 }
 
 /// Like [`embree`] with the intersect-context flag chosen too, so `bench
 /// peers` can time every configuration and compare the core with the fastest.
 pub fn embree_with(
     scene: &ResolvedScene,
-    mode: EmbreeMode,
+    (mode, quality): (EmbreeMode, EmbreeBuild),
     query: EmbreeQuery,
     coherence: EmbreeCoherence,
     runs: usize,
 ) -> Result<(Frame, EmbreeStats), EmbreeError> {
-    let (mut frame, _) = embree::render_timed_with(scene, mode, query, coherence)?;
+    let (mut frame, _) = embree::render_timed_with(scene, mode, quality, query, coherence)?;
     let (mut dev, mut build, mut tr, mut both) = (vec![], vec![], vec![], vec![]);
     let mut rays = 0;
     for _ in 0..runs.max(1) {
-        let (f, t) = embree::render_timed_with(scene, mode, query, coherence)?;
+        let (f, t) = embree::render_timed_with(scene, mode, quality, query, coherence)?;
         dev.push(t.device_seconds);
         build.push(t.build_seconds);
         tr.push(t.trace_seconds);
@@ -179,21 +182,29 @@ pub fn embree_with(
 /// context: "embree single", "embree_robust packet8", ... (the keys earlier
 /// records and pages use).
 pub fn embree_name(mode: EmbreeMode, query: EmbreeQuery) -> String {
-    embree_name_with(mode, query, EmbreeCoherence::Incoherent)
+    embree_name_with(
+        (mode, EmbreeBuild::Medium),
+        query,
+        EmbreeCoherence::Incoherent,
+    )
 }
 
 /// A short name for an Embree configuration: [`embree_name`]'s, with
-/// " coherent" appended for the coherent context, so incoherent names stay
-/// those of earlier records.
+/// " coherent" appended for the coherent context and " high" for the high
+/// build quality, so the names of earlier records (medium quality) stay.
 pub fn embree_name_with(
-    mode: EmbreeMode,
+    (mode, build): (EmbreeMode, EmbreeBuild),
     query: EmbreeQuery,
     coherence: EmbreeCoherence,
 ) -> String {
-    match coherence {
-        EmbreeCoherence::Incoherent => format!("{} {}", mode.name(), query.name()),
-        EmbreeCoherence::Coherent => format!("{} {} coherent", mode.name(), query.name()),
+    let mut name = format!("{} {}", mode.name(), query.name());
+    if coherence == EmbreeCoherence::Coherent {
+        name.push_str(" coherent");
     }
+    if build == EmbreeBuild::High {
+        name.push_str(" high");
+    }
+    name
 }
 
 #[cfg(test)]
@@ -206,16 +217,27 @@ mod tests {
         assert_eq!(embree_name(d, EmbreeQuery::Single), "embree single");
         assert_eq!(embree_name(d, EmbreeQuery::Packet8), "embree packet8");
         assert_eq!(embree_name(r, EmbreeQuery::Single), "embree_robust single");
+        let medium = (d, EmbreeBuild::Medium);
         assert_eq!(
-            embree_name_with(d, EmbreeQuery::Packet16, EmbreeCoherence::Coherent),
+            embree_name_with(medium, EmbreeQuery::Packet16, EmbreeCoherence::Coherent),
             "embree packet16 coherent"
+        );
+        assert_eq!(
+            embree_name_with(
+                (r, EmbreeBuild::High),
+                EmbreeQuery::Single,
+                EmbreeCoherence::Coherent
+            ),
+            "embree_robust single coherent high"
         );
         // Every configuration has its own name.
         let mut names = std::collections::BTreeSet::new();
         for m in [d, r] {
-            for q in EmbreeQuery::ALL {
-                for c in EmbreeCoherence::ALL {
-                    assert!(names.insert(embree_name_with(m, q, c)));
+            for b in EmbreeBuild::ALL {
+                for q in EmbreeQuery::ALL {
+                    for c in EmbreeCoherence::ALL {
+                        assert!(names.insert(embree_name_with((m, b), q, c)));
+                    }
                 }
             }
         }

@@ -23,12 +23,13 @@ use super::spp::{core_path, mitsuba_path, MitsubaPoint, MitsubaRun};
 use super::{measure, radiance, visibility_error, Common};
 use anyhow::Result;
 use glam::{DVec3, Vec3};
-use rendiff::backends::embree::{self, EmbreeCoherence, EmbreeMode, EmbreeQuery};
+use rendiff::backends::embree::{self, EmbreeBuild, EmbreeCoherence, EmbreeMode, EmbreeQuery};
 use rendiff::camera::Camera;
 use rendiff::exr_io::read_buffers;
+use rendiff::names::Named;
 use rendiff::report::svg::{backend_color, time_bars, Bar};
 use rendiff::scene::resolve::ResolvedScene;
-use rendiff::trace::{BvhQuality, TraceKernel};
+use rendiff::trace::{BvhQuality, TraceBvh, TraceKernel};
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -155,28 +156,45 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
     // Whole renders (keys plus the frame's buffers) for the record, and
         // the queries alone for Mrays/s, as Embree's trace_s times them.
         let core = measure::trace(scene, BvhQuality::Medium, runs);
-        let packets = measure::trace_queries(scene, &core.build.last, TraceKernel::Packets, runs);
+        let packets_medium =
+            measure::trace_queries(scene, &core.build.last, TraceKernel::Packets, runs);
         let single = measure::trace_queries(scene, &core.build.last, TraceKernel::SingleRays, runs);
+        // The core at its best too: obvhs' slow (higher-quality) build,
+        // its build time apart as Embree's is, and the faster BVH counts.
+        let slow_bvh = TraceBvh::build(scene, BvhQuality::Slow);
+        let packets_slow = measure::trace_queries(scene, &slow_bvh, TraceKernel::Packets, runs);
+        let medium_mrays = pixels / packets_medium.median_s / 1e6;
+        let slow_mrays = pixels / packets_slow.median_s / 1e6;
+        let (packets, core_bvh) = if slow_mrays > medium_mrays {
+            (&packets_slow, BvhQuality::Slow)
+        } else {
+            (&packets_medium, BvhQuality::Medium)
+        };
         let raster = measure::raster(scene, runs);
         let core_mrays = pixels / packets.median_s / 1e6;
         let single_mrays = pixels / single.median_s / 1e6;
         let mut embree = Map::new();
         let mut skipped = Vec::new();
-        for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+        for config in [EmbreeMode::Default, EmbreeMode::Robust]
+            .into_iter()
+            .flat_map(|m| EmbreeBuild::ALL.map(|b| (m, b)))
+        {
+            let (mode, build) = config;
             // The reference path (single rays, incoherent context) comes
             // first; every other path must reproduce its keys.
             let mut reference: Option<rendiff::frame::Frame> = None;
             for query in EmbreeQuery::ALL {
                 for coherence in EmbreeCoherence::ALL {
-                    let name = measure::embree_name_with(mode, query, coherence);
+                    let name = measure::embree_name_with(config, query, coherence);
                     eprintln!("peers: {threads} thread(s), {name}");
-                    match measure::embree_with(scene, mode, query, coherence, runs) {
+                    match measure::embree_with(scene, config, query, coherence, runs) {
                         Ok((f, st)) => {
                             let mrays = st.rays as f64 / st.trace_s / 1e6;
                             let vs_single = reference.as_ref().map(|r| visibility_error(r, &f));
                             embree.insert(
                                 name,
-                                json!({"mode": mode.name(), "query": query.name(),
+                                json!({"mode": mode.name(), "build_quality": build.name(),
+                                       "query": query.name(),
                                        "entry_point": query.entry_point(), "layout": query.layout(),
                                        "context": coherence.name(),
                                        "timing": st, "mrays_per_s": mrays,
@@ -207,9 +225,12 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
         json!({
             "threads": threads,
             "core_trace": {"kernel": "packets (8x4)", "mrays_per_s": core_mrays,
+                           "bvh_quality": core_bvh.name(),
+                           "mrays_per_s_by_bvh_quality": {"medium": medium_mrays, "slow": slow_mrays},
                            "queries": packets.json(), "timing": core.json(),
                            "raster_equals_trace": visibility_error(&raster.last, &core.trace.last).identical()
-                               && visibility_error(&raster.last, &packets.last).identical()},
+                               && visibility_error(&raster.last, &packets_medium.last).identical()
+                               && visibility_error(&raster.last, &packets_slow.last).identical()},
             "core_trace_single_rays": {"mrays_per_s": single_mrays, "queries": single.json(),
                            "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},
             "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,

@@ -183,8 +183,8 @@ fn peers_writes_throughput_ratios() {
     if !embree.is_empty() {
         assert_eq!(
             embree.len(),
-            24,
-            "6 query paths x 2 context flags x 2 scene flags"
+            48,
+            "6 query paths x 2 context flags x 2 scene flags x 2 build qualities"
         );
         for key in ["embree single", "embree packet8", "embree_robust single"] {
             assert!(embree.contains_key(key), "{key}: earlier records' keys");

@@ -192,6 +192,40 @@ impl EmbreeCoherence {
     }
 }
 
+/// The BVH build quality Embree is asked for (`rtcSetSceneBuildQuality`).
+/// `Medium` is Embree's default and what renders and checks use; `High`
+/// ("higher quality data structures for final-frame rendering", a spatial
+/// split BVH for triangles) trades build time for traversal speed, so the
+/// throughput benchmark measures Embree with both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum EmbreeBuild {
+    /// `RTC_BUILD_QUALITY_MEDIUM`.
+    #[default]
+    Medium,
+    /// `RTC_BUILD_QUALITY_HIGH`.
+    High,
+}
+
+impl EmbreeBuild {
+    /// Both qualities, the default first.
+    pub const ALL: [EmbreeBuild; 2] = [EmbreeBuild::Medium, EmbreeBuild::High];
+
+    /// Short name for reports ("medium", "high").
+    pub fn name(self) -> &'static str {
+        match self {
+            EmbreeBuild::Medium => "medium",
+            EmbreeBuild::High => "high",
+        }
+    }
+
+    fn quality(self) -> u32 {
+        match self {
+            EmbreeBuild::Medium => ffi::BUILD_QUALITY_MEDIUM,
+            EmbreeBuild::High => ffi::BUILD_QUALITY_HIGH,
+        }
+    }
+}
+
 /// Which ray-query features this Embree build has natively (device
 /// properties), so a benchmark can say whether a packet size it measured is
 /// native or emulated by Embree.
@@ -286,14 +320,22 @@ pub fn render_timed(
     mode: EmbreeMode,
     query: EmbreeQuery,
 ) -> Result<(Frame, EmbreeTimings), EmbreeError> {
-    render_timed_with(scene, mode, query, EmbreeCoherence::Incoherent)
+    render_timed_with(
+        scene,
+        mode,
+        EmbreeBuild::Medium,
+        query,
+        EmbreeCoherence::Incoherent,
+    )
 }
 
-/// Like [`render_timed`] with the intersect-context flag chosen too: the
-/// benchmarks try every query path with both flags to find Embree's fastest.
+/// Like [`render_timed`] with the build quality and the intersect-context
+/// flag chosen too: the benchmarks try every query path with both flags and
+/// both qualities to find Embree's fastest.
 pub fn render_timed_with(
     scene: &ResolvedScene,
     mode: EmbreeMode,
+    build: EmbreeBuild,
     query: EmbreeQuery,
     coherence: EmbreeCoherence,
 ) -> Result<(Frame, EmbreeTimings), EmbreeError> {
@@ -303,7 +345,7 @@ pub fn render_timed_with(
     let device = Device::new(api, threads)?;
     let device_seconds = start.elapsed().as_secs_f64();
     let t_build = Instant::now();
-    let built = BuiltScene::new(device, scene, mode)?;
+    let built = BuiltScene::new(device, scene, mode, build)?;
     let build_seconds = t_build.elapsed().as_secs_f64();
     let t_trace = Instant::now();
     let cam = &scene.camera;
@@ -652,6 +694,7 @@ impl BuiltScene {
         device: Device,
         scene: &ResolvedScene,
         mode: EmbreeMode,
+        build: EmbreeBuild,
     ) -> Result<BuiltScene, EmbreeError> {
         let api = device.api;
         let n = scene.triangles.len();
@@ -688,7 +731,7 @@ impl BuiltScene {
         // SAFETY: `raw` is a live, uncommitted scene; the arguments are valid enum values.
         unsafe {
             (api.set_scene_flags)(raw, flags);
-            (api.set_scene_build_quality)(raw, ffi::BUILD_QUALITY_MEDIUM);
+            (api.set_scene_build_quality)(raw, build.quality());
         }
         dev.check("rtcSetSceneFlags/rtcSetSceneBuildQuality")?;
         if n > 0 {
@@ -1075,6 +1118,7 @@ mod ffi {
     pub const SCENE_FLAG_NONE: u32 = 0;
     pub const SCENE_FLAG_ROBUST: u32 = 1 << 2;
     pub const BUILD_QUALITY_MEDIUM: u32 = 1;
+    pub const BUILD_QUALITY_HIGH: u32 = 2;
     pub const GEOMETRY_TYPE_TRIANGLE: u32 = 0;
     pub const BUFFER_TYPE_INDEX: u32 = 0;
     pub const BUFFER_TYPE_VERTEX: u32 = 1;
