@@ -333,6 +333,9 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
     }
 }
 
+/// How many bin entries ahead the tile loop prefetches a triangle.
+const PREFETCH_AHEAD: usize = 8;
+
 /// Boxes of at most this many pixels skip the fast path's per-tile edge and
 /// depth setup and ask the predicate and [`TriDepth::depth`] directly (what
 /// [`render_exact`] does everywhere, so nothing can differ): for triangles
@@ -414,7 +417,12 @@ fn fast_tile<L: Lanes>(
 ) {
     let cam = &scene.camera;
     let mut hiz = LazyBound::new(mode, || rays.depth_bound(cam));
-    for &Binned { prim, rect } in bin {
+    for (i, &Binned { prim, rect }) in bin.iter().enumerate() {
+        // Bins name triangles scattered through memory: ask for one a few
+        // entries ahead (a hint; nothing observable changes).
+        if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
+            crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+        }
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {

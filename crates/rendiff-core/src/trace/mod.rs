@@ -7,6 +7,8 @@
 //! skipped only when its nearest possible key is worse than the best hit.
 
 mod nodes;
+/// A cache hint the raster's tile loop shares (for the triangles its bins name next).
+pub(crate) use nodes::prefetch;
 mod packet;
 mod primary;
 mod rect;

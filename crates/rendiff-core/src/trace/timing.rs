@@ -1,7 +1,8 @@
 //! A manual timing loop for the packet kernel (`#[ignore]`d: no timed
 //! assertions). Run with
 //! `TRACE_SCENE=scenes/million.toml TRACE_SIZE=1920x1080 cargo test --release
-//! -p rendiff-core trace::timing -- --ignored --nocapture`; it prints the BVH
+//! -p rendiff-core trace::timing -- --ignored --nocapture` (`TRACE_BVH=slow`
+//! for obvhs' slow build, as `bench peers` also measures); it prints the BVH
 //! build time, the keys-only Mrays/s per thread count, and a hash of the keys
 //! (so two builds of the kernel can be compared bit for bit).
 
@@ -45,10 +46,15 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let mut builds = Vec::new();
-                let mut bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+                let quality = if std::env::var("TRACE_BVH").as_deref() == Ok("slow") {
+                    BvhQuality::Slow
+                } else {
+                    BvhQuality::Medium
+                };
+                let mut bvh = TraceBvh::build(&scene, quality);
                 for _ in 0..3 {
                     let st = Instant::now();
-                    bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+                    bvh = TraceBvh::build(&scene, quality);
                     builds.push(st.elapsed().as_secs_f64());
                 }
                 let opts = TraceOptions::default();
