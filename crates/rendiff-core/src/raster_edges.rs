@@ -885,6 +885,24 @@ mod tests {
     use crate::predicate::tests::lcg;
     use glam::DVec3;
 
+    /// An exact 90° 32x32 camera looking down -z from `o + z`, and a tilted
+    /// non-dyadic `w` x `h` one, both around `o`.
+    fn offset_cameras(o: DVec3, w: u32, h: u32) -> [Result<Camera, String>; 2] {
+        [
+            Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 32, 32, 1e-3, f64::INFINITY),
+            Camera::new(
+                o + DVec3::new(0.3, 0.7, 2.1),
+                o + DVec3::new(0.1, -0.2, 0.0),
+                DVec3::Y,
+                50.0,
+                w,
+                h,
+                1e-3,
+                f64::INFINITY,
+            ),
+        ]
+    }
+
     /// Both [`Lanes`] give the same bits, for equal values, infinities, NaN and signed zeros.
     #[test]
     fn lane_masks_agree() {
@@ -1125,19 +1143,7 @@ mod tests {
         let (mut decided, mut broken) = (0, 0);
         for (k, off) in [0.0, 1e3, 12345.678, 1e7].into_iter().enumerate() {
             let o = DVec3::new(off, -off, off);
-            let cams = [
-                Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 32, 32, 1e-3, f64::INFINITY),
-                Camera::new(
-                    o + DVec3::new(0.3, 0.7, 2.1),
-                    o + DVec3::new(0.1, -0.2, 0.0),
-                    DVec3::Y,
-                    50.0,
-                    32,
-                    32,
-                    1e-3,
-                    f64::INFINITY,
-                ),
-            ];
+            let cams = offset_cameras(o, 32, 32);
             for cam in cams.map(Result::unwrap) {
                 let rays = TileRays::new(&cam, 0, 0, 32, 32);
                 let on = |x: u32, y: u32, t: f64| (cam.eye + cam.pixel_ray(x, y).dir * t).as_vec3();
@@ -1272,19 +1278,7 @@ mod tests {
         let (mut free, mut slab) = (0, 0);
         for (k, off) in [0.0, 1e3, 12345.678].into_iter().enumerate() {
             let o = DVec3::new(off, -off, off);
-            let cams = [
-                Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 32, 32, 1e-3, f64::INFINITY),
-                Camera::new(
-                    o + DVec3::new(0.3, 0.7, 2.1),
-                    o + DVec3::new(0.1, -0.2, 0.0),
-                    DVec3::Y,
-                    50.0,
-                    40,
-                    24,
-                    1e-3,
-                    f64::INFINITY,
-                ),
-            ];
+            let cams = offset_cameras(o, 40, 24);
             for (c, cam) in cams.into_iter().map(Result::unwrap).enumerate() {
                 let tris = clamp_trial_triangles(&cam, 11 + (k * 2 + c) as u64, 60);
                 let [f, sl, differ] = chunk_depth_trial(&cam, &tris, CLAMP_FREE_MARGIN);

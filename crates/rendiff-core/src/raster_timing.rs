@@ -8,19 +8,21 @@
 //! be compared bit for bit, and with the tracer's hash).
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use crate::raster::{render_keys, RasterOptions};
     use crate::scene::generators::crossover_grid;
     use crate::scene::resolve::ResolvedScene;
     use std::time::Instant;
 
-    fn median(v: &mut [f64]) -> f64 {
+    /// The median (sorts `v`).
+    pub(crate) fn median(v: &mut [f64]) -> f64 {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     }
 
-    /// The scene `RASTER_SCENE` names, at `RASTER_SIZE`.
-    fn scene(path: &str, size: &str) -> ResolvedScene {
+    /// The scene a timing loop names (a path from the repository root, or
+    /// `grid:N`), at `WxH`.
+    pub(crate) fn scene(path: &str, size: &str) -> ResolvedScene {
         let (w, h) = size.split_once('x').unwrap();
         let (w, h): (u32, u32) = (w.parse().unwrap(), h.parse().unwrap());
         if let Some(nx) = path.strip_prefix("grid:") {

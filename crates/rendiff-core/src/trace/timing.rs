@@ -2,20 +2,16 @@
 //! assertions). Run with
 //! `TRACE_SCENE=scenes/million.toml TRACE_SIZE=1920x1080 cargo test --release
 //! -p rendiff-core trace::timing -- --ignored --nocapture` (`TRACE_BVH=slow`
-//! for obvhs' slow build, as `bench peers` also measures); it prints the BVH
+//! for obvhs' slow build, as `bench peers` also measures; `TRACE_SCENE=grid:N`
+//! for `bench crossover`'s grid, as in `raster_timing`); it prints the BVH
 //! build time, the keys-only Mrays/s per thread count, and a hash of the keys
 //! (so two builds of the kernel can be compared bit for bit).
 
 #[cfg(test)]
 mod tests {
-    use crate::scene::resolve::ResolvedScene;
+    use crate::raster_timing::tests::{median, scene};
     use crate::trace::{trace_keys, BvhQuality, TraceBvh, TraceOptions};
     use std::time::Instant;
-
-    fn median(v: &mut [f64]) -> f64 {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    }
 
     /// Prints build time, Mrays/s and a key hash for one scene.
     #[test]
@@ -29,15 +25,7 @@ mod tests {
             .split(',')
             .map(|t| t.parse().unwrap())
             .collect();
-        let (w, h) = size.split_once('x').unwrap();
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../..")
-            .join(&path);
-        let s = crate::scene::Scene::load(&file).unwrap();
-        let scene = ResolvedScene::resolve(&s)
-            .unwrap()
-            .resized(w.parse().unwrap(), h.parse().unwrap())
-            .unwrap();
+        let scene = scene(&path, &size);
         let pixels = scene.camera.pixel_count() as f64;
         for &t in &threads {
             let pool = rayon::ThreadPoolBuilder::new()
