@@ -9,62 +9,33 @@
 
 #[cfg(test)]
 mod tests {
-    use crate::raster_timing::tests::{median, scene};
+    use crate::raster_timing::tests::{key_hash, TimingLoop};
     use crate::trace::{trace_keys, BvhQuality, TraceBvh, TraceOptions};
-    use std::time::Instant;
 
     /// Prints build time, Mrays/s and a key hash for one scene.
     #[test]
     #[ignore]
     fn time_packet_kernel() {
-        let env = |k: &str, d: &str| std::env::var(k).unwrap_or_else(|_| d.to_string());
-        let path = env("TRACE_SCENE", "scenes/million.toml");
-        let size = env("TRACE_SIZE", "1920x1080");
-        let runs: usize = env("TRACE_RUNS", "5").parse().unwrap();
-        let threads: Vec<usize> = env("TRACE_THREADS", "1,2")
-            .split(',')
-            .map(|t| t.parse().unwrap())
-            .collect();
-        let scene = scene(&path, &size);
-        let pixels = scene.camera.pixel_count() as f64;
-        for &t in &threads {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                let mut builds = Vec::new();
-                let quality = if std::env::var("TRACE_BVH").as_deref() == Ok("slow") {
-                    BvhQuality::Slow
-                } else {
-                    BvhQuality::Medium
-                };
-                let mut bvh = TraceBvh::build(&scene, quality);
-                for _ in 0..3 {
-                    let st = Instant::now();
-                    bvh = TraceBvh::build(&scene, quality);
-                    builds.push(st.elapsed().as_secs_f64());
-                }
-                let opts = TraceOptions::default();
-                let mut keys = trace_keys(&scene, &bvh, opts, &|_| {});
-                let mut times = Vec::new();
-                for _ in 0..runs {
-                    let st = Instant::now();
-                    keys = trace_keys(&scene, &bvh, opts, &|_| {});
-                    times.push(st.elapsed().as_secs_f64());
-                }
-                let hash = keys.keys.iter().fold(0xcbf29ce484222325u64, |h, &k| {
-                    (h ^ k).wrapping_mul(0x100000001b3)
-                });
-                let med = median(&mut times);
-                println!(
-                    "TIMING {path} {size} threads={t} build_s={:.4} trace_s={med:.4} mrays={:.2} hash={hash:016x} nodes={} cov={}",
-                    median(&mut builds),
-                    pixels / med / 1e6,
-                    keys.counters.bvh_nodes_visited,
-                    keys.counters.coverage_tests,
-                );
-            });
-        }
+        let lp = TimingLoop::from_env("TRACE", 5);
+        let quality = if std::env::var("TRACE_BVH").as_deref() == Ok("slow") {
+            BvhQuality::Slow
+        } else {
+            BvhQuality::Medium
+        };
+        let pixels = lp.scene.camera.pixel_count() as f64;
+        lp.per_thread_count(|t| {
+            let (build_s, bvh) = lp.timed(|| TraceBvh::build(&lp.scene, quality));
+            let opts = TraceOptions::default();
+            let (med, keys) = lp.timed(|| trace_keys(&lp.scene, &bvh, opts, &|_| {}));
+            println!(
+                "TIMING {} {} threads={t} build_s={build_s:.4} trace_s={med:.4} mrays={:.2} hash={:016x} nodes={} cov={}",
+                lp.path,
+                lp.size,
+                pixels / med / 1e6,
+                key_hash(&keys.keys),
+                keys.counters.bvh_nodes_visited,
+                keys.counters.coverage_tests,
+            );
+        });
     }
 }
