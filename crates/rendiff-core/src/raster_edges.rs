@@ -628,14 +628,31 @@ impl ChunkDepth {
         }
         let d = [0, 1, 2].map(|k| lane(&rays.d[k], at));
         let planar = lane(&rays.planar, at);
-        if !rays.subnormal {
+        self.chunk(l, cam, d, planar, need, rays.subnormal)
+    }
+
+    /// [`ChunkDepth::depths`] for 8 rays given by their directions `d` and
+    /// planar factors (the tracer's packet rows): exact for the lanes in
+    /// `need`; `subnormal`: some direction component among the rays is
+    /// subnormal (no shortcut).
+    #[inline(always)]
+    pub fn chunk<L: Lanes>(
+        &self,
+        l: L,
+        cam: &Camera,
+        d: [&[f64; CHUNK]; 3],
+        planar: &[f64; CHUNK],
+        need: u32,
+        subnormal: bool,
+    ) -> ([f32; CHUNK], u32) {
+        if !subnormal {
             if let Some((z, ok, free)) = l.clamp_free_depths(self, cam, d, planar) {
                 if need & !free == 0 {
                     return (z, ok);
                 }
             }
         }
-        self.lanes(cam, d.map(|v| *v), *planar, need, rays.subnormal)
+        self.lanes(cam, d.map(|v| *v), *planar, need, subnormal)
     }
 
     /// The wide shortcut alone ([`Lanes::clamp_free_depths`]) over the 8

@@ -28,6 +28,7 @@ use super::rows::Avx2;
 use super::rows::{Portable, Rows, ROW};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
+use crate::raster_edges::{self as edges, ChunkDepth, Lanes};
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{hit_key, key_depth, Counters, TriDepth, NO_HIT};
 use glam::DVec3;
@@ -52,14 +53,30 @@ fn row(a: &[f32; LANES], r: usize) -> &[f32; ROW] {
     a[r * ROW..][..ROW].try_into().unwrap()
 }
 
+/// Lanes `r * ROW ..` of a per-lane f64 array.
+#[inline(always)]
+fn row64(a: &[f64; LANES], r: usize) -> &[f64; ROW] {
+    a[r * ROW..][..ROW].try_into().unwrap()
+}
+
 /// One bit per lane.
 pub(crate) type Mask = u32;
 
 /// A packet of pixel rays and their per-lane traversal state (structure of arrays
 /// where the slab and edge tests run across lanes).
 pub(crate) struct Packet {
-    /// The exact rays (fallback signs and depth).
-    rays: [PixelRay; LANES],
+    /// The exact directions `D` per axis, per lane (depth, and the exact
+    /// fallback's rays: [`Packet::ray`]).
+    d64: [[f64; LANES]; 3],
+    /// `D . forward` per lane.
+    planar: [f64; LANES],
+    /// `sx` per column and `sy` per row, from which [`Packet::ray`] rebuilds
+    /// a lane's point on the image plane.
+    sx: [f64; PW],
+    sy: [f64; PH],
+    /// Some lane has a subnormal direction component (no depth shortcut:
+    /// [`ChunkDepth`]).
+    subnormal: bool,
     /// `D` per axis, per lane.
     dir: [[f32; LANES]; 3],
     /// `1 / D` per axis, per lane.
@@ -98,27 +115,19 @@ impl Packet {
         // order as glam's, hence the same bits.
         let sxl: [f64; LANES] = std::array::from_fn(|i| sx[i % PW]);
         let syl: [f64; LANES] = std::array::from_fn(|i| sy[i / PW]);
-        let mut p64 = [[0f64; LANES]; 3];
+        // (The point P and 1 / D are rebuilt by `ray` for the few lanes
+        // whose exact fallback needs them.)
         let mut d64 = [[0f64; LANES]; 3];
-        let mut inv64 = [[0f64; LANES]; 3];
         for k in 0..3 {
             let (e, f, r, u) = (cam.eye[k], cam.forward[k], cam.right[k], cam.up_ortho[k]);
             for i in 0..LANES {
-                p64[k][i] = e + (f + r * sxl[i] + u * syl[i]);
-                d64[k][i] = p64[k][i] - e;
-                inv64[k][i] = 1.0 / d64[k][i];
+                d64[k][i] = (e + (f + r * sxl[i] + u * syl[i])) - e;
             }
         }
         let (f0, f1, f2) = (cam.forward.x, cam.forward.y, cam.forward.z);
         let planar: [f64; LANES] =
             std::array::from_fn(|i| d64[0][i] * f0 + d64[1][i] * f1 + d64[2][i] * f2);
-        let v3 = |a: &[[f64; LANES]; 3], i: usize| DVec3::new(a[0][i], a[1][i], a[2][i]);
-        let rays: [PixelRay; LANES] = std::array::from_fn(|i| PixelRay {
-            p: v3(&p64, i),
-            dir: v3(&d64, i),
-            inv_dir: v3(&inv64, i),
-            planar: planar[i],
-        });
+        let subnormal = d64.iter().flatten().any(|v| v.is_subnormal());
         let mut active: Mask = 0;
         for i in 0..LANES {
             active |= Mask::from(x0 + i % PW < w && y0 + i / PW < h) << i;
@@ -143,7 +152,11 @@ impl Packet {
         });
         Packet {
             axis_sign,
-            rays,
+            d64,
+            planar,
+            sx,
+            sy,
+            subnormal,
             dir,
             inv,
             dir_norm,
@@ -151,6 +164,21 @@ impl Packet {
             best: [NO_HIT; LANES],
             best_z: [f32::INFINITY; LANES],
             active,
+        }
+    }
+
+    /// Lane `i`'s exact ray, bit for bit [`Camera::pixel_ray`]'s (the same
+    /// arithmetic as `new`, a test checks it).
+    #[inline(always)]
+    fn ray(&self, cam: &Camera, i: usize) -> PixelRay {
+        let (sx, sy) = (self.sx[i % PW], self.sy[i / PW]);
+        let p = |k: usize| cam.eye[k] + (cam.forward[k] + cam.right[k] * sx + cam.up_ortho[k] * sy);
+        let dir = DVec3::new(self.d64[0][i], self.d64[1][i], self.d64[2][i]);
+        PixelRay {
+            p: DVec3::new(p(0), p(1), p(2)),
+            dir,
+            inv_dir: DVec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z),
+            planar: self.planar[i],
         }
     }
 
@@ -214,7 +242,14 @@ impl Packet {
     /// lanes with an unsure sign take the per-lane path. The caller has already
     /// removed the lanes outside the triangle's pixel rectangle from `m`.
     #[inline(always)]
-    fn leaf<S: Rows>(&mut self, s: S, cam: &Camera, leaf: &LeafTri, m: Mask, c: &mut Counters) {
+    fn leaf<S: Rows, L: Lanes>(
+        &mut self,
+        (s, l): (S, L),
+        cam: &Camera,
+        leaf: &LeafTri,
+        m: Mask,
+        c: &mut Counters,
+    ) {
         let mut pos = [0 as Mask; 3];
         let mut neg = [0 as Mask; 3];
         for r in 0..NROWS {
@@ -248,19 +283,30 @@ impl Packet {
             let i = lanes.trailing_zeros() as usize;
             lanes &= lanes - 1;
             let signs = [0, 1, 2].map(|k| ((pos[k] >> i) & 1) as i8 - ((neg[k] >> i) & 1) as i8);
-            if covers(cam, &leaf.tri, signs, &self.rays[i], c) != 0 {
+            if covers(cam, &leaf.tri, signs, &self.ray(cam, i), c) != 0 {
                 hit |= 1 << i;
             }
         }
         if hit == 0 {
             return;
         }
-        let d = TriDepth::new(cam, &leaf.tri);
-        while hit != 0 {
-            let i = hit.trailing_zeros() as usize;
-            hit &= hit - 1;
-            if let Some(z) = d.depth(cam, &self.rays[i]) {
-                let k = hit_key(z, leaf.prim);
+        // Depths a row of 8 lanes at a time, as the rasterizer's chunks take
+        // them (`ChunkDepth`: `TriDepth::depth` bit for bit, mostly without
+        // the slab clamp).
+        let d = ChunkDepth::new(cam, &TriDepth::new(cam, &leaf.tri));
+        for r in 0..NROWS {
+            let need = (hit >> (r * ROW)) & ROW_BITS;
+            if need == 0 {
+                continue;
+            }
+            let dirs = [0, 1, 2].map(|k| row64(&self.d64[k], r));
+            let (z, ok) = d.chunk(l, cam, dirs, row64(&self.planar, r), need, self.subnormal);
+            let mut m = need & ok;
+            while m != 0 {
+                let j = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let i = r * ROW + j;
+                let k = hit_key(z[j], leaf.prim);
                 if k < self.best[i] {
                     self.best[i] = k;
                     self.best_z[i] = key_depth(k);
@@ -287,18 +333,18 @@ impl TraceBvh {
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
         #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = Avx2::detect() {
-            // SAFETY: the token proves the CPU supports AVX2.
-            return unsafe { self.trace_packet_avx2(avx2, scene, x0, y0, c, stack) };
+        if let (Some(avx2), Some(wide)) = (Avx2::detect(), edges::Avx2::detect()) {
+            // SAFETY: the tokens prove the CPU supports AVX2.
+            return unsafe { self.trace_packet_avx2((avx2, wide), scene, x0, y0, c, stack) };
         }
-        self.trace_packet_body(Portable, scene, x0, y0, c, stack)
+        self.trace_packet_body((Portable, edges::Portable), scene, x0, y0, c, stack)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     fn trace_packet_avx2(
         &self,
-        avx2: Avx2,
+        avx2: (Avx2, edges::Avx2),
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
@@ -330,9 +376,9 @@ impl TraceBvh {
     }
 
     #[inline(always)]
-    fn trace_packet_body<S: Rows>(
+    fn trace_packet_body<S: Rows, L: Lanes>(
         &self,
-        s: S,
+        (s, l): (S, L),
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
@@ -359,7 +405,7 @@ impl TraceBvh {
                 for k in node.first as usize..(node.first + node.count) as usize {
                     let m = m & self.rects[k].lanes(x0 as i32, y0 as i32);
                     if m != 0 {
-                        pk.leaf(s, cam, &self.leaves[k], m, c);
+                        pk.leaf((s, l), cam, &self.leaves[k], m, c);
                     }
                 }
                 continue;
@@ -408,12 +454,18 @@ mod tests {
             for y0 in (0..size.1 as usize).step_by(PH) {
                 for x0 in (0..size.0 as usize).step_by(PW) {
                     let mut c = Counters::default();
-                    let portable =
-                        bvh.trace_packet_body(Portable, &scene, x0, y0, &mut c, &mut stack);
+                    let portable = bvh.trace_packet_body(
+                        (Portable, edges::Portable),
+                        &scene,
+                        x0,
+                        y0,
+                        &mut c,
+                        &mut stack,
+                    );
                     #[cfg(target_arch = "x86_64")]
-                    if let Some(avx2) = Avx2::detect() {
+                    if let Some(avx2) = Avx2::detect().zip(edges::Avx2::detect()) {
                         let mut c2 = Counters::default();
-                        // SAFETY: the token proves the CPU supports AVX2.
+                        // SAFETY: the tokens prove the CPU supports AVX2.
                         let fast = unsafe {
                             bvh.trace_packet_avx2(avx2, &scene, x0, y0, &mut c2, &mut stack)
                         };
@@ -478,7 +530,7 @@ mod tests {
                     let inside = x < w && y < h;
                     assert_eq!(pk.active >> i & 1 == 1, inside, "lane {i} at ({x}, {y})");
                     let exact = cam.pixel_ray(x as u32, y as u32);
-                    assert_eq!(pk.rays[i], exact, "lane {i} at ({x}, {y})");
+                    assert_eq!(pk.ray(&cam, i), exact, "lane {i} at ({x}, {y})");
                     let r32 = Ray32::new(&exact);
                     assert_eq!([0, 1, 2].map(|k| pk.dir[k][i]), r32.dir);
                     assert_eq!([0, 1, 2].map(|k| pk.inv[k][i]), r32.inv);

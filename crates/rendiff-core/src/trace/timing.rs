@@ -2,7 +2,8 @@
 //! assertions). Run with
 //! `TRACE_SCENE=scenes/million.toml TRACE_SIZE=1920x1080 cargo test --release
 //! -p rendiff-core trace::timing -- --ignored --nocapture` (`TRACE_BVH=slow`
-//! for obvhs' slow build, as `bench peers` also measures; `TRACE_SCENE=grid:N`
+//! for obvhs' slow build, as `bench peers` also measures; `TRACE_BUILD=once`
+//! builds it once, untimed, for profiling the kernel; `TRACE_SCENE=grid:N`
 //! for `bench crossover`'s grid, as in `raster_timing`); it prints the BVH
 //! build time, the keys-only Mrays/s per thread count, and a hash of the keys
 //! (so two builds of the kernel can be compared bit for bit).
@@ -24,7 +25,12 @@ mod tests {
         };
         let pixels = lp.scene.camera.pixel_count() as f64;
         lp.per_thread_count(|t| {
-            let (build_s, bvh) = lp.timed(|| TraceBvh::build(&lp.scene, quality));
+            // The build once, untimed, under TRACE_BUILD=once (profiling the kernel).
+            let (build_s, bvh) = if std::env::var("TRACE_BUILD").as_deref() == Ok("once") {
+                (f64::NAN, TraceBvh::build(&lp.scene, quality))
+            } else {
+                lp.timed(|| TraceBvh::build(&lp.scene, quality))
+            };
             let opts = TraceOptions::default();
             let (med, keys) = lp.timed(|| trace_keys(&lp.scene, &bvh, opts, &|_| {}));
             println!(
