@@ -118,10 +118,10 @@ impl Packet {
         // (The point P and 1 / D are rebuilt by `ray` for the few lanes
         // whose exact fallback needs them.)
         let mut d64 = [[0f64; LANES]; 3];
-        for k in 0..3 {
+        for (k, dk) in d64.iter_mut().enumerate() {
             let (e, f, r, u) = (cam.eye[k], cam.forward[k], cam.right[k], cam.up_ortho[k]);
-            for i in 0..LANES {
-                d64[k][i] = (e + (f + r * sxl[i] + u * syl[i])) - e;
+            for (i, d) in dk.iter_mut().enumerate() {
+                *d = (e + (f + r * sxl[i] + u * syl[i])) - e;
             }
         }
         let (f0, f1, f2) = (cam.forward.x, cam.forward.y, cam.forward.z);
