@@ -61,14 +61,18 @@ impl Bins {
             .map(|(ci, (tris, deg))| {
                 let mut rects = vec![None; tris.len()];
                 crate::raster_bounds::bounds_into(cam, tris, deg, margin, &mut rects);
-                let tiles_of = |r: PixelRect| {
-                    (r.y0 / TILE..=r.y1 / TILE)
-                        .flat_map(move |ty| (r.x0 / TILE..=r.x1 / TILE).map(move |tx| (tx, ty)))
-                };
+                // Each box's tile range (most boxes of a dense mesh lie in one
+                // tile), computed once for both passes.
+                let spans: Vec<Option<[u32; 4]>> = rects
+                    .iter()
+                    .map(|r| r.map(|r| [r.x0 / TILE, r.x1 / TILE, r.y0 / TILE, r.y1 / TILE]))
+                    .collect();
                 let mut start = vec![0u32; tiles + 1];
-                for &r in rects.iter().flatten() {
-                    for (tx, ty) in tiles_of(r) {
-                        start[(ty * tiles_x + tx) as usize + 1] += 1;
+                for &[tx0, tx1, ty0, ty1] in spans.iter().flatten() {
+                    for ty in ty0..=ty1 {
+                        for tx in tx0..=tx1 {
+                            start[(ty * tiles_x + tx) as usize + 1] += 1;
+                        }
                     }
                 }
                 for i in 0..tiles {
@@ -80,18 +84,22 @@ impl Bins {
                     rect: [0; 4],
                 };
                 let mut entries = vec![empty; start[tiles] as usize];
-                for (i, r) in rects.iter().enumerate() {
-                    let &Some(r) = r else { continue };
+                for (i, (r, span)) in rects.iter().zip(&spans).enumerate() {
+                    let (&Some(r), &Some([tx0, tx1, ty0, ty1])) = (r, span) else {
+                        continue;
+                    };
                     let prim = (ci * Self::GRAIN + i) as u32;
-                    for (tx, ty) in tiles_of(r) {
-                        let (x0, y0) = (tx * TILE, ty * TILE);
-                        let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                        let slot = &mut next[(ty * tiles_x + tx) as usize];
-                        entries[*slot as usize] = Binned {
-                            prim,
-                            rect: clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8),
-                        };
-                        *slot += 1;
+                    for ty in ty0..=ty1 {
+                        for tx in tx0..=tx1 {
+                            let (x0, y0) = (tx * TILE, ty * TILE);
+                            let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
+                            let slot = &mut next[(ty * tiles_x + tx) as usize];
+                            entries[*slot as usize] = Binned {
+                                prim,
+                                rect: clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8),
+                            };
+                            *slot += 1;
+                        }
                     }
                 }
                 // This chunk's non-empty runs, by tile.
