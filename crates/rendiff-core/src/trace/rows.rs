@@ -14,6 +14,13 @@ pub(crate) const ROW: usize = 8;
 pub(crate) trait Rows: Copy {
     /// Bit `j` set where `a[j] > b[j]` (false for NaN, which never arises here).
     fn gt(self, a: &[f32; ROW], b: &[f32; ROW]) -> u32;
+
+    /// `gt(a, b) | gt(c, d)`: the AVX2 form ors the comparison vectors and
+    /// moves one mask instead of two (the box test's per-row epilogue).
+    #[inline(always)]
+    fn gt_either(self, a: &[f32; ROW], b: &[f32; ROW], c: &[f32; ROW], d: &[f32; ROW]) -> u32 {
+        self.gt(a, b) | self.gt(c, d)
+    }
 }
 
 /// Plain Rust, for any CPU.
@@ -57,6 +64,26 @@ impl Rows for Avx2 {
             _mm256_movemask_ps(c) as u32
         }
     }
+
+    #[inline(always)]
+    fn gt_either(self, a: &[f32; ROW], b: &[f32; ROW], c: &[f32; ROW], d: &[f32; ROW]) -> u32 {
+        use std::arch::x86_64::{
+            _mm256_cmp_ps, _mm256_loadu_ps, _mm256_movemask_ps, _mm256_or_ps, _CMP_GT_OQ,
+        };
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
+        // the loads read exactly the four 8-float arrays borrowed here.
+        unsafe {
+            let ab = _mm256_cmp_ps::<_CMP_GT_OQ>(
+                _mm256_loadu_ps(a.as_ptr()),
+                _mm256_loadu_ps(b.as_ptr()),
+            );
+            let cd = _mm256_cmp_ps::<_CMP_GT_OQ>(
+                _mm256_loadu_ps(c.as_ptr()),
+                _mm256_loadu_ps(d.as_ptr()),
+            );
+            _mm256_movemask_ps(_mm256_or_ps(ab, cd)) as u32
+        }
+    }
 }
 
 #[cfg(test)]
@@ -88,9 +115,15 @@ mod tests {
             }
             let want: u32 = (0..ROW).map(|j| u32::from(a[j] > b[j]) << j).sum();
             assert_eq!(Portable.gt(&a, &b), want);
+            // Either of two comparisons: (a > b) | (b > a), and (a > b) | (a > a).
+            let either = Portable.gt(&b, &a) | want;
+            assert_eq!(Portable.gt_either(&a, &b, &b, &a), either);
+            assert_eq!(Portable.gt_either(&a, &b, &a, &a), want);
             #[cfg(target_arch = "x86_64")]
             if let Some(avx) = Avx2::detect() {
                 assert_eq!(avx.gt(&a, &b), want, "{a:?} > {b:?}");
+                assert_eq!(avx.gt_either(&a, &b, &b, &a), either, "{a:?} <> {b:?}");
+                assert_eq!(avx.gt_either(&a, &b, &a, &a), want, "{a:?} > {b:?}");
             }
         }
     }
