@@ -69,6 +69,11 @@ impl Bins {
                     .collect();
                 let mut start = vec![0u32; tiles + 1];
                 for &[tx0, tx1, ty0, ty1] in spans.iter().flatten() {
+                    if tx0 == tx1 && ty0 == ty1 {
+                        // One tile: no loops.
+                        start[(ty0 * tiles_x + tx0) as usize + 1] += 1;
+                        continue;
+                    }
                     for ty in ty0..=ty1 {
                         for tx in tx0..=tx1 {
                             start[(ty * tiles_x + tx) as usize + 1] += 1;
@@ -89,6 +94,18 @@ impl Bins {
                         continue;
                     };
                     let prim = (ci * Self::GRAIN + i) as u32;
+                    if tx0 == tx1 && ty0 == ty1 {
+                        // One tile: no loops, and the box (inside the tile
+                        // and the image) needs no clipping.
+                        let slot = &mut next[(ty0 * tiles_x + tx0) as usize];
+                        let (x0, y0) = (tx0 * TILE, ty0 * TILE);
+                        entries[*slot as usize] = Binned {
+                            prim,
+                            rect: [r.x0 - x0, r.x1 - x0, r.y0 - y0, r.y1 - y0].map(|v| v as u8),
+                        };
+                        *slot += 1;
+                        continue;
+                    }
                     for ty in ty0..=ty1 {
                         for tx in tx0..=tx1 {
                             let (x0, y0) = (tx * TILE, ty * TILE);
