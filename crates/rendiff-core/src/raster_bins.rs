@@ -175,3 +175,50 @@ pub fn clip_to_tile(r: PixelRect, x0: u32, y0: u32, tw: u32, th: u32) -> [usize;
         (r.y1.min(y0 + th - 1) - y0) as usize,
     ]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raster::screen_bounds;
+    use crate::scene::generators::crossover_grid;
+
+    /// Every tile's bin is what one serial pass over the triangles gives:
+    /// each triangle whose box meets the tile, in index order, with its box
+    /// clipped to the tile. The grids span several chunks, with boxes in one
+    /// tile and boxes across many.
+    #[test]
+    fn bins_are_the_serial_binning() {
+        for (nx, size) in [(64, 200), (3, 200), (1, 100), (100, 70)] {
+            let scene = crossover_grid(nx, size, false).unwrap();
+            assert!(nx < 64 || scene.triangles.len() > Bins::GRAIN);
+            let cam = &scene.camera;
+            let margin = Some(BoxMargin::new(cam));
+            let (tiles_x, tiles_y) = (cam.width.div_ceil(TILE), cam.height.div_ceil(TILE));
+            let bins = Bins::new(&scene, margin, tiles_x, tiles_y);
+            let mut bin = Vec::new();
+            let mut entries = 0;
+            for ty in 0..tiles_y {
+                for tx in 0..tiles_x {
+                    let (x0, y0) = (tx * TILE, ty * TILE);
+                    let (tw, th) = (TILE.min(cam.width - x0), TILE.min(cam.height - y0));
+                    let want: Vec<(u32, [u8; 4])> = (0..scene.triangles.len())
+                        .filter(|&i| !scene.degenerate[i])
+                        .filter_map(|i| Some((i, screen_bounds(cam, &scene.triangles[i])?)))
+                        .filter(|(_, r)| {
+                            r.x0 < x0 + tw && r.x1 >= x0 && r.y0 < y0 + th && r.y1 >= y0
+                        })
+                        .map(|(i, r)| {
+                            let c = clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8);
+                            (i as u32, c)
+                        })
+                        .collect();
+                    bins.tile((ty * tiles_x + tx) as usize, &mut bin);
+                    let got: Vec<(u32, [u8; 4])> = bin.iter().map(|b| (b.prim, b.rect)).collect();
+                    assert_eq!(got, want, "grid {nx} at {size}, tile ({tx}, {ty})");
+                    entries += got.len();
+                }
+            }
+            assert!(entries > 0);
+        }
+    }
+}
