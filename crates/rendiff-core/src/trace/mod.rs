@@ -376,11 +376,16 @@ pub fn trace_keys(
 ) -> PixelKeys {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    // The packet loop writes every key (a band cut off by the deadline is
-    // filled with NO_HIT), so its buffer starts as fresh zero pages: no serial
-    // fill before the parallel loop, which then touches each page first.
-    let packets = !opts.count_coverage && opts.kernel == TraceKernel::Packets;
-    let mut keys = vec![if packets { 0 } else { NO_HIT }; cam.pixel_count()];
+    if !opts.count_coverage && opts.kernel == TraceKernel::Packets {
+        let (keys, counters) = packet_keys(scene, bvh, opts, progress);
+        return PixelKeys {
+            keys,
+            coverage: None,
+            counters,
+            renderer: "trace",
+        };
+    }
+    let mut keys = vec![NO_HIT; cam.pixel_count()];
     let mut cov = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
     let counters: Counters = if opts.count_coverage {
         keys.par_chunks_mut(w)
@@ -418,30 +423,7 @@ pub fn trace_keys(
             })
             .reduce(Counters::default, sum)
     } else {
-        // Bands of PH rows, packets of PW x PH pixels.
-        keys.par_chunks_mut(w * packet::PH)
-            .enumerate()
-            .map(|(band, rows)| {
-                let mut c = Counters::default();
-                if crate::deadline::past(opts.deadline) {
-                    rows.fill(NO_HIT);
-                    return c;
-                }
-                let mut stack = Vec::with_capacity(64);
-                let y0 = band * packet::PH;
-                for x0 in (0..w).step_by(packet::PW) {
-                    let pk = bvh.trace_packet(scene, x0, y0, &mut c, &mut stack);
-                    for (i, &k) in pk.iter().enumerate() {
-                        let (x, dy) = (x0 + i % packet::PW, i / packet::PW);
-                        if x < w && dy * w < rows.len() {
-                            rows[dy * w + x] = k;
-                        }
-                    }
-                }
-                progress((rows.len() / w) as u64);
-                c
-            })
-            .reduce(Counters::default, sum)
+        unreachable!("packets return above")
     };
     PixelKeys {
         keys,
@@ -449,6 +431,53 @@ pub fn trace_keys(
         counters,
         renderer: "trace",
     }
+}
+
+/// The packet kernel over every pixel: bands of `PH` rows, packets of
+/// `PW` x `PH` pixels. The key buffer is never filled before the parallel
+/// loop (neither by a serial fill nor by `calloc`'s, which reused memory
+/// needs): each band writes every key of its rows, a band cut off by the
+/// deadline `NO_HIT`, so the whole buffer is written before it is read.
+fn packet_keys(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    opts: TraceOptions,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Vec<u64>, Counters) {
+    use std::mem::MaybeUninit;
+    let cam = &scene.camera;
+    let (w, n) = (cam.width as usize, cam.pixel_count());
+    let mut keys: Vec<u64> = Vec::with_capacity(n);
+    let counters = keys.spare_capacity_mut()[..n]
+        .par_chunks_mut(w * packet::PH)
+        .enumerate()
+        .map(|(band, rows): (usize, &mut [MaybeUninit<u64>])| {
+            let mut c = Counters::default();
+            if crate::deadline::past(opts.deadline) {
+                rows.fill(MaybeUninit::new(NO_HIT));
+                return c;
+            }
+            let mut stack = Vec::with_capacity(64);
+            let y0 = band * packet::PH;
+            // Every pixel of the band lies in exactly one packet's lanes.
+            for x0 in (0..w).step_by(packet::PW) {
+                let pk = bvh.trace_packet(scene, x0, y0, &mut c, &mut stack);
+                for (i, &k) in pk.iter().enumerate() {
+                    let (x, dy) = (x0 + i % packet::PW, i / packet::PW);
+                    if x < w && dy * w < rows.len() {
+                        rows[dy * w + x] = MaybeUninit::new(k);
+                    }
+                }
+            }
+            progress((rows.len() / w) as u64);
+            c
+        })
+        .reduce(Counters::default, sum);
+    // SAFETY: the `n` keys were all written above (each band writes every
+    // pixel of its rows: columns `0..w` in steps of `PW` lanes, rows `0..PH`
+    // clipped to the band, or `NO_HIT` throughout), and `n <= capacity`.
+    unsafe { keys.set_len(n) };
+    (keys, counters)
 }
 
 fn sum(mut a: Counters, b: Counters) -> Counters {
@@ -563,5 +592,40 @@ impl TraceBvh {
             }
         }
         best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The packet loop writes every key of its never-filled buffer: at
+    /// sizes where packets overhang the right and bottom edges its keys are
+    /// the single-ray loop's, and past the deadline every key is `NO_HIT`.
+    #[test]
+    fn packet_keys_cover_every_pixel() {
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/icosphere.toml");
+        let s = crate::scene::Scene::load(&file).unwrap();
+        let base = ResolvedScene::resolve(&s).unwrap();
+        for (w, h) in [(37, 23), (8, 4), (9, 5), (1, 1), (64, 3)] {
+            let scene = base.resized(w, h).unwrap();
+            let bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+            let packets = trace_keys(&scene, &bvh, TraceOptions::default(), &|_| {});
+            let single = TraceOptions {
+                kernel: TraceKernel::SingleRays,
+                ..TraceOptions::default()
+            };
+            let single = trace_keys(&scene, &bvh, single, &|_| {});
+            assert_eq!(packets.keys, single.keys, "{w}x{h}");
+            assert!(packets.keys.iter().any(|&k| k != NO_HIT), "{w}x{h}");
+            let past = TraceOptions {
+                deadline: Some(Instant::now()),
+                ..TraceOptions::default()
+            };
+            let cut = trace_keys(&scene, &bvh, past, &|_| {});
+            assert_eq!(cut.keys.len(), (w * h) as usize);
+            assert!(cut.keys.iter().all(|&k| k == NO_HIT), "{w}x{h}");
+        }
     }
 }
