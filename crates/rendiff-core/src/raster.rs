@@ -148,21 +148,27 @@ fn keys_impl(
     let tiles_y = h.div_ceil(TILE);
     let bins = Bins::new(scene, margin, tiles_x, tiles_y);
     let band = (w * TILE) as usize;
-    // Fresh zero pages, each band filling its own with NO_HIT: no serial
-    // fill before the parallel loop (as the tracer's key buffer).
-    let mut keys = vec![0u64; cam.pixel_count()];
-    let mut coverage = vec![[0u16; 2]; if opts.count_coverage { keys.len() } else { 0 }];
+    // Never filled before the parallel loop (neither serially nor by
+    // calloc, which zeroes reused memory): each band fills its own keys with
+    // NO_HIT first (as the tracer's packet loop writes all of its own).
+    let n = cam.pixel_count();
+    let mut keys: Vec<u64> = Vec::with_capacity(n);
+    let mut coverage = vec![[0u16; 2]; if opts.count_coverage { n } else { 0 }];
     let mut cov_bands: Vec<&mut [[u16; 2]]> = if opts.count_coverage {
         coverage.chunks_mut(band).collect()
     } else {
         (0..tiles_y).map(|_| &mut [][..]).collect()
     };
-    let counters = keys
+    let counters = keys.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .zip(cov_bands.par_iter_mut())
         .enumerate()
         .map(|(ty, (kband, cband))| {
-            kband.fill(NO_HIT);
+            kband.fill(std::mem::MaybeUninit::new(NO_HIT));
+            // SAFETY: every element was just written; `MaybeUninit<u64>`
+            // and `u64` have the same layout.
+            let kband: &mut [u64] =
+                unsafe { &mut *(kband as *mut [std::mem::MaybeUninit<u64>] as *mut [u64]) };
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
@@ -181,12 +187,21 @@ fn keys_impl(
                 }
             }
             progress(u64::from(tiles_x));
-            c
+            (c, kband.len())
         })
-        .reduce(Counters::default, |mut a, b| {
-            a += b;
-            a
-        });
+        .reduce(
+            || (Counters::default(), 0),
+            |(mut a, n), (b, m)| {
+                a += b;
+                (a, n + m)
+            },
+        );
+    let (counters, filled) = counters;
+    // Every band was zipped with a coverage band and filled (else no key may be read).
+    assert_eq!(filled, n, "raster bands left keys unwritten");
+    // SAFETY: the bands filled `n` keys, all of `0..n` (disjoint chunks in
+    // order), and `n <= capacity`.
+    unsafe { keys.set_len(n) };
     PixelKeys {
         keys,
         coverage: opts.count_coverage.then_some(coverage),
