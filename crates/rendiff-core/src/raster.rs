@@ -159,7 +159,7 @@ fn keys_impl(
     } else {
         (0..tiles_y).map(|_| &mut [][..]).collect()
     };
-    let counters = keys.spare_capacity_mut()[..n]
+    let (counters, filled) = keys.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .zip(cov_bands.par_iter_mut())
         .enumerate()
@@ -196,7 +196,6 @@ fn keys_impl(
                 (a, n + m)
             },
         );
-    let (counters, filled) = counters;
     // Every band was zipped with a coverage band and filled (else no key may be read).
     assert_eq!(filled, n, "raster bands left keys unwritten");
     // SAFETY: the bands filled `n` keys, all of `0..n` (disjoint chunks in

@@ -405,7 +405,8 @@ pub fn trace_keys(
                 c
             })
             .reduce(Counters::default, sum)
-    } else if opts.kernel == TraceKernel::SingleRays {
+    } else {
+        // Single rays (packets returned above).
         keys.par_chunks_mut(w)
             .enumerate()
             .map(|(y, row)| {
@@ -422,8 +423,6 @@ pub fn trace_keys(
                 c
             })
             .reduce(Counters::default, sum)
-    } else {
-        unreachable!("packets return above")
     };
     PixelKeys {
         keys,
