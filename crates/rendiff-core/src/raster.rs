@@ -554,7 +554,7 @@ fn small_box(
     for ly in ly0..=ly1 {
         for lx in lx0..=lx1 {
             let d = rays.dir(lx, ly);
-            let facing = covers_by(c, |k, c| {
+            let facing = covers_by(c, #[inline(always)] |k, c| {
                 let e =
                     planes[k].get_or_insert_with(|| EdgePlane::new(cam.eye, v[k], v[(k + 1) % 3]));
                 let det = d.x * e.n.x + d.y * e.n.y + d.z * e.n.z;
