@@ -496,6 +496,22 @@ impl TileRays {
         DVec3::new(self.d[0][at], self.d[1][at], self.d[2][at])
     }
 
+    /// The directions and planar factors of the 8 lanes from buffer index
+    /// `at`, written out per component (`[0, 1, 2].map` of a fallible
+    /// conversion compiled to an out-of-line call per chunk, with a
+    /// `vzeroupper`, in the raster's hottest loop).
+    #[inline(always)]
+    fn chunk_at(&self, at: usize) -> ([&[f64; CHUNK]; 3], &[f64; CHUNK]) {
+        fn lane(a: &[f64], at: usize) -> &[f64; CHUNK] {
+            a[at..at + CHUNK].try_into().unwrap()
+        }
+        let [x, y, z] = &self.d;
+        (
+            [lane(x, at), lane(y, at), lane(z, at)],
+            lane(&self.planar, at),
+        )
+    }
+
     /// Columns in the tile.
     pub fn width(&self) -> usize {
         self.width
@@ -622,12 +638,7 @@ impl ChunkDepth {
         col: usize,
         need: u32,
     ) -> ([f32; CHUNK], u32) {
-        let at = row * rays.stride + col;
-        fn lane(a: &[f64], at: usize) -> &[f64; CHUNK] {
-            a[at..at + CHUNK].try_into().unwrap()
-        }
-        let d = [0, 1, 2].map(|k| lane(&rays.d[k], at));
-        let planar = lane(&rays.planar, at);
+        let (d, planar) = rays.chunk_at(row * rays.stride + col);
         self.chunk(l, cam, d, planar, need, rays.subnormal)
     }
 
@@ -670,9 +681,7 @@ impl ChunkDepth {
         if rays.subnormal {
             return None;
         }
-        let at = row * rays.stride + col;
-        let d = [0, 1, 2].map(|k| <&[f64; CHUNK]>::try_from(&rays.d[k][at..at + CHUNK]).unwrap());
-        let planar = (&rays.planar[at..at + CHUNK]).try_into().unwrap();
+        let (d, planar) = rays.chunk_at(row * rays.stride + col);
         l.clamp_free_depths(self, cam, d, planar)
     }
 
