@@ -554,20 +554,24 @@ fn small_box(
     for ly in ly0..=ly1 {
         for lx in lx0..=lx1 {
             let d = rays.dir(lx, ly);
-            let facing = covers_by(c, #[inline(always)] |k, c| {
-                let e =
-                    planes[k].get_or_insert_with(|| EdgePlane::new(cam.eye, v[k], v[(k + 1) % 3]));
-                let det = d.x * e.n.x + d.y * e.n.y + d.z * e.n.z;
-                let bound = O3D_ERRBOUND_A
-                    * (d.x.abs() * e.perm.x + d.y.abs() * e.perm.y + d.z.abs() * e.perm.z);
-                if det > bound {
-                    1
-                } else if -det > bound {
-                    -1
-                } else {
-                    edge_sign(cam, e, &rays.ray(lx, ly), c)
-                }
-            });
+            let facing = covers_by(
+                c,
+                #[inline(always)]
+                |k, c| {
+                    let e = planes[k]
+                        .get_or_insert_with(|| EdgePlane::new(cam.eye, v[k], v[(k + 1) % 3]));
+                    let det = d.x * e.n.x + d.y * e.n.y + d.z * e.n.z;
+                    let bound = O3D_ERRBOUND_A
+                        * (d.x.abs() * e.perm.x + d.y.abs() * e.perm.y + d.z.abs() * e.perm.z);
+                    if det > bound {
+                        1
+                    } else if -det > bound {
+                        -1
+                    } else {
+                        edge_sign(cam, e, &rays.ray(lx, ly), c)
+                    }
+                },
+            );
             if facing != 0 {
                 let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
                 if let Some(z) = d.depth_at(cam, rays, lx, ly) {
