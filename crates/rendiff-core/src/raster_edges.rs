@@ -97,12 +97,25 @@ pub trait Lanes: Copy {
     /// Bit `j` set where `a[j] > b` (false for NaN).
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32;
 
-    /// Over `v`: the largest `|v_i|` that is not NaN (0 when none), whether
-    /// some `v_i` is NaN or infinite, and whether some is subnormal (a tile
-    /// row's direction components, for [`TileRays`]).
+    /// One row of one component of a tile's directions, `d[i] = (e +
+    /// (across[i] + up)) - e` ([`Camera::screen_ray`]'s roundings, see
+    /// [`TileRays::fill`]), its values taken into `ext` as they are written.
     #[inline(always)]
-    fn row_stats(self, v: &[f64]) -> RowStats {
-        row_stats_scalar(v)
+    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: &mut Extremes) {
+        for (d, &a) in d.iter_mut().zip(across) {
+            *d = (e + (a + up)) - e;
+        }
+        ext.add(d);
+    }
+
+    /// One row of a tile's planar factors, `p[i] = D_i . f` (`DVec3::dot`:
+    /// left to right), taken into `ext` as they are written.
+    #[inline(always)]
+    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64], ext: &mut Extremes) {
+        for (((p, &x), &y), &z) in p.iter_mut().zip(x).zip(y).zip(z) {
+            *p = x * f[0] + y * f[1] + z * f[2];
+        }
+        ext.add(p);
     }
 
     /// [`ChunkDepth`]'s shortcut over 8 lanes in wide registers: the
@@ -135,7 +148,8 @@ pub trait Lanes: Copy {
     }
 }
 
-/// What [`Lanes::row_stats`] finds in a row.
+/// What a scan of a tile's direction components finds ([`row_stats_scalar`],
+/// the definition [`Span::stats`] must equal).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowStats {
     /// The largest magnitude that is not NaN.
@@ -146,7 +160,8 @@ pub struct RowStats {
     pub subnormal: bool,
 }
 
-/// [`Lanes::row_stats`] one value at a time.
+/// [`RowStats`] one value at a time: the definition, and the rare tiles'
+/// fallback ([`Span::stats`]).
 #[inline(always)]
 fn row_stats_scalar(v: &[f64]) -> RowStats {
     let mut out = RowStats {
@@ -161,6 +176,146 @@ fn row_stats_scalar(v: &[f64]) -> RowStats {
         out.subnormal |= a != 0.0 && a < f64::MIN_POSITIVE;
     }
     out
+}
+
+/// Running extremes of values, four lanes wide (min, max and a sum that
+/// turns NaN at the first NaN or infinity): two compares and a
+/// multiply-add per four values, in plain Rust that vectorizes
+/// (`if x < lo { x } else { lo }` is exactly `minpd`'s rule). The tile's
+/// rays gather them as they are written, so that neither the fast path's
+/// bounds ([`RowStats`]) nor the early depth test
+/// ([`crate::raster_hiz::TileDepthBound`]) reads the tile again.
+#[derive(Debug, Clone, Copy)]
+pub struct Extremes {
+    /// Smallest value per lane (NaN never enters).
+    lo: [f64; 4],
+    /// Largest value per lane.
+    hi: [f64; 4],
+    /// `Σ 0 x` per lane: 0 while every value is finite.
+    bad: [f64; 4],
+}
+
+impl Default for Extremes {
+    fn default() -> Self {
+        Extremes {
+            lo: [f64::INFINITY; 4],
+            hi: [f64::NEG_INFINITY; 4],
+            bad: [0.0; 4],
+        }
+    }
+}
+
+impl Extremes {
+    /// Takes in the values of `v`.
+    #[inline(always)]
+    pub fn add(&mut self, v: &[f64]) {
+        // Locals and fixed-size quads: what LLVM turns into 4-lane vectors.
+        let Extremes {
+            mut lo,
+            mut hi,
+            mut bad,
+        } = *self;
+        let mut lane = |j: usize, x: f64| {
+            lo[j] = if x < lo[j] { x } else { lo[j] };
+            hi[j] = if x > hi[j] { x } else { hi[j] };
+            bad[j] += x * 0.0;
+        };
+        let mut quads = v.chunks_exact(4);
+        for q in &mut quads {
+            let q: &[f64; 4] = q.try_into().unwrap();
+            for (j, &x) in q.iter().enumerate() {
+                lane(j, x);
+            }
+        }
+        for (j, &x) in quads.remainder().iter().enumerate() {
+            lane(j, x);
+        }
+        *self = Extremes { lo, hi, bad };
+    }
+
+    /// The extremes over all lanes.
+    #[inline(always)]
+    pub fn span(&self) -> Span {
+        let mut out = Span {
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+            finite: true,
+        };
+        for j in 0..4 {
+            out.lo = if self.lo[j] < out.lo {
+                self.lo[j]
+            } else {
+                out.lo
+            };
+            out.hi = if self.hi[j] > out.hi {
+                self.hi[j]
+            } else {
+                out.hi
+            };
+            out.finite &= self.bad[j] == 0.0;
+        }
+        out
+    }
+}
+
+/// The smallest and largest of some values, and whether all are finite
+/// (then `lo` and `hi` are the true extremes; empty: `+inf`, `-inf`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Span {
+    /// Smallest value (meaningful when `finite`).
+    pub lo: f64,
+    /// Largest value.
+    pub hi: f64,
+    /// No value is NaN or infinite.
+    pub finite: bool,
+}
+
+impl Default for Span {
+    /// The span of no values.
+    fn default() -> Self {
+        Extremes::default().span()
+    }
+}
+
+impl Span {
+    /// The span of `v` (tests, and tiles not built by [`TileRays::fill`]).
+    pub fn of(v: &[f64]) -> Span {
+        let mut e = Extremes::default();
+        e.add(v);
+        e.span()
+    }
+
+    /// Every value is nonzero and of one sign.
+    #[inline(always)]
+    pub fn one_strict_sign(&self) -> bool {
+        self.lo > 0.0 || self.hi < 0.0
+    }
+
+    /// What [`TileRays`] keeps per direction component, from the span of
+    /// `v`: the largest magnitude (NaN when some value is not finite) and
+    /// whether some value is subnormal, as [`row_stats_scalar`] defines
+    /// them. The magnitudes are the extremes'; with one strict sign the
+    /// smallest magnitude is an extreme's too, else (values crossing or
+    /// touching zero, or non-finite: a few tiles of a frame) `v` is scanned.
+    #[inline(always)]
+    pub fn stats(&self, v: &[f64]) -> (f64, bool) {
+        if self.finite && self.one_strict_sign() {
+            let smallest = if self.lo > 0.0 { self.lo } else { -self.hi };
+            (
+                (-self.lo).max(self.hi).max(0.0),
+                smallest < f64::MIN_POSITIVE,
+            )
+        } else {
+            let r = row_stats_scalar(v);
+            let max = if r.non_finite {
+                f64::NAN
+            } else {
+                // Mixed signs: the extremes' magnitudes (finite here).
+                (-self.lo).max(self.hi).max(0.0)
+            };
+            (max, r.subnormal)
+        }
+    }
 }
 
 /// [`Lanes`] in plain Rust, for any CPU.
@@ -204,45 +359,6 @@ impl Lanes for Avx2 {
             let hi = _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(a.as_ptr().add(4)), b);
             (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32
         }
-    }
-
-    #[inline(always)]
-    fn row_stats(self, v: &[f64]) -> RowStats {
-        use std::arch::x86_64::*;
-        let mut quads = v.chunks_exact(4);
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; each load reads
-        // the 4 f64 of a chunk of `v`, the stores 4 f64 into local arrays.
-        let (mut out, rest) = unsafe {
-            let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
-            let (zero, one) = (_mm256_setzero_pd(), _mm256_set1_pd(1.0));
-            let inf = _mm256_set1_pd(f64::INFINITY);
-            let (mut max, mut min_nz, mut bad) = (zero, one, zero);
-            for q in &mut quads {
-                let a = _mm256_and_pd(_mm256_loadu_pd(q.as_ptr()), abs_mask);
-                // maxpd(a, max) returns `max` where `a` is NaN.
-                max = _mm256_max_pd(a, max);
-                // Zeros count as 1 (not subnormal); NaN compares false.
-                let nz = _mm256_blendv_pd(a, one, _mm256_cmp_pd::<_CMP_EQ_OQ>(a, zero));
-                min_nz = _mm256_min_pd(nz, min_nz);
-                // Not below infinity: NaN or infinite.
-                bad = _mm256_or_pd(bad, _mm256_cmp_pd::<_CMP_NLT_UQ>(a, inf));
-            }
-            let mut m = [0.0; 4];
-            let mut n = [0.0; 4];
-            _mm256_storeu_pd(m.as_mut_ptr(), max);
-            _mm256_storeu_pd(n.as_mut_ptr(), min_nz);
-            let out = RowStats {
-                max: m.into_iter().fold(0.0, |x, y| if y > x { y } else { x }),
-                non_finite: _mm256_movemask_pd(bad) != 0,
-                subnormal: n.iter().any(|&x| x < f64::MIN_POSITIVE),
-            };
-            (out, quads.remainder())
-        };
-        let r = row_stats_scalar(rest);
-        out.max = if r.max > out.max { r.max } else { out.max };
-        out.non_finite |= r.non_finite;
-        out.subnormal |= r.subnormal;
-        out
     }
 
     #[inline(always)]
@@ -306,6 +422,67 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
+    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: &mut Extremes) {
+        use std::arch::x86_64::*;
+        let n = d.len().min(across.len());
+        let whole = n / 4 * 4;
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and
+        // stores touch 4 f64 at `i + 4 <= n`, within both slices, and the
+        // four lanes of `ext`'s arrays. Per lane: `Lanes::dir_row`'s
+        // operations in its order, and `Extremes::add`'s (`minpd(v, lo)`
+        // is `if v < lo { v } else { lo }`).
+        unsafe {
+            let (ev, uv, zero) = (_mm256_set1_pd(e), _mm256_set1_pd(up), _mm256_setzero_pd());
+            let mut lo = _mm256_loadu_pd(ext.lo.as_ptr());
+            let mut hi = _mm256_loadu_pd(ext.hi.as_ptr());
+            let mut bad = _mm256_loadu_pd(ext.bad.as_ptr());
+            for i in (0..whole).step_by(4) {
+                let a = _mm256_loadu_pd(across.as_ptr().add(i));
+                let v = _mm256_sub_pd(_mm256_add_pd(ev, _mm256_add_pd(a, uv)), ev);
+                _mm256_storeu_pd(d.as_mut_ptr().add(i), v);
+                lo = _mm256_min_pd(v, lo);
+                hi = _mm256_max_pd(v, hi);
+                bad = _mm256_add_pd(bad, _mm256_mul_pd(v, zero));
+            }
+            _mm256_storeu_pd(ext.lo.as_mut_ptr(), lo);
+            _mm256_storeu_pd(ext.hi.as_mut_ptr(), hi);
+            _mm256_storeu_pd(ext.bad.as_mut_ptr(), bad);
+        }
+        Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], ext);
+    }
+
+    #[inline(always)]
+    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64], ext: &mut Extremes) {
+        use std::arch::x86_64::*;
+        let n = p.len().min(x.len()).min(y.len()).min(z.len());
+        let whole = n / 4 * 4;
+        // SAFETY: as in `dir_row`: 4 f64 at `i + 4 <= n` of each slice.
+        // Per lane `(x f0 + y f1) + z f2`, then `Extremes::add`'s rules.
+        unsafe {
+            let fv = f.map(|v| _mm256_set1_pd(v));
+            let zero = _mm256_setzero_pd();
+            let mut lo = _mm256_loadu_pd(ext.lo.as_ptr());
+            let mut hi = _mm256_loadu_pd(ext.hi.as_ptr());
+            let mut bad = _mm256_loadu_pd(ext.bad.as_ptr());
+            for i in (0..whole).step_by(4) {
+                let xv = _mm256_mul_pd(_mm256_loadu_pd(x.as_ptr().add(i)), fv[0]);
+                let yv = _mm256_mul_pd(_mm256_loadu_pd(y.as_ptr().add(i)), fv[1]);
+                let zv = _mm256_mul_pd(_mm256_loadu_pd(z.as_ptr().add(i)), fv[2]);
+                let v = _mm256_add_pd(_mm256_add_pd(xv, yv), zv);
+                _mm256_storeu_pd(p.as_mut_ptr().add(i), v);
+                lo = _mm256_min_pd(v, lo);
+                hi = _mm256_max_pd(v, hi);
+                bad = _mm256_add_pd(bad, _mm256_mul_pd(v, zero));
+            }
+            _mm256_storeu_pd(ext.lo.as_mut_ptr(), lo);
+            _mm256_storeu_pd(ext.hi.as_mut_ptr(), hi);
+            _mm256_storeu_pd(ext.bad.as_mut_ptr(), bad);
+        }
+        let rest = [&x[whole..n], &y[whole..n], &z[whole..n]];
+        Portable.planar_row(f, rest, &mut p[whole..n], ext);
+    }
+
+    #[inline(always)]
     fn min_keys(self, keys: &mut [u64; CHUNK], z: &[f32; CHUNK], hits: u32, prim: u32) {
         use std::arch::x86_64::*;
         // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
@@ -359,6 +536,13 @@ pub struct TileRays {
     d: [Vec<f64>; 3],
     /// `D . forward`.
     planar: Vec<f64>,
+    /// `forward_k + right_k sx` per column and component (the part of `D`
+    /// that does not change down a column).
+    across: [Vec<f64>; 3],
+    /// The span of each component of `D` over the tile's pixels.
+    d_span: [Span; 3],
+    /// The span of `planar`.
+    planar_span: Span,
     /// `max |D_i|` over the tile's pixels, per component.
     max_abs: [f64; 3],
     /// Some direction component is subnormal: its reciprocal may overflow,
@@ -400,41 +584,42 @@ impl TileRays {
             // Every lane is written below; old values only avoid zeroing.
             v.resize(n, 0.0);
         }
-        t.max_abs = [0.0; 3];
-        t.subnormal = false;
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
         // The camera's private aspect tan, by the same expression.
         let a = cam.tan_half_vfov * (f64::from(cam.width) / f64::from(cam.height));
         t.eta = [0, 1, 2].map(|k| {
             16.0 * U * (e[k].abs() + f[k].abs() + r[k].abs() * a + u[k].abs() * cam.tan_half_vfov)
         });
+        let (e, f, r, u) = (e.to_array(), f.to_array(), r.to_array(), u.to_array());
+        for (k, across) in t.across.iter_mut().enumerate() {
+            across.clear();
+            across.extend(t.sx.iter().map(|&sx| f[k] + r[k] * sx));
+        }
+        let mut d_ext = [Extremes::default(); 3];
+        let mut planar_ext = Extremes::default();
         for ly in 0..rows {
             let sy = t.sy[ly];
             let row = ly * stride..(ly + 1) * stride;
             for k in 0..3 {
                 // Camera::screen_ray: P = eye + ((forward + right sx) + up sy),
-                // D = P - eye, component by component.
-                let (ek, fk, rk, uk) = (e[k], f[k], r[k], u[k]);
+                // D = P - eye, component by component (the same roundings,
+                // with `forward + right sx` taken once per column).
                 let d = &mut t.d[k][row.clone()];
-                for (d, &sx) in d.iter_mut().zip(&t.sx) {
-                    *d = (ek + ((fk + rk * sx) + uk * sy)) - ek;
-                }
+                l.dir_row(e[k], u[k] * sy, &t.across[k], d, &mut d_ext[k]);
             }
             let [dx, dy, dz] = &t.d;
-            let (dx, dy, dz) = (&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]);
+            let d = [&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]];
             // DVec3::dot(D, forward).
-            for (((p, &x), &y), &z) in t.planar[row.clone()].iter_mut().zip(dx).zip(dy).zip(dz) {
-                *p = x * f.x + y * f.y + z * f.z;
-            }
+            l.planar_row(f, d, &mut t.planar[row.clone()], &mut planar_ext);
         }
-        for k in 0..3 {
-            // The whole tile at once: padding lanes repeat real pixels.
-            let r = l.row_stats(&t.d[k]);
-            // A NaN or infinite direction leaves a NaN bound, which
-            // decides nothing (as an infinite one would).
-            t.max_abs[k] = if r.non_finite { f64::NAN } else { r.max };
-            t.subnormal |= r.subnormal;
-        }
+        // Padding lanes repeat real pixels: the spans are the tile's.
+        t.planar_span = planar_ext.span();
+        t.d_span = d_ext.map(|e| e.span());
+        // A NaN or infinite direction leaves a NaN bound, which decides
+        // nothing (as an infinite one would).
+        let stats = [0, 1, 2].map(|k| t.d_span[k].stats(&t.d[k]));
+        t.max_abs = stats.map(|(max_abs, _)| max_abs);
+        t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
     }
 
     /// Builds the tile from given directions (tests of the edge functions).
@@ -456,6 +641,9 @@ impl TileRays {
             sy: vec![0.0; th],
             basis: [DVec3::ZERO; 4],
             planar: d[0].clone(),
+            across: Default::default(),
+            d_span: [0, 1, 2].map(|k| Span::of(&d[k])),
+            planar_span: Span::of(&d[0]),
             d,
             max_abs,
             subnormal: false,
@@ -481,12 +669,13 @@ impl TileRays {
         }
     }
 
-    /// The tile's early depth bound ([`crate::raster_hiz`]); padding lanes
-    /// repeat real pixels, so they change nothing.
+    /// The tile's early depth bound ([`crate::raster_hiz`]), from the spans
+    /// gathered as the tile was filled (padding lanes repeat real pixels, so
+    /// they change nothing).
     #[inline(always)]
     pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
         let k = crate::raster_hiz::TileDepthBound::axis(cam);
-        crate::raster_hiz::TileDepthBound::new(k, &self.planar, &self.d[k])
+        crate::raster_hiz::TileDepthBound::from_spans(k, self.planar_span, self.d_span[k])
     }
 
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
@@ -956,10 +1145,12 @@ mod tests {
         }
     }
 
-    /// Both [`Lanes`] give the same row statistics, whatever the length
-    /// (whole and partial vectors), with zeros, subnormals, infinities and NaN.
+    /// The statistics taken from a span ([`Span::stats`]) are the scan's
+    /// ([`row_stats_scalar`]), whatever the length (whole and partial
+    /// vectors), with zeros, subnormals, infinities and NaN, of one sign or
+    /// mixed; and the span's extremes are the values' own.
     #[test]
-    fn row_stats_agree() {
+    fn span_stats_are_the_scans() {
         let vals = [
             0.0,
             -0.0,
@@ -988,11 +1179,23 @@ mod tests {
                         }
                     })
                     .collect();
+                // Half the vectors of one sign, so the extremes decide.
+                let v: Vec<f64> = if lcg(&mut s) > 0.0 {
+                    v.iter().map(|x| x.abs()).collect()
+                } else {
+                    v
+                };
                 let want = row_stats_scalar(&v);
-                assert_eq!(Portable.row_stats(&v), want);
-                #[cfg(target_arch = "x86_64")]
-                if let Some(avx) = Avx2::detect() {
-                    assert_eq!(avx.row_stats(&v), want, "{v:?}");
+                let span = Span::of(&v);
+                let (max, subnormal) = span.stats(&v);
+                let want_max = if want.non_finite { f64::NAN } else { want.max };
+                assert_eq!(max.to_bits(), want_max.to_bits(), "{v:?}");
+                assert_eq!(subnormal, want.subnormal, "{v:?}");
+                assert_eq!(span.finite, !want.non_finite, "{v:?}");
+                if span.finite {
+                    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+                    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                    assert_eq!((span.lo, span.hi), (lo, hi), "{v:?}");
                 }
                 let finite_max = v
                     .iter()
@@ -1052,6 +1255,90 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A filled tile's statistics, gathered as its rays are written, are the
+    /// scans' of its arrays (largest magnitudes, subnormals, the early depth
+    /// bound), on either lane kind, whose arrays agree bit for bit; tiles
+    /// where a direction component crosses or touches zero (the odd-sized
+    /// image's middle column) take the rescan, the others the extremes.
+    #[test]
+    fn filled_tiles_keep_the_scans_statistics() {
+        let cams = [
+            Camera::new(
+                DVec3::new(0.3, 0.7, 2.1),
+                DVec3::new(0.1, -0.2, 0.0),
+                DVec3::Y,
+                50.0,
+                45,
+                37,
+                1e-3,
+                1.0,
+            ),
+            Camera::new(
+                DVec3::Z * 1e7,
+                DVec3::ZERO,
+                DVec3::X,
+                90.0,
+                33,
+                33,
+                1e-3,
+                1.0,
+            ),
+            Camera::new(
+                DVec3::new(-4.0, 0.5, 0.25),
+                DVec3::new(3.0, 0.0, 0.0),
+                DVec3::Z,
+                20.0,
+                70,
+                9,
+                1e-3,
+                10.0,
+            ),
+        ];
+        let (mut rescans, mut extremes_only) = (0, 0);
+        for cam in cams.map(Result::unwrap) {
+            for (x0, y0) in [(0, 0), (32, 0), (0, 32), (32, 32), (64, 0), (5, 3)] {
+                if x0 >= cam.width || y0 >= cam.height {
+                    continue;
+                }
+                let (tw, th) = ((cam.width - x0).min(32), (cam.height - y0).min(32));
+                let t = TileRays::new(&cam, x0, y0, tw, th);
+                for k in 0..3 {
+                    let want = row_stats_scalar(&t.d[k]);
+                    let want_max = if want.non_finite { f64::NAN } else { want.max };
+                    assert_eq!(t.max_abs[k].to_bits(), want_max.to_bits());
+                    assert_eq!(t.d_span[k], Span::of(&t.d[k]));
+                    if t.d_span[k].one_strict_sign() {
+                        extremes_only += 1;
+                    } else {
+                        rescans += 1;
+                    }
+                }
+                let any_subnormal = (0..3).any(|k| row_stats_scalar(&t.d[k]).subnormal);
+                assert_eq!(t.subnormal, any_subnormal);
+                assert_eq!(t.planar_span, Span::of(&t.planar));
+                let k = crate::raster_hiz::TileDepthBound::axis(&cam);
+                let scanned = crate::raster_hiz::TileDepthBound::new(k, &t.planar, &t.d[k]);
+                assert!(scanned.is_some());
+                assert_eq!(t.depth_bound(&cam), scanned);
+                #[cfg(target_arch = "x86_64")]
+                if let Some(avx) = Avx2::detect() {
+                    let mut w = TileRays::default();
+                    w.fill(avx, &cam, x0, y0, tw, th);
+                    let bits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    for k in 0..3 {
+                        assert_eq!(bits(&w.d[k]), bits(&t.d[k]));
+                        assert_eq!(w.d_span[k], t.d_span[k]);
+                    }
+                    assert_eq!(bits(&w.planar), bits(&t.planar));
+                    assert_eq!(w.planar_span, t.planar_span);
+                    assert_eq!(bits(&w.max_abs), bits(&t.max_abs));
+                    assert_eq!(w.subnormal, t.subnormal);
+                }
+            }
+        }
+        assert!(rescans > 0 && extremes_only > 0, "{rescans} {extremes_only}");
     }
 
     #[test]

@@ -48,6 +48,7 @@
 //! and without skipping are identical, and that a bound 1% too high breaks them.
 
 use crate::camera::Camera;
+use crate::raster_edges::Span;
 use crate::scene::resolve::Tri;
 use crate::visibility::hit_key;
 
@@ -59,7 +60,7 @@ const GROW: f64 = 1.0 / (1u64 << 47) as f64;
 
 /// One tile's depth bound: the axis, the common sign of its rays' `D_k`,
 /// and `κ`.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TileDepthBound {
     /// The camera's most forward axis.
     axis: usize,
@@ -90,70 +91,26 @@ impl TileDepthBound {
     /// all share a strict sign or some `planar` is not positive.
     #[inline(always)]
     pub fn new(axis: usize, planar: &[f64], dk: &[f64]) -> Option<Self> {
-        // Reductions by min, max and sum only, lane-parallel, so that the
-        // loop vectorizes: `0 p + 0 d` sums to NaN once some value is
-        // NaN or infinite; then every `p > 0`, every `d != 0` and one sign
-        // of `d` follow from the extremes.
-        const L: usize = 4;
         let n = planar.len().min(dk.len());
-        let (mut p_min, mut bad, mut d_abs_min, mut d_min, mut d_max) = (
-            f64::INFINITY,
-            0.0f64,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        );
-        let mut lanes_p = [f64::INFINITY; L];
-        let mut lanes_bad = [0.0f64; L];
-        let mut lanes_a = [f64::INFINITY; L];
-        let mut lanes_dmin = [f64::INFINITY; L];
-        let mut lanes_dmax = [f64::NEG_INFINITY; L];
-        let whole = n / L * L;
-        for i in (0..whole).step_by(L) {
-            let p: &[f64; L] = planar[i..i + L].try_into().unwrap();
-            let d: &[f64; L] = dk[i..i + L].try_into().unwrap();
-            for j in 0..L {
-                let a = d[j].abs();
-                lanes_p[j] = if p[j] < lanes_p[j] { p[j] } else { lanes_p[j] };
-                lanes_bad[j] += p[j] * 0.0 + d[j] * 0.0;
-                lanes_a[j] = if a < lanes_a[j] { a } else { lanes_a[j] };
-                lanes_dmin[j] = if d[j] < lanes_dmin[j] {
-                    d[j]
-                } else {
-                    lanes_dmin[j]
-                };
-                lanes_dmax[j] = if d[j] > lanes_dmax[j] {
-                    d[j]
-                } else {
-                    lanes_dmax[j]
-                };
-            }
-        }
-        for j in 0..L {
-            p_min = p_min.min(lanes_p[j]);
-            bad += lanes_bad[j];
-            d_abs_min = d_abs_min.min(lanes_a[j]);
-            d_min = d_min.min(lanes_dmin[j]);
-            d_max = d_max.max(lanes_dmax[j]);
-        }
-        for i in whole..n {
-            let (p, d) = (planar[i], dk[i]);
-            p_min = p_min.min(p);
-            bad += p * 0.0 + d * 0.0;
-            d_abs_min = d_abs_min.min(d.abs());
-            d_min = d_min.min(d);
-            d_max = d_max.max(d);
-        }
-        let (neg, pos) = (d_min < 0.0, d_max > 0.0);
+        Self::from_spans(axis, Span::of(&planar[..n]), Span::of(&dk[..n]))
+    }
+
+    /// The bound from the spans of the tile's `planar` and `D_axis` values
+    /// ([`TileRays`](crate::raster_edges::TileRays) gathers them as it
+    /// fills the tile): every `planar > 0` and every `D_axis` of one strict
+    /// sign follow from the extremes, and so does `κ`, the smallest
+    /// `planar` over the largest `|D_axis|` (module documentation).
+    #[inline(always)]
+    pub fn from_spans(axis: usize, planar: Span, dk: Span) -> Option<Self> {
+        let ok = planar.finite && dk.finite && planar.lo > 0.0 && dk.one_strict_sign();
         // With one sign, the largest magnitude is an extreme's.
-        let kappa = p_min / (-d_min).max(d_max);
-        let ok = bad == 0.0 && p_min > 0.0 && d_abs_min > 0.0;
-        if !ok || neg == pos || !(kappa > 0.0 && kappa.is_finite()) {
+        let kappa = planar.lo / (-dk.lo).max(dk.hi);
+        if !(ok && kappa > 0.0 && kappa.is_finite()) {
             return None;
         }
         Some(TileDepthBound {
             axis,
-            negative: neg,
+            negative: dk.hi < 0.0,
             kappa: kappa * (1.0 - SLACK),
             factor: 1.0,
         })
