@@ -1338,7 +1338,10 @@ mod tests {
                 }
             }
         }
-        assert!(rescans > 0 && extremes_only > 0, "{rescans} {extremes_only}");
+        assert!(
+            rescans > 0 && extremes_only > 0,
+            "{rescans} {extremes_only}"
+        );
     }
 
     #[test]

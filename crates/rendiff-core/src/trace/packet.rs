@@ -108,13 +108,22 @@ impl Packet {
     pub fn new(cam: &Camera, x0: usize, y0: usize) -> Packet {
         let (w, h) = (cam.width as usize, cam.height as usize);
         // Columns or rows past the image give finite rays on inactive lanes.
-        let sx: [f64; PW] = std::array::from_fn(|i| cam.screen_x((x0 + i) as u32));
-        let sy: [f64; PH] = std::array::from_fn(|j| cam.screen_y((y0 + j) as u32));
+        // (Plain loops, not `std::array::from_fn`: its closures compiled to
+        // out-of-line calls in this kernel, several per packet.)
+        let (mut sx, mut sy) = ([0f64; PW], [0f64; PH]);
+        for (i, sx) in sx.iter_mut().enumerate() {
+            *sx = cam.screen_x((x0 + i) as u32);
+        }
+        for (j, sy) in sy.iter_mut().enumerate() {
+            *sy = cam.screen_y((y0 + j) as u32);
+        }
         // `Camera::screen_ray` lane-parallel, one axis at a time (structure of
         // arrays, so the f64 loops vectorize): the same operations in the same
         // order as glam's, hence the same bits.
-        let sxl: [f64; LANES] = std::array::from_fn(|i| sx[i % PW]);
-        let syl: [f64; LANES] = std::array::from_fn(|i| sy[i / PW]);
+        let (mut sxl, mut syl) = ([0f64; LANES], [0f64; LANES]);
+        for i in 0..LANES {
+            (sxl[i], syl[i]) = (sx[i % PW], sy[i / PW]);
+        }
         // (The point P and 1 / D are rebuilt by `ray` for the few lanes
         // whose exact fallback needs them.)
         let mut d64 = [[0f64; LANES]; 3];
@@ -125,9 +134,16 @@ impl Packet {
             }
         }
         let (f0, f1, f2) = (cam.forward.x, cam.forward.y, cam.forward.z);
-        let planar: [f64; LANES] =
-            std::array::from_fn(|i| d64[0][i] * f0 + d64[1][i] * f1 + d64[2][i] * f2);
-        let subnormal = d64.iter().flatten().any(|v| v.is_subnormal());
+        let mut planar = [0f64; LANES];
+        for (i, p) in planar.iter_mut().enumerate() {
+            *p = d64[0][i] * f0 + d64[1][i] * f1 + d64[2][i] * f2;
+        }
+        let mut subnormal = false;
+        for dk in &d64 {
+            for v in dk {
+                subnormal |= v.is_subnormal();
+            }
+        }
         let mut active: Mask = 0;
         for i in 0..LANES {
             active |= Mask::from(x0 + i % PW < w && y0 + i / PW < h) << i;
@@ -140,16 +156,25 @@ impl Packet {
                 inv[k][i] = 1.0 / dir[k][i];
             }
         }
-        let dir_norm = std::array::from_fn(|i| dir_norm_bound([dir[0][i], dir[1][i], dir[2][i]]));
+        let mut dir_norm = [0f32; LANES];
+        for (i, n) in dir_norm.iter_mut().enumerate() {
+            *n = dir_norm_bound([dir[0][i], dir[1][i], dir[2][i]]);
+        }
         // Pixel rays have planar > 0 (D = forward + sideways terms), so rounding
         // planar (1 - 2^-18) to nearest stays below planar (1 - 2^-19), and then
         // fl(tmin * zscale) <= tmin * planar * (1 - 2^-20): the single-ray lower key.
-        let zscale = planar.map(|p| (p * (1.0 - 1.0 / (1u64 << 18) as f64)) as f32);
-        let axis_sign = inv.map(|v| {
-            let pos = v.iter().all(|&x| x > 0.0);
-            let neg = v.iter().all(|&x| x < 0.0);
-            i8::from(pos) - i8::from(neg)
-        });
+        let mut zscale = [0f32; LANES];
+        for (z, &p) in zscale.iter_mut().zip(&planar) {
+            *z = (p * (1.0 - 1.0 / (1u64 << 18) as f64)) as f32;
+        }
+        let mut axis_sign = [0i8; 3];
+        for (sign, v) in axis_sign.iter_mut().zip(&inv) {
+            let (mut pos, mut neg) = (true, true);
+            for &x in v {
+                (pos, neg) = (pos & (x > 0.0), neg & (x < 0.0));
+            }
+            *sign = i8::from(pos) - i8::from(neg);
+        }
         Packet {
             axis_sign,
             d64,
@@ -307,7 +332,8 @@ impl Packet {
             if need == 0 {
                 continue;
             }
-            let dirs = [0, 1, 2].map(|k| row64(&self.d64[k], r));
+            let [x, y, z] = &self.d64;
+            let dirs = [row64(x, r), row64(y, r), row64(z, r)];
             let (z, ok) = d.chunk(l, cam, dirs, row64(&self.planar, r), need, self.subnormal);
             let mut m = need & ok;
             while m != 0 {
@@ -399,7 +425,10 @@ impl TraceBvh {
             return pk.best;
         }
         // Near-to-far child order along the packet's mean direction.
-        let mean = [0, 1, 2].map(|k| pk.dir[k].iter().sum::<f32>());
+        let mut mean = [0f32; 3];
+        for (m, d) in mean.iter_mut().zip(&pk.dir) {
+            *m = d.iter().sum();
+        }
         stack.clear();
         stack.push((Nodes32::ROOT, pk.active));
         while let Some((ni, mask)) = stack.pop() {
