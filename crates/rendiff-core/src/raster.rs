@@ -20,7 +20,7 @@
 
 use crate::camera::{Camera, PixelRay};
 use crate::frame::{Frame, PixelKeys};
-use crate::predicate::{EdgePlane, O3D_ERRBOUND_A};
+use crate::predicate::EdgePlane;
 use crate::raster_bins::{Binned, Bins};
 use crate::raster_bounds::BoxMargin;
 #[cfg(target_arch = "x86_64")]
@@ -356,6 +356,9 @@ const PREFETCH_AHEAD: usize = 8;
 /// of about a pixel, the setup costs more than it saves.
 const SMALL_BOX: usize = 4;
 
+// One pixel of a small box per lane of `Lanes::filter4`.
+const _: () = assert!(SMALL_BOX <= 4);
+
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn render_tile_body<L: Lanes>(
@@ -445,7 +448,7 @@ fn fast_tile<L: Lanes>(
         }
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
-            small_box(cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
+            small_box(l, cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
         }
         let edges = TriEdges::new(cam, t);
@@ -532,14 +535,20 @@ fn covered_block<L: Lanes>(
 }
 
 /// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as
-/// [`TriEdges::covers`] asks it, with each edge plane set up only when a
-/// pixel first needs it and the predicate's own f64 filter
+/// [`TriEdges::covers`] asks it, with the predicate's own f64 filter
 /// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
-/// evaluated here, so only the signs it cannot settle call it (which then
-/// counts its exact fallbacks and ties as always). Depth by
+/// evaluated here for every pixel and edge at once, one pixel per lane
+/// ([`Lanes::filter4`]), so only the signs it cannot settle call it (which
+/// then counts its exact fallbacks and ties as always). Depth by
 /// [`ChunkDepth::depth_at`], [`TriDepth::depth`] bit for bit.
+///
+/// (The three edge planes are set up whether or not an early exit would
+/// have spared one: on a million triangles, the branch per sign of the
+/// lazy form cost more than the planes.)
 #[inline(always)]
-fn small_box(
+#[allow(clippy::too_many_arguments)]
+fn small_box<L: Lanes>(
+    l: L,
     cam: &Camera,
     t: &Tri,
     prim: u32,
@@ -548,35 +557,47 @@ fn small_box(
     out: &mut TileOut,
     c: &mut Counters,
 ) {
-    let v = t.map(|v| v.as_dvec3());
-    let mut planes: [Option<EdgePlane>; 3] = [None; 3];
-    let mut depth: Option<ChunkDepth> = None;
+    let [a, b, v2] = t.map(|v| v.as_dvec3());
+    let e = cam.eye;
+    let planes = [
+        EdgePlane::new(e, a, b),
+        EdgePlane::new(e, b, v2),
+        EdgePlane::new(e, v2, a),
+    ];
+    // The box's pixels, row by row, one lane each (spare lanes repeat the first).
+    let mut at = [(lx0, ly0); SMALL_BOX];
+    let mut n = 0;
     for ly in ly0..=ly1 {
         for lx in lx0..=lx1 {
-            let d = rays.dir(lx, ly);
-            let facing = covers_by(
-                c,
-                #[inline(always)]
-                |k, c| {
-                    let e = planes[k]
-                        .get_or_insert_with(|| EdgePlane::new(cam.eye, v[k], v[(k + 1) % 3]));
-                    let det = d.x * e.n.x + d.y * e.n.y + d.z * e.n.z;
-                    let bound = O3D_ERRBOUND_A
-                        * (d.x.abs() * e.perm.x + d.y.abs() * e.perm.y + d.z.abs() * e.perm.z);
-                    if det > bound {
-                        1
-                    } else if -det > bound {
-                        -1
-                    } else {
-                        edge_sign(cam, e, &rays.ray(lx, ly), c)
-                    }
-                },
-            );
-            if facing != 0 {
-                let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-                if let Some(z) = d.depth_at(cam, rays, lx, ly) {
-                    out.offer(out.at(lx, ly), hit_key(z, prim), facing);
+            at[n] = (lx, ly);
+            n += 1;
+        }
+    }
+    let mut d = [[0f64; 4]; 3];
+    for (j, &(lx, ly)) in at.iter().enumerate() {
+        let v = rays.dir(lx, ly);
+        (d[0][j], d[1][j], d[2][j]) = (v.x, v.y, v.z);
+    }
+    let (pos, neg) = l.filter4(&planes, &d);
+    let mut depth: Option<ChunkDepth> = None;
+    for (j, &(lx, ly)) in at[..n].iter().enumerate() {
+        let facing = covers_by(
+            c,
+            #[inline(always)]
+            |k, c| {
+                if (pos[k] >> j) & 1 == 1 {
+                    1
+                } else if (neg[k] >> j) & 1 == 1 {
+                    -1
+                } else {
+                    edge_sign(cam, &planes[k], &rays.ray(lx, ly), c)
                 }
+            },
+        );
+        if facing != 0 {
+            let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+            if let Some(z) = d.depth_at(cam, rays, lx, ly) {
+                out.offer(out.at(lx, ly), hit_key(z, prim), facing);
             }
         }
     }

@@ -97,6 +97,28 @@ pub trait Lanes: Copy {
     /// Bit `j` set where `a[j] > b` (false for NaN).
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32;
 
+    /// The predicate's own f64 filter ([`EdgePlane::sign_with`]: the same
+    /// operands in the same order) for the three edge planes `e` at four
+    /// rays whose directions `d` hold one ray per lane: per edge, the lanes
+    /// whose sign it settles as positive and as negative (NaN: neither).
+    /// (Boxes of a few pixels, [`crate::raster`]'s `small_box`: all signs
+    /// at once, without a branch per sign.)
+    #[inline(always)]
+    fn filter4(self, e: &[EdgePlane; 3], d: &[[f64; 4]; 3]) -> ([u32; 3], [u32; 3]) {
+        let (mut pos, mut neg) = ([0u32; 3], [0u32; 3]);
+        for (k, e) in e.iter().enumerate() {
+            for j in 0..4 {
+                let (x, y, z) = (d[0][j], d[1][j], d[2][j]);
+                let det = x * e.n.x + y * e.n.y + z * e.n.z;
+                let bound = crate::predicate::O3D_ERRBOUND_A
+                    * (x.abs() * e.perm.x + y.abs() * e.perm.y + z.abs() * e.perm.z);
+                pos[k] |= u32::from(det > bound) << j;
+                neg[k] |= u32::from(-det > bound) << j;
+            }
+        }
+        (pos, neg)
+    }
+
     /// One row of one component of a tile's directions, `d[i] = (e +
     /// (across[i] + up)) - e` ([`Camera::screen_ray`]'s roundings, see
     /// [`TileRays::fill`]), its values taken into `ext` as they are written.
@@ -419,6 +441,38 @@ impl Lanes for Avx2 {
             }
         }
         Some((z, ok, free))
+    }
+
+    #[inline(always)]
+    fn filter4(self, e: &[EdgePlane; 3], d: &[[f64; 4]; 3]) -> ([u32; 3], [u32; 3]) {
+        use std::arch::x86_64::*;
+        let (mut pos, mut neg) = ([0u32; 3], [0u32; 3]);
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the loads read
+        // the four f64 of each borrowed array. Per lane: `Lanes::filter4`'s
+        // operations in its order (`abs` and negation by sign bit, exact).
+        unsafe {
+            let sign = _mm256_set1_pd(-0.0);
+            let a = _mm256_set1_pd(crate::predicate::O3D_ERRBOUND_A);
+            let [x, y, z] = d.map(|v| _mm256_loadu_pd(v.as_ptr()));
+            let [ax, ay, az] = [x, y, z].map(|v| _mm256_andnot_pd(sign, v));
+            for (k, e) in e.iter().enumerate() {
+                let n = [e.n.x, e.n.y, e.n.z].map(|v| _mm256_set1_pd(v));
+                let p = [e.perm.x, e.perm.y, e.perm.z].map(|v| _mm256_set1_pd(v));
+                let det = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(x, n[0]), _mm256_mul_pd(y, n[1])),
+                    _mm256_mul_pd(z, n[2]),
+                );
+                let sum = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(ax, p[0]), _mm256_mul_pd(ay, p[1])),
+                    _mm256_mul_pd(az, p[2]),
+                );
+                let bound = _mm256_mul_pd(a, sum);
+                let minus = _mm256_xor_pd(det, sign);
+                pos[k] = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(det, bound)) as u32;
+                neg[k] = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(minus, bound)) as u32;
+            }
+        }
+        (pos, neg)
     }
 
     #[inline(always)]
@@ -1143,6 +1197,71 @@ mod tests {
                 assert_eq!(avx.gt(&a, b), want, "{a:?} > {b}");
             }
         }
+    }
+
+    /// [`Lanes::filter4`] settles exactly the signs the predicate's filter
+    /// settles ([`EdgePlane::sign`] without an exact fallback), with its
+    /// sign, on both lane kinds: rays on, near and off the edge planes,
+    /// zero and NaN components.
+    #[test]
+    fn filter4_is_the_predicates_filter() {
+        let mut s = 17u64;
+        let (mut settled, mut deferred) = (0, 0);
+        for case in 0..3000 {
+            let scale = [1.0, 1e-3, 1e5][case % 3];
+            let p = |s: &mut u64| DVec3::new(lcg(s), lcg(s), lcg(s)) * scale;
+            let (eye, a, b, c) = (p(&mut s), p(&mut s), p(&mut s), p(&mut s));
+            let planes = [
+                EdgePlane::new(eye, a, b),
+                EdgePlane::new(eye, b, c),
+                EdgePlane::new(eye, c, a),
+            ];
+            let mut d = [[0f64; 4]; 3];
+            for j in 0..4 {
+                // Through a point of an edge (on its plane up to rounding),
+                // or anywhere; sometimes a zero or NaN component.
+                let t = lcg(&mut s);
+                let v = match (case + j) % 4 {
+                    0 => a + (b - a) * t - eye,
+                    1 => c + (a - c) * t - eye,
+                    _ => p(&mut s) - eye,
+                };
+                let mut v = v.to_array();
+                match (case / 4 + j) % 7 {
+                    0 => v[j % 3] = 0.0,
+                    1 if case % 5 == 0 => v[j % 3] = f64::NAN,
+                    // det = bound = 0: the filter settles nothing.
+                    2 if case % 11 == 0 => v = [0.0; 3],
+                    _ => {}
+                }
+                for k in 0..3 {
+                    d[k][j] = v[k];
+                }
+            }
+            let (pos, neg) = Portable.filter4(&planes, &d);
+            for (k, e) in planes.iter().enumerate() {
+                for j in 0..4 {
+                    let qd = DVec3::new(d[0][j], d[1][j], d[2][j]);
+                    let mut fallbacks = 0;
+                    let sign = e.sign(eye, eye + qd, qd, &mut fallbacks);
+                    let (p, n) = ((pos[k] >> j) & 1 == 1, (neg[k] >> j) & 1 == 1);
+                    assert_eq!(
+                        (p, n),
+                        (fallbacks == 0 && sign > 0, fallbacks == 0 && sign < 0)
+                    );
+                    if fallbacks == 0 {
+                        settled += 1;
+                    } else {
+                        deferred += 1;
+                    }
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = Avx2::detect() {
+                assert_eq!(avx.filter4(&planes, &d), (pos, neg), "{d:?}");
+            }
+        }
+        assert!(settled > 1000 && deferred > 1000, "{settled} {deferred}");
     }
 
     /// The statistics taken from a span ([`Span::stats`]) are the scan's
