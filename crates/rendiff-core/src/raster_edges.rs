@@ -107,8 +107,8 @@ pub trait Lanes: Copy {
     fn filter4(self, e: &[EdgePlane; 3], d: &[[f64; 4]; 3]) -> ([u32; 3], [u32; 3]) {
         let (mut pos, mut neg) = ([0u32; 3], [0u32; 3]);
         for (k, e) in e.iter().enumerate() {
-            for j in 0..4 {
-                let (x, y, z) = (d[0][j], d[1][j], d[2][j]);
+            let [dx, dy, dz] = d;
+            for (j, ((&x, &y), &z)) in dx.iter().zip(dy).zip(dz).enumerate() {
                 let det = x * e.n.x + y * e.n.y + z * e.n.z;
                 let bound = crate::predicate::O3D_ERRBOUND_A
                     * (x.abs() * e.perm.x + y.abs() * e.perm.y + z.abs() * e.perm.z);
