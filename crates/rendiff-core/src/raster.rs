@@ -470,6 +470,13 @@ fn fast_tile<L: Lanes>(
                 let block = (full_rows && span == 0xff)
                     .then(|| f.block(rays, r0, base))
                     .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff);
+                if block.is_some_and(|g| g.rejected() == 0xff) {
+                    // What 64 settled, rejected lanes count (`chunk_hits`).
+                    let n = (CHUNK * CHUNK) as u64;
+                    c.coverage_tests += n;
+                    c.fast_decided += n;
+                    continue;
+                }
                 if block.is_some_and(|g| g.rejected() == 0) && out.cov.is_empty() {
                     let d =
                         depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
