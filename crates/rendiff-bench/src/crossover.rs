@@ -14,7 +14,10 @@
 //! normal buffers: `assembly_s`, one figure as it is the same code on the
 //! same keys), and the whole frame (`raster_s`, `trace_s`). The crossover
 //! sizes are interpolated on the visibility passes (the like-for-like
-//! comparison of the two loops) and on whole frames.
+//! comparison of the two loops) and on whole frames. The process keeps
+//! freed memory for the sweep ([`super::keep_freed_memory`]): both loops
+//! allocate their frames per run, and fresh pages made whole-frame times
+//! bimodal (a spurious whole-frame crossing at 3 triangles).
 
 use super::page::{num, Page};
 use super::plot::{lines, Series};
@@ -96,6 +99,7 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
 /// Runs the sweep and returns the JSON record, the page and the SVGs.
 pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
     let environment = super::environment();
+    let allocator = super::keep_freed_memory();
     let pool = super::pool(opts.threads)?;
     let runs = opts.common.runs;
     let sweep = |aligned: bool| -> Result<Vec<Value>> {
@@ -131,6 +135,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             "size": [opts.size, opts.size], "nx": opts.nx, "threads": opts.threads,
             "runs": runs, "quick": opts.common.quick, "bvh": "medium",
             "timing": "median of `runs` timed runs after one untimed warm-up",
+            "allocator": allocator,
             "phases": "raster_keys_s / trace_keys_s: each loop's visibility pass alone (hit keys per pixel; the tracer's packet kernel through a built BVH); assembly_s: keys to depth, ID and normal buffers, shared code timed once; raster_s / trace_s: whole frames (pass + assembly); bvh_build_s apart",
         },
         "rows": rows,

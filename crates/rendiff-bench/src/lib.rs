@@ -179,6 +179,33 @@ pub fn environment() -> Value {
     })
 }
 
+/// Keeps freed memory in the process (glibc's allocator: blocks up to its
+/// 32 MiB ceiling from the heap, the heap never trimmed), so that repeated
+/// runs of a loop that allocates its frame reuse the same pages. Without
+/// it, whether a run's buffers came back as fresh pages (a fault and
+/// zeroing per 4 KiB: 1-2 ms on a 512x512 frame's 8 MB) depended on the
+/// allocator's history, and `bench crossover`'s whole-frame times were
+/// bimodal run to run. Applies to every loop timed afterwards alike;
+/// returns what was set, for the record.
+pub fn keep_freed_memory() -> Value {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        const MMAP_THRESHOLD: i32 = 32 << 20;
+        // SAFETY: mallopt only changes allocator parameters; called before
+        // the timed work, with values glibc documents as valid.
+        let ok = unsafe {
+            libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+                && libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX) == 1
+        };
+        if ok {
+            return json!("glibc mallopt: M_MMAP_THRESHOLD 32 MiB, M_TRIM_THRESHOLD 2 GiB (freed buffers reused, no page faults after the warm-up)");
+        }
+        json!("glibc mallopt refused: the allocator's defaults")
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    json!("the platform allocator's defaults")
+}
+
 /// Closes a record: the load average after the run, next to the one before.
 pub fn finish_environment(record: &mut Value) {
     if let Some(env) = record.get_mut("environment") {
