@@ -832,7 +832,16 @@ impl ChunkDepth {
         Self::with_margin(cam, d, CLAMP_FREE_MARGIN)
     }
 
+    /// [`ChunkDepth::new`] inlined into the caller (the packet tracer's
+    /// leaf, once per triangle a packet hits: out of line, its time moved
+    /// by several percent with where the linker happened to put it).
+    #[inline(always)]
+    pub fn new_inlined(cam: &Camera, d: &TriDepth) -> ChunkDepth {
+        Self::with_margin(cam, d, CLAMP_FREE_MARGIN)
+    }
+
     /// [`ChunkDepth::new`] with another clamp-free margin (tests: 0 must break).
+    #[inline(always)]
     fn with_margin(cam: &Camera, d: &TriDepth, margin: f64) -> ChunkDepth {
         // Arrays, not glam's run-time component index (a match per access).
         let (eye, blo, bhi) = (

@@ -326,7 +326,7 @@ impl Packet {
         // Depths a row of 8 lanes at a time, as the rasterizer's chunks take
         // them (`ChunkDepth`: `TriDepth::depth` bit for bit, mostly without
         // the slab clamp).
-        let d = ChunkDepth::new(cam, &TriDepth::new(cam, &leaf.tri));
+        let d = ChunkDepth::new_inlined(cam, &TriDepth::new(cam, &leaf.tri));
         for r in 0..NROWS {
             let need = (hit >> (r * ROW)) & ROW_BITS;
             if need == 0 {
