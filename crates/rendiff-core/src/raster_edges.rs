@@ -1248,9 +1248,9 @@ mod tests {
                 }
             }
             let (pos, neg) = Portable.filter4(&planes, &d);
+            let dirs: [DVec3; 4] = std::array::from_fn(|j| DVec3::new(d[0][j], d[1][j], d[2][j]));
             for (k, e) in planes.iter().enumerate() {
-                for j in 0..4 {
-                    let qd = DVec3::new(d[0][j], d[1][j], d[2][j]);
+                for (j, &qd) in dirs.iter().enumerate() {
                     let mut fallbacks = 0;
                     let sign = e.sign(eye, eye + qd, qd, &mut fallbacks);
                     let (p, n) = ((pos[k] >> j) & 1 == 1, (neg[k] >> j) & 1 == 1);
