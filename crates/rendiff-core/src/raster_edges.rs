@@ -1339,59 +1339,10 @@ mod tests {
         assert_eq!(seen, [true; 3]);
     }
 
-    /// Every ray of a tile is [`Camera::pixel_ray`]'s, bit for bit, borders included.
-    #[test]
-    fn tile_rays_are_the_cameras() {
-        let cams = [
-            Camera::new(
-                DVec3::new(0.3, 0.7, 2.1),
-                DVec3::new(0.1, -0.2, 0.0),
-                DVec3::Y,
-                50.0,
-                45,
-                37,
-                1e-3,
-                1.0,
-            ),
-            Camera::new(
-                DVec3::Z * 1e7,
-                DVec3::ZERO,
-                DVec3::X,
-                90.0,
-                33,
-                33,
-                1e-3,
-                1.0,
-            ),
-        ];
-        for cam in cams.map(Result::unwrap) {
-            for (x0, y0) in [(0, 0), (32, 32), (32, 0)] {
-                let (tw, th) = ((cam.width - x0).min(32), (cam.height - y0).min(32));
-                let t = TileRays::new(&cam, x0, y0, tw, th);
-                for ly in 0..th {
-                    for lx in 0..tw {
-                        let (a, b) = (
-                            t.ray(lx as usize, ly as usize),
-                            cam.pixel_ray(x0 + lx, y0 + ly),
-                        );
-                        let bits = |r: PixelRay| {
-                            [r.p, r.dir, r.inv_dir].map(|v| v.to_array().map(f64::to_bits))
-                        };
-                        assert_eq!(bits(a), bits(b), "pixel ({}, {})", x0 + lx, y0 + ly);
-                        assert_eq!(a.planar.to_bits(), b.planar.to_bits());
-                    }
-                }
-            }
-        }
-    }
-
-    /// A filled tile's statistics, gathered as its rays are written, are the
-    /// scans' of its arrays (largest magnitudes, subnormals, the early depth
-    /// bound), on either lane kind, whose arrays agree bit for bit; tiles
-    /// where a direction component crosses or touches zero (the odd-sized
-    /// image's middle column) take the rescan, the others the extremes.
-    #[test]
-    fn filled_tiles_keep_the_scans_statistics() {
+    /// Cameras for the tile tests: tilted and non-dyadic, far from the
+    /// origin with an odd image (a column of rays with a zero component),
+    /// looking along +x at a wide, short image.
+    fn tile_cameras() -> Vec<Camera> {
         let cams = [
             Camera::new(
                 DVec3::new(0.3, 0.7, 2.1),
@@ -1424,8 +1375,45 @@ mod tests {
                 10.0,
             ),
         ];
+        cams.into_iter().map(Result::unwrap).collect()
+    }
+
+    /// Every ray of a tile is [`Camera::pixel_ray`]'s, bit for bit, borders included.
+    #[test]
+    fn tile_rays_are_the_cameras() {
+        for cam in tile_cameras() {
+            for (x0, y0) in [(0, 0), (32, 32), (32, 0)] {
+                if x0 >= cam.width || y0 >= cam.height {
+                    continue;
+                }
+                let (tw, th) = ((cam.width - x0).min(32), (cam.height - y0).min(32));
+                let t = TileRays::new(&cam, x0, y0, tw, th);
+                for ly in 0..th {
+                    for lx in 0..tw {
+                        let (a, b) = (
+                            t.ray(lx as usize, ly as usize),
+                            cam.pixel_ray(x0 + lx, y0 + ly),
+                        );
+                        let bits = |r: PixelRay| {
+                            [r.p, r.dir, r.inv_dir].map(|v| v.to_array().map(f64::to_bits))
+                        };
+                        assert_eq!(bits(a), bits(b), "pixel ({}, {})", x0 + lx, y0 + ly);
+                        assert_eq!(a.planar.to_bits(), b.planar.to_bits());
+                    }
+                }
+            }
+        }
+    }
+
+    /// A filled tile's statistics, gathered as its rays are written, are the
+    /// scans' of its arrays (largest magnitudes, subnormals, the early depth
+    /// bound), on either lane kind, whose arrays agree bit for bit; tiles
+    /// where a direction component crosses or touches zero (the odd-sized
+    /// image's middle column) take the rescan, the others the extremes.
+    #[test]
+    fn filled_tiles_keep_the_scans_statistics() {
         let (mut rescans, mut extremes_only) = (0, 0);
-        for cam in cams.map(Result::unwrap) {
+        for cam in tile_cameras() {
             for (x0, y0) in [(0, 0), (32, 0), (0, 32), (32, 32), (64, 0), (5, 3)] {
                 if x0 >= cam.width || y0 >= cam.height {
                     continue;
