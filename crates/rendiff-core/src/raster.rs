@@ -28,7 +28,9 @@ use crate::raster_edges::Avx2;
 use crate::raster_edges::{ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileRays, CHUNK};
 use crate::raster_hiz::TileDepthBound;
 use crate::scene::resolve::{ResolvedScene, Tri};
-use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
+use crate::visibility::{
+    covers_by, edge_sign, fill_no_hit, hit_key, Counters, TriDepth, TriEdges, NO_HIT,
+};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -164,11 +166,7 @@ fn keys_impl(
         .zip(cov_bands.par_iter_mut())
         .enumerate()
         .map(|(ty, (kband, cband))| {
-            kband.fill(std::mem::MaybeUninit::new(NO_HIT));
-            // SAFETY: every element was just written; `MaybeUninit<u64>`
-            // and `u64` have the same layout.
-            let kband: &mut [u64] =
-                unsafe { &mut *(kband as *mut [std::mem::MaybeUninit<u64>] as *mut [u64]) };
+            let kband = fill_no_hit(kband);
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();

@@ -351,6 +351,61 @@ impl Lanes for Portable {
     }
 }
 
+/// [`Extremes`] in AVX2 registers while a row is written ([`Avx2`]'s
+/// `dir_row` and `planar_row`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct WideExtremes {
+    /// Running minimum per lane.
+    lo: std::arch::x86_64::__m256d,
+    /// Running maximum per lane.
+    hi: std::arch::x86_64::__m256d,
+    /// `Σ 0 v` per lane.
+    bad: std::arch::x86_64::__m256d,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl WideExtremes {
+    /// `ext`'s four lanes.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 (callers hold an [`Avx2`]).
+    #[inline(always)]
+    unsafe fn load(ext: &Extremes) -> Self {
+        use std::arch::x86_64::_mm256_loadu_pd;
+        WideExtremes {
+            lo: _mm256_loadu_pd(ext.lo.as_ptr()),
+            hi: _mm256_loadu_pd(ext.hi.as_ptr()),
+            bad: _mm256_loadu_pd(ext.bad.as_ptr()),
+        }
+    }
+
+    /// Takes in four values, lane by lane as [`Extremes::add`] does
+    /// (`minpd(v, lo)` is `if v < lo { v } else { lo }`).
+    ///
+    /// # Safety
+    /// As [`WideExtremes::load`].
+    #[inline(always)]
+    unsafe fn add(&mut self, v: std::arch::x86_64::__m256d) {
+        use std::arch::x86_64::*;
+        self.lo = _mm256_min_pd(v, self.lo);
+        self.hi = _mm256_max_pd(v, self.hi);
+        self.bad = _mm256_add_pd(self.bad, _mm256_mul_pd(v, _mm256_setzero_pd()));
+    }
+
+    /// Back into `ext`.
+    ///
+    /// # Safety
+    /// As [`WideExtremes::load`].
+    #[inline(always)]
+    unsafe fn store(self, ext: &mut Extremes) {
+        use std::arch::x86_64::_mm256_storeu_pd;
+        _mm256_storeu_pd(ext.lo.as_mut_ptr(), self.lo);
+        _mm256_storeu_pd(ext.hi.as_mut_ptr(), self.hi);
+        _mm256_storeu_pd(ext.bad.as_mut_ptr(), self.bad);
+    }
+}
+
 /// Proof that the running CPU has AVX2 and POPCNT: only [`Avx2::detect`] makes one.
 #[cfg(target_arch = "x86_64")]
 #[derive(Debug, Clone, Copy)]
@@ -486,21 +541,15 @@ impl Lanes for Avx2 {
         // operations in its order, and `Extremes::add`'s (`minpd(v, lo)`
         // is `if v < lo { v } else { lo }`).
         unsafe {
-            let (ev, uv, zero) = (_mm256_set1_pd(e), _mm256_set1_pd(up), _mm256_setzero_pd());
-            let mut lo = _mm256_loadu_pd(ext.lo.as_ptr());
-            let mut hi = _mm256_loadu_pd(ext.hi.as_ptr());
-            let mut bad = _mm256_loadu_pd(ext.bad.as_ptr());
+            let (ev, uv) = (_mm256_set1_pd(e), _mm256_set1_pd(up));
+            let mut wide = WideExtremes::load(ext);
             for i in (0..whole).step_by(4) {
                 let a = _mm256_loadu_pd(across.as_ptr().add(i));
                 let v = _mm256_sub_pd(_mm256_add_pd(ev, _mm256_add_pd(a, uv)), ev);
                 _mm256_storeu_pd(d.as_mut_ptr().add(i), v);
-                lo = _mm256_min_pd(v, lo);
-                hi = _mm256_max_pd(v, hi);
-                bad = _mm256_add_pd(bad, _mm256_mul_pd(v, zero));
+                wide.add(v);
             }
-            _mm256_storeu_pd(ext.lo.as_mut_ptr(), lo);
-            _mm256_storeu_pd(ext.hi.as_mut_ptr(), hi);
-            _mm256_storeu_pd(ext.bad.as_mut_ptr(), bad);
+            wide.store(ext);
         }
         Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], ext);
     }
@@ -514,23 +563,16 @@ impl Lanes for Avx2 {
         // Per lane `(x f0 + y f1) + z f2`, then `Extremes::add`'s rules.
         unsafe {
             let fv = f.map(|v| _mm256_set1_pd(v));
-            let zero = _mm256_setzero_pd();
-            let mut lo = _mm256_loadu_pd(ext.lo.as_ptr());
-            let mut hi = _mm256_loadu_pd(ext.hi.as_ptr());
-            let mut bad = _mm256_loadu_pd(ext.bad.as_ptr());
+            let mut wide = WideExtremes::load(ext);
             for i in (0..whole).step_by(4) {
                 let xv = _mm256_mul_pd(_mm256_loadu_pd(x.as_ptr().add(i)), fv[0]);
                 let yv = _mm256_mul_pd(_mm256_loadu_pd(y.as_ptr().add(i)), fv[1]);
                 let zv = _mm256_mul_pd(_mm256_loadu_pd(z.as_ptr().add(i)), fv[2]);
                 let v = _mm256_add_pd(_mm256_add_pd(xv, yv), zv);
                 _mm256_storeu_pd(p.as_mut_ptr().add(i), v);
-                lo = _mm256_min_pd(v, lo);
-                hi = _mm256_max_pd(v, hi);
-                bad = _mm256_add_pd(bad, _mm256_mul_pd(v, zero));
+                wide.add(v);
             }
-            _mm256_storeu_pd(ext.lo.as_mut_ptr(), lo);
-            _mm256_storeu_pd(ext.hi.as_mut_ptr(), hi);
-            _mm256_storeu_pd(ext.bad.as_mut_ptr(), bad);
+            wide.store(ext);
         }
         let rest = [&x[whole..n], &y[whole..n], &z[whole..n]];
         Portable.planar_row(f, rest, &mut p[whole..n], ext);

@@ -257,6 +257,21 @@ pub fn hit_key(z: f32, prim: u32) -> u64 {
 /// Key of an empty pixel: loses to every hit.
 pub const NO_HIT: u64 = u64::MAX;
 
+/// A band of a key buffer that was never written (`Vec::spare_capacity_mut`),
+/// filled with [`NO_HIT`] and handed back as keys. Visibility passes fill
+/// their bands this way inside their parallel loops, each on its own
+/// thread, rather than pre-filling the buffer serially (or having `calloc`
+/// zero reused memory) before the loop: the raster, and the Embree backend
+/// so that its timed region pays no serial fill either. The one home of the
+/// cast's safety argument.
+#[inline]
+pub fn fill_no_hit(band: &mut [std::mem::MaybeUninit<u64>]) -> &mut [u64] {
+    band.fill(std::mem::MaybeUninit::new(NO_HIT));
+    // SAFETY: every element was just written; `MaybeUninit<u64>` and `u64`
+    // have the same layout.
+    unsafe { &mut *(band as *mut [std::mem::MaybeUninit<u64>] as *mut [u64]) }
+}
+
 /// Depth of a key (for assembling buffers).
 #[inline]
 pub fn key_depth(k: u64) -> f32 {

@@ -37,7 +37,7 @@
 use crate::camera::{Camera, PixelRay};
 use crate::frame::Frame;
 use crate::scene::resolve::ResolvedScene;
-use crate::visibility::{hit_key, Counters, NO_HIT};
+use crate::visibility::{fill_no_hit, hit_key, Counters, NO_HIT};
 use libloading::Library;
 use rayon::prelude::*;
 use std::ffi::{c_char, c_void, CStr, CString};
@@ -425,13 +425,7 @@ fn strips(
 ) -> u64 {
     keys.par_chunks_mut(h * w)
         .enumerate()
-        .map(|(i, rows)| {
-            rows.fill(MaybeUninit::new(NO_HIT));
-            // SAFETY: every element was just written; `MaybeUninit<u64>`
-            // and `u64` have the same layout.
-            let rows = unsafe { &mut *(rows as *mut [MaybeUninit<u64>] as *mut [u64]) };
-            trace((i * h) as u32, rows)
-        })
+        .map(|(i, rows)| trace((i * h) as u32, fill_no_hit(rows)))
         .sum()
 }
 

@@ -20,7 +20,8 @@ use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{
-    covers_by, edge_sign, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth, NO_HIT,
+    covers_by, edge_sign, fill_no_hit, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth,
+    NO_HIT,
 };
 use glam::Vec3;
 use nodes::Nodes32;
@@ -453,7 +454,7 @@ fn packet_keys(
         .map(|(band, rows): (usize, &mut [MaybeUninit<u64>])| {
             let mut c = Counters::default();
             if crate::deadline::past(opts.deadline) {
-                rows.fill(MaybeUninit::new(NO_HIT));
+                fill_no_hit(rows);
                 return c;
             }
             let mut stack = Vec::with_capacity(64);
