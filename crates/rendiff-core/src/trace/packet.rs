@@ -21,7 +21,7 @@
 //! single-ray kernel's (which tests every candidate the tree hands it).
 
 use super::nodes::{prefetch, Nodes32};
-use super::primary::{dir_norm_bound, max, min, LeafTri, Node32};
+use super::primary::{dir_norm_bound, LeafTri, Node32};
 use super::rect::PixelRect;
 #[cfg(target_arch = "x86_64")]
 use super::rows::Avx2;
@@ -223,43 +223,31 @@ impl Packet {
     ///   depth that passed `z >= near > 0`; `Camera::new` rejects `near <= 0`).
     #[inline(always)]
     fn node_mask<S: Rows>(&self, s: S, node: &Node32, mask: Mask) -> Mask {
-        let mut tmin = [0f32; LANES];
-        let mut tmax = [f32::INFINITY; LANES];
-        for k in 0..3 {
+        // Per axis, the bounds in the order `Rows::box_out` takes them: with
+        // one sign on every lane (lo <= hi and rounding is monotone), min(t0,
+        // t1) is always the same one of the two, saving a min and a max per lane.
+        let mut axes = [(0f32, 0f32, false); 3];
+        for (k, a) in axes.iter_mut().enumerate() {
             let (lo, hi) = node.bounds(k);
-            let inv = &self.inv[k];
-            if self.axis_sign[k] == 0 {
-                for i in 0..LANES {
-                    let t0 = lo * inv[i];
-                    let t1 = hi * inv[i];
-                    tmin[i] = max(tmin[i], min(t0, t1));
-                    tmax[i] = min(tmax[i], max(t0, t1));
-                }
-            } else {
-                // lo <= hi and rounding is monotone: with 1/D of one sign on every
-                // lane, min(t0, t1) is always the same one of the two.
-                let (near, far) = if self.axis_sign[k] > 0 {
-                    (lo, hi)
-                } else {
-                    (hi, lo)
-                };
-                for i in 0..LANES {
-                    tmin[i] = max(tmin[i], near * inv[i]);
-                    tmax[i] = min(tmax[i], far * inv[i]);
-                }
-            }
+            *a = match self.axis_sign[k] {
+                0 => (lo, hi, true),
+                s if s > 0 => (lo, hi, false),
+                _ => (hi, lo, false),
+            };
         }
         // A lane misses as in `Node32::misses` (see above for its `tmax < 0`),
-        // or is pruned when even the box's entry is beyond its best hit.
+        // or is pruned when even the box's entry is beyond its best hit. Row
+        // by row, so each row's interval stays in registers (a whole-packet
+        // `tmin`/`tmax` array went through the stack, and its cost moved with
+        // the compiler's inlining: 2.5x slower kernel in an LTO build).
         let mut m: Mask = 0;
         for r in 0..NROWS {
-            let tmax_slack = row(&tmax, r).map(Node32::slack_tmax);
-            let tmin_r = row(&tmin, r);
-            let mut entry_z = [0f32; ROW];
-            for (j, z) in entry_z.iter_mut().enumerate() {
-                *z = tmin_r[j] * self.zscale[r * ROW + j];
-            }
-            let out = s.gt_either(tmin_r, &tmax_slack, &entry_z, row(&self.best_z, r));
+            let inv = [
+                row(&self.inv[0], r),
+                row(&self.inv[1], r),
+                row(&self.inv[2], r),
+            ];
+            let out = s.box_out(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
             m |= (Mask::from(!out) & ROW_BITS) << (r * ROW);
         }
         m & mask

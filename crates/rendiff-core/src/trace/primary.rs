@@ -165,8 +165,11 @@ impl Node32 {
     /// applies the same test to a row of lanes at once).
     #[inline(always)]
     pub fn slack_tmax(tmax: f32) -> f32 {
-        tmax * (1.0 + SLAB_SLACK)
+        tmax * Node32::TMAX_SLACK
     }
+
+    /// The factor [`Node32::slack_tmax`] applies: `1 + 2^-20`, exact in f32.
+    pub const TMAX_SLACK: f32 = 1.0 + SLAB_SLACK;
 
     /// The box's eye-relative extent on axis `k`.
     #[inline]
