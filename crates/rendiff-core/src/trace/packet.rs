@@ -278,17 +278,15 @@ impl Packet {
             if (m >> (r * ROW)) & ROW_BITS == 0 {
                 continue;
             }
-            for k in 0..3 {
-                let mut det = [0f32; ROW];
-                let mut bound = [0f32; ROW];
-                for j in 0..ROW {
-                    let i = r * ROW + j;
-                    let d = [self.dir[0][i], self.dir[1][i], self.dir[2][i]];
-                    (det[j], bound[j]) = leaf.edge_det32(k, d, self.dir_norm[i]);
-                }
-                let neg_det = det.map(|d| -d);
-                pos[k] |= Mask::from(s.gt(&det, &bound)) << (r * ROW);
-                neg[k] |= Mask::from(s.gt(&neg_det, &bound)) << (r * ROW);
+            let dir = [
+                row(&self.dir[0], r),
+                row(&self.dir[1], r),
+                row(&self.dir[2], r),
+            ];
+            let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
+            for (k, &(p, n)) in signs.iter().enumerate() {
+                pos[k] |= Mask::from(p) << (r * ROW);
+                neg[k] |= Mask::from(n) << (r * ROW);
             }
         }
         let [p0, p1, p2] = pos;

@@ -16,6 +16,7 @@
 //!   [`crate::visibility::edge_sign`] (f64 filter, exact arithmetic, tie rule),
 //!   so coverage, depth and the operation counts are unchanged bit for bit.
 
+use super::rows::{Rows, ROW};
 use crate::camera::PixelRay;
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::Tri;
@@ -236,13 +237,33 @@ impl LeafTri {
     }
 
     /// Edge `k`'s f32 determinant and the bound its magnitude must clear for
-    /// its sign to be exact (the packet kernel compares all lanes at once).
+    /// its sign to be exact.
     #[inline(always)]
     pub fn edge_det32(&self, k: usize, d: [f32; 3], dir_norm: f32) -> (f32, f32) {
-        let n = &self.n[k];
-        let det = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-        (det, self.beta[k] * dir_norm)
+        edge_det32(&self.n[k], self.beta[k], d, dir_norm)
     }
+
+    /// All three edges' f32 signs for a row of lanes (the packet kernel's
+    /// form of [`LeafTri::edge_sign32`]): per edge, the bits of the lanes
+    /// whose sign is certainly positive, and of those certainly negative.
+    #[inline(always)]
+    pub fn edge_rows<S: Rows>(
+        &self,
+        s: S,
+        dir: [&[f32; ROW]; 3],
+        dir_norm: &[f32; ROW],
+    ) -> [(u32, u32); 3] {
+        s.edge_signs(&self.n, &self.beta, dir, dir_norm)
+    }
+}
+
+/// An edge's f32 determinant `n . d` and the bound `beta |d|` its magnitude
+/// must clear for its sign to be exact: the one home of the formula, which
+/// both the per-ray and the row-wise ([`Rows::edge_signs`]) tests evaluate.
+#[inline(always)]
+pub(crate) fn edge_det32(n: &[f32; 3], beta: f32, d: [f32; 3], dir_norm: f32) -> (f32, f32) {
+    let det = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+    (det, beta * dir_norm)
 }
 
 /// A pixel ray's direction rounded to f32, with what the kernel needs per ray.

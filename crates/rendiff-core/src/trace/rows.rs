@@ -1,18 +1,19 @@
 //! The packet kernel's row operations: 8 lanes at once, read off as 8 mask bits.
 //!
 //! The packet kernel decides everything per lane with f32 comparisons and then
-//! works with bit masks. Left to itself the compiler turns `m |= (a > b) << i`
+//! works with bit masks: the box test ([`Rows::box_out`]) and a triangle's
+//! edge signs ([`Rows::edge_signs`]). Written as plain loops over a packet,
+//! their speed depended on the compiler's inlining and vectorizing choices
+//! (the same box test ran 2.5x slower in an LTO build, its intervals spilled
+//! to the stack), and left to itself the compiler turns `m |= (a > b) << i`
 //! into an and-with-constants plus an or-reduction, about eight instructions
-//! per row; AVX's `vmovmskps` does it in one. [`Avx2`] is a token that exists
-//! only once the CPU is known to have AVX2, so the safe [`Rows::gt`] can use
-//! it; [`Portable`] is the same function in plain Rust for every other CPU.
-//!
-//! The box test ([`Rows::box_out`]) is here too: written as plain loops over
-//! a packet, its speed depended on the compiler's inlining and vectorizing
-//! choices (the same source ran 2.5x slower in an LTO build), so the AVX2
-//! form is spelled out, with the portable form as its definition.
+//! per row, where AVX's `vmovmskps` does it in one. So the AVX2 forms are
+//! spelled out: [`Avx2`] is a token that exists only once the CPU is known to
+//! have AVX2, so its safe methods can use the intrinsics; [`Portable`] is the
+//! same arithmetic in plain Rust for every other CPU, and the definition the
+//! tests hold the AVX2 forms to.
 
-use super::primary::{max, min, Node32};
+use super::primary::{edge_det32, max, min, Node32};
 
 /// Per axis, a box's bounds in the order a row of lanes meets them: `(near,
 /// far, mixed)`, where `near * 1/D` is the entry parameter when every lane's
@@ -22,11 +23,8 @@ pub(crate) type BoxAxes = [(f32, f32, bool); 3];
 /// Lanes per row: one 256-bit vector of f32.
 pub(crate) const ROW: usize = 8;
 
-/// How a row of comparisons becomes mask bits.
+/// The packet kernel's row operations, one implementation per instruction set.
 pub(crate) trait Rows: Copy {
-    /// Bit `j` set where `a[j] > b[j]` (false for NaN, which never arises here).
-    fn gt(self, a: &[f32; ROW], b: &[f32; ROW]) -> u32;
-
     /// The packet box test for one row of lanes: bit `j` set where lane `j`
     /// misses the box (`tmin > tmax (1 + s)`, with `tmin` starting at 0, as
     /// in `Packet::node_mask`), or where its entry depth `tmin zscale` is
@@ -38,6 +36,18 @@ pub(crate) trait Rows: Copy {
         zscale: &[f32; ROW],
         best_z: &[f32; ROW],
     ) -> u32;
+
+    /// A triangle's three f32 edge signs for one row of lanes: per edge `k`
+    /// (normal `n[k]`, filter bound `beta[k]`), the bits of the lanes where
+    /// [`edge_det32`]'s determinant certainly clears its bound above, and
+    /// where it certainly clears it below.
+    fn edge_signs(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW]; 3],
+        dir_norm: &[f32; ROW],
+    ) -> [(u32, u32); 3];
 }
 
 /// Plain Rust, for any CPU.
@@ -45,11 +55,6 @@ pub(crate) trait Rows: Copy {
 pub(crate) struct Portable;
 
 impl Rows for Portable {
-    #[inline(always)]
-    fn gt(self, a: &[f32; ROW], b: &[f32; ROW]) -> u32 {
-        (0..ROW).fold(0, |m, j| m | (u32::from(a[j] > b[j]) << j))
-    }
-
     #[inline(always)]
     fn box_out(
         self,
@@ -76,6 +81,26 @@ impl Rows for Portable {
         }
         m
     }
+
+    #[inline(always)]
+    fn edge_signs(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW]; 3],
+        dir_norm: &[f32; ROW],
+    ) -> [(u32, u32); 3] {
+        let mut out = [(0, 0); 3];
+        for ((n, &beta), (pos, neg)) in n.iter().zip(beta).zip(&mut out) {
+            for j in 0..ROW {
+                let d = [dir[0][j], dir[1][j], dir[2][j]];
+                let (det, bound) = edge_det32(n, beta, d, dir_norm[j]);
+                *pos |= u32::from(det > bound) << j;
+                *neg |= u32::from(-det > bound) << j;
+            }
+        }
+        out
+    }
 }
 
 /// Proof that the running CPU has AVX2 (and so AVX): only [`Avx2::detect`]
@@ -95,20 +120,6 @@ impl Avx2 {
 
 #[cfg(target_arch = "x86_64")]
 impl Rows for Avx2 {
-    #[inline(always)]
-    fn gt(self, a: &[f32; ROW], b: &[f32; ROW]) -> u32 {
-        use std::arch::x86_64::{_mm256_cmp_ps, _mm256_loadu_ps, _mm256_movemask_ps, _CMP_GT_OQ};
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
-        // the loads read exactly the two 8-float arrays borrowed here.
-        unsafe {
-            let c = _mm256_cmp_ps::<_CMP_GT_OQ>(
-                _mm256_loadu_ps(a.as_ptr()),
-                _mm256_loadu_ps(b.as_ptr()),
-            );
-            _mm256_movemask_ps(c) as u32
-        }
-    }
-
     #[inline(always)]
     fn box_out(
         self,
@@ -147,43 +158,57 @@ impl Rows for Avx2 {
             _mm256_movemask_ps(_mm256_or_ps(miss, pruned)) as u32
         }
     }
+
+    #[inline(always)]
+    fn edge_signs(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW]; 3],
+        dir_norm: &[f32; ROW],
+    ) -> [(u32, u32); 3] {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_cmp_ps, _mm256_loadu_ps, _mm256_movemask_ps, _mm256_mul_ps,
+            _mm256_set1_ps, _mm256_xor_ps, _CMP_GT_OQ,
+        };
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
+        // the loads read exactly the four 8-float arrays borrowed here.
+        // `edge_det32`'s operations in its order (`(n0 d0 + n1 d1) + n2 d2`);
+        // flipping the sign bit is negation.
+        unsafe {
+            // (Not `dir.map`: array `map` compiled to an out-of-line call here.)
+            let d = [
+                _mm256_loadu_ps(dir[0].as_ptr()),
+                _mm256_loadu_ps(dir[1].as_ptr()),
+                _mm256_loadu_ps(dir[2].as_ptr()),
+            ];
+            let dn = _mm256_loadu_ps(dir_norm.as_ptr());
+            let sign = _mm256_set1_ps(-0.0);
+            let mut out = [(0, 0); 3];
+            for ((n, &beta), out) in n.iter().zip(beta).zip(&mut out) {
+                let det = _mm256_add_ps(
+                    _mm256_add_ps(
+                        _mm256_mul_ps(_mm256_set1_ps(n[0]), d[0]),
+                        _mm256_mul_ps(_mm256_set1_ps(n[1]), d[1]),
+                    ),
+                    _mm256_mul_ps(_mm256_set1_ps(n[2]), d[2]),
+                );
+                let bound = _mm256_mul_ps(_mm256_set1_ps(beta), dn);
+                let pos = _mm256_cmp_ps::<_CMP_GT_OQ>(det, bound);
+                let neg = _mm256_cmp_ps::<_CMP_GT_OQ>(_mm256_xor_ps(det, sign), bound);
+                *out = (
+                    _mm256_movemask_ps(pos) as u32,
+                    _mm256_movemask_ps(neg) as u32,
+                );
+            }
+            out
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Both implementations give the same bits, including for equal values,
-    /// infinities and signed zeros.
-    #[test]
-    fn implementations_agree() {
-        let vals = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            1e-40,
-            3.5,
-        ];
-        let mut s = 7u32;
-        for _ in 0..2000 {
-            let mut a = [0f32; ROW];
-            let mut b = [0f32; ROW];
-            for j in 0..ROW {
-                s = s.wrapping_mul(1664525).wrapping_add(1013904223);
-                a[j] = vals[(s >> 8) as usize % vals.len()];
-                b[j] = vals[(s >> 16) as usize % vals.len()];
-            }
-            let want: u32 = (0..ROW).map(|j| u32::from(a[j] > b[j]) << j).sum();
-            assert_eq!(Portable.gt(&a, &b), want);
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(avx.gt(&a, &b), want, "{a:?} > {b:?}");
-            }
-        }
-    }
 
     /// The box test's two forms agree bit for bit, on both axis orders and on
     /// infinities, signed zeros and ties; and the portable form is the
@@ -271,5 +296,63 @@ mod tests {
         }
         // Both answers occur often.
         assert!(outs > 1000 && ins > 1000, "{outs} out, {ins} in");
+    }
+
+    /// The edge signs' two forms agree bit for bit, and the portable form is
+    /// `edge_det32`'s sign test lane by lane, on values that round, overflow,
+    /// cancel and tie.
+    #[test]
+    fn edge_signs_forms_agree() {
+        let vals = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            -3.3,
+            1e20,
+            -1e20,
+            1e-20,
+            f32::INFINITY,
+            f32::MAX,
+        ];
+        let mut s = 5u32;
+        let mut next = |n: usize| {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            (s >> 8) as usize % n
+        };
+        let (mut pos, mut neg, mut unsure) = (0, 0, 0);
+        for _ in 0..4000 {
+            let n: [[f32; 3]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| vals[next(9)]));
+            let beta: [f32; 3] = std::array::from_fn(|_| vals[next(vals.len())].abs());
+            let dir: [[f32; ROW]; 3] =
+                std::array::from_fn(|_| std::array::from_fn(|_| vals[next(9)]));
+            let dir_norm: [f32; ROW] = std::array::from_fn(|_| vals[next(vals.len())].abs());
+            let rows = [&dir[0], &dir[1], &dir[2]];
+            let want = Portable.edge_signs(&n, &beta, rows, &dir_norm);
+            for (k, &(p, q)) in want.iter().enumerate() {
+                for j in 0..ROW {
+                    let d = [dir[0][j], dir[1][j], dir[2][j]];
+                    let det = n[k][0] * d[0] + n[k][1] * d[1] + n[k][2] * d[2];
+                    let bound = beta[k] * dir_norm[j];
+                    assert_eq!(p >> j & 1 == 1, det > bound, "{n:?} {d:?}");
+                    assert_eq!(q >> j & 1 == 1, -det > bound, "{n:?} {d:?}");
+                    match (p >> j & 1, q >> j & 1) {
+                        (1, _) => pos += 1,
+                        (_, 1) => neg += 1,
+                        _ => unsure += 1,
+                    }
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = Avx2::detect() {
+                assert_eq!(avx.edge_signs(&n, &beta, rows, &dir_norm), want, "{n:?}");
+            }
+        }
+        // Every outcome occurs often.
+        assert!(
+            pos > 5000 && neg > 5000 && unsure > 5000,
+            "{pos} {neg} {unsure}"
+        );
     }
 }
