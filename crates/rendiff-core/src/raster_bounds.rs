@@ -165,10 +165,12 @@ impl BoxMargin {
             let mi = max3([0, 1, 2].map(|i| pts[i].1 * iz[i]));
             let (lo, hi) = ([min3(px), min3(py)], [max3(px), max3(py)]);
             let sm = [max3(sx.map(f64::abs)), max3(sy.map(f64::abs))];
-            let err = [0, 1].map(|k| {
+            let err_k = |k: usize| {
                 self.scale[k] * 8.0 * U * (mi * (1.0 + sm[k]) + sm[k])
                     + 4.0 * U * (lo[k].abs().max(hi[k].abs()) + 2.0 * self.half[k])
-            });
+            };
+            // (Not `[0, 1].map`: it compiled to an out-of-line call per triangle.)
+            let err = [err_k(0), err_k(1)];
             if cam.far.is_finite() && pts.iter().all(|(p, _)| p.z > cam.far * (1.0 + 1e-6)) {
                 return None;
             }

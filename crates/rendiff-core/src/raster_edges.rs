@@ -710,11 +710,16 @@ impl TileRays {
         }
         // Padding lanes repeat real pixels: the spans are the tile's.
         t.planar_span = planar_ext.span();
-        t.d_span = d_ext.map(|e| e.span());
+        t.d_span = [d_ext[0].span(), d_ext[1].span(), d_ext[2].span()];
         // A NaN or infinite direction leaves a NaN bound, which decides
         // nothing (as an infinite one would).
-        let stats = [0, 1, 2].map(|k| t.d_span[k].stats(&t.d[k]));
-        t.max_abs = stats.map(|(max_abs, _)| max_abs);
+        // (Plain arrays: array `map` compiled to out-of-line calls here.)
+        let stats = [
+            t.d_span[0].stats(&t.d[0]),
+            t.d_span[1].stats(&t.d[1]),
+            t.d_span[2].stats(&t.d[2]),
+        ];
+        t.max_abs = [stats[0].0, stats[1].0, stats[2].0];
         t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
     }
 
@@ -885,38 +890,34 @@ impl ChunkDepth {
     /// [`ChunkDepth::new`] with another clamp-free margin (tests: 0 must break).
     #[inline(always)]
     fn with_margin(cam: &Camera, d: &TriDepth, margin: f64) -> ChunkDepth {
-        // Arrays, not glam's run-time component index (a match per access).
+        // Arrays, not glam's run-time component index (a match per access);
+        // plain loops, not array `map` (its closures compiled to out-of-line
+        // calls in the packet tracer's leaf, once per hit triangle).
         let (eye, blo, bhi) = (
             cam.eye.to_array(),
             d.bounds.lo.to_array(),
             d.bounds.hi.to_array(),
         );
-        let lo = [0, 1, 2].map(|k| blo[k] - eye[k]);
-        let hi = [0, 1, 2].map(|k| bhi[k] - eye[k]);
-        let m = [0, 1, 2].map(|k| margin * lo[k].abs().max(hi[k].abs()));
-        // A margin near underflow (or NaN) settles nothing: empty thresholds.
-        let usable = |k: usize| m[k].abs() >= CLAMP_FREE_MIN_MARGIN || margin == 0.0;
-        ChunkDepth {
+        let mut c = ChunkDepth {
             normal: d.normal.to_array(),
             num: d.num,
-            lo,
-            hi,
-            zero_misses: [0, 1, 2].map(|k| eye[k] < blo[k] || eye[k] > bhi[k]),
-            clamp_free_lo: [0, 1, 2].map(|k| {
-                if usable(k) {
-                    lo[k] + m[k]
-                } else {
-                    f64::INFINITY
-                }
-            }),
-            clamp_free_hi: [0, 1, 2].map(|k| {
-                if usable(k) {
-                    hi[k] - m[k]
-                } else {
-                    f64::NEG_INFINITY
-                }
-            }),
+            lo: [0.0; 3],
+            hi: [0.0; 3],
+            zero_misses: [false; 3],
+            clamp_free_lo: [f64::INFINITY; 3],
+            clamp_free_hi: [f64::NEG_INFINITY; 3],
+        };
+        for k in 0..3 {
+            let (lo, hi) = (blo[k] - eye[k], bhi[k] - eye[k]);
+            let m = margin * lo.abs().max(hi.abs());
+            (c.lo[k], c.hi[k]) = (lo, hi);
+            c.zero_misses[k] = eye[k] < blo[k] || eye[k] > bhi[k];
+            // A margin near underflow (or NaN) settles nothing: empty thresholds.
+            if m.abs() >= CLAMP_FREE_MIN_MARGIN || margin == 0.0 {
+                (c.clamp_free_lo[k], c.clamp_free_hi[k]) = (lo + m, hi - m);
+            }
         }
+        c
     }
 
     /// Depths of the 8 lanes from column `col` of tile row `row`, and the
@@ -983,7 +984,8 @@ impl ChunkDepth {
     #[inline(always)]
     pub fn depth_at(&self, cam: &Camera, rays: &TileRays, lx: usize, ly: usize) -> Option<f32> {
         let at = ly * rays.stride + lx;
-        let d = [0, 1, 2].map(|k| [rays.d[k][at]]);
+        // (Not `[0, 1, 2].map`: array `map` compiled to an out-of-line call.)
+        let d = [[rays.d[0][at]], [rays.d[1][at]], [rays.d[2][at]]];
         let (z, ok) = self.lanes(cam, d, [rays.planar[at]], 1, rays.subnormal);
         (ok == 1).then_some(z[0])
     }
@@ -1129,12 +1131,19 @@ impl FastEdges {
         };
         let bound = [f(&edges.0[0]), f(&edges.0[1]), f(&edges.0[2])];
         let eta = dirs.eta;
-        let block = [0, 1, 2].map(|k| {
+        let block_k = |k: usize| {
             let p = edges.0[k].perm;
             3.0 * bound[k] + 4.0 * (p.x * eta[0] + p.y * eta[1] + p.z * eta[2])
-        });
+        };
+        // Plain arrays, not array `map`: its closures compiled to
+        // out-of-line calls here, once per triangle and tile.
+        let block = [block_k(0), block_k(1), block_k(2)];
         FastEdges {
-            n: edges.0.map(|e| e.n.to_array()),
+            n: [
+                edges.0[0].n.to_array(),
+                edges.0[1].n.to_array(),
+                edges.0[2].n.to_array(),
+            ],
             bound,
             block,
         }
