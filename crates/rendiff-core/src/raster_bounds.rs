@@ -69,7 +69,7 @@
 use crate::camera::Camera;
 use crate::raster::PixelRect;
 use crate::scene::resolve::Tri;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 /// Unit roundoff of f64.
 const U: f64 = f64::EPSILON / 2.0;
@@ -143,11 +143,13 @@ impl BoxMargin {
             y1: cam.height - 1,
         };
         // Camera-space vertices and the l1 magnitude of the world difference behind each.
-        let pts: [(DVec3, f64); 3] = t.map(|v| {
+        let cam_space = |v: Vec3| {
             let q = v.as_dvec3() - cam.eye;
             let c = DVec3::new(q.dot(cam.right), q.dot(cam.up_ortho), q.dot(cam.forward));
             (c, q.abs().element_sum())
-        });
+        };
+        // (Not `t.map`: array `map` compiled to out-of-line calls here.)
+        let pts: [(DVec3, f64); 3] = [cam_space(t[0]), cam_space(t[1]), cam_space(t[2])];
         if pts
             .iter()
             .all(|&(p, mag)| p.z >= zmin && 16.0 * U * mag < p.z)

@@ -683,9 +683,10 @@ impl TileRays {
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
         // The camera's private aspect tan, by the same expression.
         let a = cam.tan_half_vfov * (f64::from(cam.width) / f64::from(cam.height));
-        t.eta = [0, 1, 2].map(|k| {
+        let eta_k = |k: usize| {
             16.0 * U * (e[k].abs() + f[k].abs() + r[k].abs() * a + u[k].abs() * cam.tan_half_vfov)
-        });
+        };
+        t.eta = [eta_k(0), eta_k(1), eta_k(2)];
         let (e, f, r, u) = (e.to_array(), f.to_array(), r.to_array(), u.to_array());
         for (k, across) in t.across.iter_mut().enumerate() {
             across.clear();
