@@ -8,7 +8,11 @@
 //!   both scene flags (default, robust). Every row is kept; the fastest is
 //!   named and the core's ratio against it reported, so the core is compared
 //!   with Embree at its best, not at a convenient setting. BVH builds are
-//!   excluded from Mrays/s and recorded beside it.
+//!   excluded from Mrays/s and recorded beside it. Both the core and Embree
+//!   allocate their key buffer per frame, so freed memory is kept in the
+//!   process ([`super::keep_freed_memory`], recorded as `config.allocator`):
+//!   neither pays 16 MB of fresh-page faults per 1080p frame, and neither's
+//!   time depends on what the allocator happened to return to the system.
 //! - Raster: core raster vs pyrender (OpenGL on Mesa llvmpipe), depth + IDs;
 //!   pyrender's time is its own per-pass sub-timing (scene upload, draw and
 //!   read-back; Python start-up excluded), and a one-triangle render's
@@ -62,6 +66,7 @@ pub struct PeersOptions {
 /// Runs the comparisons and returns the JSON record, the page and the SVGs.
 pub fn run(opts: &PeersOptions) -> Result<super::Output> {
     let environment = super::environment();
+    let allocator = super::keep_freed_memory();
     let scene = opts.scene.load()?;
     let cam = &scene.camera;
     let runs = opts.common.runs;
@@ -121,7 +126,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             "scene": opts.scene.path, "width": cam.width, "height": cam.height,
             "triangles": scene.triangles.len(), "threads": opts.threads, "runs": runs,
             "quick": opts.common.quick, "gi_scene": opts.gi_scene, "reference": opts.reference,
-            "mitsuba_spp": opts.mitsuba_spp, "seed": opts.seed,
+            "mitsuba_spp": opts.mitsuba_spp, "seed": opts.seed, "allocator": allocator,
             "timing": "median of `runs` timed runs after one untimed warm-up",
             "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32)",
             "embree_version": embree::version().ok(),
