@@ -64,19 +64,19 @@ pub(crate) type Mask = u32;
 
 /// A packet of pixel rays and their per-lane traversal state (structure of arrays
 /// where the slab and edge tests run across lanes).
+///
+/// Aligned to a cache line, its lane arrays first and each a multiple of 64
+/// bytes long (`repr(C)` keeps that order), so every row of 8 lanes is one
+/// aligned vector load: with Rust's 8-byte alignment the packet's offset in
+/// its stack frame, and so which row loads split cache lines, changed with
+/// the frame layout of each build.
+#[repr(C, align(64))]
 pub(crate) struct Packet {
     /// The exact directions `D` per axis, per lane (depth, and the exact
     /// fallback's rays: [`Packet::ray`]).
     d64: [[f64; LANES]; 3],
     /// `D . forward` per lane.
     planar: [f64; LANES],
-    /// `sx` per column and `sy` per row, from which [`Packet::ray`] rebuilds
-    /// a lane's point on the image plane.
-    sx: [f64; PW],
-    sy: [f64; PH],
-    /// Some lane has a subnormal direction component (no depth shortcut:
-    /// [`ChunkDepth`]).
-    subnormal: bool,
     /// `D` per axis, per lane.
     dir: [[f32; LANES]; 3],
     /// `1 / D` per axis, per lane.
@@ -89,13 +89,25 @@ pub(crate) struct Packet {
     pub best: [u64; LANES],
     /// Depth of `best` (+inf when none), for pruning.
     best_z: [f32; LANES],
+    /// `sx` per column and `sy` per row, from which [`Packet::ray`] rebuilds
+    /// a lane's point on the image plane.
+    sx: [f64; PW],
+    sy: [f64; PH],
     /// Lanes inside the image.
     active: Mask,
     /// Per axis, the sign every lane's direction shares (+1 or -1, by the sign
     /// of `1 / D`), or 0 when lanes differ: a shared sign fixes which slab
     /// plane is entered first, saving a min and a max per lane.
     axis_sign: [i8; 3],
+    /// Some lane has a subnormal direction component (no depth shortcut:
+    /// [`ChunkDepth`]).
+    subnormal: bool,
 }
+
+// Every lane array is a whole number of cache lines, so each starts on one.
+const _: () = assert!(
+    (LANES * 4).is_multiple_of(64) && (LANES * 8).is_multiple_of(64) && (PW * 8).is_multiple_of(64)
+);
 
 impl Packet {
     /// The packet whose top-left pixel is `(x0, y0)`; lanes outside the image are
