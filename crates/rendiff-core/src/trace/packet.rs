@@ -353,9 +353,10 @@ impl TraceBvh {
     /// returns its lanes' nearest keys (only those: handing back the whole
     /// 4 KB packet cost a tenth of the kernel's time in copies).
     /// On x86-64 CPUs with AVX2 the same code runs compiled for 256-bit
-    /// vectors (the lane loops are auto-vectorized, and rows of comparisons
-    /// become masks with `vmovmskps`, see [`super::rows`]); the arithmetic is
-    /// unchanged, as Rust never contracts a*b+c into an FMA by itself.
+    /// vectors (the packet set-up's lane loops auto-vectorized; the box
+    /// test and edge signs as intrinsics, rows of comparisons read off with
+    /// `vmovmskps`, see [`super::rows`]); the arithmetic is unchanged, as
+    /// neither Rust nor the intrinsics contract a*b+c into an FMA.
     pub(crate) fn trace_packet(
         &self,
         scene: &ResolvedScene,
