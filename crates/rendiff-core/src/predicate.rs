@@ -48,6 +48,18 @@ impl EdgePlane {
         self.sign_with(eye, q, qd, Precision::Exact, fallbacks)
     }
 
+    /// The f64 filter's determinant for the ray direction `(x, y, z)` and the
+    /// bound its magnitude must clear for its sign to be exact: the one home
+    /// of the formula, which [`EdgePlane::sign_with`] and the raster's
+    /// all-pixels-at-once form (`raster_edges::Lanes::filter4`) evaluate.
+    #[inline(always)]
+    pub fn filter(&self, x: f64, y: f64, z: f64) -> (f64, f64) {
+        let det = x * self.n.x + y * self.n.y + z * self.n.z;
+        let bound = O3D_ERRBOUND_A
+            * (x.abs() * self.perm.x + y.abs() * self.perm.y + z.abs() * self.perm.z);
+        (det, bound)
+    }
+
     /// [`EdgePlane::sign`] at a chosen precision: `FloatOnly` trusts the f64 value
     /// even inside the error bound (a speed/accuracy knob for benchmarks; the
     /// sign may then be wrong or zero where the exact one is not).
@@ -60,9 +72,7 @@ impl EdgePlane {
         precision: Precision,
         fallbacks: &mut u64,
     ) -> i8 {
-        let det = qd.x * self.n.x + qd.y * self.n.y + qd.z * self.n.z;
-        let bound = O3D_ERRBOUND_A
-            * (qd.x.abs() * self.perm.x + qd.y.abs() * self.perm.y + qd.z.abs() * self.perm.z);
+        let (det, bound) = self.filter(qd.x, qd.y, qd.z);
         if det > bound {
             1
         } else if -det > bound {

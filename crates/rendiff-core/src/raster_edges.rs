@@ -109,9 +109,7 @@ pub trait Lanes: Copy {
         for (k, e) in e.iter().enumerate() {
             let [dx, dy, dz] = d;
             for (j, ((&x, &y), &z)) in dx.iter().zip(dy).zip(dz).enumerate() {
-                let det = x * e.n.x + y * e.n.y + z * e.n.z;
-                let bound = crate::predicate::O3D_ERRBOUND_A
-                    * (x.abs() * e.perm.x + y.abs() * e.perm.y + z.abs() * e.perm.z);
+                let (det, bound) = e.filter(x, y, z);
                 pos[k] |= u32::from(det > bound) << j;
                 neg[k] |= u32::from(-det > bound) << j;
             }
@@ -503,7 +501,7 @@ impl Lanes for Avx2 {
         use std::arch::x86_64::*;
         let (mut pos, mut neg) = ([0u32; 3], [0u32; 3]);
         // SAFETY: an `Avx2` exists only on a CPU with AVX2; the loads read
-        // the four f64 of each borrowed array. Per lane: `Lanes::filter4`'s
+        // the four f64 of each borrowed array. Per lane: `EdgePlane::filter`'s
         // operations in its order (`abs` and negation by sign bit, exact).
         unsafe {
             let sign = _mm256_set1_pd(-0.0);
