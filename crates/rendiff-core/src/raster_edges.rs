@@ -119,13 +119,16 @@ pub trait Lanes: Copy {
 
     /// One row of one component of a tile's directions, `d[i] = (e +
     /// (across[i] + up)) - e` ([`Camera::screen_ray`]'s roundings, see
-    /// [`TileRays::fill`]), its values taken into `ext` as they are written.
+    /// [`TileRays::fill`]), its values taken into `ext` as they are written
+    /// (none where the tile's corners already gave the span).
     #[inline(always)]
-    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: &mut Extremes) {
+    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: Option<&mut Extremes>) {
         for (d, &a) in d.iter_mut().zip(across) {
-            *d = (e + (a + up)) - e;
+            *d = dir_lane(e, up, a);
         }
-        ext.add(d);
+        if let Some(ext) = ext {
+            ext.add(d);
+        }
     }
 
     /// One row of a tile's planar factors, `p[i] = D_i . f` (`DVec3::dot`:
@@ -529,27 +532,40 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
-    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: &mut Extremes) {
+    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: Option<&mut Extremes>) {
         use std::arch::x86_64::*;
         let n = d.len().min(across.len());
         let whole = n / 4 * 4;
         // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and
         // stores touch 4 f64 at `i + 4 <= n`, within both slices, and the
-        // four lanes of `ext`'s arrays. Per lane: `Lanes::dir_row`'s
-        // operations in its order, and `Extremes::add`'s (`minpd(v, lo)`
-        // is `if v < lo { v } else { lo }`).
+        // four lanes of `ext`'s arrays. Per lane: `dir_lane`'s operations in
+        // its order, and `Extremes::add`'s (`minpd(v, lo)` is `if v < lo {
+        // v } else { lo }`).
         unsafe {
             let (ev, uv) = (_mm256_set1_pd(e), _mm256_set1_pd(up));
-            let mut wide = WideExtremes::load(ext);
-            for i in (0..whole).step_by(4) {
+            let mut lane = |i: usize| {
                 let a = _mm256_loadu_pd(across.as_ptr().add(i));
                 let v = _mm256_sub_pd(_mm256_add_pd(ev, _mm256_add_pd(a, uv)), ev);
                 _mm256_storeu_pd(d.as_mut_ptr().add(i), v);
-                wide.add(v);
+                v
+            };
+            match ext {
+                Some(ext) => {
+                    let mut wide = WideExtremes::load(ext);
+                    for i in (0..whole).step_by(4) {
+                        wide.add(lane(i));
+                    }
+                    wide.store(ext);
+                    Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], Some(ext));
+                }
+                None => {
+                    for i in (0..whole).step_by(4) {
+                        lane(i);
+                    }
+                    Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], None);
+                }
             }
-            wide.store(ext);
         }
-        Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], ext);
     }
 
     #[inline(always)]
@@ -605,6 +621,15 @@ impl Lanes for Avx2 {
     }
 }
 
+/// One direction component of a pixel ray, `(e + (across + up)) - e`:
+/// [`Camera::screen_ray`]'s `P = eye + ((forward + right sx) + up sy)` and
+/// `D = P - eye`, with `across = forward + right sx` taken once per column
+/// and `up = up_k sy` once per row.
+#[inline(always)]
+fn dir_lane(e: f64, up: f64, across: f64) -> f64 {
+    (e + (across + up)) - e
+}
+
 /// The pixel rays of one tile, by component (structure of arrays with a fixed
 /// row stride, so 8 lanes from any column of a row are one slice), and the largest magnitude of
 /// each direction component over the tile (for the bound). Every value is
@@ -635,6 +660,9 @@ pub struct TileRays {
     across: [Vec<f64>; 3],
     /// The span of each component of `D` over the tile's pixels.
     d_span: [Span; 3],
+    /// `d_span` came from the tile's four corner pixels
+    /// ([`TileRays::corner_spans`]), not from every value as it was written.
+    spans_from_corners: bool,
     /// The span of `planar`.
     planar_span: Span,
     /// `max |D_i|` over the tile's pixels, per component.
@@ -690,17 +718,20 @@ impl TileRays {
             across.clear();
             across.extend(t.sx.iter().map(|&sx| f[k] + r[k] * sx));
         }
+        let corners = t.corner_spans(e, u);
+        t.spans_from_corners = corners.is_some();
         let mut d_ext = [Extremes::default(); 3];
         let mut planar_ext = Extremes::default();
         for ly in 0..rows {
             let sy = t.sy[ly];
             let row = ly * stride..(ly + 1) * stride;
-            for k in 0..3 {
+            for (k, ext) in d_ext.iter_mut().enumerate() {
                 // Camera::screen_ray: P = eye + ((forward + right sx) + up sy),
                 // D = P - eye, component by component (the same roundings,
                 // with `forward + right sx` taken once per column).
                 let d = &mut t.d[k][row.clone()];
-                l.dir_row(e[k], u[k] * sy, &t.across[k], d, &mut d_ext[k]);
+                let ext = corners.is_none().then_some(ext);
+                l.dir_row(e[k], u[k] * sy, &t.across[k], d, ext);
             }
             let [dx, dy, dz] = &t.d;
             let d = [&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]];
@@ -709,7 +740,7 @@ impl TileRays {
         }
         // Padding lanes repeat real pixels: the spans are the tile's.
         t.planar_span = planar_ext.span();
-        t.d_span = [d_ext[0].span(), d_ext[1].span(), d_ext[2].span()];
+        t.d_span = corners.unwrap_or([d_ext[0].span(), d_ext[1].span(), d_ext[2].span()]);
         // A NaN or infinite direction leaves a NaN bound, which decides
         // nothing (as an infinite one would).
         // (Plain arrays: array `map` compiled to out-of-line calls here.)
@@ -720,6 +751,46 @@ impl TileRays {
         ];
         t.max_abs = [stats[0].0, stats[1].0, stats[2].0];
         t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
+    }
+
+    /// The span of each direction component over the tile, from its four
+    /// corner pixels alone, when those are finite and, per component, of one
+    /// strict sign (`None` otherwise: the rows then gather the spans as
+    /// they are written). Needs `sx`, `sy` and `across` filled.
+    ///
+    /// Why the corners suffice: `D_k = fl(fl(e_k + fl(A_k(x) + B_k(y))) -
+    /// e_k)` with `A_k(x) = fl(f_k + fl(r_k sx(x)))` and `B_k(y) = fl(u_k
+    /// sy(y))`, and `sx`, `sy` are monotone in the column and row
+    /// ([`Camera::screen_x`]: `+ 0.5`, `* 2`, `/ width`, `- 1`, `* A`, each
+    /// rounded; padding lanes repeat the last column). Rounding to nearest is
+    /// monotone, so every step is monotone in its variable argument (a
+    /// product by a negative constant reverses the order), and `D_k` is
+    /// monotone in the column along each row and in the row down each
+    /// column, the same way everywhere in the tile. So each value lies
+    /// between the two ends of its row, and each end between the corners of
+    /// its column: the least and greatest corner values are the tile's.
+    /// Overflow is monotone too (to `±inf`), and with finite corners every
+    /// intermediate lies between finite corner intermediates, so no value
+    /// is infinite or NaN. One strict sign per component leaves no zero
+    /// whose sign would depend on the order of `min`/`max` (the rescan of
+    /// [`Span::stats`] is never needed). `tests::filled_tiles_keep_the_scans_statistics`
+    /// compares the spans with scans, on tiles that take either way.
+    #[inline(always)]
+    fn corner_spans(&self, e: [f64; 3], u: [f64; 3]) -> Option<[Span; 3]> {
+        let (last_col, last_row) = (self.width - 1, self.sy.len() - 1);
+        let mut out = [Span::default(); 3];
+        for (k, span) in out.iter_mut().enumerate() {
+            for (lx, ly) in [(0, 0), (last_col, 0), (0, last_row), (last_col, last_row)] {
+                let v = dir_lane(e[k], u[k] * self.sy[ly], self.across[k][lx]);
+                span.lo = if v < span.lo { v } else { span.lo };
+                span.hi = if v > span.hi { v } else { span.hi };
+                span.finite &= v.is_finite();
+            }
+            if !(span.finite && span.one_strict_sign()) {
+                return None;
+            }
+        }
+        Some(out)
     }
 
     /// Builds the tile from given directions (tests of the edge functions).
@@ -743,6 +814,7 @@ impl TileRays {
             planar: d[0].clone(),
             across: Default::default(),
             d_span: [0, 1, 2].map(|k| Span::of(&d[k])),
+            spans_from_corners: false,
             planar_span: Span::of(&d[0]),
             d,
             max_abs,
@@ -1462,7 +1534,7 @@ mod tests {
     /// image's middle column) take the rescan, the others the extremes.
     #[test]
     fn filled_tiles_keep_the_scans_statistics() {
-        let (mut rescans, mut extremes_only) = (0, 0);
+        let (mut rescans, mut extremes_only, mut from_corners, mut tiles) = (0, 0, 0, 0);
         for cam in tile_cameras() {
             for (x0, y0) in [(0, 0), (32, 0), (0, 32), (32, 32), (64, 0), (5, 3)] {
                 if x0 >= cam.width || y0 >= cam.height {
@@ -1470,6 +1542,8 @@ mod tests {
                 }
                 let (tw, th) = ((cam.width - x0).min(32), (cam.height - y0).min(32));
                 let t = TileRays::new(&cam, x0, y0, tw, th);
+                from_corners += usize::from(t.spans_from_corners);
+                tiles += 1;
                 for k in 0..3 {
                     let want = row_stats_scalar(&t.d[k]);
                     let want_max = if want.non_finite { f64::NAN } else { want.max };
@@ -1501,12 +1575,15 @@ mod tests {
                     assert_eq!(w.planar_span, t.planar_span);
                     assert_eq!(bits(&w.max_abs), bits(&t.max_abs));
                     assert_eq!(w.subnormal, t.subnormal);
+                    assert_eq!(w.spans_from_corners, t.spans_from_corners);
                 }
             }
         }
+        // Both ways to the spans are taken: from the corners, and gathered
+        // per row (then with and without the rescan).
         assert!(
-            rescans > 0 && extremes_only > 0,
-            "{rescans} {extremes_only}"
+            rescans > 0 && extremes_only > 0 && from_corners > 0 && from_corners < tiles,
+            "{rescans} {extremes_only} {from_corners} of {tiles}"
         );
     }
 
