@@ -318,20 +318,9 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
         out: &TileOut,
         [lx0, lx1, ly0, ly1]: [usize; 4],
     ) -> bool {
-        if !self.on {
+        // An empty first pixel (a tile's first triangle) settles it at once.
+        if !self.on || out.keys[out.at(lx0, ly0)] == NO_HIT {
             return false;
-        }
-        // The largest key in the box, row by row: NO_HIT (the largest key)
-        // as soon as a row has an empty pixel.
-        let mut highest = 0;
-        for ly in ly0..=ly1 {
-            let row = out.at(lx0, ly);
-            highest = out.keys[row..=row + (lx1 - lx0)]
-                .iter()
-                .fold(highest, |m, &k| m.max(k));
-            if highest == NO_HIT {
-                return false;
-            }
         }
         let (make, factor) = (&mut self.make, self.factor);
         let bound = self
@@ -341,7 +330,15 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
             return false;
         };
         let low = b.lowest_key(cam, t, prim);
-        low != 0 && highest <= low
+        // `low` is 0 or a hit's key, below NO_HIT: a background pixel
+        // fails `k <= low`, as does any key the triangle might beat, so the
+        // scan stops at the first such key (at once, mostly, for a visible
+        // triangle over a tile already drawn).
+        low != 0
+            && (ly0..=ly1).all(|ly| {
+                let row = out.at(lx0, ly);
+                out.keys[row..=row + (lx1 - lx0)].iter().all(|&k| k <= low)
+            })
     }
 }
 
