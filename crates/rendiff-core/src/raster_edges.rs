@@ -1587,6 +1587,44 @@ mod tests {
         );
     }
 
+    /// Where a tile's direction spans come from its corners
+    /// ([`TileRays::corner_spans`]), they are the scans' of its arrays, on
+    /// random cameras: eyes from 1e-3 to 1e9 from the origin, any view
+    /// direction and roll, narrow to wide fields of view, tiles anywhere
+    /// in odd-sized images (edge tiles narrower than a chunk included).
+    #[test]
+    fn corner_spans_are_the_scans() {
+        let mut s = 41u64;
+        let (mut from_corners, mut tiles) = (0, 0);
+        for i in 0..400 {
+            let scale = 10f64.powi(i % 13 - 3);
+            let v = |s: &mut u64| DVec3::new(lcg(s), lcg(s), lcg(s));
+            let eye = v(&mut s) * scale;
+            let at = eye + v(&mut s);
+            let up = v(&mut s);
+            let vfov = 1.0 + 178.0 * (lcg(&mut s) + 1.0) / 2.0;
+            let (w, h) = (1 + (i * 37 % 97) as u32, 1 + (i * 53 % 89) as u32);
+            let Ok(cam) = Camera::new(eye, at, up, vfov, w, h, 1e-3, 1.0) else {
+                continue;
+            };
+            let x0 = (((lcg(&mut s) + 1.0) / 2.0 * f64::from(w)) as u32).min(w - 1);
+            let y0 = (((lcg(&mut s) + 1.0) / 2.0 * f64::from(h)) as u32).min(h - 1);
+            let (tw, th) = ((w - x0).min(32), (h - y0).min(32));
+            let t = TileRays::new(&cam, x0, y0, tw, th);
+            tiles += 1;
+            if t.spans_from_corners {
+                from_corners += 1;
+                for k in 0..3 {
+                    assert_eq!(t.d_span[k], Span::of(&t.d[k]), "camera {i}, axis {k}");
+                }
+            }
+        }
+        assert!(
+            from_corners > 100 && tiles > 300,
+            "{from_corners} of {tiles}"
+        );
+    }
+
     #[test]
     fn bound_covers_the_derived_evaluation_error() {
         assert!(FAST_EDGE_BOUND * (1.0 - 8.0 * U) * (1.0 - U).powi(9) > 8.0 * U);
