@@ -23,10 +23,77 @@ pub fn parse_threads(s: &str) -> std::result::Result<usize, String> {
     Ok(n)
 }
 
+/// Most timed runs a benchmark takes per configuration: each is a whole
+/// pass (seconds on the big scenes, minutes for `bench scale`), a median of
+/// a thousand is already exact to the machine's noise, and the run times are
+/// kept in a list allocated up front (`--runs 10^14` aborted on that
+/// allocation).
+pub const MAX_RUNS: usize = 1000;
+
+/// `--runs N`: 1 to [`MAX_RUNS`] (0 used to be raised to 1 silently, so the
+/// report said one thing and the command another).
+pub fn parse_runs(s: &str) -> std::result::Result<usize, String> {
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of runs"))?;
+    if n == 0 || n > MAX_RUNS {
+        return Err(format!("{n} runs: give 1 to {MAX_RUNS}"));
+    }
+    Ok(n)
+}
+
+/// Longest `--timeout` for one external render: a week. Longer is a typo
+/// (and `--timeout 18446744073709551615` overflowed the deadline's clock
+/// arithmetic: a panic, not an error).
+pub const MAX_TIMEOUT_S: u64 = 7 * 24 * 3600;
+
+/// `--timeout SECONDS`: 1 to [`MAX_TIMEOUT_S`] (0 failed every external
+/// render as timed out).
+pub fn parse_timeout(s: &str) -> std::result::Result<u64, String> {
+    let n: u64 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if n == 0 || n > MAX_TIMEOUT_S {
+        return Err(format!("{n} s: give 1 to {MAX_TIMEOUT_S} (a week)"));
+    }
+    Ok(n)
+}
+
+/// `--spp N`: the scene file's own limit ([`crate::scene::check_spp`]), before any rendering.
+pub fn parse_spp(s: &str) -> std::result::Result<u32, String> {
+    let n: u32 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a sample count"))?;
+    crate::scene::check_spp(n).map(|()| n)
+}
+
 /// A clap parser for a core enum: its names are the core's ([`Named`]), so the
 /// core needs no command-line library and each name is written once.
 pub fn named<T: Named + Clone>() -> impl clap::builder::TypedValueParser<Value = T> {
     use clap::builder::TypedValueParser;
     clap::builder::PossibleValuesParser::new(T::ALL.iter().map(|v| v.name()))
         .map(|s| T::from_name(&s).expect("clap accepted only listed names"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runs_timeouts_and_threads_are_bounded() {
+        assert_eq!(parse_runs("1"), Ok(1));
+        assert_eq!(parse_runs("1000"), Ok(MAX_RUNS));
+        for bad in ["0", "1001", "100000000000000", "-1", "x", ""] {
+            assert!(parse_runs(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(parse_timeout("1"), Ok(1));
+        assert_eq!(parse_timeout("604800"), Ok(MAX_TIMEOUT_S));
+        for bad in ["0", "604801", "18446744073709551615", "1.5", "-1"] {
+            assert!(parse_timeout(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(parse_threads("1"), Ok(1));
+        for bad in ["0", "100000", "-2", "two"] {
+            assert!(parse_threads(bad).is_err(), "{bad:?}");
+        }
+    }
 }

@@ -67,7 +67,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
         /// Samples per pixel for path tracing (default: the scene's integrator.spp).
-        #[arg(long, value_parser = parse_spp)]
+        #[arg(long, value_parser = rendiff::args::parse_spp)]
         spp: Option<u32>,
         /// Random seed for path tracing.
         #[arg(long, default_value_t = 1)]
@@ -105,8 +105,8 @@ enum Command {
         /// Only these backends, comma-separated (the raster reference always runs).
         #[arg(long, value_delimiter = ',')]
         only: Option<Vec<String>>,
-        /// Seconds before an external renderer is killed.
-        #[arg(long, default_value_t = 600)]
+        /// Seconds before an external renderer is killed (1 to a week).
+        #[arg(long, default_value_t = 600, value_parser = rendiff::args::parse_timeout)]
         timeout: u64,
         /// Known divergences with their bounds (default: rendiff's tests/expectations.toml).
         #[arg(long)]
@@ -122,7 +122,7 @@ enum Command {
         #[arg(long, default_value_t = rendiff::check::CHECK_SEED)]
         seed: u64,
         /// Samples per pixel of the core's path tracer (default: each scene's integrator.spp).
-        #[arg(long, value_parser = parse_spp)]
+        #[arg(long, value_parser = rendiff::args::parse_spp)]
         spp: Option<u32>,
         /// Deliberately wrong core shading, for testing the statistical gate's power.
         #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
@@ -668,14 +668,6 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);
 /// exit 1 on any difference, 0 when identical, 2 (an error) when the files
 /// share no buffer.
-/// `--spp N`: the scene file's own limit (`scene::check_spp`), before any rendering.
-fn parse_spp(s: &str) -> std::result::Result<u32, String> {
-    let n: u32 = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a sample count"))?;
-    rendiff::scene::check_spp(n).map(|()| n)
-}
-
 fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     let d = rendiff::diff::diff_files(a, b)?;
     for line in d.lines(&a.display().to_string(), &b.display().to_string()) {

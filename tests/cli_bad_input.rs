@@ -667,3 +667,29 @@ fn thread_and_sample_counts_are_bounded_before_anything_starts() {
         assert!(!out.exists(), "{flag} {value}: no output may be written");
     }
 }
+
+/// `check --timeout` is 1 s to a week: 0 used to fail every external render
+/// as timed out, and 2^64 - 1 panicked in the deadline's clock arithmetic.
+#[test]
+fn check_timeouts_are_bounded_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    for value in ["0", "604801", "18446744073709551615"] {
+        let res = output_within(
+            rendiff()
+                .args(["check", "scenes/three_triangles.toml", "-o"])
+                .arg(&out)
+                .args(["--timeout", value]),
+            60,
+        );
+        assert_eq!(res.status.code(), Some(2), "--timeout {value}");
+        let err = String::from_utf8_lossy(&res.stderr);
+        assert!(
+            err.contains("--timeout")
+                && err.contains("give 1 to 604800")
+                && !err.contains("panicked"),
+            "--timeout {value}: {err}"
+        );
+        assert!(!out.exists(), "--timeout {value}: no output may be written");
+    }
+}

@@ -20,20 +20,20 @@ pub struct CommonArgs {
     #[arg(long)]
     pub quick: bool,
     /// Timed runs per configuration, after one warm-up (default 3; 1 with --quick).
-    #[arg(long)]
+    #[arg(long, value_parser = rendiff::args::parse_runs)]
     pub runs: Option<usize>,
     /// Output folder for JSON, HTML and SVG.
     #[arg(short, long, default_value = "reports/bench")]
     pub output: PathBuf,
-    /// Seconds before an external renderer is killed.
-    #[arg(long, default_value_t = 600)]
+    /// Seconds before an external renderer is killed (1 to a week).
+    #[arg(long, default_value_t = 600, value_parser = rendiff::args::parse_timeout)]
     pub timeout: u64,
 }
 
 impl CommonArgs {
     fn common(&self) -> Result<Common> {
         Ok(Common {
-            runs: self.runs.unwrap_or(if self.quick { 1 } else { 3 }).max(1),
+            runs: self.runs.unwrap_or(if self.quick { 1 } else { 3 }),
             quick: self.quick,
             out_dir: self.output.clone(),
             root: std::env::current_dir()?,
@@ -61,13 +61,13 @@ pub struct KnobsArgs {
     #[arg(long, default_value = "tests/references/cornell_gi.exr")]
     pub reference: PathBuf,
     /// Core path tracer spp settings.
-    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256")]
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256", value_parser = rendiff::args::parse_spp)]
     pub spp: Vec<u32>,
     /// Mitsuba spp settings (at least 2 each).
-    #[arg(long, value_delimiter = ',', default_value = "4,16,64,256")]
+    #[arg(long, value_delimiter = ',', default_value = "4,16,64,256", value_parser = rendiff::args::parse_spp)]
     pub mitsuba_spp: Vec<u32>,
     /// Mitsuba's spp for its max_depth and variant knobs.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = rendiff::args::parse_spp)]
     pub mitsuba_knob_spp: u32,
     /// Mitsuba max_depth settings (-1 = unlimited, or >= 1; the reference uses -1).
     #[arg(
@@ -92,7 +92,7 @@ pub struct KnobsArgs {
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
     /// Worker threads (default: all CPUs).
-    #[arg(long)]
+    #[arg(long, value_parser = rendiff::args::parse_threads)]
     pub threads: Option<usize>,
     /// Skip external renderers (POV-Ray, pyrender, Mitsuba).
     #[arg(long)]
@@ -117,7 +117,7 @@ pub enum BenchCommand {
         #[arg(long)]
         scanned_scene: Option<SceneSpec>,
         /// Thread counts for trace and raster throughput.
-        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = rendiff::args::parse_threads)]
         threads: Vec<usize>,
         /// Global-illumination scene for the equal-time comparison.
         #[arg(long, default_value = "scenes/cornell_gi.toml")]
@@ -126,7 +126,7 @@ pub enum BenchCommand {
         #[arg(long, default_value = "tests/references/cornell_gi.exr")]
         reference: PathBuf,
         /// Mitsuba's spp at equal time (the core's spp is chosen to match its time).
-        #[arg(long, default_value_t = 64)]
+        #[arg(long, default_value_t = 64, value_parser = rendiff::args::parse_spp)]
         mitsuba_spp: u32,
         /// Seed of both path tracers.
         #[arg(long, default_value_t = 1000)]
@@ -140,7 +140,7 @@ pub enum BenchCommand {
         /// Options every subcommand takes.
         #[command(flatten)]
         common: CommonArgs,
-        /// Square image size in pixels (--quick: 64).
+        /// Square image size in pixels, within the scenes' image limits (--quick: 64).
         #[arg(long, default_value_t = 512)]
         size: u32,
         /// Grid subdivisions per side (2 nx^2 triangles) (--quick: 1,4,16).
@@ -151,7 +151,7 @@ pub enum BenchCommand {
         )]
         nx: Vec<u32>,
         /// Worker threads (default: all CPUs).
-        #[arg(long)]
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
         threads: Option<usize>,
     },
     /// The main job's wall time: a process per render one at a time, the
@@ -162,7 +162,8 @@ pub enum BenchCommand {
         #[command(flatten)]
         common: CommonArgs,
         /// Shard counts to measure.
-        #[arg(long, value_delimiter = ',', default_value = "1,2,4")]
+        #[arg(long, value_delimiter = ',', default_value = "1,2,4",
+              value_parser = clap::value_parser!(u32).range(1..))]
         shards: Vec<u32>,
         /// Scene files or folders (default: the main job's, scenes/ and scenes/corpus/).
         #[arg(long = "scene")]
@@ -189,7 +190,7 @@ pub enum BenchCommand {
         #[arg(long, default_value = "tests/references/cornell_gi.exr")]
         reference: PathBuf,
         /// Samples per pixel settings, at least 2 each (--quick: 4,8).
-        #[arg(long, value_delimiter = ',', default_value = "16,64,256")]
+        #[arg(long, value_delimiter = ',', default_value = "16,64,256", value_parser = rendiff::args::parse_spp)]
         spp: Vec<u32>,
         /// Independent seeds per setting (--quick: 8).
         #[arg(long, default_value_t = 64)]
@@ -205,7 +206,7 @@ pub enum BenchCommand {
         #[arg(long)]
         check_reference: Option<PathBuf>,
         /// Worker threads (default: all CPUs).
-        #[arg(long)]
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
         threads: Option<usize>,
     },
 }
@@ -282,7 +283,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 direct_scenes,
                 supersample: if quick { 4 } else { supersample },
                 seed,
-                threads: threads.unwrap_or_else(super::cpus).max(1),
+                threads: threads.unwrap_or_else(super::cpus),
                 no_external: no_external || quick,
             };
             ("knobs", c, knobs::run(&opts)?)
@@ -337,9 +338,9 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             let quick = c.quick;
             let opts = CrossoverOptions {
                 common: c.clone(),
-                size: if quick { 64 } else { size.max(1) },
+                size: if quick { 64 } else { size },
                 nx: if quick { vec![1, 4, 16] } else { nx },
-                threads: threads.unwrap_or_else(super::cpus).max(1),
+                threads: threads.unwrap_or_else(super::cpus),
             };
             ("crossover", c, crossover::run(&opts)?)
         }
@@ -401,7 +402,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 seed,
                 test_blocks: if quick { 1 } else { test_blocks },
                 check_reference,
-                threads: threads.unwrap_or_else(super::cpus).max(1),
+                threads: threads.unwrap_or_else(super::cpus),
             };
             ("variance", c, variance::run(&opts)?)
         }

@@ -98,6 +98,11 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
 
 /// Runs the sweep and returns the JSON record, the page and the SVGs.
 pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
+    // Every size of the sweep, before the first one runs (minutes may pass).
+    for &nx in &opts.nx {
+        rendiff::scene::generators::check_crossover_grid(nx, opts.size)
+            .map_err(|e| anyhow::anyhow!("--nx {nx} --size {}: {e}", opts.size))?;
+    }
     let environment = super::environment();
     let allocator = super::keep_freed_memory();
     let pool = super::pool(opts.threads)?;

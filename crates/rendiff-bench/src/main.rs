@@ -34,7 +34,7 @@ struct Cli {
     #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = rendiff::args::parse_threads)]
     threads: Vec<usize>,
     /// Timed runs per configuration.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = rendiff::args::parse_runs)]
     runs: usize,
     /// BVH build quality.
     #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "medium")]
@@ -67,7 +67,7 @@ fn run(cli: Cli) -> Result<()> {
     let opts = rendiff_bench::BenchOptions {
         size: cli.size,
         threads: cli.threads,
-        runs: cli.runs.max(1),
+        runs: cli.runs,
         bvh: cli.bvh,
     };
     let record = rendiff_bench::run(&resolved, &cli.scene.display().to_string(), &opts)?;

@@ -155,7 +155,6 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
 
     let mut shard_rows = Vec::new();
     for &n in &opts.shards {
-        let n = n.max(1);
         let mut times = Vec::new();
         let mut runs_dirs = Vec::new();
         for k in 1..=n {

@@ -303,3 +303,56 @@ fn scale_times_the_main_job_and_its_shards() {
         "{per:?}"
     );
 }
+
+/// Counts and sizes a benchmark cannot honour are refused before anything
+/// runs: exit code 2, an error naming the option, and no output folder.
+/// (`--runs 0` and `--threads 0` used to be raised to 1 silently, `--size
+/// 20000` and `--nx 100000` aborted on an allocation, and a huge
+/// `--timeout` panicked.) Run without `--quick`, whose fixed sizes would
+/// hide the options.
+#[test]
+fn impossible_options_are_refused_before_any_work() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let cases: &[(&[&str], &str)] = &[
+        (&["crossover", "--runs", "0"], "--runs"),
+        (&["crossover", "--runs", "100000000000000"], "--runs"),
+        (&["crossover", "--threads", "0"], "--threads"),
+        (&["crossover", "--nx", "0,1"], "--nx 0"),
+        (&["crossover", "--nx", "1,100000"], "20000000000 triangles"),
+        (&["crossover", "--size", "0"], "at least 1x1"),
+        (&["crossover", "--size", "20000"], "per side"),
+        (&["peers", "--threads", "1,0"], "--threads"),
+        (&["peers", "--timeout", "0"], "--timeout"),
+        (&["peers", "--timeout", "18446744073709551615"], "--timeout"),
+        (&["peers", "--mitsuba-spp", "0"], "--mitsuba-spp"),
+        (&["knobs", "--spp", "1,0"], "--spp"),
+        (&["scale", "--shards", "0"], "--shards"),
+        (&["variance", "--threads", "100000"], "--threads"),
+        (&["--runs", "0"], "--runs"),
+    ];
+    for (args, names) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let out_dir = dir.path().join("out");
+        let out = Command::new(env!("CARGO_BIN_EXE_rendiff-bench"))
+            .current_dir(&root)
+            .args(*args)
+            .arg("-o")
+            .arg(&out_dir)
+            .output()
+            .expect("rendiff-bench runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        let first = err.lines().next().unwrap_or_default();
+        assert!(
+            first.starts_with("error: ") && first.contains(names),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(!out_dir.exists(), "{args:?} wrote {}", out_dir.display());
+        // Refused before the first step: no progress line, only the error
+        // (and clap's pointer to --help).
+        for line in err.lines().skip(1).filter(|l| !l.trim().is_empty()) {
+            assert!(line.starts_with("For more information"), "{args:?}: {err}");
+        }
+    }
+}

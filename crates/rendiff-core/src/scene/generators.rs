@@ -259,6 +259,25 @@ pub fn grid(min: [f64; 2], max: [f64; 2], nx: u32, ny: u32) -> Vec<Tri64> {
     out
 }
 
+/// Checks [`crossover_grid`]'s arguments before anything is allocated (and
+/// `bench crossover`'s whole sweep before its first size runs): at least
+/// one cell per side, at most [`crate::scene::MAX_SCENE_TRIANGLES`]
+/// triangles (`2 nx²`), an image within the scenes' limits
+/// ([`crate::scene::check_image_size`]).
+pub fn check_crossover_grid(nx: u32, size: u32) -> Result<(), String> {
+    let triangles = 2 * u64::from(nx) * u64::from(nx);
+    if nx == 0 {
+        Err("grid of 0x0 cells: nx must be at least 1".into())
+    } else if triangles > crate::scene::MAX_SCENE_TRIANGLES {
+        Err(format!(
+            "grid of {nx}x{nx} cells is {triangles} triangles, more than the limit of {} (64 Mi) per scene",
+            crate::scene::MAX_SCENE_TRIANGLES
+        ))
+    } else {
+        crate::scene::check_image_size(size, size)
+    }
+}
+
 /// The crossover bench's scene (`rendiff bench crossover`, and the raster and
 /// trace timing loops): an `nx` x `nx` grid at z = 0 seen from (0, 0, 1) with
 /// a 90° field of view, covering the whole `size` x `size` image whatever
@@ -271,6 +290,7 @@ pub fn crossover_grid(
     size: u32,
     aligned: bool,
 ) -> Result<crate::scene::resolve::ResolvedScene, String> {
+    check_crossover_grid(nx, size)?;
     let cam = crate::camera::Camera::new(
         DVec3::new(0.0, 0.0, 1.0),
         DVec3::ZERO,
@@ -329,6 +349,27 @@ pub fn cube(min: DVec3, max: DVec3, inward: bool) -> Vec<Tri64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The crossover grid refuses, before allocating, what no render could
+    /// hold or what is no grid at all, naming the limit; the largest
+    /// accepted sizes pass the check.
+    #[test]
+    fn crossover_grid_sizes_are_checked() {
+        let err = |nx, size| crossover_grid(nx, size, false).err().unwrap_or_default();
+        assert!(err(0, 64).contains("at least 1"), "{}", err(0, 64));
+        assert!(
+            err(100_000, 64).contains("20000000000 triangles"),
+            "{}",
+            err(100_000, 64)
+        );
+        assert!(err(1, 0).contains("at least 1x1"), "{}", err(1, 0));
+        assert!(err(1, 20_000).contains("per side"), "{}", err(1, 20_000));
+        assert!(err(1, 16_384).contains("Mpixel"), "{}", err(1, 16_384));
+        // 2 * 5793² = 67,117,698 > 2^26 = 67,108,864 >= 2 * 5792² = 67,094,528.
+        assert!(err(5793, 8).contains("more than the limit"));
+        assert_eq!(check_crossover_grid(5792, 8192), Ok(()));
+        assert!(crossover_grid(2, 8, true).is_ok());
+    }
 
     fn normal(t: &Tri64) -> DVec3 {
         (t[1] - t[0]).cross(t[2] - t[0])

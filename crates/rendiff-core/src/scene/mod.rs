@@ -447,6 +447,29 @@ pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
 /// top), so one mesh at this limit needs about 2 to 3 GiB before resolution.
 pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
 
+/// Checks an image size against [`MAX_IMAGE_SIDE`] and [`MAX_IMAGE_PIXELS`]
+/// (scene files, and generated scenes such as `bench crossover`'s grid).
+pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
+    if width == 0 || height == 0 {
+        return Err(format!(
+            "image size must be at least 1x1, got {width}x{height}"
+        ));
+    }
+    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(format!(
+            "image size {width}x{height} exceeds the limit of {MAX_IMAGE_SIDE} per side"
+        ));
+    }
+    let pixels = u64::from(width) * u64::from(height);
+    if pixels > MAX_IMAGE_PIXELS {
+        return Err(format!(
+            "image size {width}x{height} is {pixels} pixels, more than the limit of \
+             {MAX_IMAGE_PIXELS} (64 Mpixel, e.g. 8192x8192)"
+        ));
+    }
+    Ok(())
+}
+
 /// Checks a samples-per-pixel count against [`MAX_SPP`] (also for `--spp`).
 pub fn check_spp(spp: u32) -> Result<(), String> {
     if spp == 0 {
@@ -735,38 +758,8 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
     if c.gltf.is_none() {
         validate_pose(path, c)?;
     }
-    if c.width == 0 || c.height == 0 {
-        return Err(SceneError::new(
-            path,
-            "camera.width/height",
-            format!(
-                "image size must be at least 1x1, got {}x{}",
-                c.width, c.height
-            ),
-        ));
-    }
-    if c.width > MAX_IMAGE_SIDE || c.height > MAX_IMAGE_SIDE {
-        return Err(SceneError::new(
-            path,
-            "camera.width/height",
-            format!(
-                "image size {}x{} exceeds the limit of {MAX_IMAGE_SIDE} per side",
-                c.width, c.height
-            ),
-        ));
-    }
-    let pixels = u64::from(c.width) * u64::from(c.height);
-    if pixels > MAX_IMAGE_PIXELS {
-        return Err(SceneError::new(
-            path,
-            "camera.width/height",
-            format!(
-                "image size {}x{} is {pixels} pixels, more than the limit of {MAX_IMAGE_PIXELS} \
-                 (64 Mpixel, e.g. 8192x8192)",
-                c.width, c.height
-            ),
-        ));
-    }
+    check_image_size(c.width, c.height)
+        .map_err(|p| SceneError::new(path, "camera.width/height", p))?;
     if let Some(n) = c.near {
         if !(n.is_finite() && n > 0.0) {
             return Err(SceneError::new(
