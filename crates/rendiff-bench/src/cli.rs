@@ -12,6 +12,12 @@ use super::{Common, Output};
 use anyhow::Result;
 use std::path::PathBuf;
 
+/// `--supersample K` ([`super::direct::check_supersample`]).
+fn parse_supersample(s: &str) -> std::result::Result<u32, String> {
+    let k: u32 = s.parse().map_err(|_| format!("{s:?} is not a count"))?;
+    super::direct::check_supersample(k).map(|()| k)
+}
+
 /// Options every subcommand takes.
 #[derive(Debug, Clone, clap::Args)]
 pub struct CommonArgs {
@@ -52,7 +58,7 @@ pub struct KnobsArgs {
     #[arg(long = "scene")]
     pub scenes: Vec<SceneSpec>,
     /// Resolution factors of the first scene's size.
-    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2")]
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2", value_parser = knobs::parse_scale)]
     pub scales: Vec<f64>,
     /// Global-illumination scene for the spp knobs.
     #[arg(long, default_value = "scenes/cornell_gi.toml")]
@@ -86,7 +92,7 @@ pub struct KnobsArgs {
     #[arg(long = "direct-scene")]
     pub direct_scenes: Vec<SceneSpec>,
     /// Direct-lighting reference: K×K pixel-center samples per pixel, box-filtered (a power of two; --quick: 4).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = parse_supersample)]
     pub supersample: u32,
     /// Seed of both path tracers (the reference used 0, so not 0).
     #[arg(long, default_value_t = 1000)]

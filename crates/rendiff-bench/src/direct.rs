@@ -142,6 +142,16 @@ pub fn box_downsample(big: &[[f32; 3]], w: usize, h: usize, k: usize) -> Vec<[f3
     out
 }
 
+/// The direct-lighting reference's K x K samples per pixel: a power of two
+/// in 2..=64 (`--supersample`, checked before anything runs).
+pub fn check_supersample(k: u32) -> Result<(), String> {
+    if k.is_power_of_two() && (2..=64).contains(&k) {
+        Ok(())
+    } else {
+        Err(format!("must be a power of two in 2..=64, got {k}"))
+    }
+}
+
 /// The core's local shading with k×k pixel-center samples per pixel (raster,
 /// BVH build for shadow rays, shading, all timed), box-filtered to the scene's size.
 pub fn core_supersampled(
@@ -186,9 +196,7 @@ pub fn direct_group(opts: &DirectOptions) -> Result<Group> {
         bail!("{path}: the direct-lighting knobs need a shaded scene (lambert or emission)");
     }
     let k_ref = opts.supersample;
-    if !k_ref.is_power_of_two() || !(2..=64).contains(&k_ref) {
-        bail!("--supersample must be a power of two in 2..=64, got {k_ref}");
-    }
+    check_supersample(k_ref).map_err(|e| anyhow::anyhow!("--supersample: {e}"))?;
     let cam = &scene.camera;
     let mut g = Group {
         id: format!("radiance-direct-{}", opts.spec.stem()),

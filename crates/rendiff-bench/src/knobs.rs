@@ -63,9 +63,30 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
         .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
     let p = |v: &str| v.parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
     let (w, h) = (p(w)?, p(h)?);
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("size must be 1..=16384 per side, got {s}"));
+    rendiff::scene::check_image_size(w, h)?;
+    Ok((w, h))
+}
+
+/// `--scales K`: a resolution factor, finite and positive (the sizes it
+/// gives are checked against the image limits once the scene is loaded,
+/// before anything runs: [`scaled_size`]).
+pub fn parse_scale(s: &str) -> Result<f64, String> {
+    let k: f64 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if k.is_finite() && k > 0.0 {
+        Ok(k)
+    } else {
+        Err(format!(
+            "a resolution factor must be finite and > 0, got {s}"
+        ))
     }
+}
+
+/// A `w0` x `h0` image scaled by `k` (rounded), within the image limits.
+pub fn scaled_size(w0: u32, h0: u32, k: f64) -> Result<(u32, u32)> {
+    let side = |v: u32| (f64::from(v) * k).round().min(f64::from(u32::MAX)) as u32;
+    let (w, h) = (side(w0), side(h0));
+    rendiff::scene::check_image_size(w, h)
+        .map_err(|e| anyhow::anyhow!("--scales {k} of {w0}x{h0}: {e}"))?;
     Ok((w, h))
 }
 
@@ -252,6 +273,13 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
         let scene = spec
             .load()
             .with_context(|| format!("{}: cannot load", spec.path.display()))?;
+        if i == 0 {
+            // Every resolution of the table, before the first timed run.
+            let (w0, h0) = (scene.camera.width, scene.camera.height);
+            for &k in &opts.resolution_scales {
+                scaled_size(w0, h0, k)?;
+            }
+        }
         eprintln!(
             "knobs: visibility on {} ({}x{}, {} triangles)",
             spec.path.display(),
@@ -415,8 +443,7 @@ fn resolution_table(scene: &ResolvedScene, opts: &KnobsOptions) -> Result<Value>
     let bvh = measure::trace(scene, BvhQuality::Medium, runs);
     let mut rows = Vec::new();
     for &k in &opts.resolution_scales {
-        let w = ((f64::from(w0) * k).round() as u32).max(1);
-        let h = ((f64::from(h0) * k).round() as u32).max(1);
+        let (w, h) = scaled_size(w0, h0, k)?;
         let s = super::resized(scene, w, h)?;
         // The BVH depends on the eye only, not on the image size.
         let r = measure::raster(&s, runs);

@@ -326,6 +326,32 @@ fn impossible_options_are_refused_before_any_work() {
         (&["peers", "--timeout", "18446744073709551615"], "--timeout"),
         (&["peers", "--mitsuba-spp", "0"], "--mitsuba-spp"),
         (&["knobs", "--spp", "1,0"], "--spp"),
+        (&["knobs", "--scales", "0.5,nan"], "--scales"),
+        (&["knobs", "--supersample", "4096"], "--supersample"),
+        (
+            &[
+                "knobs",
+                "--scene",
+                "scenes/icosphere.toml@64x48",
+                "--scales",
+                "1e9",
+            ],
+            "per side",
+        ),
+        (
+            &[
+                "knobs",
+                "--scene",
+                "scenes/icosphere.toml@64x48",
+                "--scales",
+                "1e-9",
+            ],
+            "at least 1x1",
+        ),
+        (
+            &["scenes/icosphere.toml", "--size", "16384x16384"],
+            "Mpixel",
+        ),
         (&["scale", "--shards", "0"], "--shards"),
         (&["variance", "--threads", "100000"], "--threads"),
         (&["--runs", "0"], "--runs"),

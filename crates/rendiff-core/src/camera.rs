@@ -120,11 +120,9 @@ impl Camera {
         near: f64,
         far: f64,
     ) -> Result<Camera, String> {
-        if width == 0 || height == 0 {
-            return Err(format!(
-                "image size must be at least 1x1, got {width}x{height}"
-            ));
-        }
+        // The scenes' limits hold for every camera (a resized one too: an
+        // image of 10^9 columns overflowed the raster's tile arithmetic).
+        crate::scene::check_image_size(width, height)?;
         if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
             return Err(format!("vfov must be in (0, 180), got {vfov_deg}"));
         }
@@ -304,5 +302,11 @@ mod tests {
         assert!(Camera::new(e, DVec3::ZERO, DVec3::Z, 60.0, 4, 4, 1e-3, 1.0).is_err());
         assert!(Camera::new(e, DVec3::ZERO, DVec3::Y, 180.0, 4, 4, 1e-3, 1.0).is_err());
         assert!(Camera::new(e, DVec3::ZERO, DVec3::Y, 60.0, 0, 4, 1e-3, 1.0).is_err());
+        // Images no render could hold, as for scene files (a resized
+        // camera of 2^32 - 1 columns overflowed the raster's tile arithmetic).
+        let size = |w, h| Camera::new(e, DVec3::ZERO, DVec3::Y, 60.0, w, h, 1e-3, 1.0);
+        assert!(size(u32::MAX, 4).unwrap_err().contains("per side"));
+        assert!(size(16_384, 16_384).unwrap_err().contains("Mpixel"));
+        assert!(size(16_384, 4_096).is_ok());
     }
 }
