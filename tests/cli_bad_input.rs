@@ -693,3 +693,47 @@ fn check_timeouts_are_bounded_before_anything_starts() {
         assert!(!out.exists(), "--timeout {value}: no output may be written");
     }
 }
+
+/// A name in `check --only` that is no backend is refused before anything
+/// runs, with the known names listed (it used to leave everything but the
+/// reference out silently, and pass); an escape sequence in it is shown
+/// escaped. Known names, core and external, still run.
+#[test]
+fn unknown_only_backends_are_refused_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    for (value, shown) in [("bogus", "bogus"), ("trace,pov\u{1b}ray", "pov\\u{1b}ray")] {
+        let res = output_within(
+            rendiff()
+                .args(["check", "scenes/three_triangles.toml", "-o"])
+                .arg(&out)
+                .args(["--only", value]),
+            120,
+        );
+        assert_eq!(res.status.code(), Some(2), "--only {value:?}");
+        let err = String::from_utf8_lossy(&res.stderr);
+        assert!(
+            err.contains(&format!("--only {shown}: no such backend"))
+                && err.contains("raster, trace, embree, embree_robust")
+                && !err.contains('\u{1b}'),
+            "--only {value:?}: {err}"
+        );
+        assert!(
+            !out.exists(),
+            "--only {value:?}: no run folder may be written"
+        );
+    }
+    let res = output_within(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "-o"])
+            .arg(&out)
+            .args(["--only", "trace,embree_robust"]),
+        120,
+    );
+    assert_eq!(
+        res.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+}

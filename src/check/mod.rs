@@ -305,6 +305,66 @@ fn stem(path: &Path) -> String {
         .unwrap_or_else(|| "scene".into())
 }
 
+/// The core's loops, rendered in process (the first is [`REFERENCE`]).
+const CORE_LOOPS: [&str; 2] = [REFERENCE, "trace"];
+
+/// Embree's scene modes, rendered in process.
+const EMBREE_MODES: [EmbreeMode; 2] = [EmbreeMode::Default, EmbreeMode::Robust];
+
+/// Every name in `--only` is a backend this run could render: the core's
+/// loops, Embree's modes, or one the harness lists (`listed`, asked only
+/// when a name is none of the first two). A typo used to leave its backend
+/// out silently: `--only bogus` ran the reference alone and passed.
+fn check_only(only: &[String], listed: impl FnOnce() -> Result<Vec<String>, String>) -> Result<()> {
+    let in_process: Vec<&str> = CORE_LOOPS
+        .into_iter()
+        .chain(EMBREE_MODES.map(EmbreeMode::name))
+        .collect();
+    let others: Vec<&String> = only
+        .iter()
+        .filter(|n| !in_process.contains(&n.as_str()))
+        .collect();
+    if others.is_empty() {
+        return Ok(());
+    }
+    let listed = listed().map_err(|e| {
+        anyhow::anyhow!(
+            "--only {}: not a core or Embree backend, and the harness cannot list its own: {e}",
+            crate::scene::printable(others[0], 100)
+        )
+    })?;
+    if let Some(bad) = others.iter().find(|n| !listed.contains(n)) {
+        let known: Vec<&str> = in_process
+            .iter()
+            .copied()
+            .chain(listed.iter().map(String::as_str))
+            .collect();
+        bail!(
+            "--only {}: no such backend (known: {})",
+            crate::scene::printable(bad, 100),
+            known.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// [`check_only`] for callers that run many checks with one `--only`
+/// (`bench stability`): refuses a name no backend has before the first.
+pub fn check_only_option(opts: &CheckOptions) -> Result<()> {
+    match &opts.only {
+        Some(only) => check_only(only, || harness_names(opts)),
+        None => Ok(()),
+    }
+}
+
+/// The names the harness lists, asked in a scratch folder of its own.
+fn harness_names(opts: &CheckOptions) -> Result<Vec<String>, String> {
+    let probe = std::env::temp_dir().join(format!("rendiff-renderers-{}", std::process::id()));
+    let l = harness_backends(opts, &probe);
+    let _ = std::fs::remove_dir_all(&probe);
+    l.map(|b| b.into_iter().map(|b| b.name).collect())
+}
+
 fn wanted(opts: &CheckOptions, name: &str) -> bool {
     name == REFERENCE
         || opts
@@ -432,15 +492,18 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
         bail!("no scenes to check");
     }
     let jobs = scene_jobs(opts)?;
+    // The harness's backends, asked at most once before anything runs.
+    let mut listed: Option<Result<Vec<String>, String>> = None;
+    let mut list = || listed.get_or_insert_with(|| harness_names(opts)).clone();
     if let Some(file) = &opts.renderers {
         // A user's renderers file is checked before anything runs: a typo in
         // it is one line naming it, not an error on every scene.
-        let probe = std::env::temp_dir().join(format!("rendiff-renderers-{}", std::process::id()));
-        let listed = harness_backends(opts, &probe);
-        let _ = std::fs::remove_dir_all(&probe);
-        if let Err(e) = listed {
+        if let Err(e) = list() {
             bail!("{}: {e}", file.display());
         }
+    }
+    if let Some(only) = &opts.only {
+        check_only(only, list)?;
     }
     // Everything is written to a staging folder that replaces the run folder
     // once results.json exists (run_folder.rs): never a half-old run.
@@ -516,7 +579,7 @@ fn render_and_compare(
         runs.requires = scene.requires.iter().cloned().collect();
         let core_missing = missing(&runs.requires, &core_features());
         let scene_arg = scene_path.display().to_string();
-        for name in ["raster", "trace"] {
+        for name in CORE_LOOPS {
             if !wanted(opts, name) {
                 continue;
             }
@@ -569,7 +632,7 @@ fn render_and_compare(
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
             runs.renders.push(rec);
         }
-        for mode in [EmbreeMode::Default, EmbreeMode::Robust] {
+        for mode in EMBREE_MODES {
             let name = mode.name();
             if !wanted(opts, name) {
                 continue;

@@ -353,6 +353,7 @@ fn impossible_options_are_refused_before_any_work() {
             "Mpixel",
         ),
         (&["scale", "--shards", "0"], "--shards"),
+        (&["stability", "--only", "trace,bogus"], "--only bogus"),
         (&["variance", "--threads", "100000"], "--threads"),
         (&["--runs", "0"], "--runs"),
     ];

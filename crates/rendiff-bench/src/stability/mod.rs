@@ -167,6 +167,8 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         renderers: None,
         memory_budget: check::pool::default_memory_budget(),
     };
+    // A name in --only that no backend has fails here, not in every check below.
+    check::check_only_option(&check_opts)?;
     eprintln!(
         "stability: {} scenes through rendiff check ({})",
         check_opts.scenes.len(),
