@@ -544,7 +544,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let mut scenes = rendiff::check::collect_scenes(&scenes)?;
             if let Some(shard) = shard {
                 use rendiff::check::shard;
-                let costs = shard::recorded_costs(shard_costs.as_deref().unwrap_or(&output));
+                let costs = match &shard_costs {
+                    Some(run) => shard::recorded_costs(run, true)?,
+                    None => shard::recorded_costs(&output, false)?,
+                };
                 let all = scenes.len();
                 scenes = shard::select(&scenes, shard, &costs);
                 eprintln!(

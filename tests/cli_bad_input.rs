@@ -737,3 +737,56 @@ fn unknown_only_backends_are_refused_before_anything_starts() {
         String::from_utf8_lossy(&res.stderr)
     );
 }
+
+/// Run records a user names (a baseline, a run's manifest.json and
+/// results.json, a `--shard-costs` run) are read as scene files are: a
+/// device or FIFO is refused with one line (`gate --baseline /dev/zero`
+/// filled memory until the kernel killed it), a wrong `--shard-costs` run is
+/// an error (it dealt the shards without costs, silently), and a shard count
+/// beyond the limit is refused (`--shard 1/99999999999` aborted).
+#[test]
+fn run_records_and_shards_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    std::fs::create_dir(&run).unwrap();
+    std::fs::write(run.join("results.json"), "{}").unwrap();
+    mkfifo(&dir.path().join("pipe.json"));
+    for (baseline, needle) in [
+        ("/dev/zero", "character device"),
+        (dir.path().join("pipe.json").to_str().unwrap(), "FIFO"),
+    ] {
+        let res = output_within(
+            rendiff().args(["gate", "--baseline", baseline]).arg(&run),
+            60,
+        );
+        check_failure(&res, &[baseline, needle]);
+    }
+    mkfifo(&run.join("manifest.json"));
+    let res = output_within(rendiff().args(["report"]).arg(&run), 60);
+    check_failure(&res, &["manifest.json", "FIFO"]);
+    let out = dir.path().join("out");
+    for (args, needle) in [
+        (&["--shard", "1/99999999999"][..], "at most 1024 shards"),
+        (
+            &["--shard", "1/2", "--shard-costs", "/nonexistent"][..],
+            "--shard-costs",
+        ),
+    ] {
+        let res = output_within(
+            rendiff()
+                .args(["check", "scenes/three_triangles.toml", "-o"])
+                .arg(&out)
+                .args(args),
+            60,
+        );
+        // (A value clap refuses comes with its pointer to --help.)
+        assert_eq!(res.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&res.stderr);
+        let first = err.lines().next().unwrap_or_default();
+        assert!(
+            first.starts_with("error: ") && first.contains(needle),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists(), "{args:?}: no run folder may be written");
+    }
+}

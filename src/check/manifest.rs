@@ -12,6 +12,22 @@ pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 /// Format tag of manifest.json.
 pub const MANIFEST_FORMAT: &str = "rendiff-manifest/1";
 
+/// Largest run record (manifest.json, results.json, a baseline) rendiff
+/// reads: 256 MiB. The main job's 520 entries make a 0.7 MiB results.json
+/// (about 1.4 KiB an entry), so this is some 180,000 entries, 350 times
+/// today's; a bigger file, a device (`/dev/zero` as a baseline filled
+/// memory until the kernel killed the process) or a FIFO is refused with
+/// one line instead.
+pub const MAX_RECORD_BYTES: u64 = 256 << 20;
+
+/// A run record's text, read as scene files are
+/// ([`crate::scene::read_regular_file`]: regular files only, at most
+/// [`MAX_RECORD_BYTES`], never blocking on a FIFO); the problem in words
+/// otherwise (the caller names the file).
+pub fn read_record(path: &std::path::Path) -> Result<String, String> {
+    crate::scene::read_regular_file(path, MAX_RECORD_BYTES).and_then(crate::scene::utf8_text)
+}
+
 /// manifest.json.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Manifest {

@@ -23,6 +23,12 @@ use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// Most shards a run may be split into: 1024. Each shard renders the
+/// calibration probes again and a machine of its own is the point, so no CI
+/// fans out wider; the deal keeps a load per shard (`--shard 1/99999999999`
+/// aborted on that allocation).
+pub const MAX_SHARDS: usize = 1024;
+
 /// `K/N`: this machine runs shard K (1-based) of N.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
@@ -40,6 +46,9 @@ impl std::str::FromStr for Shard {
             .ok_or_else(|| format!("{s:?}: give the shard as K/N, e.g. 2/4"))?;
         let parse = |t: &str| t.trim().parse::<usize>().ok();
         match (parse(k), parse(n)) {
+            (Some(_), Some(total)) if total > MAX_SHARDS => Err(format!(
+                "{s:?}: at most {MAX_SHARDS} shards (each renders the probes again)"
+            )),
             (Some(index), Some(total)) if total >= 1 && (1..=total).contains(&index) => {
                 Ok(Shard { index, total })
             }
@@ -51,22 +60,27 @@ impl std::str::FromStr for Shard {
 }
 
 /// Recorded cost of each scene (seconds of rendering, summed over its
-/// renders) in a previous run's manifest.json; empty when there is none.
-pub fn recorded_costs(previous_run: &Path) -> BTreeMap<String, f64> {
-    let text = match std::fs::read_to_string(previous_run.join("manifest.json")) {
-        Ok(t) => t,
-        Err(_) => return BTreeMap::new(),
+/// renders) in a previous run's manifest.json. A run named by `--shard-costs`
+/// (`given`) must have a readable manifest (a wrong path used to deal the
+/// shards without costs, silently); the run folder's own previous run is
+/// optional (empty when there is none, or when it cannot be read).
+pub fn recorded_costs(previous_run: &Path, given: bool) -> Result<BTreeMap<String, f64>> {
+    let path = previous_run.join("manifest.json");
+    let manifest = super::manifest::read_record(&path).and_then(|text| {
+        serde_json::from_str::<Manifest>(&text).map_err(|e| format!("not a rendiff manifest: {e}"))
+    });
+    let m = match manifest {
+        Ok(m) => m,
+        Err(e) if given => bail!("--shard-costs {}: {e}", path.display()),
+        Err(_) => return Ok(BTreeMap::new()),
     };
-    let Ok(m) = serde_json::from_str::<Manifest>(&text) else {
-        return BTreeMap::new();
-    };
-    m.scenes
+    Ok(m.scenes
         .iter()
         .map(|s| {
             let t: f64 = s.renders.iter().map(|r| r.time_s.max(0.0)).sum();
             (s.scene.clone(), t)
         })
-        .collect()
+        .collect())
 }
 
 fn stem(p: &Path) -> String {
@@ -146,8 +160,11 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
     for run in shards {
         ensure_complete(run)?;
         let path = run.join("manifest.json");
-        let text = std::fs::read_to_string(&path).with_context(|| {
-            format!("{}: cannot read (not a finished check run)", path.display())
+        let text = super::manifest::read_record(&path).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: cannot read (not a finished check run): {e}",
+                path.display()
+            )
         })?;
         let m: Manifest = serde_json::from_str(&text)
             .with_context(|| format!("{}: not a rendiff manifest", path.display()))?;

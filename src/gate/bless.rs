@@ -192,7 +192,7 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
             }
         }
     }
-    let expectations = std::fs::read_to_string(run.join("results.json"))
+    let expectations = crate::check::manifest::read_record(&run.join("results.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<Value>(&t).ok())
         .and_then(|v| v.get("expectations")?.as_str().map(String::from));

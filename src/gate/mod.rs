@@ -297,8 +297,8 @@ pub struct BaselineEntry {
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read {what}", path.display()))?;
+    let text = crate::check::manifest::read_record(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read {what}: {e}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{}: not a valid {what}", path.display()))
 }
 

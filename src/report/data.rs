@@ -260,16 +260,16 @@ impl RunData {
     pub fn load(dir: &Path) -> Result<RunData> {
         crate::check::run_folder::ensure_complete(dir)?;
         let mpath = dir.join("manifest.json");
-        let mtext = std::fs::read_to_string(&mpath).with_context(|| {
-            format!(
-                "{}: cannot read (run `rendiff check` first)",
+        let mtext = crate::check::manifest::read_record(&mpath).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: cannot read (run `rendiff check` first): {e}",
                 mpath.display()
             )
         })?;
         let manifest: Manifest = serde_json::from_str(&mtext)
             .with_context(|| format!("{}: not a rendiff manifest", mpath.display()))?;
         let rpath = dir.join("results.json");
-        let (results, results_problem) = match std::fs::read_to_string(&rpath) {
+        let (results, results_problem) = match crate::check::manifest::read_record(&rpath) {
             Err(e) => (
                 None,
                 Some(format!(
@@ -282,7 +282,7 @@ impl RunData {
                 Err(e) => (None, Some(format!("{}: unreadable: {e}", rpath.display()))),
             },
         };
-        let raw = std::fs::read_to_string(&rpath)
+        let raw = crate::check::manifest::read_record(&rpath)
             .ok()
             .and_then(|t| serde_json::from_str::<Value>(&t).ok());
         let expectations = raw
@@ -355,7 +355,8 @@ impl RunData {
 
 fn load_resolved(dir: &Path) -> Option<ResolvedInfo> {
     let v: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("scene.json")).ok()?).ok()?;
+        serde_json::from_str(&crate::check::manifest::read_record(&dir.join("scene.json")).ok()?)
+            .ok()?;
     let u = |x: &Value, k: &str| x.get(k).and_then(Value::as_u64).unwrap_or(0);
     let cam = v.get("camera").cloned().unwrap_or(Value::Null);
     Some(ResolvedInfo {
