@@ -620,8 +620,14 @@ fn bench(args: &[std::ffi::OsString]) -> Result<ExitCode> {
 fn renderers_file(file: Option<PathBuf>) -> Result<Option<PathBuf>> {
     let Some(file) = file else { return Ok(None) };
     let abs = std::path::absolute(&file)?;
-    if !abs.is_file() {
+    if !abs.exists() {
         anyhow::bail!("{}: renderers file not found", file.display());
+    }
+    if !abs.is_file() {
+        anyhow::bail!(
+            "{}: the renderers file is not a regular file",
+            file.display()
+        );
     }
     Ok(Some(abs))
 }

@@ -167,6 +167,20 @@ fn a_missing_or_malformed_renderers_file_is_one_clear_error() {
         !dir.path().join("run").exists(),
         "no run folder for a refused command"
     );
+    // A device is no renderers file (it is refused, never read).
+    let out = rendiff(dir.path())
+        .arg("check")
+        .arg(&scene)
+        .args(["--renderers", "/dev/zero", "--quiet", "-o", "run"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("/dev/zero: the renderers file is not a regular file"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("run").exists());
 
     std::fs::write(
         dir.path().join("bad.toml"),

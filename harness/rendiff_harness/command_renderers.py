@@ -41,6 +41,7 @@ import os
 import re
 import shutil
 import signal
+import stat
 import tempfile
 import tomllib
 from collections.abc import Collection, Mapping, Sequence
@@ -57,6 +58,12 @@ if TYPE_CHECKING:
     from .resolved import ResolvedScene
 
 ENV_VAR = "RENDIFF_RENDERERS"
+
+# Largest renderers file read: 1 MiB. A declaration is a few hundred bytes
+# (the worked example's two renderers are 2 KiB with comments), so this is
+# thousands of renderers; a bigger file is a mistake, and reading it whole
+# would only fill memory.
+MAX_FILE_BYTES = 1 << 20
 """The environment variable naming the renderers file (an absolute path)."""
 EXIT_SKIP = vocab.EXIT_SKIPPED
 """A renderer's exit status for "cannot render this here" (the reason on its last stderr line)."""
@@ -321,9 +328,18 @@ def load(path: str | Path) -> tuple[Renderer, ...]:
     """Read and validate a renderers file (relative paths are taken from the current folder)."""
     path = Path(path).absolute()
     try:
-        raw = path.read_bytes()
+        # Non-blocking, and the kind and size checked on the open handle: a
+        # FIFO is refused instead of waited on, a device instead of read forever.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with os.fdopen(fd, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if not stat.S_ISREG(st.st_mode):
+                raise RenderersError(f"{path}: the renderers file is not a regular file")
+            raw = fh.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise RenderersError(f"{path}: cannot read the renderers file: {exc.strerror or exc}") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise RenderersError(f"{path}: the renderers file is larger than {MAX_FILE_BYTES} bytes (1 MiB)")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

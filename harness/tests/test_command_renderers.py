@@ -210,6 +210,19 @@ def test_info_fails_clearly_on_a_malformed_file(tmp_path: Path, monkeypatch: pyt
     assert rc == 2 and "absent.toml: cannot read the renderers file" in err
 
 
+def test_a_renderers_file_is_a_regular_file_within_the_limit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A FIFO, a device or an oversized file is refused in one line (never waited on or read whole)."""
+    fifo = tmp_path / "pipe.toml"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.toml"
+    big.write_bytes(b"#" * (command_renderers.MAX_FILE_BYTES + 1))
+    for path, needle in ((fifo, "not a regular file"), (Path("/dev/zero"), "not a regular file"), (big, "larger than")):
+        monkeypatch.setenv(ENV_VAR, str(path))
+        rc, out, err = cli("info", "--json")
+        assert rc == 2 and out == "", err
+        assert err.strip().count("\n") == 0 and str(path) in err and needle in err, err
+
+
 def test_reserved_names_cover_every_built_in_backend() -> None:
     builtin = {b.name for b in registry.all_backends()} | set(registry.BACKEND_MODULES)
     core = set(tolerance.MODELS) | set(calibration.MODELS) | {compare.CACHED_REFERENCE_BACKEND}
