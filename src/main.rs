@@ -458,7 +458,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             renderers,
         } => {
             let root = rendiff::check::find_root()?;
-            let expectations = own_file(&root, expectations, "tests/expectations.toml")?;
+            let expectations = match expectations {
+                Some(f) => user_file(&f, "expectations")?,
+                None => own_file(&root, None, "tests/expectations.toml")?,
+            };
             let references = own_file(&root, references, "tests/references")?;
             let output = std::path::absolute(&output)?;
             let runs = runs
@@ -529,7 +532,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             // rendiff's own files come from its checkout, wherever this runs;
             // the harness runs there, so every path it gets is absolute.
             let root = rendiff::check::find_root()?;
-            let expectations = own_file(&root, expectations, "tests/expectations.toml")?;
+            let expectations = match expectations {
+                Some(f) => user_file(&f, "expectations")?,
+                None => own_file(&root, None, "tests/expectations.toml")?,
+            };
             let references = own_file(&root, references, "tests/references")?;
             let calibration = own_file(&root, calibration, "scenes/calibration")?;
             let output = std::path::absolute(&output)?;
@@ -618,18 +624,22 @@ fn bench(args: &[std::ffi::OsString]) -> Result<ExitCode> {
 /// a typo is one clear line and the harness (which runs in rendiff's
 /// checkout) finds it.
 fn renderers_file(file: Option<PathBuf>) -> Result<Option<PathBuf>> {
-    let Some(file) = file else { return Ok(None) };
-    let abs = std::path::absolute(&file)?;
+    file.map(|f| user_file(&f, "renderers")).transpose()
+}
+
+/// A file the user names for the harness to read (`--renderers`,
+/// `--expectations`), absolute, checked here to exist and to be a regular
+/// file (the harness reads it later, after the renders: a typo or a device
+/// is one line before anything runs).
+fn user_file(file: &Path, what: &str) -> Result<PathBuf> {
+    let abs = std::path::absolute(file)?;
     if !abs.exists() {
-        anyhow::bail!("{}: renderers file not found", file.display());
+        anyhow::bail!("{}: {what} file not found", file.display());
     }
     if !abs.is_file() {
-        anyhow::bail!(
-            "{}: the renderers file is not a regular file",
-            file.display()
-        );
+        anyhow::bail!("{}: the {what} file is not a regular file", file.display());
     }
-    Ok(Some(abs))
+    Ok(abs)
 }
 
 /// One of rendiff's own files: as the user gave it, else `rel` in its

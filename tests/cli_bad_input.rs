@@ -790,3 +790,35 @@ fn run_records_and_shards_are_bounded() {
         assert!(!out.exists(), "{args:?}: no run folder may be written");
     }
 }
+
+/// `check --expectations` names a regular file that exists, checked before
+/// anything runs (the harness read it only after every render: a typo cost
+/// the whole run, and `/dev/zero` was read until memory ran out).
+#[test]
+fn expectations_files_are_checked_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    mkfifo(&dir.path().join("pipe.toml"));
+    let fifo = dir.path().join("pipe.toml");
+    for (file, needle) in [
+        ("/dev/zero", "the expectations file is not a regular file"),
+        (
+            fifo.to_str().unwrap(),
+            "the expectations file is not a regular file",
+        ),
+        (
+            "/nonexistent/expectations.toml",
+            "expectations file not found",
+        ),
+    ] {
+        let res = output_within(
+            rendiff()
+                .args(["check", "scenes/three_triangles.toml", "-o"])
+                .arg(&out)
+                .args(["--expectations", file]),
+            60,
+        );
+        check_failure(&res, &[file, needle]);
+        assert!(!out.exists(), "{file}: no run folder may be written");
+    }
+}

@@ -41,7 +41,6 @@ import os
 import re
 import shutil
 import signal
-import stat
 import tempfile
 import tomllib
 from collections.abc import Collection, Mapping, Sequence
@@ -53,6 +52,7 @@ from typing import TYPE_CHECKING, Any
 from . import vocab
 from .children import run_in_group
 from .errors import BackendError, BackendSkipped, BackendUnavailable
+from .userfile import UserFileError, read_regular
 
 if TYPE_CHECKING:
     from .resolved import ResolvedScene
@@ -328,18 +328,11 @@ def load(path: str | Path) -> tuple[Renderer, ...]:
     """Read and validate a renderers file (relative paths are taken from the current folder)."""
     path = Path(path).absolute()
     try:
-        # Non-blocking, and the kind and size checked on the open handle: a
-        # FIFO is refused instead of waited on, a device instead of read forever.
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-        with os.fdopen(fd, "rb") as fh:
-            st = os.fstat(fh.fileno())
-            if not stat.S_ISREG(st.st_mode):
-                raise RenderersError(f"{path}: the renderers file is not a regular file")
-            raw = fh.read(MAX_FILE_BYTES + 1)
+        raw = read_regular(path, MAX_FILE_BYTES)
+    except UserFileError as exc:
+        raise RenderersError(f"{path}: the renderers file {exc}") from None
     except OSError as exc:
         raise RenderersError(f"{path}: cannot read the renderers file: {exc.strerror or exc}") from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise RenderersError(f"{path}: the renderers file is larger than {MAX_FILE_BYTES} bytes (1 MiB)")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -46,6 +46,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .userfile import UserFileError, read_regular
+
+# Largest expectations file read: 1 MiB. rendiff's own is 2.5 KiB for a
+# dozen entries (about 200 bytes each), so this is some 5,000 entries; a
+# bigger file is a mistake, and reading a device whole would fill memory.
+MAX_FILE_BYTES = 1 << 20
+
 BUFFERS = ("id", "Z", "N", "RGB")
 COUNT_KEYS = ("interior_mismatches", "crack_mismatches")
 ALLOWED_CLASS_KEYS = ("edge_mismatches", "tie_mismatches")
@@ -252,7 +259,9 @@ def load(path: str | Path | None) -> Expectations:
         return Expectations(None)
     path = Path(path)
     try:
-        text = path.read_bytes()
+        text = read_regular(path, MAX_FILE_BYTES)
+    except UserFileError as exc:
+        raise ExpectationsError(f"{path}: the expectations file {exc}") from None
     except FileNotFoundError:
         raise ExpectationsError(f"{path}: expectations file not found") from None
     except OSError as exc:

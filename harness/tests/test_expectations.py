@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -123,6 +124,17 @@ def test_malformed_files_name_file_entry_and_key(tmp_path: Path, text: str, need
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(ex.ExpectationsError, match="not found"):
         ex.load(tmp_path / "nope.toml")
+
+
+def test_special_and_oversized_files_are_refused(tmp_path: Path) -> None:
+    """A FIFO or device is refused (never waited on or read whole), as is a file past the limit."""
+    fifo = tmp_path / "pipe.toml"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.toml"
+    big.write_bytes(b"#" * (ex.MAX_FILE_BYTES + 1))
+    for path, needle in ((fifo, "not a regular file"), (Path("/dev/zero"), "not a regular file"), (big, "larger than")):
+        with pytest.raises(ex.ExpectationsError, match=needle):
+            ex.load(path)
 
 
 def _exp(**kw: object) -> ex.Expectation:
