@@ -71,16 +71,13 @@ pub struct Channels {
 
 /// Reads every channel of an EXR; ID channels must be stored as uint.
 pub fn read_channels(path: &Path) -> Result<Channels> {
-    if !path.exists() {
-        bail!("{}: file not found", path.display());
-    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(crate::exr_io::open_exr(path)?)
         .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
     let layer = &image.layer_data;
     let mut out = Channels {

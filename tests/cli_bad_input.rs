@@ -822,3 +822,20 @@ fn expectations_files_are_checked_before_anything_starts() {
         assert!(!out.exists(), "{file}: no run folder may be written");
     }
 }
+
+/// `rendiff diff` (and every EXR rendiff reads) opens regular files only: a
+/// FIFO used to block the reader, which opened it waiting for a writer.
+#[test]
+fn diff_refuses_fifos_and_devices() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe.exr");
+    mkfifo(&fifo);
+    for (path, needle) in [
+        (fifo.to_str().unwrap(), "FIFO"),
+        ("/dev/zero", "character device"),
+        ("/nonexistent/a.exr", "file not found"),
+    ] {
+        let res = output_within(rendiff().args(["diff", path, path]), 60);
+        check_failure(&res, &[path, needle]);
+    }
+}

@@ -134,18 +134,32 @@ pub struct Buffers {
     pub attrs: BTreeMap<String, String>,
 }
 
+/// Largest EXR file rendiff reads: 16 GiB. A frame at the largest image
+/// (64 Mpixel) with every buffer, radiance and variance is about 3.5 GiB
+/// uncompressed; this leaves room for any file rendiff or a renderer writes
+/// and refuses what could only be a mistake.
+pub const MAX_EXR_BYTES: u64 = 16 << 30;
+
+/// An EXR a user or a renderer wrote, opened for the `exr` reader: a regular
+/// file only, at most [`MAX_EXR_BYTES`] ([`crate::scene::open_regular_file`]:
+/// a FIFO is refused, never waited on), buffered.
+pub fn open_exr(path: &Path) -> Result<std::io::BufReader<std::fs::File>> {
+    match crate::scene::open_regular_file(path, MAX_EXR_BYTES) {
+        Ok((file, _)) => Ok(std::io::BufReader::new(file)),
+        Err(e) if !path.exists() => bail!("{}: file not found ({e})", path.display()),
+        Err(e) => bail!("{}: {e}", path.display()),
+    }
+}
+
 /// Reads the docs/DESIGN.md channels of an EXR; IDs must be stored as uint.
 pub fn read_buffers(path: &Path) -> Result<Buffers> {
-    if !path.exists() {
-        bail!("{}: file not found", path.display());
-    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(open_exr(path)?)
         .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
     let layer = &image.layer_data;
     let mut out = Buffers {
@@ -199,7 +213,7 @@ pub fn read_radiance(path: &Path) -> Result<Option<RgbImage>> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(open_exr(path)?)
         .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
     let layer = &image.layer_data;
     let n = layer.size.width() * layer.size.height();

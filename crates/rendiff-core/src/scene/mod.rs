@@ -527,14 +527,16 @@ fn bytes_in_words(n: u64) -> String {
     }
 }
 
-/// Reads a whole regular file of at most `limit` bytes. The kind and size are
-/// checked from metadata (symlinks followed) before the file is opened, so a
-/// FIFO, device, socket or folder is never opened (opening a FIFO blocks,
-/// `/dev/zero` never ends); the open itself is non-blocking and re-checked on
-/// the open handle, so a file swapped in between cannot slip through.
-/// Returns the problem in words (the caller names the file and field).
-pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
-    use std::io::Read;
+/// Opens a regular file of at most `limit` bytes for reading, and its
+/// metadata. The kind and size are checked from metadata (symlinks
+/// followed) before the file is opened, so a FIFO, device, socket or folder
+/// is never opened (opening a FIFO blocks, `/dev/zero` never ends); the open
+/// itself is non-blocking and re-checked on the open handle, so a file
+/// swapped in between cannot slip through. The problem in words otherwise.
+pub fn open_regular_file(
+    path: &Path,
+    limit: u64,
+) -> Result<(std::fs::File, std::fs::Metadata), String> {
     let check = |meta: &std::fs::Metadata| -> Result<(), String> {
         if let Some(kind) = special_kind(&meta.file_type()) {
             return Err(kind.to_string());
@@ -564,6 +566,15 @@ pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
         .metadata()
         .map_err(|e| format!("cannot be read: {e}"))?;
     check(&meta)?;
+    Ok((file, meta))
+}
+
+/// Reads a whole regular file of at most `limit` bytes, opened by
+/// [`open_regular_file`]. Returns the problem in words (the caller names the
+/// file and field).
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let (file, meta) = open_regular_file(path, limit)?;
     let mut buf = Vec::with_capacity(meta.len() as usize);
     file.take(limit + 1)
         .read_to_end(&mut buf)
