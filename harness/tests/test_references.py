@@ -168,8 +168,8 @@ def test_committed_reference_matches_its_scene_and_mitsuba(exr: Path, tmp_path: 
         pytest.skip(f"{toml} not found")
     out = tmp_path / "resolved"
     proc = subprocess.run([str(_rendiff()), "export", str(toml), "-o", str(out)], capture_output=True, text=True)
-    if proc.returncode != 0:
-        pytest.skip(f"rendiff export failed (binary out of date?): {proc.stderr[-300:]}")
+    # A failure, not a skip (a skip would hide a rendiff that refuses the scene).
+    assert proc.returncode == 0, f"rendiff export failed (rebuild it?): {proc.stderr[-300:]}"
     scene = resolved.load(out)
     cached = references.load(exr, scene)  # raises "reference is stale: regenerate with ..." if the scene changed
     n_ref = radiance.samples_per_pixel(cached.attrs)
