@@ -839,3 +839,31 @@ fn diff_refuses_fifos_and_devices() {
         check_failure(&res, &[path, needle]);
     }
 }
+
+/// An output path that is a FIFO (or a device, or a socket) is refused, and
+/// left as it was: the write's rename would have replaced the node itself
+/// (as root, `render -o /dev/full` replaced the device with an EXR).
+#[test]
+fn outputs_never_replace_special_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("out.exr");
+    mkfifo(&fifo);
+    let res = output_within(
+        rendiff()
+            .args([
+                "render",
+                "scenes/three_triangles.toml",
+                "--renderer",
+                "raster",
+                "-o",
+            ])
+            .arg(&fifo),
+        60,
+    );
+    check_failure(&res, &["out.exr", "FIFO", "regular files only"]);
+    use std::os::unix::fs::FileTypeExt;
+    let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced");
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(names.len(), 1, "nothing else written: {names:?}");
+}

@@ -14,6 +14,14 @@ pub const ATTR_PREFIX: &str = "rendiff:";
 /// Writes `bytes`-producing work to `path` through a temporary file in the same
 /// folder and a rename, so a reader never sees a half-written result.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    // Only a regular file (or nothing) is ever replaced: the rename would
+    // put the result in place of a device, FIFO or socket node itself.
+    if let Some(kind) = crate::scene::special_entry(path) {
+        bail!(
+            "{}: {kind}; rendiff writes its results to regular files only: choose another output",
+            path.display()
+        );
+    }
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())

@@ -516,6 +516,19 @@ fn special_kind(ft: &std::fs::FileType) -> Option<&'static str> {
     Some("is not a regular file")
 }
 
+/// What the entry at `path` is, when it exists and is neither a regular file
+/// nor a symlink (a rename replaces a symlink itself, never its target):
+/// outputs are never written over such an entry
+/// ([`crate::exr_io::write_atomically`]; as root, `render -o /dev/full`
+/// replaced the device node with an EXR).
+pub fn special_entry(path: &Path) -> Option<&'static str> {
+    let meta = std::fs::symlink_metadata(path).ok()?;
+    if meta.file_type().is_symlink() {
+        return None;
+    }
+    special_kind(&meta.file_type())
+}
+
 /// Human size of a byte limit (the limits are powers of two).
 fn bytes_in_words(n: u64) -> String {
     if n >= 1 << 30 && n.is_multiple_of(1 << 30) {
