@@ -4,23 +4,27 @@
 
 use rendiff_core::names::Named;
 
+/// The shape of every count option: `s` parsed as a whole number (`what`
+/// names it when it is none), then 1 to `max`; the error reads `{n}{unit}:
+/// give 1 to {max}{why}`.
+fn count(s: &str, what: &str, max: u64, unit: &str, why: &str) -> Result<u64, String> {
+    let n: u64 = s.parse().map_err(|_| format!("{s:?} is not {what}"))?;
+    if n == 0 || n > max {
+        return Err(format!("{n}{unit}: give 1 to {max}{why}"));
+    }
+    Ok(n)
+}
+
 /// More worker threads than this per core only adds switching (and `--threads
 /// 100000` once started 2661 threads and stalled the machine).
 pub const MAX_THREADS_PER_CORE: usize = 4;
 
 /// `--threads N`: 1 to 4 per core of this machine, checked before any thread starts.
 pub fn parse_threads(s: &str) -> std::result::Result<usize, String> {
-    let n: usize = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a thread count"))?;
     let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-    let max = MAX_THREADS_PER_CORE * cores;
-    if n == 0 || n > max {
-        return Err(format!(
-            "{n} threads: give 1 to {max} ({MAX_THREADS_PER_CORE} per core on {cores} cores)"
-        ));
-    }
-    Ok(n)
+    let max = (MAX_THREADS_PER_CORE * cores) as u64;
+    let why = format!(" ({MAX_THREADS_PER_CORE} per core on {cores} cores)");
+    count(s, "a thread count", max, " threads", &why).map(|n| n as usize)
 }
 
 /// Most timed runs a benchmark takes per configuration: each is a whole
@@ -33,13 +37,7 @@ pub const MAX_RUNS: usize = 1000;
 /// `--runs N`: 1 to [`MAX_RUNS`] (0 used to be raised to 1 silently, so the
 /// report said one thing and the command another).
 pub fn parse_runs(s: &str) -> std::result::Result<usize, String> {
-    let n: usize = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of runs"))?;
-    if n == 0 || n > MAX_RUNS {
-        return Err(format!("{n} runs: give 1 to {MAX_RUNS}"));
-    }
-    Ok(n)
+    count(s, "a number of runs", MAX_RUNS as u64, " runs", "").map(|n| n as usize)
 }
 
 /// Longest `--timeout` for one external render: a week. Longer is a typo
@@ -50,13 +48,7 @@ pub const MAX_TIMEOUT_S: u64 = 7 * 24 * 3600;
 /// `--timeout SECONDS`: 1 to [`MAX_TIMEOUT_S`] (0 failed every external
 /// render as timed out).
 pub fn parse_timeout(s: &str) -> std::result::Result<u64, String> {
-    let n: u64 = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
-    if n == 0 || n > MAX_TIMEOUT_S {
-        return Err(format!("{n} s: give 1 to {MAX_TIMEOUT_S} (a week)"));
-    }
-    Ok(n)
+    count(s, "a number of seconds", MAX_TIMEOUT_S, " s", " (a week)")
 }
 
 /// `--spp N`: the scene file's own limit ([`crate::scene::check_spp`]), before any rendering.

@@ -288,12 +288,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         } => {
             // Refused before the render too, not only at the write.
             if let Some(out) = &output {
-                if let Some(kind) = rendiff::scene::special_entry(out) {
-                    anyhow::bail!(
-                        "{}: {kind}; rendiff writes its results to regular files only: choose another output",
-                        out.display()
-                    );
-                }
+                rendiff::exr_io::check_output(out)?;
             }
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))

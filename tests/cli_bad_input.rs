@@ -86,6 +86,36 @@ fn check_failure(res: &std::process::Output, must_mention: &[&str]) -> String {
     stderr
 }
 
+/// `rendiff check scenes/three_triangles.toml -o RUN` with `extra` arguments
+/// must be refused before anything runs: exit 2, no panic, an error line
+/// first that names each of `must_mention` (a value clap refuses is followed
+/// by its pointer to --help, so not always one line), no raw control
+/// character, and no run folder.
+fn check_refused(extra: &[&str], must_mention: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let res = output_within(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "-o"])
+            .arg(&out)
+            .args(extra),
+        120,
+    );
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert_eq!(res.status.code(), Some(2), "{extra:?}: {err}");
+    assert!(!err.contains("panicked"), "{extra:?}: {err}");
+    let first = err.lines().next().unwrap_or_default();
+    assert!(first.starts_with("error: "), "{extra:?}: {err}");
+    for m in must_mention {
+        assert!(first.contains(m), "{extra:?}: expected {m:?} in: {err}");
+    }
+    assert!(
+        !err.trim_end().chars().any(|c| c.is_control() && c != '\n'),
+        "{extra:?}: raw control character: {err:?}"
+    );
+    assert!(!out.exists(), "{extra:?}: no run folder may be written");
+}
+
 /// Writes `scenes/bad.toml` in a fresh folder after `setup` (given the temporary
 /// root) prepared other files, then renders it with the raster and exports it,
 /// each within 60 s, and checks the failure contract: exit 2, one line naming
@@ -672,25 +702,8 @@ fn thread_and_sample_counts_are_bounded_before_anything_starts() {
 /// as timed out, and 2^64 - 1 panicked in the deadline's clock arithmetic.
 #[test]
 fn check_timeouts_are_bounded_before_anything_starts() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
     for value in ["0", "604801", "18446744073709551615"] {
-        let res = output_within(
-            rendiff()
-                .args(["check", "scenes/three_triangles.toml", "-o"])
-                .arg(&out)
-                .args(["--timeout", value]),
-            60,
-        );
-        assert_eq!(res.status.code(), Some(2), "--timeout {value}");
-        let err = String::from_utf8_lossy(&res.stderr);
-        assert!(
-            err.contains("--timeout")
-                && err.contains("give 1 to 604800")
-                && !err.contains("panicked"),
-            "--timeout {value}: {err}"
-        );
-        assert!(!out.exists(), "--timeout {value}: no output may be written");
+        check_refused(&["--timeout", value], &["--timeout", "give 1 to 604800"]);
     }
 }
 
@@ -700,29 +713,15 @@ fn check_timeouts_are_bounded_before_anything_starts() {
 /// escaped. Known names, core and external, still run.
 #[test]
 fn unknown_only_backends_are_refused_before_anything_starts() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
     for (value, shown) in [("bogus", "bogus"), ("trace,pov\u{1b}ray", "pov\\u{1b}ray")] {
-        let res = output_within(
-            rendiff()
-                .args(["check", "scenes/three_triangles.toml", "-o"])
-                .arg(&out)
-                .args(["--only", value]),
-            120,
-        );
-        assert_eq!(res.status.code(), Some(2), "--only {value:?}");
-        let err = String::from_utf8_lossy(&res.stderr);
-        assert!(
-            err.contains(&format!("--only {shown}: no such backend"))
-                && err.contains("raster, trace, embree, embree_robust")
-                && !err.contains('\u{1b}'),
-            "--only {value:?}: {err}"
-        );
-        assert!(
-            !out.exists(),
-            "--only {value:?}: no run folder may be written"
+        let refusal = format!("--only {shown}: no such backend");
+        check_refused(
+            &["--only", value],
+            &[&refusal, "raster, trace, embree, embree_robust"],
         );
     }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
     let res = output_within(
         rendiff()
             .args(["check", "scenes/three_triangles.toml", "-o"])
@@ -764,31 +763,11 @@ fn run_records_and_shards_are_bounded() {
     mkfifo(&run.join("manifest.json"));
     let res = output_within(rendiff().args(["report"]).arg(&run), 60);
     check_failure(&res, &["manifest.json", "FIFO"]);
-    let out = dir.path().join("out");
-    for (args, needle) in [
-        (&["--shard", "1/99999999999"][..], "at most 1024 shards"),
-        (
-            &["--shard", "1/2", "--shard-costs", "/nonexistent"][..],
-            "--shard-costs",
-        ),
-    ] {
-        let res = output_within(
-            rendiff()
-                .args(["check", "scenes/three_triangles.toml", "-o"])
-                .arg(&out)
-                .args(args),
-            60,
-        );
-        // (A value clap refuses comes with its pointer to --help.)
-        assert_eq!(res.status.code(), Some(2), "{args:?}");
-        let err = String::from_utf8_lossy(&res.stderr);
-        let first = err.lines().next().unwrap_or_default();
-        assert!(
-            first.starts_with("error: ") && first.contains(needle),
-            "{args:?}: {err}"
-        );
-        assert!(!out.exists(), "{args:?}: no run folder may be written");
-    }
+    check_refused(&["--shard", "1/99999999999"], &["at most 1024 shards"]);
+    check_refused(
+        &["--shard", "1/2", "--shard-costs", "/nonexistent"],
+        &["--shard-costs /nonexistent"],
+    );
 }
 
 /// `check --expectations` names a regular file that exists, checked before
@@ -797,29 +776,18 @@ fn run_records_and_shards_are_bounded() {
 #[test]
 fn expectations_files_are_checked_before_anything_starts() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
-    mkfifo(&dir.path().join("pipe.toml"));
     let fifo = dir.path().join("pipe.toml");
+    mkfifo(&fifo);
+    let not_regular = "the expectations file is not a regular file";
     for (file, needle) in [
-        ("/dev/zero", "the expectations file is not a regular file"),
-        (
-            fifo.to_str().unwrap(),
-            "the expectations file is not a regular file",
-        ),
+        ("/dev/zero", not_regular),
+        (fifo.to_str().unwrap(), not_regular),
         (
             "/nonexistent/expectations.toml",
             "expectations file not found",
         ),
     ] {
-        let res = output_within(
-            rendiff()
-                .args(["check", "scenes/three_triangles.toml", "-o"])
-                .arg(&out)
-                .args(["--expectations", file]),
-            60,
-        );
-        check_failure(&res, &[file, needle]);
-        assert!(!out.exists(), "{file}: no run folder may be written");
+        check_refused(&["--expectations", file], &[file, needle]);
     }
 }
 

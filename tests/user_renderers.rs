@@ -151,36 +151,28 @@ fn a_declared_renderer_is_calibrated_and_judged_from_any_folder() {
 fn a_missing_or_malformed_renderers_file_is_one_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/three_triangles.toml");
-    let out = rendiff(dir.path())
-        .arg("check")
-        .arg(&scene)
-        .args(["--renderers", "nope.toml", "--quiet", "-o", "run"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_ne!(out.status.code(), Some(0));
-    assert!(
-        stderr.contains("nope.toml: renderers file not found"),
-        "{stderr}"
-    );
-    assert!(
-        !dir.path().join("run").exists(),
-        "no run folder for a refused command"
-    );
-    // A device is no renderers file (it is refused, never read).
-    let out = rendiff(dir.path())
-        .arg("check")
-        .arg(&scene)
-        .args(["--renderers", "/dev/zero", "--quiet", "-o", "run"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(
-        stderr.contains("/dev/zero: the renderers file is not a regular file"),
-        "{stderr}"
-    );
-    assert!(!dir.path().join("run").exists());
+    // A missing file, and a device, which is refused, never read.
+    for (file, said) in [
+        ("nope.toml", "nope.toml: renderers file not found"),
+        (
+            "/dev/zero",
+            "/dev/zero: the renderers file is not a regular file",
+        ),
+    ] {
+        let out = rendiff(dir.path())
+            .arg("check")
+            .arg(&scene)
+            .args(["--renderers", file, "--quiet", "-o", "run"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(said), "{stderr}");
+        assert!(
+            !dir.path().join("run").exists(),
+            "no run folder for a refused command"
+        );
+    }
 
     std::fs::write(
         dir.path().join("bad.toml"),

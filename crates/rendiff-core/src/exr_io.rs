@@ -11,17 +11,24 @@ use std::path::{Path, PathBuf};
 /// Prefix of rendiff's own EXR header attributes.
 pub const ATTR_PREFIX: &str = "rendiff:";
 
+/// Refuses an output path that is a device, FIFO or socket: only a regular
+/// file (or nothing) is ever replaced, as [`write_atomically`]'s rename would
+/// put the result in place of the node itself. Commands call it before long
+/// work too, so that the refusal comes first.
+pub fn check_output(path: &Path) -> Result<()> {
+    match crate::scene::special_entry(path) {
+        Some(kind) => bail!(
+            "{}: {kind}; rendiff writes its results to regular files only: choose another output",
+            path.display()
+        ),
+        None => Ok(()),
+    }
+}
+
 /// Writes `bytes`-producing work to `path` through a temporary file in the same
 /// folder and a rename, so a reader never sees a half-written result.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    // Only a regular file (or nothing) is ever replaced: the rename would
-    // put the result in place of a device, FIFO or socket node itself.
-    if let Some(kind) = crate::scene::special_entry(path) {
-        bail!(
-            "{}: {kind}; rendiff writes its results to regular files only: choose another output",
-            path.display()
-        );
-    }
+    check_output(path)?;
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
