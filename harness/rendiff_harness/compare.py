@@ -371,7 +371,7 @@ def compare_depth(
     zr = ref.buffers["Z"].astype(np.float64)
     zt = test["Z"].astype(np.float64)
     h, w = zr.shape
-    hr, ht = np.isfinite(zr), np.isfinite(zt)
+    hr, ht = exrbuf.depth_hits(zr), exrbuf.depth_hits(zt)
     mask_mm = hr != ht
     tie_mask = np.zeros_like(mask_mm)
     crack_mask = np.zeros_like(mask_mm)

@@ -23,7 +23,7 @@ from types import ModuleType
 
 import numpy as np
 
-from . import atomic
+from . import atomic, exrbuf
 
 BG, MATCH, EDGE, INTERIOR = 0, 1, 2, 3
 ID_COLORS = (
@@ -124,11 +124,12 @@ def write_depth_diff(path: str | Path, ref_z: np.ndarray, test_z: np.ndarray, sc
     try:
         zr = np.asarray(ref_z, dtype=np.float64)
         zt = np.asarray(test_z, dtype=np.float64)
-        hr, ht = np.isfinite(zr), np.isfinite(zt)
+        hr, ht = exrbuf.depth_hits(zr), exrbuf.depth_hits(zt)
         both = hr & ht
         err = np.zeros(zr.shape)
         err[both] = np.abs(zt[both] - zr[both])
         s = scale if (np.isfinite(scale) and scale > 0.0) else 1.0
+        err[~np.isfinite(err)] = s  # a NaN or infinite depth on a hit: the scale's full color
         rgb = _color_map_named(np.clip(err / s, 0.0, 1.0), "inferno")
         rgb[~hr & ~ht] = 0.0
         rgb[hr != ht] = MASK_MISMATCH_COLOR

@@ -41,6 +41,15 @@ if TYPE_CHECKING:
     import OpenImageIO
 
 BACKGROUND_ID = 0xFFFFFFFF
+
+
+def depth_hits(z: np.ndarray) -> np.ndarray:
+    """The pixels a depth buffer reports as hit: every value but +inf, the background's depth
+    (docs/DESIGN.md, "Buffers"). NaN or -inf is a hit with a depth no renderer may report, never
+    background: read as "not finite = background", a renderer that wrote NaN or -inf where it
+    saw nothing passed."""
+    hits: np.ndarray = np.asarray(z) != np.inf
+    return hits
 ATTR_PREFIX = "rendiff:"
 """User attributes are stored as `rendiff:<key>` so that `read_attrs` returns exactly
 what `write_buffers` was given, never the EXR/OIIO standard attributes, and so

@@ -110,6 +110,12 @@ def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
     odd["Z"][hit] *= np.float32(1 + 1e-6)  # an unknown backend is compared exactly
     renders.append(_ok("newthing", rel(Path(_write_exr(s / "newthing.exr", odd)))))
 
+    nan_bg = _copy(ref)
+    assert not np.isfinite(ref["Z"][0, :2]).any()  # the image's top-left corner is background
+    nan_bg["Z"][0, 0] = np.nan  # not background: only +inf is (IDs kept)
+    nan_bg["Z"][0, 1] = -np.inf
+    renders.append(_ok("nanbg", rel(Path(_write_exr(s / "nanbg.exr", nan_bg)))))
+
     renders.append({"backend": "embree", "status": "skipped", "reason": "missing features: lambert"})
     renders.append(
         {
@@ -184,7 +190,7 @@ def test_results_cover_every_backend_and_buffer(compared: Any) -> None:
     run, res, _ = compared
     doc = _strict_json(run / "results.json")
     assert doc["format"] == "rendiff-results/1" and doc["reference"] == "raster"
-    backends = {"trace", "povray", "mitsuba", "pyrender", "newthing", "embree", "embree_robust"}
+    backends = {"trace", "povray", "mitsuba", "pyrender", "newthing", "nanbg", "embree", "embree_robust"}
     assert {(b, buf) for (s, b, buf) in res if s == "quads"} == {(b, f) for b in backends for f in ("id", "Z")}
     assert all(r["backend"] != "raster" for r in res.values())
     assert not list(run.glob(".results.*"))  # the temp file was renamed
@@ -229,6 +235,14 @@ def test_depth_tolerance_and_mask_mismatches(compared: Any) -> None:
     assert z["max_rel_error"] == pytest.approx(1e-4, rel=0.05)
     assert 1e-6 < z["mean_abs_error"] < z["max_abs_error"]
     assert "beyond tolerance" in z["reason"] and "mask" in z["reason"]
+
+
+def test_nan_or_negative_infinite_depth_is_never_background(compared: Any) -> None:
+    _, res, _ = compared
+    z = res[("quads", "nanbg", "Z")]
+    assert (z["mask_mismatches"], z["interior_mismatches"], z["status"]) == (2, 2, "fail"), z
+    assert "(0,0) ref inf test nan" in z["reason"] and "(1,0) ref inf test -inf" in z["reason"]
+    assert res[("quads", "nanbg", "id")]["status"] == "pass"
 
 
 def test_pyrender_uses_the_backend_depth_model(compared: Any) -> None:
