@@ -390,10 +390,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
             for p in entries {
                 match Scene::load(&p) {
                     Ok(s) => {
+                        // A file's name and its description are the user's text:
+                        // shown escaped, so that neither can forge a listing line
+                        // or send the terminal control sequences.
                         let req: Vec<&str> = s.requires.iter().map(String::as_str).collect();
-                        println!("{:<28} requires: {}", p.display(), req.join(", "));
+                        let name = rendiff::scene::printable(&p.display().to_string(), 200);
+                        println!("{name:<28} requires: {}", req.join(", "));
                         if !s.file.description.is_empty() {
-                            println!("{:<28}   {}", "", s.file.description);
+                            let text = rendiff::scene::printable(&s.file.description, 500);
+                            println!("{:<28}   {text}", "");
                         }
                     }
                     Err(e) => {

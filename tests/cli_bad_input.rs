@@ -707,6 +707,59 @@ fn check_timeouts_are_bounded_before_anything_starts() {
     }
 }
 
+/// `rendiff scenes` shows a scene's file name and description escaped: a
+/// newline, an escape sequence or a bidi override in either could forge a
+/// listing line or drive the terminal.
+#[test]
+fn scene_listings_escape_names_and_descriptions() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string("scenes/three_triangles.toml").unwrap();
+    let text: String = text
+        .lines()
+        .filter(|l| !l.starts_with("description"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let forged = "description = \"line\\nFAKE.toml requires: depth\\u001b[31mRED \\u202eevil\"\n";
+    std::fs::write(dir.path().join("a.toml"), format!("{forged}{text}\n")).unwrap();
+    std::fs::write(dir.path().join("b\u{1b}[2J\nx.toml"), format!("{text}\n")).unwrap();
+    let res = output_within(rendiff().arg("scenes").arg(dir.path()), 60);
+    let out = String::from_utf8_lossy(&res.stdout);
+    assert_eq!(
+        res.status.code(),
+        Some(0),
+        "{out}{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    assert_eq!(
+        out.lines().count(),
+        3,
+        "two scenes, one description: {out:?}"
+    );
+    assert!(
+        !out.chars()
+            .any(|c| (c.is_control() && c != '\n') || c == '\u{202e}'),
+        "raw control or bidi character: {out:?}"
+    );
+    assert!(
+        out.contains("\\u{1b}") && out.contains("\\n") && out.contains("\\u{202e}"),
+        "{out}"
+    );
+}
+
+/// A scene file whose name without `.toml` is `..` or `.` (`...toml`,
+/// `..toml`) is refused before anything runs: its name is its run folder
+/// `RUN/scenes/<name>/`, and `..` put its outputs in the run's root.
+#[test]
+fn scene_names_that_cannot_be_folders_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string("scenes/three_triangles.toml").unwrap();
+    for file in ["...toml", "..toml"] {
+        let scene = dir.path().join(file);
+        std::fs::write(&scene, &text).unwrap();
+        check_refused(&[scene.to_str().unwrap()], &[file, "rename the file"]);
+    }
+}
+
 /// A name in `check --only` that is no backend is refused before anything
 /// runs, with the known names listed (it used to leave everything but the
 /// reference out silently, and pass); an escape sequence in it is shown

@@ -193,12 +193,16 @@ fn a_missing_or_malformed_renderers_file_is_one_clear_error() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_ne!(out.status.code(), Some(0), "{stderr}");
-    // Refused before anything runs, in one line naming the file and the entry.
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    // Refused before anything runs, in one line naming the file (once) and
+    // the entry: the harness's own words, not "failed to start; run setup".
+    assert!(stderr.starts_with("error: "), "{stderr}");
     assert!(
         stderr.contains("bad.toml: [[renderer]] #1 (x): missing key 'features'"),
         "{stderr}"
     );
+    assert_eq!(stderr.matches("bad.toml").count(), 1, "{stderr}");
+    assert!(!stderr.contains("setup.sh"), "{stderr}");
     assert!(
         !dir.path().join("run").exists(),
         "no run folder for a refused file"

@@ -60,11 +60,9 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
     };
     let mut cmd = Command::new(job.bin);
     cmd.args(args);
-    let work = job.scratch.join(format!(
-        "{}-{}",
-        job.scene.file_stem().unwrap_or_default().to_string_lossy(),
-        job.backend
-    ));
+    let work = job
+        .scratch
+        .join(format!("{}-{}", super::stem(job.scene), job.backend));
     match run_measured(cmd, opts.timeout, &work, job.bin) {
         Err(e) => {
             rec.status = "error".into();

@@ -219,6 +219,10 @@ struct HarnessBackend {
     reason: Option<String>,
 }
 
+/// How the harness begins the one line of an expected failure
+/// (`rendiff_harness/__main__.py`, `_fail`).
+const HARNESS_REFUSAL: &str = "rendiff_harness: ";
+
 /// Asks the Python harness which backends it has. An error here means the harness
 /// itself is not installed; the message says how to fix it.
 fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
@@ -235,10 +239,20 @@ fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBa
     let o = run_with_timeout(cmd, Duration::from_secs(120), scratch)
         .map_err(|e| format!("cannot run the Python harness: {e:#}"))?;
     if o.code != Some(0) {
+        let tail = o.stderr_tail(5);
+        // The harness's own one-line refusal (a malformed renderers file,
+        // which it names): shown as it is. "Failed to start; run setup" is for
+        // a harness that could not run at all (a traceback, a missing module).
+        if let Some(refusal) = tail
+            .trim()
+            .strip_prefix(HARNESS_REFUSAL)
+            .filter(|m| !m.contains('\n'))
+        {
+            return Err(refusal.to_string());
+        }
         return Err(format!(
-            "the Python harness failed to start ({}): {}; run scripts/setup.sh",
+            "the Python harness failed to start ({}): {tail}; run scripts/setup.sh",
             o.how(),
-            o.stderr_tail(5)
         ));
     }
     #[derive(serde::Deserialize)]
@@ -299,10 +313,26 @@ fn visibility_only(rec: &mut RenderRecord, missing: &[String]) {
     }
 }
 
-fn stem(path: &Path) -> String {
+/// A scene's name in a run: its file's stem, which names its folder
+/// `RUN/scenes/<name>/` (checked by [`scene_name`] before anything runs).
+pub(crate) fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "scene".into())
+}
+
+/// [`stem`], refused where it cannot name a folder of its own: a file
+/// `...toml` has the stem `..`, and its outputs landed in the run's root,
+/// beside (and over) the run's own files; `..toml` wrote into `RUN/scenes/`.
+fn scene_name(path: &Path) -> Result<String> {
+    let name = stem(path);
+    if name.is_empty() || name == "." || name == ".." {
+        bail!(
+            "{}: a scene file's name without .toml names its run folder RUN/scenes/<name>/, and {name:?} cannot (rename the file)",
+            path.display()
+        );
+    }
+    Ok(name)
 }
 
 /// The core's loops, rendered in process (the first is [`REFERENCE`]).
@@ -499,7 +529,12 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
         // A user's renderers file is checked before anything runs: a typo in
         // it is one line naming it, not an error on every scene.
         if let Err(e) = list() {
-            bail!("{}: {e}", file.display());
+            // The harness's refusal names the file already.
+            let file = file.display().to_string();
+            if e.starts_with(&file) {
+                bail!("{e}");
+            }
+            bail!("{file}: {e}");
         }
     }
     if let Some(only) = &opts.only {
@@ -1005,7 +1040,7 @@ fn scene_jobs(opts: &CheckOptions) -> Result<Vec<(PathBuf, &'static str)>> {
     let mut seen: std::collections::HashMap<String, PathBuf> = std::collections::HashMap::new();
     let mut out = Vec::new();
     for (path, role) in list {
-        let name = stem(&path);
+        let name = scene_name(&path)?;
         match seen.get(&name) {
             Some(prev) if same_file(prev, &path) => continue,
             Some(prev) => bail!(

@@ -18,7 +18,7 @@
 
 use super::manifest::{Manifest, SceneRuns, MANIFEST_FORMAT};
 use super::run_folder::{ensure_complete, Staging};
-use super::{CheckOptions, CheckOutcome, CALIBRATION_ROLE};
+use super::{stem, CheckOptions, CheckOutcome, CALIBRATION_ROLE};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -81,12 +81,6 @@ pub fn recorded_costs(previous_run: &Path, given: bool) -> Result<BTreeMap<Strin
             (s.scene.clone(), t)
         })
         .collect())
-}
-
-fn stem(p: &Path) -> String {
-    p.file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default()
 }
 
 /// The scenes shard `shard` runs, in their original order. Greedy
