@@ -289,6 +289,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             // Refused before the render too, not only at the write.
             if let Some(out) = &output {
                 rendiff::exr_io::check_output(out)?;
+                preview::check_preview_paths(out)?;
             }
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
@@ -349,11 +350,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     r.integrator, r.spp, r.seconds
                 );
             }
+            // Never a result beside another render's previews, nor one whose
+            // previews failed: the EXR and its previews are one output.
+            preview::remove_previews(&out)?;
             write_frame_with(&out, &frame, radiance.as_ref(), &attrs)?;
             if !no_preview {
-                preview::write_previews(&out, &frame)?;
-                if let Some(r) = &radiance {
-                    preview::write_radiance_preview(&out, frame.width, frame.height, &r.rgb)?;
+                let written =
+                    preview::write_previews(&out, &frame).and_then(|()| match &radiance {
+                        Some(r) => {
+                            preview::write_radiance_preview(&out, frame.width, frame.height, &r.rgb)
+                        }
+                        None => Ok(()),
+                    });
+                if let Err(e) = written {
+                    let _ = std::fs::remove_file(&out);
+                    let _ = preview::remove_previews(&out);
+                    return Err(e);
                 }
             }
             let c = &frame.counters;

@@ -3,10 +3,10 @@
 //! `render`'s previews and the report's images both use them. They are never
 //! compared; the EXR is the result.
 
-use crate::exr_io::write_atomically;
+use crate::exr_io::{check_output, write_atomically};
 use crate::frame::{Frame, BACKGROUND_ID};
 use anyhow::{Context, Result};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A stable, well-spread color for an ID (background is black).
 pub fn id_color(id: u32) -> [u8; 3] {
@@ -90,28 +90,61 @@ pub fn srgb8(v: f32) -> u8 {
     (s * 255.0).round() as u8
 }
 
+/// What each preview beside an EXR shows: its file name is `<stem>.<suffix>`.
+const PREVIEW_SUFFIXES: [&str; 3] = [".ids.png", ".depth.png", ".rgb.png"];
+
+/// The previews `render` may write beside `exr_path`, in [`PREVIEW_SUFFIXES`]'
+/// order: the one list behind writing them and clearing stale ones.
+pub fn preview_paths(exr_path: &Path) -> [PathBuf; 3] {
+    let stem = exr_path.with_extension("");
+    PREVIEW_SUFFIXES.map(|suffix| {
+        let mut name = stem.clone().into_os_string();
+        name.push(suffix);
+        PathBuf::from(name)
+    })
+}
+
+/// Refuses preview paths beside `exr_path` that are devices, FIFOs or
+/// sockets, before a render starts ([`check_output`]'s rule for every file
+/// rendiff writes).
+pub fn check_preview_paths(exr_path: &Path) -> Result<()> {
+    preview_paths(exr_path)
+        .iter()
+        .try_for_each(|p| check_output(p))
+}
+
+/// Removes the previews an earlier render left beside `exr_path`, before a
+/// new result goes there: a render with `--no-preview`, or without radiance,
+/// left the last render's pictures beside its new EXR, showing another
+/// scene. Only files and symlinks are removed; a folder there is an error
+/// naming it.
+pub fn remove_previews(exr_path: &Path) -> Result<()> {
+    for p in preview_paths(exr_path) {
+        let Ok(meta) = std::fs::symlink_metadata(&p) else {
+            continue;
+        };
+        if !(meta.is_file() || meta.file_type().is_symlink()) {
+            anyhow::bail!(
+                "{}: a preview's path, and not a file: cannot clear it (choose another output)",
+                p.display()
+            );
+        }
+        std::fs::remove_file(&p)
+            .with_context(|| format!("{}: cannot remove the stale preview", p.display()))?;
+    }
+    Ok(())
+}
+
 /// Writes `<stem>.rgb.png`: radiance through the sRGB transfer.
 pub fn write_radiance_preview(exr_path: &Path, w: u32, h: u32, rgb: &[[f32; 3]]) -> Result<()> {
-    let mut name = exr_path.with_extension("").into_os_string();
-    name.push(".rgb.png");
     let px = rgb.iter().map(|p| p.map(srgb8)).collect();
-    save(Path::new(&name), w, h, px)
+    save(&preview_paths(exr_path)[2], w, h, px)
 }
 
 /// Writes `<stem>.ids.png` and `<stem>.depth.png` beside `exr_path`.
 pub fn write_previews(exr_path: &Path, frame: &Frame) -> Result<()> {
-    let stem = exr_path.with_extension("");
-    let sibling = |suffix: &str| {
-        let mut name = stem.clone().into_os_string();
-        name.push(suffix);
-        std::path::PathBuf::from(name)
-    };
+    let [ids_path, depth_path, _] = preview_paths(exr_path);
     let ids = frame.prim.iter().map(|&p| id_color(p)).collect();
-    save(&sibling(".ids.png"), frame.width, frame.height, ids)?;
-    save(
-        &sibling(".depth.png"),
-        frame.width,
-        frame.height,
-        depth_rgb(&frame.z),
-    )
+    save(&ids_path, frame.width, frame.height, ids)?;
+    save(&depth_path, frame.width, frame.height, depth_rgb(&frame.z))
 }

@@ -707,6 +707,44 @@ fn check_timeouts_are_bounded_before_anything_starts() {
     }
 }
 
+/// A render's EXR and its previews are one output: a later render to the
+/// same path with `--no-preview` (or without radiance) removes the earlier
+/// render's pictures, which showed another scene beside the new EXR; a
+/// preview path that is a folder is refused before anything is written.
+#[test]
+fn renders_never_leave_stale_previews() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.exr");
+    let render = |scene: &str, extra: &[&str]| {
+        output_within(
+            rendiff()
+                .args(["render", "--renderer", "raster", "--quiet", scene, "-o"])
+                .arg(&out)
+                .args(extra),
+            60,
+        )
+    };
+    let previews = ["o.ids.png", "o.depth.png"].map(|f| dir.path().join(f));
+    let res = render("scenes/three_triangles.toml", &[]);
+    assert_eq!(res.status.code(), Some(0), "{res:?}");
+    assert!(previews.iter().all(|p| p.is_file()));
+    let res = render("scenes/three_triangles.toml", &["--no-preview"]);
+    assert_eq!(res.status.code(), Some(0), "{res:?}");
+    assert!(out.is_file());
+    assert!(!previews.iter().any(|p| p.exists()), "stale previews left");
+
+    std::fs::remove_file(&out).unwrap();
+    std::fs::create_dir(&previews[1]).unwrap();
+    let res = render("scenes/three_triangles.toml", &[]);
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert_eq!(res.status.code(), Some(2), "{err}");
+    assert!(err.lines().next().unwrap().contains("o.depth.png"), "{err}");
+    assert!(
+        !out.exists() && !previews[0].exists(),
+        "nothing written: {err}"
+    );
+}
+
 /// `rendiff scenes` shows a scene's file name and description escaped: a
 /// newline, an escape sequence or a bidi override in either could forge a
 /// listing line or drive the terminal.
