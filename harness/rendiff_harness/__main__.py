@@ -125,7 +125,17 @@ def cmd_render(args: argparse.Namespace) -> int:
         flags = ", ".join("--" + k.replace("_", "-") for k in refused)
         return _fail(f"{backend.name}: {flags} is not a setting of this backend (see `render --help`)")
     own_workdir = args.workdir is None
-    workdir = Path(tempfile.mkdtemp(prefix=f"rendiff-{backend.name}-")) if own_workdir else Path(args.workdir)
+    # Scratch space beside the output, never under /tmp: `rendiff check` writes outputs into
+    # its staging run folder, which it removes when interrupted (and which replaces the run
+    # folder otherwise), so a harness killed before its `finally` leaves nothing behind.
+    try:
+        workdir = (
+            Path(tempfile.mkdtemp(prefix=f".{out.name}.work-", dir=out.parent.absolute()))
+            if own_workdir
+            else Path(args.workdir)
+        )
+    except OSError as exc:
+        return _fail(f"{backend.name}: cannot create a scratch folder in {out.parent}: {exc.strerror or exc}")
     try:
         version = backend.version()
         t0 = time.monotonic()
@@ -238,7 +248,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
     p_render.add_argument("--out", required=True, help="output EXR path (written atomically)")
     p_render.add_argument("--timeout", type=float, default=600.0, help="seconds before the renderer is killed")
-    p_render.add_argument("--workdir", default=None, help="scratch folder (default: a temp folder, removed)")
+    p_render.add_argument(
+        "--workdir",
+        default=None,
+        help="scratch folder (default: a new hidden folder beside --out, removed at the end)",
+    )
     p_render.add_argument(
         "--spp",
         type=int,

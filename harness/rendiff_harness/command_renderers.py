@@ -27,11 +27,19 @@ program is missing is listed as unavailable, with that reason.
 Running (`CommandBackend.render`): the command is an argument vector, never a shell, with
 the placeholders expanded in each argument after the first; it runs in a process group of
 its own (children.run_in_group: stdin /dev/null; the group is killed on the timeout, when
-the renderer ends, and when the harness dies), in a scratch working folder. {out} is a temporary name in the
-scratch folder; the EXR found there is checked (size, channels, pixel types) and only then
-written to the real output, atomically, so no half-written EXR ever survives. Exit status:
+the renderer ends, and when the harness dies), in a scratch working folder inside the
+`workdir` it is given (`render` puts that beside its `--out`, in the run folder). What it
+prints is drained while it runs, and only the first and the last `children.OUTPUT_KEEP_BYTES`
+of each stream are kept (in its scratch folder's stdout.log and stderr.log, a line marking
+what was dropped). {out} is a temporary name in the scratch folder; the EXR found there is
+checked (size, channels, pixel types) and only then written to the real output, atomically,
+so no half-written EXR ever survives. Exit status:
 0 = rendered, 3 = skipped (the last non-empty stderr line is the reason), anything else an
 error carrying the status or signal and the tail of stderr.
+
+The version command runs in the renderers file's folder (the one place every entry point
+has that is the user's own, so nothing is created under /tmp, where an interrupted harness
+would leave it) and only the first `VERSION_MAX_BYTES` of its stdout are read.
 """
 
 from __future__ import annotations
@@ -50,7 +58,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import vocab
-from .children import run_in_group
+from .children import Capture, run_in_group
 from .errors import BackendError, BackendSkipped, BackendUnavailable
 from .userfile import UserFileError, read_regular
 
@@ -70,6 +78,12 @@ EXIT_SKIP = vocab.EXIT_SKIPPED
 PLACEHOLDERS = ("scene", "out", "width", "height")
 BUFFERS = ("Z", "id", "N", "RGB")
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_-]*\Z")
+# Longest renderer name: 64 characters. The name becomes file and folder names (the run's
+# `<name>.exr`, the harness's scratch `<name>-XXXXXXXX/<name>.exr`, rendiff check's
+# `scratch/<scene>-<name>/`), each at most 255 bytes (NAME_MAX), and a column of the
+# results table; a 300-character name loaded fine and then failed every render with
+# "File name too long". 64 leaves room for a scene's name beside it.
+MAX_NAME_CHARS = 64
 RESERVED_NAMES = frozenset(
     {
         # the Rust core's own renderers
@@ -103,6 +117,10 @@ CHANNELS: dict[str, tuple[tuple[str, str], ...]] = {
 }
 """The EXR channels (and pixel types) each buffer must have (docs/resolved-scene.md)."""
 VERSION_TIMEOUT_S = 30.0
+# Most of the version command's stdout read: 4 KiB. The version is its first non-empty line,
+# a few dozen characters; the rest is drained unread, so a version command printing 1 GB
+# (which once took `info` to 3.2 GB of memory) costs 4 KiB.
+VERSION_MAX_BYTES = 4096
 STDERR_TAIL_LINES = 5
 STDERR_TAIL_CHARS = 1000
 
@@ -266,6 +284,10 @@ def _entry(path: Path, i: int, entry: object, taken: dict[str, int], reserved: C
     name = entry.get("name")
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
         raise RenderersError(f"{where}: name must be a string matching [a-z][a-z0-9_-]*, got {name!r}")
+    if len(name) > MAX_NAME_CHARS:
+        raise RenderersError(
+            f"{where}: name {name[:20] + '...'!r} is {len(name)} characters long; at most {MAX_NAME_CHARS} are allowed"
+        )
     where = _where(path, i, name)
     if name in reserved:
         raise RenderersError(f"{where}: name {name!r} is taken by a built-in backend")
@@ -371,26 +393,30 @@ def find(name: str) -> Renderer | None:
 # --------------------------------------------------------------------------- running it
 
 
-def _tail(path: Path) -> list[str]:
-    """The non-empty lines at the end of a log file (at most STDERR_TAIL_CHARS)."""
-    try:
-        with open(path, "rb") as fh:
-            fh.seek(0, os.SEEK_END)
-            size = fh.tell()
-            fh.seek(max(0, size - 8 * STDERR_TAIL_CHARS))
-            text = fh.read().decode("utf-8", "replace")
-    except OSError:
-        return []
+def _tail(stream: Capture) -> list[str]:
+    """The non-empty lines at the end of a captured stream (its last 8 * STDERR_TAIL_CHARS bytes)."""
+    end = (stream.head + stream.tail)[-8 * STDERR_TAIL_CHARS :]
+    text = end.decode("utf-8", "replace")
     return [line.strip() for line in text.splitlines() if line.strip()]
 
 
-def _tail_text(lines: list[str]) -> str:
+def _tail_text(lines: list[str], stream: Capture) -> str:
     if not lines:
         return "; nothing on stderr"
     text = " | ".join(lines[-STDERR_TAIL_LINES:])
     if len(text) > STDERR_TAIL_CHARS:
         text = "..." + text[-STDERR_TAIL_CHARS:]
+    if stream.omitted:
+        return f"; stderr ({stream.total} bytes, only its first and last {stream.tail_limit} kept), last lines: {text}"
     return f"; stderr: {text}"
+
+
+def _save_log(path: Path, stream: Capture) -> None:
+    """Keep what was captured of a stream in the scratch folder (the omission marked)."""
+    try:
+        path.write_bytes(stream.kept())
+    except OSError:
+        pass
 
 
 def _how(returncode: int) -> str:
@@ -472,28 +498,24 @@ class CommandBackend:
         program, problem = self.spec.program(argv[0])
         if program is None:
             return f"unknown ({problem})"
-        with tempfile.TemporaryDirectory(prefix=f"rendiff-{self.NAME}-version-") as tmp:
-            scratch = Path(tmp)
-            out, err = scratch / "stdout.log", scratch / "stderr.log"
-            try:
-                with open(out, "wb") as so, open(err, "wb") as se:
-                    ran = run_in_group(
-                        [program, *(expand(a, {}) for a in argv[1:])],
-                        cwd=scratch,
-                        env=os.environ,
-                        stdout=so,
-                        stderr=se,
-                        timeout_s=VERSION_TIMEOUT_S,
-                    )
-            except OSError as exc:
-                return f"unknown (cannot run the version command: {exc.strerror or exc})"
-            if ran.timed_out:
-                return f"unknown (the version command timed out after {VERSION_TIMEOUT_S:g} s)"
-            if ran.returncode != 0:
-                return f"unknown (the version command {_how(ran.returncode or 0)})"
-            lines = [line.strip() for line in out.read_bytes().decode("utf-8", "replace").splitlines()]
-            first = next((line for line in lines if line), None)
-            return first if first is not None else "unknown (the version command printed nothing)"
+        try:
+            ran = run_in_group(
+                [program, *(expand(a, {}) for a in argv[1:])],
+                cwd=self.spec.source.parent,
+                env=os.environ,
+                timeout_s=VERSION_TIMEOUT_S,
+                stdout=Capture(head_limit=VERSION_MAX_BYTES, tail_limit=0),
+                stderr=Capture(head_limit=0, tail_limit=0),
+            )
+        except OSError as exc:
+            return f"unknown (cannot run the version command: {exc.strerror or exc})"
+        if ran.timed_out:
+            return f"unknown (the version command timed out after {VERSION_TIMEOUT_S:g} s)"
+        if ran.returncode != 0:
+            return f"unknown (the version command {_how(ran.returncode or 0)})"
+        lines = [line.strip() for line in ran.stdout.head.decode("utf-8", "replace").splitlines()]
+        first = next((line for line in lines if line), None)
+        return first if first is not None else "unknown (the version command printed nothing)"
 
     def render(
         self,
@@ -531,22 +553,21 @@ class CommandBackend:
                 "height": str(cam.height),
             }
             argv = [program, *(expand(a, values) for a in spec.command[1:])]
-            err_log = scratch / "stderr.log"
             try:
-                with open(scratch / "stdout.log", "wb") as so, open(err_log, "wb") as se:
-                    ran = run_in_group(argv, cwd=cwd, env=os.environ, stdout=so, stderr=se, timeout_s=limit)
+                ran = run_in_group(argv, cwd=cwd, env=os.environ, timeout_s=limit)
             except OSError as exc:
                 raise BackendUnavailable(f"{self.NAME}: cannot start {program}: {exc.strerror or exc}") from None
-            lines = _tail(err_log)
+            _save_log(scratch / "stdout.log", ran.stdout)
+            _save_log(scratch / "stderr.log", ran.stderr)
+            lines = _tail(ran.stderr)
+            said = _tail_text(lines, ran.stderr)
             if ran.timed_out:
-                raise BackendError(
-                    f"{self.NAME}: timed out after {limit:g} s; its process group was killed{_tail_text(lines)}"
-                )
+                raise BackendError(f"{self.NAME}: timed out after {limit:g} s; its process group was killed{said}")
             rc = ran.returncode or 0
             if rc == EXIT_SKIP:
                 raise BackendSkipped(lines[-1] if lines else "exit status 3 (skipped) without a reason on stderr")
             if rc != 0:
-                raise BackendError(f"{self.NAME}: {_how(rc)}{_tail_text(lines)}")
+                raise BackendError(f"{self.NAME}: {_how(rc)}{said}")
             channels = [c for b in wanted for c in CHANNELS[b]]
             problems = check_exr(temp_out, cam.width, cam.height, channels)
             if problems:
@@ -560,6 +581,8 @@ class CommandBackend:
             "exit_status": rc,
             "renderer_s": ran.elapsed_s,
             "timeout_s": limit,
+            "stdout_bytes": ran.stdout.total,
+            "stderr_bytes": ran.stderr.total,
         }
         if visibility_only:
             info["visibility_only"] = True

@@ -50,6 +50,8 @@ def depth_hits(z: np.ndarray) -> np.ndarray:
     saw nothing passed."""
     hits: np.ndarray = np.asarray(z) != np.inf
     return hits
+
+
 ATTR_PREFIX = "rendiff:"
 """User attributes are stored as `rendiff:<key>` so that `read_attrs` returns exactly
 what `write_buffers` was given, never the EXR/OIIO standard attributes, and so
