@@ -2,12 +2,14 @@
 //! confined to the scene's folder like OBJ meshes.
 //!
 //! The `gltf` crate parses and validates the JSON (every index reference in
-//! range, known enum values); everything that touches bytes is done here, so
-//! that each error names the file and the problem in one line and no input can
-//! panic: the GLB container is split here (the crate's own GLB reader
-//! underflows on a short header), buffers are read here (relative file names
-//! inside the scene's folder, or base64 `data:` URIs; never images), and
-//! accessors are read here with every byte range checked. Only geometry is
+//! range, known enum values; the accessors a primitive names are checked
+//! here first, as the crate's check of POSITION panics on a bad index);
+//! everything that touches bytes is done here, so that each error names the
+//! file and the problem in one line and no input can panic: the GLB
+//! container is split here (the crate's own GLB reader underflows on a short
+//! header), buffers are read here (relative file names inside the scene's
+//! folder, or base64 `data:` URIs; never images), and accessors are read here
+//! with every byte range checked. Only geometry is
 //! read: positions, indices, primitive modes, the node hierarchy and, when the
 //! scene asks for it, one perspective camera. Materials, textures, normals,
 //! animations and extensions that do not change geometry are ignored; skins
@@ -22,7 +24,10 @@ use gltf::json;
 use gltf::json::accessor::{ComponentType, Type as AccType};
 use gltf::json::mesh::{Mode, Semantic};
 use gltf::json::validation::Checked;
+use std::collections::hash_map::Entry;
+use std::collections::{HashMap, HashSet};
 use std::path::{Component, Path};
+use std::rc::Rc;
 
 /// True when a mesh path names a glTF file (`.gltf` or `.glb`, any case):
 /// the scene's `mesh` key takes OBJ and glTF alike, told apart by extension.
@@ -588,6 +593,335 @@ fn local_matrix(n: &json::scene::Node, ni: usize) -> Result<DMat4, String> {
     ))
 }
 
+/// Vertices a glTF file's POSITION accessors may hold, all of them together,
+/// beyond the vertex references of the scene's triangles in it (each mesh
+/// primitive counted once however many nodes use it): 65,536 (2.4 MB as read).
+///
+/// Accessors are read whole, and one without a bufferView is zeros made from
+/// nothing: a 789-byte file with a sparse POSITION accessor of 89 million
+/// elements and one triangle made rendiff allocate 3 GB. A triangle refers to
+/// at most three vertices and one no triangle refers to cannot change the
+/// image, so the vertices read are held to the references (three per triangle
+/// counted against [`MAX_SCENE_TRIANGLES`], two more per strip or fan); the
+/// allowance keeps files with a few stray vertices (left by an editor, or a
+/// vertex buffer shared with a mesh the scene does not show) loading.
+pub const MAX_UNREFERENCED_VERTICES: u64 = 1 << 16;
+
+/// A node with a mesh or a camera: (node index, world matrix, mesh or camera index).
+type NodeAt = (usize, DMat4, usize);
+
+/// The crate's validation reads each primitive's POSITION accessor without
+/// checking that it exists (gltf-json 1.4.1, mesh.rs: an index past the end
+/// panicked), so every accessor a primitive names (attributes, indices, morph
+/// targets) is checked here first, all with the same message.
+fn check_primitive_accessors(root: &json::Root) -> Result<(), String> {
+    let n = root.accessors.len();
+    for (mi, m) in root.meshes.iter().enumerate() {
+        for (pi, p) in m.primitives.iter().enumerate() {
+            let check = |ai: usize, what: &dyn Fn() -> String| {
+                if ai < n {
+                    return Ok(());
+                }
+                Err(format!(
+                    "invalid glTF: meshes[{mi}].primitives[{pi}].{}: accessor {ai} does not \
+                     exist (the file has {n} accessors)",
+                    what()
+                ))
+            };
+            for (semantic, a) in &p.attributes {
+                check(a.value(), &|| {
+                    format!("attributes.{}", semantic.to_string())
+                })?;
+            }
+            if let Some(a) = &p.indices {
+                check(a.value(), &|| "indices".into())?;
+            }
+            for (ti, t) in p.targets.iter().flatten().enumerate() {
+                for (name, a) in [
+                    ("POSITION", &t.positions),
+                    ("NORMAL", &t.normals),
+                    ("TANGENT", &t.tangents),
+                ] {
+                    if let Some(a) = a {
+                        check(a.value(), &|| format!("targets[{ti}].{name}"))?;
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The crate's validation errors as one line: the first problem and how many more.
+fn validation_problem(e: gltf::Error) -> String {
+    match e {
+        gltf::Error::Validation(list) => {
+            let more = match list.len() {
+                0 | 1 => String::new(),
+                n => format!(" (and {} more problems)", n - 1),
+            };
+            match list.first() {
+                Some((path, json::validation::Error::Unsupported)) => format!(
+                    "invalid glTF: {path}: the file requires an extension rendiff's glTF \
+                     reader does not support{more}"
+                ),
+                Some((path, e)) => format!("invalid glTF: {path}: {e}{more}"),
+                None => "invalid glTF".into(),
+            }
+        }
+        other => format!("invalid glTF: {other}"),
+    }
+}
+
+/// The scene's mesh nodes and camera nodes, depth first, pre-order, with
+/// their world matrices; the hierarchy must be a tree and mesh nodes unskinned.
+fn scene_nodes(root: &json::Root) -> Result<(usize, Vec<NodeAt>, Vec<NodeAt>), String> {
+    let scene = root
+        .scene
+        .map(|s| s.value())
+        .or(if root.scenes.is_empty() {
+            None
+        } else {
+            Some(0)
+        })
+        .ok_or("the glTF file has no scene")?;
+    let roots = &root
+        .scenes
+        .get(scene)
+        .ok_or_else(|| format!("scene {scene} does not exist"))?
+        .nodes;
+    let mut visited = vec![false; root.nodes.len()];
+    let mut stack: Vec<(usize, DMat4)> = roots
+        .iter()
+        .rev()
+        .map(|n| (n.value(), DMat4::IDENTITY))
+        .collect();
+    let (mut mesh_nodes, mut camera_nodes) = (Vec::new(), Vec::new());
+    while let Some((ni, parent)) = stack.pop() {
+        let node = root
+            .nodes
+            .get(ni)
+            .ok_or_else(|| format!("node {ni} does not exist"))?;
+        if std::mem::replace(&mut visited[ni], true) {
+            return Err(format!(
+                "node {ni} is reached twice from scene {scene}: the node hierarchy must be a tree"
+            ));
+        }
+        let world = parent * local_matrix(node, ni)?;
+        if let Some(m) = &node.mesh {
+            if node.skin.is_some() {
+                return Err(format!(
+                    "node {ni} has a skin; rendiff reads static geometry only"
+                ));
+            }
+            mesh_nodes.push((ni, world, m.value()));
+        }
+        if let Some(c) = &node.camera {
+            camera_nodes.push((ni, world, c.value()));
+        }
+        for c in node.children.iter().flatten().rev() {
+            stack.push((c.value(), world));
+        }
+    }
+    Ok((scene, mesh_nodes, camera_nodes))
+}
+
+/// What one mesh's primitives make: triangles, and vertex references (what
+/// bounds the vertices worth reading, see [`MAX_UNREFERENCED_VERTICES`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct MeshCount {
+    triangles: u64,
+    refs: u64,
+}
+
+/// The index of a primitive's POSITION accessor (present: checked while counting).
+fn position_accessor(p: &json::mesh::Primitive) -> Option<usize> {
+    p.attributes
+        .get(&Checked::Valid(Semantic::Positions))
+        .map(|a| a.value())
+}
+
+/// Counts mesh `mi` (first used by node `ni`) from its accessors' counts,
+/// before any geometry is read, or says why it cannot be read.
+fn count_mesh(root: &json::Root, mi: usize, ni: usize) -> Result<MeshCount, String> {
+    let mesh = root
+        .meshes
+        .get(mi)
+        .ok_or_else(|| format!("mesh {mi} does not exist"))?;
+    if mesh.weights.iter().flatten().any(|w| *w != 0.0) {
+        return Err(format!(
+            "mesh {mi} (node {ni}) has non-zero morph weights; rendiff reads static geometry only"
+        ));
+    }
+    let mut count = MeshCount::default();
+    for (pi, p) in mesh.primitives.iter().enumerate() {
+        let where_ = format!("mesh {mi} primitive {pi}");
+        let Checked::Valid(mode) = p.mode else {
+            return Err(format!("{where_} has an invalid mode"));
+        };
+        let pos =
+            position_accessor(p).ok_or_else(|| format!("{where_} has no POSITION attribute"))?;
+        let refs = accessor_count(root, p.indices.map_or(pos, |i| i.value()))?;
+        let triangles = triangle_count(mode, refs, &where_)?;
+        count.triangles = count.triangles.saturating_add(triangles);
+        count.refs = count.refs.saturating_add(refs);
+    }
+    Ok(count)
+}
+
+/// Each distinct mesh the nodes use, counted once, in order of first use (the
+/// first problem reported is the one the first node meets).
+fn count_meshes(
+    root: &json::Root,
+    mesh_nodes: &[NodeAt],
+) -> Result<(Vec<usize>, HashMap<usize, MeshCount>), String> {
+    let mut order = Vec::new();
+    let mut counts = HashMap::new();
+    for &(ni, _, mi) in mesh_nodes {
+        if let Entry::Vacant(slot) = counts.entry(mi) {
+            slot.insert(count_mesh(root, mi, ni)?);
+            order.push(mi);
+        }
+    }
+    Ok((order, counts))
+}
+
+/// Holds the POSITION accessors of `meshes` (each counted once) to the
+/// vertex references `refs` plus [`MAX_UNREFERENCED_VERTICES`], before any is read.
+fn check_vertex_bound(root: &json::Root, meshes: &[usize], refs: u64) -> Result<(), String> {
+    let allowed = refs.saturating_add(MAX_UNREFERENCED_VERTICES);
+    let mut seen = HashSet::new();
+    let mut vertices = 0u64;
+    for &mi in meshes {
+        for ai in root.meshes[mi]
+            .primitives
+            .iter()
+            .filter_map(position_accessor)
+        {
+            if !seen.insert(ai) {
+                continue;
+            }
+            let n = accessor_count(root, ai)?;
+            vertices = vertices.saturating_add(n);
+            if vertices > allowed {
+                let all = if vertices > n {
+                    format!(" ({vertices} with the file's other POSITION accessors)")
+                } else {
+                    String::new()
+                };
+                return Err(format!(
+                    "accessor {ai} (POSITION) has {n} vertices{all}, but the file's triangles \
+                     refer to at most {refs}: more than {MAX_UNREFERENCED_VERTICES} vertices \
+                     that no triangle uses are refused"
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// One primitive's triangles as vertex indices into its positions, which
+/// are shared by every primitive (and node) using the same accessor.
+struct Part {
+    positions: Rc<Vec<DVec3>>,
+    tris: Vec<[u32; 3]>,
+}
+
+/// The triangles a primitive's vertex references make (`mode` is one of the
+/// three surface modes: the others were refused while counting), numbered as
+/// the glTF specification defines strips and fans.
+fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    let n = idx.len().saturating_sub(2);
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|f| [f[0], f[1], f[2]]).collect(),
+        Mode::TriangleStrip => (0..n)
+            .map(|i| {
+                if i % 2 == 0 {
+                    [idx[i], idx[i + 1], idx[i + 2]]
+                } else {
+                    [idx[i], idx[i + 2], idx[i + 1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (0..n).map(|i| [idx[i + 1], idx[i + 2], idx[0]]).collect(),
+        _ => unreachable!("refused while counting"),
+    }
+}
+
+/// Reads mesh `mi`'s primitives once, however many nodes use it; a POSITION
+/// accessor already read (`cache`) is not read again. Primitives without
+/// triangles are left out.
+fn read_mesh(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    mi: usize,
+    cache: &mut HashMap<usize, Rc<Vec<DVec3>>>,
+) -> Result<Vec<Part>, String> {
+    let mut parts = Vec::new();
+    for p in &root.meshes[mi].primitives {
+        let (Checked::Valid(mode), Some(pa)) = (p.mode, position_accessor(p)) else {
+            unreachable!("checked while counting")
+        };
+        let positions = match cache.entry(pa) {
+            Entry::Occupied(e) => Rc::clone(e.get()),
+            Entry::Vacant(e) => Rc::clone(e.insert(Rc::new(read_positions(root, buffers, pa)?))),
+        };
+        let idx: Vec<u32> = match &p.indices {
+            Some(i) => read_indices(root, buffers, i.value(), positions.len())?,
+            None => (0..positions.len() as u32).collect(),
+        };
+        let tris = triangles_of(mode, &idx);
+        if !tris.is_empty() {
+            parts.push(Part { positions, tris });
+        }
+    }
+    Ok(parts)
+}
+
+/// A mesh's triangles placed by a node's world matrix (f64), the winding
+/// reversed when the matrix mirrors.
+fn place(parts: &[Part], world: DMat4) -> Vec<Tri64> {
+    let identity = world == DMat4::IDENTITY;
+    let flip = world.determinant() < 0.0;
+    let mut out = Vec::with_capacity(parts.iter().map(|p| p.tris.len()).sum());
+    for part in parts {
+        let at = |k: u32| {
+            let v = part.positions[k as usize];
+            if identity {
+                v
+            } else {
+                world.transform_point3(v)
+            }
+        };
+        for &[a, b, c] in &part.tris {
+            let t = [at(a), at(b), at(c)];
+            out.push(if flip { [t[0], t[2], t[1]] } else { t });
+        }
+    }
+    out
+}
+
+/// Labels: the node's name, its index when unnamed, `<name>#<index>` when
+/// mesh nodes share the name (names counted once: comparing every pair hung
+/// on 80,000 named nodes).
+fn node_labels(root: &json::Root, mesh_nodes: &[NodeAt]) -> Vec<String> {
+    let name_of = |ni: usize| root.nodes[ni].name.as_deref().filter(|s| !s.is_empty());
+    let mut uses: HashMap<&str, usize> = HashMap::new();
+    for &(ni, _, _) in mesh_nodes {
+        if let Some(name) = name_of(ni) {
+            *uses.entry(name).or_default() += 1;
+        }
+    }
+    mesh_nodes
+        .iter()
+        .map(|&(ni, _, _)| match name_of(ni) {
+            Some(name) if uses[name] > 1 => format!("{name}#{ni}"),
+            Some(name) => name.to_string(),
+            None => ni.to_string(),
+        })
+        .collect()
+}
+
 /// Loads a glTF 2.0 file (`.gltf` or `.glb`, told apart by the GLB magic;
 /// a `.glb` without it is refused) as its mesh nodes and, if asked, a camera.
 ///
@@ -600,7 +934,9 @@ fn local_matrix(n: &json::scene::Node, ni: usize) -> Result<DMat4, String> {
 /// whose world matrix has a negative determinant gets its triangles' winding
 /// reversed (glTF's rule). The file, its buffers and all its triangles are
 /// held to [`MAX_MESH_FILE_BYTES`] and `budget` (the triangles the scene has
-/// left of [`MAX_SCENE_TRIANGLES`]) before geometry is read.
+/// left of [`MAX_SCENE_TRIANGLES`]), and its vertices to
+/// [`MAX_UNREFERENCED_VERTICES`], before geometry is read; a file whose mesh
+/// nodes make no triangle is refused like an OBJ file without faces.
 pub fn load_gltf(
     file: &Path,
     scene_dir: &Path,
@@ -621,25 +957,8 @@ pub fn load_gltf(
     };
     let root =
         json::Root::from_slice(json_bytes).map_err(|e| err(format!("malformed glTF JSON: {e}")))?;
-    let doc = gltf::Document::from_json(root).map_err(|e| {
-        err(match e {
-            gltf::Error::Validation(list) => {
-                let more = match list.len() {
-                    0 | 1 => String::new(),
-                    n => format!(" (and {} more problems)", n - 1),
-                };
-                match list.first() {
-                    Some((path, json::validation::Error::Unsupported)) => format!(
-                        "invalid glTF: {path}: the file requires an extension rendiff's glTF \
-                         reader does not support{more}"
-                    ),
-                    Some((path, e)) => format!("invalid glTF: {path}: {e}{more}"),
-                    None => "invalid glTF".into(),
-                }
-            }
-            other => format!("invalid glTF: {other}"),
-        })
-    })?;
+    check_primitive_accessors(&root).map_err(err)?;
+    let doc = gltf::Document::from_json(root).map_err(|e| err(validation_problem(e)))?;
     let root = doc.as_json();
     // Buffers, all of them, each exactly its byteLength.
     let mut left = MAX_MESH_FILE_BYTES.saturating_sub(bytes.len() as u64);
@@ -650,84 +969,12 @@ pub fn load_gltf(
         buffers.push(data);
     }
     drop(bytes);
-    // The scene's node tree, depth first, pre-order.
-    let scene = root
-        .scene
-        .map(|s| s.value())
-        .or(if root.scenes.is_empty() {
-            None
-        } else {
-            Some(0)
-        })
-        .ok_or_else(|| err("the glTF file has no scene".into()))?;
-    let roots = &root
-        .scenes
-        .get(scene)
-        .ok_or_else(|| err(format!("scene {scene} does not exist")))?
-        .nodes;
-    let mut visited = vec![false; root.nodes.len()];
-    let mut stack: Vec<(usize, DMat4)> = roots
-        .iter()
-        .rev()
-        .map(|n| (n.value(), DMat4::IDENTITY))
-        .collect();
-    let mut mesh_nodes: Vec<(usize, DMat4, usize)> = Vec::new();
-    let mut camera_nodes: Vec<(usize, DMat4, usize)> = Vec::new();
-    while let Some((ni, parent)) = stack.pop() {
-        let node = root
-            .nodes
-            .get(ni)
-            .ok_or_else(|| err(format!("node {ni} does not exist")))?;
-        if std::mem::replace(&mut visited[ni], true) {
-            return Err(err(format!(
-                "node {ni} is reached twice from scene {scene}: the node hierarchy must be a tree"
-            )));
-        }
-        let world = parent * local_matrix(node, ni).map_err(err)?;
-        if let Some(m) = &node.mesh {
-            if node.skin.is_some() {
-                return Err(err(format!(
-                    "node {ni} has a skin; rendiff reads static geometry only"
-                )));
-            }
-            mesh_nodes.push((ni, world, m.value()));
-        }
-        if let Some(c) = &node.camera {
-            camera_nodes.push((ni, world, c.value()));
-        }
-        for c in node.children.iter().flatten().rev() {
-            stack.push((c.value(), world));
-        }
-    }
+    let (scene, mesh_nodes, camera_nodes) = scene_nodes(root).map_err(err)?;
     // Count first, against the budget, before any geometry is read.
-    let mut count = 0u64;
-    for &(ni, _, mi) in &mesh_nodes {
-        let mesh = root
-            .meshes
-            .get(mi)
-            .ok_or_else(|| err(format!("mesh {mi} does not exist")))?;
-        if mesh.weights.iter().flatten().any(|w| *w != 0.0) {
-            return Err(err(format!(
-                "mesh {mi} (node {ni}) has non-zero morph weights; rendiff reads static geometry only"
-            )));
-        }
-        for (pi, p) in mesh.primitives.iter().enumerate() {
-            let where_ = format!("mesh {mi} primitive {pi}");
-            let Checked::Valid(mode) = p.mode else {
-                return Err(err(format!("{where_} has an invalid mode")));
-            };
-            let pos = p
-                .attributes
-                .get(&Checked::Valid(Semantic::Positions))
-                .ok_or_else(|| err(format!("{where_} has no POSITION attribute")))?;
-            let refs = match &p.indices {
-                Some(i) => accessor_count(root, i.value()),
-                None => accessor_count(root, pos.value()),
-            }
-            .map_err(err)?;
-            count = count.saturating_add(triangle_count(mode, refs, &where_).map_err(err)?);
-        }
-    }
+    let (order, counts) = count_meshes(root, &mesh_nodes).map_err(err)?;
+    let count = mesh_nodes
+        .iter()
+        .fold(0u64, |n, (_, _, mi)| n.saturating_add(counts[mi].triangles));
     if count > budget {
         return Err(err(format!(
             "glTF file has {count} triangles; with the scene's other objects ({} triangles) \
@@ -738,77 +985,24 @@ pub fn load_gltf(
     if mesh_nodes.is_empty() {
         return Err(err(format!("glTF scene {scene} has no node with a mesh")));
     }
-    // Labels: the node's name, its index when unnamed, `<name>#<index>` when shared.
-    let name_of = |ni: usize| {
-        root.nodes[ni]
-            .name
-            .as_deref()
-            .filter(|s| !s.is_empty())
-            .map(str::to_string)
-    };
-    let mut nodes = Vec::with_capacity(mesh_nodes.len());
-    for &(ni, world, mi) in &mesh_nodes {
-        let label = match name_of(ni) {
-            Some(name) => {
-                let shared = mesh_nodes
-                    .iter()
-                    .filter(|(o, _, _)| name_of(*o).as_deref() == Some(name.as_str()))
-                    .count()
-                    > 1;
-                if shared {
-                    format!("{name}#{ni}")
-                } else {
-                    name
-                }
-            }
-            None => ni.to_string(),
-        };
-        let identity = world == DMat4::IDENTITY;
-        let flip = world.determinant() < 0.0;
-        let mut triangles = Vec::new();
-        for p in &root.meshes[mi].primitives {
-            let Checked::Valid(mode) = p.mode else {
-                unreachable!("checked while counting")
-            };
-            let pa = p.attributes[&Checked::Valid(Semantic::Positions)].value();
-            let pos = read_positions(root, &buffers, pa).map_err(err)?;
-            let idx: Vec<u32> = match &p.indices {
-                Some(i) => read_indices(root, &buffers, i.value(), pos.len()).map_err(err)?,
-                None => (0..pos.len() as u32).collect(),
-            };
-            let at = |k: u32| {
-                let v = pos[k as usize];
-                if identity {
-                    v
-                } else {
-                    world.transform_point3(v)
-                }
-            };
-            let mut push = |a: u32, b: u32, c: u32| {
-                let t = [at(a), at(b), at(c)];
-                triangles.push(if flip { [t[0], t[2], t[1]] } else { t });
-            };
-            match mode {
-                Mode::Triangles => idx.chunks_exact(3).for_each(|f| push(f[0], f[1], f[2])),
-                Mode::TriangleStrip => {
-                    for i in 0..idx.len().saturating_sub(2) {
-                        if i % 2 == 0 {
-                            push(idx[i], idx[i + 1], idx[i + 2]);
-                        } else {
-                            push(idx[i], idx[i + 2], idx[i + 1]);
-                        }
-                    }
-                }
-                Mode::TriangleFan => {
-                    for i in 0..idx.len().saturating_sub(2) {
-                        push(idx[i + 1], idx[i + 2], idx[0]);
-                    }
-                }
-                _ => unreachable!("refused while counting"),
-            }
-        }
-        nodes.push(GltfMeshNode { label, triangles });
+    if count == 0 {
+        return Err(err(super::NO_FACES.into()));
     }
+    let refs = counts.values().fold(0u64, |n, c| n.saturating_add(c.refs));
+    check_vertex_bound(root, &order, refs).map_err(err)?;
+    let mut cache = HashMap::new();
+    let mut meshes = HashMap::new();
+    for &mi in &order {
+        meshes.insert(mi, read_mesh(root, &buffers, mi, &mut cache).map_err(err)?);
+    }
+    let nodes = mesh_nodes
+        .iter()
+        .zip(node_labels(root, &mesh_nodes))
+        .map(|(&(_, world, mi), label)| GltfMeshNode {
+            label,
+            triangles: place(&meshes[&mi], world),
+        })
+        .collect();
     let camera = match camera {
         CameraRequest::None => None,
         request => Some(pick_camera(root, &camera_nodes, request).map_err(err)?),
@@ -1146,6 +1340,56 @@ mod tests {
         }
     }
 
+    /// Standard base64 with padding, for `data:` URIs.
+    fn base64(bytes: &[u8]) -> String {
+        const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        let mut s = String::new();
+        for c in bytes.chunks(3) {
+            let n = c
+                .iter()
+                .enumerate()
+                .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
+            for k in 0..=c.len() {
+                s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+            }
+        }
+        while !s.len().is_multiple_of(4) {
+            s.push('=');
+        }
+        s
+    }
+
+    /// A glTF file whose mesh 0 is one indexed triangle (indices 0 1 2) over
+    /// a POSITION accessor of `count` vertices without a bufferView (zeros,
+    /// the first three replaced by a sparse substitution), used by `nodes`
+    /// unnamed root nodes.
+    fn sparse_positions(count: u64, nodes: usize) -> String {
+        let mut bin: Vec<u8> = [0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect();
+        for c in [0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+        bin.extend([0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()));
+        let list = vec![r#"{"mesh": 0}"#; nodes].join(", ");
+        let roots: Vec<String> = (0..nodes).map(|i| i.to_string()).collect();
+        format!(
+            r#"{{"asset": {{"version": "2.0"}}, "scene": 0,
+               "scenes": [{{"nodes": [{roots}]}}], "nodes": [{list}],
+               "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+               "buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,{data}"}}],
+               "bufferViews": [{{"buffer": 0, "byteLength": 12}},
+                               {{"buffer": 0, "byteOffset": 12, "byteLength": 36}},
+                               {{"buffer": 0, "byteOffset": 48, "byteLength": 12}}],
+               "accessors": [{{"componentType": 5126, "count": {count}, "type": "VEC3",
+                               "min": [0, 0, 0], "max": [1, 1, 0],
+                               "sparse": {{"count": 3,
+                                           "indices": {{"bufferView": 0, "componentType": 5125}},
+                                           "values": {{"bufferView": 1}}}}}},
+                             {{"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}}]}}"#,
+            roots = roots.join(", "),
+            data = base64(&bin),
+        )
+    }
+
     fn load(p: &Path, dir: &Path) -> Result<GltfFile, SceneError> {
         load_gltf(
             p,
@@ -1238,23 +1482,7 @@ mod tests {
         assert_eq!(f.nodes[0].triangles[0][2], DVec3::Y);
 
         let mut d = Doc::tri();
-        let b64 = {
-            const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-            let mut s = String::new();
-            for c in d.bin().chunks(3) {
-                let n = c
-                    .iter()
-                    .enumerate()
-                    .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
-                for k in 0..=c.len() {
-                    s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-                }
-            }
-            while !s.len().is_multiple_of(4) {
-                s.push('=');
-            }
-            s
-        };
+        let b64 = base64(&d.bin());
         d.uri = Some(format!("data:application/octet-stream;base64,{b64}"));
         let p = dir.path().join("embedded.gltf");
         std::fs::write(&p, d.json()).unwrap();
@@ -1413,5 +1641,151 @@ mod tests {
         assert!(e.contains("orthographic"), "{e}");
         let e = get(CameraRequest::Named("nope")).unwrap_err().to_string();
         assert!(e.contains("no camera node or camera named \"nope\""), "{e}");
+    }
+
+    #[test]
+    fn accessor_indices_past_the_end_are_an_error_not_a_panic() {
+        // The crate's validation indexed POSITION's accessor unchecked and panicked.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path();
+        let d = Doc::tri();
+        std::fs::write(path.join("m.bin"), d.bin()).unwrap();
+        let cases = [
+            (
+                r#""POSITION": 1}"#,
+                r#""POSITION": 9}"#,
+                "attributes.POSITION: accessor 9",
+            ),
+            (
+                r#""POSITION": 1}"#,
+                r#""POSITION": 1, "NORMAL": 8}"#,
+                "attributes.NORMAL: accessor 8",
+            ),
+            (r#""indices": 0"#, r#""indices": 5"#, "indices: accessor 5"),
+            (
+                r#""mode": 4"#,
+                r#""mode": 4, "targets": [{"NORMAL": 0}, {"POSITION": 7}]"#,
+                "targets[1].POSITION: accessor 7",
+            ),
+        ];
+        let p = path.join("bad.gltf");
+        for (from, to, want) in cases {
+            let json = d.json().replacen(from, to, 1);
+            assert_ne!(json, d.json());
+            std::fs::write(&p, json).unwrap();
+            let e = load_err(&p, path);
+            let want = format!(
+                "invalid glTF: meshes[0].primitives[0].{want} does not exist (the file has 2 accessors)"
+            );
+            assert!(e.contains(&want), "{e}");
+        }
+    }
+
+    #[test]
+    fn many_named_nodes_sharing_a_mesh_load_in_linear_time() {
+        // Comparing every pair of names took 6-9 s for 20,000 nodes (and hung
+        // on 80,000): at 60,000 that is over a minute, against a few hundredths
+        // of a second now. The bound below is a hang guard, not a speed claim.
+        let dir = tempfile::tempdir().unwrap();
+        let n = 60_000;
+        let mut d = Doc::tri();
+        let nodes: Vec<String> = (0..n)
+            .map(|i| {
+                let name = if i < 2 {
+                    "twin".into()
+                } else {
+                    format!("n{i}")
+                };
+                format!(r#"{{"mesh": 0, "name": "{name}"}}"#)
+            })
+            .collect();
+        d.nodes = format!("[{}]", nodes.join(", "));
+        d.roots = format!("{:?}", (0..n).collect::<Vec<_>>());
+        let p = d.write(dir.path());
+        let start = std::time::Instant::now();
+        let f = load(&p, dir.path()).unwrap();
+        let took = start.elapsed();
+        let labels: Vec<&str> = f.nodes.iter().map(|n| n.label.as_str()).collect();
+        assert_eq!(labels[..3], ["twin#0", "twin#1", "n2"]);
+        assert_eq!(labels.len(), n);
+        assert!(took < std::time::Duration::from_secs(5), "took {took:?}");
+    }
+
+    #[test]
+    fn vertices_no_triangle_can_use_are_refused_before_they_are_read() {
+        // One triangle over 10 million zero vertices made from nothing (a
+        // sparse accessor without a bufferView) was read whole: 360 MB; the
+        // probe's 89 million, 3 GB.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("z.gltf");
+        let most = 3 + MAX_UNREFERENCED_VERTICES;
+        std::fs::write(&p, sparse_positions(most, 1)).unwrap();
+        let f = load(&p, dir.path()).unwrap();
+        assert_eq!(
+            f.nodes[0].triangles,
+            vec![[DVec3::ZERO, DVec3::X, DVec3::Y]]
+        );
+        for count in [most + 1, 10_000_000] {
+            std::fs::write(&p, sparse_positions(count, 1)).unwrap();
+            let e = load_err(&p, dir.path());
+            let want = format!(
+                "accessor 0 (POSITION) has {count} vertices, but the file's triangles refer to at most 3"
+            );
+            assert!(e.contains(&want), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_mesh_used_by_many_nodes_is_read_once() {
+        // 100,000 nodes over one mesh of 65,539 vertices: read per node, that
+        // was 6.6 billion vertices (20,000 nodes took 4.3 s), against a few
+        // hundredths of a second now. The bound below is a hang guard.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("z.gltf");
+        let n = 100_000;
+        std::fs::write(&p, sparse_positions(3 + MAX_UNREFERENCED_VERTICES, n)).unwrap();
+        let start = std::time::Instant::now();
+        let f = load(&p, dir.path()).unwrap();
+        let took = start.elapsed();
+        assert_eq!(f.nodes.len(), n);
+        let tri = vec![[DVec3::ZERO, DVec3::X, DVec3::Y]];
+        assert!(f.nodes.iter().all(|node| node.triangles == tri));
+        assert!(took < std::time::Duration::from_secs(5), "took {took:?}");
+    }
+
+    #[test]
+    fn mesh_nodes_without_triangles_are_refused_like_an_obj_without_faces() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path();
+        let obj = path.join("e.obj");
+        std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+        let want = super::super::obj::load_obj(&obj, "objects[0].mesh", MAX_SCENE_TRIANGLES)
+            .unwrap_err()
+            .problem;
+        assert_eq!(want, super::super::NO_FACES);
+        let d = Doc::tri();
+        let prim = r#"{"attributes": {"POSITION": 1}, "indices": 0, "mode": 4}"#;
+        let cases = [
+            (prim, ""),
+            (
+                r#""componentType": 5123, "count": 3"#,
+                r#""componentType": 5123, "count": 0"#,
+            ),
+        ];
+        let p = path.join("e.gltf");
+        std::fs::write(path.join("m.bin"), d.bin()).unwrap();
+        for (from, to) in cases {
+            let json = d.json().replacen(from, to, 1);
+            assert_ne!(json, d.json());
+            std::fs::write(&p, json).unwrap();
+            let e = load(&p, path).expect_err("loaded");
+            assert_eq!(e.problem, want, "{e}");
+            assert!(load_err(&p, path).ends_with(&format!("objects[0].mesh: {want}")));
+        }
+        // A strip of two vertex references makes no triangle either.
+        let mut d = Doc::tri();
+        d.indices = Some(vec![0, 1]);
+        d.mode = 5;
+        assert!(load_err(&d.write(path), path).ends_with(&want));
     }
 }

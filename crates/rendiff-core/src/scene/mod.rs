@@ -447,6 +447,12 @@ pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
 /// top), so one mesh at this limit needs about 2 to 3 GiB before resolution.
 pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
 
+/// The problem for a mesh file that makes no triangle (an OBJ file without
+/// faces, a glTF file whose mesh nodes have no triangle primitive): the
+/// object would be empty, a mistake in the scene whatever the format, so
+/// both formats say it alike.
+pub const NO_FACES: &str = "mesh has no faces: it makes no triangles";
+
 /// Checks an image size against [`MAX_IMAGE_SIDE`] and [`MAX_IMAGE_PIXELS`]
 /// (scene files, and generated scenes such as `bench crossover`'s grid).
 pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {

@@ -14,13 +14,22 @@ use std::path::{Component, Path, PathBuf};
 
 /// Resolves `rel` against `scene_dir` and refuses anything that leaves the folder
 /// (absolute paths, `..`, or symlinks pointing outside), so a scene cannot read
-/// arbitrary files through a renderer.
+/// arbitrary files through a renderer. An empty path and a folder (`"."`,
+/// `"meshes/"`) are refused here, naming the scene file and its field: the
+/// mesh reader would name only the folder the path resolves to.
 pub fn confined_path(
     scene_file: &Path,
     scene_dir: &Path,
     rel: &str,
     field: &str,
 ) -> Result<PathBuf, SceneError> {
+    if rel.is_empty() {
+        return Err(SceneError::new(
+            scene_file,
+            field,
+            "mesh path is empty: name an OBJ or glTF file inside the scene's folder",
+        ));
+    }
     let p = Path::new(rel);
     if p.is_absolute() || p.components().any(|c| matches!(c, Component::Prefix(_))) {
         return Err(SceneError::new(
@@ -55,6 +64,13 @@ pub fn confined_path(
                 "mesh path {rel:?} points outside the scene's folder {}",
                 dir.display()
             ),
+        ));
+    }
+    if full.is_dir() {
+        return Err(SceneError::new(
+            scene_file,
+            field,
+            format!("mesh path {rel:?} is a folder, not a file"),
         ));
     }
     Ok(full)
@@ -239,7 +255,7 @@ pub fn load_obj(mesh: &Path, field: &str, budget: u64) -> Result<Vec<ObjGroup>, 
         }
     }
     if out.is_empty() {
-        return Err(SceneError::new(mesh, field, "OBJ mesh has no faces"));
+        return Err(SceneError::new(mesh, field, super::NO_FACES));
     }
     Ok(out)
 }
@@ -248,12 +264,13 @@ pub fn load_obj(mesh: &Path, field: &str, budget: u64) -> Result<Vec<ObjGroup>, 
 mod tests {
     use super::*;
 
-    fn write_obj(name: &str, text: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("rendiff-obj-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join(format!("{name}.obj"));
+    /// `<name>.obj` in a folder of its own, removed when the returned
+    /// handle drops (a fixed folder under /tmp stayed after every run).
+    fn write_obj(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join(format!("{name}.obj"));
         std::fs::write(&p, text).unwrap();
-        p
+        (dir, p)
     }
 
     #[test]
@@ -276,7 +293,7 @@ mod tests {
             ),
         ];
         for (name, text, want) in cases {
-            let e = load_obj(&write_obj(name, text), "objects[0].mesh", u64::MAX)
+            let e = load_obj(&write_obj(name, text).1, "objects[0].mesh", u64::MAX)
                 .err()
                 .unwrap_or_else(|| panic!("{name}: loaded"))
                 .to_string();
@@ -287,7 +304,7 @@ mod tests {
 
     #[test]
     fn groups_are_kept_in_file_order() {
-        let p = write_obj(
+        let (_dir, p) = write_obj(
             "two_groups",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0 0\n\
              o first\nf 1 2 3\nf 2 4 3\n\
@@ -305,7 +322,7 @@ mod tests {
 
     #[test]
     fn a_file_without_groups_is_one_group() {
-        let p = write_obj("no_groups", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+        let (_dir, p) = write_obj("no_groups", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
         let groups = load_obj(&p, "objects[0].mesh", MAX_SCENE_TRIANGLES).unwrap();
         assert_eq!(groups.len(), 1);
         assert_eq!(groups[0].triangles.len(), 1);
@@ -313,7 +330,7 @@ mod tests {
 
     #[test]
     fn groups_without_faces_are_left_out() {
-        let p = write_obj(
+        let (_dir, p) = write_obj(
             "empty_group",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\no lines_only\nl 1 2\no tri\nf 1 2 3\n",
         );
