@@ -748,7 +748,23 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     let results = run.join("results.json");
     let clean = std::fs::read(&results).unwrap();
     type Case = (&'static str, fn(&mut Value), &'static str);
-    let cases: [Case; 5] = [
+    let cases: [Case; 7] = [
+        (
+            // The gate kept the last of two verdicts for one entry: PASS.
+            "a failing verdict followed by a passing copy",
+            |v| {
+                let copy = v["results"][1].clone();
+                v["results"][1]["status"] = "fail".into();
+                v["results"][1]["interior_mismatches"] = 50.into();
+                v["results"].as_array_mut().unwrap().push(copy);
+            },
+            "results[6]: a second verdict for scene alpha, backend trace, buffer Z (the first is results[1])",
+        ),
+        (
+            "another format",
+            |v| v["format"] = "rendiff-results/9".into(),
+            "format is \"rendiff-results/9\", expected \"rendiff-results/1\"",
+        ),
         (
             "unknown status",
             |v| v["results"][4]["status"] = "passs".into(),
@@ -806,6 +822,18 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
         &err,
         &baseline,
         "entries[2].metrics.interior_mismatches: -2 is not a count",
+    );
+    std::fs::write(&baseline, &blessed).unwrap();
+    edit_json(&baseline, |v| {
+        let copy = v["entries"][0].clone();
+        v["entries"].as_array_mut().unwrap().push(copy);
+    });
+    let (code, _, err) = gate_cli(&run, &baseline);
+    one_error_line(
+        code,
+        &err,
+        &baseline,
+        "entries[6]: a second verdict for scene",
     );
     std::fs::write(&baseline, &blessed).unwrap();
     edit_json(&baseline, |v| {

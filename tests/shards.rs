@@ -100,6 +100,34 @@ fn merged_shards_give_the_verdicts_of_one_run() {
     );
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("in two shards"));
+    assert!(!dup.exists(), "a refused merge made its output folder");
+    // ... and it leaves a good run given as its output as it was (it wrote
+    // the run's incomplete marker before it checked the shards).
+    let o = rendiff(
+        &["merge", "--quiet"],
+        &[&shard_runs[0], &shard_runs[0], Path::new("-o"), &merged],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let g = rendiff(&["report"], &[&merged]);
+    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+    // A shard whose manifest names a scene outside its scenes/ folder.
+    let hostile = t.path().join("hostile");
+    std::fs::create_dir_all(&hostile).unwrap();
+    let m = std::fs::read_to_string(shard_runs[1].join("manifest.json")).unwrap();
+    let mut m: Value = serde_json::from_str(&m).unwrap();
+    let scenes = m["scenes"].as_array_mut().unwrap();
+    let last = scenes.len() - 1;
+    scenes[last]["scene"] = "../../outside".into();
+    std::fs::write(hostile.join("manifest.json"), m.to_string()).unwrap();
+    let out = t.path().join("out");
+    let o = rendiff(&["merge", "--quiet"], &[&hostile, Path::new("-o"), &out]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("\"../../outside\" cannot name a folder"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }
 
 /// `rendiff check` from a folder outside the checkout, on the user's own

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import exrbuf, resolved, vocab
 
-MANIFEST_FORMAT = "rendiff-manifest/1"
+MANIFEST_FORMAT = vocab.MANIFEST_FORMAT
 RENDER_STATUSES = tuple(vocab.RenderStatus)
 
 

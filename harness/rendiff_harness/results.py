@@ -23,7 +23,7 @@ from typing import Any
 from . import atomic, expectations, vocab
 from .vocab import FAILING_STATUSES, Buffer, Status
 
-RESULTS_FORMAT = "rendiff-results/1"
+RESULTS_FORMAT = vocab.RESULTS_FORMAT
 
 COMMON_FIELDS = (
     "scene",

@@ -90,7 +90,15 @@ EXIT_SKIPPED = 3
 every command renderer (docs/your-renderer.md)."""
 
 
-def as_json() -> dict[str, list[str] | int]:
+MANIFEST_FORMAT = "rendiff-manifest/1"
+"""Format tag of a run's manifest.json (Rust's `vocab::MANIFEST_FORMAT`)."""
+
+RESULTS_FORMAT = "rendiff-results/1"
+"""Format tag of a run's results.json (Rust's `vocab::RESULTS_FORMAT`): gate, bless and report
+refuse any other."""
+
+
+def as_json() -> dict[str, list[str] | int | str]:
     """The vocabulary in the shape of ``rendiff vocab --json``."""
     return {
         "features": [f.value for f in Feature],
@@ -102,4 +110,6 @@ def as_json() -> dict[str, list[str] | int]:
         "buffers": [b.value for b in Buffer],
         "mismatch_classes": [c.value for c in MismatchClass],
         "exit_skipped": EXIT_SKIPPED,
+        "manifest_format": MANIFEST_FORMAT,
+        "results_format": RESULTS_FORMAT,
     }

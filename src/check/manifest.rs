@@ -9,8 +9,7 @@ use serde::{Deserialize, Serialize};
 /// refuse such a folder (`run_folder::ensure_complete`).
 pub const INCOMPLETE_MARKER: &str = "INCOMPLETE";
 
-/// Format tag of manifest.json.
-pub const MANIFEST_FORMAT: &str = "rendiff-manifest/1";
+pub use crate::vocab::{MANIFEST_FORMAT, RESULTS_FORMAT};
 
 /// Largest run record (manifest.json, results.json, a baseline) rendiff
 /// reads: 256 MiB. The main job's 520 entries make a 0.7 MiB results.json

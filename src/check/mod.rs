@@ -321,12 +321,23 @@ pub(crate) fn stem(path: &Path) -> String {
         .unwrap_or_else(|| "scene".into())
 }
 
+/// A scene name that can be its run folder `scenes/<name>/`: one plain path
+/// component (checked for names from files too: `merge` reads them from
+/// shards' manifests, where `../../x` would name a folder outside the run).
+pub(crate) fn is_folder_name(name: &str) -> bool {
+    let mut parts = Path::new(name).components();
+    matches!(
+        (parts.next(), parts.next()),
+        (Some(std::path::Component::Normal(n)), None) if n == std::ffi::OsStr::new(name)
+    )
+}
+
 /// [`stem`], refused where it cannot name a folder of its own: a file
 /// `...toml` has the stem `..`, and its outputs landed in the run's root,
 /// beside (and over) the run's own files; `..toml` wrote into `RUN/scenes/`.
 fn scene_name(path: &Path) -> Result<String> {
     let name = stem(path);
-    if name.is_empty() || name == "." || name == ".." {
+    if !is_folder_name(&name) {
         bail!(
             "{}: a scene file's name without .toml names its run folder RUN/scenes/<name>/, and {name:?} cannot (rename the file)",
             path.display()

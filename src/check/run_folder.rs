@@ -81,6 +81,13 @@ fn sweep_abandoned(run_dir: &Path) {
         format!(".{}.partial-", name.to_string_lossy()),
         format!(".{}.old-", name.to_string_lossy()),
     ];
+    remove_abandoned(parent, &prefixes);
+}
+
+/// Removes the folders in `parent` named `<prefix><pid>` whose process no
+/// longer runs: what a rendiff killed outright (or interrupted while another
+/// thread still wrote there) left of its temporary folders.
+pub(crate) fn remove_abandoned(parent: &Path, prefixes: &[String]) {
     let Ok(list) = std::fs::read_dir(parent) else {
         return;
     };
@@ -157,19 +164,34 @@ impl Drop for Staging {
     }
 }
 
+/// Most of a marker's text that is read: check writes one line naming its
+/// process; a marker is never read whole (a 1.3 MB one was quoted whole).
+const MARKER_READ_BYTES: u64 = 4096;
+
 /// Refuses a run folder whose run did not finish (`INCOMPLETE` present): what
-/// `gate`, `report` and `bless` call before reading anything.
+/// `gate`, `report` and `bless` call before reading anything. Any entry by
+/// that name marks the run, whatever it is (a dangling symlink passed as no
+/// marker); only a regular file's first bytes are read, never through a
+/// link: a FIFO there blocked every reader, `/dev/zero` ran them out of memory.
 pub fn ensure_complete(run_dir: &Path) -> Result<()> {
     let marker = run_dir.join(INCOMPLETE_MARKER);
-    if marker.exists() {
-        let why = std::fs::read_to_string(&marker).unwrap_or_default();
-        bail!(
-            "{}: incomplete run ({}); its verdicts are not trustworthy: run rendiff check again",
-            run_dir.display(),
-            crate::scene::printable(why.trim(), 200)
-        );
-    }
-    Ok(())
+    let Ok(meta) = std::fs::symlink_metadata(&marker) else {
+        return Ok(());
+    };
+    let why = if meta.is_file() {
+        use std::io::Read;
+        let mut text = String::new();
+        let _ = std::fs::File::open(&marker)
+            .map(|f| f.take(MARKER_READ_BYTES).read_to_string(&mut text));
+        text
+    } else {
+        format!("its {INCOMPLETE_MARKER} marker is not a regular file")
+    };
+    bail!(
+        "{}: incomplete run ({}); its verdicts are not trustworthy: run rendiff check again",
+        run_dir.display(),
+        crate::scene::printable(why.trim(), 200)
+    )
 }
 
 #[cfg(test)]
@@ -243,5 +265,62 @@ mod tests {
         let s = Staging::begin(&run).unwrap();
         assert!(!dead.exists());
         s.publish().unwrap();
+    }
+
+    #[test]
+    fn any_marker_marks_the_run_and_none_is_read_whole() {
+        // A FIFO (blocked every reader), a link to /dev/zero (read until the
+        // kernel killed the reader), a dangling link (read as no marker), a
+        // folder, and a marker of 1 MiB (quoted whole): each marks the run,
+        // in one short line.
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let marker = run.join(INCOMPLETE_MARKER);
+        let fifo = |p: &Path| {
+            let c = std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
+            // SAFETY: a valid NUL-terminated path.
+            assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        };
+        type Maker<'a> = (&'a str, &'a dyn Fn(&Path));
+        let makers: [Maker; 5] = [
+            ("a FIFO", &|p| fifo(p)),
+            ("/dev/zero", &|p| {
+                std::os::unix::fs::symlink("/dev/zero", p).unwrap()
+            }),
+            ("dangling", &|p| {
+                std::os::unix::fs::symlink("/no/such/file", p).unwrap()
+            }),
+            ("a folder", &|p| std::fs::create_dir(p).unwrap()),
+            ("1 MiB", &|p| {
+                std::fs::write(p, "x".repeat(1 << 20)).unwrap()
+            }),
+        ];
+        for (what, make) in makers {
+            make(&marker);
+            let err = ensure_complete(&run).unwrap_err().to_string();
+            assert!(err.contains("incomplete run"), "{what}: {err}");
+            assert!(err.len() < 600 && !err.contains('\n'), "{what}: {err}");
+            if marker.is_dir() {
+                std::fs::remove_dir(&marker).unwrap();
+            } else {
+                std::fs::remove_file(&marker).unwrap();
+            }
+        }
+        ensure_complete(&run).unwrap();
+    }
+
+    #[test]
+    fn abandoned_folders_of_dead_processes_are_removed_and_live_ones_kept() {
+        let t = tempfile::tempdir().unwrap();
+        // No process has pid 4194304 (above Linux's pid_max limit).
+        let dead = t.path().join(".report.tmp-4194304");
+        let live = t.path().join(format!(".report.tmp-{}", std::process::id()));
+        let other = t.path().join(".reporting-4194304");
+        for d in [&dead, &live, &other] {
+            std::fs::create_dir_all(d.join("img")).unwrap();
+        }
+        remove_abandoned(t.path(), &[".report.tmp-".to_string()]);
+        assert!(!dead.exists() && live.exists() && other.exists());
     }
 }

@@ -181,11 +181,19 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
             );
         }
     }
-    let staging = Staging::begin(&opts.run_dir)?;
-    let mut scenes: Vec<SceneRuns> = Vec::new();
+    // Every scene is checked before the output is touched: a refused merge
+    // left the marker in a good run given as -o.
     let mut seen: BTreeMap<String, PathBuf> = BTreeMap::new();
+    let mut taken: Vec<(&PathBuf, &SceneRuns)> = Vec::new();
     for (run, m) in &manifests {
         for s in &m.scenes {
+            if !super::is_folder_name(&s.scene) {
+                bail!(
+                    "{}: scene name {:?} cannot name a folder of the run (scenes/<name>/)",
+                    run.join("manifest.json").display(),
+                    crate::scene::printable(&s.scene, 100)
+                );
+            }
             if let Some(prev) = seen.get(&s.scene) {
                 if s.role == CALIBRATION_ROLE {
                     continue; // every shard renders the probes; one copy is kept
@@ -198,9 +206,18 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
                 );
             }
             seen.insert(s.scene.clone(), run.clone());
+            taken.push((run, s));
+        }
+    }
+    let staging = Staging::begin(&opts.run_dir)?;
+    let mut scenes: Vec<SceneRuns> = Vec::new();
+    for (run, s) in taken {
+        {
             let rel = format!("scenes/{}", s.scene);
             let from = run.join(&rel);
-            if from.is_dir() {
+            // Never through a link: a linked scene folder copied files from
+            // outside the shard into the merged run.
+            if std::fs::symlink_metadata(&from).is_ok_and(|m| m.is_dir()) {
                 copy_tree(&from, &staging.dir.join(&rel))?;
             }
             let mut s = s.clone();

@@ -49,7 +49,7 @@ pub use bless::*;
 pub use markdown::*;
 pub use policy::*;
 
-use crate::check::manifest::{Manifest, ResultEntry, Results};
+use crate::check::manifest::{Manifest, ResultEntry, Results, RESULTS_FORMAT};
 use crate::exr_io::write_atomically;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -193,14 +193,48 @@ fn verdict(e: &ResultEntry) -> std::result::Result<Verdict, String> {
 }
 
 /// Types every verdict of a results.json; the error is one line naming the
-/// first bad field, e.g. `results[12].status: unknown status "passs"`.
+/// first bad field, e.g. `results[12].status: unknown status "passs"`. A
+/// results.json of another format, or with two verdicts for one (scene,
+/// backend, buffer), is refused: the gate kept the last of two, so a failing
+/// verdict followed by a passing copy passed.
 pub fn verdicts(results: &Results) -> Result<Vec<Verdict>> {
-    results
+    if results.format != RESULTS_FORMAT {
+        bail!(
+            "format is {:?}, expected {RESULTS_FORMAT:?}",
+            crate::scene::printable(&results.format, 100)
+        );
+    }
+    let list = results
         .results
         .iter()
         .enumerate()
         .map(|(i, e)| verdict(e).map_err(|why| anyhow::anyhow!("results[{i}].{why}")))
-        .collect()
+        .collect::<Result<Vec<_>>>()?;
+    once_each(
+        list.iter().map(|v| (&v.scene, &v.backend, &v.buffer)),
+        "results",
+    )?;
+    Ok(list)
+}
+
+/// Refuses a list (`what`: results or entries) naming one (scene, backend,
+/// buffer) twice, naming both places.
+fn once_each<'a>(
+    keys: impl Iterator<Item = (&'a String, &'a String, &'a String)>,
+    what: &str,
+) -> Result<()> {
+    let mut first = std::collections::HashMap::new();
+    for (i, k) in keys.enumerate() {
+        if let Some(j) = first.insert(k, i) {
+            bail!(
+                "{what}[{i}]: a second verdict for scene {}, backend {}, buffer {} (the first is {what}[{j}])",
+                crate::scene::printable(k.0, 100),
+                crate::scene::printable(k.1, 100),
+                crate::scene::printable(k.2, 100)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Reads RUN/results.json into typed verdicts; an error names the file and the field.
@@ -316,6 +350,11 @@ pub fn load_baseline(path: &Path) -> Result<Baseline> {
             b.format
         );
     }
+    once_each(
+        b.entries.iter().map(|e| (&e.scene, &e.backend, &e.buffer)),
+        "entries",
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     Ok(b)
 }
 

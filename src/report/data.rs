@@ -3,7 +3,9 @@
 //! itself failed, and the report must still show the renders), and each scene's
 //! resolved scene.json (display name, objects), grouped per scene.
 
-use crate::check::manifest::{Manifest, RenderRecord, ResultEntry, Results, SceneRuns};
+use crate::check::manifest::{
+    Manifest, RenderRecord, ResultEntry, Results, SceneRuns, MANIFEST_FORMAT, RESULTS_FORMAT,
+};
 use anyhow::{Context, Result};
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -213,11 +215,22 @@ pub fn text<'a>(e: &'a ResultEntry, key: &str) -> &'a str {
 
 /// A path from the run's JSON, relative to the run and never leaving it (the
 /// files are the run's own; a hostile or broken entry must not make the report
-/// read elsewhere).
+/// read elsewhere): no absolute path, no `..`, and no symlink on the way
+/// inside the run (a link to /etc/hostname as a diff image was copied into
+/// the report). A path that does not exist is returned: reading it names it.
 pub fn run_relative(run: &Path, rel: &str) -> Option<PathBuf> {
     let p = Path::new(rel);
     if rel.is_empty() || !p.components().all(|c| matches!(c, Component::Normal(_))) {
         return None;
+    }
+    let mut at = run.to_path_buf();
+    for c in p.components() {
+        at.push(c);
+        match std::fs::symlink_metadata(&at) {
+            Ok(meta) if meta.file_type().is_symlink() => return None,
+            Ok(_) => {}
+            Err(_) => break,
+        }
     }
     Some(run.join(p))
 }
@@ -268,6 +281,13 @@ impl RunData {
         })?;
         let manifest: Manifest = serde_json::from_str(&mtext)
             .with_context(|| format!("{}: not a rendiff manifest", mpath.display()))?;
+        if manifest.format != MANIFEST_FORMAT {
+            anyhow::bail!(
+                "{}: format is {:?}, expected {MANIFEST_FORMAT:?}",
+                mpath.display(),
+                crate::scene::printable(&manifest.format, 100)
+            );
+        }
         let rpath = dir.join("results.json");
         let (results, results_problem) = match crate::check::manifest::read_record(&rpath) {
             Err(e) => (
@@ -278,6 +298,14 @@ impl RunData {
                 )),
             ),
             Ok(t) => match serde_json::from_str::<Results>(&t) {
+                Ok(r) if r.format != RESULTS_FORMAT => (
+                    None,
+                    Some(format!(
+                        "{}: format is {:?}, expected {RESULTS_FORMAT:?}: verdicts not shown",
+                        rpath.display(),
+                        crate::scene::printable(&r.format, 100)
+                    )),
+                ),
                 Ok(r) => (Some(r), None),
                 Err(e) => (None, Some(format!("{}: unreadable: {e}", rpath.display()))),
             },
@@ -436,5 +464,21 @@ mod tests {
         assert_eq!(run_relative(run, "../x"), None);
         assert_eq!(run_relative(run, "/etc/passwd"), None);
         assert_eq!(run_relative(run, ""), None);
+    }
+
+    #[test]
+    fn run_paths_never_go_through_a_symlink() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path();
+        std::fs::create_dir_all(run.join("scenes/a")).unwrap();
+        std::fs::write(run.join("scenes/a/real.png"), "png").unwrap();
+        std::os::unix::fs::symlink("/etc/hostname", run.join("scenes/a/link.png")).unwrap();
+        std::os::unix::fs::symlink(run.join("scenes/a"), run.join("scenes/b")).unwrap();
+        let real = run_relative(run, "scenes/a/real.png");
+        assert_eq!(real, Some(run.join("scenes/a/real.png")));
+        assert_eq!(run_relative(run, "scenes/a/link.png"), None);
+        assert_eq!(run_relative(run, "scenes/b/real.png"), None);
+        // Missing: returned, so that reading it says what is missing.
+        assert!(run_relative(run, "scenes/a/none.png").is_some());
     }
 }

@@ -137,6 +137,22 @@ fn depth_diff_colors(r: &[f32], t: &[f32]) -> Vec<[u8; 3]> {
         .collect()
 }
 
+/// Largest diff image copied into a report: a PNG of the largest image
+/// rendiff renders (16384 x 16384 pixels, 3 bytes each, uncompressed) fits.
+const MAX_DIFF_IMAGE_BYTES: u64 = 1 << 30;
+
+/// Copies a diff image the comparison wrote, only if it is a regular file
+/// within [`MAX_DIFF_IMAGE_BYTES`] (`std::fs::copy` on a FIFO there blocked
+/// the report forever).
+fn copy_regular(src: &Path, dst: &Path) -> std::result::Result<(), String> {
+    use std::io::Read;
+    let (file, _) = crate::scene::open_regular_file(src, MAX_DIFF_IMAGE_BYTES)?;
+    let mut out = std::fs::File::create(dst).map_err(|e| format!("cannot be written: {e}"))?;
+    std::io::copy(&mut file.take(MAX_DIFF_IMAGE_BYTES), &mut out)
+        .map(|_| ())
+        .map_err(|e| format!("cannot be copied: {e}"))
+}
+
 /// Draws and measures everything for one scene into `report_dir/img/<page>/`.
 pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) -> SceneImages {
     let mut out = SceneImages::default();
@@ -157,7 +173,7 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
         }
         let Some(path) = run_relative(run, &rec.exr) else {
             out.notes.push(format!(
-                "{backend}: buffer path {:?} leaves the run folder; not shown",
+                "{backend}: buffer path {:?} leaves the run folder (absolute, `..` or through a symlink); not shown",
                 rec.exr
             ));
             continue;
@@ -298,7 +314,7 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
                 };
                 let name = format!("{}.{}.diff", page_stem(&e.buffer), page_stem(key));
                 let file = format!("{rel_dir}/{}.{name}.png", page_stem(&l.backend));
-                match std::fs::copy(&src, report_dir.join(&file)) {
+                match copy_regular(&src, &report_dir.join(&file)) {
                     Err(err) => out.notes.push(format!(
                         "{}: diff image {} not copied: {err}",
                         l.backend,
@@ -360,6 +376,25 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn diff_images_are_copied_from_regular_files_only() {
+        // A FIFO as a diff image blocked the report forever (std::fs::copy
+        // waits for a writer); a device is refused the same way.
+        let t = tempfile::tempdir().unwrap();
+        let (src, dst) = (t.path().join("a.png"), t.path().join("b.png"));
+        std::fs::write(&src, "png bytes").unwrap();
+        copy_regular(&src, &dst).unwrap();
+        assert_eq!(std::fs::read(&dst).unwrap(), b"png bytes");
+        let fifo = t.path().join("fifo.png");
+        let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let e = copy_regular(&fifo, &t.path().join("c.png")).unwrap_err();
+        assert!(e.contains("FIFO"), "{e}");
+        let e = copy_regular(Path::new("/dev/zero"), &t.path().join("d.png")).unwrap_err();
+        assert!(e.contains("not a regular file"), "{e}");
+    }
 
     #[test]
     fn depth_colors_share_a_range_and_count_clamps() {

@@ -35,6 +35,12 @@ pub fn scene_page_path(scene: &str) -> String {
 /// a half-written report.
 pub fn write(run: &Path) -> Result<PathBuf> {
     let data = data::RunData::load(run)?;
+    // A report interrupted while it wrote images could leave its folder
+    // (a writer recreated it after the signal handler removed it).
+    crate::check::run_folder::remove_abandoned(
+        run,
+        &[format!(".{REPORT_DIR}.tmp-"), format!(".{REPORT_DIR}.old-")],
+    );
     let tmp = run.join(format!(".{REPORT_DIR}.tmp-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
     let _pending = crate::shutdown::track_path(&tmp);

@@ -178,6 +178,14 @@ words! {
 /// speak it.
 pub const EXIT_SKIPPED: i32 = 3;
 
+/// Format tag of a run's manifest.json (written by `check` and `merge`, read
+/// by the harness's comparison and by `merge`).
+pub const MANIFEST_FORMAT: &str = "rendiff-manifest/1";
+
+/// Format tag of a run's results.json (written by the harness's comparison,
+/// read by `gate`, `bless` and `report`, which refuse any other).
+pub const RESULTS_FORMAT: &str = "rendiff-results/1";
+
 /// The whole vocabulary as JSON (`rendiff vocab --json`), for the harness's
 /// drift test.
 pub fn json() -> serde_json::Value {
@@ -192,6 +200,8 @@ pub fn json() -> serde_json::Value {
         "buffers": Buffer::names(),
         "mismatch_classes": MismatchClass::names(),
         "exit_skipped": EXIT_SKIPPED,
+        "manifest_format": MANIFEST_FORMAT,
+        "results_format": RESULTS_FORMAT,
     })
 }
 
