@@ -33,14 +33,39 @@ pub fn metadata(scene: &ResolvedScene) -> serde_json::Value {
         "materials": scene.materials,
         "lights": scene.lights,
         "integrator": scene.integrator,
-        "files": {"triangles": "triangles.f32", "object_ids": "object_ids.u32"},
+        "files": {"triangles": FILES[0], "object_ids": FILES[1]},
     })
 }
 
-/// Writes `scene.json`, `triangles.f32` and `object_ids.u32` into `dir` (each atomically).
+/// The files of an export, in the order they are written: `scene.json`
+/// last, as its presence says the other two are complete.
+const FILES: [&str; 3] = ["triangles.f32", "object_ids.u32", "scene.json"];
+
+/// Writes `scene.json`, `triangles.f32` and `object_ids.u32` into `dir` (each
+/// atomically). Every path is checked before anything is written (a FIFO or
+/// folder in place of the last file left the new triangles beside the old
+/// scene), and an earlier export's `scene.json` is removed first: an export
+/// into a folder holding another scene's files that fails or is interrupted
+/// leaves no scene.json, so the folder reads as incomplete, never as the old
+/// scene over the new triangles.
 pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
+    for f in FILES {
+        crate::exr_io::check_output(&dir.join(f))?;
+    }
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let tri_path = dir.join("triangles.f32");
+    let meta_path = dir.join(FILES[2]);
+    match std::fs::remove_file(&meta_path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(e).with_context(|| {
+                format!(
+                    "{}: cannot remove the earlier export's",
+                    meta_path.display()
+                )
+            });
+        }
+        _ => {}
+    }
+    let tri_path = dir.join(FILES[0]);
     write_atomically(&tri_path, |tmp| {
         let mut f = std::io::BufWriter::new(std::fs::File::create(tmp)?);
         for t in &scene.triangles {
@@ -53,7 +78,7 @@ pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
         f.flush()?;
         Ok(())
     })?;
-    write_atomically(&dir.join("object_ids.u32"), |tmp| {
+    write_atomically(&dir.join(FILES[1]), |tmp| {
         let bytes: Vec<u8> = scene
             .object_ids
             .iter()
@@ -62,9 +87,64 @@ pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
         std::fs::write(tmp, bytes)?;
         Ok(())
     })?;
-    // scene.json last: its presence means the other two are complete.
-    write_atomically(&dir.join("scene.json"), |tmp| {
+    write_atomically(&meta_path, |tmp| {
         std::fs::write(tmp, serde_json::to_vec_pretty(&metadata(scene))?)?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene(name: &str) -> ResolvedScene {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenes/{name}.toml"));
+        ResolvedScene::resolve(&super::super::Scene::load(&path).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn a_failed_export_never_leaves_another_scene_readable() {
+        let t = tempfile::tempdir().unwrap();
+        let dir = t.path().join("out");
+        let (a, b) = (scene("three_triangles"), scene("icosphere"));
+        export(&a, &dir).unwrap();
+        let before: Vec<Vec<u8>> = FILES
+            .iter()
+            .map(|f| std::fs::read(dir.join(f)).unwrap())
+            .collect();
+
+        // A folder where a later file goes: refused before anything is written.
+        std::fs::remove_file(dir.join(FILES[1])).unwrap();
+        std::fs::create_dir(dir.join(FILES[1])).unwrap();
+        let e = export(&b, &dir).unwrap_err().to_string();
+        assert!(e.contains("object_ids.u32") && e.contains("folder"), "{e}");
+        for i in [0, 2] {
+            assert_eq!(
+                std::fs::read(dir.join(FILES[i])).unwrap(),
+                before[i],
+                "{}",
+                FILES[i]
+            );
+        }
+        std::fs::remove_dir(dir.join(FILES[1])).unwrap();
+        std::fs::write(dir.join(FILES[1]), &before[1]).unwrap();
+
+        // A write that fails midway (the object ids' temporary file cannot be
+        // made): the new triangles are in, so the old scene.json must be gone.
+        let tmp = dir.join(format!(".{}.tmp-{}", FILES[1], std::process::id()));
+        std::fs::create_dir(&tmp).unwrap();
+        assert!(export(&b, &dir).is_err());
+        assert_ne!(
+            std::fs::read(dir.join(FILES[0])).unwrap(),
+            before[0],
+            "triangles were replaced"
+        );
+        assert!(
+            !dir.join(FILES[2]).exists(),
+            "the old scene.json describes other triangles"
+        );
+        std::fs::remove_dir(&tmp).unwrap();
+        export(&b, &dir).unwrap();
+        assert!(dir.join(FILES[2]).is_file());
+    }
 }
