@@ -882,6 +882,38 @@ fn expectations_files_are_checked_before_anything_starts() {
     }
 }
 
+/// An expectation that matches no verdict (a typo in a backend's name: a
+/// trailing space) used to pass in silence; check now shows the comparison's
+/// note naming it.
+#[test]
+fn expectations_that_match_nothing_are_shown() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("exp.toml");
+    std::fs::write(
+        &file,
+        "[[expect]]\nscene = \"three_triangles\"\nbackend = \"trace \"\nbuffer = \"id\"\n\
+         status = \"expected_fail\"\nreason = \"a typo\"\n",
+    )
+    .unwrap();
+    let out = dir.path().join("run");
+    let res = output_within(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "--only", "trace"])
+            .args(["--no-calibration", "-o"])
+            .arg(&out)
+            .arg("--expectations")
+            .arg(&file),
+        300,
+    );
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert_eq!(res.status.code(), Some(0), "{err}");
+    let note = err
+        .lines()
+        .find(|l| l.starts_with("note: expectations matched by no compared result"))
+        .unwrap_or_else(|| panic!("no note in: {err}"));
+    assert!(note.contains("three_triangles/trace /id"), "{note}");
+}
+
 /// `rendiff diff` (and every EXR rendiff reads) opens regular files only: a
 /// FIFO used to block the reader, which opened it waiting for a writer.
 #[test]

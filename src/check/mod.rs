@@ -1022,8 +1022,16 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<(Results, String)> {
         .with_context(|| format!("{}: comparison wrote no results", results_path.display()))?;
     let results = serde_json::from_str(&text)
         .with_context(|| format!("{}: unreadable", results_path.display()))?;
+    // The comparison's notes (expectations that matched no verdict: a typo
+    // in a backend's name passed silently), in its own words.
+    for line in o.stderr.lines().filter(|l| l.starts_with(COMPARE_NOTE)) {
+        say(opts, crate::scene::printable(line, 2000));
+    }
     Ok((results, o.stdout))
 }
+
+/// How the comparison begins a line meant for the user (`compare.py`).
+const COMPARE_NOTE: &str = "note: ";
 
 /// The run's scenes in order, each with its manifest `role`: the calibration
 /// probes first (`CALIBRATION_ROLE`), then `opts.scenes`. A file named twice
