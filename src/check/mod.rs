@@ -219,9 +219,23 @@ struct HarnessBackend {
     reason: Option<String>,
 }
 
-/// How the harness begins the one line of an expected failure
-/// (`rendiff_harness/__main__.py`, `_fail`).
-const HARNESS_REFUSAL: &str = "rendiff_harness: ";
+/// How the harness begins the one line of an expected failure: its commands
+/// (`rendiff_harness/__main__.py`, `_fail`) and its comparison (`compare.py`).
+const HARNESS_REFUSALS: [&str; 2] = ["rendiff_harness: ", "rendiff_harness compare: "];
+
+/// The harness's own one-line refusal (a malformed renderers or expectations
+/// file, which it names), when that is all its stderr says; None for a
+/// harness that could not run at all (a traceback, a missing module).
+fn harness_refusal(stderr: &str) -> Option<String> {
+    let text = stderr.trim();
+    if text.contains('\n') {
+        return None;
+    }
+    HARNESS_REFUSALS
+        .iter()
+        .find_map(|p| text.strip_prefix(p))
+        .map(|m| crate::scene::printable(m, 2000))
+}
 
 /// Asks the Python harness which backends it has. An error here means the harness
 /// itself is not installed; the message says how to fix it.
@@ -239,17 +253,10 @@ fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBa
     let o = run_with_timeout(cmd, Duration::from_secs(120), scratch)
         .map_err(|e| format!("cannot run the Python harness: {e:#}"))?;
     if o.code != Some(0) {
-        let tail = o.stderr_tail(5);
-        // The harness's own one-line refusal (a malformed renderers file,
-        // which it names): shown as it is. "Failed to start; run setup" is for
-        // a harness that could not run at all (a traceback, a missing module).
-        if let Some(refusal) = tail
-            .trim()
-            .strip_prefix(HARNESS_REFUSAL)
-            .filter(|m| !m.contains('\n'))
-        {
-            return Err(refusal.to_string());
+        if let Some(refusal) = harness_refusal(&o.stderr) {
+            return Err(refusal);
         }
+        let tail = o.stderr_tail(5);
         return Err(format!(
             "the Python harness failed to start ({}): {tail}; run scripts/setup.sh",
             o.how(),
@@ -1012,6 +1019,9 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<(Results, String)> {
     let o = run_with_timeout(cmd, Duration::from_secs(1800), &scratch.join("compare"))
         .context("cannot run the comparison (python -m rendiff_harness compare)")?;
     if o.timed_out || o.code != Some(0) {
+        if let Some(refusal) = harness_refusal(&o.stderr).filter(|_| !o.timed_out) {
+            bail!("the comparison refused the run: {refusal}");
+        }
         bail!(
             "the comparison failed ({}): {}\nrun scripts/setup.sh if the Python harness is missing",
             o.how(),
