@@ -6,12 +6,14 @@
 //! [`scene`] reads the resolved scene folder, [`camera`] turns the exported
 //! camera into a view-projection matrix, [`gpu`] draws and reads back,
 //! [`output`] writes the EXR, and [`precision`] derives how far this
-//! renderer may legitimately differ from rendiff's exact core.
+//! renderer may legitimately differ from rendiff's exact core; [`pending`]
+//! removes the temporary paths when the process is interrupted.
 
 #![deny(missing_docs)]
 
 pub mod camera;
 pub mod gpu;
 pub mod output;
+pub mod pending;
 pub mod precision;
 pub mod scene;

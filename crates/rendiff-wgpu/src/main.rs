@@ -4,11 +4,14 @@
 //!
 //! Exit status: 0 written; 3 skipped (no Vulkan adapter: one line
 //! "no Vulkan adapter: <reason>" on stderr); 1 any other failure (one line
-//! naming the file and the problem). Never a panic.
+//! naming the file and the problem; bad input, including special files such
+//! as FIFOs and devices, is refused before any adapter is looked for). Never
+//! a panic, never a hang on an input. Interrupted (SIGINT, SIGTERM, SIGHUP),
+//! it removes its temporary files and folders and dies by that signal.
 
 use clap::Parser;
 use rendiff_wgpu::gpu::{self, RenderError};
-use rendiff_wgpu::{camera, output, precision, scene};
+use rendiff_wgpu::{camera, output, pending, precision, scene};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,6 +33,9 @@ struct Args {
     /// Draw at most this many triangles per draw call (testing the split draws).
     #[arg(long, hide = true)]
     chunk_triangles: Option<usize>,
+    /// Wait this many milliseconds (at most 60,000) before reading the scene (testing the clean-up on signals).
+    #[arg(long, hide = true)]
+    pause_ms: Option<u64>,
 }
 
 /// Exit status for "skipped" in rendiff's command protocol.
@@ -37,6 +43,8 @@ const EXIT_SKIPPED: u8 = 3;
 
 fn run(args: &Args) -> Result<(), RenderError> {
     let t0 = std::time::Instant::now();
+    // Bad input is refused before the (slow) adapter selection.
+    output::check_output(&args.out)?;
     let scene = scene::load(&args.scene)?;
     // GPU failures name the scene folder they were rendering.
     let buffers = gpu::render(&scene, args.chunk_triangles).map_err(|e| match e {
@@ -84,8 +92,9 @@ fn run(args: &Args) -> Result<(), RenderError> {
 /// Mesa's Vulkan WSI prints "error: XDG_RUNTIME_DIR is invalid or not set"
 /// for every instance when that variable is unset (as under CI and rendiff's
 /// runner), which would break the one-line stderr protocol. Point it at a
-/// fresh private folder for this process only; removed on drop.
-struct QuietWsi(Option<PathBuf>);
+/// fresh private folder for this process only; removed on drop, or by the
+/// signal handler ([`pending`]) if the process is interrupted.
+struct QuietWsi(Option<(PathBuf, pending::PathGuard)>);
 
 impl QuietWsi {
     fn new() -> QuietWsi {
@@ -106,15 +115,18 @@ impl QuietWsi {
         if !made {
             return QuietWsi(None);
         }
+        // Registered once made (never someone else's folder of this name); a
+        // signal arriving in between waits for the watcher, started later.
+        let guard = pending::track_path(&dir);
         // Edition 2021: safe; nothing else runs yet (no threads started).
         std::env::set_var("XDG_RUNTIME_DIR", &dir);
-        QuietWsi(Some(dir))
+        QuietWsi(Some((dir, guard)))
     }
 }
 
 impl Drop for QuietWsi {
     fn drop(&mut self) {
-        if let Some(dir) = &self.0 {
+        if let Some((dir, _guard)) = &self.0 {
             let _ = std::fs::remove_dir_all(dir);
         }
     }
@@ -122,7 +134,17 @@ impl Drop for QuietWsi {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // Hooked before the folder exists, watched once the environment is set
+    // (set_var must come before any thread starts). A failure to hook leaves
+    // the default behaviour, which is no reason to refuse the render.
+    let signals = pending::Signals::hook();
     let _wsi = QuietWsi::new();
+    if let Ok(signals) = signals {
+        let _ = signals.watch();
+    }
+    if let Some(ms) = args.pause_ms {
+        std::thread::sleep(std::time::Duration::from_millis(ms.min(60_000)));
+    }
     // wgpu and the driver may panic on conditions they consider bugs; report
     // them as one line and exit 1, never with a backtrace.
     std::panic::set_hook(Box::new(|_| {}));

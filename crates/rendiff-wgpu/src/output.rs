@@ -2,18 +2,42 @@
 //! (f32), `id.prim` and `id.object` (u32), scanline, ZIP, plus `rendiff:*`
 //! text attributes; written to a temporary name in the output folder and
 //! renamed into place only when complete, so a reader never sees half a file.
+//! Only a regular file (or nothing) is ever replaced ([`check_output`]).
 
 use crate::gpu::Buffers;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use exr::prelude::*;
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::path::Path;
 
 /// Prefix of rendiff's EXR header attributes.
 pub const ATTR_PREFIX: &str = "rendiff:";
 
+/// Refuses an output path that is a folder, device, FIFO or socket: the
+/// rename that puts the result in place would replace the node itself (a
+/// FIFO or `/dev/null` swapped for a file). A link is not followed (the
+/// rename replaces the link). `main` calls it before rendering, so that the
+/// refusal comes first; [`write_exr`] again before it writes.
+pub fn check_output(path: &Path) -> Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    if meta.file_type().is_symlink() {
+        return Ok(());
+    }
+    match crate::scene::special_kind(&meta.file_type()) {
+        Some(kind) => bail!(
+            "{}: {kind}; the output must be a regular file: choose another output",
+            path.display()
+        ),
+        None => Ok(()),
+    }
+}
+
 /// Writes `buffers` to `path` with `attrs` as `rendiff:<key>` attributes.
 pub fn write_exr(path: &Path, buffers: &Buffers, attrs: &BTreeMap<String, String>) -> Result<()> {
+    check_output(path)?;
     let size = (buffers.width as usize, buffers.height as usize);
     let channels = SmallVec::from_vec(vec![
         AnyChannel::new("Z", FlatSamples::F32(buffers.z.clone())),
@@ -49,10 +73,18 @@ pub fn write_exr(path: &Path, buffers: &Buffers, attrs: &BTreeMap<String, String
         name.to_string_lossy(),
         std::process::id()
     ));
-    let result = image
-        .write()
-        .to_file(&tmp)
-        .map_err(|e| anyhow::anyhow!("{}: cannot write EXR: {e}", tmp.display()))
+    // Removed by the signal handler if the process is interrupted mid-write.
+    let _pending = crate::pending::track_path(&tmp);
+    let result = create_new(&tmp)
+        .and_then(|file| {
+            let mut w = std::io::BufWriter::new(file);
+            image
+                .write()
+                .to_buffered(&mut w)
+                .map_err(|e| anyhow::anyhow!("{}: cannot write EXR: {e}", tmp.display()))?;
+            w.flush()
+                .with_context(|| format!("{}: cannot write EXR", tmp.display()))
+        })
         .and_then(|_| {
             std::fs::rename(&tmp, path)
                 .with_context(|| format!("{}: cannot move result into place", path.display()))
@@ -61,6 +93,28 @@ pub fn write_exr(path: &Path, buffers: &Buffers, attrs: &BTreeMap<String, String
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Creates the temporary file `tmp`, never opening what is already there (a
+/// FIFO would block, a link would lead elsewhere): a leftover of a killed
+/// process with this pid that is not a folder is removed first.
+fn create_new(tmp: &Path) -> Result<std::fs::File> {
+    let open = || {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(tmp)
+    };
+    let file = match open() {
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            if std::fs::symlink_metadata(tmp).is_ok_and(|m| !m.is_dir()) {
+                let _ = std::fs::remove_file(tmp);
+            }
+            open()
+        }
+        other => other,
+    };
+    file.with_context(|| format!("{}: cannot create", tmp.display()))
 }
 
 /// The three channels of an EXR, exactly as stored (for tests and for users

@@ -95,28 +95,151 @@ fn data_file(dir: &Path, json: &Path, name: &str) -> Result<PathBuf> {
     Ok(dir.join(name))
 }
 
-/// Reads `path` and checks it holds exactly `expected` bytes.
-fn read_exact_len(path: &Path, expected: u64, what: &str) -> Result<Vec<u8>> {
+/// Largest `scene.json` read: 256 MiB, checked from metadata before reading
+/// (rendiff reads a resolved scene.json with the same limit). A resolved
+/// scene.json is the camera and one entry per object, material and light:
+/// kilobytes in practice, a few hundred MB for millions of named objects.
+pub const MAX_SCENE_JSON_BYTES: u64 = 256 << 20;
+
+/// Most triangles a resolved scene may declare: 2^26 = 67,108,864, rendiff's
+/// own scene limit (`rendiff_core::scene::MAX_SCENE_TRIANGLES`), so no export
+/// has more. `triangles.f32` is then at most 2.25 GiB; a larger count is a
+/// malformed scene.json, refused before its files are sized or read.
+pub const MAX_TRIANGLES: u64 = 1 << 26;
+
+/// What is wrong with a file of type `ft` as an input or output file: `None`
+/// for a regular file.
+pub fn special_kind(ft: &std::fs::FileType) -> Option<&'static str> {
+    if ft.is_file() {
+        return None;
+    }
+    if ft.is_dir() {
+        return Some("is a folder, not a file");
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if ft.is_fifo() {
+            return Some("is a FIFO (named pipe), not a regular file");
+        }
+        if ft.is_socket() {
+            return Some("is a socket, not a regular file");
+        }
+        if ft.is_char_device() {
+            return Some("is a character device, not a regular file");
+        }
+        if ft.is_block_device() {
+            return Some("is a block device, not a regular file");
+        }
+    }
+    Some("is not a regular file")
+}
+
+/// Opens a regular file of at most `limit` bytes for reading, with its
+/// length. The kind and size are checked from metadata (links followed)
+/// before the file is opened, so a FIFO, device, socket or folder is never
+/// opened (opening a FIFO blocks, `/dev/zero` never ends); the open itself is
+/// non-blocking and checked again on the open handle, so a file swapped in
+/// between cannot slip through. Errors name the file and the problem.
+fn open_regular_file(path: &Path, limit: u64) -> Result<(std::fs::File, u64)> {
+    let check = |meta: &std::fs::Metadata| -> Result<()> {
+        if let Some(kind) = special_kind(&meta.file_type()) {
+            bail!("{}: {kind}", path.display());
+        }
+        if meta.len() > limit {
+            bail!(
+                "{}: {} bytes, more than the limit of {limit} bytes",
+                path.display(),
+                meta.len()
+            );
+        }
+        Ok(())
+    };
     let meta =
         std::fs::metadata(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    if meta.len() != expected {
+    check(&meta)?;
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.custom_flags(libc::O_NONBLOCK);
+    }
+    let file = opts
+        .open(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let meta = file
+        .metadata()
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    check(&meta)?;
+    Ok((file, meta.len()))
+}
+
+/// Reads at most `limit` bytes of the regular file `path` (see
+/// [`open_regular_file`]), holding `len` bytes when opened; errors name the
+/// file.
+fn read_opened(path: &Path, file: std::fs::File, len: u64, limit: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let mut buf = Vec::new();
+    buf.try_reserve_exact(len as usize)
+        .map_err(|_| anyhow::anyhow!("{}: {len} bytes do not fit in memory", path.display()))?;
+    file.take(limit + 1)
+        .read_to_end(&mut buf)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    if buf.len() as u64 > limit {
         bail!(
-            "{}: {} bytes, expected {expected} ({what})",
-            path.display(),
-            meta.len()
+            "{}: grew past {limit} bytes while being read",
+            path.display()
         );
     }
-    std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))
+    Ok(buf)
+}
+
+/// Reads a whole regular file of at most `limit` bytes.
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>> {
+    let (file, len) = open_regular_file(path, limit)?;
+    read_opened(path, file, len, limit)
+}
+
+/// Opens the regular file `path`, which must hold exactly `expected` bytes
+/// (checked here, before anything is read, and again by [`read_exact`]).
+fn open_exact_len(path: &Path, expected: u64, what: &str) -> Result<std::fs::File> {
+    // No limit of its own: the size must match `expected`, checked next.
+    let (file, len) = open_regular_file(path, u64::MAX)?;
+    if len != expected {
+        bail!(
+            "{}: {len} bytes, expected {expected} ({what})",
+            path.display()
+        );
+    }
+    Ok(file)
+}
+
+/// Reads `file`, opened by [`open_exact_len`], which must still hold exactly
+/// `expected` bytes.
+fn read_exact(path: &Path, file: std::fs::File, expected: u64) -> Result<Vec<u8>> {
+    let bytes = read_opened(path, file, expected, expected)?;
+    if bytes.len() as u64 != expected {
+        bail!(
+            "{}: shrank from {expected} to {} bytes while being read",
+            path.display(),
+            bytes.len()
+        );
+    }
+    Ok(bytes)
 }
 
 /// Loads and validates a resolved scene folder. Every error names the file
-/// and the problem, on one line.
+/// and the problem, on one line. Only regular files are read, each with a
+/// size limit checked before reading: scene.json at most
+/// [`MAX_SCENE_JSON_BYTES`], the data files exactly the size that
+/// `triangle_count` (at most [`MAX_TRIANGLES`]) implies.
 pub fn load(dir: &Path) -> Result<Scene> {
     let json_path = dir.join("scene.json");
-    let text = std::fs::read_to_string(&json_path)
-        .with_context(|| format!("{}: cannot read", json_path.display()))?;
-    let meta: SceneJson = serde_json::from_str(&text)
+    let bytes = read_regular_file(&json_path, MAX_SCENE_JSON_BYTES)?;
+    let meta: SceneJson = serde_json::from_slice(&bytes)
         .map_err(|e| anyhow::anyhow!("{}: not a resolved scene: {e}", json_path.display()))?;
+    drop(bytes);
     if meta.format != FORMAT {
         bail!(
             "{}: format {:?} is not {FORMAT:?}",
@@ -126,17 +249,24 @@ pub fn load(dir: &Path) -> Result<Scene> {
     }
     check_camera(&meta.camera).map_err(|p| anyhow::anyhow!("{}: {p}", json_path.display()))?;
     let n = meta.triangle_count;
+    if n > MAX_TRIANGLES {
+        bail!(
+            "{}: triangle_count {n} is more than the limit of {MAX_TRIANGLES}",
+            json_path.display()
+        );
+    }
     let tri_path = data_file(dir, &json_path, &meta.files.triangles)?;
     let ids_path = data_file(dir, &json_path, &meta.files.object_ids)?;
-    let tri_bytes = n
-        .checked_mul(36)
-        .with_context(|| format!("{}: triangle_count {n} too large", json_path.display()))?;
-    let tri = read_exact_len(&tri_path, tri_bytes, &format!("{n} triangles x 9 f32"))?;
-    let ids = read_exact_len(&ids_path, n * 4, &format!("{n} u32 object IDs"))?;
+    // Both sizes are checked before either file is read.
+    let tri_file = open_exact_len(&tri_path, n * 36, &format!("{n} triangles x 9 f32"))?;
+    let ids_file = open_exact_len(&ids_path, n * 4, &format!("{n} u32 object IDs"))?;
+    let tri = read_exact(&tri_path, tri_file, n * 36)?;
+    let ids = read_exact(&ids_path, ids_file, n * 4)?;
     let triangles: Vec<f32> = tri
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
+    drop(tri);
     let object_ids: Vec<u32> = ids
         .chunks_exact(4)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
