@@ -880,6 +880,28 @@ fn expectations_files_are_checked_before_anything_starts() {
     ] {
         check_refused(&["--expectations", file], &[file, needle]);
     }
+    // Its content too, by the comparison's own reader: a bad entry, and
+    // nesting too deep for the TOML parser (a traceback before), were found
+    // only after every render.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[[expect]]\nscene = \"a\"\nbackend = \"x\"\nbuffer = \"q\"\nstatus = \"expected_fail\"\nreason = \"r\"\n",
+    )
+    .unwrap();
+    let deep = dir.path().join("deep.toml");
+    std::fs::write(
+        &deep,
+        format!("x = {}{}\n", "[".repeat(5000), "]".repeat(5000)),
+    )
+    .unwrap();
+    for (file, needle) in [
+        (&bad, "key 'buffer' must be one of"),
+        (&deep, "nested too deeply"),
+    ] {
+        let file = file.to_str().unwrap();
+        check_refused(&["--expectations", file], &[file, needle]);
+    }
 }
 
 /// An expectation that matches no verdict (a typo in a backend's name: a

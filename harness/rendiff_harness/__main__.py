@@ -1,4 +1,4 @@
-"""Command line: `python -m rendiff_harness {info,render,serve,compare,reference,metamorphic} ...`.
+"""Command line: `python -m rendiff_harness {info,render,serve,compare,reference,metamorphic,expectations} ...`.
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -10,6 +10,11 @@ exited 3, command_renderers.py). Renderers declared in the file RENDIFF_RENDERER
 are listed and run like the built-in backends; a malformed file fails every command.
 Expected failures print one line naming the backend and the problem, never a
 traceback; a traceback means a bug in rendiff.
+
+`expectations FILE` checks an expectations file exactly as `compare --expectations FILE`
+loads it (expectations.load), before anything renders: nothing on stdout or stderr and
+exit 0 when it is valid, else one line `rendiff_harness: FILE: problem` on stderr and
+exit 2.
 """
 
 from __future__ import annotations
@@ -196,6 +201,17 @@ def cmd_metamorphic(args: argparse.Namespace) -> int:
     return int(metamorphic_main(list(args.rest)) or 0)
 
 
+def cmd_expectations(args: argparse.Namespace) -> int:
+    """Load and validate an expectations file as the comparison will; silent when it is valid."""
+    from . import expectations
+
+    try:
+        expectations.load(args.file)
+    except expectations.ExpectationsError as exc:
+        return _fail(str(exc))
+    return EXIT_OK
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
     from .worker import serve
@@ -210,6 +226,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "reference": cmd_reference,
     "metamorphic": cmd_metamorphic,
     "serve": cmd_serve,
+    "expectations": cmd_expectations,
 }
 
 
@@ -315,6 +332,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="answer render requests, one JSON line each on stdin, until stdin closes (worker.py; "
         "`rendiff check` keeps one such worker per backend and job slot)",
     )
+    p_exp = sub.add_parser(
+        "expectations",
+        help="check an expectations file as `compare --expectations` will read it: silent and exit 0 when "
+        "it is valid, else one line naming the file and the problem, exit 2",
+    )
+    p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
     p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
     p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)

@@ -244,6 +244,10 @@ def _argv(value: object, key: str, where: str, placeholders: Sequence[str]) -> t
 def _number(value: object, key: str, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise RenderersError(f"{where}: {key} must be a number, got {value!r}")
+    if isinstance(value, int) and not -(2**63) <= value < 2**63:  # TOML integers are 64-bit; tomllib's are not
+        raise RenderersError(
+            f"{where}: {key} must be a finite number >= 0, got an integer of {value.bit_length()} bits"
+        )
     f = float(value)
     if not math.isfinite(f) or f < 0:
         raise RenderersError(f"{where}: {key} must be a finite number >= 0, got {value!r}")
@@ -334,8 +338,10 @@ def parse(path: Path, text: str, reserved: Collection[str] = RESERVED_NAMES) -> 
     """Validate the renderers file's content; RenderersError (one line) on the first problem."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RenderersError(f"{path}: not valid TOML: {exc}") from None
+    except ValueError as exc:  # tomllib.TOMLDecodeError, or an integer of over 4300 digits
+        raise RenderersError(f"{path}: not valid TOML: {str(exc).split(';')[0]}") from None
+    except RecursionError:  # arrays or inline tables nested some 500 deep
+        raise RenderersError(f"{path}: not valid TOML: nested too deeply") from None
     unknown = sorted(set(data) - {"renderer"})
     if unknown:
         raise RenderersError(f"{path}: unknown top-level key {unknown[0]!r}; declare renderers as [[renderer]] tables")

@@ -34,12 +34,17 @@ rejected with a message saying so.
 
 A more specific entry (exact scene name) wins over a "*" one; two entries for the same
 (scene, backend, buffer) are an error. Every problem is reported as one
-ExpectationsError naming the file, the entry (1-based, in file order) and the key.
+ExpectationsError naming the file, the entry (1-based, in file order) and the key, in one
+line: values from the file are shown short and escaped (`_show`), and a file the parser
+cannot take (nested too deeply, an integer of thousands of digits) is "invalid TOML".
+`python -m rendiff_harness expectations FILE` runs `load` alone (__main__.py), so that a
+bad file is refused before anything renders.
 """
 
 from __future__ import annotations
 
 import math
+import reprlib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -61,9 +66,32 @@ DECLARE_KEYS = frozenset({"backend", "allows", "reason"})
 DECLARABLE = ("crack",)
 TOP_KEYS = frozenset({"expect", "declare"})
 STATUSES = ("expected_fail",)
+MAX_COUNT = 2**63 - 1  # largest bound: TOML's largest integer
 INF = math.inf
 
 Bound = tuple[int, float]  # (lo, hi); hi may be inf for expected_fail defaults
+
+# Values from the file in messages: short (a string's first 60 characters, a list's first
+# 4 items, 3 levels deep), escaped by repr, so that a message stays one readable line.
+_REPR = reprlib.Repr()
+_REPR.maxstring = _REPR.maxother = 60
+_REPR.maxlist = _REPR.maxdict = 4
+_REPR.maxlevel = 3
+
+
+def _show(value: Any) -> str:
+    """`value` for a message: a short repr (an integer too long for str() is described instead)."""
+    try:
+        return _REPR.repr(value)
+    except (ValueError, RecursionError):
+        return f"<{type(value).__name__} too large to show>"
+
+
+def _label(value: Any) -> str:
+    """A scene/backend/buffer name for a message: as it is when short and printable, else `_show`."""
+    if isinstance(value, str) and value.isprintable() and len(value) <= 60:
+        return value
+    return _show(value)
 
 
 class ExpectationsError(Exception):
@@ -149,7 +177,7 @@ class Expectations:
 def _where(path: Path | str, index: int, entry: Mapping[str, Any] | None = None) -> str:
     label = ""
     if entry is not None:
-        parts = [str(entry.get(k, "?")) for k in ("scene", "backend", "buffer")]
+        parts = [_label(entry.get(k, "?")) for k in ("scene", "backend", "buffer")]
         label = f" ({'/'.join(parts)})"
     return f"{path}: [[expect]] entry {index}{label}"
 
@@ -160,10 +188,12 @@ def _bound(value: Any, where: str, key: str) -> Bound:
         or len(value) != 2
         or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
     ):
-        raise ExpectationsError(f"{where}: key {key!r} must be a list of two integers [lo, hi], got {value!r}")
+        raise ExpectationsError(f"{where}: key {key!r} must be a list of two integers [lo, hi], got {_show(value)}")
     lo, hi = value
+    if hi > MAX_COUNT:  # TOML integers are 64-bit; tomllib takes bigger ones, which results.json cannot show
+        raise ExpectationsError(f"{where}: key {key!r}: hi must be at most {MAX_COUNT}, got {_show(hi)}")
     if lo < 0 or hi < lo:
-        raise ExpectationsError(f"{where}: key {key!r} must satisfy 0 <= lo <= hi, got [{lo}, {hi}]")
+        raise ExpectationsError(f"{where}: key {key!r} must satisfy 0 <= lo <= hi, got [{_show(lo)}, {_show(hi)}]")
     return (lo, hi)
 
 
@@ -174,7 +204,7 @@ def _string(entry: Mapping[str, Any], key: str, where: str, required: bool = Tru
         return None
     value = entry[key]
     if not isinstance(value, str) or not value.strip():
-        raise ExpectationsError(f"{where}: key {key!r} must be a non-empty string, got {value!r}")
+        raise ExpectationsError(f"{where}: key {key!r} must be a non-empty string, got {_show(value)}")
     return value
 
 
@@ -182,7 +212,9 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
     """Validate the TOML document `data` (from `path`, for messages) into entries."""
     unknown = sorted(set(data) - TOP_KEYS)
     if unknown:
-        raise ExpectationsError(f"{path}: unknown top-level key(s) {unknown}; only [[expect]] entries are allowed")
+        raise ExpectationsError(
+            f"{path}: unknown top-level key(s) {_show(unknown)}; only [[expect]] entries are allowed"
+        )
     raw = data.get("expect", [])
     for key in ALLOWED_CLASS_KEYS:
         for i, entry in enumerate(raw if isinstance(raw, list) else [], start=1):
@@ -201,21 +233,23 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
         where = _where(path, i, entry)
         extra = sorted(set(entry) - ENTRY_KEYS)
         if extra:
-            raise ExpectationsError(f"{where}: unknown key {extra[0]!r} (allowed: {', '.join(sorted(ENTRY_KEYS))})")
+            raise ExpectationsError(
+                f"{where}: unknown key {_show(extra[0])} (allowed: {', '.join(sorted(ENTRY_KEYS))})"
+            )
         scene = _string(entry, "scene", where)
         backend = _string(entry, "backend", where)
         buffer = _string(entry, "buffer", where)
         reason = _string(entry, "reason", where)
         assert scene is not None and backend is not None and buffer is not None and reason is not None
         if buffer not in BUFFERS:
-            raise ExpectationsError(f"{where}: key 'buffer' must be one of {list(BUFFERS)}, got {buffer!r}")
+            raise ExpectationsError(f"{where}: key 'buffer' must be one of {list(BUFFERS)}, got {_show(buffer)}")
         if backend == "*":
             raise ExpectationsError(f"{where}: key 'backend' must name one backend ('*' is for scenes only)")
         status = _string(entry, "status", where, required=False)
         if status not in STATUSES:
             raise ExpectationsError(
                 f"{where}: key 'status' must be \"expected_fail\" (only known bugs are recorded; allowed "
-                f"classes need no entry), got {status!r}"
+                f"classes need no entry), got {_show(status)}"
             )
         bounds = {k: _bound(entry[k], where, k) for k in COUNT_KEYS if k in entry}
         ident = (scene, backend, buffer)
@@ -239,15 +273,19 @@ def parse_declarations(data: Mapping[str, Any], path: Path | str) -> list[Declar
             raise ExpectationsError(f"{where}: must be a table")
         extra = sorted(set(entry) - DECLARE_KEYS)
         if extra:
-            raise ExpectationsError(f"{where}: unknown key {extra[0]!r} (allowed: {', '.join(sorted(DECLARE_KEYS))})")
+            raise ExpectationsError(
+                f"{where}: unknown key {_show(extra[0])} (allowed: {', '.join(sorted(DECLARE_KEYS))})"
+            )
         backend = _string(entry, "backend", where)
         allows = _string(entry, "allows", where)
         reason = _string(entry, "reason", where)
         assert backend is not None and allows is not None and reason is not None
         if allows not in DECLARABLE:
-            raise ExpectationsError(f"{where}: key 'allows' must be one of {list(DECLARABLE)}, got {allows!r}")
+            raise ExpectationsError(f"{where}: key 'allows' must be one of {list(DECLARABLE)}, got {_show(allows)}")
         if (backend, allows) in seen:
-            raise ExpectationsError(f"{where}: duplicates entry {seen[(backend, allows)]} ({backend} allows {allows})")
+            raise ExpectationsError(
+                f"{where}: duplicates entry {seen[(backend, allows)]} ({_label(backend)} allows {allows})"
+            )
         seen[(backend, allows)] = i
         out.append(Declaration(i, backend, allows, reason))
     return out
@@ -270,8 +308,10 @@ def load(path: str | Path | None) -> Expectations:
         data = tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise ExpectationsError(f"{path}: not UTF-8 text: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ExpectationsError(f"{path}: invalid TOML: {exc}") from None
+    except ValueError as exc:  # tomllib.TOMLDecodeError, or an integer of over 4300 digits
+        raise ExpectationsError(f"{path}: invalid TOML: {str(exc).split(';')[0]}") from None
+    except RecursionError:
+        raise ExpectationsError(f"{path}: invalid TOML: nested too deeply") from None
     return Expectations(path, parse(data, path), declarations=parse_declarations(data, path))
 
 

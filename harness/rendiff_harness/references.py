@@ -27,9 +27,13 @@ materials, lights, integrator, requires) changes the hash.
 
 `load` refuses, with one ReferenceError whose message says how to regenerate:
 a missing EXR or JSON ("missing"), an unreadable or inconsistent pair ("corrupt":
-unparsable JSON, wrong format, EXR checksum differing from the JSON's, unreadable EXR,
-missing R,G,B or var channels), and a reference of another scene ("reference is stale:
-regenerate with <command>": the hash or the image size differs).
+unparsable or too deeply nested JSON, wrong format, EXR checksum differing from the
+JSON's, unreadable EXR, missing R,G,B or var channels, either file not a regular file or
+larger than its limit, MAX_PROVENANCE_BYTES / MAX_EXR_BYTES), and a reference of another
+scene ("reference is stale: regenerate with <command>": the hash or the image size
+differs). Files in the references folder are user files (userfile.py): opened without
+blocking, regular files only, read within their limit, so that a FIFO or a link to a
+device there is one scene's error, never a hang or a run out of memory.
 """
 
 from __future__ import annotations
@@ -49,11 +53,19 @@ from typing import Any
 import numpy as np
 
 from . import atomic, exrbuf, resolved
+from .userfile import UserFileError, read_regular, sha256_regular
 
 FORMAT = "rendiff-reference/1"
 DEFAULT_SPP = 4096
 DEFAULT_SEED = 0
 HASHED_FILES = ("scene.json", "triangles.f32", "object_ids.u32")
+
+# Largest <scene>.json read: 64 KiB. A provenance file is about 1 KiB (a dozen short keys
+# and two command lines); anything much bigger is not one.
+MAX_PROVENANCE_BYTES = 1 << 16
+# Largest <scene>.exr read: 64 MiB. The committed references are at most 64x64 (about
+# 56 KiB, ZIP-compressed); even 1024x1024 with its six float32 channels is 24 MiB raw.
+MAX_EXR_BYTES = 1 << 26
 
 
 class ReferenceError(Exception):
@@ -74,6 +86,8 @@ def _canonical_scene_json(data: bytes, where: Path) -> bytes:
         meta = json.loads(data)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ReferenceError(f"{where}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ReferenceError(f"{where}: not valid JSON: nested too deeply") from None
     if isinstance(meta, dict):
         meta.pop("source", None)
     return json.dumps(meta, sort_keys=True, separators=(",", ":")).encode("utf-8")
@@ -95,12 +109,20 @@ def scene_hash(scene_dir: str | Path) -> str:
     return h.hexdigest()
 
 
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+def file_sha256(path: Path, limit: int | None = None) -> str:
+    """sha256 of a regular file of at most `limit` bytes (default MAX_EXR_BYTES; UserFileError
+    otherwise, OSError from opening)."""
+    return sha256_regular(path, MAX_EXR_BYTES if limit is None else limit)
+
+
+def _read_provenance(js: Path) -> Any:
+    """The parsed <scene>.json: ValueError (UserFileError, UnicodeDecodeError, JSONDecodeError, or one
+    saying it nests too deeply) for bad content, OSError (FileNotFoundError...) from opening."""
+    raw = read_regular(js, MAX_PROVENANCE_BYTES)
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
 
 
 def provenance_path(exr: str | Path) -> Path:
@@ -132,7 +154,7 @@ def regenerate_command(scene_dir: str | Path, exr: str | Path) -> str:
     """The command for `exr` from `scene_dir`, keeping the spp/seed of the existing provenance if readable."""
     spp, seed = DEFAULT_SPP, DEFAULT_SEED
     try:
-        prov = json.loads(provenance_path(exr).read_text(encoding="utf-8"))
+        prov = _read_provenance(provenance_path(exr))
         if isinstance(prov, dict):
             if isinstance(prov.get("spp_requested"), int) and prov["spp_requested"] > 1:
                 spp = int(prov["spp_requested"])
@@ -186,6 +208,10 @@ def generate(
         "rgb_encoding": "float32",
     }
     exrbuf.write_buffers(out, RGB=rgb.astype(np.float32), var=var.astype(np.float32), attrs=attrs)
+    try:
+        exr_sum = file_sha256(out)
+    except UserFileError as exc:  # past MAX_EXR_BYTES: `load` would refuse it
+        raise ReferenceError(f"{out}: the written reference {exc} (MAX_EXR_BYTES): render a smaller image") from None
     import drjit
     import mitsuba
 
@@ -218,7 +244,7 @@ def generate(
         "python": sys.version.split()[0],
         "created": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "render_seconds": round(seconds, 3),
-        "exr_sha256": file_sha256(out),
+        "exr_sha256": exr_sum,
     }
     _write_json_atomically(provenance_path(out), prov)
     for path in (out, provenance_path(out)):  # files meant for the repository: readable by all
@@ -234,23 +260,42 @@ def load(exr: str | Path, scene: resolved.ResolvedScene) -> CachedReference:
     exr = Path(exr)
     js = provenance_path(exr)
     fix = regenerate_command(scene.directory, exr)
-    if not exr.is_file():
-        raise ReferenceError(f"{exr}: cached reference missing: generate it with {fix}")
-    if not js.is_file():
-        raise ReferenceError(f"{js}: provenance of the cached reference missing: regenerate with {fix}")
     try:
-        prov = json.loads(js.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        exr_sum = file_sha256(exr)
+    except FileNotFoundError:
+        raise ReferenceError(f"{exr}: cached reference missing: generate it with {fix}") from None
+    except UserFileError as exc:
+        raise ReferenceError(f"{exr}: cached reference corrupt (the EXR {exc}): regenerate with {fix}") from None
+    except OSError as exc:
         raise ReferenceError(
-            f"{js}: cached reference corrupt (provenance unreadable: {exc}): regenerate with {fix}"
+            f"{exr}: cached reference corrupt (EXR unreadable: {exc.strerror or exc}): regenerate with {fix}"
+        ) from None
+    try:
+        prov = _read_provenance(js)
+    except FileNotFoundError:
+        raise ReferenceError(f"{js}: provenance of the cached reference missing: regenerate with {fix}") from None
+    except UserFileError as exc:
+        raise ReferenceError(
+            f"{js}: cached reference corrupt (the provenance file {exc}): regenerate with {fix}"
+        ) from None
+    except (OSError, ValueError) as exc:
+        detail = (exc.strerror or str(exc)) if isinstance(exc, OSError) else str(exc)
+        raise ReferenceError(
+            f"{js}: cached reference corrupt (provenance unreadable: {detail}): regenerate with {fix}"
         ) from None
     if not isinstance(prov, dict) or prov.get("format") != FORMAT:
-        got = prov.get("format") if isinstance(prov, dict) else type(prov).__name__
+        got = prov.get("format") if isinstance(prov, dict) else prov
+        # a short repr for a short value, else its type: the file's content may be large or deeply nested
+        shown = (
+            repr(got[:80] if isinstance(got, str) else got)
+            if isinstance(got, (str, int, float, type(None)))
+            else type(got).__name__
+        )
         raise ReferenceError(
-            f"{js}: cached reference corrupt (format {got!r}, expected {FORMAT!r}): regenerate with {fix}"
+            f"{js}: cached reference corrupt (format {shown}, expected {FORMAT!r}): regenerate with {fix}"
         )
     want_sum = prov.get("exr_sha256")
-    if not isinstance(want_sum, str) or file_sha256(exr) != want_sum:
+    if not isinstance(want_sum, str) or exr_sum != want_sum:
         raise ReferenceError(
             f"{exr}: cached reference corrupt (its sha256 differs from {js.name}'s exr_sha256): regenerate with {fix}"
         )

@@ -405,6 +405,32 @@ pub fn check_only_option(opts: &CheckOptions) -> Result<()> {
     }
 }
 
+/// The expectations file's content, checked by the reader the comparison
+/// uses (`python -m rendiff_harness expectations FILE`) before anything
+/// runs: a bad bound or a typo in a key was found only after every render,
+/// leaving the run incomplete.
+fn check_expectations(opts: &CheckOptions) -> Result<()> {
+    let probe = std::env::temp_dir().join(format!("rendiff-expectations-{}", std::process::id()));
+    let _pending = crate::shutdown::track_path(&probe);
+    let mut cmd = harness_command(opts);
+    cmd.arg("expectations").arg("--").arg(&opts.expectations);
+    let o = run_with_timeout(cmd, Duration::from_secs(120), &probe);
+    let _ = std::fs::remove_dir_all(&probe);
+    let o = o.context("cannot run the Python harness to read the expectations file")?;
+    if o.code == Some(0) {
+        return Ok(());
+    }
+    match harness_refusal(&o.stderr) {
+        Some(refusal) => bail!("{refusal}"),
+        None => bail!(
+            "{}: the Python harness could not check it ({}): {}; run scripts/setup.sh",
+            opts.expectations.display(),
+            o.how(),
+            o.stderr_tail(5)
+        ),
+    }
+}
+
 /// The names the harness lists, asked in a scratch folder of its own.
 fn harness_names(opts: &CheckOptions) -> Result<Vec<String>, String> {
     let probe = std::env::temp_dir().join(format!("rendiff-renderers-{}", std::process::id()));
@@ -558,6 +584,7 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
     if let Some(only) = &opts.only {
         check_only(only, list)?;
     }
+    check_expectations(opts)?;
     // Everything is written to a staging folder that replaces the run folder
     // once results.json exists (run_folder.rs): never a half-old run.
     let staging = run_folder::Staging::begin(&opts.run_dir)?;
