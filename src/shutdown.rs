@@ -63,7 +63,12 @@ pub fn install() -> std::io::Result<()> {
             if let Some(sig) = signals.forever().next() {
                 INTERRUPTED.store(true, Ordering::SeqCst);
                 let (groups, paths) = clean_up();
-                eprintln!(
+                // Not eprintln!: it panics when stderr is a closed pipe, and a
+                // panic here ended this thread before the exit, leaving the
+                // process running with its interrupt flag set, forever.
+                use std::io::Write;
+                let _ = writeln!(
+                    std::io::stderr(),
                     "rendiff: interrupted by {}: killed {groups} child process group(s), removed {paths} temporary file(s) or folder(s)",
                     crate::check::process::signal_name(sig)
                 );

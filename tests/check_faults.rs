@@ -278,6 +278,59 @@ fn an_interrupted_check_stops_its_renderers_and_leaves_no_stale_verdict() {
     }
 }
 
+/// An interrupted rendiff whose stderr is a closed pipe (its reader gone, as
+/// when `rendiff check | head` ends, or a bench's parent dropped the pipe)
+/// still cleans up and exits: its handler's message used to panic on the
+/// closed pipe, ending the handler's thread, and the process ran on forever.
+#[test]
+fn an_interrupt_with_stderr_closed_still_exits() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let (fake, real) = fake_python(dir.path());
+    let run = dir.path().join("run");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(root)
+        .env("RENDIFF_PYTHON", &fake)
+        .env("REAL_PYTHON", &real)
+        .env("FAKE_PIDS", dir.path())
+        .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
+        .args(["--only", "trace,forkhang", "--timeout", "600", "-o"])
+        .arg(&run)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid_file = dir.path().join("forkhang.pid");
+    let start = Instant::now();
+    while !pid_file.exists() {
+        assert!(start.elapsed().as_secs() < 60, "the renderer never started");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let grandchild = read_pid(&pid_file);
+    drop(child.stderr.take()); // the pipe's only reader
+                               // SAFETY: kill(2) on our own child's pid; no memory is touched.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGTERM);
+    }
+    let start = Instant::now();
+    let status = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break st;
+        }
+        if start.elapsed() > Duration::from_secs(30) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("rendiff still running 30 s after SIGTERM with its stderr closed");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(status.code(), Some(128 + libc::SIGTERM));
+    assert!(
+        gone_within(grandchild, Duration::from_secs(5)),
+        "process {grandchild}, forked by a renderer, outlived rendiff"
+    );
+}
+
 /// `check --timeout` bounds the core's own renders, not only external ones:
 /// a path-traced scene at 65,536 samples per pixel stops at the limit and is
 /// reported as timed out, with no buffer kept.

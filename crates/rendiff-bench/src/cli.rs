@@ -1,6 +1,17 @@
 //! The `rendiff bench` subcommands' options (clap), kept in the library so
 //! that `main.rs` only names them, and their dispatch: each subcommand runs,
-//! writes `OUT/<name>.json`, `OUT/<name>.html` and its SVGs, and prints where.
+//! writes `OUT/<name>.json`, `OUT/<name>.html` and its SVGs as one set, and
+//! prints where.
+//!
+//! Two rules hold for every subcommand. `--quick` only changes the defaults
+//! of options not given: an option given explicitly is used as given, with
+//! or without `--quick` ([`plan`] resolves both). And rendiff's own files
+//! named by a default (scenes, references) are found in rendiff's checkout
+//! the way `rendiff check` finds it (`RENDIFF_HOME`, the current folder if
+//! it is a checkout, else the checkout the binary was built from:
+//! [`rendiff::check::find_root`]), so a benchmark works from any folder;
+//! paths given on the command line are relative to the current folder, and
+//! so is the default output folder.
 
 use super::crossover::{self, CrossoverOptions};
 use super::knobs::{self, KnobsOptions, SceneSpec};
@@ -9,7 +20,7 @@ use super::scale::{self, ScaleOptions};
 use super::stability::{self, StabilityOptions};
 use super::variance::{self, VarianceOptions};
 use super::{Common, Output};
-use anyhow::Result;
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 /// `--supersample K` ([`super::direct::check_supersample`]).
@@ -22,7 +33,8 @@ fn parse_supersample(s: &str) -> std::result::Result<u32, String> {
 #[derive(Debug, Clone, clap::Args)]
 pub struct CommonArgs {
     /// Tiny configuration (small images, one run, no external renderers): checks the
-    /// benchmark runs; its numbers mean nothing.
+    /// benchmark runs; its numbers mean nothing. It changes only the defaults of options
+    /// not given ("--quick: ..." in their help): an option given explicitly is used as given.
     #[arg(long)]
     pub quick: bool,
     /// Timed runs per configuration, after one warm-up (default 3; 1 with --quick).
@@ -36,16 +48,58 @@ pub struct CommonArgs {
     pub timeout: u64,
 }
 
+/// rendiff's checkout, where the defaults' files live ([`rendiff::check::find_root`]),
+/// or why it was not found (an error only once a default needs it).
+#[derive(Debug, Clone)]
+pub struct Home(std::result::Result<PathBuf, String>);
+
+impl Home {
+    /// Finds the checkout as `rendiff check` does.
+    pub fn find() -> Home {
+        Home(rendiff::check::find_root().map_err(|e| format!("{e:#}")))
+    }
+
+    /// `rel`, one of rendiff's own files, in the checkout (relative as given
+    /// when the checkout is the current folder: [`rendiff::check::in_root`]).
+    pub fn file(&self, rel: &str) -> Result<PathBuf> {
+        match &self.0 {
+            Ok(root) => Ok(rendiff::check::in_root(root, rel)),
+            Err(e) => anyhow::bail!("{rel} (a default): {e}"),
+        }
+    }
+
+    /// A default `PATH[@WxH]`, its path in the checkout.
+    pub fn spec(&self, spec: &str) -> Result<SceneSpec> {
+        let mut s: SceneSpec = spec.parse().map_err(anyhow::Error::msg)?;
+        s.path = self.file(&s.path.to_string_lossy())?;
+        Ok(s)
+    }
+
+    /// The checkout, or the current folder where none was found (the
+    /// harness and its venv are looked for there, and reported missing).
+    fn root(&self) -> Result<PathBuf> {
+        match &self.0 {
+            Ok(r) => Ok(r.clone()),
+            Err(_) => std::env::current_dir().context("cannot read the current folder"),
+        }
+    }
+}
+
 impl CommonArgs {
-    fn common(&self) -> Result<Common> {
+    fn common(&self, home: &Home) -> Result<Common> {
         Ok(Common {
             runs: self.runs.unwrap_or(if self.quick { 1 } else { 3 }),
             quick: self.quick,
             out_dir: self.output.clone(),
-            root: std::env::current_dir()?,
+            root: home.root()?,
             timeout_s: self.timeout,
         })
     }
+}
+
+/// `given` if the option was given, else `--quick`'s default or the normal one.
+fn pick<T>(given: Option<T>, quick: bool, quick_default: T, default: T) -> T {
+    given.unwrap_or(if quick { quick_default } else { default })
 }
 
 /// `rendiff bench knobs`'s options (boxed in [`BenchCommand`]: they outnumber the others').
@@ -54,21 +108,22 @@ pub struct KnobsArgs {
     /// Options every subcommand takes.
     #[command(flatten)]
     pub common: CommonArgs,
-    /// Visibility scenes, PATH or PATH@WxH (default: million@960x540 and pixel_grid; --quick: icosphere@64x48).
+    /// Visibility scenes, PATH or PATH@WxH (default: scenes/million.toml@960x540 and
+    /// scenes/pixel_grid.toml; --quick: scenes/icosphere.toml@64x48).
     #[arg(long = "scene")]
     pub scenes: Vec<SceneSpec>,
-    /// Resolution factors of the first scene's size.
-    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2", value_parser = knobs::parse_scale)]
-    pub scales: Vec<f64>,
-    /// Global-illumination scene for the spp knobs.
-    #[arg(long, default_value = "scenes/cornell_gi.toml")]
-    pub gi_scene: PathBuf,
-    /// Its cached reference EXR.
-    #[arg(long, default_value = "tests/references/cornell_gi.exr")]
-    pub reference: PathBuf,
-    /// Core path tracer spp settings.
-    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256", value_parser = rendiff::args::parse_spp)]
-    pub spp: Vec<u32>,
+    /// Resolution factors of the first scene's size (default: 0.25,0.5,1,2; --quick: 0.5,1).
+    #[arg(long, value_delimiter = ',', value_parser = knobs::parse_scale)]
+    pub scales: Option<Vec<f64>>,
+    /// Global-illumination scene for the spp knobs (default: scenes/cornell_gi.toml).
+    #[arg(long)]
+    pub gi_scene: Option<PathBuf>,
+    /// Its cached reference EXR (default: tests/references/cornell_gi.exr).
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Core path tracer spp settings (default: 1,4,16,64,256; --quick: 1,4).
+    #[arg(long, value_delimiter = ',', value_parser = rendiff::args::parse_spp)]
+    pub spp: Option<Vec<u32>>,
     /// Mitsuba spp settings (at least 2 each).
     #[arg(long, value_delimiter = ',', default_value = "4,16,64,256", value_parser = rendiff::args::parse_spp)]
     pub mitsuba_spp: Vec<u32>,
@@ -88,12 +143,14 @@ pub struct KnobsArgs {
           value_parser = ["scalar_rgb", "llvm_ad_rgb"])]
     pub mitsuba_variant: Vec<String>,
     /// Locally shaded scenes for the direct-lighting knobs (POV-Ray antialiasing and quality, pyrender, core supersampling), PATH or PATH@WxH
-    /// (default: directional_shadows@320x240 and two_lights_shadowless@320x240; --quick: directional_shadows@32x24).
+    /// (default: scenes/directional_shadows.toml@320x240 and scenes/two_lights_shadowless.toml@320x240;
+    /// --quick: scenes/directional_shadows.toml@32x24).
     #[arg(long = "direct-scene")]
     pub direct_scenes: Vec<SceneSpec>,
-    /// Direct-lighting reference: K×K pixel-center samples per pixel, box-filtered (a power of two; --quick: 4).
-    #[arg(long, default_value_t = 16, value_parser = parse_supersample)]
-    pub supersample: u32,
+    /// Direct-lighting reference: K×K pixel-center samples per pixel, box-filtered
+    /// (a power of two; default: 16; --quick: 4).
+    #[arg(long, value_parser = parse_supersample)]
+    pub supersample: Option<u32>,
     /// Seed of both path tracers (the reference used 0, so not 0).
     #[arg(long, default_value_t = 1000)]
     pub seed: u64,
@@ -115,22 +172,23 @@ pub enum BenchCommand {
         /// Options every subcommand takes.
         #[command(flatten)]
         common: CommonArgs,
-        /// Throughput scene, PATH or PATH@WxH (--quick: icosphere@64x48).
-        #[arg(long, default_value = "scenes/million.toml@1920x1080")]
-        scene: SceneSpec,
+        /// Throughput scene, PATH or PATH@WxH (default: scenes/million.toml@1920x1080;
+        /// --quick: scenes/icosphere.toml@64x48).
+        #[arg(long)]
+        scene: Option<SceneSpec>,
         /// A real scanned mesh measured the same way, PATH or PATH@WxH
         /// (default: scenes/corpus/nefertiti_scan.toml@1920x1080; --quick: none unless given).
         #[arg(long)]
         scanned_scene: Option<SceneSpec>,
-        /// Thread counts for trace and raster throughput.
-        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = rendiff::args::parse_threads)]
-        threads: Vec<usize>,
-        /// Global-illumination scene for the equal-time comparison.
-        #[arg(long, default_value = "scenes/cornell_gi.toml")]
-        gi_scene: PathBuf,
-        /// Its cached reference EXR.
-        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
-        reference: PathBuf,
+        /// Thread counts for trace and raster throughput (default: 1,2; --quick: 1).
+        #[arg(long, value_delimiter = ',', value_parser = rendiff::args::parse_threads)]
+        threads: Option<Vec<usize>>,
+        /// Global-illumination scene for the equal-time comparison (default: scenes/cornell_gi.toml).
+        #[arg(long)]
+        gi_scene: Option<PathBuf>,
+        /// Its cached reference EXR (default: tests/references/cornell_gi.exr).
+        #[arg(long)]
+        reference: Option<PathBuf>,
         /// Mitsuba's spp at equal time (the core's spp is chosen to match its time).
         #[arg(long, default_value_t = 64, value_parser = rendiff::args::parse_spp)]
         mitsuba_spp: u32,
@@ -146,16 +204,13 @@ pub enum BenchCommand {
         /// Options every subcommand takes.
         #[command(flatten)]
         common: CommonArgs,
-        /// Square image size in pixels, within the scenes' image limits (--quick: 64).
-        #[arg(long, default_value_t = 512)]
-        size: u32,
-        /// Grid subdivisions per side (2 nx^2 triangles) (--quick: 1,4,16).
-        #[arg(
-            long,
-            value_delimiter = ',',
-            default_value = "1,2,4,8,16,32,64,128,256,512,1024,2048"
-        )]
-        nx: Vec<u32>,
+        /// Square image size in pixels, within the scenes' image limits (default: 512; --quick: 64).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Grid subdivisions per side, 2 nx^2 triangles
+        /// (default: 1,2,4,8,16,32,64,128,256,512,1024,2048; --quick: 1,4,16).
+        #[arg(long, value_delimiter = ',')]
+        nx: Option<Vec<u32>>,
         /// Worker threads (default: all CPUs).
         #[arg(long, value_parser = rendiff::args::parse_threads)]
         threads: Option<usize>,
@@ -167,11 +222,12 @@ pub enum BenchCommand {
         /// Options every subcommand takes.
         #[command(flatten)]
         common: CommonArgs,
-        /// Shard counts to measure.
-        #[arg(long, value_delimiter = ',', default_value = "1,2,4",
+        /// Shard counts to measure (default: 1,2,4; --quick: 2).
+        #[arg(long, value_delimiter = ',',
               value_parser = clap::value_parser!(u32).range(1..))]
-        shards: Vec<u32>,
-        /// Scene files or folders (default: the main job's, scenes/ and scenes/corpus/).
+        shards: Option<Vec<u32>>,
+        /// Scene files or folders (default: the main job's, scenes/ and scenes/corpus/;
+        /// --quick: scenes/three_triangles.toml and scenes/icosphere.toml).
         #[arg(long = "scene")]
         scenes: Vec<PathBuf>,
     },
@@ -189,24 +245,25 @@ pub enum BenchCommand {
         /// Options every subcommand takes.
         #[command(flatten)]
         common: CommonArgs,
-        /// Global-illumination scene.
-        #[arg(long, default_value = "scenes/cornell_gi.toml")]
-        scene: PathBuf,
-        /// Its cached reference EXR (with var.R/G/B).
-        #[arg(long, default_value = "tests/references/cornell_gi.exr")]
-        reference: PathBuf,
-        /// Samples per pixel settings, at least 2 each (--quick: 4,8).
-        #[arg(long, value_delimiter = ',', default_value = "16,64,256", value_parser = rendiff::args::parse_spp)]
-        spp: Vec<u32>,
-        /// Independent seeds per setting (--quick: 8).
-        #[arg(long, default_value_t = 64)]
-        seeds: u64,
+        /// Global-illumination scene (default: scenes/cornell_gi.toml).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Its cached reference EXR, with var.R/G/B (default: tests/references/cornell_gi.exr).
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        /// Samples per pixel settings, at least 2 each (default: 16,64,256; --quick: 4,8).
+        #[arg(long, value_delimiter = ',', value_parser = rendiff::args::parse_spp)]
+        spp: Option<Vec<u32>>,
+        /// Independent seeds per setting (default: 64; --quick: 8).
+        #[arg(long)]
+        seeds: Option<u64>,
         /// First seed.
         #[arg(long, default_value_t = 1000)]
         seed: u64,
-        /// Disjoint seed blocks on which the quick calibration test's false-alarm rate is measured (--quick: 1).
-        #[arg(long, default_value_t = 64)]
-        test_blocks: u64,
+        /// Disjoint seed blocks on which the quick calibration test's false-alarm rate is
+        /// measured (default: 64; --quick: 1).
+        #[arg(long)]
+        test_blocks: Option<u64>,
         /// A second, independent reference EXR of the scene (another seed), to check the
         /// reference's stated variance.
         #[arg(long)]
@@ -217,9 +274,69 @@ pub enum BenchCommand {
     },
 }
 
-/// Runs one subcommand and writes its outputs.
-pub fn run(cmd: BenchCommand) -> Result<()> {
-    let (stem, common, out): (&str, Common, Output) = match cmd {
+/// A subcommand with every option resolved: what runs.
+#[derive(Debug, Clone)]
+pub enum Plan {
+    /// `bench knobs`.
+    Knobs(Box<KnobsOptions>),
+    /// `bench peers`.
+    Peers(Box<PeersOptions>),
+    /// `bench crossover`.
+    Crossover(CrossoverOptions),
+    /// `bench scale`.
+    Scale(ScaleOptions),
+    /// `bench stability`.
+    Stability(StabilityOptions),
+    /// `bench variance`.
+    Variance(VarianceOptions),
+}
+
+impl Plan {
+    /// The benchmark's name: its outputs are `STEM.json`, `STEM.html`, `STEM-*.svg`.
+    pub fn stem(&self) -> &'static str {
+        match self {
+            Plan::Knobs(_) => "knobs",
+            Plan::Peers(_) => "peers",
+            Plan::Crossover(_) => "crossover",
+            Plan::Scale(_) => "scale",
+            Plan::Stability(_) => "stability",
+            Plan::Variance(_) => "variance",
+        }
+    }
+
+    /// The options every subcommand shares.
+    pub fn common(&self) -> &Common {
+        match self {
+            Plan::Knobs(o) => &o.common,
+            Plan::Peers(o) => &o.common,
+            Plan::Crossover(o) => &o.common,
+            Plan::Scale(o) => &o.common,
+            Plan::Stability(o) => &o.common,
+            Plan::Variance(o) => &o.common,
+        }
+    }
+
+    fn run(&self) -> Result<Output> {
+        match self {
+            Plan::Knobs(o) => knobs::run(o),
+            Plan::Peers(o) => peers::run(o),
+            Plan::Crossover(o) => crossover::run(o),
+            Plan::Scale(o) => scale::run(o),
+            Plan::Stability(o) => stability::run(o),
+            Plan::Variance(o) => variance::run(o),
+        }
+    }
+}
+
+/// Resolves a subcommand's options: explicit ones as given, the others
+/// `--quick`'s default or the normal one, rendiff's own files in its checkout.
+pub fn plan(cmd: BenchCommand) -> Result<Plan> {
+    plan_in(cmd, &Home::find())
+}
+
+/// [`plan`] with the checkout given.
+pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
+    Ok(match cmd {
         BenchCommand::Knobs(args) => {
             let KnobsArgs {
                 common,
@@ -238,7 +355,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
                 threads,
                 no_external,
             } = *args;
-            let c = common.common()?;
+            let c = common.common(home)?;
             let quick = c.quick;
             if let Some(d) = mitsuba_max_depth.iter().find(|&&d| d == 0 || d < -1) {
                 anyhow::bail!("--mitsuba-max-depth: {d} is neither -1 (unlimited) nor >= 1");
@@ -246,53 +363,46 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             let direct_scenes = if !direct_scenes.is_empty() {
                 direct_scenes
             } else if quick {
-                vec!["scenes/directional_shadows.toml@32x24"
-                    .parse()
-                    .map_err(anyhow::Error::msg)?]
+                vec![home.spec("scenes/directional_shadows.toml@32x24")?]
             } else {
                 vec![
-                    "scenes/directional_shadows.toml@320x240"
-                        .parse()
-                        .map_err(anyhow::Error::msg)?,
-                    "scenes/two_lights_shadowless.toml@320x240"
-                        .parse()
-                        .map_err(anyhow::Error::msg)?,
+                    home.spec("scenes/directional_shadows.toml@320x240")?,
+                    home.spec("scenes/two_lights_shadowless.toml@320x240")?,
                 ]
             };
             let scenes = if !scenes.is_empty() {
                 scenes
             } else if quick {
-                vec!["scenes/icosphere.toml@64x48"
-                    .parse()
-                    .map_err(anyhow::Error::msg)?]
+                vec![home.spec("scenes/icosphere.toml@64x48")?]
             } else {
                 vec![
-                    "scenes/million.toml@960x540"
-                        .parse()
-                        .map_err(anyhow::Error::msg)?,
-                    "scenes/pixel_grid.toml"
-                        .parse()
-                        .map_err(anyhow::Error::msg)?,
+                    home.spec("scenes/million.toml@960x540")?,
+                    home.spec("scenes/pixel_grid.toml")?,
                 ]
             };
-            let opts = KnobsOptions {
-                common: c.clone(),
+            Plan::Knobs(Box::new(KnobsOptions {
+                common: c,
                 scenes,
-                resolution_scales: if quick { vec![0.5, 1.0] } else { scales },
-                gi_scene,
-                reference,
-                core_spp: if quick { vec![1, 4] } else { spp },
+                resolution_scales: pick(scales, quick, vec![0.5, 1.0], vec![0.25, 0.5, 1.0, 2.0]),
+                gi_scene: match gi_scene {
+                    Some(p) => p,
+                    None => home.file("scenes/cornell_gi.toml")?,
+                },
+                reference: match reference {
+                    Some(p) => p,
+                    None => home.file("tests/references/cornell_gi.exr")?,
+                },
+                core_spp: pick(spp, quick, vec![1, 4], vec![1, 4, 16, 64, 256]),
                 mitsuba_spp,
                 mitsuba_knob_spp,
                 mitsuba_max_depth,
                 mitsuba_variants: mitsuba_variant,
                 direct_scenes,
-                supersample: if quick { 4 } else { supersample },
+                supersample: pick(supersample, quick, 4, 16),
                 seed,
                 threads: threads.unwrap_or_else(super::cpus),
                 no_external: no_external || quick,
-            };
-            ("knobs", c, knobs::run(&opts)?)
+            }))
         }
         BenchCommand::Peers {
             common,
@@ -305,34 +415,33 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             seed,
             no_external,
         } => {
-            let c = common.common()?;
+            let c = common.common(home)?;
             let quick = c.quick;
-            let opts = PeersOptions {
-                common: c.clone(),
-                scene: if quick {
-                    "scenes/icosphere.toml@64x48"
-                        .parse()
-                        .map_err(anyhow::Error::msg)?
-                } else {
-                    scene
+            Plan::Peers(Box::new(PeersOptions {
+                common: c,
+                scene: match scene {
+                    Some(s) => s,
+                    None if quick => home.spec("scenes/icosphere.toml@64x48")?,
+                    None => home.spec("scenes/million.toml@1920x1080")?,
                 },
                 scanned_scene: match scanned_scene {
                     Some(s) => Some(s),
                     None if quick => None,
-                    None => Some(
-                        "scenes/corpus/nefertiti_scan.toml@1920x1080"
-                            .parse()
-                            .map_err(anyhow::Error::msg)?,
-                    ),
+                    None => Some(home.spec("scenes/corpus/nefertiti_scan.toml@1920x1080")?),
                 },
-                threads: if quick { vec![1] } else { threads },
-                gi_scene,
-                reference,
+                threads: pick(threads, quick, vec![1], vec![1, 2]),
+                gi_scene: match gi_scene {
+                    Some(p) => p,
+                    None => home.file("scenes/cornell_gi.toml")?,
+                },
+                reference: match reference {
+                    Some(p) => p,
+                    None => home.file("tests/references/cornell_gi.exr")?,
+                },
                 mitsuba_spp,
                 seed,
                 no_external: no_external || quick,
-            };
-            ("peers", c, peers::run(&opts)?)
+            }))
         }
         BenchCommand::Crossover {
             common,
@@ -340,15 +449,19 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             nx,
             threads,
         } => {
-            let c = common.common()?;
+            let c = common.common(home)?;
             let quick = c.quick;
-            let opts = CrossoverOptions {
-                common: c.clone(),
-                size: if quick { 64 } else { size },
-                nx: if quick { vec![1, 4, 16] } else { nx },
+            Plan::Crossover(CrossoverOptions {
+                common: c,
+                size: pick(size, quick, 64, 512),
+                nx: pick(
+                    nx,
+                    quick,
+                    vec![1, 4, 16],
+                    vec![1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048],
+                ),
                 threads: threads.unwrap_or_else(super::cpus),
-            };
-            ("crossover", c, crossover::run(&opts)?)
+            })
         }
         BenchCommand::Scale {
             common,
@@ -356,36 +469,31 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             scenes,
         } => {
             let explicit_runs = common.runs.is_some();
-            let mut c = common.common()?;
+            let mut c = common.common(home)?;
             if !explicit_runs {
                 c.runs = 1; // each run is a whole check of minutes
             }
             let quick = c.quick;
-            let scenes = if quick {
-                vec![
-                    c.root.join("scenes/three_triangles.toml"),
-                    c.root.join("scenes/icosphere.toml"),
-                ]
-            } else if scenes.is_empty() {
-                vec![c.root.join("scenes"), c.root.join("scenes/corpus")]
-            } else {
+            let scenes = if !scenes.is_empty() {
                 scenes
+            } else if quick {
+                vec![
+                    home.file("scenes/three_triangles.toml")?,
+                    home.file("scenes/icosphere.toml")?,
+                ]
+            } else {
+                vec![home.file("scenes")?, home.file("scenes/corpus")?]
             };
-            let opts = ScaleOptions {
-                common: c.clone(),
-                shards: if quick { vec![2] } else { shards },
+            Plan::Scale(ScaleOptions {
+                common: c,
+                shards: pick(shards, quick, vec![2], vec![1, 2, 4]),
                 scenes,
-            };
-            ("scale", c, scale::run(&opts)?)
+            })
         }
-        BenchCommand::Stability { common, only } => {
-            let c = common.common()?;
-            let opts = StabilityOptions {
-                common: c.clone(),
-                only,
-            };
-            ("stability", c, stability::run(&opts)?)
-        }
+        BenchCommand::Stability { common, only } => Plan::Stability(StabilityOptions {
+            common: common.common(home)?,
+            only,
+        }),
         BenchCommand::Variance {
             common,
             scene,
@@ -397,25 +505,224 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
             check_reference,
             threads,
         } => {
-            let c = common.common()?;
+            let c = common.common(home)?;
             let quick = c.quick;
-            let opts = VarianceOptions {
-                common: c.clone(),
-                scene,
-                reference,
-                spp: if quick { vec![4, 8] } else { spp },
-                seeds: if quick { 8 } else { seeds },
+            Plan::Variance(VarianceOptions {
+                common: c,
+                scene: match scene {
+                    Some(p) => p,
+                    None => home.file("scenes/cornell_gi.toml")?,
+                },
+                reference: match reference {
+                    Some(p) => p,
+                    None => home.file("tests/references/cornell_gi.exr")?,
+                },
+                spp: pick(spp, quick, vec![4, 8], vec![16, 64, 256]),
+                seeds: pick(seeds, quick, 8, 64),
                 seed,
-                test_blocks: if quick { 1 } else { test_blocks },
+                test_blocks: pick(test_blocks, quick, 1, 64),
                 check_reference,
                 threads: threads.unwrap_or_else(super::cpus),
-            };
-            ("variance", c, variance::run(&opts)?)
+            })
         }
-    };
-    let written = super::write_outputs(&common.out_dir, stem, &out.record, &out.html, &out.svgs)?;
+    })
+}
+
+/// Runs one subcommand and writes its outputs: every output path is checked
+/// before the benchmark starts, and the set is written all or nothing.
+pub fn run(cmd: BenchCommand) -> Result<()> {
+    let plan = plan(cmd)?;
+    let (stem, out_dir) = (plan.stem(), plan.common().out_dir.clone());
+    super::outputs::check_targets(&out_dir, stem)?;
+    let out = plan.run()?;
+    let written = super::write_outputs(&out_dir, stem, &out.record, &out.html, &out.svgs)?;
     for p in written {
         println!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// The default scene of the plain `rendiff bench` (no subcommand), in rendiff's checkout.
+pub fn default_core_scene() -> Result<PathBuf> {
+    Home::find().file("scenes/million.toml")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use std::path::Path;
+
+    #[derive(Debug, Parser)]
+    struct T {
+        #[command(subcommand)]
+        cmd: BenchCommand,
+    }
+
+    fn plan_of(args: &[&str]) -> Plan {
+        let t = T::try_parse_from(std::iter::once("bench").chain(args.iter().copied()))
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"));
+        plan_in(t.cmd, &Home(Ok(PathBuf::from("/home/rd")))).unwrap()
+    }
+
+    fn spec(s: &str) -> SceneSpec {
+        s.parse().unwrap()
+    }
+
+    /// Every option --quick has a default for is honoured when given with
+    /// it (each was silently replaced by --quick's value).
+    #[test]
+    fn explicit_options_win_over_quick() {
+        let Plan::Crossover(o) = plan_of(&["crossover", "--quick", "--nx", "1", "--size", "16"])
+        else {
+            panic!()
+        };
+        assert_eq!((o.size, o.nx, o.common.runs), (16, vec![1], 1));
+
+        let Plan::Scale(o) = plan_of(&[
+            "scale", "--quick", "--scene", "x.toml", "--shards", "3", "--runs", "2",
+        ]) else {
+            panic!()
+        };
+        assert_eq!(o.scenes, [PathBuf::from("x.toml")]);
+        assert_eq!((o.shards, o.common.runs), (vec![3], 2));
+
+        let Plan::Peers(o) = plan_of(&[
+            "peers",
+            "--quick",
+            "--scene",
+            "a.toml@8x8",
+            "--threads",
+            "2",
+        ]) else {
+            panic!()
+        };
+        assert_eq!((o.scene, o.threads), (spec("a.toml@8x8"), vec![2]));
+
+        let Plan::Variance(o) = plan_of(&[
+            "variance",
+            "--quick",
+            "--spp",
+            "2",
+            "--seeds",
+            "3",
+            "--test-blocks",
+            "5",
+        ]) else {
+            panic!()
+        };
+        assert_eq!((o.spp, o.seeds, o.test_blocks), (vec![2], 3, 5));
+
+        let Plan::Knobs(o) = plan_of(&[
+            "knobs",
+            "--quick",
+            "--scales",
+            "1",
+            "--spp",
+            "2",
+            "--supersample",
+            "2",
+            "--scene",
+            "a.toml",
+            "--direct-scene",
+            "b.toml",
+        ]) else {
+            panic!()
+        };
+        assert_eq!(o.resolution_scales, [1.0]);
+        assert_eq!((o.core_spp, o.supersample), (vec![2], 2));
+        assert_eq!(
+            (o.scenes, o.direct_scenes),
+            (vec![spec("a.toml")], vec![spec("b.toml")])
+        );
+
+        let Plan::Stability(o) = plan_of(&["stability", "--quick", "--only", "trace"]) else {
+            panic!()
+        };
+        assert_eq!(o.only, Some(vec!["trace".to_string()]));
+    }
+
+    /// Without the options, --quick's defaults and the normal ones apply.
+    #[test]
+    fn quick_and_normal_defaults() {
+        let Plan::Crossover(o) = plan_of(&["crossover", "--quick"]) else {
+            panic!()
+        };
+        assert_eq!((o.size, o.nx), (64, vec![1, 4, 16]));
+        let Plan::Crossover(o) = plan_of(&["crossover"]) else {
+            panic!()
+        };
+        assert_eq!((o.size, o.nx.len(), o.common.runs), (512, 12, 3));
+        let Plan::Variance(o) = plan_of(&["variance", "--quick"]) else {
+            panic!()
+        };
+        assert_eq!((o.spp, o.seeds, o.test_blocks), (vec![4, 8], 8, 1));
+        let Plan::Knobs(o) = plan_of(&["knobs"]) else {
+            panic!()
+        };
+        assert_eq!((o.core_spp.len(), o.supersample), (5, 16));
+        assert_eq!(o.resolution_scales, [0.25, 0.5, 1.0, 2.0]);
+        let Plan::Scale(o) = plan_of(&["scale", "--quick"]) else {
+            panic!()
+        };
+        assert_eq!((o.shards, o.common.runs), (vec![2], 1));
+    }
+
+    /// Defaults name rendiff's own files in its checkout, wherever the
+    /// command runs; explicit paths stay as given (relative to the current folder).
+    #[test]
+    fn default_files_come_from_the_checkout() {
+        let Plan::Knobs(o) = plan_of(&["knobs", "--quick"]) else {
+            panic!()
+        };
+        assert_eq!(
+            o.scenes,
+            [spec("/home/rd/scenes/icosphere.toml@64x48")],
+            "{o:?}"
+        );
+        assert_eq!(
+            o.direct_scenes,
+            [spec("/home/rd/scenes/directional_shadows.toml@32x24")]
+        );
+        assert_eq!(o.gi_scene, Path::new("/home/rd/scenes/cornell_gi.toml"));
+        assert_eq!(
+            o.reference,
+            Path::new("/home/rd/tests/references/cornell_gi.exr")
+        );
+        assert_eq!(o.common.root, Path::new("/home/rd"));
+        assert_eq!(o.common.out_dir, Path::new("reports/bench"));
+        let Plan::Peers(o) = plan_of(&["peers"]) else {
+            panic!()
+        };
+        assert_eq!(o.scene, spec("/home/rd/scenes/million.toml@1920x1080"));
+        assert_eq!(
+            o.scanned_scene,
+            Some(spec("/home/rd/scenes/corpus/nefertiti_scan.toml@1920x1080"))
+        );
+        let Plan::Variance(o) = plan_of(&["variance", "--reference", "r.exr"]) else {
+            panic!()
+        };
+        assert_eq!(o.scene, Path::new("/home/rd/scenes/cornell_gi.toml"));
+        assert_eq!(o.reference, Path::new("r.exr"));
+        let Plan::Scale(o) = plan_of(&["scale"]) else {
+            panic!()
+        };
+        assert_eq!(
+            o.scenes,
+            [
+                PathBuf::from("/home/rd/scenes"),
+                PathBuf::from("/home/rd/scenes/corpus")
+            ]
+        );
+        // No checkout: a default that needs one says so; explicit paths need none.
+        let none = Home(Err("cannot find rendiff's harness".into()));
+        let t = T::try_parse_from(["bench", "variance"]).unwrap();
+        let e = plan_in(t.cmd, &none).unwrap_err();
+        assert!(
+            format!("{e}").contains("cannot find rendiff's harness"),
+            "{e}"
+        );
+        let t = T::try_parse_from(["bench", "crossover"]).unwrap();
+        assert!(plan_in(t.cmd, &none).is_ok());
+    }
 }

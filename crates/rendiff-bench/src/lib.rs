@@ -22,6 +22,7 @@ pub mod direct;
 pub mod harness;
 pub mod knobs;
 pub mod measure;
+pub mod outputs;
 pub mod page;
 pub mod pareto;
 pub mod peers;
@@ -213,10 +214,20 @@ pub fn finish_environment(record: &mut Value) {
     }
 }
 
-/// A scratch folder removed when dropped (the `tempfile` crate is a test-only
-/// dependency, and benchmark scratch needs nothing more than this).
-#[derive(Debug)]
-pub struct Scratch(PathBuf);
+/// A scratch folder removed when dropped, and registered with the shutdown
+/// handler while it lives, so that an interrupted benchmark removes it too
+/// (the `tempfile` crate is a test-only dependency, and benchmark scratch
+/// needs nothing more than this).
+pub struct Scratch {
+    dir: PathBuf,
+    _registered: rendiff::shutdown::PathGuard,
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("Scratch").field(&self.dir).finish()
+    }
+}
 
 impl Scratch {
     /// Creates a fresh, empty folder under the system's temporary directory.
@@ -229,20 +240,24 @@ impl Scratch {
             NEXT.fetch_add(1, Ordering::Relaxed)
         ));
         let _ = std::fs::remove_dir_all(&dir);
+        let guard = rendiff::shutdown::track_path(&dir);
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create scratch folder", dir.display()))?;
-        Ok(Scratch(dir))
+        Ok(Scratch {
+            dir,
+            _registered: guard,
+        })
     }
 
     /// The folder.
     pub fn path(&self) -> &Path {
-        &self.0
+        &self.dir
     }
 }
 
 impl Drop for Scratch {
     fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
+        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
 
@@ -297,8 +312,11 @@ pub struct Output {
     pub svgs: Vec<(String, String)>,
 }
 
-/// Writes `STEM.json`, `STEM.html` and each `(name, svg)` as a standalone
-/// file, atomically, then refreshes the folder's index page.
+/// Writes `STEM.json`, `STEM.html`, each `(name, svg)` as a standalone
+/// file `STEM-NAME.svg` and the folder's refreshed index page, as one set
+/// ([`outputs::write_set`]: all or nothing, the benchmark's plots of an
+/// earlier run that this one does not write removed); returns the paths
+/// written, index aside.
 pub fn write_outputs(
     dir: &Path,
     stem: &str,
@@ -306,31 +324,29 @@ pub fn write_outputs(
     html: &str,
     svgs: &[(String, String)],
 ) -> Result<Vec<PathBuf>> {
-    let mut written = Vec::new();
-    let mut put = |name: String, bytes: Vec<u8>| -> Result<()> {
-        let path = dir.join(name);
-        rendiff::exr_io::write_atomically(&path, |tmp| {
-            std::fs::write(tmp, &bytes)?;
-            Ok(())
-        })?;
-        written.push(path);
-        Ok(())
-    };
-    put(
-        format!("{stem}.json"),
-        serde_json::to_vec_pretty(record)?
-            .into_iter()
-            .chain([b'\n'])
-            .collect(),
-    )?;
-    put(format!("{stem}.html"), html.as_bytes().to_vec())?;
+    let mut files = vec![
+        (
+            format!("{stem}.json"),
+            serde_json::to_vec_pretty(record)?
+                .into_iter()
+                .chain([b'\n'])
+                .collect(),
+        ),
+        (format!("{stem}.html"), html.as_bytes().to_vec()),
+    ];
     for (name, svg) in svgs {
-        put(
+        files.push((
             format!("{stem}-{name}.svg"),
             plot::standalone(svg).into_bytes(),
-        )?;
+        ));
     }
-    page::write_index(dir)?;
+    let n = files.len();
+    files.push((
+        "index.html".into(),
+        page::index_html(dir, Some(stem)).into_bytes(),
+    ));
+    let mut written = outputs::write_set(dir, stem, &files)?;
+    written.truncate(n);
     Ok(written)
 }
 

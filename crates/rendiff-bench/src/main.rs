@@ -24,9 +24,9 @@ struct Cli {
     /// What to benchmark (default: raster and trace on SCENE).
     #[command(subcommand)]
     what: Option<BenchCommand>,
-    /// Scene file (TOML).
-    #[arg(default_value = "scenes/million.toml")]
-    scene: PathBuf,
+    /// Scene file (TOML) (default: scenes/million.toml in rendiff's checkout, found like
+    /// `rendiff check` finds it: RENDIFF_HOME, the current folder, the checkout built from).
+    scene: Option<PathBuf>,
     /// Resolution override, e.g. 1920x1080.
     #[arg(long, value_parser = rendiff_bench::knobs::parse_size)]
     size: Option<(u32, u32)>,
@@ -62,7 +62,13 @@ fn run(cli: Cli) -> Result<()> {
     if let Some(what) = cli.what {
         return rendiff_bench::cli::run(what);
     }
-    let scene = rendiff::scene::Scene::load(&cli.scene)?;
+    // Refused before minutes of work, not after.
+    rendiff::exr_io::check_output(&cli.output)?;
+    let scene_path = match cli.scene {
+        Some(p) => p,
+        None => rendiff_bench::cli::default_core_scene()?,
+    };
+    let scene = rendiff::scene::Scene::load(&scene_path)?;
     let resolved = rendiff::scene::resolve::ResolvedScene::resolve(&scene)?;
     let opts = rendiff_bench::BenchOptions {
         size: cli.size,
@@ -70,7 +76,7 @@ fn run(cli: Cli) -> Result<()> {
         runs: cli.runs,
         bvh: cli.bvh,
     };
-    let record = rendiff_bench::run(&resolved, &cli.scene.display().to_string(), &opts)?;
+    let record = rendiff_bench::run(&resolved, &scene_path.display().to_string(), &opts)?;
     let text = serde_json::to_string_pretty(&record)?;
     rendiff::exr_io::write_atomically(&cli.output, |tmp| {
         std::fs::write(tmp, &text)?;

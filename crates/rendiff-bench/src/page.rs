@@ -22,6 +22,10 @@ pub const PAGES: &[(&str, &str)] = &[
     ),
     ("crossover", "raster against trace as triangles shrink"),
     (
+        "scale",
+        "the main job's wall time: a process per render, the default pool, shards",
+    ),
+    (
         "stability",
         "where each renderer breaks on numerical extremes",
     ),
@@ -170,12 +174,22 @@ pub fn num(v: Option<f64>, digits: usize) -> String {
 
 /// Rewrites `index.html`: a link to each benchmark page present in `dir`.
 pub fn write_index(dir: &Path) -> Result<()> {
+    let html = index_html(dir, None);
+    rendiff::exr_io::write_atomically(&dir.join("index.html"), |tmp| {
+        std::fs::write(tmp, html)?;
+        Ok(())
+    })
+}
+
+/// The index page of `dir`: a link to each benchmark page present there,
+/// and to `also`'s (a page about to be written with it).
+pub fn index_html(dir: &Path, also: Option<&str>) -> String {
     let mut p = Page {
         title: "rendiff benchmarks".into(),
         body: "<h1>rendiff benchmarks</h1><p>Measurements, never assertions: each page says how it was run and the machine's load while it ran.</p><ul>".into(),
     };
     for (stem, what) in PAGES {
-        if dir.join(format!("{stem}.html")).exists() {
+        if also == Some(*stem) || dir.join(format!("{stem}.html")).exists() {
             let _ = write!(
                 p.body,
                 "<li><a href=\"{}\">{}</a> — {} (<a href=\"{}\">JSON</a>)</li>",
@@ -187,11 +201,7 @@ pub fn write_index(dir: &Path) -> Result<()> {
         }
     }
     p.body.push_str("</ul>");
-    let html = p.finish();
-    rendiff::exr_io::write_atomically(&dir.join("index.html"), |tmp| {
-        std::fs::write(tmp, html)?;
-        Ok(())
-    })
+    p.finish()
 }
 
 #[cfg(test)]

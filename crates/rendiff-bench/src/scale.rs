@@ -19,10 +19,11 @@ use super::page::{self, Page};
 use super::plot;
 use super::{environment, finish_environment, median, Common, Output, Scratch};
 use anyhow::{bail, Context, Result};
+use rendiff::check::process::run_with_timeout;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Instant;
+use std::time::Duration;
 
 /// What `bench scale` runs.
 #[derive(Debug, Clone)]
@@ -42,29 +43,28 @@ struct Timing {
     code: Option<i32>,
 }
 
-fn rendiff(args: &[String]) -> Result<Timing> {
+/// Runs `rendiff ARGS` as `rendiff check` runs a renderer: in a process group
+/// of its own registered with the shutdown handler (an interrupted benchmark
+/// kills it, instead of leaving it writing into the removed scratch folder),
+/// dying with this process, its output captured under `logs`.
+fn rendiff(args: &[String], logs: &Path) -> Result<Timing> {
     let exe = super::rendiff_binary()?;
-    let t = Instant::now();
-    let out = Command::new(&exe)
-        .args(args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .output()
+    let mut cmd = Command::new(&exe);
+    cmd.args(args);
+    // A whole check has no limit of its own; each renderer has --timeout.
+    let o = run_with_timeout(cmd, Duration::from_secs(30 * 24 * 3600), logs)
         .with_context(|| format!("cannot run {}", exe.display()))?;
-    let code = out.status.code();
-    if !matches!(code, Some(0) | Some(1)) {
-        let err = String::from_utf8_lossy(&out.stderr);
-        let tail: Vec<&str> = err.lines().rev().take(4).collect();
+    if !matches!(o.code, Some(0) | Some(1)) {
         bail!(
-            "rendiff {} failed ({:?}): {}",
+            "rendiff {} failed ({}): {}",
             args.join(" "),
-            code,
-            tail.into_iter().rev().collect::<Vec<_>>().join(" | ")
+            o.how(),
+            o.stderr_tail(4).lines().collect::<Vec<_>>().join(" | ")
         );
     }
     Ok(Timing {
-        seconds: t.elapsed().as_secs_f64(),
-        code,
+        seconds: o.seconds,
+        code: o.code,
     })
 }
 
@@ -78,11 +78,11 @@ fn check_args(opts: &ScaleOptions, out: &Path, extra: &[&str]) -> Vec<String> {
 }
 
 /// Times `args` `runs` times; the median and every run.
-fn timed(runs: usize, args: &[String]) -> Result<(f64, Vec<f64>, Option<i32>)> {
+fn timed(runs: usize, args: &[String], logs: &Path) -> Result<(f64, Vec<f64>, Option<i32>)> {
     let mut times = Vec::new();
     let mut code = None;
     for _ in 0..runs.max(1) {
-        let t = rendiff(args)?;
+        let t = rendiff(args, logs)?;
         times.push(t.seconds);
         code = t.code;
     }
@@ -123,8 +123,9 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
         "runs": runs,
     });
     let main_run = scratch.path().join("default");
+    let logs = scratch.path().join("logs");
     eprintln!("scale: warm-up (one default check run, untimed)");
-    rendiff(&check_args(opts, &main_run, &[]))?;
+    rendiff(&check_args(opts, &main_run, &[]), &logs)?;
 
     let mut configs = Vec::new();
     let plans: [(&str, &str, &[&str]); 2] = [
@@ -142,7 +143,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     for (name, what, extra) in plans {
         eprintln!("scale: {what}");
         let out = scratch.path().join(name);
-        let (m, all, code) = timed(runs, &check_args(opts, &out, extra))?;
+        let (m, all, code) = timed(runs, &check_args(opts, &out, extra), &logs)?;
         configs.push(
             json!({"name": name, "what": what, "median_s": m, "runs_s": all, "exit_code": code}),
         );
@@ -163,14 +164,14 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
             let costs = main_run.display().to_string();
             let args = check_args(opts, &out, &["--shard", &spec, "--shard-costs", &costs]);
             eprintln!("scale: shard {spec}");
-            times.push(rendiff(&args)?.seconds);
+            times.push(rendiff(&args, &logs)?.seconds);
             runs_dirs.push(out);
         }
         let merged = scratch.path().join(format!("merged{n}"));
         let mut margs = vec!["merge".to_string()];
         margs.extend(runs_dirs.iter().map(|d| d.display().to_string()));
         margs.extend(["-o".into(), merged.display().to_string()]);
-        let merge_s = rendiff(&margs)?.seconds;
+        let merge_s = rendiff(&margs, &logs)?.seconds;
         let slowest = times.iter().cloned().fold(0.0, f64::max);
         shard_rows.push(json!({
             "shards": n,

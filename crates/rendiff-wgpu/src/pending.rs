@@ -97,7 +97,11 @@ impl Signals {
                 .spawn(move || {
                     if let Some(sig) = signals.forever().next() {
                         let removed = remove_all();
-                        eprintln!(
+                        // Not eprintln!: it panics on a closed stderr, which
+                        // would end this thread before the process exits.
+                        use std::io::Write;
+                        let _ = writeln!(
+                            std::io::stderr(),
                             "rendiff-wgpu: interrupted by {}: removed {removed} temporary file(s) or folder(s)",
                             signal_name(sig)
                         );
