@@ -12,6 +12,36 @@ pub use rendiff_core::{
     shade, trace, visibility, vocab,
 };
 
+/// `println!` that never panics: with stdout a closed pipe (`rendiff scenes |
+/// head -1`, `rendiff check ... | head -c1`) `println!` panicked, exit 101,
+/// even after a check's run was published. Lines for a reader that has left
+/// are dropped; the command's own result and exit code stand.
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
+/// [`outln!`] without the newline.
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout(), $($arg)*);
+    }};
+}
+
+/// `eprintln!` that never panics on a closed stderr (see [`outln!`]).
+#[macro_export]
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
 pub mod args;
 pub mod check;
 pub mod diff;

@@ -260,12 +260,12 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Err(e) = rendiff::shutdown::install() {
-        eprintln!("warning: SIGINT/SIGTERM not hooked ({e}); an interrupted run may leave renderers running");
+        rendiff::errln!("warning: SIGINT/SIGTERM not hooked ({e}); an interrupted run may leave renderers running");
     }
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            rendiff::errln!("error: {e:#}");
             ExitCode::from(2)
         }
     }
@@ -323,7 +323,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Ok(r) => r,
                 Err(NotRendered::Skipped(why)) => {
                     // The harness's convention: `check` runs this as a child.
-                    eprintln!("{name}: skipped: {why}");
+                    rendiff::errln!("{name}: skipped: {why}");
                     return Ok(ExitCode::from(rendiff::check::isolated::EXIT_SKIPPED as u8));
                 }
                 Err(NotRendered::Failed(why)) => anyhow::bail!("{name}: {why}"),
@@ -345,7 +345,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 if let Some(b) = inject_bias {
                     attrs.insert("injected_bias".to_string(), format!("{b:?}"));
                 }
-                println!(
+                rendiff::outln!(
                     "  radiance: {} ({} spp) in {:.3} s",
                     r.integrator, r.spp, r.seconds
                 );
@@ -369,7 +369,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             let c = &frame.counters;
-            println!(
+            rendiff::outln!(
                 "{name}: {}x{} px, {} triangles, {:.3} s -> {}",
                 frame.width,
                 frame.height,
@@ -378,12 +378,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 out.display()
             );
             if !matches!(backend, Backend::Embree(_)) {
-                println!(
+                rendiff::outln!(
                     "  coverage tests {}, covered {}, exact fallbacks {}, ties {}, triangle setups {}, BVH nodes visited {}",
                     c.coverage_tests, c.covered, c.exact_fallbacks, c.ties, c.triangle_setups, c.bvh_nodes_visited
                 );
                 if c.fast_decided + c.hidden_skipped > 0 {
-                    println!(
+                    rendiff::outln!(
                         "  decided by edge functions {}, triangle-tile pairs skipped as hidden {}",
                         c.fast_decided, c.hidden_skipped
                     );
@@ -407,15 +407,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         // or send the terminal control sequences.
                         let req: Vec<&str> = s.requires.iter().map(String::as_str).collect();
                         let name = rendiff::scene::printable(&p.display().to_string(), 200);
-                        println!("{name:<28} requires: {}", req.join(", "));
+                        rendiff::outln!("{name:<28} requires: {}", req.join(", "));
                         if !s.file.description.is_empty() {
                             let text = rendiff::scene::printable(&s.file.description, 500);
-                            println!("{:<28}   {text}", "");
+                            rendiff::outln!("{:<28}   {text}", "");
                         }
                     }
                     Err(e) => {
                         failed = true;
-                        eprintln!("error: {e}");
+                        rendiff::errln!("error: {e}");
                     }
                 }
             }
@@ -428,7 +428,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Export { scene, output } => {
             let resolved = load_scene(&scene)?;
             rendiff::scene::export::export(&resolved, &output)?;
-            println!(
+            rendiff::outln!(
                 "exported {} triangles to {}",
                 resolved.triangles.len(),
                 output.display()
@@ -438,12 +438,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Diff { a, b } => diff(&a, &b),
         Command::Report { run } => {
             let index = rendiff::report::write(&run)?;
-            println!("report: {}", index.display());
+            rendiff::outln!("report: {}", index.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Gate { run, baseline } => {
             let (summary, passed) = rendiff::gate::gate(&baseline, &run)?;
-            print!("{summary}");
+            rendiff::out!("{summary}");
             Ok(if passed {
                 ExitCode::SUCCESS
             } else {
@@ -462,7 +462,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 allow_scene_changes,
             };
             let b = rendiff::gate::bless(&run, &baseline, &opts)?;
-            println!(
+            rendiff::outln!(
                 "blessed {} entries from {} into {}",
                 b.entries.len(),
                 run.display(),
@@ -512,14 +512,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Vocab { json } => {
             let v = rendiff::vocab::json();
             if json {
-                println!("{v}");
+                rendiff::outln!("{v}");
             } else if let Some(map) = v.as_object() {
                 for (k, words) in map {
                     let list: Vec<&str> = words
                         .as_array()
                         .map(|a| a.iter().filter_map(|w| w.as_str()).collect())
                         .unwrap_or_default();
-                    println!("{k:<20} {}", list.join(", "));
+                    rendiff::outln!("{k:<20} {}", list.join(", "));
                 }
             }
             Ok(ExitCode::SUCCESS)
@@ -577,7 +577,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 };
                 let all = scenes.len();
                 scenes = shard::select(&scenes, shard, &costs);
-                eprintln!(
+                rendiff::errln!(
                     "shard {}/{}: {} of {all} scenes",
                     shard.index,
                     shard.total,
@@ -676,8 +676,8 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 /// exit 1 when any verdict fails.
 fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
     let tally = rendiff::check::tally(&outcome.results);
-    print!("{}", outcome.table);
-    println!(
+    rendiff::out!("{}", outcome.table);
+    rendiff::outln!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,
         tally.failed,
@@ -695,8 +695,8 @@ fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path)
 /// Every check run gets its report; a report problem is a warning, never a changed verdict.
 fn write_report(run: &Path) {
     match rendiff::report::write(run) {
-        Ok(index) => println!("report: {}", index.display()),
-        Err(e) => eprintln!("warning: report not written: {e:#}"),
+        Ok(index) => rendiff::outln!("report: {}", index.display()),
+        Err(e) => rendiff::errln!("warning: report not written: {e:#}"),
     }
 }
 
@@ -711,7 +711,7 @@ fn load_scene(path: &Path) -> Result<ResolvedScene> {
 fn diff(a: &Path, b: &Path) -> Result<ExitCode> {
     let d = rendiff::diff::diff_files(a, b)?;
     for line in d.lines(&a.display().to_string(), &b.display().to_string()) {
-        println!("{line}");
+        rendiff::outln!("{line}");
     }
     Ok(if d.differs() {
         ExitCode::from(1)

@@ -745,6 +745,41 @@ fn renders_never_leave_stale_previews() {
     );
 }
 
+/// A reader that leaves early (`rendiff scenes | head -1`, `rendiff check
+/// ... | head -c1`) never turns a command into a panic: `println!` panicked
+/// on the closed pipe, exit 101, even after a check had published its run.
+#[test]
+fn a_closed_stdout_is_no_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let runs: [&[&str]; 2] = [
+        &["scenes", "scenes"],
+        &[
+            "check",
+            "scenes/three_triangles.toml",
+            "--only",
+            "trace",
+            "--no-calibration",
+            "-o",
+            run.to_str().unwrap(),
+        ],
+    ];
+    for args in runs {
+        let mut child = rendiff()
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take()); // the reader leaves before the first line
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+    }
+    assert!(run.join("results.json").is_file());
+}
+
 /// `rendiff scenes` shows a scene's file name and description escaped: a
 /// newline, an escape sequence or a bidi override in either could forge a
 /// listing line or drive the terminal.

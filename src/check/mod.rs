@@ -538,7 +538,7 @@ fn in_process(
 
 fn say(opts: &CheckOptions, line: String) {
     if !opts.quiet {
-        eprintln!("{line}");
+        crate::errln!("{line}");
     }
 }
 

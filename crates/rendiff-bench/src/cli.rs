@@ -537,7 +537,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
     let out = plan.run()?;
     let written = super::write_outputs(&out_dir, stem, &out.record, &out.html, &out.svgs)?;
     for p in written {
-        println!("wrote {}", p.display());
+        rendiff::outln!("wrote {}", p.display());
     }
     Ok(())
 }

@@ -111,7 +111,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
         let mut rows = Vec::new();
         for &nx in &opts.nx {
             let scene = grid_scene(nx, opts.size, aligned)?;
-            eprintln!(
+            rendiff::errln!(
                 "crossover: nx {nx} ({} triangles){}",
                 scene.triangles.len(),
                 if aligned { ", pixel-aligned" } else { "" }

@@ -218,7 +218,7 @@ pub fn direct_group(opts: &DirectOptions) -> Result<Group> {
         skipped: Vec::new(),
         facts: json!({}),
     };
-    eprintln!("knobs: direct-lighting reference ({k_ref}x{k_ref} per pixel) on {path}");
+    rendiff::errln!("knobs: direct-lighting reference ({k_ref}x{k_ref} per pixel) on {path}");
     let reference_t = core_supersampled(&scene, k_ref, opts.runs)?;
     let reference = image(&scene, reference_t.last.clone());
     let mut contract: Option<RgbImage> = None;
@@ -282,7 +282,7 @@ pub fn direct_group(opts: &DirectOptions) -> Result<Group> {
         }
     };
     for (i, s) in opts.settings.iter().enumerate() {
-        eprintln!("knobs: {} {}", s.backend, s.label);
+        rendiff::errln!("knobs: {} {}", s.backend, s.label);
         let out = harness.scratch.join(format!("direct-{i}.exr"));
         match external(&harness, s, &resolved, &out, opts.runs) {
             Ok((time_s, times, last)) => {

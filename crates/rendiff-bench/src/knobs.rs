@@ -280,7 +280,7 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
                 scaled_size(w0, h0, k)?;
             }
         }
-        eprintln!(
+        rendiff::errln!(
             "knobs: visibility on {} ({}x{}, {} triangles)",
             spec.path.display(),
             scene.camera.width,
@@ -290,7 +290,7 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
         let g = pool.install(|| visibility_group(spec, &scene, opts.common.runs));
         groups.push(g);
         if i == 0 {
-            eprintln!("knobs: resolution on {}", spec.path.display());
+            rendiff::errln!("knobs: resolution on {}", spec.path.display());
             resolution = pool.install(|| resolution_table(&scene, opts))?;
         }
     }
@@ -310,7 +310,7 @@ pub fn run(opts: &KnobsOptions) -> Result<super::Output> {
             .with_context(|| format!("{}: direct-lighting knobs", spec.path.display()))?;
         groups.push(g);
     }
-    eprintln!("knobs: radiance on {}", opts.gi_scene.display());
+    rendiff::errln!("knobs: radiance on {}", opts.gi_scene.display());
     let g = pool.install(|| super::spp::radiance_group(opts))?;
     groups.push(g);
     for g in &mut groups {

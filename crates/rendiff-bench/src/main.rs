@@ -47,12 +47,12 @@ struct Cli {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Err(e) = rendiff::shutdown::install() {
-        eprintln!("warning: SIGINT/SIGTERM not hooked ({e}); an interrupted run may leave renderers running");
+        rendiff::errln!("warning: SIGINT/SIGTERM not hooked ({e}); an interrupted run may leave renderers running");
     }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            rendiff::errln!("error: {e:#}");
             ExitCode::from(2)
         }
     }
@@ -82,6 +82,6 @@ fn run(cli: Cli) -> Result<()> {
         std::fs::write(tmp, &text)?;
         Ok(())
     })?;
-    println!("{text}");
+    rendiff::outln!("{text}");
     Ok(())
 }

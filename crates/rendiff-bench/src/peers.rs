@@ -70,7 +70,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
     let scene = opts.scene.load()?;
     let cam = &scene.camera;
     let runs = opts.common.runs;
-    eprintln!(
+    rendiff::errln!(
         "peers: {} at {}x{} ({} triangles)",
         opts.scene.path.display(),
         cam.width,
@@ -81,7 +81,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
     let scanned = match &opts.scanned_scene {
         Some(spec) => {
             let s = spec.load()?;
-            eprintln!(
+            rendiff::errln!(
                 "peers: scanned mesh {} at {}x{} ({} triangles)",
                 spec.path.display(),
                 s.camera.width,
@@ -191,7 +191,7 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
             for query in EmbreeQuery::ALL {
                 for coherence in EmbreeCoherence::ALL {
                     let name = measure::embree_name_with(config, query, coherence);
-                    eprintln!("peers: {threads} thread(s), {name}");
+                    rendiff::errln!("peers: {threads} thread(s), {name}");
                     match measure::embree_with(scene, config, query, coherence, runs) {
                         Ok((f, st)) => {
                             let mrays = st.rays as f64 / st.trace_s / 1e6;
@@ -424,7 +424,7 @@ fn equal_time(h: &Harness, opts: &PeersOptions, runs: usize) -> Result<Value> {
             settings: &settings,
             name: &name,
         };
-        eprintln!("peers: equal time, mitsuba {variant}");
+        rendiff::errln!("peers: equal time, mitsuba {variant}");
         match mitsuba_path(h, &resolved, &reference, &run, runs) {
             Ok(m) => {
                 variants.insert(

@@ -124,7 +124,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     });
     let main_run = scratch.path().join("default");
     let logs = scratch.path().join("logs");
-    eprintln!("scale: warm-up (one default check run, untimed)");
+    rendiff::errln!("scale: warm-up (one default check run, untimed)");
     rendiff(&check_args(opts, &main_run, &[]), &logs)?;
 
     let mut configs = Vec::new();
@@ -141,7 +141,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
         ),
     ];
     for (name, what, extra) in plans {
-        eprintln!("scale: {what}");
+        rendiff::errln!("scale: {what}");
         let out = scratch.path().join(name);
         let (m, all, code) = timed(runs, &check_args(opts, &out, extra), &logs)?;
         configs.push(
@@ -163,7 +163,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
             let spec = format!("{k}/{n}");
             let costs = main_run.display().to_string();
             let args = check_args(opts, &out, &["--shard", &spec, "--shard-costs", &costs]);
-            eprintln!("scale: shard {spec}");
+            rendiff::errln!("scale: shard {spec}");
             times.push(rendiff(&args, &logs)?.seconds);
             runs_dirs.push(out);
         }

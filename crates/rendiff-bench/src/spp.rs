@@ -107,7 +107,7 @@ pub fn radiance_group(opts: &KnobsOptions) -> Result<Group> {
         ));
     }
     for (i, (knob, label, spp, args)) in configs.into_iter().enumerate() {
-        eprintln!("knobs: {label}");
+        rendiff::errln!("knobs: {label}");
         let run = MitsubaRun {
             spp,
             seed: opts.seed,

@@ -253,13 +253,13 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
     let mut verdicts = Vec::new();
     let mut parts: Vec<(u32, Split)> = Vec::new();
     for &spp in &opts.spp {
-        eprintln!("variance: {spp} spp x {} seeds", opts.seeds);
+        rendiff::errln!("variance: {spp} spp x {} seeds", opts.seeds);
         let (c, s, seconds) = pool.install(|| setting(&scene, &bvh, refr, spp, opts))?;
         verdicts.push(verdict(spp, &c, &s));
         rows.push(json!({"spp": spp, "seconds": seconds, "calibration": c, "split": s.clone()}));
         parts.push((spp, s));
     }
-    eprintln!("variance: the quick test on {} blocks", opts.test_blocks);
+    rendiff::errln!("variance: the quick test on {} blocks", opts.test_blocks);
     let test = if opts.test_blocks > 0 {
         pool.install(|| test_check(&scene, &bvh, opts, ref_var))?
     } else {

@@ -79,7 +79,7 @@ pub fn run(
             only,
             ..template.clone()
         };
-        eprintln!(
+        rendiff::errln!(
             "stability: {} ({} triangles), each renderer in its own process",
             m.name,
             m.triangles.unwrap_or(0)

@@ -169,7 +169,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
     };
     // A name in --only that no backend has fails here, not in every check below.
     check::check_only_option(&check_opts)?;
-    eprintln!(
+    rendiff::errln!(
         "stability: {} scenes through rendiff check ({})",
         check_opts.scenes.len(),
         only.as_ref()
