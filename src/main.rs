@@ -347,7 +347,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 rendiff::outln!(
                     "  radiance: {} ({} spp) in {:.3} s",
-                    r.integrator, r.spp, r.seconds
+                    r.integrator,
+                    r.spp,
+                    r.seconds
                 );
             }
             // Never a result beside another render's previews, nor one whose
@@ -385,7 +387,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 if c.fast_decided + c.hidden_skipped > 0 {
                     rendiff::outln!(
                         "  decided by edge functions {}, triangle-tile pairs skipped as hidden {}",
-                        c.fast_decided, c.hidden_skipped
+                        c.fast_decided,
+                        c.hidden_skipped
                     );
                 }
             }
