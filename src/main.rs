@@ -354,6 +354,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             // Never a result beside another render's previews, nor one whose
             // previews failed: the EXR and its previews are one output.
+            // One render's EXR and previews at a time in this folder: two
+            // renders to one output at once mixed their files.
+            let folder = out
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            std::fs::create_dir_all(folder)
+                .with_context(|| format!("{}: cannot create output folder", folder.display()))?;
+            let _lock = rendiff::exr_io::lock_folder(folder)?;
             preview::remove_previews(&out)?;
             write_frame_with(&out, &frame, radiance.as_ref(), &attrs)?;
             if !no_preview {

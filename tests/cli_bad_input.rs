@@ -745,6 +745,44 @@ fn renders_never_leave_stale_previews() {
     );
 }
 
+/// Two renders to one output take turns writing it: each file was atomic,
+/// but the set was not, and one render's EXR ended up beside the other's
+/// depth preview. While another writer holds the folder, a render writes
+/// nothing; released, it writes its whole set.
+#[test]
+fn renders_to_one_output_take_turns() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.exr");
+    let lock = rendiff::exr_io::lock_folder(dir.path()).unwrap();
+    let mut child = rendiff()
+        .args([
+            "render",
+            "--renderer",
+            "raster",
+            "--quiet",
+            "scenes/three_triangles.toml",
+            "-o",
+        ])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    assert!(child.try_wait().unwrap().is_none(), "it did not wait");
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "written while locked"
+    );
+    drop(lock);
+    let res = child.wait_with_output().unwrap();
+    assert_eq!(res.status.code(), Some(0), "{res:?}");
+    for f in ["o.exr", "o.ids.png", "o.depth.png"] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
+}
+
 /// A reader that leaves early (`rendiff scenes | head -1`, `rendiff check
 /// ... | head -c1`) never turns a command into a panic: `println!` panicked
 /// on the closed pipe, exit 101, even after a check had published its run.

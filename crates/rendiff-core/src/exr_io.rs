@@ -25,6 +25,53 @@ pub fn check_output(path: &Path) -> Result<()> {
     }
 }
 
+/// How long a writer waits for another rendiff writing the same output set
+/// (a render's EXR and previews, an export's three files) before giving up.
+const FOLDER_LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// An exclusive advisory lock (flock) on a folder, held while a set of files
+/// is written into it and released when dropped. Each file of a set is atomic
+/// on its own, but two renders (or exports) to one output at once could
+/// interleave their files: one scene's EXR beside another's depth preview,
+/// one scene's triangles beside another's object IDs. With the lock, one
+/// writer's whole set lands after the other's.
+pub struct FolderLock {
+    /// The open folder; closing it releases the lock.
+    _folder: std::fs::File,
+}
+
+/// Locks `dir` (which must exist) for writing a set of files, waiting up to
+/// [`FOLDER_LOCK_WAIT`] for another rendiff writing there.
+pub fn lock_folder(dir: &Path) -> Result<FolderLock> {
+    let f = std::fs::File::open(dir).with_context(|| {
+        format!(
+            "{}: cannot open the output folder to lock it",
+            dir.display()
+        )
+    })?;
+    let start = std::time::Instant::now();
+    loop {
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock(2) on a descriptor this function owns.
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            return Ok(FolderLock { _folder: f });
+        }
+        let e = std::io::Error::last_os_error();
+        if e.raw_os_error() != Some(libc::EWOULDBLOCK) {
+            return Err(e)
+                .with_context(|| format!("{}: cannot lock the output folder", dir.display()));
+        }
+        if start.elapsed() > FOLDER_LOCK_WAIT {
+            bail!(
+                "{}: another rendiff has been writing here for {} s; try again when it is done",
+                dir.display(),
+                FOLDER_LOCK_WAIT.as_secs()
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// Writes `bytes`-producing work to `path` through a temporary file in the same
 /// folder and a rename, so a reader never sees a half-written result.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {

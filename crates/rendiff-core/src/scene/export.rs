@@ -53,6 +53,9 @@ pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
         crate::exr_io::check_output(&dir.join(f))?;
     }
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    // One export's three files at a time: two exports to one folder at once
+    // left one scene's triangles beside the other's object IDs.
+    let _lock = crate::exr_io::lock_folder(dir)?;
     let meta_path = dir.join(FILES[2]);
     match std::fs::remove_file(&meta_path) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -145,6 +148,26 @@ mod tests {
         );
         std::fs::remove_dir(&tmp).unwrap();
         export(&b, &dir).unwrap();
+        assert!(dir.join(FILES[2]).is_file());
+    }
+
+    #[test]
+    fn exports_to_one_folder_take_turns() {
+        // Another writer holds the folder: the export waits, writing nothing,
+        // until it is released (two at once mixed their files).
+        let t = tempfile::tempdir().unwrap();
+        let dir = t.path().join("out");
+        std::fs::create_dir_all(&dir).unwrap();
+        let lock = crate::exr_io::lock_folder(&dir).unwrap();
+        let d = dir.clone();
+        let writer = std::thread::spawn(move || export(&scene("three_triangles"), &d));
+        std::thread::sleep(std::time::Duration::from_millis(400));
+        assert!(
+            std::fs::read_dir(&dir).unwrap().next().is_none(),
+            "written while locked"
+        );
+        drop(lock);
+        writer.join().unwrap().unwrap();
         assert!(dir.join(FILES[2]).is_file());
     }
 }
