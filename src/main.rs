@@ -515,6 +515,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 jobs: rendiff::check::default_jobs(),
                 workers: true,
                 renderers: renderers_file(renderers)?,
+                renderers_snapshot: None,
                 memory_budget: rendiff::check::pool::default_memory_budget(),
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
@@ -622,6 +623,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 jobs,
                 workers: !no_workers,
                 renderers: renderers_file(renderers)?,
+                renderers_snapshot: None,
                 memory_budget: memory_budget
                     .map_or_else(rendiff::check::pool::default_memory_budget, |mib| mib << 20),
             };

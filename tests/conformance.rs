@@ -60,6 +60,7 @@ fn main() {
             jobs: check::default_jobs(),
             workers: true,
             renderers: Some(root.join("renderers/wgpu.toml")),
+            renderers_snapshot: None,
             memory_budget: check::pool::default_memory_budget(),
         };
         match check::run(&opts) {

@@ -305,6 +305,7 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
         jobs: check::default_jobs(),
         workers: true,
         renderers: None,
+        renderers_snapshot: None,
         memory_budget: check::pool::default_memory_budget(),
     };
     check::run(&opts).map_err(|e| format!("rendiff check failed: {e:#}"))?;

@@ -208,3 +208,53 @@ fn a_missing_or_malformed_renderers_file_is_one_clear_error() {
         "no run folder for a refused file"
     );
 }
+
+/// The run keeps a copy of the renderers file (RUN/renderers.toml), taken as
+/// it begins, and every later step reads the declarations from the copy: a
+/// renderer (or a user) that rewrites the file during the run changes nothing
+/// the run judges by. Here the renderer breaks the file after its render;
+/// the comparison, which read the file again, used to fail on it.
+#[test]
+fn a_run_judges_by_the_renderers_file_it_began_with() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        root.join("harness/examples/tiny_renderer.py"),
+        dir.path().join("tiny_renderer.py"),
+    )
+    .unwrap();
+    let script = dir.path().join("render_then_edit.sh");
+    std::fs::write(
+        &script,
+        "#!/bin/sh\nhere=$(dirname \"$0\")\n\"$here/tiny_renderer.py\" \"$1\" \"$2\" || exit $?\n\
+         printf 'not = [toml\\n' > \"$here/renderers.toml\"\n",
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let original = std::fs::read_to_string(root.join("harness/examples/renderers.toml"))
+        .unwrap()
+        .replace("./tiny_renderer.py", "./render_then_edit.sh");
+    std::fs::write(dir.path().join("renderers.toml"), &original).unwrap();
+    let out = rendiff(dir.path())
+        .arg("check")
+        .arg(root.join("scenes/three_triangles.toml"))
+        .args(["--renderers", "renderers.toml", "--only", "tiny", "--quiet"])
+        .args(["--no-calibration", "-o", "run"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        std::fs::read_to_string(dir.path().join("renderers.toml"))
+            .unwrap()
+            .starts_with("not = ["),
+        "the renderer did not edit the file"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("run/renderers.toml")).unwrap(),
+        original
+    );
+    let results = std::fs::read_to_string(dir.path().join("run/results.json")).unwrap();
+    assert!(results.contains("\"backend\": \"tiny\""), "{results}");
+}

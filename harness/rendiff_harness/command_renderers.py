@@ -66,6 +66,11 @@ if TYPE_CHECKING:
     from .resolved import ResolvedScene
 
 ENV_VAR = "RENDIFF_RENDERERS"
+# The copy of that file `rendiff check` takes as its run begins (RUN/renderers.toml): the
+# declarations (precision above all) are read from the copy, while the file's own path names
+# it and resolves its commands, so that editing the file during a run changes no later render
+# or comparison, and the run keeps what it was judged with.
+SNAPSHOT_ENV_VAR = "RENDIFF_RENDERERS_SNAPSHOT"
 
 # Largest renderers file read: 1 MiB. A declaration is a few hundred bytes
 # (the worked example's two renderers are 2 KiB with comments), so this is
@@ -352,25 +357,28 @@ def parse(path: Path, text: str, reserved: Collection[str] = RESERVED_NAMES) -> 
     return tuple(_entry(path, i, e, taken, reserved) for i, e in enumerate(entries))
 
 
-def load(path: str | Path) -> tuple[Renderer, ...]:
-    """Read and validate a renderers file (relative paths are taken from the current folder)."""
+def load(path: str | Path, text_from: str | Path | None = None) -> tuple[Renderer, ...]:
+    """Read and validate a renderers file (relative paths are taken from the current folder).
+    With `text_from`, the declarations are read from that copy of it (`SNAPSHOT_ENV_VAR`),
+    while `path` still names the file and resolves its relative commands."""
     path = Path(path).absolute()
+    source = Path(text_from).absolute() if text_from is not None else path
     try:
-        raw = read_regular(path, MAX_FILE_BYTES)
+        raw = read_regular(source, MAX_FILE_BYTES)
     except UserFileError as exc:
-        raise RenderersError(f"{path}: the renderers file {exc}") from None
+        raise RenderersError(f"{source}: the renderers file {exc}") from None
     except OSError as exc:
-        raise RenderersError(f"{path}: cannot read the renderers file: {exc.strerror or exc}") from None
+        raise RenderersError(f"{source}: cannot read the renderers file: {exc.strerror or exc}") from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise RenderersError(f"{path}: not UTF-8 text: {exc}") from None
+        raise RenderersError(f"{source}: not UTF-8 text: {exc}") from None
     return parse(path, text)
 
 
 @lru_cache(maxsize=8)
-def _load_cached(path: str, mtime_ns: int, size: int) -> tuple[Renderer, ...]:
-    return load(path)
+def _load_cached(path: str, text_from: str | None, mtime_ns: int, size: int) -> tuple[Renderer, ...]:
+    return load(path, text_from)
 
 
 def from_env() -> tuple[Renderer, ...]:
@@ -381,11 +389,17 @@ def from_env() -> tuple[Renderer, ...]:
     path = Path(value)
     if not path.is_absolute():
         raise RenderersError(f"{ENV_VAR}={value}: must be an absolute path to a renderers TOML file")
+    snapshot = os.environ.get(SNAPSHOT_ENV_VAR, "")
+    read_from = Path(snapshot) if snapshot else path
+    if not read_from.is_absolute():
+        raise RenderersError(f"{SNAPSHOT_ENV_VAR}={snapshot}: must be an absolute path")
     try:
-        st = path.stat()
+        st = read_from.stat()
     except OSError as exc:
-        raise RenderersError(f"{path}: cannot read the renderers file ({ENV_VAR}): {exc.strerror or exc}") from None
-    return _load_cached(str(path), st.st_mtime_ns, st.st_size)
+        raise RenderersError(
+            f"{read_from}: cannot read the renderers file ({ENV_VAR}): {exc.strerror or exc}"
+        ) from None
+    return _load_cached(str(path), snapshot or None, st.st_mtime_ns, st.st_size)
 
 
 def find(name: str) -> Renderer | None:
@@ -624,6 +638,7 @@ def backends() -> list[CommandBackend]:
 
 __all__ = [
     "ENV_VAR",
+    "SNAPSHOT_ENV_VAR",
     "CommandBackend",
     "Precision",
     "Renderer",

@@ -99,6 +99,9 @@ pub struct CheckOptions {
     /// The user's renderers file (`--renderers`, docs/your-renderer.md),
     /// absolute: its renderers join the harness's built-in ones.
     pub renderers: Option<PathBuf>,
+    /// The run's copy of that file ([`RENDERERS_SNAPSHOT`]), set by the run
+    /// itself once its staging folder exists; `None` everywhere else.
+    pub renderers_snapshot: Option<PathBuf>,
     /// Estimated peak bytes of external renders in flight at most
     /// ([`pool::render_memory`]); [`pool::default_memory_budget`] by default.
     pub memory_budget: u64,
@@ -191,6 +194,21 @@ pub fn python(root: &Path) -> PathBuf {
 /// harness (harness `command_renderers.py`, docs/your-renderer.md).
 pub const RENDERERS_ENV: &str = "RENDIFF_RENDERERS";
 
+/// The environment variable that names the run's copy of the renderers file
+/// (`RUN/renderers.toml`), whose declarations the harness reads in place of
+/// the file's (`command_renderers.SNAPSHOT_ENV_VAR`).
+pub const RENDERERS_SNAPSHOT_ENV: &str = "RENDIFF_RENDERERS_SNAPSHOT";
+
+/// The run's copy of the user's renderers file, taken as the run begins: the
+/// declarations (their precision above all) every render and the comparison
+/// of the run use, whatever happens to the file meanwhile, and the record of
+/// what the run was judged with. An edit to the file during a run used to
+/// change the precision of the comparisons after it.
+pub const RENDERERS_SNAPSHOT: &str = "renderers.toml";
+
+/// Most bytes of a renderers file (the harness's `MAX_FILE_BYTES`).
+const MAX_RENDERERS_BYTES: u64 = 1 << 20;
+
 fn harness_command(opts: &CheckOptions) -> Command {
     let root = &opts.root;
     let mut cmd = Command::new(python(root));
@@ -201,7 +219,21 @@ fn harness_command(opts: &CheckOptions) -> Command {
         Some(file) => cmd.env(RENDERERS_ENV, file),
         None => cmd.env_remove(RENDERERS_ENV),
     };
+    match &opts.renderers_snapshot {
+        Some(copy) if opts.renderers.is_some() => cmd.env(RENDERERS_SNAPSHOT_ENV, copy),
+        _ => cmd.env_remove(RENDERERS_SNAPSHOT_ENV),
+    };
     cmd
+}
+
+/// Copies the user's renderers file into the staging run folder
+/// ([`RENDERERS_SNAPSHOT`]) and returns the copy's path.
+fn snapshot_renderers(file: &Path, run_dir: &Path) -> Result<PathBuf> {
+    let bytes = crate::scene::read_regular_file(file, MAX_RENDERERS_BYTES)
+        .map_err(|p| anyhow::anyhow!("{}: the renderers file {p}", file.display()))?;
+    let copy = run_dir.join(RENDERERS_SNAPSHOT);
+    crate::exr_io::write_atomically(&copy, |tmp| Ok(std::fs::write(tmp, &bytes)?))?;
+    Ok(copy)
 }
 
 /// One external backend as the harness describes it (`info --json`).
@@ -588,8 +620,13 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
     // Everything is written to a staging folder that replaces the run folder
     // once results.json exists (run_folder.rs): never a half-old run.
     let staging = run_folder::Staging::begin(&opts.run_dir)?;
+    let renderers_snapshot = match &opts.renderers {
+        Some(file) => Some(snapshot_renderers(file, &staging.dir)?),
+        None => None,
+    };
     let staged = CheckOptions {
         run_dir: staging.dir.clone(),
+        renderers_snapshot,
         ..opts.clone()
     };
     let outcome = render_and_compare(&staged, &jobs, isolate, &opts.run_dir)?;
@@ -1264,6 +1301,7 @@ mod tests {
             jobs: 1,
             workers: true,
             renderers: None,
+            renderers_snapshot: None,
             memory_budget: pool::default_memory_budget(),
         };
         let jobs = scene_jobs(&opts).unwrap();

@@ -165,6 +165,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         jobs: 1,
         workers: true,
         renderers: None,
+        renderers_snapshot: None,
         memory_budget: check::pool::default_memory_budget(),
     };
     // A name in --only that no backend has fails here, not in every check below.
