@@ -13,11 +13,20 @@ into their own messages).
   created apart from a write that fails (exrbuf).
 * `renamed_into_place`: for a writer that needs a file name and creates the file itself
   (OpenImageIO): the caller names the temp file; no fsync.
+
+An output is only ever a regular file (or nothing yet, or a symlink: the rename replaces
+the link itself, never its target). A FIFO, device, socket or folder at the target is
+refused (`OutputError`, an OSError) before the temp file is made and again just before the
+rename, as Rust's `exr_io::check_output` does: a rename would otherwise put the result in
+place of the node. Commands call `special_entry` / `check_output` on their output paths
+before any long work, so that the refusal comes first.
 """
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -25,6 +34,41 @@ from pathlib import Path
 from typing import IO, AnyStr
 
 DEFAULT_SUFFIX = ".tmp"
+
+
+class OutputError(OSError):
+    """An output path that names a FIFO, device, socket or folder; `strerror` says which."""
+
+
+def special_entry(path: str | Path) -> str | None:
+    """What the entry at `path` is, in words, when it exists and is neither a regular file nor a
+    symlink (as Rust's `scene::special_entry`); None when it may be written over."""
+    try:
+        mode = os.lstat(path).st_mode
+    except (OSError, ValueError):  # absent (or a name no file can have): nothing is replaced
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a folder, not a file"
+    if stat.S_ISFIFO(mode):
+        return "is a FIFO (named pipe), not a regular file"
+    if stat.S_ISSOCK(mode):
+        return "is a socket, not a regular file"
+    if stat.S_ISCHR(mode):
+        return "is a character device, not a regular file"
+    if stat.S_ISBLK(mode):
+        return "is a block device, not a regular file"
+    return "is not a regular file"
+
+
+def check_output(path: str | Path) -> None:
+    """Raise OutputError when `path` is a FIFO, device, socket or folder (`special_entry`)."""
+    kind = special_entry(path)
+    if kind is not None:
+        raise OutputError(
+            errno.EEXIST, f"{kind}; results are written to regular files only: choose another output", str(path)
+        )
 
 
 def _remove(name: str | Path) -> None:
@@ -44,8 +88,10 @@ class AtomicFile:
     """
 
     def __init__(self, path: str | Path, *, prefix: str | None = None, suffix: str = DEFAULT_SUFFIX) -> None:
-        """Create the temp file; raises OSError (nothing was written) when it cannot."""
+        """Create the temp file; raises OSError (nothing was written) when it cannot, OutputError
+        when `path` is a FIFO, device, socket or folder."""
         self.path = Path(path)
+        check_output(self.path)
         fd, name = tempfile.mkstemp(
             prefix=f".{self.path.name}." if prefix is None else prefix, suffix=suffix, dir=self.path.parent
         )
@@ -70,6 +116,7 @@ class AtomicFile:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
+            check_output(self.path)
             os.replace(self.temp, self.path)
         except BaseException:
             _remove(self.temp)
@@ -97,10 +144,13 @@ def renamed_into_place(temp: Path, path: Path) -> Iterator[Path]:
     For a writer that creates the file itself, by name (so the file gets the writer's usual
     permissions): `temp` must be in `path`'s folder and is the caller's choice of name. It is
     removed whatever happens: after a failure in the block or in the rename, and an exception
-    is re-raised unchanged.
+    is re-raised unchanged. A FIFO, device, socket or folder at `path` is refused (OutputError)
+    before the block runs and again before the rename.
     """
     try:
+        check_output(path)
         yield temp
+        check_output(path)
         os.replace(temp, path)
     finally:
         if temp.exists():

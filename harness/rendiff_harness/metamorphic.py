@@ -30,6 +30,12 @@ not limited); interior mismatches fail, unless FILE (tests/metamorphic_expectati
 expectations.py's format with `scene` = the relation) records them as a known failure.
 Writes OUT (default RUN/metamorphic.json) atomically and prints a table; exits 0 when it
 could write results, 2 when an input is unusable (one line naming the file).
+
+Inputs are checked before any work: RUN must be a finished run (a RUN/INCOMPLETE entry of
+any kind is refused, as `rendiff gate`, `report` and `bless` do: src/check/run_folder.rs
+`ensure_complete`); OUT must be in an existing folder and not a FIFO, device, socket or folder
+(atomic.py). SPEC is a user file (userfile.py: regular, at most MAX_SPEC_BYTES, opened
+without blocking); unparsable, too deeply nested or out-of-range content is one line naming it.
 """
 
 from __future__ import annotations
@@ -37,6 +43,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import stat
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -45,16 +53,27 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, compare, expectations, exrbuf, resolved, tolerance
+from . import atomic, classify, compare, expectations, exrbuf, resolved, tolerance
 from . import results as results_table
 from .manifest import EntryError, ManifestError, load_manifest, load_reference, render_info, render_reason, run_path
 from .results import finite, write_results
+from .userfile import open_regular, read_regular
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
 CORE = ("raster", "trace")
 BACKGROUND_ID = exrbuf.BACKGROUND_ID
 EXIT_OK, EXIT_ERROR = 0, 2
+# Largest SPEC read: 64 MiB. A spec is a few cases, each with one prim_map entry per variant
+# triangle (under 10 bytes of JSON each): about 7M triangles of maps.
+MAX_SPEC_BYTES = 1 << 26
+# Map entries are triangle and object IDs: u32, below the background ID.
+MAX_MAP_ENTRY = BACKGROUND_ID - 1
+# The marker `rendiff check` keeps in a run folder until the run is finished
+# (INCOMPLETE_MARKER in src/check/manifest.rs), and how much of it is read for the message
+# (MARKER_READ_BYTES in src/check/run_folder.rs).
+INCOMPLETE_MARKER = "INCOMPLETE"
+MARKER_READ_BYTES = 4096
 
 
 @dataclass(frozen=True)
@@ -94,6 +113,47 @@ class SpecError(Exception):
     """The spec file is unusable; the message names the file."""
 
 
+class RunError(Exception):
+    """The run folder is unusable (incomplete); the message names it."""
+
+
+_ESCAPES = {"\t": "\\t", "\n": "\\n", "\r": "\\r", "\0": "\\0"}
+
+
+def _printable(text: str, max_chars: int) -> str:
+    """Control and bidi characters escaped, clipped to `max_chars` (Rust's `scene::printable`)."""
+    out = []
+    for i, c in enumerate(text):
+        if i >= max_chars:
+            out.append(f"... ({len(text) - i} more characters)")
+            break
+        out.append(c if c.isprintable() else _ESCAPES.get(c, f"\\u{{{ord(c):x}}}"))
+    return "".join(out)
+
+
+def ensure_complete(run: Path) -> None:
+    """RunError when RUN holds an INCOMPLETE entry of any kind (src/check/run_folder.rs `ensure_complete`)."""
+    marker = run / INCOMPLETE_MARKER
+    try:
+        mode = os.lstat(marker).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        why = f"its {INCOMPLETE_MARKER} marker cannot be examined: {exc.strerror or exc}"
+    else:
+        why = f"its {INCOMPLETE_MARKER} marker is not a regular file"
+        if stat.S_ISREG(mode):
+            try:
+                with open_regular(marker) as fh:
+                    why = fh.read(MARKER_READ_BYTES).decode("utf-8", errors="replace")
+            except (OSError, ValueError):
+                pass
+    raise RunError(
+        f"{run}: incomplete run ({_printable(why.strip(), 200)}); its verdicts are not trustworthy: "
+        "run rendiff check again"
+    )
+
+
 @dataclass(frozen=True)
 class Case:
     relation: str
@@ -108,10 +168,14 @@ class Case:
 def load_spec(path: Path) -> list[Case]:
     """Read and validate SPEC; SpecError names the file and the case."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(read_regular(path, MAX_SPEC_BYTES).decode("utf-8"))
     except FileNotFoundError:
         raise SpecError(f"{path}: spec file not found") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except RecursionError:
+        raise SpecError(f"{path}: unreadable spec: nested too deeply") from None
+    except OSError as exc:
+        raise SpecError(f"{path}: unreadable spec: {exc.strerror or exc}") from None
+    except ValueError as exc:  # UserFileError, UnicodeDecodeError, JSONDecodeError, too many digits
         raise SpecError(f"{path}: unreadable spec: {exc}") from None
     if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
         raise SpecError(f"{path}: format must be {SPEC_FORMAT!r}")
@@ -129,14 +193,28 @@ def load_spec(path: Path) -> list[Case]:
         maps = {}
         for key in ("prim_map", "object_map"):
             v = c.get(key)
-            if not isinstance(v, list) or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in v):
-                raise SpecError(f"{where} ({c['relation']}): {key!r} must be a list of non-negative integers")
+            if not isinstance(v, list) or not all(
+                isinstance(x, int) and not isinstance(x, bool) and 0 <= x <= MAX_MAP_ENTRY for x in v
+            ):
+                raise SpecError(
+                    f"{where} ({c['relation']}): {key!r} must be a list of integers from 0 to {MAX_MAP_ENTRY} (IDs)"
+                )
             maps[key] = np.asarray(v, dtype=np.int64)
         s = c.get("depth_scale", 1.0)
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or s <= 0:
-            raise SpecError(f"{where} ({c['relation']}): 'depth_scale' must be a positive number, got {s!r}")
-        if math.frexp(float(s))[0] != 0.5:
-            raise SpecError(f"{where} ({c['relation']}): 'depth_scale' must be a power of two (exact), got {s!r}")
+        try:
+            scale = float(s) if isinstance(s, (int, float)) and not isinstance(s, bool) else math.nan
+        except OverflowError:  # an int beyond float's range
+            scale = math.inf
+        if isinstance(s, bool) or not isinstance(s, (int, float)):
+            shown = f"a {type(s).__name__}"
+        elif isinstance(s, int) and abs(s) >= 10**30:
+            shown = f"an integer of {len(str(abs(s)))} digits"
+        else:
+            shown = repr(s)
+        if not math.isfinite(scale) or scale <= 0:
+            raise SpecError(f"{where} ({c['relation']}): 'depth_scale' must be a positive number, got {shown}")
+        if math.frexp(scale)[0] != 0.5 or (isinstance(s, int) and s != int(scale)):
+            raise SpecError(f"{where} ({c['relation']}): 'depth_scale' must be a power of two (exact), got {shown}")
         cases.append(
             Case(
                 c["relation"],
@@ -145,7 +223,7 @@ def load_spec(path: Path) -> list[Case]:
                 c["variant"],
                 maps["prim_map"],
                 maps["object_map"],
-                float(s),
+                scale,
             )
         )
     return cases
@@ -410,7 +488,10 @@ def _check_maps(case: Case, base: resolved.ResolvedScene, variant: resolved.Reso
 
 
 def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None, out: Path) -> dict[str, Any]:
-    """Every case on every backend that rendered the base scene; writes OUT and returns the document."""
+    """Every case on every backend that rendered the base scene; writes OUT and returns the document.
+
+    RunError for an incomplete run, before anything is read."""
+    ensure_complete(run)
     manifest = load_manifest(run)
     cases = load_spec(spec)
     exps = load_expectations(expectations_path)
@@ -472,15 +553,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     run = Path(args.run)
     out = Path(args.out) if args.out else run / "metamorphic.json"
     if not run.is_dir():
-        print(f"rendiff_harness metamorphic: {run}: run folder does not exist", file=sys.stderr)
+        print(f"rendiff_harness metamorphic: --run {run}: run folder does not exist", file=sys.stderr)
+        return EXIT_ERROR
+    problem = None
+    try:
+        ensure_complete(run)
+    except RunError as exc:
+        problem = f"--run {exc}"
+    if problem is None and not out.parent.is_dir():
+        problem = f"--out {out}: output folder {out.parent} does not exist"
+    kind = atomic.special_entry(out) if problem is None else None
+    if kind is not None:
+        problem = f"--out {out}: {kind}; results are written to regular files only: choose another --out"
+    if problem is not None:
+        print(f"rendiff_harness metamorphic: {problem}", file=sys.stderr)
         return EXIT_ERROR
     try:
         doc = run_metamorphic(run, Path(args.spec), args.expectations, out)
-    except (SpecError, ManifestError, expectations.ExpectationsError) as exc:
+    except (SpecError, RunError, ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness metamorphic: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except OSError as exc:
-        print(f"rendiff_harness metamorphic: {out}: cannot write: {exc}", file=sys.stderr)
+        print(f"rendiff_harness metamorphic: {out}: cannot write: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_ERROR
     print(format_table(doc["results"]))
     for u in doc["unused_expectations"]:

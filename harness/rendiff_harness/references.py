@@ -12,6 +12,12 @@ in <scene>.json:
 (RESOLVED_DIR from `rendiff export scenes/<scene>.toml -o RESOLVED_DIR`, or a check run's
 RUN/scenes/<scene>/resolved.)
 
+Options are checked before anything is rendered (`check_request`, exit 2 with one line naming
+the option): --scene a folder; --spp in [2, MAX_SPP]; --seed in [0, MAX_SEED]; --out a path
+ending in `.exr` (so that its provenance, the same path ending in `.json`, can never be the
+EXR itself), in an existing folder, and neither it nor its provenance a FIFO, device, socket
+or folder (atomic.py: outputs replace regular files only).
+
 Provenance (<scene>.json, format "rendiff-reference/1"): mitsuba / drjit versions, the
 variant, integrator and max_depth, spp (total and per pass), passes, seed, the exact
 command (and the `rendiff export` that made its resolved scene), the resolved scene's
@@ -59,6 +65,13 @@ FORMAT = "rendiff-reference/1"
 DEFAULT_SPP = 4096
 DEFAULT_SEED = 0
 HASHED_FILES = ("scene.json", "triangles.f32", "object_ids.u32")
+# Most samples per pixel: 2^16 = 65,536, rendiff's own limit (MAX_SPP in
+# crates/rendiff-core/src/scene/mod.rs, 16x the references' 4096), mirrored here.
+MAX_SPP = 1 << 16
+# Largest seed: 2^31 - 1. It is stored as the EXR's rendiff:seed int attribute, a signed 32-bit
+# int (exrbuf), and the pass seeds (seed * passes + k, mitsuba_backend) are taken mod 2^32.
+MAX_SEED = 2**31 - 1
+EXR_SUFFIX = ".exr"
 
 # Largest <scene>.json read: 64 KiB. A provenance file is about 1 KiB (a dozen short keys
 # and two command lines); anything much bigger is not one.
@@ -84,7 +97,7 @@ class CachedReference:
 def _canonical_scene_json(data: bytes, where: Path) -> bytes:
     try:
         meta = json.loads(data)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer of too many digits
         raise ReferenceError(f"{where}: not valid JSON: {exc}") from None
     except RecursionError:
         raise ReferenceError(f"{where}: not valid JSON: nested too deeply") from None
@@ -126,7 +139,36 @@ def _read_provenance(js: Path) -> Any:
 
 
 def provenance_path(exr: str | Path) -> Path:
+    """<out>.json beside <out>.exr: the EXR's name with its suffix replaced (`check_request` requires
+    the `.exr` suffix, so the two never collide)."""
     return Path(exr).with_suffix(".json")
+
+
+def check_request(scene_dir: str | Path, out: str | Path, spp: int, seed: int) -> str | None:
+    """What is wrong with a `reference` request, in one line naming the option; None when it may run.
+
+    Checked before any work (module docstring): nothing is rendered or written for a bad request.
+    """
+    scene_dir, out = Path(scene_dir), Path(out)
+    if not 2 <= spp <= MAX_SPP:
+        return f"--spp must be between 2 and {MAX_SPP} (rendiff's MAX_SPP), got {spp}"
+    if not 0 <= seed <= MAX_SEED:
+        return f"--seed must be between 0 and {MAX_SEED} (it is stored as a 32-bit EXR attribute), got {seed}"
+    if not scene_dir.is_dir():
+        what = "does not exist" if not os.path.lexists(scene_dir) else "is not a folder"
+        return f"--scene {scene_dir}: {what} (expected a resolved scene folder from `rendiff export`)"
+    if out.suffix.lower() != EXR_SUFFIX:
+        return (
+            f"--out {out}: must be a file name ending in {EXR_SUFFIX} (its provenance is written beside it, "
+            f"with .json in place of {EXR_SUFFIX}, so the two never collide)"
+        )
+    if not out.parent.is_dir():
+        return f"--out {out}: output folder {out.parent} does not exist"
+    for path, role in ((out, "--out"), (provenance_path(out), "--out's provenance")):
+        kind = atomic.special_entry(path)
+        if kind is not None:
+            return f"{role} {path}: {kind}; outputs are written to regular files only: choose another --out"
+    return None
 
 
 def command_line(scene_dir: str | Path, out: str | Path, spp: int, seed: int) -> str:
@@ -179,6 +221,9 @@ def generate(
     from .backends import mitsuba_backend as mb
 
     scene_dir, out = Path(scene_dir), Path(out)
+    problem = check_request(scene_dir, out, spp, seed)
+    if problem is not None:
+        raise ReferenceError(problem)
     scene = resolved.load(scene_dir)
     if "global_illumination" not in scene.requires:
         raise ReferenceError(
@@ -188,8 +233,6 @@ def generate(
     missing = sorted(scene.requires - mb.FEATURES)
     if missing:
         raise ReferenceError(f"{scene_dir}: mitsuba cannot model {', '.join(missing)}")
-    if not out.parent.is_dir():
-        raise ReferenceError(f"{out.parent}: output folder does not exist")
     digest = scene_hash(scene_dir)
     t0 = time.monotonic()
     rgb, var, info = mb.render_radiance(scene, spp=spp, seed=seed)
@@ -334,14 +377,20 @@ def main(argv: list[str]) -> int:
         description="Render a high-spp Mitsuba path-traced reference (R,G,B + var) with provenance.",
     )
     p.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
-    p.add_argument("--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel (default {DEFAULT_SPP})")
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed (default {DEFAULT_SEED})")
     p.add_argument(
-        "--out", required=True, help="output EXR (tests/references/<scene>.exr); <out>.json is written beside it"
+        "--spp", type=int, default=DEFAULT_SPP, help=f"samples per pixel, 2 to {MAX_SPP} (default {DEFAULT_SPP})"
+    )
+    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed, 0 to {MAX_SEED} (default {DEFAULT_SEED})")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output EXR, ending in .exr (tests/references/<scene>.exr); its provenance is written beside it "
+        "with .json in place of .exr (tests/references/<scene>.json)",
     )
     args = p.parse_args(argv)
-    if args.spp < 2 or args.seed < 0:
-        print("rendiff_harness reference: --spp must be >= 2 and --seed >= 0", file=sys.stderr)
+    problem = check_request(args.scene, args.out, args.spp, args.seed)
+    if problem is not None:
+        print(f"rendiff_harness reference: {problem}", file=sys.stderr)
         return 2
     from .errors import BackendError
 
@@ -349,6 +398,12 @@ def main(argv: list[str]) -> int:
         prov = generate(args.scene, args.out, args.spp, args.seed)
     except (ReferenceError, resolved.SceneError, BackendError, exrbuf.BufferError) as exc:
         print(f"rendiff_harness reference: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # writing the provenance (atomic.OutputError included)
+        print(
+            f"rendiff_harness reference: {exc.filename or args.out}: cannot write: {exc.strerror or exc}",
+            file=sys.stderr,
+        )
         return 2
     print(
         json.dumps(
