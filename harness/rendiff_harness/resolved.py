@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .userfile import UserFileError, open_regular, read_regular
 
 FORMAT = "rendiff-resolved/1"
 
@@ -134,16 +137,56 @@ def _vec(meta: dict[str, Any], key: str, where: Path) -> np.ndarray:
     return arr
 
 
+# Largest scene.json read: its size limit in Rust's readers (run records, 256 MiB).
+MAX_SCENE_JSON_BYTES = 256 << 20
+
+
+def _data_file(directory: Path, files: Any, key: str, default: str, meta_path: Path) -> Path:
+    """The data file `files[key]` names: a plain file name inside `directory` (a name from
+    scene.json with a folder in it, `..` or an absolute path read a file elsewhere)."""
+    name = files.get(key, default) if isinstance(files, dict) else default
+    if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
+        raise SceneError(f"{meta_path}: files.{key} must be a file name in its folder, got {name!r}")
+    return directory / name
+
+
+def _read_array(path: Path, dtype: str, count: int, per: int) -> np.ndarray:
+    """`count * per` values of `dtype` from the regular file `path`, its size checked first (a FIFO
+    there hung the reader, /dev/zero ran it out of memory)."""
+    want = count * per * np.dtype(dtype).itemsize
+    try:
+        with open_regular(path) as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size != want:
+                raise SceneError(f"{path}: is {size} bytes, expected {want} ({count} x {per} x {dtype})")
+            data: np.ndarray = np.fromfile(fh, dtype=dtype, count=count * per)
+            return data
+    except FileNotFoundError:
+        raise SceneError(f"{path}: missing") from None
+    except UserFileError as exc:
+        raise SceneError(f"{path}: {exc}") from None
+    except OSError as exc:
+        raise SceneError(f"{path}: unreadable: {exc.strerror or exc}") from None
+
+
 def load(directory: str | Path) -> ResolvedScene:
     """Load a resolved scene directory; raises SceneError naming the bad file."""
     directory = Path(directory)
     meta_path = directory / "scene.json"
     try:
-        meta = json.loads(meta_path.read_text())
+        meta = json.loads(read_regular(meta_path, MAX_SCENE_JSON_BYTES).decode("utf-8"))
     except FileNotFoundError as exc:
         raise SceneError(f"{meta_path}: missing (run `rendiff export` first)") from exc
+    except UserFileError as exc:
+        raise SceneError(f"{meta_path}: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{meta_path}: unreadable: {exc}") from None
     except json.JSONDecodeError as exc:
         raise SceneError(f"{meta_path}: not valid JSON: {exc}") from exc
+    except RecursionError:
+        raise SceneError(f"{meta_path}: not valid JSON: nested too deeply") from None
+    if not isinstance(meta, dict):
+        raise SceneError(f"{meta_path}: must be a JSON object")
     if meta.get("format") != FORMAT:
         raise SceneError(f"{meta_path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
     cam = meta["camera"]
@@ -162,15 +205,14 @@ def load(directory: str | Path) -> ResolvedScene:
         near=float(cam["near"]),
         far=math.inf if far is None else float(far),
     )
-    count = int(meta["triangle_count"])
+    count = meta["triangle_count"]
+    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+        raise SceneError(f"{meta_path}: triangle_count must be a count, got {count!r}")
     files = meta.get("files", {})
-    tri_path = directory / files.get("triangles", "triangles.f32")
-    ids_path = directory / files.get("object_ids", "object_ids.u32")
-    try:
-        tris = np.fromfile(tri_path, dtype="<f4")
-        oids = np.fromfile(ids_path, dtype="<u4")
-    except FileNotFoundError as exc:
-        raise SceneError(f"{exc.filename}: missing") from exc
+    tri_path = _data_file(directory, files, "triangles", "triangles.f32", meta_path)
+    ids_path = _data_file(directory, files, "object_ids", "object_ids.u32", meta_path)
+    tris = _read_array(tri_path, "<f4", count, 9)
+    oids = _read_array(ids_path, "<u4", count, 1)
     if tris.size != count * 9:
         raise SceneError(f"{tri_path}: holds {tris.size} floats, expected {count * 9}")
     if oids.size != count:
