@@ -29,7 +29,14 @@ def _in_child(code: str, *args: str) -> subprocess.CompletedProcess[str]:
         pytest.fail("hung: the reader blocked")
 
 
-LOAD_SCENE = "import sys\nfrom rendiff_harness import resolved\ntry:\n    resolved.load(sys.argv[1])\nexcept resolved.SceneError as e:\n    print(e)\n"
+LOAD_SCENE = """
+import sys
+from rendiff_harness import resolved
+try:
+    resolved.load(sys.argv[1])
+except resolved.SceneError as e:
+    print(e)
+"""
 
 
 @pytest.mark.parametrize("name", ["triangles.f32", "object_ids.u32", "scene.json"])
