@@ -7,8 +7,9 @@ file at the target as it was. Exceptions reach the caller unchanged (the callers
 into their own messages).
 
 * `write_bytes_atomically` / `write_text_atomically`: the whole content at once; the temp
-  file is a new `tempfile.mkstemp` file (mode 0600, which the renamed file keeps), flushed
-  and fsynced before the rename.
+  file is a new `tempfile.mkstemp` file, given the mode a plainly created file would have
+  (0666 less the umask; mkstemp's 0600 made results.json unreadable to anyone but its
+  writer), flushed and fsynced before the rename.
 * `AtomicFile`: the same in two steps, for a caller that tells a temp file that cannot be
   created apart from a write that fails (exrbuf).
 * `renamed_into_place`: for a writer that needs a file name and creates the file itself
@@ -34,6 +35,17 @@ from pathlib import Path
 from typing import IO, AnyStr
 
 DEFAULT_SUFFIX = ".tmp"
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and back: there is no other way)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+FILE_MODE = 0o666 & ~_umask()
+"""The mode of every file written here: what `open(path, "w")` would give, read once at import."""
 
 
 class OutputError(OSError):
@@ -95,6 +107,12 @@ class AtomicFile:
         fd, name = tempfile.mkstemp(
             prefix=f".{self.path.name}." if prefix is None else prefix, suffix=suffix, dir=self.path.parent
         )
+        try:
+            os.fchmod(fd, FILE_MODE)
+        except OSError:
+            os.close(fd)
+            os.unlink(name)
+            raise
         self._fd = fd
         self.temp = Path(name)
 

@@ -37,6 +37,14 @@ def test_write_bytes_and_text(tmp_path: Path) -> None:
     assert _names(tmp_path) == ["a.bin", "b.txt"]
 
 
+def test_written_files_have_the_mode_a_plain_write_gives(tmp_path: Path) -> None:
+    # mkstemp's 0600 stayed on every result: results.json was unreadable to all but its writer.
+    atomic.write_text_atomically(tmp_path / "r.json", "{}\n")
+    (tmp_path / "plain.json").write_text("{}\n")
+    mode = stat.S_IMODE((tmp_path / "r.json").stat().st_mode)
+    assert mode == stat.S_IMODE((tmp_path / "plain.json").stat().st_mode) == atomic.FILE_MODE
+
+
 def test_temp_name_defaults_and_overrides(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     seen = _temp_names(monkeypatch)
     atomic.write_bytes_atomically(tmp_path / "a.bin", b"1")
