@@ -112,7 +112,7 @@ def test_results_json_temp_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
     assert path == tmp_path / "results.json"
     assert path.read_text(encoding="utf-8") == '{\n "b": 1,\n "a": [\n  1.5\n ]\n}\n'
     assert seen[0].startswith(".results.") and seen[0].endswith(".json.tmp")
-    assert stat.S_IMODE(path.stat().st_mode) == 0o600  # mkstemp's mode, as before the refactoring
+    assert stat.S_IMODE(path.stat().st_mode) == atomic.FILE_MODE  # a plain write's mode, not mkstemp's 0600
 
 
 def test_reference_provenance_temp_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
