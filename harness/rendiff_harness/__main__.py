@@ -32,13 +32,15 @@ from typing import Any
 
 from . import command_renderers, exrbuf, registry, resolved, vocab
 from .errors import BackendError, BackendSkipped
+from .text import printable
 
 EXIT_OK, EXIT_ERROR = 0, 2
 EXIT_SKIPPED = vocab.EXIT_SKIPPED
 
 
 def _fail(message: str) -> int:
-    print(f"rendiff_harness: {message}", file=sys.stderr)
+    # One line, whatever paths or names it quotes (a newline in --scene forged a second line).
+    print(f"rendiff_harness: {printable(message)}", file=sys.stderr)
     return EXIT_ERROR
 
 
@@ -264,7 +266,13 @@ def build_parser() -> argparse.ArgumentParser:
     p_render.add_argument("--backend", required=True, help="backend name, see `info`")
     p_render.add_argument("--scene", required=True, help="resolved scene folder (rendiff export)")
     p_render.add_argument("--out", required=True, help="output EXR path (written atomically)")
-    p_render.add_argument("--timeout", type=float, default=600.0, help="seconds before the renderer is killed")
+    p_render.add_argument(
+        "--timeout",
+        type=float,
+        default=600.0,
+        help="seconds before a renderer process (POV-Ray, a declared command) is killed; the in-process "
+        "backends (pyrender, Mitsuba) are bounded by their caller, as `rendiff check` kills the harness",
+    )
     p_render.add_argument(
         "--workdir",
         default=None,

@@ -74,6 +74,7 @@ from .results import base_entry as base_entry
 from .results import blank_if_not_compared as blank_if_not_compared
 from .results import format_table as format_table
 from .results import write_results as write_results
+from .text import printable
 from .vocab import Buffer, Status
 
 SHADING_FEATURES = frozenset(f.value for f in vocab.SHADED_FEATURES)
@@ -1104,17 +1105,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     run = Path(args.run)
     t0 = time.monotonic()
     if not run.is_dir():
-        print(f"rendiff_harness compare: {run}: run folder does not exist", file=sys.stderr)
+        print(f"rendiff_harness compare: {printable(str(run))}: run folder does not exist", file=sys.stderr)
         return EXIT_ERROR
     try:
         doc = run_compare(
             run, args.expectations, images=not args.no_images, references_dir=args.references, jobs=max(args.jobs, 1)
         )
     except (ManifestError, expectations.ExpectationsError) as exc:
-        print(f"rendiff_harness compare: {exc}", file=sys.stderr)
+        print(f"rendiff_harness compare: {printable(str(exc))}", file=sys.stderr)
         return EXIT_ERROR
     except OSError as exc:
-        print(f"rendiff_harness compare: {run / 'results.json'}: cannot write: {exc}", file=sys.stderr)
+        where = run / "results.json"
+        print(f"rendiff_harness compare: {printable(f'{where}: cannot write: {exc}')}", file=sys.stderr)
         return EXIT_ERROR
     print(format_table(doc["results"]))
     unused = doc["unused_expectations"]

@@ -57,6 +57,7 @@ from . import atomic, classify, compare, expectations, exrbuf, resolved, toleran
 from . import results as results_table
 from .manifest import EntryError, ManifestError, load_manifest, load_reference, render_info, render_reason, run_path
 from .results import finite, write_results
+from .text import printable
 from .userfile import open_regular, read_regular
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
@@ -117,20 +118,6 @@ class RunError(Exception):
     """The run folder is unusable (incomplete); the message names it."""
 
 
-_ESCAPES = {"\t": "\\t", "\n": "\\n", "\r": "\\r", "\0": "\\0"}
-
-
-def _printable(text: str, max_chars: int) -> str:
-    """Control and bidi characters escaped, clipped to `max_chars` (Rust's `scene::printable`)."""
-    out = []
-    for i, c in enumerate(text):
-        if i >= max_chars:
-            out.append(f"... ({len(text) - i} more characters)")
-            break
-        out.append(c if c.isprintable() else _ESCAPES.get(c, f"\\u{{{ord(c):x}}}"))
-    return "".join(out)
-
-
 def ensure_complete(run: Path) -> None:
     """RunError when RUN holds an INCOMPLETE entry of any kind (src/check/run_folder.rs `ensure_complete`)."""
     marker = run / INCOMPLETE_MARKER
@@ -149,7 +136,7 @@ def ensure_complete(run: Path) -> None:
             except (OSError, ValueError):
                 pass
     raise RunError(
-        f"{run}: incomplete run ({_printable(why.strip(), 200)}); its verdicts are not trustworthy: "
+        f"{run}: incomplete run ({printable(why.strip(), 200)}); its verdicts are not trustworthy: "
         "run rendiff check again"
     )
 

@@ -268,3 +268,20 @@ def test_far_probe_calibrates_and_the_old_look_at_does_not(tmp_path: Path, monke
     assert before.status == "fail"
     assert before.reason.startswith("convention error in the mitsuba exporter: camera turned by (")
     assert before.max_shift_px is not None and before.max_shift_px > 0.01
+
+
+def test_clip_ranges_float32_cannot_hold_are_clamped_or_declined(tmp_path: Path) -> None:
+    # Mitsuba keeps clip distances in float32: a far of 1e308 overflowed to inf and rendered a
+    # blank image reported as ok; a near of 1e-300 was rejected as an error.
+    from fixtures import write_scene
+    from rendiff_harness.errors import BackendSkipped
+
+    tri = [[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]]
+    far = resolved.load(write_scene(tmp_path / "far", tri, far=1e308))
+    near, clip = mb.clip_range(far)
+    assert clip == mb.FAR_FACTOR * 5.0 and near == far.camera.near  # beyond every vertex: clips nothing
+    kept = resolved.load(write_scene(tmp_path / "kept", tri, far=4.0))
+    assert mb.clip_range(kept)[1] == 4.0  # a far that clips is the scene's own
+    tiny = resolved.load(write_scene(tmp_path / "tiny", tri, near=1e-300))
+    with pytest.raises(BackendSkipped, match="beyond float32"):
+        mb.clip_range(tiny)

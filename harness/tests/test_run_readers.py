@@ -65,3 +65,16 @@ def test_a_special_manifest_is_refused(tmp_path: Path) -> None:
     os.symlink("/dev/zero", tmp_path / "run" / "manifest.json")
     with pytest.raises(manifest.ManifestError, match=r"manifest.json: is not a regular file"):
         manifest.load_manifest(tmp_path / "run")
+
+
+def test_harness_messages_stay_one_line_whatever_paths_they_quote(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A newline in --scene forged a second message line ("FAKE: injected line/scene.json: missing").
+    from rendiff_harness.__main__ import main
+
+    scene = str(tmp_path / "nope\nFAKE: injected line")
+    rc = main(["render", "--backend", "povray", "--scene", scene, "--out", str(tmp_path / "o.exr")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1, err
+    assert err.startswith("rendiff_harness: ") and "nope\\nFAKE: injected line" in err, err

@@ -94,7 +94,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import BackendError, BackendUnavailable
+from ..errors import BackendError, BackendSkipped, BackendUnavailable
 from ..resolved import Camera, ResolvedScene
 from ..tolerance import (
     F32_U,
@@ -232,23 +232,33 @@ def unavailable_reason() -> str | None:
 # --------------------------------------------------------------------------- scene
 
 
+F32_MAX = float(np.finfo(np.float32).max)
+F32_TINY = float(np.finfo(np.float32).tiny)
+
+
 def clip_range(scene: ResolvedScene) -> tuple[float, float]:
     """(near_clip, far_clip) for the sensor.
 
     near is the scene's. Mitsuba needs a finite far_clip (it builds a projection matrix
     from it), so an infinite far becomes 2 x the farthest vertex's planar depth: nothing
-    lies beyond it, so visibility is unchanged. far_clip must also exceed near_clip.
+    lies beyond it, so visibility is unchanged. So does a finite far beyond that: Mitsuba
+    keeps clip distances in float32, and a far of 1e39 (or 1e308) overflowed to inf and
+    rendered a blank image reported as ok. far_clip must also exceed near_clip. A range
+    float32 still cannot hold (a near below its smallest normal, geometry past its largest
+    value) is declined (skipped, with the reason): Mitsuba rejected such a near as an error.
     """
     cam = scene.camera
     near = float(cam.near)
-    if math.isfinite(cam.far):
+    verts = scene.triangles.reshape(-1, 3).astype(np.float64)
+    farthest = float(((verts - cam.eye) @ cam.forward).max()) if verts.size else 0.0
+    if math.isfinite(cam.far) and cam.far <= FAR_FACTOR * farthest:
         far = float(cam.far)
     else:
-        verts = scene.triangles.reshape(-1, 3).astype(np.float64)
-        farthest = float(((verts - cam.eye) @ cam.forward).max()) if verts.size else 0.0
         far = FAR_FACTOR * farthest
     if not far > near:
         far = FAR_FACTOR * near if near > 0 else 1.0
+    if not (near >= F32_TINY and far <= F32_MAX):
+        raise BackendSkipped(f"{NAME}: clip range [{near:g}, {far:g}] is beyond float32, in which Mitsuba keeps it")
     return near, far
 
 
