@@ -643,7 +643,11 @@ fn eyes_too_far_for_f64_rays_are_refused() {
     expect_failure(
         &camera_variant("eye = [0.0, 0.0, 5.0]", "eye = [0.0, 0.0, 1e15]"),
         &[],
-        &["camera.eye", "too far for the core's f64 pixel rays", "1/64"],
+        &[
+            "camera.eye",
+            "too far for the core's f64 pixel rays",
+            "1/64",
+        ],
     );
 }
 
