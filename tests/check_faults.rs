@@ -185,6 +185,32 @@ fn fake_python(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (fake, real)
 }
 
+/// Starts `rendiff check` into `run` with the fake harness's `forkhang`
+/// renderer (it forks a grandchild and hangs), stderr piped, and waits until
+/// the renderer runs; returns the check and the grandchild's pid.
+fn start_forkhang(dir: &Path, run: &Path) -> (std::process::Child, i32) {
+    let (fake, real) = fake_python(dir);
+    let child = Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("RENDIFF_PYTHON", &fake)
+        .env("REAL_PYTHON", &real)
+        .env("FAKE_PIDS", dir)
+        .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
+        .args(["--only", "trace,forkhang", "--timeout", "600", "-o"])
+        .arg(run)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid_file = dir.join("forkhang.pid");
+    let start = Instant::now();
+    while !pid_file.exists() {
+        assert!(start.elapsed().as_secs() < 60, "the renderer never started");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (child, read_pid(&pid_file))
+}
+
 /// SIGTERM (what `timeout` and CI runners send) and SIGINT during a check:
 /// rendiff kills every renderer's process group, leaves no staging folder or
 /// temporary file, exits 128 + the signal, and the run folder, which held a
@@ -195,7 +221,6 @@ fn an_interrupted_check_stops_its_renderers_and_leaves_no_stale_verdict() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     for (sig, name) in [(libc::SIGTERM, "SIGTERM"), (libc::SIGINT, "SIGINT")] {
         let dir = tempfile::tempdir().unwrap();
-        let (fake, real) = fake_python(dir.path());
         let runs = dir.path().join("runs");
         let run = runs.join("latest");
         // A finished run whose verdicts all pass: what an interrupted rerun used to leave.
@@ -215,25 +240,7 @@ fn an_interrupted_check_stops_its_renderers_and_leaves_no_stale_verdict() {
                 .output()
                 .unwrap()
         };
-        let child = Command::new(env!("CARGO_BIN_EXE_rendiff"))
-            .current_dir(root)
-            .env("RENDIFF_PYTHON", &fake)
-            .env("REAL_PYTHON", &real)
-            .env("FAKE_PIDS", dir.path())
-            .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
-            .args(["--only", "trace,forkhang", "--timeout", "600", "-o"])
-            .arg(&run)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let pid_file = dir.path().join("forkhang.pid");
-        let start = Instant::now();
-        while !pid_file.exists() {
-            assert!(start.elapsed().as_secs() < 60, "the renderer never started");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let grandchild = read_pid(&pid_file);
+        let (child, grandchild) = start_forkhang(dir.path(), &run);
         // SAFETY: kill(2) on our own child's pid; no memory is touched.
         unsafe {
             libc::kill(child.id() as i32, sig);
@@ -284,31 +291,12 @@ fn an_interrupted_check_stops_its_renderers_and_leaves_no_stale_verdict() {
 /// closed pipe, ending the handler's thread, and the process ran on forever.
 #[test]
 fn an_interrupt_with_stderr_closed_still_exits() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();
-    let (fake, real) = fake_python(dir.path());
     let run = dir.path().join("run");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rendiff"))
-        .current_dir(root)
-        .env("RENDIFF_PYTHON", &fake)
-        .env("REAL_PYTHON", &real)
-        .env("FAKE_PIDS", dir.path())
-        .args(["check", "scenes/three_triangles.toml", "--no-calibration"])
-        .args(["--only", "trace,forkhang", "--timeout", "600", "-o"])
-        .arg(&run)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let pid_file = dir.path().join("forkhang.pid");
-    let start = Instant::now();
-    while !pid_file.exists() {
-        assert!(start.elapsed().as_secs() < 60, "the renderer never started");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let grandchild = read_pid(&pid_file);
-    drop(child.stderr.take()); // the pipe's only reader
-                               // SAFETY: kill(2) on our own child's pid; no memory is touched.
+    let (mut child, grandchild) = start_forkhang(dir.path(), &run);
+    // Its stderr's only reader goes.
+    drop(child.stderr.take());
+    // SAFETY: kill(2) on our own child's pid; no memory is touched.
     unsafe {
         libc::kill(child.id() as i32, libc::SIGTERM);
     }
