@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 mod common_cli;
-use common_cli::{check_failure, output_within, rendiff};
+use common_cli::{check_failure, output_within, render_lesson, rendiff};
 
 const CAMERA: &str = r#"
 [camera]
@@ -352,18 +352,8 @@ fn diff_exits_one_on_difference_and_zero_on_equal() {
 fn render_writes_exr_previews_and_counters() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("t.exr");
-    let res = rendiff()
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args([
-            "render",
-            "scenes/three_triangles.toml",
-            "--renderer",
-            "trace",
-            "--threads",
-            "2",
-            "-o",
-        ])
-        .arg(&out)
+    let res = render_lesson("trace", &out)
+        .args(["--threads", "2"])
         .output()
         .unwrap();
     assert!(res.status.success());
@@ -629,19 +619,7 @@ fn thread_and_sample_counts_are_bounded_before_anything_starts() {
         ("--threads", "0", "give 1 to"),
         ("--spp", "4000000000", "limit of 65536"),
     ] {
-        let res = output_within(
-            rendiff()
-                .args([
-                    "render",
-                    "scenes/three_triangles.toml",
-                    "--renderer",
-                    "raster",
-                    "-o",
-                ])
-                .arg(&out)
-                .args([flag, value]),
-            60,
-        );
+        let res = output_within(render_lesson("raster", &out).args([flag, value]), 60);
         assert_eq!(res.status.code(), Some(2), "{flag} {value}");
         let err = String::from_utf8_lossy(&res.stderr);
         assert!(err.contains(needle), "{flag} {value}: {err}");
@@ -666,27 +644,19 @@ fn check_timeouts_are_bounded_before_anything_starts() {
 fn renders_never_leave_stale_previews() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o.exr");
-    let render = |scene: &str, extra: &[&str]| {
-        output_within(
-            rendiff()
-                .args(["render", "--renderer", "raster", "--quiet", scene, "-o"])
-                .arg(&out)
-                .args(extra),
-            60,
-        )
-    };
+    let render = |extra: &[&str]| output_within(render_lesson("raster", &out).args(extra), 60);
     let previews = ["o.ids.png", "o.depth.png"].map(|f| dir.path().join(f));
-    let res = render("scenes/three_triangles.toml", &[]);
+    let res = render(&[]);
     assert_eq!(res.status.code(), Some(0), "{res:?}");
     assert!(previews.iter().all(|p| p.is_file()));
-    let res = render("scenes/three_triangles.toml", &["--no-preview"]);
+    let res = render(&["--no-preview"]);
     assert_eq!(res.status.code(), Some(0), "{res:?}");
     assert!(out.is_file());
     assert!(!previews.iter().any(|p| p.exists()), "stale previews left");
 
     std::fs::remove_file(&out).unwrap();
     std::fs::create_dir(&previews[1]).unwrap();
-    let res = render("scenes/three_triangles.toml", &[]);
+    let res = render(&[]);
     let err = String::from_utf8_lossy(&res.stderr);
     assert_eq!(res.status.code(), Some(2), "{err}");
     assert!(err.lines().next().unwrap().contains("o.depth.png"), "{err}");
@@ -705,16 +675,8 @@ fn renders_to_one_output_take_turns() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o.exr");
     let lock = rendiff::exr_io::lock_folder(dir.path()).unwrap();
-    let mut child = rendiff()
-        .args([
-            "render",
-            "--renderer",
-            "raster",
-            "--quiet",
-            "scenes/three_triangles.toml",
-            "-o",
-        ])
-        .arg(&out)
+    let mut child = render_lesson("raster", &out)
+        .arg("--quiet")
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -985,18 +947,7 @@ fn outputs_never_replace_special_files() {
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("out.exr");
     mkfifo(&fifo);
-    let res = output_within(
-        rendiff()
-            .args([
-                "render",
-                "scenes/three_triangles.toml",
-                "--renderer",
-                "raster",
-                "-o",
-            ])
-            .arg(&fifo),
-        60,
-    );
+    let res = output_within(&mut render_lesson("raster", &fifo), 60);
     check_failure(&res, &["out.exr", "FIFO", "regular files only"]);
     use std::os::unix::fs::FileTypeExt;
     let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();

@@ -115,3 +115,18 @@ pub fn check_failure(res: &std::process::Output, must_mention: &[&str]) -> Strin
     }
     stderr
 }
+
+/// `rendiff render` of the lesson's scene (scenes/three_triangles.toml) with
+/// `renderer` into `out`: the render most CLI tests start from.
+pub fn render_lesson(renderer: &str, out: &Path) -> Command {
+    let mut c = rendiff();
+    c.args([
+        "render",
+        "scenes/three_triangles.toml",
+        "--renderer",
+        renderer,
+        "-o",
+    ])
+    .arg(out);
+    c
+}

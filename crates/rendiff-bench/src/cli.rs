@@ -48,6 +48,11 @@ pub struct CommonArgs {
     pub timeout: u64,
 }
 
+/// The path-traced scene the radiance benchmarks default to, and its cached
+/// Mitsuba reference.
+const GI_SCENE: &str = "scenes/cornell_gi.toml";
+const GI_REFERENCE: &str = "tests/references/cornell_gi.exr";
+
 /// rendiff's checkout, where the defaults' files live ([`rendiff::check::find_root`]),
 /// or why it was not found (an error only once a default needs it).
 #[derive(Debug, Clone)]
@@ -66,6 +71,11 @@ impl Home {
             Ok(root) => Ok(rendiff::check::in_root(root, rel)),
             Err(e) => anyhow::bail!("{rel} (a default): {e}"),
         }
+    }
+
+    /// `given` when the user gave it, else the default file `rel` in the checkout.
+    pub fn or_file(&self, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
+        given.map_or_else(|| self.file(rel), Ok)
     }
 
     /// A default `PATH[@WxH]`, its path in the checkout.
@@ -384,14 +394,8 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
                 common: c,
                 scenes,
                 resolution_scales: pick(scales, quick, vec![0.5, 1.0], vec![0.25, 0.5, 1.0, 2.0]),
-                gi_scene: match gi_scene {
-                    Some(p) => p,
-                    None => home.file("scenes/cornell_gi.toml")?,
-                },
-                reference: match reference {
-                    Some(p) => p,
-                    None => home.file("tests/references/cornell_gi.exr")?,
-                },
+                gi_scene: home.or_file(gi_scene, GI_SCENE)?,
+                reference: home.or_file(reference, GI_REFERENCE)?,
                 core_spp: pick(spp, quick, vec![1, 4], vec![1, 4, 16, 64, 256]),
                 mitsuba_spp,
                 mitsuba_knob_spp,
@@ -430,14 +434,8 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
                     None => Some(home.spec("scenes/corpus/nefertiti_scan.toml@1920x1080")?),
                 },
                 threads: pick(threads, quick, vec![1], vec![1, 2]),
-                gi_scene: match gi_scene {
-                    Some(p) => p,
-                    None => home.file("scenes/cornell_gi.toml")?,
-                },
-                reference: match reference {
-                    Some(p) => p,
-                    None => home.file("tests/references/cornell_gi.exr")?,
-                },
+                gi_scene: home.or_file(gi_scene, GI_SCENE)?,
+                reference: home.or_file(reference, GI_REFERENCE)?,
                 mitsuba_spp,
                 seed,
                 no_external: no_external || quick,
@@ -509,14 +507,8 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
             let quick = c.quick;
             Plan::Variance(VarianceOptions {
                 common: c,
-                scene: match scene {
-                    Some(p) => p,
-                    None => home.file("scenes/cornell_gi.toml")?,
-                },
-                reference: match reference {
-                    Some(p) => p,
-                    None => home.file("tests/references/cornell_gi.exr")?,
-                },
+                scene: home.or_file(scene, GI_SCENE)?,
+                reference: home.or_file(reference, GI_REFERENCE)?,
                 spp: pick(spp, quick, vec![4, 8], vec![16, 64, 256]),
                 seeds: pick(seeds, quick, 8, 64),
                 seed,
