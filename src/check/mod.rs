@@ -442,13 +442,12 @@ pub fn check_only_option(opts: &CheckOptions) -> Result<()> {
 /// runs: a bad bound or a typo in a key was found only after every render,
 /// leaving the run incomplete.
 fn check_expectations(opts: &CheckOptions) -> Result<()> {
-    let probe = std::env::temp_dir().join(format!("rendiff-expectations-{}", std::process::id()));
-    let _pending = crate::shutdown::track_path(&probe);
     let mut cmd = harness_command(opts);
     cmd.arg("expectations").arg("--").arg(&opts.expectations);
-    let o = run_with_timeout(cmd, Duration::from_secs(120), &probe);
-    let _ = std::fs::remove_dir_all(&probe);
-    let o = o.context("cannot run the Python harness to read the expectations file")?;
+    let o = in_probe_folder("expectations", |probe| {
+        run_with_timeout(cmd, Duration::from_secs(120), probe)
+    })
+    .context("cannot run the Python harness to read the expectations file")?;
     if o.code == Some(0) {
         return Ok(());
     }
@@ -463,12 +462,21 @@ fn check_expectations(opts: &CheckOptions) -> Result<()> {
     }
 }
 
+/// Runs `f` with a scratch folder of its own for a harness call made before
+/// the run folder exists (`rendiff-<what>-<pid>` in the temp folder), removed
+/// afterwards, and by the signal handler if rendiff is interrupted meanwhile.
+fn in_probe_folder<T>(what: &str, f: impl FnOnce(&Path) -> T) -> T {
+    let probe = std::env::temp_dir().join(format!("rendiff-{what}-{}", std::process::id()));
+    let _pending = crate::shutdown::track_path(&probe);
+    let out = f(&probe);
+    let _ = std::fs::remove_dir_all(&probe);
+    out
+}
+
 /// The names the harness lists, asked in a scratch folder of its own.
 fn harness_names(opts: &CheckOptions) -> Result<Vec<String>, String> {
-    let probe = std::env::temp_dir().join(format!("rendiff-renderers-{}", std::process::id()));
-    let l = harness_backends(opts, &probe);
-    let _ = std::fs::remove_dir_all(&probe);
-    l.map(|b| b.into_iter().map(|b| b.name).collect())
+    in_probe_folder("renderers", |probe| harness_backends(opts, probe))
+        .map(|b| b.into_iter().map(|b| b.name).collect())
 }
 
 fn wanted(opts: &CheckOptions, name: &str) -> bool {
