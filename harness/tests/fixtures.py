@@ -6,6 +6,8 @@ tested in isolation, against closed-form answers.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -113,3 +115,13 @@ def three_triangles(directory: Path) -> Path:
         [[-1.0, -0.2, 1.0], [1.0, -0.2, 1.0], [0.0, 0.6, 1.0]],
     ]
     return write_scene(directory, tris, [0, 1, 2], name="three_triangles")
+
+
+def cli(*argv: str) -> tuple[int, str, str]:
+    """`python -m rendiff_harness ARGV...` in process: its exit code, stdout and stderr."""
+    from rendiff_harness.__main__ import main as harness_main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = harness_main(list(argv))
+    return rc, out.getvalue(), err.getvalue()

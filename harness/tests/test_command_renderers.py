@@ -8,7 +8,6 @@ core's answer in the end-to-end test) to {out}.
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
 import shutil
@@ -24,9 +23,8 @@ import pytest
 
 import backend_cases as cases
 import fixtures
-from fixtures import write_scene
+from fixtures import cli, write_scene
 from rendiff_harness import calibration, command_renderers, compare, exrbuf, registry, resolved, tolerance
-from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.command_renderers import ENV_VAR, RenderersError
 from rendiff_harness.errors import BackendError, BackendSkipped
 
@@ -89,13 +87,6 @@ def write_exr(path: Path, bufs: dict[str, np.ndarray], **kw: Any) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     exrbuf.write_buffers(path, Z=bufs.get("Z"), prim=bufs.get("prim"), obj=bufs.get("obj"), **kw)
     return path
-
-
-def cli(*argv: str) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = harness_main(list(argv))
-    return rc, out.getvalue(), err.getvalue()
 
 
 def render(scene: Path, out: Path, backend: str = "mine", *extra: str) -> tuple[int, dict[str, Any], str]:

@@ -8,8 +8,6 @@ and its name has a length limit (command_renderers.MAX_NAME_CHARS) checked at lo
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import shutil
@@ -24,9 +22,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fixtures import write_scene
+from fixtures import cli, write_scene
 from rendiff_harness import command_renderers, exrbuf
-from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.children import OUTPUT_KEEP_BYTES, Capture, run_in_group
 from rendiff_harness.command_renderers import ENV_VAR, MAX_NAME_CHARS, VERSION_MAX_BYTES, RenderersError
 
@@ -55,13 +52,6 @@ def declare(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "renderers.toml"
     path.write_text(text)
     return path
-
-
-def cli(*argv: str) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = harness_main(list(argv))
-    return rc, out.getvalue(), err.getvalue()
 
 
 def scene_and_answer(tmp_path: Path) -> tuple[Path, Path]:
