@@ -24,6 +24,7 @@ pub mod raster_bins;
 pub mod raster_bounds;
 pub mod raster_edges;
 pub mod raster_hiz;
+pub mod raster_screen_depth;
 mod raster_timing;
 pub mod render;
 pub mod scene;

@@ -27,6 +27,7 @@ use crate::raster_bounds::BoxMargin;
 use crate::raster_edges::Avx2;
 use crate::raster_edges::{ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileRays, CHUNK};
 use crate::raster_hiz::TileDepthBound;
+use crate::raster_screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
 use crate::visibility::{
     covers_by, edge_sign, fill_no_hit, hit_key, Counters, TriDepth, TriEdges, NO_HIT,
@@ -449,6 +450,10 @@ fn fast_tile<L: Lanes>(
         let edges = TriEdges::new(cam, t);
         let f = FastEdges::new(&edges, rays);
         let mut depth: Option<ChunkDepth> = None;
+        // Set up with the first covered block: the screen-space depth (`None`:
+        // it cannot run here) and its bound over the whole box in the tile
+        // (`None`: each block asks for its own).
+        let mut screen: Option<(Option<ScreenDepth>, Option<BlockBound>)> = None;
         // Boxes at least a chunk wide take chunks aligned to the tile's 8x8
         // blocks, so that whole blocks can be decided at once; narrower ones
         // take one chunk per row from their first column (any column:
@@ -475,7 +480,21 @@ fn fast_tile<L: Lanes>(
                 if block.is_some_and(|g| g.rejected() == 0) && out.cov.is_empty() {
                     let d =
                         depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-                    if covered_block(l, cam, prim, rays, d, (r0, base), out) {
+                    let (s, whole) = screen.get_or_insert_with(|| {
+                        let s = ScreenDepth::new(cam, d, rays);
+                        let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
+                        (s, whole)
+                    });
+                    let done = match s {
+                        Some(s) => {
+                            let bound = whole.or_else(|| s.block(rays, r0, base));
+                            bound.is_some_and(|b| {
+                                screen_block(l, cam, prim, rays, s, d, b, (r0, base), out)
+                            })
+                        }
+                        None => false,
+                    };
+                    if done || covered_block(l, cam, prim, rays, d, (r0, base), out) {
                         // What 64 settled, covered lanes count (`chunk_hits`).
                         let n = (CHUNK * CHUNK) as u64;
                         c.coverage_tests += n;
@@ -527,6 +546,43 @@ fn covered_block<L: Lanes>(
     }
     if free != 0xff {
         return false;
+    }
+    for (i, (z, &ok)) in z.iter().zip(&ok).enumerate() {
+        let row = out.at(base, r0 + i);
+        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
+        l.min_keys(keys, z, ok, prim);
+    }
+    true
+}
+
+/// An 8x8 block the triangle covers whole, by certain signs, whose depths
+/// come from its screen-space interpolant ([`crate::raster_screen_depth`])
+/// under `bound` (the block's, or its box's): every lane the rounding
+/// certificate settles keeps the interpolant's f32, the rest of its row
+/// takes [`ChunkDepth`] (the depth function bit for bit), and the keys are
+/// updated.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn screen_block<L: Lanes>(
+    l: L,
+    cam: &Camera,
+    prim: u32,
+    rays: &TileRays,
+    s: &ScreenDepth,
+    d: &ChunkDepth,
+    bound: BlockBound,
+    (r0, base): (usize, usize),
+    out: &mut TileOut,
+) -> bool {
+    let mut z = [[0f32; CHUNK]; CHUNK];
+    let mut ok = [0u32; CHUNK];
+    for (i, (z, ok)) in z.iter_mut().zip(&mut ok).enumerate() {
+        let (zi, oki, sure) = s.row(l, rays, r0 + i, base, bound.eu);
+        (*z, *ok) = if sure == 0xff {
+            (zi, oki)
+        } else {
+            d.depths(l, cam, rays, r0 + i, base, 0xff)
+        };
     }
     for (i, (z, &ok)) in z.iter().zip(&ok).enumerate() {
         let row = out.at(base, r0 + i);

@@ -72,6 +72,7 @@
 
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
+use crate::raster_screen_depth::{ScreenRow, DROPPED_MASK, MIDPOINT};
 use crate::visibility::{hit_key, TriDepth, TriEdges, NO_HIT};
 use glam::DVec3;
 
@@ -154,6 +155,13 @@ pub trait Lanes: Copy {
         _planar: &[f64; CHUNK],
     ) -> Option<([f32; CHUNK], u32, u32)> {
         None
+    }
+
+    /// [`ScreenRow::lanes`] (its definition) for the 8 lanes of columns
+    /// `sx`, in wide registers where the CPU has them.
+    #[inline(always)]
+    fn screen_row(self, p: &ScreenRow, sx: &[f64; CHUNK]) -> ([f32; CHUNK], u32, u32) {
+        p.lanes(sx)
     }
 
     /// Each key of `keys` lowered to `hit_key(z[j], prim)` where lane `j`
@@ -593,6 +601,50 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
+    fn screen_row(self, p: &ScreenRow, sx: &[f64; CHUNK]) -> ([f32; CHUNK], u32, u32) {
+        use std::arch::x86_64::*;
+        let mut z = [0f32; CHUNK];
+        let (mut ok, mut sure) = (0u32, 0u32);
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
+        // stay within the borrowed arrays (4 f64 or 4 f32 at a time).
+        unsafe {
+            let (num, a, r) = (
+                _mm256_set1_pd(p.num),
+                _mm256_set1_pd(p.a),
+                _mm256_set1_pd(p.r),
+            );
+            let (near, far) = (_mm256_set1_pd(p.near), _mm256_set1_pd(p.far));
+            let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
+            let mid = _mm256_set1_epi64x(MIDPOINT);
+            let eu = _mm256_set1_epi64x(p.eu);
+            for h in 0..2 {
+                // Each lane is `ScreenRow::lanes`' arithmetic, operation for operation.
+                let x = _mm256_loadu_pd(sx.as_ptr().add(4 * h));
+                let w = _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r));
+                let zh = _mm256_cvtpd_ps(w);
+                _mm_storeu_ps(z.as_mut_ptr().add(4 * h), zh);
+                let zf = _mm256_cvtps_pd(zh);
+                let hit = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_GE_OQ>(zf, near),
+                    _mm256_cmp_pd::<_CMP_LE_OQ>(zf, far),
+                );
+                ok |= (_mm256_movemask_pd(hit) as u32) << (4 * h);
+                let d = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w), mask), mid);
+                let neg = _mm256_sub_epi64(_mm256_setzero_si256(), d);
+                // |d|: the negation where d's sign bit is set.
+                let abs = _mm256_castpd_si256(_mm256_blendv_pd(
+                    _mm256_castsi256_pd(d),
+                    _mm256_castsi256_pd(neg),
+                    _mm256_castsi256_pd(d),
+                ));
+                let far_enough = _mm256_castsi256_pd(_mm256_cmpgt_epi64(abs, eu));
+                sure |= (_mm256_movemask_pd(far_enough) as u32) << (4 * h);
+            }
+        }
+        (z, ok, sure)
+    }
+
+    #[inline(always)]
     fn min_keys(self, keys: &mut [u64; CHUNK], z: &[f32; CHUNK], hits: u32, prim: u32) {
         use std::arch::x86_64::*;
         // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
@@ -877,6 +929,29 @@ impl TileRays {
     pub fn width(&self) -> usize {
         self.width
     }
+
+    /// `sx` of the tile's columns, as [`Camera::screen_x`] computes them
+    /// (padding lanes repeat the last column).
+    pub(crate) fn sx(&self) -> &[f64] {
+        &self.sx
+    }
+
+    /// `sy` of the tile's rows.
+    pub(crate) fn sy(&self) -> &[f64] {
+        &self.sy
+    }
+
+    /// `η_j` (module documentation, whole blocks): how far a pixel's `P - e`
+    /// may lie from its ideal direction, per component.
+    pub(crate) fn eta(&self) -> [f64; 3] {
+        self.eta
+    }
+
+    /// Some direction component of the tile is subnormal (its reciprocal
+    /// may overflow: no proof that skips the slab holds there).
+    pub(crate) fn subnormal(&self) -> bool {
+        self.subnormal
+    }
 }
 
 /// [`TriDepth::depth`] for the 8 lanes of a chunk, bit for bit, written
@@ -942,7 +1017,7 @@ const CLAMP_FREE_MAX_T: f64 = 1e300;
 
 /// Smallest margin `8u M_k` the clamp-free test uses: far above the
 /// subnormal range, so the roundings it absorbs are relative ones.
-const CLAMP_FREE_MIN_MARGIN: f64 = 1e-280;
+pub(crate) const CLAMP_FREE_MIN_MARGIN: f64 = 1e-280;
 
 impl ChunkDepth {
     /// Takes the scalar depth function's per-triangle data.
@@ -989,6 +1064,17 @@ impl ChunkDepth {
             }
         }
         c
+    }
+
+    /// The triangle's f64 plane: `normal` and `num = normal . (a - eye)`.
+    pub(crate) fn plane(&self) -> ([f64; 3], f64) {
+        (self.normal, self.num)
+    }
+
+    /// The slab's planes relative to the eye, `(L_k, H_k) = (fl(b.lo_k -
+    /// e_k), fl(b.hi_k - e_k))`: what the slab divides by `D_k`.
+    pub(crate) fn slab_planes(&self) -> ([f64; 3], [f64; 3]) {
+        (self.lo, self.hi)
     }
 
     /// Depths of the 8 lanes from column `col` of tile row `row`, and the

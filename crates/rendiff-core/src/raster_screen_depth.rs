@@ -1,0 +1,655 @@
+//! Depth for whole 8x8 blocks without their pixel rays: the depth
+//! function's f32 result read off a screen-space interpolant, and taken only
+//! where a rounding certificate proves it is [`TriDepth::depth`](crate::visibility::TriDepth::depth)'s, bit for bit.
+//!
+//! # Why
+//!
+//! [`TriDepth::depth`](crate::visibility::TriDepth::depth) per pixel costs a ray (`D = (e + d) - e`), two dot
+//! products, a division, the product `t · planar` and a proof that the slab
+//! clamp is the identity ([`ChunkDepth`]). The f32 it returns is all that
+//! is kept, and an f32 has 29 fewer bits than the f64 arithmetic behind it.
+//! So one division per pixel of an affine interpolant, off by at most a
+//! bounded relative error `e` (about `1e-15`), gives the same f32 unless the
+//! true value lies within `e` of an f32 rounding boundary: a test on the
+//! interpolant's own bits finds those pixels, and only those pay the exact
+//! path. Raster and trace stay one depth function: this is a proof about
+//! that function's output, never a second definition (docs/DESIGN.md).
+//!
+//! # The interpolant and its error ([`ScreenDepth::block`])
+//!
+//! `u = 2^-53`. Let `n`, `num` be the triangle's f64 plane ([`TriDepth`](crate::visibility::TriDepth),
+//! as [`ChunkDepth::plane`] keeps it),
+//! `f, r, v` the camera's f64 basis, and `(sx, sy)` a pixel's computed
+//! screen coordinates ([`TileRays::sx`], the camera's own), taken as exact
+//! reals. The ideal direction `g = f + r sx + v sy` makes `G = n · g =
+//! A sx + B sy + C` affine, with `A = n · r`, `B = n · v`, `C = n · f`
+//! (exact reals). Per pixel the interpolant is `den = fl(fl(a sx) + R)`,
+//! `R = fl(fl(b sy) + c)` (once per row), `a, b, c` the f64 dot products,
+//! and `w = fl(num / den)`.
+//!
+//! - `|den - G| <= Δf = 6u S`, `S = Σ|n_j||r_j| |sx| + Σ|n_j||v_j| |sy| +
+//!   Σ|n_j||f_j|`: each of `a, b, c` is off by `γ3` of its absolute dot
+//!   product, the evaluation by `γ2` of `|a sx| + |b sy| + |c|`, in all
+//!   `5.001u S`, and `S` as computed (five roundings of non-negative terms)
+//!   is within `6u` of the real one.
+//! - The pixel's ray `D` lies within `ε_j` = [`TileRays::eta`] of `g` per
+//!   component: `η_j = 16u(|e_j| + H_j)` bounds `|δ_j - g_j|` for exact
+//!   screen coordinates ([`crate::raster_edges`], whole blocks), and with
+//!   the computed ones the sum `f + r sx + v sy` (`3.01u H_j`), `P = e + s`
+//!   and `D = fl(P - e)` (`u(|e_j| + 1.01 H_j)` each) come to `5.03u H_j +
+//!   1.01u|e_j| < η_j`. The eye's distance from the origin enters here.
+//! - The depth function's `denom = fl(n · D)` lies within `Δden = 3.01u(S +
+//!   Nε) + Nε`, `Nε = Σ|n_j| ε_j`, of `G` (`Σ|n_j||g_j| <= S`).
+//! - Its `planar = fl(D · f)` lies within `Δpl` of 1: `|g · f - 1| <= |f·f
+//!   - 1| + |sx||r·f| + |sy||v·f|` (exact dot products, bounded through the
+//!   computed ones plus `3.01u` of their absolute sums), plus `Σ|f_j| ε_j`
+//!   for `D - g` and `3.01u Σ|f_j|(|g_j| + ε_j)` for the rounding.
+//!
+//! Over a block, `G` is affine and its pixel centers' `(sx, sy)` lie in the
+//! rectangle of its corners' (the coordinates are monotone in the column
+//! and row), so when all four corner `den` share a sign and exceed `Δf` in
+//! magnitude, `|G| >= g_min = min|den| - Δf > 0` at every pixel. The depth
+//! function's unrounded depth is `z = fl(fl(num / denom) · planar) = num
+//! planar / denom (1 + θ)`, `|θ| <= γ2`, and `w = num / den (1 + θ')`,
+//! `|θ'| <= u`, so with `ρ = (Δf + Δden) / (g_min - Δden)`:
+//!
+//! `|z / w - 1| <= (1 + Δpl)(1 + ρ)(1 + γ2)/(1 - u) - 1 <= e =
+//! 1.01(Δpl + ρ) + 4u`
+//!
+//! while `Δpl, ρ <= 2^-32` (the cross terms, below `2^-61.9`, fit in the
+//! `0.99u` left of `4u - 3.01u`). A block past that, with a sign change, or
+//! with depths outside `[2^-100, 2^100]` (f32-normal with room to spare) is
+//! left to [`ChunkDepth`].
+//!
+//! # The certificate ([`rounds_alone`])
+//!
+//! For `w` in binade `[2^k, 2^(k+1))` (f64 ulp `2^(k-52)`), `e|w| < e 2^53`
+//! ulps. The f32 rounding boundaries in the binade (midpoints between
+//! neighbouring f32 values) are exactly the f64 values whose low 29 bits are
+//! `2^28`. So when the low bits of `w` differ from `2^28` by more than `E >=
+//! e 2^53`, no boundary of the binade lies within `e|w|` of `w`; the
+//! nearest boundaries of the neighbouring binades are `2^-25`-relative away
+//! from the binade's ends, beyond reach while `e <= 2^-30`. Round-to-nearest
+//! is constant between boundaries, so `z as f32 == w as f32`: the depth
+//! function's bits, and with them its `near <= z <= far` decision and its
+//! hit (`denom` is finite and non-zero, as `|denom| >= g_min - Δden > 0`).
+//! A lane that fails the test takes [`ChunkDepth`] with its row.
+//!
+//! # The slab clamp
+//!
+//! The depth function clamps `t = fl(num / denom)` into the triangle's slab
+//! interval; [`ChunkDepth`]'s documentation proves it returns `t` when, on
+//! every axis, the real product `t D_k >= L_k + 2.0001u|L_k|` and `t D_k <=
+//! H_k - 2.0001u|H_k|` (`L_k, H_k` the slab's planes, [`ChunkDepth::slab_planes`]),
+//! under its guards: no subnormal direction in the tile, `|t| <= 1e300`
+//! (here `|t| <= 2|num| / g_min (1 + u) < 2^102`, as `g_min > 2Δden` is
+//! required), and `8u M_k >= 1e-280`. Without the ray, `t D_k` is bounded
+//! per block: write `h_k = num g_k / G`, the exact hit of the ideal ray on
+//! the f64 plane. Then `num D_k / denom - h_k = num (D_k G - g_k denom) /
+//! (denom G)`, with `D_k G - g_k (n · D) = Σ_{j≠k} n_j ((D_k - g_k) g_j -
+//! g_k (D_j - g_j))` and `|denom - n · D| <= 3.01u(S + Nε)`. The axis's own
+//! term cancels: that is what keeps an axis-aligned plane inside the proof
+//! (its box has no extent on `k`, and every hit lies on the box's boundary
+//! but for the growth of [`crate::visibility::grow_box`], `32u M_k`). So,
+//! with `X_k = Σ_{j≠k}|n_j|(ε_k H_j^b + H_k^b ε_j)`,
+//!
+//! `|t D_k - h_k| <= |num|(X_k + H_k^b 3.01u(S + Nε)) / ((g_min - Δden)
+//! g_min) (1 + u) + u|h_k|` (the last two for `t`'s own rounding),
+//!
+//! with `H_j^b = |f_j| + |r_j| max|sx| + |v_j| max|sy| >= |g_j|` over the
+//! block. `h_k` is linear-fractional in `(sx, sy)` with `G` of one sign, so
+//! over the block it lies between its corner values; those are computed as
+//! `fl(fl(num g̃_k) fl(1 / den))`, `g̃_k` the rounded sum, off by at most
+//! `|num| (3.01u H_k^b + H_k^b Δf / g_min) / g_min + 3.01u|h|`. The block passes an
+//! axis when the corner range widened by both errors (and 1% plus `4u
+//! max|h|` for the comparison's own rounding) lies within `[fl(L_k + 3.2u
+//! M_k), fl(H_k - 3.2u M_k)]`, which is at least `L_k + 2.19u M_k` (resp.
+//! mirrored) however it rounds.
+//!
+//! Tests: `certified_depths_are_the_depth_functions` compares every
+//! certified lane with [`TriDepth::depth`](crate::visibility::TriDepth::depth) and checks that the clamp was the
+//! identity there, on adversarial cameras and planes;
+//! `observed_error_stays_within_the_bound` checks `|z - w| <= e|w|` lane by
+//! lane; `rounds_alone_at_the_bound` checks the certificate at its edge
+//! against every f64 around a rounding boundary.
+
+use crate::camera::Camera;
+use crate::raster_edges::{ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
+
+/// Unit roundoff of f64.
+const U: f64 = f64::EPSILON / 2.0;
+
+/// Largest `Δpl` and `ρ` a block may carry (module documentation): far
+/// below the f32 spacing (`2^-24`), so almost every lane certifies, and
+/// small enough that the bound's second-order terms fit in its slack.
+const MAX_TERM: f64 = 1.0 / (1u64 << 32) as f64;
+
+/// Depths the certificate handles: f32-normal, far from overflow, so that
+/// the rounding to f32 is the one the bit test reads.
+const MIN_DEPTH: f64 = 1.0 / (1u128 << 100) as f64;
+/// See [`MIN_DEPTH`].
+const MAX_DEPTH: f64 = (1u128 << 100) as f64;
+
+/// The f64 bits an f32 rounding drops (52 - 23).
+pub(crate) const DROPPED_MASK: u64 = (1 << 29) - 1;
+/// The dropped bits of an f32 rounding boundary (a midpoint).
+pub(crate) const MIDPOINT: i64 = 1 << 28;
+
+/// True when every real within `eu` f64 ulps of `w` (a positive normal f64
+/// of the f32-normal range) rounds to the f32 `w` rounds to: the low 29
+/// bits of `w` lie more than `eu` from a midpoint's (module documentation).
+#[inline(always)]
+pub fn rounds_alone(w: f64, eu: i64) -> bool {
+    ((w.to_bits() & DROPPED_MASK) as i64 - MIDPOINT).abs() > eu
+}
+
+/// One row of a block, as [`Lanes::screen_row`] evaluates it.
+#[derive(Debug, Clone, Copy)]
+pub struct ScreenRow {
+    /// The plane's `num`.
+    pub num: f64,
+    /// The interpolant's `a`.
+    pub a: f64,
+    /// The row's `R = fl(fl(b sy) + c)`.
+    pub r: f64,
+    /// The camera's near depth.
+    pub near: f64,
+    /// The camera's far depth.
+    pub far: f64,
+    /// The block's bound in ulps ([`BlockBound::eu`]).
+    pub eu: i64,
+}
+
+impl ScreenRow {
+    /// The definition the wide code must equal: per lane `w = fl(num /
+    /// fl(fl(a sx) + R))`, its f32, whether that is within `[near, far]`,
+    /// and whether [`rounds_alone`] certifies it.
+    #[inline(always)]
+    pub fn lanes(&self, sx: &[f64; CHUNK]) -> ([f32; CHUNK], u32, u32) {
+        let mut z = [0f32; CHUNK];
+        let (mut ok, mut sure) = (0u32, 0u32);
+        for j in 0..CHUNK {
+            let w = self.num / (self.a * sx[j] + self.r);
+            let zj = w as f32;
+            let zf = f64::from(zj);
+            z[j] = zj;
+            ok |= u32::from((zf >= self.near) & (zf <= self.far)) << j;
+            sure |= u32::from(rounds_alone(w, self.eu)) << j;
+        }
+        (z, ok, sure)
+    }
+}
+
+/// One triangle's screen-space depth over one tile: the interpolant's
+/// coefficients and what its error bounds need (module documentation).
+/// Built once per triangle and tile whose box has a covered block.
+#[derive(Debug, Clone, Copy)]
+pub struct ScreenDepth {
+    /// `normal . (a - eye)`.
+    num: f64,
+    /// `a, b, c`: `den = fl(fl(a sx) + fl(fl(b sy) + c))`.
+    coef: [f64; 3],
+    /// `Σ|n_j||r_j|`, `Σ|n_j||v_j|`, `Σ|n_j||f_j|`.
+    abs_coef: [f64; 3],
+    /// `|n_j|`.
+    n_abs: [f64; 3],
+    /// `ε_j`: the tile's ray error bound per component.
+    eps: [f64; 3],
+    /// `Nε = Σ|n_j| ε_j`.
+    n_eps: f64,
+    /// The camera basis per axis: `|f_k|, |r_k|, |v_k|` and `f_k, r_k, v_k`.
+    basis: [[f64; 3]; 3],
+    /// `Δpl = pl[0] + max|sx| pl[1] + max|sy| pl[2]`.
+    pl: [f64; 3],
+    /// Per axis, `fl(L_k + 3.2u M_k)`: `t D_k` above it is not clamped from below.
+    lo_req: [f64; 3],
+    /// Per axis, `fl(H_k - 3.2u M_k)`.
+    hi_req: [f64; 3],
+    /// The camera's depth range.
+    near: f64,
+    /// See `near`.
+    far: f64,
+}
+
+/// What a block's certificate needs per lane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlockBound {
+    /// The relative error bound `e` of the block's interpolant.
+    pub e: f64,
+    /// `e` in f64 ulps of the lane's value ([`rounds_alone`]).
+    pub eu: i64,
+}
+
+impl ScreenDepth {
+    /// Sets up a triangle over a tile; `None` when the clamp proof's guards
+    /// fail for it (a subnormal direction in the tile, a slab too close to
+    /// underflow).
+    pub fn new(cam: &Camera, cd: &ChunkDepth, rays: &TileRays) -> Option<Self> {
+        if rays.subnormal() {
+            return None;
+        }
+        let (n, num) = cd.plane();
+        let (f, r, v) = (
+            cam.forward.to_array(),
+            cam.right.to_array(),
+            cam.up_ortho.to_array(),
+        );
+        let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+        let abs_dot = |x: [f64; 3], y: [f64; 3]| {
+            x[0].abs() * y[0].abs() + x[1].abs() * y[1].abs() + x[2].abs() * y[2].abs()
+        };
+        let eps = rays.eta();
+        let n_abs = n.map(f64::abs);
+        let n_eps = abs_dot(n, eps);
+        let f_eps = abs_dot(f, eps);
+        let (ff, rf, vf) = (dot(f, f), dot(r, f), dot(v, f));
+        let pl = [
+            (ff - 1.0).abs() + 4.0 * U + 4.0 * U * (abs_dot(f, f) + f_eps) + 1.01 * f_eps,
+            rf.abs() + 8.0 * U * abs_dot(r, f),
+            vf.abs() + 8.0 * U * abs_dot(v, f),
+        ];
+        let (lo, hi) = cd.slab_planes();
+        let (mut lo_req, mut hi_req) = ([0.0; 3], [0.0; 3]);
+        for k in 0..3 {
+            let m = lo[k].abs().max(hi[k].abs());
+            // (Written so that NaN fails, here and below.)
+            let relative = 8.0 * U * m >= CLAMP_FREE_MIN_MARGIN;
+            if !relative {
+                return None;
+            }
+            lo_req[k] = lo[k] + 3.2 * U * m;
+            hi_req[k] = hi[k] - 3.2 * U * m;
+        }
+        Some(ScreenDepth {
+            num,
+            coef: [dot(n, r), dot(n, v), dot(n, f)],
+            abs_coef: [abs_dot(n, r), abs_dot(n, v), abs_dot(n, f)],
+            n_abs,
+            eps,
+            n_eps,
+            basis: [0, 1, 2].map(|k| [f[k], r[k], v[k]]),
+            pl,
+            lo_req,
+            hi_req,
+            near: cam.near,
+            far: cam.far,
+        })
+    }
+
+    /// The error bound of the 8x8 block whose top-left tile pixel is
+    /// `(base, r0)`, when the module's conditions hold there: one sign of
+    /// `G`, terms below [`MAX_TERM`], depths in range, the slab clamp the
+    /// identity at every pixel. `None` sends the block to [`ChunkDepth`].
+    #[inline(always)]
+    pub fn block(&self, rays: &TileRays, r0: usize, base: usize) -> Option<BlockBound> {
+        self.rect(rays, [base, base + CHUNK - 1, r0, r0 + CHUNK - 1])
+    }
+
+    /// [`ScreenDepth::block`] for every block inside the tile rectangle
+    /// `[lx0, lx1, ly0, ly1]` at once (the module's argument holds for any
+    /// rectangle of pixel centers): one bound for all of them, a little
+    /// looser than each block's own.
+    #[inline(always)]
+    pub fn rect(&self, rays: &TileRays, [lx0, lx1, ly0, ly1]: [usize; 4]) -> Option<BlockBound> {
+        let (sx, sy) = (rays.sx(), rays.sy());
+        let (sx0, sx1) = (sx[lx0], sx[lx1]);
+        let (sy0, sy1) = (sy[ly0], sy[ly1]);
+        let [a, b, c] = self.coef;
+        let (row0, row1) = (b * sy0 + c, b * sy1 + c);
+        let corners = [
+            (sx0, sy0, row0),
+            (sx1, sy0, row0),
+            (sx0, sy1, row1),
+            (sx1, sy1, row1),
+        ];
+        let den = corners.map(|(x, _, row)| a * x + row);
+        let (sxm, sym) = (sx0.abs().max(sx1.abs()), sy0.abs().max(sy1.abs()));
+        let s = self.abs_coef[0] * sxm + self.abs_coef[1] * sym + self.abs_coef[2];
+        let delta_f = 6.0 * U * s;
+        let positive = den.iter().all(|&d| d > 0.0);
+        if !positive && !den.iter().all(|&d| d < 0.0) {
+            return None;
+        }
+        let (dmin, dmax) = den.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &d| {
+            (lo.min(d.abs()), hi.max(d.abs()))
+        });
+        let g_min = dmin - delta_f;
+        let delta_den = 4.0 * U * (s + self.n_eps) + 1.01 * self.n_eps;
+        let conditioned = g_min > 2.0 * delta_den;
+        if !conditioned {
+            return None;
+        }
+        let rho = (delta_f + delta_den) / (g_min - delta_den);
+        let delta_pl = self.pl[0] + sxm * self.pl[1] + sym * self.pl[2];
+        let small = rho <= MAX_TERM && delta_pl <= MAX_TERM;
+        if !small {
+            return None;
+        }
+        // Depths positive and in range at every lane.
+        let num = self.num;
+        let in_range = (num > 0.0) == positive
+            && num.abs() / (dmax + delta_f) * 0.99 >= MIN_DEPTH
+            && num.abs() / g_min * 1.01 <= MAX_DEPTH;
+        if !in_range {
+            return None;
+        }
+        // The slab clamp, axis by axis.
+        let inv = den.map(|d| 1.0 / d);
+        let hb = self
+            .basis
+            .map(|[f, r, v]| f.abs() + r.abs() * sxm + v.abs() * sym);
+        for k in 0..3 {
+            let [fk, rk, vk] = self.basis[k];
+            let (mut h_lo, mut h_hi, mut h_abs) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+            for (&(x, y, _), &q) in corners.iter().zip(&inv) {
+                let h = num * ((fk + rk * x) + vk * y) * q;
+                (h_lo, h_hi, h_abs) = (h_lo.min(h), h_hi.max(h), h_abs.max(h.abs()));
+            }
+            let mut x_k = 0.0;
+            for j in 0..3 {
+                if j != k {
+                    x_k += self.n_abs[j] * (self.eps[k] * hb[j] + hb[k] * self.eps[j]);
+                }
+            }
+            let ray = num.abs() * (x_k + hb[k] * 4.0 * U * (s + self.n_eps))
+                / ((g_min - delta_den) * g_min)
+                * 1.02
+                + 3.0 * U * h_abs;
+            let corner = num.abs() * (4.0 * U * hb[k] + hb[k] * delta_f / g_min) / g_min * 1.02
+                + 4.0 * U * h_abs;
+            let tot = (ray + corner) * 1.01 + 4.0 * U * h_abs;
+            let inside = h_lo - tot >= self.lo_req[k] && h_hi + tot <= self.hi_req[k];
+            if !inside {
+                return None;
+            }
+        }
+        let e = 1.01 * (delta_pl + rho) + 4.0 * U;
+        Some(BlockBound {
+            e,
+            eu: (e * (1u64 << 53) as f64).ceil() as i64 + 1,
+        })
+    }
+
+    /// The 8 lanes of tile row `row` from column `base` in a block
+    /// [`ScreenDepth::block`] passed with `eu`: `w as f32` per lane, the
+    /// lanes with a hit (`near <= z <= far`), and the lanes [`rounds_alone`]
+    /// certifies (only those are the depth function's).
+    #[inline(always)]
+    pub fn row<L: Lanes>(
+        &self,
+        l: L,
+        rays: &TileRays,
+        row: usize,
+        base: usize,
+        eu: i64,
+    ) -> ([f32; CHUNK], u32, u32) {
+        let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
+        let [a, b, c] = self.coef;
+        let p = ScreenRow {
+            num: self.num,
+            a,
+            r: b * rays.sy()[row] + c,
+            near: self.near,
+            far: self.far,
+            eu,
+        };
+        l.screen_row(&p, sx)
+    }
+
+    /// The interpolant `w` itself at tile pixel `(col, row)` (tests: its
+    /// distance from the depth function's unrounded depth).
+    #[cfg(test)]
+    fn value(&self, rays: &TileRays, row: usize, col: usize) -> f64 {
+        let [a, b, c] = self.coef;
+        self.num / (a * rays.sx()[col] + (b * rays.sy()[row] + c))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::predicate::tests::lcg;
+    use crate::raster::TILE;
+    use crate::raster_edges::Portable;
+    use crate::visibility::{slab, TriDepth};
+    use glam::{DVec3, Vec3};
+
+    /// Cameras the bounds must survive: facing an axis (every depth of a
+    /// facing plane equal) and oblique, near the origin and far from it
+    /// (the eye's offset enters the ray error).
+    fn cameras() -> Vec<Camera> {
+        let mut out = Vec::new();
+        for off in [0.0, 1e3, 12345.678, 3.1e6] {
+            let o = DVec3::new(off, -off, off);
+            out.push(Camera::new(
+                o + DVec3::Z,
+                o,
+                DVec3::Y,
+                90.0,
+                64,
+                64,
+                1e-3,
+                f64::INFINITY,
+            ));
+            out.push(Camera::new(
+                o + DVec3::new(0.3, 0.7, 2.1),
+                o + DVec3::new(0.1, -0.2, 0.0),
+                DVec3::Y,
+                50.0,
+                72,
+                40,
+                1e-3,
+                f64::INFINITY,
+            ));
+        }
+        out.into_iter().map(Result::unwrap).collect()
+    }
+
+    /// Triangles for one camera: planes filling the view (facing it,
+    /// axis-aligned walls seen at an angle, random tilts up to grazing) and
+    /// triangles whose corners fall inside it (blocks near the box's edges,
+    /// where the slab clamp's margin is thinnest).
+    fn triangles(cam: &Camera, seed: u64) -> Vec<[Vec3; 3]> {
+        let mut s = seed;
+        let (f, r, v, e) = (cam.forward, cam.right, cam.up_ortho, cam.eye);
+        let mut tris = Vec::new();
+        let mut plane = |c: DVec3, a: DVec3, b: DVec3, big: f64| {
+            let quad = [
+                c - a * big - b * big,
+                c + a * big - b * big,
+                c + a * big + b * big,
+            ];
+            tris.push(quad.map(|p| p.as_vec3()));
+            let other = [
+                c - a * big - b * big,
+                c + a * big + b * big,
+                c - a * big + b * big,
+            ];
+            tris.push(other.map(|p| p.as_vec3()));
+        };
+        for depth in [1.0, 2.5, 7.0] {
+            // Facing, and world-axis-aligned through the same point.
+            plane(e + f * depth, r, v, 10.0);
+            plane(e + f * depth, DVec3::X, DVec3::Y, 10.0);
+            plane(e + f * depth, DVec3::Y, DVec3::Z, 10.0);
+            plane(e + f * depth, DVec3::Z, DVec3::X, 10.0);
+        }
+        for _ in 0..12 {
+            // Random tilts; the smallest scales make grazing planes.
+            let tilt = lcg(&mut s).abs().powi(3) * 0.999;
+            let a = (r + f * tilt * 30.0 * lcg(&mut s)).normalize();
+            let b = (v + f * tilt * 30.0 * lcg(&mut s)).normalize();
+            plane(e + f * (2.0 + 3.0 * lcg(&mut s).abs()), a, b, 50.0);
+        }
+        for _ in 0..20 {
+            // Corners in view.
+            let p = |s: &mut u64| {
+                let d = cam.screen_direction(lcg(s) * 1.2, lcg(s) * 1.2);
+                e + d * (2.0 + lcg(s))
+            };
+            let t = [p(&mut s), p(&mut s), p(&mut s)];
+            tris.push(t.map(|p| p.as_vec3()));
+        }
+        tris
+    }
+
+    /// Every certified lane of every block [`ScreenDepth::block`] passes,
+    /// over every tile of every trial: `check(cam, tri, rays, block, lane
+    /// pixel, z, ok)`. Returns (certified lanes, lanes of passed blocks).
+    fn each_certified_lane(
+        mut check: impl FnMut(
+            &Camera,
+            &TriDepth,
+            &ScreenDepth,
+            &TileRays,
+            BlockBound,
+            (u32, u32, usize, usize),
+            f32,
+            bool,
+        ),
+    ) -> (usize, usize) {
+        let (mut sure_lanes, mut lanes) = (0, 0);
+        for (c, cam) in cameras().iter().enumerate() {
+            for t in triangles(cam, 7 + c as u64) {
+                let td = TriDepth::new(cam, &t);
+                let cd = ChunkDepth::new(cam, &td);
+                for y0 in (0..cam.height).step_by(TILE as usize) {
+                    for x0 in (0..cam.width).step_by(TILE as usize) {
+                        let (tw, th) = (TILE.min(cam.width - x0), TILE.min(cam.height - y0));
+                        let rays = TileRays::new(cam, x0, y0, tw, th);
+                        let Some(s) = ScreenDepth::new(cam, &cd, &rays) else {
+                            continue;
+                        };
+                        for r0 in (0..th as usize + 1 - CHUNK).step_by(CHUNK) {
+                            for base in (0..tw as usize + 1 - CHUNK).step_by(CHUNK) {
+                                let Some(bound) = s.block(&rays, r0, base) else {
+                                    continue;
+                                };
+                                for i in 0..CHUNK {
+                                    let (z, ok, sure) =
+                                        s.row(Portable, &rays, r0 + i, base, bound.eu);
+                                    #[cfg(target_arch = "x86_64")]
+                                    if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                                        let wide = s.row(avx, &rays, r0 + i, base, bound.eu);
+                                        assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
+                                        assert_eq!((wide.1, wide.2), (ok, sure));
+                                    }
+                                    lanes += CHUNK;
+                                    for j in (0..CHUNK).filter(|j| (sure >> j) & 1 == 1) {
+                                        sure_lanes += 1;
+                                        let px = (x0 + (base + j) as u32, y0 + (r0 + i) as u32);
+                                        let at = (px.0, px.1, base + j, r0 + i);
+                                        check(
+                                            cam,
+                                            &td,
+                                            &s,
+                                            &rays,
+                                            bound,
+                                            at,
+                                            z[j],
+                                            (ok >> j) & 1 == 1,
+                                        );
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        (sure_lanes, lanes)
+    }
+
+    /// The depth function's own `t = num / denom` at a pixel, its slab
+    /// interval, and its unrounded depth `t · planar`.
+    fn contract(cam: &Camera, td: &TriDepth, x: u32, y: u32) -> (f64, (f64, f64), f64) {
+        let ray = cam.pixel_ray(x, y);
+        let t = td.num / td.normal.dot(ray.dir);
+        (t, slab(cam.eye, &ray, &td.bounds), t * ray.planar)
+    }
+
+    /// Every lane the certificate settles is [`TriDepth::depth`]'s, bit for
+    /// bit, and the slab clamp the module's proof skips is the identity
+    /// there; most lanes of the trials are settled (the test is not vacuous).
+    #[test]
+    fn certified_depths_are_the_depth_functions() {
+        let (sure, lanes) = each_certified_lane(|cam, td, _, _, _, (x, y, _, _), z, ok| {
+            let want = td.depth(cam, &cam.pixel_ray(x, y));
+            let got = ok.then_some(z);
+            assert_eq!(
+                got.map(f32::to_bits),
+                want.map(f32::to_bits),
+                "pixel ({x}, {y})"
+            );
+            let (t, (lo, hi), _) = contract(cam, td, x, y);
+            assert!(
+                lo <= t && t <= hi,
+                "pixel ({x}, {y}): t {t} outside [{lo}, {hi}]"
+            );
+        });
+        assert!(
+            lanes > 100_000 && sure * 100 > lanes * 95,
+            "{sure} of {lanes} lanes certified"
+        );
+    }
+
+    /// The bound holds lane by lane: the depth function's unrounded depth
+    /// lies within `e|w|` of the interpolant `w`, and not absurdly far
+    /// inside it (a bound 10^4 times too loose would still certify most
+    /// lanes, so the test says how tight it is).
+    #[test]
+    fn observed_error_stays_within_the_bound() {
+        let mut worst = 0.0f64;
+        each_certified_lane(|cam, td, s, rays, bound, (x, y, lx, ly), _, _| {
+            let (_, _, z) = contract(cam, td, x, y);
+            let w = s.value(rays, ly, lx);
+            let used = (z - w).abs() / (bound.e * w.abs());
+            assert!(
+                used <= 1.0,
+                "pixel ({x}, {y}): |z - w| = {} > e|w|",
+                (z - w).abs()
+            );
+            worst = worst.max(used);
+        });
+        assert!(worst > 1e-4, "the largest error used {worst} of the bound");
+    }
+
+    /// The certificate at its edge: around f32 rounding boundaries (in a
+    /// binade and at its ends), `w` is certified for `eu` exactly when
+    /// every f64 within `eu` ulps rounds as it does, once `eu` ulps reach
+    /// the boundary.
+    #[test]
+    fn rounds_alone_at_the_bound() {
+        let up = |x: f64, k: i64| f64::from_bits((x.to_bits() as i64 + k) as u64);
+        for base in [1.0f32, 1.5, 3.999_999_8, 1e-20, 7.5e19] {
+            let next = f32::from_bits(base.to_bits() + 1);
+            // The f64 midpoint between `base` and the next f32.
+            let mid = (f64::from(base) + f64::from(next)) / 2.0;
+            assert_eq!(mid.to_bits() & DROPPED_MASK, MIDPOINT as u64);
+            for eu in [0i64, 3, 40] {
+                for k in -60i64..=60 {
+                    let w = up(mid, k);
+                    let alone = (-eu..=eu).all(|i| up(w, i) as f32 == w as f32);
+                    assert_eq!(
+                        rounds_alone(w, eu),
+                        k.abs() > eu,
+                        "base {base}, eu {eu}, k {k}"
+                    );
+                    if rounds_alone(w, eu) {
+                        assert!(
+                            alone,
+                            "base {base}, eu {eu}, k {k}: certified but not alone"
+                        );
+                    }
+                }
+            }
+        }
+        // A power of two: the boundary below it lies in the lower binade.
+        let two = 2.0f64;
+        for k in -50i64..=50 {
+            let w = up(two, k);
+            assert!(rounds_alone(w, 40), "next to 2, offset {k}");
+            assert!((-40..=40).all(|i| up(w, i) as f32 == 2.0f32));
+        }
+    }
+}
