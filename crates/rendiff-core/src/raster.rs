@@ -284,35 +284,34 @@ fn render_tile_avx2(
 
 /// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
 /// triangle's box is found full of hits (most tiles of big triangles never need it).
-struct LazyBound<F> {
+struct LazyBound {
     /// Skipping is on.
     on: bool,
     /// Multiplies the bound (tests).
     factor: f64,
     /// Computed yet, and its value.
     bound: Option<Option<TileDepthBound>>,
-    /// Computes it.
-    make: F,
 }
 
-impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
-    /// A bound for a tile whose rays `make` lists.
+impl LazyBound {
+    /// No bound yet.
     #[inline(always)]
-    fn new(mode: Mode, make: F) -> Self {
+    fn new(mode: Mode) -> Self {
         LazyBound {
             on: mode.hiz,
             factor: mode.hiz_factor,
             bound: None,
-            make,
         }
     }
 
     /// True when triangle `prim` can change no key in its box `[lx0, lx1,
     /// ly0, ly1]` of the tile: its lowest possible key is no smaller than
-    /// every key there (none of which may then be background).
+    /// every key there (none of which may then be background). `make`
+    /// computes the tile's bound the first time one is needed.
     #[inline(always)]
     fn hidden(
         &mut self,
+        make: impl FnOnce() -> Option<TileDepthBound>,
         cam: &Camera,
         t: &Tri,
         prim: u32,
@@ -323,7 +322,7 @@ impl<F: FnMut() -> Option<TileDepthBound>> LazyBound<F> {
         if !self.on || out.keys[out.at(lx0, ly0)] == NO_HIT {
             return false;
         }
-        let (make, factor) = (&mut self.make, self.factor);
+        let factor = self.factor;
         let bound = self
             .bound
             .get_or_insert_with(|| make().map(|b| b.scaled(factor)));
@@ -381,16 +380,17 @@ fn render_tile_body<L: Lanes>(
         .flat_map(|ly| (0..tw).map(move |lx| (lx, ly)))
         .map(|(lx, ly)| cam.pixel_ray(x0 + lx, y0 + ly))
         .collect();
-    let mut hiz = LazyBound::new(mode, || {
+    let mut hiz = LazyBound::new(mode);
+    let bound = || {
         let k = TileDepthBound::axis(cam);
         let planar: Vec<f64> = pixel_rays.iter().map(|r| r.planar).collect();
         let dk: Vec<f64> = pixel_rays.iter().map(|r| r.dir[k]).collect();
         TileDepthBound::new(k, &planar, &dk)
-    });
+    };
     for &Binned { prim, rect } in bin {
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
-        if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+        if hiz.hidden(bound, cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
             c.hidden_skipped += 1;
             continue;
         }
@@ -425,11 +425,11 @@ fn fast_tile<L: Lanes>(
     bin: &[Binned],
     mode: Mode,
     out: &mut TileOut,
-    rays: &TileRays,
+    rays: &mut TileRays,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
-    let mut hiz = LazyBound::new(mode, || rays.depth_bound(cam));
+    let mut hiz = LazyBound::new(mode);
     for (i, &Binned { prim, rect }) in bin.iter().enumerate() {
         // Bins name triangles scattered through memory: ask for one a few
         // entries ahead (a hint; nothing observable changes).
@@ -438,12 +438,17 @@ fn fast_tile<L: Lanes>(
         }
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
-        if hiz.hidden(cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+        let bound = || {
+            rays.ensure_dirs(l);
+            rays.depth_bound(cam)
+        };
+        if hiz.hidden(bound, cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
             c.hidden_skipped += 1;
             continue;
         }
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
+            rays.ensure_dirs(l);
             small_box(l, cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
         }
@@ -480,21 +485,29 @@ fn fast_tile<L: Lanes>(
                 if block.is_some_and(|g| g.rejected() == 0) && out.cov.is_empty() {
                     let d =
                         depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-                    let (s, whole) = screen.get_or_insert_with(|| {
+                    let &mut (s, whole) = screen.get_or_insert_with(|| {
                         let s = ScreenDepth::new(cam, d, rays);
                         let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
                         (s, whole)
                     });
-                    let done = match s {
-                        Some(s) => {
-                            let bound = whole.or_else(|| s.block(rays, r0, base));
-                            bound.is_some_and(|b| {
-                                screen_block(l, cam, prim, rays, s, d, b, (r0, base), out)
-                            })
-                        }
-                        None => false,
+                    // (Matches, not closures: a closure would not inherit
+                    // the caller's target features, nor inline its intrinsics.)
+                    let bound = match (s, whole) {
+                        (Some(_), Some(b)) => Some(b),
+                        (Some(s), None) => s.block(rays, r0, base),
+                        (None, _) => None,
                     };
-                    if done || covered_block(l, cam, prim, rays, d, (r0, base), out) {
+                    let done = match (s, bound) {
+                        (Some(s), Some(b)) => {
+                            screen_block(l, cam, prim, rays, &s, d, b, (r0, base), out);
+                            true
+                        }
+                        _ => false,
+                    };
+                    if done || {
+                        rays.ensure_dirs(l);
+                        covered_block(l, cam, prim, rays, d, (r0, base), out)
+                    } {
                         // What 64 settled, covered lanes count (`chunk_hits`).
                         let n = (CHUNK * CHUNK) as u64;
                         c.coverage_tests += n;
@@ -503,6 +516,7 @@ fn fast_tile<L: Lanes>(
                         continue;
                     }
                 }
+                rays.ensure_dirs(l);
                 for ly in r0..=r1 {
                     let sg = match block {
                         Some(g) => g,
@@ -567,13 +581,13 @@ fn screen_block<L: Lanes>(
     l: L,
     cam: &Camera,
     prim: u32,
-    rays: &TileRays,
+    rays: &mut TileRays,
     s: &ScreenDepth,
     d: &ChunkDepth,
     bound: BlockBound,
     (r0, base): (usize, usize),
     out: &mut TileOut,
-) -> bool {
+) {
     let mut z = [[0f32; CHUNK]; CHUNK];
     let mut ok = [0u32; CHUNK];
     for (i, (z, ok)) in z.iter_mut().zip(&mut ok).enumerate() {
@@ -581,6 +595,7 @@ fn screen_block<L: Lanes>(
         (*z, *ok) = if sure == 0xff {
             (zi, oki)
         } else {
+            rays.ensure_dirs(l);
             d.depths(l, cam, rays, r0 + i, base, 0xff)
         };
     }
@@ -589,7 +604,6 @@ fn screen_block<L: Lanes>(
         let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
         l.min_keys(keys, z, ok, prim);
     }
-    true
 }
 
 /// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as

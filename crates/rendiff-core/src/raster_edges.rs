@@ -719,6 +719,9 @@ pub struct TileRays {
     planar_span: Span,
     /// `max |D_i|` over the tile's pixels, per component.
     max_abs: [f64; 3],
+    /// `d` and `planar` (and `planar_span`) are written for this tile
+    /// ([`TileRays::ensure_dirs`]).
+    dirs_filled: bool,
     /// Some direction component is subnormal: its reciprocal may overflow,
     /// so [`ChunkDepth`] takes no shortcut in this tile.
     subnormal: bool,
@@ -735,6 +738,7 @@ impl TileRays {
     pub fn new(cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) -> TileRays {
         let mut t = TileRays::default();
         t.fill(Portable, cam, x0, y0, tw, th);
+        t.ensure_dirs(Portable);
         t
     }
 
@@ -742,10 +746,9 @@ impl TileRays {
     /// them: no allocation or zeroing per tile; start from `default()`).
     #[inline(always)]
     pub fn fill<L: Lanes>(&mut self, l: L, cam: &Camera, x0: u32, y0: u32, tw: u32, th: u32) {
-        let (width, rows) = (tw as usize, th as usize);
+        let width = tw as usize;
         // At least CHUNK - 1 padding lanes, rounded up to whole 4-lane vectors.
         let stride = (width + CHUNK - 1).next_multiple_of(4);
-        let n = stride * rows;
         let t = self;
         t.width = width;
         t.stride = stride;
@@ -754,10 +757,6 @@ impl TileRays {
         t.sy.clear();
         t.sy.extend((0..th).map(|ly| cam.screen_y(y0 + ly)));
         t.basis = [cam.eye, cam.forward, cam.right, cam.up_ortho];
-        for v in t.d.iter_mut().chain([&mut t.planar]) {
-            // Every lane is written below; old values only avoid zeroing.
-            v.resize(n, 0.0);
-        }
         let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
         // The camera's private aspect tan, by the same expression.
         let a = cam.tan_half_vfov * (f64::from(cam.width) / f64::from(cam.height));
@@ -772,6 +771,58 @@ impl TileRays {
         }
         let corners = t.corner_spans(e, u);
         t.spans_from_corners = corners.is_some();
+        t.dirs_filled = false;
+        match corners {
+            Some(spans) => {
+                // One strict sign and finite per component: the spans alone
+                // give the statistics (`Span::stats` never scans then), and
+                // the directions wait until something reads them.
+                t.d_span = spans;
+                let stats = spans.map(|s| s.stats(&[]));
+                t.max_abs = stats.map(|(max, _)| max);
+                t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
+            }
+            None => {
+                t.fill_dirs(l);
+                // A NaN or infinite direction leaves a NaN bound, which decides
+                // nothing (as an infinite one would).
+                // (Plain arrays: array `map` compiled to out-of-line calls here.)
+                let stats = [
+                    t.d_span[0].stats(&t.d[0]),
+                    t.d_span[1].stats(&t.d[1]),
+                    t.d_span[2].stats(&t.d[2]),
+                ];
+                t.max_abs = [stats[0].0, stats[1].0, stats[2].0];
+                t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
+            }
+        }
+    }
+
+    /// The directions and planar factors of every pixel, written now if
+    /// [`TileRays::fill`] left them for later (tiles whose corners gave the
+    /// spans): a tile whose triangles all settle whole blocks by corners
+    /// and screen-space depth ([`crate::raster_screen_depth`]) never needs
+    /// them.
+    #[inline(always)]
+    pub fn ensure_dirs<L: Lanes>(&mut self, l: L) {
+        if !self.dirs_filled {
+            self.fill_dirs(l);
+        }
+    }
+
+    /// Writes the directions and planar factors (and the spans the corners
+    /// did not give).
+    #[inline(always)]
+    fn fill_dirs<L: Lanes>(&mut self, l: L) {
+        let t = self;
+        let (stride, rows) = (t.stride, t.sy.len());
+        let n = stride * rows;
+        for v in t.d.iter_mut().chain([&mut t.planar]) {
+            // Every lane is written below; old values only avoid zeroing.
+            v.resize(n, 0.0);
+        }
+        let [e, f, _, u] = t.basis.map(|v| v.to_array());
+        let from_corners = t.spans_from_corners;
         let mut d_ext = [Extremes::default(); 3];
         let mut planar_ext = Extremes::default();
         for ly in 0..rows {
@@ -782,7 +833,7 @@ impl TileRays {
                 // D = P - eye, component by component (the same roundings,
                 // with `forward + right sx` taken once per column).
                 let d = &mut t.d[k][row.clone()];
-                let ext = corners.is_none().then_some(ext);
+                let ext = (!from_corners).then_some(ext);
                 l.dir_row(e[k], u[k] * sy, &t.across[k], d, ext);
             }
             let [dx, dy, dz] = &t.d;
@@ -792,17 +843,23 @@ impl TileRays {
         }
         // Padding lanes repeat real pixels: the spans are the tile's.
         t.planar_span = planar_ext.span();
-        t.d_span = corners.unwrap_or([d_ext[0].span(), d_ext[1].span(), d_ext[2].span()]);
-        // A NaN or infinite direction leaves a NaN bound, which decides
-        // nothing (as an infinite one would).
-        // (Plain arrays: array `map` compiled to out-of-line calls here.)
-        let stats = [
-            t.d_span[0].stats(&t.d[0]),
-            t.d_span[1].stats(&t.d[1]),
-            t.d_span[2].stats(&t.d[2]),
-        ];
-        t.max_abs = [stats[0].0, stats[1].0, stats[2].0];
-        t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
+        if !from_corners {
+            t.d_span = [d_ext[0].span(), d_ext[1].span(), d_ext[2].span()];
+        }
+        t.dirs_filled = true;
+    }
+
+    /// Component `k` of the direction of tile pixel `(lx, ly)`, from the
+    /// written directions or, before they are written, by the same
+    /// arithmetic ([`dir_lane`]: equal bits).
+    #[inline(always)]
+    fn dir_component(&self, k: usize, lx: usize, ly: usize) -> f64 {
+        if self.dirs_filled {
+            self.d[k][ly * self.stride + lx]
+        } else {
+            let [e, _, _, u] = self.basis;
+            dir_lane(e[k], u[k] * self.sy[ly], self.across[k][lx])
+        }
     }
 
     /// The span of each direction component over the tile, from its four
@@ -871,6 +928,7 @@ impl TileRays {
             d,
             max_abs,
             subnormal: false,
+            dirs_filled: true,
             // Unknown rays: no block is ever decided whole.
             eta: [f64::NAN; 3],
         }
@@ -879,6 +937,7 @@ impl TileRays {
     /// The ray of pixel `(lx, ly)` of the tile, as [`Camera::pixel_ray`] gives it.
     #[inline(always)]
     pub fn ray(&self, lx: usize, ly: usize) -> PixelRay {
+        debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         let at = ly * self.stride + lx;
         let v = |a: &[Vec<f64>; 3]| DVec3::new(a[0][at], a[1][at], a[2][at]);
         let [e, f, r, u] = self.basis;
@@ -898,6 +957,7 @@ impl TileRays {
     /// they change nothing).
     #[inline(always)]
     pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
+        debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         let k = crate::raster_hiz::TileDepthBound::axis(cam);
         crate::raster_hiz::TileDepthBound::from_spans(k, self.planar_span, self.d_span[k])
     }
@@ -905,6 +965,7 @@ impl TileRays {
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
     #[inline(always)]
     pub fn dir(&self, lx: usize, ly: usize) -> DVec3 {
+        debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         let at = ly * self.stride + lx;
         DVec3::new(self.d[0][at], self.d[1][at], self.d[2][at])
     }
@@ -915,6 +976,7 @@ impl TileRays {
     /// `vzeroupper`, in the raster's hottest loop).
     #[inline(always)]
     fn chunk_at(&self, at: usize) -> ([&[f64; CHUNK]; 3], &[f64; CHUNK]) {
+        debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         fn lane(a: &[f64], at: usize) -> &[f64; CHUNK] {
             a[at..at + CHUNK].try_into().unwrap()
         }
@@ -1142,6 +1204,7 @@ impl ChunkDepth {
     pub fn depth_at(&self, cam: &Camera, rays: &TileRays, lx: usize, ly: usize) -> Option<f32> {
         let at = ly * rays.stride + lx;
         // (Not `[0, 1, 2].map`: array `map` compiled to an out-of-line call.)
+        debug_assert!(rays.dirs_filled, "tile directions read before ensure_dirs");
         let d = [[rays.d[0][at]], [rays.d[1][at]], [rays.d[2][at]]];
         let (z, ok) = self.lanes(cam, d, [rays.planar[at]], 1, rays.subnormal);
         (ok == 1).then_some(z[0])
@@ -1319,18 +1382,21 @@ impl FastEdges {
     /// block; the caller needs the block inside the tile.
     #[inline(always)]
     pub fn block(&self, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
-        let c = [
-            row * dirs.stride + col,
-            row * dirs.stride + col + CHUNK - 1,
-            (row + CHUNK - 1) * dirs.stride + col,
-            (row + CHUNK - 1) * dirs.stride + col + CHUNK - 1,
-        ];
+        let (r1, c1) = (row + CHUNK - 1, col + CHUNK - 1);
+        let c = [(col, row), (c1, row), (col, r1), (c1, r1)];
+        // Plain loops: array `map` compiled to out-of-line calls here.
+        let mut corner = [[0.0; 3]; 4];
+        for (d, &(lx, ly)) in corner.iter_mut().zip(&c) {
+            for (k, d) in d.iter_mut().enumerate() {
+                *d = dirs.dir_component(k, lx, ly);
+            }
+        }
         let mut out = ChunkSigns::default();
         for k in 0..3 {
             let [nx, ny, nz] = self.n[k];
             let mut det = [0.0; 4];
-            for (det, &at) in det.iter_mut().zip(&c) {
-                *det = dirs.d[0][at] * nx + dirs.d[1][at] * ny + dirs.d[2][at] * nz;
+            for (det, d) in det.iter_mut().zip(&corner) {
+                *det = d[0] * nx + d[1] * ny + d[2] * nz;
             }
             let b = self.block[k];
             // NaN fails both.
@@ -1348,6 +1414,7 @@ impl FastEdges {
     #[inline(always)]
     pub fn chunk<L: Lanes>(&self, l: L, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
         let at = row * dirs.stride + col;
+        debug_assert!(dirs.dirs_filled, "tile directions read before ensure_dirs");
         let dx: &[f64; CHUNK] = dirs.d[0][at..at + CHUNK].try_into().unwrap();
         let dy: &[f64; CHUNK] = dirs.d[1][at..at + CHUNK].try_into().unwrap();
         let dz: &[f64; CHUNK] = dirs.d[2][at..at + CHUNK].try_into().unwrap();
@@ -1652,6 +1719,18 @@ mod tests {
                 if let Some(avx) = Avx2::detect() {
                     let mut w = TileRays::default();
                     w.fill(avx, &cam, x0, y0, tw, th);
+                    // Before its directions are written, a tile gives the
+                    // same statistics, and the same direction per pixel.
+                    assert_eq!(w.max_abs.map(f64::to_bits), t.max_abs.map(f64::to_bits));
+                    assert_eq!(w.subnormal, t.subnormal);
+                    for (k, ly, lx) in (0..3).flat_map(|k| {
+                        (0..th as usize)
+                            .flat_map(move |ly| (0..tw as usize).map(move |lx| (k, ly, lx)))
+                    }) {
+                        let want = t.d[k][ly * t.stride + lx];
+                        assert_eq!(w.dir_component(k, lx, ly).to_bits(), want.to_bits());
+                    }
+                    w.ensure_dirs(avx);
                     let bits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                     for k in 0..3 {
                         assert_eq!(bits(&w.d[k]), bits(&t.d[k]));

@@ -302,7 +302,12 @@ impl ScreenDepth {
             (sx0, sy1, row1),
             (sx1, sy1, row1),
         ];
-        let den = corners.map(|(x, _, row)| a * x + row);
+        // Plain loops, not array `map`: its closures compiled to out-of-line
+        // calls, once per block.
+        let mut den = [0.0; 4];
+        for (d, &(x, _, row)) in den.iter_mut().zip(&corners) {
+            *d = a * x + row;
+        }
         let (sxm, sym) = (sx0.abs().max(sx1.abs()), sy0.abs().max(sy1.abs()));
         let s = self.abs_coef[0] * sxm + self.abs_coef[1] * sym + self.abs_coef[2];
         let delta_f = 6.0 * U * s;
@@ -334,10 +339,14 @@ impl ScreenDepth {
             return None;
         }
         // The slab clamp, axis by axis.
-        let inv = den.map(|d| 1.0 / d);
-        let hb = self
-            .basis
-            .map(|[f, r, v]| f.abs() + r.abs() * sxm + v.abs() * sym);
+        let mut inv = [0.0; 4];
+        for (q, &d) in inv.iter_mut().zip(&den) {
+            *q = 1.0 / d;
+        }
+        let mut hb = [0.0; 3];
+        for (h, &[f, r, v]) in hb.iter_mut().zip(&self.basis) {
+            *h = f.abs() + r.abs() * sxm + v.abs() * sym;
+        }
         for k in 0..3 {
             let [fk, rk, vk] = self.basis[k];
             let (mut h_lo, mut h_hi, mut h_abs) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
