@@ -454,6 +454,17 @@ fn fast_tile<L: Lanes>(
         }
         let edges = TriEdges::new(cam, t);
         let f = FastEdges::new(&edges, rays);
+        // The whole box by its corners: rejected, it adds its pixels' counts
+        // (as its blocks and chunks would); covered, every full block in it
+        // takes these signs.
+        let whole = f.rect(rays, [lx0, lx1, ly0, ly1]);
+        if whole.rejected() == 0xff {
+            let n = ((lx1 - lx0 + 1) * (ly1 - ly0 + 1)) as u64;
+            c.coverage_tests += n;
+            c.fast_decided += n;
+            continue;
+        }
+        let whole = Some(whole).filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
         let mut depth: Option<ChunkDepth> = None;
         // Set up with the first covered block: the screen-space depth (`None`:
         // it cannot run here) and its bound over the whole box in the tile
@@ -472,9 +483,12 @@ fn fast_tile<L: Lanes>(
                 let (a, b) = (lx0.saturating_sub(base), (lx1 - base).min(CHUNK - 1));
                 let span: u32 = ((1u32 << (b + 1)) - 1) & !((1u32 << a) - 1);
                 // A block inside the box whose certain signs settle all of it.
-                let block = (full_rows && span == 0xff)
-                    .then(|| f.block(rays, r0, base))
-                    .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff);
+                let block = match whole {
+                    Some(g) if full_rows && span == 0xff => Some(g),
+                    _ => (full_rows && span == 0xff)
+                        .then(|| f.block(rays, r0, base))
+                        .filter(|g| g.rejected() | g.inside_pos() | g.inside_neg() == 0xff),
+                };
                 if block.is_some_and(|g| g.rejected() == 0xff) {
                     // What 64 settled, rejected lanes count (`chunk_hits`).
                     let n = (CHUNK * CHUNK) as u64;

@@ -517,11 +517,28 @@ impl Lanes for Avx2 {
         unsafe {
             let sign = _mm256_set1_pd(-0.0);
             let a = _mm256_set1_pd(crate::predicate::O3D_ERRBOUND_A);
-            let [x, y, z] = d.map(|v| _mm256_loadu_pd(v.as_ptr()));
-            let [ax, ay, az] = [x, y, z].map(|v| _mm256_andnot_pd(sign, v));
+            // No array `map` around intrinsics: its closures can be
+            // compiled out of line, without this function's target features
+            // (each intrinsic then a call).
+            let x = _mm256_loadu_pd(d[0].as_ptr());
+            let y = _mm256_loadu_pd(d[1].as_ptr());
+            let z = _mm256_loadu_pd(d[2].as_ptr());
+            let (ax, ay, az) = (
+                _mm256_andnot_pd(sign, x),
+                _mm256_andnot_pd(sign, y),
+                _mm256_andnot_pd(sign, z),
+            );
             for (k, e) in e.iter().enumerate() {
-                let n = [e.n.x, e.n.y, e.n.z].map(|v| _mm256_set1_pd(v));
-                let p = [e.perm.x, e.perm.y, e.perm.z].map(|v| _mm256_set1_pd(v));
+                let n = [
+                    _mm256_set1_pd(e.n.x),
+                    _mm256_set1_pd(e.n.y),
+                    _mm256_set1_pd(e.n.z),
+                ];
+                let p = [
+                    _mm256_set1_pd(e.perm.x),
+                    _mm256_set1_pd(e.perm.y),
+                    _mm256_set1_pd(e.perm.z),
+                ];
                 let det = _mm256_add_pd(
                     _mm256_add_pd(_mm256_mul_pd(x, n[0]), _mm256_mul_pd(y, n[1])),
                     _mm256_mul_pd(z, n[2]),
@@ -778,8 +795,13 @@ impl TileRays {
                 // give the statistics (`Span::stats` never scans then), and
                 // the directions wait until something reads them.
                 t.d_span = spans;
-                let stats = spans.map(|s| s.stats(&[]));
-                t.max_abs = stats.map(|(max, _)| max);
+                // (Plain arrays: array `map` compiled to out-of-line calls here.)
+                let stats = [
+                    spans[0].stats(&[]),
+                    spans[1].stats(&[]),
+                    spans[2].stats(&[]),
+                ];
+                t.max_abs = [stats[0].0, stats[1].0, stats[2].0];
                 t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
             }
             None => {
@@ -821,7 +843,8 @@ impl TileRays {
             // Every lane is written below; old values only avoid zeroing.
             v.resize(n, 0.0);
         }
-        let [e, f, _, u] = t.basis.map(|v| v.to_array());
+        let [e, f, _, u] = t.basis;
+        let (e, f, u) = (e.to_array(), f.to_array(), u.to_array());
         let from_corners = t.spans_from_corners;
         let mut d_ext = [Extremes::default(); 3];
         let mut planar_ext = Extremes::default();
@@ -1382,8 +1405,15 @@ impl FastEdges {
     /// block; the caller needs the block inside the tile.
     #[inline(always)]
     pub fn block(&self, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
-        let (r1, c1) = (row + CHUNK - 1, col + CHUNK - 1);
-        let c = [(col, row), (c1, row), (col, r1), (c1, r1)];
+        self.rect(dirs, [col, col + CHUNK - 1, row, row + CHUNK - 1])
+    }
+
+    /// [`FastEdges::block`] over the tile rectangle `[lx0, lx1, ly0, ly1]`
+    /// (the argument holds for any rectangle of pixel centers: it is their
+    /// convex hull): a triangle's box in a tile, decided at once.
+    #[inline(always)]
+    pub fn rect(&self, dirs: &TileRays, [lx0, lx1, ly0, ly1]: [usize; 4]) -> ChunkSigns {
+        let c = [(lx0, ly0), (lx1, ly0), (lx0, ly1), (lx1, ly1)];
         // Plain loops: array `map` compiled to out-of-line calls here.
         let mut corner = [[0.0; 3]; 4];
         for (d, &(lx, ly)) in corner.iter_mut().zip(&c) {
