@@ -380,16 +380,16 @@ fn render_tile_body<L: Lanes>(
         .flat_map(|ly| (0..tw).map(move |lx| (lx, ly)))
         .map(|(lx, ly)| cam.pixel_ray(x0 + lx, y0 + ly))
         .collect();
+    // The skipping bound the fast path uses, from the same tile frame (so
+    // both skip the same triangles and their counts agree).
     let mut hiz = LazyBound::new(mode);
-    let bound = || {
-        let k = TileDepthBound::axis(cam);
-        let planar: Vec<f64> = pixel_rays.iter().map(|r| r.planar).collect();
-        let dk: Vec<f64> = pixel_rays.iter().map(|r| r.dir[k]).collect();
-        TileDepthBound::new(k, &planar, &dk)
-    };
     for &Binned { prim, rect } in bin {
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
+        let bound = || {
+            rays.fill(l, cam, x0, y0, tw, th);
+            rays.depth_bound(cam)
+        };
         if hiz.hidden(bound, cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
             c.hidden_skipped += 1;
             continue;
@@ -438,11 +438,14 @@ fn fast_tile<L: Lanes>(
         }
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
-        let bound = || {
-            rays.ensure_dirs(l);
-            rays.depth_bound(cam)
-        };
-        if hiz.hidden(bound, cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+        if hiz.hidden(
+            || rays.depth_bound(cam),
+            cam,
+            t,
+            prim,
+            out,
+            [lx0, lx1, ly0, ly1],
+        ) {
             c.hidden_skipped += 1;
             continue;
         }

@@ -133,13 +133,12 @@ pub trait Lanes: Copy {
     }
 
     /// One row of a tile's planar factors, `p[i] = D_i . f` (`DVec3::dot`:
-    /// left to right), taken into `ext` as they are written.
+    /// left to right).
     #[inline(always)]
-    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64], ext: &mut Extremes) {
+    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64]) {
         for (((p, &x), &y), &z) in p.iter_mut().zip(x).zip(y).zip(z) {
             *p = x * f[0] + y * f[1] + z * f[2];
         }
-        ext.add(p);
     }
 
     /// [`ChunkDepth`]'s shortcut over 8 lanes in wide registers: the
@@ -594,27 +593,28 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
-    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64], ext: &mut Extremes) {
+    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64]) {
         use std::arch::x86_64::*;
         let n = p.len().min(x.len()).min(y.len()).min(z.len());
         let whole = n / 4 * 4;
         // SAFETY: as in `dir_row`: 4 f64 at `i + 4 <= n` of each slice.
-        // Per lane `(x f0 + y f1) + z f2`, then `Extremes::add`'s rules.
+        // Per lane `(x f0 + y f1) + z f2`.
         unsafe {
-            let fv = f.map(|v| _mm256_set1_pd(v));
-            let mut wide = WideExtremes::load(ext);
+            let (f0, f1, f2) = (
+                _mm256_set1_pd(f[0]),
+                _mm256_set1_pd(f[1]),
+                _mm256_set1_pd(f[2]),
+            );
             for i in (0..whole).step_by(4) {
-                let xv = _mm256_mul_pd(_mm256_loadu_pd(x.as_ptr().add(i)), fv[0]);
-                let yv = _mm256_mul_pd(_mm256_loadu_pd(y.as_ptr().add(i)), fv[1]);
-                let zv = _mm256_mul_pd(_mm256_loadu_pd(z.as_ptr().add(i)), fv[2]);
+                let xv = _mm256_mul_pd(_mm256_loadu_pd(x.as_ptr().add(i)), f0);
+                let yv = _mm256_mul_pd(_mm256_loadu_pd(y.as_ptr().add(i)), f1);
+                let zv = _mm256_mul_pd(_mm256_loadu_pd(z.as_ptr().add(i)), f2);
                 let v = _mm256_add_pd(_mm256_add_pd(xv, yv), zv);
                 _mm256_storeu_pd(p.as_mut_ptr().add(i), v);
-                wide.add(v);
             }
-            wide.store(ext);
         }
         let rest = [&x[whole..n], &y[whole..n], &z[whole..n]];
-        Portable.planar_row(f, rest, &mut p[whole..n], ext);
+        Portable.planar_row(f, rest, &mut p[whole..n]);
     }
 
     #[inline(always)]
@@ -732,11 +732,12 @@ pub struct TileRays {
     /// `d_span` came from the tile's four corner pixels
     /// ([`TileRays::corner_spans`]), not from every value as it was written.
     spans_from_corners: bool,
-    /// The span of `planar`.
-    planar_span: Span,
+    /// A lower bound on `planar` over the tile's pixels, from its corners
+    /// alone ([`TileRays::planar_low`]; NaN when a corner is not finite).
+    planar_low: f64,
     /// `max |D_i|` over the tile's pixels, per component.
     max_abs: [f64; 3],
-    /// `d` and `planar` (and `planar_span`) are written for this tile
+    /// `d` and `planar` are written for this tile
     /// ([`TileRays::ensure_dirs`]).
     dirs_filled: bool,
     /// Some direction component is subnormal: its reciprocal may overflow,
@@ -818,6 +819,7 @@ impl TileRays {
                 t.subnormal = stats.iter().any(|&(_, subnormal)| subnormal);
             }
         }
+        t.planar_low = t.planar_low(f, a, cam.tan_half_vfov);
     }
 
     /// The directions and planar factors of every pixel, written now if
@@ -847,7 +849,6 @@ impl TileRays {
         let (e, f, u) = (e.to_array(), f.to_array(), u.to_array());
         let from_corners = t.spans_from_corners;
         let mut d_ext = [Extremes::default(); 3];
-        let mut planar_ext = Extremes::default();
         for ly in 0..rows {
             let sy = t.sy[ly];
             let row = ly * stride..(ly + 1) * stride;
@@ -862,14 +863,57 @@ impl TileRays {
             let [dx, dy, dz] = &t.d;
             let d = [&dx[row.clone()], &dy[row.clone()], &dz[row.clone()]];
             // DVec3::dot(D, forward).
-            l.planar_row(f, d, &mut t.planar[row.clone()], &mut planar_ext);
+            l.planar_row(f, d, &mut t.planar[row.clone()]);
         }
         // Padding lanes repeat real pixels: the spans are the tile's.
-        t.planar_span = planar_ext.span();
         if !from_corners {
             t.d_span = [d_ext[0].span(), d_ext[1].span(), d_ext[2].span()];
         }
         t.dirs_filled = true;
+    }
+
+    /// A lower bound on every pixel's `planar = fl(D · f)` in the tile, from
+    /// its four corners: `min planar(corner) - 2ε`, NaN when a corner's is
+    /// not finite. (`a`: the aspect tan, `tan`: `tan(vfov / 2)`.)
+    ///
+    /// Why: `g = f + r sx + v sy` with the computed screen coordinates taken
+    /// as exact reals makes `g · f` affine in `(sx, sy)`, and every pixel
+    /// center's `(sx, sy)` lies in the rectangle of the corners' (monotone
+    /// in the column and row), so its least value over the tile is a
+    /// corner's. Each computed `planar` lies within `ε = 4u Σ|f_j|(H_j +
+    /// η_j) + 1.01 Σ|f_j| η_j` of `g · f`: `|D_j - g_j| <= η_j`
+    /// ([`crate::raster_screen_depth`] derives it from the module's `η_j`),
+    /// `|g_j| <= H_j = |f_j| + |r_j| a + |v_j| tan`, and the dot product
+    /// rounds by at most `3.01u Σ|f_j||D_j|`. So `planar(p) >= g·f(p) - ε
+    /// >= min_c g·f(c) - ε >= min_c planar(c) - 2ε`. Costs four directions
+    /// instead of the tile's, which a tile settled by whole blocks never
+    /// computes ([`TileRays::ensure_dirs`]).
+    #[inline(always)]
+    fn planar_low(&self, f: [f64; 3], a: f64, tan: f64) -> f64 {
+        let [_, _, r, v] = self.basis;
+        let (last_col, last_row) = (self.width - 1, self.sy.len() - 1);
+        let mut low = f64::INFINITY;
+        let mut finite = true;
+        for (lx, ly) in [(0, 0), (last_col, 0), (0, last_row), (last_col, last_row)] {
+            let (x, y, z) = (
+                self.dir_component(0, lx, ly),
+                self.dir_component(1, lx, ly),
+                self.dir_component(2, lx, ly),
+            );
+            let p = x * f[0] + y * f[1] + z * f[2];
+            finite &= p.is_finite();
+            low = low.min(p);
+        }
+        let mut eps = 0.0;
+        for k in 0..3 {
+            let h = f[k].abs() + r[k].abs() * a + v[k].abs() * tan;
+            eps += f[k].abs() * (4.0 * U * (h + self.eta[k]) + 1.01 * self.eta[k]);
+        }
+        if finite {
+            low - 2.0 * eps
+        } else {
+            f64::NAN
+        }
     }
 
     /// Component `k` of the direction of tile pixel `(lx, ly)`, from the
@@ -947,7 +991,7 @@ impl TileRays {
             across: Default::default(),
             d_span: [0, 1, 2].map(|k| Span::of(&d[k])),
             spans_from_corners: false,
-            planar_span: Span::of(&d[0]),
+            planar_low: Span::of(&d[0]).lo,
             d,
             max_abs,
             subnormal: false,
@@ -975,14 +1019,13 @@ impl TileRays {
         }
     }
 
-    /// The tile's early depth bound ([`crate::raster_hiz`]), from the spans
-    /// gathered as the tile was filled (padding lanes repeat real pixels, so
-    /// they change nothing).
+    /// The tile's early depth bound ([`crate::raster_hiz`]), from its frame:
+    /// the corners' lower bound on `planar` and the span of `D_axis` (from
+    /// the corners, or gathered when the directions were written).
     #[inline(always)]
     pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
-        debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         let k = crate::raster_hiz::TileDepthBound::axis(cam);
-        crate::raster_hiz::TileDepthBound::from_spans(k, self.planar_span, self.d_span[k])
+        crate::raster_hiz::TileDepthBound::from_low(k, self.planar_low, self.d_span[k])
     }
 
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
@@ -1740,11 +1783,22 @@ mod tests {
                 }
                 let any_subnormal = (0..3).any(|k| row_stats_scalar(&t.d[k]).subnormal);
                 assert_eq!(t.subnormal, any_subnormal);
-                assert_eq!(t.planar_span, Span::of(&t.planar));
+                // The corners' lower bound on `planar` holds at every pixel,
+                // and lies within 1e-12 of the least value (1e-6 for the eye
+                // 1e7 from the origin, whose rays carry 1e7 times the error).
+                let least = Span::of(&t.planar).lo;
+                let within = if cam.eye.length() < 1e3 { 1e-12 } else { 1e-6 };
+                assert!(t.planar_low <= least, "{} above {least}", t.planar_low);
+                assert!(
+                    t.planar_low >= least * (1.0 - within),
+                    "{} far below {least}",
+                    t.planar_low
+                );
                 let k = crate::raster_hiz::TileDepthBound::axis(&cam);
                 let scanned = crate::raster_hiz::TileDepthBound::new(k, &t.planar, &t.d[k]);
-                assert!(scanned.is_some());
-                assert_eq!(t.depth_bound(&cam), scanned);
+                let (got, scanned) = (t.depth_bound(&cam).unwrap(), scanned.unwrap());
+                assert!(got.kappa() <= scanned.kappa());
+                assert!(got.kappa() >= scanned.kappa() * (1.0 - within));
                 #[cfg(target_arch = "x86_64")]
                 if let Some(avx) = Avx2::detect() {
                     let mut w = TileRays::default();
@@ -1767,7 +1821,7 @@ mod tests {
                         assert_eq!(w.d_span[k], t.d_span[k]);
                     }
                     assert_eq!(bits(&w.planar), bits(&t.planar));
-                    assert_eq!(w.planar_span, t.planar_span);
+                    assert_eq!(w.planar_low.to_bits(), t.planar_low.to_bits());
                     assert_eq!(bits(&w.max_abs), bits(&t.max_abs));
                     assert_eq!(w.subnormal, t.subnormal);
                     assert_eq!(w.spans_from_corners, t.spans_from_corners);

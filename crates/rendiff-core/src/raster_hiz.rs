@@ -17,10 +17,14 @@
 //! `fl(t · planar) >= fl(a_k · planar) >= |F - e_k| (planar / |D_k|) (1 - u)^4`.
 //!
 //! Per tile the axis `k` is the camera's most forward one; when every ray of
-//! the tile has `D_k` of one sign (not 0) and `planar > 0`, `κ = (1 - 2^-40)
-//! fl(min planar / max |D_k|)` bounds `planar / |D_k|` from below: every
-//! pixel's quotient is at least the exact `min planar / max |D_k|`, which one
-//! rounding and the slack keep above `κ`. (The extremes need no division per
+//! the tile has `D_k` of one sign (not 0) and `planar >= P > 0`, `κ = (1 -
+//! 2^-40) fl(P / max |D_k|)` bounds `planar / |D_k|` from below: every
+//! pixel's quotient is at least the exact `P / max |D_k|`, which one
+//! rounding and the slack keep above `κ`. `P` is the tile's lower bound on
+//! `planar` from its four corners ([`TileRays`](crate::raster_edges::TileRays),
+//! `planar_low`: within about `1e-15` of the least `planar`, and it needs no
+//! ray but the corners', so a tile whose pixels never need their rays does
+//! not compute them for this bound). (The extremes need no division per
 //! pixel: the per-pixel minimum of `fl(planar / |D_k|)` cost a tenth of the
 //! raster's time on two screen-filling triangles, and a tile spans so small
 //! an angle that the two minima differ by about a percent.) The grown face
@@ -102,9 +106,17 @@ impl TileDepthBound {
     /// `planar` over the largest `|D_axis|` (module documentation).
     #[inline(always)]
     pub fn from_spans(axis: usize, planar: Span, dk: Span) -> Option<Self> {
-        let ok = planar.finite && dk.finite && planar.lo > 0.0 && dk.one_strict_sign();
+        Self::from_low(axis, if planar.finite { planar.lo } else { f64::NAN }, dk)
+    }
+
+    /// The bound from a lower bound `planar_low` on the tile's `planar`
+    /// values (NaN: none) and the span of its `D_axis` values (module
+    /// documentation): what renders use, from the tile's corners.
+    #[inline(always)]
+    pub fn from_low(axis: usize, planar_low: f64, dk: Span) -> Option<Self> {
+        let ok = dk.finite && planar_low > 0.0 && dk.one_strict_sign();
         // With one sign, the largest magnitude is an extreme's.
-        let kappa = planar.lo / (-dk.lo).max(dk.hi);
+        let kappa = planar_low / (-dk.lo).max(dk.hi);
         if !(ok && kappa > 0.0 && kappa.is_finite()) {
             return None;
         }
@@ -114,6 +126,12 @@ impl TileDepthBound {
             kappa: kappa * (1.0 - SLACK),
             factor: 1.0,
         })
+    }
+
+    /// `κ` (tests: how far a bound lies below another).
+    #[cfg(test)]
+    pub(crate) fn kappa(&self) -> f64 {
+        self.kappa
     }
 
     /// The same bound multiplied by `factor` (1 in renders; tests: too high must break).
