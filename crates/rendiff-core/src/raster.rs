@@ -605,21 +605,20 @@ fn screen_block<L: Lanes>(
     (r0, base): (usize, usize),
     out: &mut TileOut,
 ) {
-    let mut z = [[0f32; CHUNK]; CHUNK];
-    let mut ok = [0u32; CHUNK];
-    for (i, (z, ok)) in z.iter_mut().zip(&mut ok).enumerate() {
-        let (zi, oki, sure) = s.row(l, rays, r0 + i, base, bound.eu);
-        (*z, *ok) = if sure == 0xff {
-            (zi, oki)
+    for i in 0..CHUNK {
+        let row = out.at(base, r0 + i);
+        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
+        if bound.all_hit && s.row_keys(l, rays, r0 + i, base, bound.eu, keys, prim) {
+            continue;
+        }
+        let (z, ok, sure) = s.row(l, rays, r0 + i, base, bound.eu);
+        let (z, ok) = if sure == 0xff {
+            (z, ok)
         } else {
             rays.ensure_dirs(l);
             d.depths(l, cam, rays, r0 + i, base, 0xff)
         };
-    }
-    for (i, (z, &ok)) in z.iter().zip(&ok).enumerate() {
-        let row = out.at(base, r0 + i);
-        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
-        l.min_keys(keys, z, ok, prim);
+        l.min_keys(keys, &z, ok, prim);
     }
 }
 

@@ -163,6 +163,25 @@ pub trait Lanes: Copy {
         p.lanes(sx)
     }
 
+    /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass, for a row
+    /// whose lanes all hit: when every lane is certified, the keys lowered
+    /// (true); otherwise nothing written (false).
+    #[inline(always)]
+    fn screen_keys(
+        self,
+        p: &ScreenRow,
+        sx: &[f64; CHUNK],
+        keys: &mut [u64; CHUNK],
+        prim: u32,
+    ) -> bool {
+        let (z, _, sure) = p.lanes(sx);
+        if sure != 0xff {
+            return false;
+        }
+        self.min_keys(keys, &z, 0xff, prim);
+        true
+    }
+
     /// Each key of `keys` lowered to `hit_key(z[j], prim)` where lane `j`
     /// of `hits` is set and that key is smaller (the z-buffer test, 8 at a time).
     #[inline(always)]
@@ -659,6 +678,78 @@ impl Lanes for Avx2 {
             }
         }
         (z, ok, sure)
+    }
+
+    #[inline(always)]
+    fn screen_keys(
+        self,
+        p: &ScreenRow,
+        sx: &[f64; CHUNK],
+        keys: &mut [u64; CHUNK],
+        prim: u32,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
+        // stay within the borrowed arrays (4 f64 or 4 u64 at a time).
+        unsafe {
+            let (num, a, r) = (
+                _mm256_set1_pd(p.num),
+                _mm256_set1_pd(p.a),
+                _mm256_set1_pd(p.r),
+            );
+            let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
+            let mid = _mm256_set1_epi64x(MIDPOINT);
+            let eu = _mm256_set1_epi64x(p.eu);
+            // `ScreenRow::lanes`' arithmetic, operation for operation.
+            let w0 = {
+                let x = _mm256_loadu_pd(sx.as_ptr());
+                _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r))
+            };
+            let w1 = {
+                let x = _mm256_loadu_pd(sx.as_ptr().add(4));
+                _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r))
+            };
+            // `rounds_alone` per lane: |low bits - midpoint| > eu. (Written
+            // out twice: a closure here was compiled out of line, without
+            // AVX2, its intrinsics then calls.)
+            let d0 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w0), mask), mid);
+            let d1 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w1), mask), mid);
+            let zero = _mm256_setzero_si256();
+            let (n0, n1) = (_mm256_sub_epi64(zero, d0), _mm256_sub_epi64(zero, d1));
+            let abs0 = _mm256_blendv_pd(
+                _mm256_castsi256_pd(d0),
+                _mm256_castsi256_pd(n0),
+                _mm256_castsi256_pd(d0),
+            );
+            let abs1 = _mm256_blendv_pd(
+                _mm256_castsi256_pd(d1),
+                _mm256_castsi256_pd(n1),
+                _mm256_castsi256_pd(d1),
+            );
+            let sure = _mm256_and_si256(
+                _mm256_cmpgt_epi64(_mm256_castpd_si256(abs0), eu),
+                _mm256_cmpgt_epi64(_mm256_castpd_si256(abs1), eu),
+            );
+            if _mm256_movemask_pd(_mm256_castsi256_pd(sure)) != 0xf {
+                return false;
+            }
+            // `min_keys` with every lane a hit.
+            let sign = _mm256_set1_epi64x(i64::MIN);
+            let low = _mm256_set1_epi64x(i64::from(prim));
+            for h in 0..2 {
+                let w = if h == 0 { w0 } else { w1 };
+                let bits = _mm_castps_si128(_mm256_cvtpd_ps(w));
+                let new =
+                    _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low);
+                let ptr = keys.as_mut_ptr().add(4 * h).cast::<__m256i>();
+                let old = _mm256_loadu_si256(ptr);
+                // Unsigned comparison as signed, with the top bits flipped.
+                let old_bigger =
+                    _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
+                _mm256_storeu_si256(ptr, _mm256_blendv_epi8(old, new, old_bigger));
+            }
+        }
+        true
     }
 
     #[inline(always)]

@@ -218,6 +218,9 @@ pub struct BlockBound {
     pub e: f64,
     /// `e` in f64 ulps of the lane's value ([`rounds_alone`]).
     pub eu: i64,
+    /// Every lane's f32 depth lies within `[near, far]`: each lane with a
+    /// certified depth is a hit, without testing it.
+    pub all_hit: bool,
 }
 
 impl ScreenDepth {
@@ -330,11 +333,15 @@ impl ScreenDepth {
         if !small {
             return None;
         }
-        // Depths positive and in range at every lane.
+        // Depths positive and in range at every lane: `|den| <= dmax + 2Δf`
+        // and `>= g_min - Δf` per pixel, `Δf <= 2^-32 g_min`, so 1% covers
+        // both and the f32 rounding (as it does for `near` and `far` below).
         let num = self.num;
-        let in_range = (num > 0.0) == positive
-            && num.abs() / (dmax + delta_f) * 0.99 >= MIN_DEPTH
-            && num.abs() / g_min * 1.01 <= MAX_DEPTH;
+        let (z_lo, z_hi) = (
+            num.abs() / (dmax + delta_f) * 0.99,
+            num.abs() / g_min * 1.01,
+        );
+        let in_range = (num > 0.0) == positive && z_lo >= MIN_DEPTH && z_hi <= MAX_DEPTH;
         if !in_range {
             return None;
         }
@@ -376,6 +383,7 @@ impl ScreenDepth {
         Some(BlockBound {
             e,
             eu: (e * (1u64 << 53) as f64).ceil() as i64 + 1,
+            all_hit: z_lo >= self.near && z_hi <= self.far,
         })
     }
 
@@ -393,16 +401,42 @@ impl ScreenDepth {
         eu: i64,
     ) -> ([f32; CHUNK], u32, u32) {
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
+        l.screen_row(&self.row_params(rays, row, eu), sx)
+    }
+
+    /// The keys of tile row `row`'s 8 lanes from column `base`, in a block
+    /// whose bound has `all_hit`, lowered to the certified depths when
+    /// [`rounds_alone`] certifies every lane (true); nothing written when
+    /// some lane is not certified (false: the caller takes the row the
+    /// slow way). [`ScreenDepth::row`] and the z-test in one pass.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn row_keys<L: Lanes>(
+        &self,
+        l: L,
+        rays: &TileRays,
+        row: usize,
+        base: usize,
+        eu: i64,
+        keys: &mut [u64; CHUNK],
+        prim: u32,
+    ) -> bool {
+        let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
+        l.screen_keys(&self.row_params(rays, row, eu), sx, keys, prim)
+    }
+
+    /// The constants of one row of the interpolant.
+    #[inline(always)]
+    fn row_params(&self, rays: &TileRays, row: usize, eu: i64) -> ScreenRow {
         let [a, b, c] = self.coef;
-        let p = ScreenRow {
+        ScreenRow {
             num: self.num,
             a,
             r: b * rays.sy()[row] + c,
             near: self.near,
             far: self.far,
             eu,
-        };
-        l.screen_row(&p, sx)
+        }
     }
 
     /// The interpolant `w` itself at tile pixel `(col, row)` (tests: its
@@ -502,22 +536,22 @@ mod tests {
         tris
     }
 
-    /// Every certified lane of every block [`ScreenDepth::block`] passes,
-    /// over every tile of every trial: `check(cam, tri, rays, block, lane
-    /// pixel, z, ok)`. Returns (certified lanes, lanes of passed blocks).
-    fn each_certified_lane(
-        mut check: impl FnMut(
-            &Camera,
-            &TriDepth,
-            &ScreenDepth,
-            &TileRays,
-            BlockBound,
-            (u32, u32, usize, usize),
-            f32,
-            bool,
-        ),
-    ) -> (usize, usize) {
-        let (mut sure_lanes, mut lanes) = (0, 0);
+    /// One row of a block [`ScreenDepth::block`] passed: the camera, the
+    /// triangle's depth data and interpolant, the tile, the block's bound,
+    /// the tile's origin and the row's tile coordinates `(row, base)`.
+    struct Row<'a> {
+        cam: &'a Camera,
+        td: &'a TriDepth,
+        s: &'a ScreenDepth,
+        rays: &'a TileRays,
+        bound: BlockBound,
+        origin: (u32, u32),
+        at: (usize, usize),
+    }
+
+    /// Every row of every block [`ScreenDepth::block`] passes, over every
+    /// tile of every trial.
+    fn each_row(mut visit: impl FnMut(&Row)) {
         for (c, cam) in cameras().iter().enumerate() {
             for t in triangles(cam, 7 + c as u64) {
                 let td = TriDepth::new(cam, &t);
@@ -535,30 +569,15 @@ mod tests {
                                     continue;
                                 };
                                 for i in 0..CHUNK {
-                                    let (z, ok, sure) =
-                                        s.row(Portable, &rays, r0 + i, base, bound.eu);
-                                    #[cfg(target_arch = "x86_64")]
-                                    if let Some(avx) = crate::raster_edges::Avx2::detect() {
-                                        let wide = s.row(avx, &rays, r0 + i, base, bound.eu);
-                                        assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
-                                        assert_eq!((wide.1, wide.2), (ok, sure));
-                                    }
-                                    lanes += CHUNK;
-                                    for j in (0..CHUNK).filter(|j| (sure >> j) & 1 == 1) {
-                                        sure_lanes += 1;
-                                        let px = (x0 + (base + j) as u32, y0 + (r0 + i) as u32);
-                                        let at = (px.0, px.1, base + j, r0 + i);
-                                        check(
-                                            cam,
-                                            &td,
-                                            &s,
-                                            &rays,
-                                            bound,
-                                            at,
-                                            z[j],
-                                            (ok >> j) & 1 == 1,
-                                        );
-                                    }
+                                    visit(&Row {
+                                        cam,
+                                        td: &td,
+                                        s: &s,
+                                        rays: &rays,
+                                        bound,
+                                        origin: (x0, y0),
+                                        at: (r0 + i, base),
+                                    });
                                 }
                             }
                         }
@@ -566,6 +585,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Every certified lane of every row [`each_row`] visits (both
+    /// [`Lanes`] giving the same row): `check(row, pixel, tile column, z,
+    /// hit)`. Returns (certified lanes, lanes of passed blocks).
+    fn each_certified_lane(
+        mut check: impl FnMut(&Row, (u32, u32), usize, f32, bool),
+    ) -> (usize, usize) {
+        let (mut sure_lanes, mut lanes) = (0, 0);
+        each_row(|r| {
+            let (row, base) = r.at;
+            let (z, ok, sure) = r.s.row(Portable, r.rays, row, base, r.bound.eu);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                let wide = r.s.row(avx, r.rays, row, base, r.bound.eu);
+                assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
+                assert_eq!((wide.1, wide.2), (ok, sure));
+            }
+            lanes += CHUNK;
+            for j in (0..CHUNK).filter(|j| (sure >> j) & 1 == 1) {
+                sure_lanes += 1;
+                let px = (r.origin.0 + (base + j) as u32, r.origin.1 + row as u32);
+                check(r, px, base + j, z[j], (ok >> j) & 1 == 1);
+            }
+        });
         (sure_lanes, lanes)
     }
 
@@ -582,18 +626,22 @@ mod tests {
     /// there; most lanes of the trials are settled (the test is not vacuous).
     #[test]
     fn certified_depths_are_the_depth_functions() {
-        let (sure, lanes) = each_certified_lane(|cam, td, _, _, _, (x, y, _, _), z, ok| {
-            let want = td.depth(cam, &cam.pixel_ray(x, y));
+        let (sure, lanes) = each_certified_lane(|r, (x, y), _, z, ok| {
+            let want = r.td.depth(r.cam, &r.cam.pixel_ray(x, y));
             let got = ok.then_some(z);
             assert_eq!(
                 got.map(f32::to_bits),
                 want.map(f32::to_bits),
                 "pixel ({x}, {y})"
             );
-            let (t, (lo, hi), _) = contract(cam, td, x, y);
+            let (t, (lo, hi), _) = contract(r.cam, r.td, x, y);
             assert!(
                 lo <= t && t <= hi,
                 "pixel ({x}, {y}): t {t} outside [{lo}, {hi}]"
+            );
+            assert!(
+                !r.bound.all_hit || ok,
+                "pixel ({x}, {y}): all_hit, yet no hit"
             );
         });
         assert!(
@@ -609,10 +657,10 @@ mod tests {
     #[test]
     fn observed_error_stays_within_the_bound() {
         let mut worst = 0.0f64;
-        each_certified_lane(|cam, td, s, rays, bound, (x, y, lx, ly), _, _| {
-            let (_, _, z) = contract(cam, td, x, y);
-            let w = s.value(rays, ly, lx);
-            let used = (z - w).abs() / (bound.e * w.abs());
+        each_certified_lane(|r, (x, y), col, _, _| {
+            let (_, _, z) = contract(r.cam, r.td, x, y);
+            let w = r.s.value(r.rays, r.at.0, col);
+            let used = (z - w).abs() / (r.bound.e * w.abs());
             assert!(
                 used <= 1.0,
                 "pixel ({x}, {y}): |z - w| = {} > e|w|",
@@ -621,6 +669,51 @@ mod tests {
             worst = worst.max(used);
         });
         assert!(worst > 1e-4, "the largest error used {worst} of the bound");
+    }
+
+    /// [`ScreenDepth::row_keys`] is [`ScreenDepth::row`] followed by the
+    /// z-test, for both [`Lanes`], over keys below, above and equal to
+    /// the row's: it writes exactly when every lane is certified.
+    #[test]
+    fn row_keys_is_row_then_min_keys() {
+        let (mut seed, mut written) = (3u64, 0);
+        each_row(|r| {
+            if !r.bound.all_hit {
+                return;
+            }
+            let (row, base) = r.at;
+            let (z, _, sure) = r.s.row(Portable, r.rays, row, base, r.bound.eu);
+            let mut keys = [0u64; CHUNK];
+            for (j, k) in keys.iter_mut().enumerate() {
+                let own = crate::visibility::hit_key(z[j], 5);
+                *k = match (lcg(&mut seed) * 2.0) as i64 {
+                    -1 => own - 1,
+                    0 => own,
+                    _ => crate::visibility::NO_HIT,
+                };
+            }
+            let mut want = keys;
+            if sure == 0xff {
+                Portable.min_keys(&mut want, &z, 0xff, 5);
+                written += 1;
+            }
+            let mut got = keys;
+            assert_eq!(
+                r.s.row_keys(Portable, r.rays, row, base, r.bound.eu, &mut got, 5),
+                sure == 0xff
+            );
+            assert_eq!(got, want);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                let mut wide = keys;
+                assert_eq!(
+                    r.s.row_keys(avx, r.rays, row, base, r.bound.eu, &mut wide, 5),
+                    sure == 0xff
+                );
+                assert_eq!(wide, want);
+            }
+        });
+        assert!(written > 1000, "{written} rows written");
     }
 
     /// The certificate at its edge: around f32 rounding boundaries (in a
