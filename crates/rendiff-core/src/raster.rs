@@ -457,17 +457,19 @@ fn fast_tile<L: Lanes>(
         }
         let edges = TriEdges::new(cam, t);
         let f = FastEdges::new(&edges, rays);
-        // The whole box by its corners: rejected, it adds its pixels' counts
-        // (as its blocks and chunks would); covered, every full block in it
-        // takes these signs.
-        let whole = f.rect(rays, [lx0, lx1, ly0, ly1]);
-        if whole.rejected() == 0xff {
-            let n = ((lx1 - lx0 + 1) * (ly1 - ly0 + 1)) as u64;
+        // A box of a block or more, by its corners: rejected, it adds its
+        // pixels' counts (as its blocks and chunks would); covered, every
+        // full block in it takes these signs. (Smaller boxes, most of a
+        // finely meshed scene's, rarely settle whole: they skip the test.)
+        let (bw, bh) = (lx1 - lx0 + 1, ly1 - ly0 + 1);
+        let whole = (bw >= CHUNK && bh >= CHUNK).then(|| f.rect(rays, [lx0, lx1, ly0, ly1]));
+        if whole.is_some_and(|g| g.rejected() == 0xff) {
+            let n = (bw * bh) as u64;
             c.coverage_tests += n;
             c.fast_decided += n;
             continue;
         }
-        let whole = Some(whole).filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
+        let whole = whole.filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
         let mut depth: Option<ChunkDepth> = None;
         // Set up with the first covered block: the screen-space depth (`None`:
         // it cannot run here) and its bound over the whole box in the tile
@@ -605,12 +607,15 @@ fn screen_block<L: Lanes>(
     (r0, base): (usize, usize),
     out: &mut TileOut,
 ) {
-    for i in 0..CHUNK {
+    let done = if bound.all_hit {
+        let at = (out.at(base, r0), out.stride);
+        s.block_keys(l, rays, (r0, base), bound.eu, out.keys, at, prim)
+    } else {
+        0
+    };
+    for i in (0..CHUNK).filter(|i| (done >> i) & 1 == 0) {
         let row = out.at(base, r0 + i);
         let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
-        if bound.all_hit && s.row_keys(l, rays, r0 + i, base, bound.eu, keys, prim) {
-            continue;
-        }
         let (z, ok, sure) = s.row(l, rays, r0 + i, base, bound.eu);
         let (z, ok) = if sure == 0xff {
             (z, ok)
@@ -645,7 +650,9 @@ fn small_box<L: Lanes>(
     out: &mut TileOut,
     c: &mut Counters,
 ) {
-    let [a, b, v2] = t.map(|v| v.as_dvec3());
+    // (Not array `map`: its closure compiled to an out-of-line call here,
+    // once per small box.)
+    let (a, b, v2) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
     let e = cam.eye;
     let planes = [
         EdgePlane::new(e, a, b),

@@ -163,23 +163,34 @@ pub trait Lanes: Copy {
         p.lanes(sx)
     }
 
-    /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass, for a row
-    /// whose lanes all hit: when every lane is certified, the keys lowered
-    /// (true); otherwise nothing written (false).
+    /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass over the 8
+    /// rows of a block whose lanes all hit: row `i` has `R = r[i]` (the
+    /// rest of `p` is the block's) and its keys at `keys[at + i stride..]`.
+    /// A row whose every lane is certified has its keys lowered, and its
+    /// bit set in the returned mask; other rows are left as they were.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn screen_keys(
         self,
         p: &ScreenRow,
+        r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
-        keys: &mut [u64; CHUNK],
+        keys: &mut [u64],
+        at: usize,
+        stride: usize,
         prim: u32,
-    ) -> bool {
-        let (z, _, sure) = p.lanes(sx);
-        if sure != 0xff {
-            return false;
+    ) -> u32 {
+        let mut done = 0;
+        for (i, &r) in r.iter().enumerate() {
+            let (z, _, sure) = ScreenRow { r, ..*p }.lanes(sx);
+            if sure == 0xff {
+                let row = at + i * stride;
+                let row: &mut [u64; CHUNK] = (&mut keys[row..row + CHUNK]).try_into().unwrap();
+                self.min_keys(row, &z, 0xff, prim);
+                done |= 1 << i;
+            }
         }
-        self.min_keys(keys, &z, 0xff, prim);
-        true
+        done
     }
 
     /// Each key of `keys` lowered to `hit_key(z[j], prim)` where lane `j`
@@ -483,15 +494,33 @@ impl Lanes for Avx2 {
         // like `as f32`, `cvtps2pd` is exact).
         unsafe {
             let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
-            let n = cd.normal.map(|v| _mm256_set1_pd(v));
+            // No array `map` or closure around intrinsics (see `filter4`).
+            let (cn, cl, ch) = (cd.normal, cd.clamp_free_lo, cd.clamp_free_hi);
+            let n = [
+                _mm256_set1_pd(cn[0]),
+                _mm256_set1_pd(cn[1]),
+                _mm256_set1_pd(cn[2]),
+            ];
             let num = _mm256_set1_pd(cd.num);
-            let lo = cd.clamp_free_lo.map(|v| _mm256_set1_pd(v));
-            let hi = cd.clamp_free_hi.map(|v| _mm256_set1_pd(v));
+            let lo = [
+                _mm256_set1_pd(cl[0]),
+                _mm256_set1_pd(cl[1]),
+                _mm256_set1_pd(cl[2]),
+            ];
+            let hi = [
+                _mm256_set1_pd(ch[0]),
+                _mm256_set1_pd(ch[1]),
+                _mm256_set1_pd(ch[2]),
+            ];
             let max_t = _mm256_set1_pd(CLAMP_FREE_MAX_T);
             let (zero, inf) = (_mm256_setzero_pd(), _mm256_set1_pd(f64::INFINITY));
             let (near, far) = (_mm256_set1_pd(cam.near), _mm256_set1_pd(cam.far));
             for h in 0..2 {
-                let dk = d.map(|a| _mm256_loadu_pd(a.as_ptr().add(4 * h)));
+                let dk = [
+                    _mm256_loadu_pd(d[0].as_ptr().add(4 * h)),
+                    _mm256_loadu_pd(d[1].as_ptr().add(4 * h)),
+                    _mm256_loadu_pd(d[2].as_ptr().add(4 * h)),
+                ];
                 // DVec3::dot: x*x' + y*y' + z*z', left to right.
                 let denom = _mm256_add_pd(
                     _mm256_add_pd(_mm256_mul_pd(n[0], dk[0]), _mm256_mul_pd(n[1], dk[1])),
@@ -681,75 +710,81 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn screen_keys(
         self,
         p: &ScreenRow,
+        r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
-        keys: &mut [u64; CHUNK],
+        keys: &mut [u64],
+        at: usize,
+        stride: usize,
         prim: u32,
-    ) -> bool {
+    ) -> u32 {
         use std::arch::x86_64::*;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
-        // stay within the borrowed arrays (4 f64 or 4 u64 at a time).
+        assert!(at + (CHUNK - 1) * stride + CHUNK <= keys.len());
+        let mut done = 0;
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads read the
+        // borrowed arrays, and the key rows lie within `keys` (asserted).
         unsafe {
-            let (num, a, r) = (
-                _mm256_set1_pd(p.num),
-                _mm256_set1_pd(p.a),
-                _mm256_set1_pd(p.r),
-            );
+            let num = _mm256_set1_pd(p.num);
+            let a = _mm256_set1_pd(p.a);
+            // `fl(a sx)` is the same in every row.
+            let ax0 = _mm256_mul_pd(a, _mm256_loadu_pd(sx.as_ptr()));
+            let ax1 = _mm256_mul_pd(a, _mm256_loadu_pd(sx.as_ptr().add(4)));
             let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
             let mid = _mm256_set1_epi64x(MIDPOINT);
             let eu = _mm256_set1_epi64x(p.eu);
-            // `ScreenRow::lanes`' arithmetic, operation for operation.
-            let w0 = {
-                let x = _mm256_loadu_pd(sx.as_ptr());
-                _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r))
-            };
-            let w1 = {
-                let x = _mm256_loadu_pd(sx.as_ptr().add(4));
-                _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r))
-            };
-            // `rounds_alone` per lane: |low bits - midpoint| > eu. (Written
-            // out twice: a closure here was compiled out of line, without
-            // AVX2, its intrinsics then calls.)
-            let d0 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w0), mask), mid);
-            let d1 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w1), mask), mid);
             let zero = _mm256_setzero_si256();
-            let (n0, n1) = (_mm256_sub_epi64(zero, d0), _mm256_sub_epi64(zero, d1));
-            let abs0 = _mm256_blendv_pd(
-                _mm256_castsi256_pd(d0),
-                _mm256_castsi256_pd(n0),
-                _mm256_castsi256_pd(d0),
-            );
-            let abs1 = _mm256_blendv_pd(
-                _mm256_castsi256_pd(d1),
-                _mm256_castsi256_pd(n1),
-                _mm256_castsi256_pd(d1),
-            );
-            let sure = _mm256_and_si256(
-                _mm256_cmpgt_epi64(_mm256_castpd_si256(abs0), eu),
-                _mm256_cmpgt_epi64(_mm256_castpd_si256(abs1), eu),
-            );
-            if _mm256_movemask_pd(_mm256_castsi256_pd(sure)) != 0xf {
-                return false;
-            }
-            // `min_keys` with every lane a hit.
             let sign = _mm256_set1_epi64x(i64::MIN);
             let low = _mm256_set1_epi64x(i64::from(prim));
-            for h in 0..2 {
-                let w = if h == 0 { w0 } else { w1 };
-                let bits = _mm_castps_si128(_mm256_cvtpd_ps(w));
-                let new =
-                    _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low);
-                let ptr = keys.as_mut_ptr().add(4 * h).cast::<__m256i>();
-                let old = _mm256_loadu_si256(ptr);
-                // Unsigned comparison as signed, with the top bits flipped.
-                let old_bigger =
-                    _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
-                _mm256_storeu_si256(ptr, _mm256_blendv_epi8(old, new, old_bigger));
+            for i in 0..CHUNK {
+                let rv = _mm256_set1_pd(r[i]);
+                let w0 = _mm256_div_pd(num, _mm256_add_pd(ax0, rv));
+                let w1 = _mm256_div_pd(num, _mm256_add_pd(ax1, rv));
+                // `rounds_alone` per lane: |low bits - midpoint| > eu.
+                // (Written out, not in a closure: one was compiled out of
+                // line, without AVX2, its intrinsics then calls.)
+                let d0 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w0), mask), mid);
+                let d1 = _mm256_sub_epi64(_mm256_and_si256(_mm256_castpd_si256(w1), mask), mid);
+                let (n0, n1) = (_mm256_sub_epi64(zero, d0), _mm256_sub_epi64(zero, d1));
+                let abs0 = _mm256_blendv_pd(
+                    _mm256_castsi256_pd(d0),
+                    _mm256_castsi256_pd(n0),
+                    _mm256_castsi256_pd(d0),
+                );
+                let abs1 = _mm256_blendv_pd(
+                    _mm256_castsi256_pd(d1),
+                    _mm256_castsi256_pd(n1),
+                    _mm256_castsi256_pd(d1),
+                );
+                let sure = _mm256_and_si256(
+                    _mm256_cmpgt_epi64(_mm256_castpd_si256(abs0), eu),
+                    _mm256_cmpgt_epi64(_mm256_castpd_si256(abs1), eu),
+                );
+                if _mm256_movemask_pd(_mm256_castsi256_pd(sure)) != 0xf {
+                    continue;
+                }
+                // `min_keys` with every lane a hit.
+                let row = keys.as_mut_ptr().add(at + i * stride);
+                for h in 0..2 {
+                    let w = if h == 0 { w0 } else { w1 };
+                    let bits = _mm_castps_si128(_mm256_cvtpd_ps(w));
+                    let new =
+                        _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low);
+                    let ptr = row.add(4 * h).cast::<__m256i>();
+                    let old = _mm256_loadu_si256(ptr);
+                    // Unsigned comparison as signed, with the top bits flipped.
+                    let old_bigger = _mm256_cmpgt_epi64(
+                        _mm256_xor_si256(old, sign),
+                        _mm256_xor_si256(new, sign),
+                    );
+                    _mm256_storeu_si256(ptr, _mm256_blendv_epi8(old, new, old_bigger));
+                }
+                done |= 1 << i;
             }
         }
-        true
+        done
     }
 
     #[inline(always)]

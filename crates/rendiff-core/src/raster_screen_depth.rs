@@ -404,25 +404,32 @@ impl ScreenDepth {
         l.screen_row(&self.row_params(rays, row, eu), sx)
     }
 
-    /// The keys of tile row `row`'s 8 lanes from column `base`, in a block
-    /// whose bound has `all_hit`, lowered to the certified depths when
-    /// [`rounds_alone`] certifies every lane (true); nothing written when
-    /// some lane is not certified (false: the caller takes the row the
-    /// slow way). [`ScreenDepth::row`] and the z-test in one pass.
+    /// The keys of the 8x8 block at tile pixel `(base, r0)` (its first key
+    /// at `keys[at]`, rows `stride` apart), in a block whose bound has
+    /// `all_hit`: each row whose lanes [`rounds_alone`] all certifies gets
+    /// its keys lowered to the certified depths and its bit in the returned
+    /// mask; the other rows are left for the caller. [`ScreenDepth::row`]
+    /// and the z-test in one pass.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub fn row_keys<L: Lanes>(
+    pub fn block_keys<L: Lanes>(
         &self,
         l: L,
         rays: &TileRays,
-        row: usize,
-        base: usize,
+        (r0, base): (usize, usize),
         eu: i64,
-        keys: &mut [u64; CHUNK],
+        keys: &mut [u64],
+        (at, stride): (usize, usize),
         prim: u32,
-    ) -> bool {
+    ) -> u32 {
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
-        l.screen_keys(&self.row_params(rays, row, eu), sx, keys, prim)
+        let p = self.row_params(rays, r0, eu);
+        let [_, b, c] = self.coef;
+        let mut r = [0.0; CHUNK];
+        for (i, r) in r.iter_mut().enumerate() {
+            *r = b * rays.sy()[r0 + i] + c;
+        }
+        l.screen_keys(&p, &r, sx, keys, at, stride, prim)
     }
 
     /// The constants of one row of the interpolant.
@@ -671,46 +678,66 @@ mod tests {
         assert!(worst > 1e-4, "the largest error used {worst} of the bound");
     }
 
-    /// [`ScreenDepth::row_keys`] is [`ScreenDepth::row`] followed by the
-    /// z-test, for both [`Lanes`], over keys below, above and equal to
-    /// the row's: it writes exactly when every lane is certified.
+    /// [`ScreenDepth::block_keys`] is [`ScreenDepth::row`] followed by the
+    /// z-test, row by row, for both [`Lanes`], over keys below, above and
+    /// equal to the block's: it writes exactly the rows whose lanes are all
+    /// certified.
     #[test]
-    fn row_keys_is_row_then_min_keys() {
+    fn block_keys_is_row_then_min_keys() {
         let (mut seed, mut written) = (3u64, 0);
         each_row(|r| {
-            if !r.bound.all_hit {
+            let (row, base) = r.at;
+            // Once per block, from its first row.
+            if !r.bound.all_hit || row % CHUNK != 0 {
                 return;
             }
-            let (row, base) = r.at;
-            let (z, _, sure) = r.s.row(Portable, r.rays, row, base, r.bound.eu);
-            let mut keys = [0u64; CHUNK];
-            for (j, k) in keys.iter_mut().enumerate() {
-                let own = crate::visibility::hit_key(z[j], 5);
-                *k = match (lcg(&mut seed) * 2.0) as i64 {
-                    -1 => own - 1,
-                    0 => own,
-                    _ => crate::visibility::NO_HIT,
-                };
+            let stride = 11;
+            let mut keys = vec![0u64; CHUNK * stride];
+            let mut want = keys.clone();
+            let mut rows = 0u32;
+            for i in 0..CHUNK {
+                let (z, _, sure) = r.s.row(Portable, r.rays, row + i, base, r.bound.eu);
+                let at = i * stride;
+                for (j, k) in keys[at..at + CHUNK].iter_mut().enumerate() {
+                    let own = crate::visibility::hit_key(z[j], 5);
+                    *k = match (lcg(&mut seed) * 2.0) as i64 {
+                        -1 => own - 1,
+                        0 => own,
+                        _ => crate::visibility::NO_HIT,
+                    };
+                }
+                want[at..at + CHUNK].copy_from_slice(&keys[at..at + CHUNK]);
+                if sure == 0xff {
+                    let w: &mut [u64; CHUNK] = (&mut want[at..at + CHUNK]).try_into().unwrap();
+                    Portable.min_keys(w, &z, 0xff, 5);
+                    rows |= 1 << i;
+                    written += 1;
+                }
             }
-            let mut want = keys;
-            if sure == 0xff {
-                Portable.min_keys(&mut want, &z, 0xff, 5);
-                written += 1;
-            }
-            let mut got = keys;
-            assert_eq!(
-                r.s.row_keys(Portable, r.rays, row, base, r.bound.eu, &mut got, 5),
-                sure == 0xff
+            let mut got = keys.clone();
+            let done = r.s.block_keys(
+                Portable,
+                r.rays,
+                (row, base),
+                r.bound.eu,
+                &mut got,
+                (0, stride),
+                5,
             );
-            assert_eq!(got, want);
+            assert_eq!((done, &got), (rows, &want));
             #[cfg(target_arch = "x86_64")]
             if let Some(avx) = crate::raster_edges::Avx2::detect() {
-                let mut wide = keys;
-                assert_eq!(
-                    r.s.row_keys(avx, r.rays, row, base, r.bound.eu, &mut wide, 5),
-                    sure == 0xff
+                let mut wide = keys.clone();
+                let done = r.s.block_keys(
+                    avx,
+                    r.rays,
+                    (row, base),
+                    r.bound.eu,
+                    &mut wide,
+                    (0, stride),
+                    5,
                 );
-                assert_eq!(wide, want);
+                assert_eq!((done, &wide), (rows, &want));
             }
         });
         assert!(written > 1000, "{written} rows written");
