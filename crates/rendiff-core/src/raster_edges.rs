@@ -738,8 +738,8 @@ impl Lanes for Avx2 {
             let zero = _mm256_setzero_si256();
             let sign = _mm256_set1_epi64x(i64::MIN);
             let low = _mm256_set1_epi64x(i64::from(prim));
-            for i in 0..CHUNK {
-                let rv = _mm256_set1_pd(r[i]);
+            for (i, &r) in r.iter().enumerate() {
+                let rv = _mm256_set1_pd(r);
                 let w0 = _mm256_div_pd(num, _mm256_add_pd(ax0, rv));
                 let w1 = _mm256_div_pd(num, _mm256_add_pd(ax1, rv));
                 // `rounds_alone` per lane: |low bits - midpoint| > eu.
