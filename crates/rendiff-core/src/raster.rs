@@ -951,6 +951,60 @@ mod tests {
         }
     }
 
+    /// Planes filling the view, where whole blocks take their depth from
+    /// the screen-space interpolant ([`crate::raster_screen_depth`]):
+    /// facing the camera, world-axis walls, tilted up to grazing, a copy of
+    /// one a hair behind and a coplanar duplicate (the z-test and the tie
+    /// on prim), with the eye up to 1e7 from the origin and near and far
+    /// planes cutting through them. Every buffer and count matches.
+    #[test]
+    fn screen_depth_blocks_equal_the_predicate_path() {
+        let mut s = 5u64;
+        for (i, off) in [0.0, 1e3, 1e5, 1e7].into_iter().enumerate() {
+            let o = DVec3::new(off, -0.5 * off, off);
+            for (near, far) in [(1e-3, f64::INFINITY), (2.2, 3.1)] {
+                let cams = [
+                    Camera::new(o + DVec3::Z, o, DVec3::Y, 90.0, 80, 72, near, far),
+                    Camera::new(
+                        o + DVec3::new(0.3, 0.7, 2.1),
+                        o,
+                        DVec3::Y,
+                        50.0,
+                        72,
+                        64,
+                        near,
+                        far,
+                    ),
+                ];
+                for cam in cams.map(Result::unwrap) {
+                    let (e, f, r, u) = (cam.eye, cam.forward, cam.right, cam.up_ortho);
+                    let mut tris = Vec::new();
+                    let mut quad = |c: DVec3, a: DVec3, b: DVec3| {
+                        let p = [c - a - b, c + a - b, c + a + b, c - a + b].map(|v| v.as_vec3());
+                        tris.push([p[0], p[1], p[2]]);
+                        tris.push([p[0], p[2], p[3]]);
+                    };
+                    let c = e + f * 2.5;
+                    quad(c, r * 10.0, u * 10.0);
+                    quad(c + f * 1e-4, r * 10.0, u * 10.0);
+                    quad(c, r * 10.0, u * 10.0);
+                    quad(c + f * 0.3, DVec3::X * 10.0, DVec3::Y * 10.0);
+                    quad(c - f * 0.2, DVec3::Y * 10.0, DVec3::Z * 10.0);
+                    let tilt = 0.01 + lcg(&mut s).abs();
+                    quad(
+                        c,
+                        (r + f * tilt).normalize() * 10.0,
+                        (u - f * tilt).normalize() * 10.0,
+                    );
+                    fast_equals_exact(
+                        &format!("offset {off}, near {near}, far {far}, camera {i}"),
+                        &ResolvedScene::from_triangles(cam, tris),
+                    );
+                }
+            }
+        }
+    }
+
     /// Buffers of two key sets (the keys decide z, prim and the rest).
     fn same_keys(a: &PixelKeys, b: &PixelKeys) -> bool {
         a.keys == b.keys && a.coverage == b.coverage

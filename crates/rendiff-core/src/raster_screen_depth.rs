@@ -492,6 +492,18 @@ mod tests {
                 f64::INFINITY,
             ));
         }
+        // Near and far planes through the trial planes: blocks whose depths
+        // straddle them (not `all_hit`) test each lane's hit.
+        out.push(Camera::new(
+            DVec3::new(0.3, 0.7, 2.1),
+            DVec3::new(0.1, -0.2, 0.0),
+            DVec3::Y,
+            50.0,
+            72,
+            40,
+            2.4,
+            5.5,
+        ));
         out.into_iter().map(Result::unwrap).collect()
     }
 
@@ -633,7 +645,10 @@ mod tests {
     /// there; most lanes of the trials are settled (the test is not vacuous).
     #[test]
     fn certified_depths_are_the_depth_functions() {
+        let (mut straddling, mut missed) = (0, 0);
         let (sure, lanes) = each_certified_lane(|r, (x, y), _, z, ok| {
+            straddling += usize::from(!r.bound.all_hit);
+            missed += usize::from(!ok);
             let want = r.td.depth(r.cam, &r.cam.pixel_ray(x, y));
             let got = ok.then_some(z);
             assert_eq!(
@@ -654,6 +669,10 @@ mod tests {
         assert!(
             lanes > 100_000 && sure * 100 > lanes * 95,
             "{sure} of {lanes} lanes certified"
+        );
+        assert!(
+            straddling > 1000 && missed > 100,
+            "{straddling} straddling lanes, {missed} missed"
         );
     }
 
