@@ -90,23 +90,20 @@ impl TileDepthBound {
         }
     }
 
-    /// The bound for a tile whose rays have these `planar` and `D_axis`
-    /// values (pairwise, any order, repeats allowed); `None` when they do not
-    /// all share a strict sign or some `planar` is not positive.
-    #[inline(always)]
-    pub fn new(axis: usize, planar: &[f64], dk: &[f64]) -> Option<Self> {
+    /// The bound from every one of a tile's `planar` and `D_axis` values
+    /// (pairwise, any order, repeats allowed): the least `planar` itself as
+    /// the lower bound. `None` when they do not all share a strict sign or
+    /// some `planar` is not positive. Tests only: renders take the corners'
+    /// bound ([`TileDepthBound::from_low`]), which tests hold against this.
+    #[cfg(test)]
+    pub(crate) fn new(axis: usize, planar: &[f64], dk: &[f64]) -> Option<Self> {
         let n = planar.len().min(dk.len());
-        Self::from_spans(axis, Span::of(&planar[..n]), Span::of(&dk[..n]))
-    }
-
-    /// The bound from the spans of the tile's `planar` and `D_axis` values
-    /// ([`TileRays`](crate::raster_edges::TileRays) gathers them as it
-    /// fills the tile): every `planar > 0` and every `D_axis` of one strict
-    /// sign follow from the extremes, and so does `κ`, the smallest
-    /// `planar` over the largest `|D_axis|` (module documentation).
-    #[inline(always)]
-    pub fn from_spans(axis: usize, planar: Span, dk: Span) -> Option<Self> {
-        Self::from_low(axis, if planar.finite { planar.lo } else { f64::NAN }, dk)
+        let p = Span::of(&planar[..n]);
+        Self::from_low(
+            axis,
+            if p.finite { p.lo } else { f64::NAN },
+            Span::of(&dk[..n]),
+        )
     }
 
     /// The bound from a lower bound `planar_low` on the tile's `planar`
