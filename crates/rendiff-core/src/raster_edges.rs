@@ -195,6 +195,24 @@ pub trait Lanes: Copy {
         done
     }
 
+    /// Each of the 8 rows of keys from `keys[at]` (`stride` apart) lowered
+    /// to its row's `key` where that is smaller (`NO_HIT`: unchanged).
+    #[inline(always)]
+    fn min_key_rows(self, keys: &mut [u64], (at, stride): (usize, usize), key: &[u64; CHUNK]) {
+        let mut tmp = [[0u64; CHUNK]; CHUNK];
+        for (i, t) in tmp.iter_mut().enumerate() {
+            *t = keys[at + i * stride..][..CHUNK].try_into().unwrap();
+        }
+        for (t, &k) in tmp.iter_mut().zip(key) {
+            for t in t.iter_mut() {
+                *t = (*t).min(k);
+            }
+        }
+        for (i, t) in tmp.iter().enumerate() {
+            keys[at + i * stride..][..CHUNK].copy_from_slice(t);
+        }
+    }
+
     /// Each key of `keys` lowered to `hit_key(z[j], prim)` where lane `j`
     /// of `hits` is set and that key is smaller (the z-buffer test, 8 at a time).
     #[inline(always)]
@@ -746,6 +764,22 @@ impl Lanes for Avx2 {
             }
         }
         done
+    }
+
+    #[inline(always)]
+    fn min_key_rows(self, keys: &mut [u64], (at, stride): (usize, usize), key: &[u64; CHUNK]) {
+        use std::arch::x86_64::_mm256_set1_epi64x;
+        assert!(at + (CHUNK - 1) * stride + CHUNK <= keys.len());
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the rows lie
+        // within `keys` (asserted), 8 keys each.
+        unsafe {
+            for (i, &k) in key.iter().enumerate() {
+                let row = keys.as_mut_ptr().add(at + i * stride);
+                let new = _mm256_set1_epi64x(k as i64);
+                min_keys4(row, new);
+                min_keys4(row.add(4), new);
+            }
+        }
     }
 
     #[inline(always)]

@@ -115,6 +115,7 @@
 
 use crate::camera::Camera;
 use crate::raster_edges::{ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
+use crate::visibility::{hit_key, NO_HIT};
 
 /// Unit roundoff of f64.
 const U: f64 = f64::EPSILON / 2.0;
@@ -422,14 +423,70 @@ impl ScreenDepth {
         (at, stride): (usize, usize),
         prim: u32,
     ) -> u32 {
+        let [a, b, c] = self.coef;
+        if a == 0.0 {
+            return self.row_constant_keys(l, rays, r0, eu, keys, (at, stride), prim);
+        }
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
         let p = self.row_params(rays, r0, eu);
-        let [_, b, c] = self.coef;
         let mut r = [0.0; CHUNK];
         for (i, r) in r.iter_mut().enumerate() {
             *r = b * rays.sy()[r0 + i] + c;
         }
         l.screen_keys(&p, &r, sx, keys, at, stride, prim)
+    }
+
+    /// [`ScreenDepth::block_keys`] where `a` is a zero (the plane's
+    /// interpolant is constant along rows: `n . r = 0`, a wall parallel to
+    /// the camera's right axis, or a plane facing the camera): every lane's
+    /// `den = fl(fl(a sx) + R)` is `R` itself, since `fl(a sx)` is a zero
+    /// (`sx` is finite) and a zero plus a nonzero `R` is `R` exactly. So a
+    /// row's lanes share one `w = fl(num / R)`, one certificate and one key,
+    /// the lane path's bits for one division a row; where `b` is a zero as
+    /// well (a plane facing the camera), `R = fl(fl(b sy) + c)` is `c` in
+    /// every row, and the block takes one division. Rows whose `R` is zero
+    /// or not finite are left to the caller.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn row_constant_keys<L: Lanes>(
+        &self,
+        l: L,
+        rays: &TileRays,
+        r0: usize,
+        eu: i64,
+        keys: &mut [u64],
+        at: (usize, usize),
+        prim: u32,
+    ) -> u32 {
+        let [_, b, c] = self.coef;
+        let mut key = [NO_HIT; CHUNK];
+        let mut done = 0;
+        if b == 0.0 {
+            if let Some(k) = self.row_key(c, eu, prim) {
+                (key, done) = ([k; CHUNK], 0xff);
+            }
+        } else {
+            for (i, key) in key.iter_mut().enumerate() {
+                if let Some(k) = self.row_key(b * rays.sy()[r0 + i] + c, eu, prim) {
+                    (*key, done) = (k, done | 1 << i);
+                }
+            }
+        }
+        if done != 0 {
+            l.min_key_rows(keys, at, &key);
+        }
+        done
+    }
+
+    /// The key every lane of a row with `den = r` takes, when its `w` is
+    /// certified (`None`: `r` zero or not finite, or `w` not certified).
+    #[inline(always)]
+    fn row_key(&self, r: f64, eu: i64, prim: u32) -> Option<u64> {
+        if r == 0.0 || !r.is_finite() {
+            return None;
+        }
+        let w = self.num / r;
+        rounds_alone(w, eu).then(|| hit_key(w as f32, prim))
     }
 
     /// The constants of one row of the interpolant.
@@ -488,6 +545,22 @@ mod tests {
                 50.0,
                 72,
                 40,
+                1e-3,
+                f64::INFINITY,
+            ));
+        }
+        // Pitched down, its right axis exactly the world's x: the
+        // horizontal and z-facing planes have interpolants constant along
+        // rows (`a = n . r = 0`, `b` not).
+        for off in [0.0, 1e3] {
+            let o = DVec3::new(off, -off, off);
+            out.push(Camera::new(
+                o + DVec3::new(0.0, 2.0, 3.0),
+                o,
+                DVec3::Y,
+                60.0,
+                64,
+                48,
                 1e-3,
                 f64::INFINITY,
             ));
@@ -704,11 +777,18 @@ mod tests {
     #[test]
     fn block_keys_is_row_then_min_keys() {
         let (mut seed, mut written) = (3u64, 0);
+        // Blocks of planes whose interpolant is constant along rows (`a`
+        // a zero), and of those, constant over the block (`b` too).
+        let (mut row_constant, mut flat) = (0, 0);
         each_row(|r| {
             let (row, base) = r.at;
             // Once per block, from its first row.
             if !r.bound.all_hit || row % CHUNK != 0 {
                 return;
+            }
+            if r.s.coef[0] == 0.0 {
+                row_constant += 1;
+                flat += usize::from(r.s.coef[1] == 0.0);
             }
             let stride = 11;
             let mut keys = vec![0u64; CHUNK * stride];
@@ -760,6 +840,10 @@ mod tests {
             }
         });
         assert!(written > 1000, "{written} rows written");
+        assert!(
+            row_constant - flat > 100 && flat > 100,
+            "{row_constant} blocks with a = 0, {flat} of them with b = 0"
+        );
     }
 
     /// The certificate at its edge: around f32 rounding boundaries (in a
