@@ -535,15 +535,60 @@ fn fast_tile<L: Lanes>(
                         continue;
                     }
                 }
-                rays.ensure_dirs(l);
+                // The rows' depths from the screen-space interpolant where a
+                // bound covers them: the box's, or a block's inside it.
+                // (Boxes of a block or more: set up like the covered blocks'.
+                // A smaller box's few rows take the rays' depths, which cost
+                // less than this setup.)
+                let rows_screen = if bw >= CHUNK && bh >= CHUNK {
+                    let d =
+                        depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+                    let &mut (s, whole) = screen.get_or_insert_with(|| {
+                        let s = ScreenDepth::new(cam, d, rays);
+                        let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
+                        (s, whole)
+                    });
+                    match (s, whole) {
+                        (Some(s), Some(b)) => Some((s, b)),
+                        (Some(s), None) if full_rows && span == 0xff => {
+                            s.block(rays, r0, base).map(|b| (s, b))
+                        }
+                        _ => None,
+                    }
+                } else {
+                    None
+                };
                 for ly in r0..=r1 {
                     let sg = match block {
                         Some(g) => g,
-                        None => f.chunk(l, rays, ly, base),
+                        None => {
+                            // Screen-space signs need no rays; where they
+                            // leave a lane of the span open, the rays' own.
+                            let g = f.screen_chunk(l, rays, ly, base);
+                            if span & !(g.rejected() | g.inside_pos() | g.inside_neg()) == 0 {
+                                g
+                            } else {
+                                rays.ensure_dirs(l);
+                                f.chunk(l, rays, ly, base)
+                            }
+                        }
                     };
                     let at = (ly, base, span);
                     let d = &mut depth;
-                    chunk_hits(l, cam, t, prim, &edges, rays, sg, at, d, out, c);
+                    chunk_hits(
+                        l,
+                        cam,
+                        t,
+                        prim,
+                        &edges,
+                        rays,
+                        sg,
+                        at,
+                        d,
+                        rows_screen,
+                        out,
+                        c,
+                    );
                 }
             }
         }
@@ -711,10 +756,11 @@ fn chunk_hits<L: Lanes>(
     t: &Tri,
     prim: u32,
     edges: &TriEdges,
-    rays: &TileRays,
+    rays: &mut TileRays,
     sg: ChunkSigns,
     (ly, base, span): (usize, usize, u32),
     depth: &mut Option<ChunkDepth>,
+    screen: Option<(ScreenDepth, BlockBound)>,
     out: &mut TileOut,
     c: &mut Counters,
 ) {
@@ -727,6 +773,9 @@ fn chunk_hits<L: Lanes>(
     c.fast_decided += decided;
     c.covered += u64::from(inside.count_ones());
     let mut unsure = span & !rejected & !inside;
+    if unsure != 0 {
+        rays.ensure_dirs(l);
+    }
     while unsure != 0 {
         let j = unsure.trailing_zeros() as usize;
         unsure &= unsure - 1;
@@ -743,9 +792,23 @@ fn chunk_hits<L: Lanes>(
     if back | front == 0 {
         return;
     }
-    let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-    let (z, ok) = d.depths(l, cam, rays, ly, base, back | front);
-    let mut m = (back | front) & ok;
+    let covered = back | front;
+    // Certified screen-space depths where they cover every covered lane
+    // (`ScreenDepth::row`: the depth function's f32 and hit there), else
+    // the depth function from the rays.
+    let from_screen = screen.and_then(|(s, b)| {
+        let (z, ok, sure) = s.row(l, rays, ly, base, b.eu);
+        (covered & !sure == 0).then_some((z, ok))
+    });
+    let (z, ok) = match from_screen {
+        Some(zo) => zo,
+        None => {
+            rays.ensure_dirs(l);
+            let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+            d.depths(l, cam, rays, ly, base, covered)
+        }
+    };
+    let mut m = covered & ok;
     let row = out.at(base, ly);
     if span == 0xff && out.cov.is_empty() {
         // All 8 lanes lie in the box (so in the tile): the z-buffer test 8 at a time.

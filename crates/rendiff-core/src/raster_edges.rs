@@ -69,6 +69,37 @@
 //! pixels would be one by one, with the same counts.
 //! `tests::block_signs_hold_at_every_pixel` checks the claim pixel by pixel
 //! on edges through block corners, and that a block bound of 0 breaks it.
+//!
+//! # Screen-space chunks ([`FastEdges::screen_chunk`])
+//!
+//! A chunk whose rays were never written (a block on a big triangle's edge)
+//! takes its signs from screen coordinates alone. Per edge, `a = fl(n . r)`,
+//! `b = fl(n . v)`, `c = fl(n . f)` (the f64 normal `n`, the camera's f64
+//! right, up and forward), and per lane `G' = fl(fl(a sx) + fl(fl(b sy) + c))`
+//! with the tile's computed `sx`, `sy`. `G'` is off the exact `G(p) = N . g_p`
+//! of the block argument by at most `δ`, the sum of:
+//! - the evaluation, against `n . g'` with `g' = f + r sx + v sy` at the
+//!   computed coordinates taken as exact: `6u Σ_j |n_j| H_j` (three
+//!   roundings in each coefficient, three in the evaluation: the bound
+//!   [`crate::raster_screen_depth`] derives for its `den`, with `|sx| <= A`,
+//!   `|sy| <= T`);
+//! - the coordinates' own rounding, `|g' - g| <= 4u (|r_j| A + |v_j| T)` per
+//!   component: `4u Σ_j |n_j| H_j`;
+//! - the normal's rounding: `n_i = fl(fl(ad_j bd_k) - fl(ad_k bd_j))` from
+//!   rounded differences is within `γ4 (|x1| + |x2|) <= 4.0001u perm_i` of
+//!   `N_i` (`x1, x2` the exact products), so `|n . g - N . g| <= 4.0001u
+//!   Σ_j perm_j H_j`.
+//!
+//! With `|n_j| <= 1.0001 perm_j`, `δ <= 14.01u Σ_j perm_j H_j <= 0.876 Σ_j
+//! perm_j η_j` (`η_j = 16u H_j`), and `|E(p) - G(p)| <= ρ <= 1.0001 Σ_j perm_j
+//! η_j`. So `G' > B_block = 3B + 4 Σ_j perm_j η_j` gives `E(p) > 3B + 2.1 Σ_j
+//! perm_j η_j` and `det_p > E(p) - B > B`: the sign [`FastEdges::chunk`]
+//! gives at `p`, hence the predicate filter's. Likewise for `-G'`; NaN
+//! decides nothing. A lane this leaves open sends its row to the rays'
+//! chunk (writing the tile's rays first), so counts and buffers are the
+//! predicate path's. `tests::screen_signs_are_chunk_signs` checks every sign
+//! against the rays' chunk on edges through pixel centers, with eyes up to
+//! 1e7 from the origin, and that a bound of 0 breaks it.
 
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
@@ -1536,6 +1567,11 @@ pub struct FastEdges {
     /// `B_block` per edge: a block's sign is taken only where every corner's
     /// `|det|` exceeds it, with one sign.
     block: [f64; 3],
+    /// Per edge, the screen-space form `(a, b, c) = (n . r, n . v, n . f)`
+    /// (f64 dot products with the camera's right, up and forward): `G' =
+    /// fl(fl(a sx) + fl(fl(b sy) + c))` decides a lane's sign where `|G'|`
+    /// exceeds `B_block` ([`FastEdges::screen_chunk`]).
+    screen: [[f64; 3]; 3],
 }
 
 /// Sign masks of one chunk: bit `j` of `pos[k]` (`neg[k]`) set when edge `k`
@@ -1596,14 +1632,22 @@ impl FastEdges {
         // Plain arrays, not array `map`: its closures compiled to
         // out-of-line calls here, once per triangle and tile.
         let block = [block_k(0), block_k(1), block_k(2)];
+        let n = [
+            edges.0[0].n.to_array(),
+            edges.0[1].n.to_array(),
+            edges.0[2].n.to_array(),
+        ];
+        let [_, f, r, v] = dirs.basis;
+        let mut screen = [[0.0; 3]; 3];
+        for (g, n) in screen.iter_mut().zip(&n) {
+            let dot = |w: DVec3| n[0] * w.x + n[1] * w.y + n[2] * w.z;
+            *g = [dot(r), dot(v), dot(f)];
+        }
         FastEdges {
-            n: [
-                edges.0[0].n.to_array(),
-                edges.0[1].n.to_array(),
-                edges.0[2].n.to_array(),
-            ],
+            n,
             bound,
             block,
+            screen,
         }
     }
 
@@ -1649,6 +1693,37 @@ impl FastEdges {
             let neg = det.iter().all(|&d| -d > b);
             out.pos[k] = if pos { 0xff } else { 0 };
             out.neg[k] = if neg { 0xff } else { 0 };
+        }
+        out
+    }
+
+    /// Certain signs of the three edges at the 8 pixels from column `col` of
+    /// tile row `row`, from their screen coordinates alone (module
+    /// documentation, screen-space chunks): no pixel ray is needed, and
+    /// every sign given is one [`FastEdges::chunk`] gives too (lanes past
+    /// the tile's width are padding, to be masked off).
+    #[inline(always)]
+    pub fn screen_chunk<L: Lanes>(
+        &self,
+        l: L,
+        rays: &TileRays,
+        row: usize,
+        col: usize,
+    ) -> ChunkSigns {
+        let sx: &[f64; CHUNK] = rays.sx[col..col + CHUNK].try_into().unwrap();
+        let sy = rays.sy[row];
+        let mut out = ChunkSigns::default();
+        for k in 0..3 {
+            let [a, b, c] = self.screen[k];
+            let r = b * sy + c;
+            let mut det = [0.0; CHUNK];
+            let mut neg = [0.0; CHUNK];
+            for j in 0..CHUNK {
+                det[j] = a * sx[j] + r;
+                neg[j] = -det[j];
+            }
+            out.pos[k] = l.gt(&det, self.block[k]);
+            out.neg[k] = l.gt(&neg, self.block[k]);
         }
         out
     }
@@ -2211,6 +2286,70 @@ mod tests {
         }
         assert!(decided > 1000, "only {decided} blocks decided");
         assert!(broken > 0, "a block bound of 0 broke nothing");
+    }
+
+    /// Screen-space chunk signs against the rays' own ([`FastEdges::chunk`],
+    /// the predicate filter's): on the triangles of
+    /// `block_signs_hold_at_every_pixel` (edges through pixel centers, eyes
+    /// up to 1e7 from the origin), every sign `screen_chunk` gives at a
+    /// pixel is one `chunk` gives there; most lanes get a sign; and with a
+    /// bound of 0 some lane gets a sign the filter does not vouch for.
+    #[test]
+    fn screen_signs_are_chunk_signs() {
+        let mut s = 21u64;
+        let (mut lanes, mut signed, mut broken) = (0, 0, 0);
+        for off in [0.0, 1e3, 12345.678, 1e7] {
+            let o = DVec3::new(off, -off, off);
+            for cam in offset_cameras(o, 32, 32).map(Result::unwrap) {
+                let rays = TileRays::new(&cam, 0, 0, 32, 32);
+                let on = |x: u32, y: u32, t: f64| (cam.eye + cam.pixel_ray(x, y).dir * t).as_vec3();
+                for case in 0..150u32 {
+                    let mut px = || {
+                        (
+                            ((lcg(&mut s) + 1.0) * 16.0) as u32 % 32,
+                            ((lcg(&mut s) + 1.0) * 16.0) as u32 % 32,
+                            1.0 + 0.5 * (lcg(&mut s) + 1.0),
+                        )
+                    };
+                    let (p, q, r) = (px(), px(), px());
+                    // Two vertices on pixel rays: an edge through pixel centers.
+                    let tri = [on(p.0, p.1, p.2), on(q.0, q.1, q.2), on(r.0, r.1, r.2)];
+                    let edges = TriEdges::new(&cam, &tri);
+                    let fast = FastEdges::new(&edges, &rays);
+                    for (f, zero) in [(fast, false), (fast.block_scaled(0.0), true)] {
+                        for ly in 0..32 {
+                            for col in (0..32).step_by(CHUNK) {
+                                let sc = f.screen_chunk(Portable, &rays, ly, col);
+                                #[cfg(target_arch = "x86_64")]
+                                if let Some(avx) = Avx2::detect() {
+                                    assert_eq!(f.screen_chunk(avx, &rays, ly, col), sc);
+                                }
+                                let sg = fast.chunk(Portable, &rays, ly, col);
+                                let mut holds = true;
+                                for e in 0..3 {
+                                    holds &= sg.pos[e] & sc.pos[e] == sc.pos[e];
+                                    holds &= sg.neg[e] & sc.neg[e] == sc.neg[e];
+                                }
+                                if zero {
+                                    broken += usize::from(!holds);
+                                } else {
+                                    assert!(holds, "offset {off} case {case} row {ly} col {col}");
+                                    lanes += 3 * CHUNK;
+                                    signed += (0..3)
+                                        .map(|e| (sc.pos[e] | sc.neg[e]).count_ones() as usize)
+                                        .sum::<usize>();
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            signed * 100 > lanes * 95,
+            "{signed} of {lanes} edge lanes signed"
+        );
+        assert!(broken > 0, "a bound of 0 broke nothing");
     }
 
     /// Runs [`ChunkDepth::depths`] (clamp-free margin `margin`) over every
