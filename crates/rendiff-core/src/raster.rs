@@ -430,6 +430,8 @@ fn fast_tile<L: Lanes>(
 ) {
     let cam = &scene.camera;
     let mut hiz = LazyBound::new(mode);
+    // No triangle has written in the tile yet: every key is `NO_HIT`.
+    let mut fresh = true;
     for (i, &Binned { prim, rect }) in bin.iter().enumerate() {
         // Bins name triangles scattered through memory: ask for one a few
         // entries ahead (a hint; nothing observable changes).
@@ -451,6 +453,7 @@ fn fast_tile<L: Lanes>(
         }
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
+            fresh = false;
             rays.ensure_dirs(l);
             small_box(l, cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
@@ -469,6 +472,9 @@ fn fast_tile<L: Lanes>(
             c.fast_decided += n;
             continue;
         }
+        // Only this triangle can have written the keys it reads from here on
+        // (each pixel once), so those the tile started with are `NO_HIT`.
+        let fresh_box = std::mem::replace(&mut fresh, false);
         let whole = whole.filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
         let mut depth: Option<ChunkDepth> = None;
         // Set up with the first covered block: the screen-space depth (`None`:
@@ -518,7 +524,8 @@ fn fast_tile<L: Lanes>(
                     };
                     let done = match (s, bound) {
                         (Some(s), Some(b)) => {
-                            screen_block(l, cam, prim, rays, &s, d, b, (r0, base), out);
+                            let at = (r0, base);
+                            screen_block(l, cam, prim, rays, &s, d, b, at, fresh_box, out);
                             true
                         }
                         _ => false,
@@ -650,11 +657,12 @@ fn screen_block<L: Lanes>(
     d: &ChunkDepth,
     bound: BlockBound,
     (r0, base): (usize, usize),
+    fresh: bool,
     out: &mut TileOut,
 ) {
     let done = if bound.all_hit {
         let at = (out.at(base, r0), out.stride);
-        s.block_keys(l, rays, (r0, base), bound.eu, out.keys, at, prim)
+        s.block_keys(l, rays, (r0, base), bound.eu, out.keys, at, prim, fresh)
     } else {
         0
     };

@@ -199,8 +199,9 @@ pub trait Lanes: Copy {
     /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass over the 8
     /// rows of a block whose lanes all hit: row `i` has `R = r[i]` (the
     /// rest of `p` is the block's) and its keys at `keys[at + i stride..]`.
-    /// A row whose every lane is certified has its keys lowered, and its
-    /// bit set in the returned mask; other rows are left as they were.
+    /// A row whose every lane is certified has its keys lowered (set, when
+    /// `fresh`: the keys are all `NO_HIT`), and its bit set in the returned
+    /// mask; other rows are left as they were.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn screen_keys(
@@ -209,9 +210,9 @@ pub trait Lanes: Copy {
         r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
         keys: &mut [u64],
-        at: usize,
-        stride: usize,
+        (at, stride): (usize, usize),
         prim: u32,
+        fresh: bool,
     ) -> u32 {
         let mut done = 0;
         for (i, &r) in r.iter().enumerate() {
@@ -219,11 +220,34 @@ pub trait Lanes: Copy {
             if sure == 0xff {
                 let row = at + i * stride;
                 let row: &mut [u64; CHUNK] = (&mut keys[row..row + CHUNK]).try_into().unwrap();
-                self.min_keys(row, &z, 0xff, prim);
+                if fresh {
+                    for (k, &z) in row.iter_mut().zip(&z) {
+                        *k = hit_key(z, prim);
+                    }
+                } else {
+                    self.min_keys(row, &z, 0xff, prim);
+                }
                 done |= 1 << i;
             }
         }
         done
+    }
+
+    /// [`Lanes::min_key_rows`] on rows whose keys are all `NO_HIT`: the
+    /// rows of mask `rows` set to their key, without reading them.
+    #[inline(always)]
+    fn store_key_rows(
+        self,
+        keys: &mut [u64],
+        (at, stride): (usize, usize),
+        key: &[u64; CHUNK],
+        rows: u32,
+    ) {
+        for (i, &k) in key.iter().enumerate() {
+            if (rows >> i) & 1 == 1 {
+                keys[at + i * stride..][..CHUNK].fill(k);
+            }
+        }
     }
 
     /// Each of the 8 rows of keys from `keys[at]` (`stride` apart) lowered
@@ -758,9 +782,9 @@ impl Lanes for Avx2 {
         r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
         keys: &mut [u64],
-        at: usize,
-        stride: usize,
+        (at, stride): (usize, usize),
         prim: u32,
+        fresh: bool,
     ) -> u32 {
         use std::arch::x86_64::*;
         assert!(at + (CHUNK - 1) * stride + CHUNK <= keys.len());
@@ -789,8 +813,14 @@ impl Lanes for Avx2 {
                 let row = keys.as_mut_ptr().add(at + i * stride);
                 let bits0 = _mm_castps_si128(_mm256_cvtpd_ps(w0));
                 let bits1 = _mm_castps_si128(_mm256_cvtpd_ps(w1));
-                min_keys4(row, hit_keys4(bits0, low));
-                min_keys4(row.add(4), hit_keys4(bits1, low));
+                if fresh {
+                    let p = row.cast::<__m256i>();
+                    _mm256_storeu_si256(p, hit_keys4(bits0, low));
+                    _mm256_storeu_si256(p.add(1), hit_keys4(bits1, low));
+                } else {
+                    min_keys4(row, hit_keys4(bits0, low));
+                    min_keys4(row.add(4), hit_keys4(bits1, low));
+                }
                 done |= 1 << i;
             }
         }

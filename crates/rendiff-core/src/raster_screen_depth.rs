@@ -410,7 +410,9 @@ impl ScreenDepth {
     /// `all_hit`: each row whose lanes [`rounds_alone`] all certifies gets
     /// its keys lowered to the certified depths and its bit in the returned
     /// mask; the other rows are left for the caller. [`ScreenDepth::row`]
-    /// and the z-test in one pass.
+    /// and the z-test in one pass. `fresh`: every key of the block is
+    /// still `NO_HIT` (no triangle has written in the tile yet), so the
+    /// z-test's result is the new key itself, stored without reading.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn block_keys<L: Lanes>(
@@ -422,10 +424,11 @@ impl ScreenDepth {
         keys: &mut [u64],
         (at, stride): (usize, usize),
         prim: u32,
+        fresh: bool,
     ) -> u32 {
         let [a, b, c] = self.coef;
         if a == 0.0 {
-            return self.row_constant_keys(l, rays, r0, eu, keys, (at, stride), prim);
+            return self.row_constant_keys(l, rays, r0, eu, keys, (at, stride), prim, fresh);
         }
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
         let p = self.row_params(rays, r0, eu);
@@ -433,7 +436,7 @@ impl ScreenDepth {
         for (i, r) in r.iter_mut().enumerate() {
             *r = b * rays.sy()[r0 + i] + c;
         }
-        l.screen_keys(&p, &r, sx, keys, at, stride, prim)
+        l.screen_keys(&p, &r, sx, keys, (at, stride), prim, fresh)
     }
 
     /// [`ScreenDepth::block_keys`] where `a` is a zero (the plane's
@@ -457,6 +460,7 @@ impl ScreenDepth {
         keys: &mut [u64],
         at: (usize, usize),
         prim: u32,
+        fresh: bool,
     ) -> u32 {
         let [_, b, c] = self.coef;
         let mut key = [NO_HIT; CHUNK];
@@ -472,7 +476,9 @@ impl ScreenDepth {
                 }
             }
         }
-        if done != 0 {
+        if fresh {
+            l.store_key_rows(keys, at, &key, done);
+        } else if done != 0 {
             l.min_key_rows(keys, at, &key);
         }
         done
@@ -813,30 +819,46 @@ mod tests {
                     written += 1;
                 }
             }
-            let mut got = keys.clone();
-            let done = r.s.block_keys(
-                Portable,
-                r.rays,
-                (row, base),
-                r.bound.eu,
-                &mut got,
-                (0, stride),
-                5,
-            );
-            assert_eq!((done, &got), (rows, &want));
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = crate::raster_edges::Avx2::detect() {
-                let mut wide = keys.clone();
+            // Over the keys as they were, and (`fresh`) over a block
+            // still all `NO_HIT`, whose z-test leaves the new keys.
+            let empty = vec![crate::visibility::NO_HIT; keys.len()];
+            let mut fresh_want = empty.clone();
+            for i in (0..CHUNK).filter(|i| (rows >> i) & 1 == 1) {
+                let (z, _, _) = r.s.row(Portable, r.rays, row + i, base, r.bound.eu);
+                let w: &mut [u64; CHUNK] = (&mut fresh_want[i * stride..i * stride + CHUNK])
+                    .try_into()
+                    .unwrap();
+                Portable.min_keys(w, &z, 0xff, 5);
+            }
+            for (start, want, fresh) in [(&keys, &want, false), (&empty, &fresh_want, true)] {
+                let mut got = start.clone();
+                let at = (0, stride);
                 let done = r.s.block_keys(
-                    avx,
+                    Portable,
                     r.rays,
                     (row, base),
                     r.bound.eu,
-                    &mut wide,
-                    (0, stride),
+                    &mut got,
+                    at,
                     5,
+                    fresh,
                 );
-                assert_eq!((done, &wide), (rows, &want));
+                assert_eq!((done, &got), (rows, want));
+                #[cfg(target_arch = "x86_64")]
+                if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                    let mut wide = start.clone();
+                    let done = r.s.block_keys(
+                        avx,
+                        r.rays,
+                        (row, base),
+                        r.bound.eu,
+                        &mut wide,
+                        at,
+                        5,
+                        fresh,
+                    );
+                    assert_eq!((done, &wide), (rows, want));
+                }
             }
         });
         assert!(written > 1000, "{written} rows written");
