@@ -58,22 +58,24 @@
 //! η_j = 16U H_j`, `H_j = |e_j| + |f_j| + |r_j| A + |u_j| T` (A = aspect
 //! tan, T = tan(vfov / 2)): the screen coordinates carry at most `4U A`,
 //! `4U T`, the sum `f + r sx + u sy` three roundings, `P = e + d` one, in all
-//! `9U H_j + O(U²)`. With `ρ = Σ_j |N_j| η_j` (and `|N_j| <= 2 perm_j`),
-//! `E(p) >= min_c E(c) - 2ρ`, and `E(c) > det_c - B` at each corner. So when
-//! every corner's `det` exceeds `B_block = 3B + 4 Σ_j perm_j η_j`, `E(p) > 2B`
-//! at every pixel of the block, hence `det_p > E(p) - B > B`: the sign is the
-//! one the chunk test above gives at `p`, and (as `B >= b`) the one the
-//! predicate's filter gives, without exact arithmetic or the tie rule.
-//! Likewise for `-det`. A block whose certain signs reject or cover all its
+//! `9U H_j + O(U²)`. With `ρ = Σ_j |N_j| η_j`, `|E(p) - G(p)| <= ρ`. The
+//! corners' `G` is read off the screen-space form `G'` of the next section,
+//! within `δ`: so when every corner's `G'` exceeds `B_block = 3B + 4 Σ_j
+//! perm_j η_j`, `G(p) >= min_c G(c) > B_block - δ` at every pixel of the
+//! block, and (next section) `det_p > B`: the sign is the one the chunk test
+//! above gives at `p`, and (as `B >= b`) the one the predicate's filter
+//! gives, without exact arithmetic or the tie rule. Likewise for `-G'`. No
+//! pixel ray is needed. A block whose certain signs reject or cover all its
 //! pixels by [`ChunkSigns`]' rules is thereby decided exactly as its 64
 //! pixels would be one by one, with the same counts.
 //! `tests::block_signs_hold_at_every_pixel` checks the claim pixel by pixel
 //! on edges through block corners, and that a block bound of 0 breaks it.
 //!
-//! # Screen-space chunks ([`FastEdges::screen_chunk`])
+//! # Screen-space signs ([`FastEdges::screen_chunk`], block corners)
 //!
-//! A chunk whose rays were never written (a block on a big triangle's edge)
-//! takes its signs from screen coordinates alone. Per edge, `a = fl(n . r)`,
+//! A chunk whose rays were never written (a block on a big triangle's edge),
+//! and a block's corners, take their signs from screen coordinates alone.
+//! Per edge, `a = fl(n . r)`,
 //! `b = fl(n . v)`, `c = fl(n . f)` (the f64 normal `n`, the camera's f64
 //! right, up and forward), and per lane `G' = fl(fl(a sx) + fl(fl(b sy) + c))`
 //! with the tile's computed `sx`, `sy`. `G'` is off the exact `G(p) = N . g_p`
@@ -92,10 +94,11 @@
 //!
 //! With `|n_j| <= 1.0001 perm_j`, `δ <= 14.01u Σ_j perm_j H_j <= 0.876 Σ_j
 //! perm_j η_j` (`η_j = 16u H_j`), and `|E(p) - G(p)| <= ρ <= 1.0001 Σ_j perm_j
-//! η_j`. So `G' > B_block = 3B + 4 Σ_j perm_j η_j` gives `E(p) > 3B + 2.1 Σ_j
-//! perm_j η_j` and `det_p > E(p) - B > B`: the sign [`FastEdges::chunk`]
-//! gives at `p`, hence the predicate filter's. Likewise for `-G'`; NaN
-//! decides nothing. A lane this leaves open sends its row to the rays'
+//! η_j` (`|N_i| <= |x1| + |x2|`). So `G > B_block - δ` at a pixel (from its
+//! own `G'`, or from a block's corners) gives `E(p) > 3B + 2.1 Σ_j perm_j
+//! η_j` and `det_p > E(p) - B > B`: the sign [`FastEdges::chunk`] gives at
+//! `p`, hence the predicate filter's. Likewise for `-G'`; NaN decides
+//! nothing. A lane this leaves open sends its row to the rays'
 //! chunk (writing the tile's rays first), so counts and buffers are the
 //! predicate path's. `tests::screen_signs_are_chunk_signs` checks every sign
 //! against the rays' chunk on edges through pixel centers, with eyes up to
@@ -1699,28 +1702,21 @@ impl FastEdges {
 
     /// [`FastEdges::block`] over the tile rectangle `[lx0, lx1, ly0, ly1]`
     /// (the argument holds for any rectangle of pixel centers: it is their
-    /// convex hull): a triangle's box in a tile, decided at once.
+    /// convex hull): a triangle's box in a tile, decided at once, from the
+    /// screen-space form at its four corners (module documentation).
     #[inline(always)]
     pub fn rect(&self, dirs: &TileRays, [lx0, lx1, ly0, ly1]: [usize; 4]) -> ChunkSigns {
-        let c = [(lx0, ly0), (lx1, ly0), (lx0, ly1), (lx1, ly1)];
-        // Plain loops: array `map` compiled to out-of-line calls here.
-        let mut corner = [[0.0; 3]; 4];
-        for (d, &(lx, ly)) in corner.iter_mut().zip(&c) {
-            for (k, d) in d.iter_mut().enumerate() {
-                *d = dirs.dir_component(k, lx, ly);
-            }
-        }
+        let (x0, x1) = (dirs.sx[lx0], dirs.sx[lx1]);
+        let (y0, y1) = (dirs.sy[ly0], dirs.sy[ly1]);
         let mut out = ChunkSigns::default();
         for k in 0..3 {
-            let [nx, ny, nz] = self.n[k];
-            let mut det = [0.0; 4];
-            for (det, d) in det.iter_mut().zip(&corner) {
-                *det = d[0] * nx + d[1] * ny + d[2] * nz;
-            }
-            let b = self.block[k];
+            let [a, b, c] = self.screen[k];
+            let (r0, r1) = (b * y0 + c, b * y1 + c);
+            let det = [a * x0 + r0, a * x1 + r0, a * x0 + r1, a * x1 + r1];
+            let bk = self.block[k];
             // NaN fails both.
-            let pos = det.iter().all(|&d| d > b);
-            let neg = det.iter().all(|&d| -d > b);
+            let pos = det.iter().all(|&d| d > bk);
+            let neg = det.iter().all(|&d| -d > bk);
             out.pos[k] = if pos { 0xff } else { 0 };
             out.neg[k] = if neg { 0xff } else { 0 };
         }
