@@ -481,6 +481,27 @@ fn fast_tile<L: Lanes>(
         // it cannot run here) and its bound over the whole box in the tile
         // (`None`: each block asks for its own).
         let mut screen: Option<(Option<ScreenDepth>, Option<BlockBound>)> = None;
+        // A covered box whose certified depth is constant along its rows
+        // takes one key per row (`ScreenDepth::box_keys`), without blocks.
+        if whole.is_some() && out.cov.is_empty() {
+            let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+            let &mut (s, bound) = screen.get_or_insert_with(|| {
+                let s = ScreenDepth::new(cam, d, rays);
+                let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
+                (s, whole)
+            });
+            if let (Some(s), Some(b)) = (s, bound) {
+                let at = (out.at(lx0, 0), out.stride);
+                let rect = [lx0, lx1, ly0, ly1];
+                if b.all_hit && s.box_keys(rays, rect, b.eu, out.keys, at, prim, fresh_box) {
+                    let n = (bw * bh) as u64;
+                    c.coverage_tests += n;
+                    c.fast_decided += n;
+                    c.covered += n;
+                    continue;
+                }
+            }
+        }
         // Boxes at least a chunk wide take chunks aligned to the tile's 8x8
         // blocks, so that whole blocks can be decided at once; narrower ones
         // take one chunk per row from their first column (any column:

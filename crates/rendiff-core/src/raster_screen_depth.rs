@@ -144,6 +144,9 @@ pub fn rounds_alone(w: f64, eu: i64) -> bool {
     ((w.to_bits() & DROPPED_MASK) as i64 - MIDPOINT).abs() > eu
 }
 
+/// The most rows [`ScreenDepth::box_keys`] takes (a tile's).
+const MAX_BOX_ROWS: usize = crate::raster::TILE as usize;
+
 /// One row of a block, as [`Lanes::screen_row`] evaluates it.
 #[derive(Debug, Clone, Copy)]
 pub struct ScreenRow {
@@ -484,6 +487,59 @@ impl ScreenDepth {
         done
     }
 
+    /// The keys of the tile rectangle `[lx0, lx1, ly0, ly1]` (row `ly`'s
+    /// first key, at column `lx0`, is `keys[at + ly stride]`; the sum wraps),
+    /// under a bound over the whole
+    /// rectangle with `all_hit`, when `a` is a zero and every row's key is
+    /// certified ([`ScreenDepth::row_constant_keys`]' argument: one key per
+    /// row, one for the rectangle where `b` is a zero too): each key
+    /// lowered to its row's (set, when `fresh`), and true. False, with
+    /// nothing written, otherwise.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn box_keys(
+        &self,
+        rays: &TileRays,
+        [lx0, lx1, ly0, ly1]: [usize; 4],
+        eu: i64,
+        keys: &mut [u64],
+        (at, stride): (usize, usize),
+        prim: u32,
+        fresh: bool,
+    ) -> bool {
+        let [a, b, c] = self.coef;
+        if a != 0.0 || ly1 - ly0 >= MAX_BOX_ROWS {
+            return false;
+        }
+        let mut row_key = [NO_HIT; MAX_BOX_ROWS];
+        let rows = &mut row_key[..=ly1 - ly0];
+        if b == 0.0 {
+            let Some(k) = self.row_key(c, eu, prim) else {
+                return false;
+            };
+            rows.fill(k);
+        } else {
+            for (i, k) in rows.iter_mut().enumerate() {
+                match self.row_key(b * rays.sy()[ly0 + i] + c, eu, prim) {
+                    Some(key) => *k = key,
+                    None => return false,
+                }
+            }
+        }
+        for (i, &k) in rows.iter().enumerate() {
+            let row = at.wrapping_add((ly0 + i) * stride);
+            let row = &mut keys[row..=row + (lx1 - lx0)];
+            if fresh {
+                row.fill(k);
+            } else {
+                for key in row {
+                    *key = (*key).min(k);
+                }
+            }
+        }
+        true
+    }
+
     /// The key every lane of a row with `den = r` takes, when its `w` is
     /// certified (`None`: `r` zero or not finite, or `w` not certified).
     #[inline(always)]
@@ -785,7 +841,7 @@ mod tests {
         let (mut seed, mut written) = (3u64, 0);
         // Blocks of planes whose interpolant is constant along rows (`a`
         // a zero), and of those, constant over the block (`b` too).
-        let (mut row_constant, mut flat) = (0, 0);
+        let (mut row_constant, mut flat, mut boxed_blocks) = (0, 0, 0);
         each_row(|r| {
             let (row, base) = r.at;
             // Once per block, from its first row.
@@ -831,6 +887,15 @@ mod tests {
                 Portable.min_keys(w, &z, 0xff, 5);
             }
             for (start, want, fresh) in [(&keys, &want, false), (&empty, &fresh_want, true)] {
+                // The block as a box: all of it, or (false) none of it.
+                let mut boxed = start.clone();
+                let rect = [base, base + CHUNK - 1, row, row + CHUNK - 1];
+                let at = (0usize.wrapping_sub(row * stride), stride);
+                let all =
+                    r.s.box_keys(r.rays, rect, r.bound.eu, &mut boxed, at, 5, fresh);
+                let can = r.s.coef[0] == 0.0 && rows == 0xff;
+                assert_eq!((all, &boxed), (can, if can { want } else { start }));
+                boxed_blocks += usize::from(all);
                 let mut got = start.clone();
                 let at = (0, stride);
                 let done = r.s.block_keys(
@@ -862,6 +927,7 @@ mod tests {
             }
         });
         assert!(written > 1000, "{written} rows written");
+        assert!(boxed_blocks > 400, "{boxed_blocks} blocks taken as boxes");
         assert!(
             row_constant - flat > 100 && flat > 100,
             "{row_constant} blocks with a = 0, {flat} of them with b = 0"
