@@ -29,10 +29,9 @@ use crate::raster_edges::{ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, Ti
 use crate::raster_hiz::TileDepthBound;
 use crate::raster_screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
-use crate::visibility::{
-    covers_by, edge_sign, fill_no_hit, hit_key, Counters, TriDepth, TriEdges, NO_HIT,
-};
+use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 use std::time::Instant;
 
 /// Tile side in pixels: small enough for load balance, big enough to amortize setup.
@@ -152,8 +151,10 @@ fn keys_impl(
     let bins = Bins::new(scene, margin, tiles_x, tiles_y);
     let band = (w * TILE) as usize;
     // Never filled before the parallel loop (neither serially nor by
-    // calloc, which zeroes reused memory): each band fills its own keys with
-    // NO_HIT first (as the tracer's packet loop writes all of its own).
+    // calloc, which zeroes reused memory): each tile writes its own keys
+    // before it reads any (`TileOut::fill`, or its first triangle's keys
+    // where that covers it whole), as the tracer's packet loop writes all
+    // of its own.
     let n = cam.pixel_count();
     let mut keys: Vec<u64> = Vec::with_capacity(n);
     let mut coverage = vec![[0u16; 2]; if opts.count_coverage { n } else { 0 }];
@@ -167,26 +168,31 @@ fn keys_impl(
         .zip(cov_bands.par_iter_mut())
         .enumerate()
         .map(|(ty, (kband, cband))| {
-            let kband = fill_no_hit(kband);
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
+            let mut written = 0;
             for tx in 0..tiles_x {
                 bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
+                let (x0, y0) = (tx * TILE, ty as u32 * TILE);
+                let mut out = TileOut {
+                    keys: &mut kband[..],
+                    cov: &mut cband[..],
+                    stride: w as usize,
+                    x0: x0 as usize,
+                    tw: TILE.min(w - x0) as usize,
+                    th: TILE.min(h - y0) as usize,
+                    filled: false,
+                };
                 // Past the deadline a tile renders nothing (background).
                 if !bin.is_empty() && !crate::deadline::past(opts.deadline) {
-                    let mut out = TileOut {
-                        keys: &mut kband[..],
-                        cov: &mut cband[..],
-                        stride: w as usize,
-                        x0: (tx * TILE) as usize,
-                    };
-                    let (x0, y0) = (tx * TILE, ty as u32 * TILE);
                     render_tile(scene, &bin, x0, y0, mode, &mut out, &mut rays, &mut c);
                 }
+                out.fill();
+                written += out.tw * out.th;
             }
             progress(u64::from(tiles_x));
-            (c, kband.len())
+            (c, written)
         })
         .reduce(
             || (Counters::default(), 0),
@@ -195,10 +201,12 @@ fn keys_impl(
                 (a, n + m)
             },
         );
-    // Every band was zipped with a coverage band and filled (else no key may be read).
-    assert_eq!(filled, n, "raster bands left keys unwritten");
-    // SAFETY: the bands filled `n` keys, all of `0..n` (disjoint chunks in
-    // order), and `n <= capacity`.
+    // Every band was zipped with a coverage band, and each of its tiles
+    // wrote all of its keys (else no key may be read).
+    assert_eq!(filled, n, "raster tiles left keys unwritten");
+    // SAFETY: the tiles wrote `n` keys: each wrote its `tw x th` rectangle
+    // whole (`TileOut::fill`), the tiles of a band partition it, and the
+    // bands are the disjoint chunks of `0..n`, in order; `n <= capacity`.
     unsafe { keys.set_len(n) };
     PixelKeys {
         keys,
@@ -209,16 +217,25 @@ fn keys_impl(
 }
 
 /// Where one tile writes: its band of tile rows in the image's key (and
-/// coverage) buffers, the image's row stride and the tile's first column.
+/// coverage) buffers, the image's row stride and the tile's rectangle. The
+/// band's keys start unwritten: a tile writes all of its own (`fill`, or
+/// `write_rows` over the whole tile) before any is read, and reads and writes
+/// no other tile's.
 struct TileOut<'a> {
     /// The band's keys, `stride` per row.
-    keys: &'a mut [u64],
+    keys: &'a mut [MaybeUninit<u64>],
     /// The band's coverage counts (empty when not counted).
     cov: &'a mut [[u16; 2]],
     /// Pixels per image row.
     stride: usize,
     /// The tile's first column.
     x0: usize,
+    /// The tile's width.
+    tw: usize,
+    /// The tile's height.
+    th: usize,
+    /// Every key of the tile is written.
+    filled: bool,
 }
 
 impl TileOut<'_> {
@@ -228,13 +245,75 @@ impl TileOut<'_> {
         ly * self.stride + self.x0 + lx
     }
 
-    /// A hit with key `k` at buffer index `at`, covered with `facing`
+    /// Writes `NO_HIT` to every key of the tile, unless it is written.
+    #[inline(always)]
+    fn fill(&mut self) {
+        if !self.filled {
+            for ly in 0..self.th {
+                let at = self.at(0, ly);
+                self.keys[at..at + self.tw].fill(MaybeUninit::new(NO_HIT));
+            }
+            self.filled = true;
+        }
+    }
+
+    /// Writes every key of the unwritten tile: row `ly` all `key[ly]`.
+    #[inline(always)]
+    fn write_rows(&mut self, key: &[u64]) {
+        assert!(!self.filled && key.len() == self.th);
+        for (ly, &k) in key.iter().enumerate() {
+            let at = self.at(0, ly);
+            self.keys[at..at + self.tw].fill(MaybeUninit::new(k));
+        }
+        self.filled = true;
+    }
+
+    /// The `n` keys of tile row `ly` from column `lx`.
+    #[inline(always)]
+    fn row(&self, lx: usize, ly: usize, n: usize) -> &[u64] {
+        assert!(self.filled && lx + n <= self.tw && ly < self.th);
+        let at = self.at(lx, ly);
+        // SAFETY: the tile's keys are all written (`filled`), and these lie
+        // in the tile (asserted); `MaybeUninit<u64>` and `u64` share a layout.
+        unsafe { &*(&self.keys[at..at + n] as *const [MaybeUninit<u64>] as *const [u64]) }
+    }
+
+    /// [`TileOut::row`], to write.
+    #[inline(always)]
+    fn row_mut(&mut self, lx: usize, ly: usize, n: usize) -> &mut [u64] {
+        assert!(self.filled && lx + n <= self.tw && ly < self.th);
+        let at = self.at(lx, ly);
+        // SAFETY: as in `row`.
+        unsafe { &mut *(&mut self.keys[at..at + n] as *mut [MaybeUninit<u64>] as *mut [u64]) }
+    }
+
+    /// The 8 keys of tile row `ly` from column `lx`.
+    #[inline(always)]
+    fn chunk_mut(&mut self, lx: usize, ly: usize) -> &mut [u64; CHUNK] {
+        self.row_mut(lx, ly, CHUNK).try_into().unwrap()
+    }
+
+    /// The 8 rows of 8 keys of the block whose top-left tile pixel is `(lx, ly)`.
+    #[inline(always)]
+    fn block_rows(&mut self, lx: usize, ly: usize) -> [&mut [u64; CHUNK]; CHUNK] {
+        assert!(self.filled && lx + CHUNK <= self.tw && ly + CHUNK <= self.th);
+        let (at, stride) = (self.at(lx, ly), self.stride);
+        assert!(CHUNK <= stride && at + (CHUNK - 1) * stride + CHUNK <= self.keys.len());
+        let base = self.keys.as_mut_ptr().cast::<u64>();
+        // SAFETY: the rows lie in the tile (asserted), whose keys are all
+        // written; they are disjoint (`stride >= CHUNK`) and within `keys`.
+        std::array::from_fn(|i| unsafe { &mut *base.add(at + i * stride).cast::<[u64; CHUNK]>() })
+    }
+
+    /// A hit with key `k` at tile pixel `(lx, ly)`, covered with `facing`
     /// (+1 back, -1 front): the nearer key stays, and the hit is counted
     /// when coverage is.
     #[inline(always)]
-    fn offer(&mut self, at: usize, k: u64, facing: i8) {
-        if k < self.keys[at] {
-            self.keys[at] = k;
+    fn offer(&mut self, lx: usize, ly: usize, k: u64, facing: i8) {
+        let at = self.at(lx, ly);
+        let key = &mut self.row_mut(lx, ly, 1)[0];
+        if k < *key {
+            *key = k;
         }
         if let Some(cv) = self.cov.get_mut(at) {
             let slot = usize::from(facing > 0);
@@ -319,7 +398,7 @@ impl LazyBound {
         [lx0, lx1, ly0, ly1]: [usize; 4],
     ) -> bool {
         // An empty first pixel (a tile's first triangle) settles it at once.
-        if !self.on || out.keys[out.at(lx0, ly0)] == NO_HIT {
+        if !self.on || !out.filled || out.row(lx0, ly0, 1)[0] == NO_HIT {
             return false;
         }
         let factor = self.factor;
@@ -334,11 +413,7 @@ impl LazyBound {
         // fails `k <= low`, as does any key the triangle might beat, so the
         // scan stops at the first such key (at once, mostly, for a visible
         // triangle over a tile already drawn).
-        low != 0
-            && (ly0..=ly1).all(|ly| {
-                let row = out.at(lx0, ly);
-                out.keys[row..=row + (lx1 - lx0)].iter().all(|&k| k <= low)
-            })
+        low != 0 && (ly0..=ly1).all(|ly| out.row(lx0, ly, lx1 - lx0 + 1).iter().all(|&k| k <= low))
     }
 }
 
@@ -375,6 +450,7 @@ fn render_tile_body<L: Lanes>(
         fast_tile(l, scene, bin, mode, out, rays, c);
         return;
     }
+    out.fill();
     // The pure predicate path: every bounding-box pixel asks `visibility`.
     let pixel_rays: Vec<PixelRay> = (0..th)
         .flat_map(|ly| (0..tw).map(move |lx| (lx, ly)))
@@ -404,7 +480,7 @@ fn render_tile_body<L: Lanes>(
                 if facing != 0 {
                     let d = depth.get_or_insert_with(|| TriDepth::new(cam, t));
                     if let Some(z) = d.depth(cam, ray) {
-                        out.offer(out.at(lx, ly), hit_key(z, prim), facing);
+                        out.offer(lx, ly, hit_key(z, prim), facing);
                     }
                 }
             }
@@ -454,6 +530,7 @@ fn fast_tile<L: Lanes>(
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
             fresh = false;
+            out.fill();
             rays.ensure_dirs(l);
             small_box(l, cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
@@ -490,18 +567,35 @@ fn fast_tile<L: Lanes>(
                 let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
                 (s, whole)
             });
-            if let (Some(s), Some(b)) = (s, bound) {
-                let at = (out.at(lx0, 0), out.stride);
-                let rect = [lx0, lx1, ly0, ly1];
-                if b.all_hit && s.box_keys(rays, rect, b.eu, out.keys, at, prim, fresh_box) {
-                    let n = (bw * bh) as u64;
-                    c.coverage_tests += n;
-                    c.fast_decided += n;
-                    c.covered += n;
-                    continue;
+            let rect = [lx0, lx1, ly0, ly1];
+            let keys = match (s, bound) {
+                (Some(s), Some(b)) if b.all_hit => s.box_keys(rays, rect, b.eu, prim),
+                _ => None,
+            };
+            if let Some(keys) = keys {
+                let keys = &keys[..bh];
+                if fresh_box && !out.filled && rect == [0, out.tw - 1, 0, out.th - 1] {
+                    // The tile's first keys, all of them at once.
+                    out.write_rows(keys);
+                } else {
+                    out.fill();
+                    for (i, &k) in keys.iter().enumerate() {
+                        let row = out.row_mut(lx0, ly0 + i, bw);
+                        if fresh_box {
+                            row.fill(k);
+                        } else {
+                            row.iter_mut().for_each(|key| *key = (*key).min(k));
+                        }
+                    }
                 }
+                let n = (bw * bh) as u64;
+                c.coverage_tests += n;
+                c.fast_decided += n;
+                c.covered += n;
+                continue;
             }
         }
+        out.fill();
         // Boxes at least a chunk wide take chunks aligned to the tile's 8x8
         // blocks, so that whole blocks can be decided at once; narrower ones
         // take one chunk per row from their first column (any column:
@@ -654,9 +748,7 @@ fn covered_block<L: Lanes>(
         return false;
     }
     for (i, (z, &ok)) in z.iter().zip(&ok).enumerate() {
-        let row = out.at(base, r0 + i);
-        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
-        l.min_keys(keys, z, ok, prim);
+        l.min_keys(out.chunk_mut(base, r0 + i), z, ok, prim);
     }
     true
 }
@@ -682,14 +774,13 @@ fn screen_block<L: Lanes>(
     out: &mut TileOut,
 ) {
     let done = if bound.all_hit {
-        let at = (out.at(base, r0), out.stride);
-        s.block_keys(l, rays, (r0, base), bound.eu, out.keys, at, prim, fresh)
+        let mut rows = out.block_rows(base, r0);
+        s.block_keys(l, rays, (r0, base), bound.eu, &mut rows, prim, fresh)
     } else {
         0
     };
     for i in (0..CHUNK).filter(|i| (done >> i) & 1 == 0) {
-        let row = out.at(base, r0 + i);
-        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
+        let keys = out.chunk_mut(base, r0 + i);
         let (z, ok, sure) = s.row(l, rays, r0 + i, base, bound.eu);
         let (z, ok) = if sure == 0xff {
             (z, ok)
@@ -766,7 +857,7 @@ fn small_box<L: Lanes>(
         if facing != 0 {
             let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
             if let Some(z) = d.depth_at(cam, rays, lx, ly) {
-                out.offer(out.at(lx, ly), hit_key(z, prim), facing);
+                out.offer(lx, ly, hit_key(z, prim), facing);
             }
         }
     }
@@ -838,18 +929,16 @@ fn chunk_hits<L: Lanes>(
         }
     };
     let mut m = covered & ok;
-    let row = out.at(base, ly);
     if span == 0xff && out.cov.is_empty() {
         // All 8 lanes lie in the box (so in the tile): the z-buffer test 8 at a time.
-        let keys: &mut [u64; CHUNK] = (&mut out.keys[row..row + CHUNK]).try_into().unwrap();
-        l.min_keys(keys, &z, m, prim);
+        l.min_keys(out.chunk_mut(base, ly), &z, m, prim);
         return;
     }
     while m != 0 {
         let j = m.trailing_zeros() as usize;
         m &= m - 1;
         let facing = if (back >> j) & 1 == 1 { 1 } else { -1 };
-        out.offer(row + j, hit_key(z[j], prim), facing);
+        out.offer(base + j, ly, hit_key(z[j], prim), facing);
     }
 }
 

@@ -127,6 +127,9 @@ const _: () = assert!(FAST_EDGE_BOUND >= crate::predicate::O3D_ERRBOUND_A);
 /// Pixels per chunk: one evaluation step (two 256-bit vectors of f64).
 pub const CHUNK: usize = 8;
 
+/// The 8 rows of 8 keys of one block of a tile, to write.
+pub type BlockRows<'a> = [&'a mut [u64; CHUNK]; CHUNK];
+
 /// How a chunk of 8 comparisons becomes 8 mask bits: plain Rust everywhere
 /// ([`Portable`]), one `vcmppd` + `vmovmskpd` per half where the CPU has AVX2
 /// ([`Avx2`]). Both give the same bits (a test checks it).
@@ -201,7 +204,7 @@ pub trait Lanes: Copy {
 
     /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass over the 8
     /// rows of a block whose lanes all hit: row `i` has `R = r[i]` (the
-    /// rest of `p` is the block's) and its keys at `keys[at + i stride..]`.
+    /// rest of `p` is the block's) and its keys `rows[i]`.
     /// A row whose every lane is certified has its keys lowered (set, when
     /// `fresh`: the keys are all `NO_HIT`), and its bit set in the returned
     /// mask; other rows are left as they were.
@@ -212,8 +215,7 @@ pub trait Lanes: Copy {
         p: &ScreenRow,
         r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
-        keys: &mut [u64],
-        (at, stride): (usize, usize),
+        rows: &mut BlockRows,
         prim: u32,
         fresh: bool,
     ) -> u32 {
@@ -221,8 +223,7 @@ pub trait Lanes: Copy {
         for (i, &r) in r.iter().enumerate() {
             let (z, _, sure) = ScreenRow { r, ..*p }.lanes(sx);
             if sure == 0xff {
-                let row = at + i * stride;
-                let row: &mut [u64; CHUNK] = (&mut keys[row..row + CHUNK]).try_into().unwrap();
+                let row = &mut *rows[i];
                 if fresh {
                     for (k, &z) in row.iter_mut().zip(&z) {
                         *k = hit_key(z, prim);
@@ -239,16 +240,10 @@ pub trait Lanes: Copy {
     /// [`Lanes::min_key_rows`] on rows whose keys are all `NO_HIT`: the
     /// rows of mask `rows` set to their key, without reading them.
     #[inline(always)]
-    fn store_key_rows(
-        self,
-        keys: &mut [u64],
-        (at, stride): (usize, usize),
-        key: &[u64; CHUNK],
-        rows: u32,
-    ) {
-        for (i, &k) in key.iter().enumerate() {
-            if (rows >> i) & 1 == 1 {
-                keys[at + i * stride..][..CHUNK].fill(k);
+    fn store_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK], mask: u32) {
+        for (i, (row, &k)) in rows.iter_mut().zip(key).enumerate() {
+            if (mask >> i) & 1 == 1 {
+                row.fill(k);
             }
         }
     }
@@ -256,18 +251,11 @@ pub trait Lanes: Copy {
     /// Each of the 8 rows of keys from `keys[at]` (`stride` apart) lowered
     /// to its row's `key` where that is smaller (`NO_HIT`: unchanged).
     #[inline(always)]
-    fn min_key_rows(self, keys: &mut [u64], (at, stride): (usize, usize), key: &[u64; CHUNK]) {
-        let mut tmp = [[0u64; CHUNK]; CHUNK];
-        for (i, t) in tmp.iter_mut().enumerate() {
-            *t = keys[at + i * stride..][..CHUNK].try_into().unwrap();
-        }
-        for (t, &k) in tmp.iter_mut().zip(key) {
-            for t in t.iter_mut() {
+    fn min_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK]) {
+        for (row, &k) in rows.iter_mut().zip(key) {
+            for t in row.iter_mut() {
                 *t = (*t).min(k);
             }
-        }
-        for (i, t) in tmp.iter().enumerate() {
-            keys[at + i * stride..][..CHUNK].copy_from_slice(t);
         }
     }
 
@@ -784,16 +772,14 @@ impl Lanes for Avx2 {
         p: &ScreenRow,
         r: &[f64; CHUNK],
         sx: &[f64; CHUNK],
-        keys: &mut [u64],
-        (at, stride): (usize, usize),
+        rows: &mut BlockRows,
         prim: u32,
         fresh: bool,
     ) -> u32 {
         use std::arch::x86_64::*;
-        assert!(at + (CHUNK - 1) * stride + CHUNK <= keys.len());
         let mut done = 0;
         // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads read the
-        // borrowed arrays, and the key rows lie within `keys` (asserted).
+        // borrowed arrays, and each key row is 8 keys.
         unsafe {
             let num = _mm256_set1_pd(p.num);
             let a = _mm256_set1_pd(p.a);
@@ -813,7 +799,7 @@ impl Lanes for Avx2 {
                     continue;
                 }
                 // `min_keys` with every lane a hit.
-                let row = keys.as_mut_ptr().add(at + i * stride);
+                let row = rows[i].as_mut_ptr();
                 let bits0 = _mm_castps_si128(_mm256_cvtpd_ps(w0));
                 let bits1 = _mm_castps_si128(_mm256_cvtpd_ps(w1));
                 if fresh {
@@ -831,14 +817,12 @@ impl Lanes for Avx2 {
     }
 
     #[inline(always)]
-    fn min_key_rows(self, keys: &mut [u64], (at, stride): (usize, usize), key: &[u64; CHUNK]) {
+    fn min_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK]) {
         use std::arch::x86_64::_mm256_set1_epi64x;
-        assert!(at + (CHUNK - 1) * stride + CHUNK <= keys.len());
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the rows lie
-        // within `keys` (asserted), 8 keys each.
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; each row is 8 keys.
         unsafe {
-            for (i, &k) in key.iter().enumerate() {
-                let row = keys.as_mut_ptr().add(at + i * stride);
+            for (row, &k) in rows.iter_mut().zip(key) {
+                let row = row.as_mut_ptr();
                 let new = _mm256_set1_epi64x(k as i64);
                 min_keys4(row, new);
                 min_keys4(row.add(4), new);

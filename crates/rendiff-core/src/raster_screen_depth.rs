@@ -114,7 +114,7 @@
 //! against every f64 around a rounding boundary.
 
 use crate::camera::Camera;
-use crate::raster_edges::{ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
+use crate::raster_edges::{BlockRows, ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
 use crate::visibility::{hit_key, NO_HIT};
 
 /// Unit roundoff of f64.
@@ -145,7 +145,7 @@ pub fn rounds_alone(w: f64, eu: i64) -> bool {
 }
 
 /// The most rows [`ScreenDepth::box_keys`] takes (a tile's).
-const MAX_BOX_ROWS: usize = crate::raster::TILE as usize;
+pub const MAX_BOX_ROWS: usize = crate::raster::TILE as usize;
 
 /// One row of a block, as [`Lanes::screen_row`] evaluates it.
 #[derive(Debug, Clone, Copy)]
@@ -408,8 +408,8 @@ impl ScreenDepth {
         l.screen_row(&self.row_params(rays, row, eu), sx)
     }
 
-    /// The keys of the 8x8 block at tile pixel `(base, r0)` (its first key
-    /// at `keys[at]`, rows `stride` apart), in a block whose bound has
+    /// The keys of the 8x8 block at tile pixel `(base, r0)` (its rows
+    /// `rows`), in a block whose bound has
     /// `all_hit`: each row whose lanes [`rounds_alone`] all certifies gets
     /// its keys lowered to the certified depths and its bit in the returned
     /// mask; the other rows are left for the caller. [`ScreenDepth::row`]
@@ -424,14 +424,13 @@ impl ScreenDepth {
         rays: &TileRays,
         (r0, base): (usize, usize),
         eu: i64,
-        keys: &mut [u64],
-        (at, stride): (usize, usize),
+        rows: &mut BlockRows,
         prim: u32,
         fresh: bool,
     ) -> u32 {
         let [a, b, c] = self.coef;
         if a == 0.0 {
-            return self.row_constant_keys(l, rays, r0, eu, keys, (at, stride), prim, fresh);
+            return self.row_constant_keys(l, rays, r0, eu, rows, prim, fresh);
         }
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
         let p = self.row_params(rays, r0, eu);
@@ -439,7 +438,7 @@ impl ScreenDepth {
         for (i, r) in r.iter_mut().enumerate() {
             *r = b * rays.sy()[r0 + i] + c;
         }
-        l.screen_keys(&p, &r, sx, keys, (at, stride), prim, fresh)
+        l.screen_keys(&p, &r, sx, rows, prim, fresh)
     }
 
     /// [`ScreenDepth::block_keys`] where `a` is a zero (the plane's
@@ -460,8 +459,7 @@ impl ScreenDepth {
         rays: &TileRays,
         r0: usize,
         eu: i64,
-        keys: &mut [u64],
-        at: (usize, usize),
+        rows: &mut BlockRows,
         prim: u32,
         fresh: bool,
     ) -> u32 {
@@ -480,64 +478,40 @@ impl ScreenDepth {
             }
         }
         if fresh {
-            l.store_key_rows(keys, at, &key, done);
+            l.store_key_rows(rows, &key, done);
         } else if done != 0 {
-            l.min_key_rows(keys, at, &key);
+            l.min_key_rows(rows, &key);
         }
         done
     }
 
-    /// The keys of the tile rectangle `[lx0, lx1, ly0, ly1]` (row `ly`'s
-    /// first key, at column `lx0`, is `keys[at + ly stride]`; the sum wraps),
-    /// under a bound over the whole
-    /// rectangle with `all_hit`, when `a` is a zero and every row's key is
-    /// certified ([`ScreenDepth::row_constant_keys`]' argument: one key per
-    /// row, one for the rectangle where `b` is a zero too): each key
-    /// lowered to its row's (set, when `fresh`), and true. False, with
-    /// nothing written, otherwise.
-    #[allow(clippy::too_many_arguments)]
+    /// The key of each row of the tile rectangle `[lx0, lx1, ly0, ly1]`
+    /// (from row `ly0`), under a bound over the whole rectangle with
+    /// `all_hit`, when `a` is a zero and every row's key is certified
+    /// ([`ScreenDepth::row_constant_keys`]' argument: every pixel of a row
+    /// has its key; the rectangle one key where `b` is a zero too); `None`
+    /// otherwise.
     #[inline(always)]
     pub fn box_keys(
         &self,
         rays: &TileRays,
-        [lx0, lx1, ly0, ly1]: [usize; 4],
+        [_, _, ly0, ly1]: [usize; 4],
         eu: i64,
-        keys: &mut [u64],
-        (at, stride): (usize, usize),
         prim: u32,
-        fresh: bool,
-    ) -> bool {
+    ) -> Option<[u64; MAX_BOX_ROWS]> {
         let [a, b, c] = self.coef;
         if a != 0.0 || ly1 - ly0 >= MAX_BOX_ROWS {
-            return false;
+            return None;
         }
-        let mut row_key = [NO_HIT; MAX_BOX_ROWS];
-        let rows = &mut row_key[..=ly1 - ly0];
+        let mut key = [NO_HIT; MAX_BOX_ROWS];
         if b == 0.0 {
-            let Some(k) = self.row_key(c, eu, prim) else {
-                return false;
-            };
-            rows.fill(k);
+            key = [self.row_key(c, eu, prim)?; MAX_BOX_ROWS];
         } else {
-            for (i, k) in rows.iter_mut().enumerate() {
-                match self.row_key(b * rays.sy()[ly0 + i] + c, eu, prim) {
-                    Some(key) => *k = key,
-                    None => return false,
-                }
+            for (i, k) in key[..=ly1 - ly0].iter_mut().enumerate() {
+                *k = self.row_key(b * rays.sy()[ly0 + i] + c, eu, prim)?;
             }
         }
-        for (i, &k) in rows.iter().enumerate() {
-            let row = at.wrapping_add((ly0 + i) * stride);
-            let row = &mut keys[row..=row + (lx1 - lx0)];
-            if fresh {
-                row.fill(k);
-            } else {
-                for key in row {
-                    *key = (*key).min(k);
-                }
-            }
-        }
-        true
+        Some(key)
     }
 
     /// The key every lane of a row with `den = r` takes, when its `w` is
@@ -886,25 +860,35 @@ mod tests {
                     .unwrap();
                 Portable.min_keys(w, &z, 0xff, 5);
             }
+            // The block's rows in a key buffer of `stride` per row.
+            fn rows_of(v: &mut [u64], stride: usize) -> BlockRows<'_> {
+                let mut it = v.chunks_mut(stride);
+                std::array::from_fn(|_| (&mut it.next().unwrap()[..CHUNK]).try_into().unwrap())
+            }
             for (start, want, fresh) in [(&keys, &want, false), (&empty, &fresh_want, true)] {
-                // The block as a box: all of it, or (false) none of it.
-                let mut boxed = start.clone();
+                // The block as a box: each row one key, the row-then-z-test
+                // keys, or (None) not taken.
                 let rect = [base, base + CHUNK - 1, row, row + CHUNK - 1];
-                let at = (0usize.wrapping_sub(row * stride), stride);
-                let all =
-                    r.s.box_keys(r.rays, rect, r.bound.eu, &mut boxed, at, 5, fresh);
+                let boxed = r.s.box_keys(r.rays, rect, r.bound.eu, 5);
                 let can = r.s.coef[0] == 0.0 && rows == 0xff;
-                assert_eq!((all, &boxed), (can, if can { want } else { start }));
-                boxed_blocks += usize::from(all);
+                assert_eq!(boxed.is_some(), can);
+                if let Some(k) = boxed {
+                    let mut by_box = start.clone();
+                    for (i, &k) in k[..CHUNK].iter().enumerate() {
+                        for key in &mut by_box[i * stride..i * stride + CHUNK] {
+                            *key = (*key).min(k);
+                        }
+                    }
+                    assert_eq!(&by_box, want);
+                    boxed_blocks += 1;
+                }
                 let mut got = start.clone();
-                let at = (0, stride);
                 let done = r.s.block_keys(
                     Portable,
                     r.rays,
                     (row, base),
                     r.bound.eu,
-                    &mut got,
-                    at,
+                    &mut rows_of(&mut got, stride),
                     5,
                     fresh,
                 );
@@ -917,8 +901,7 @@ mod tests {
                         r.rays,
                         (row, base),
                         r.bound.eu,
-                        &mut wide,
-                        at,
+                        &mut rows_of(&mut wide, stride),
                         5,
                         fresh,
                     );
