@@ -171,6 +171,7 @@ fn keys_impl(
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
+            let mut setups = TriSetups::default();
             let mut written = 0;
             for tx in 0..tiles_x {
                 bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
@@ -186,7 +187,17 @@ fn keys_impl(
                 };
                 // Past the deadline a tile renders nothing (background).
                 if !bin.is_empty() && !crate::deadline::past(opts.deadline) {
-                    render_tile(scene, &bin, x0, y0, mode, &mut out, &mut rays, &mut c);
+                    render_tile(
+                        scene,
+                        &bin,
+                        x0,
+                        y0,
+                        mode,
+                        &mut out,
+                        &mut rays,
+                        &mut setups,
+                        &mut c,
+                    );
                 }
                 out.fill();
                 written += out.tw * out.th;
@@ -334,14 +345,15 @@ fn render_tile(
     mode: Mode,
     out: &mut TileOut,
     rays: &mut TileRays,
+    setups: &mut TriSetups,
     c: &mut Counters,
 ) {
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = Avx2::detect().filter(|_| mode.fast) {
         // SAFETY: the token proves the CPU has AVX2 and POPCNT.
-        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, rays, c) };
+        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, rays, setups, c) };
     }
-    render_tile_body(Portable, scene, bin, x0, y0, mode, out, rays, c)
+    render_tile_body(Portable, scene, bin, x0, y0, mode, out, rays, setups, c)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -356,9 +368,10 @@ fn render_tile_avx2(
     mode: Mode,
     out: &mut TileOut,
     rays: &mut TileRays,
+    setups: &mut TriSetups,
     c: &mut Counters,
 ) {
-    render_tile_body(avx2, scene, bin, x0, y0, mode, out, rays, c)
+    render_tile_body(avx2, scene, bin, x0, y0, mode, out, rays, setups, c)
 }
 
 /// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
@@ -417,6 +430,72 @@ impl LazyBound {
     }
 }
 
+/// A triangle's setups that depend on the camera and the triangle alone:
+/// its edges, its depth function's 8-lane form and its screen-space depth
+/// (the last two made when first needed).
+struct TriSetup {
+    /// The triangle.
+    prim: u32,
+    /// Its edge planes.
+    edges: TriEdges,
+    /// Its depth, 8 lanes at a time.
+    depth: Option<ChunkDepth>,
+    /// Its screen-space depth, before a tile's subnormal check
+    /// ([`ScreenDepth::for_plane`]).
+    screen: Option<Option<ScreenDepth>>,
+}
+
+impl TriSetup {
+    /// The edges now, the rest when needed.
+    #[inline(always)]
+    fn new(cam: &Camera, t: &Tri, prim: u32) -> TriSetup {
+        TriSetup {
+            prim,
+            edges: TriEdges::new(cam, t),
+            depth: None,
+            screen: None,
+        }
+    }
+
+    /// [`ScreenDepth::new`] for tile `rays`, the plane's part made once.
+    #[inline(always)]
+    fn screen_depth(
+        plane: &mut Option<Option<ScreenDepth>>,
+        cam: &Camera,
+        d: &ChunkDepth,
+        rays: &TileRays,
+    ) -> Option<ScreenDepth> {
+        if rays.subnormal() {
+            return None;
+        }
+        *plane.get_or_insert_with(|| ScreenDepth::for_plane(cam, d, rays.eta()))
+    }
+}
+
+/// The setups of the big triangles a band's tiles meet (a triangle of a
+/// block or more in a tile usually spans several of the band's tiles),
+/// by triangle, a few at a time.
+#[derive(Default)]
+struct TriSetups {
+    /// Slot `prim % SETUP_SLOTS`.
+    slots: [Option<TriSetup>; SETUP_SLOTS],
+}
+
+/// Big triangles remembered per band.
+const SETUP_SLOTS: usize = 4;
+
+impl TriSetups {
+    /// Triangle `prim`'s setups, made if its slot holds another's.
+    #[inline(always)]
+    fn get(&mut self, cam: &Camera, t: &Tri, prim: u32) -> &mut TriSetup {
+        let slot = &mut self.slots[prim as usize % SETUP_SLOTS];
+        if slot.as_ref().is_none_or(|s| s.prim != prim) {
+            *slot = Some(TriSetup::new(cam, t, prim));
+        }
+        slot.as_mut().unwrap()
+    }
+}
+
 /// How many bin entries ahead the tile loop prefetches a triangle.
 const PREFETCH_AHEAD: usize = 8;
 
@@ -440,6 +519,7 @@ fn render_tile_body<L: Lanes>(
     mode: Mode,
     out: &mut TileOut,
     rays: &mut TileRays,
+    setups: &mut TriSetups,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
@@ -447,7 +527,7 @@ fn render_tile_body<L: Lanes>(
     let th = TILE.min(cam.height - y0);
     if mode.fast {
         rays.fill(l, cam, x0, y0, tw, th);
-        fast_tile(l, scene, bin, mode, out, rays, c);
+        fast_tile(l, scene, bin, mode, out, rays, setups, c);
         return;
     }
     out.fill();
@@ -502,6 +582,7 @@ fn fast_tile<L: Lanes>(
     mode: Mode,
     out: &mut TileOut,
     rays: &mut TileRays,
+    setups: &mut TriSetups,
     c: &mut Counters,
 ) {
     let cam = &scene.camera;
@@ -535,14 +616,24 @@ fn fast_tile<L: Lanes>(
             small_box(l, cam, t, prim, rays, [lx0, lx1, ly0, ly1], out, c);
             continue;
         }
-        let edges = TriEdges::new(cam, t);
-        let f = FastEdges::new(&edges, rays);
+        let (bw, bh) = (lx1 - lx0 + 1, ly1 - ly0 + 1);
+        let big = bw >= CHUNK && bh >= CHUNK;
+        // A big triangle's setups come from the band's (it meets the band's
+        // other tiles too); a smaller one's are its own.
+        let (mut own_edges, mut own_depth, mut own_screen) = (None, None, None);
+        let (edges, depth, plane_screen) = if big {
+            let s = setups.get(cam, t, prim);
+            (&s.edges, &mut s.depth, &mut s.screen)
+        } else {
+            let e = &*own_edges.insert(TriEdges::new(cam, t));
+            (e, &mut own_depth, &mut own_screen)
+        };
+        let f = FastEdges::new(edges, rays);
         // A box of a block or more, by its corners: rejected, it adds its
         // pixels' counts (as its blocks and chunks would); covered, every
         // full block in it takes these signs. (Smaller boxes, most of a
         // finely meshed scene's, rarely settle whole: they skip the test.)
-        let (bw, bh) = (lx1 - lx0 + 1, ly1 - ly0 + 1);
-        let whole = (bw >= CHUNK && bh >= CHUNK).then(|| f.rect(rays, [lx0, lx1, ly0, ly1]));
+        let whole = big.then(|| f.rect(rays, [lx0, lx1, ly0, ly1]));
         if whole.is_some_and(|g| g.rejected() == 0xff) {
             let n = (bw * bh) as u64;
             c.coverage_tests += n;
@@ -553,7 +644,6 @@ fn fast_tile<L: Lanes>(
         // (each pixel once), so those the tile started with are `NO_HIT`.
         let fresh_box = std::mem::replace(&mut fresh, false);
         let whole = whole.filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
-        let mut depth: Option<ChunkDepth> = None;
         // Set up with the first covered block: the screen-space depth (`None`:
         // it cannot run here) and its bound over the whole box in the tile
         // (`None`: each block asks for its own).
@@ -563,7 +653,7 @@ fn fast_tile<L: Lanes>(
         if whole.is_some() && out.cov.is_empty() {
             let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
             let &mut (s, bound) = screen.get_or_insert_with(|| {
-                let s = ScreenDepth::new(cam, d, rays);
+                let s = TriSetup::screen_depth(plane_screen, cam, d, rays);
                 let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
                 (s, whole)
             });
@@ -626,7 +716,7 @@ fn fast_tile<L: Lanes>(
                     let d =
                         depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
                     let &mut (s, whole) = screen.get_or_insert_with(|| {
-                        let s = ScreenDepth::new(cam, d, rays);
+                        let s = TriSetup::screen_depth(plane_screen, cam, d, rays);
                         let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
                         (s, whole)
                     });
@@ -662,11 +752,11 @@ fn fast_tile<L: Lanes>(
                 // (Boxes of a block or more: set up like the covered blocks'.
                 // A smaller box's few rows take the rays' depths, which cost
                 // less than this setup.)
-                let rows_screen = if bw >= CHUNK && bh >= CHUNK {
+                let rows_screen = if big {
                     let d =
                         depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
                     let &mut (s, whole) = screen.get_or_insert_with(|| {
-                        let s = ScreenDepth::new(cam, d, rays);
+                        let s = TriSetup::screen_depth(plane_screen, cam, d, rays);
                         let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
                         (s, whole)
                     });
@@ -696,7 +786,7 @@ fn fast_tile<L: Lanes>(
                         }
                     };
                     let at = (ly, base, span);
-                    let d = &mut depth;
+                    let d = &mut *depth;
                     chunk_hits(
                         l,
                         cam,

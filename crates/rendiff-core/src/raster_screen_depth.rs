@@ -235,6 +235,13 @@ impl ScreenDepth {
         if rays.subnormal() {
             return None;
         }
+        Self::for_plane(cam, cd, rays.eta())
+    }
+
+    /// [`ScreenDepth::new`] without the tile's subnormal check: all that
+    /// depends on the camera, the triangle and `eps` (the tiles' `η`,
+    /// the camera's alone), so one triangle's serves every tile.
+    pub fn for_plane(cam: &Camera, cd: &ChunkDepth, eps: [f64; 3]) -> Option<Self> {
         let (n, num) = cd.plane();
         let (f, r, v) = (
             cam.forward.to_array(),
@@ -245,7 +252,6 @@ impl ScreenDepth {
         let abs_dot = |x: [f64; 3], y: [f64; 3]| {
             x[0].abs() * y[0].abs() + x[1].abs() * y[1].abs() + x[2].abs() * y[2].abs()
         };
-        let eps = rays.eta();
         let n_abs = n.map(f64::abs);
         let n_eps = abs_dot(n, eps);
         let f_eps = abs_dot(f, eps);
