@@ -575,6 +575,7 @@ fn render_tile_body<L: Lanes>(
 /// time from the same arithmetic as [`TriDepth::depth`]. Boxes of at most
 /// [`SMALL_BOX`] pixels take the predicate path directly.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn fast_tile<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
@@ -787,20 +788,7 @@ fn fast_tile<L: Lanes>(
                     };
                     let at = (ly, base, span);
                     let d = &mut *depth;
-                    chunk_hits(
-                        l,
-                        cam,
-                        t,
-                        prim,
-                        &edges,
-                        rays,
-                        sg,
-                        at,
-                        d,
-                        rows_screen,
-                        out,
-                        c,
-                    );
+                    chunk_hits(l, cam, t, prim, edges, rays, sg, at, d, rows_screen, out, c);
                 }
             }
         }
