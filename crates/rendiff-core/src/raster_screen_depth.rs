@@ -410,8 +410,19 @@ impl ScreenDepth {
         base: usize,
         eu: i64,
     ) -> ([f32; CHUNK], u32, u32) {
+        let p = self.row_params(rays, row, eu);
+        if p.a == 0.0 && p.r != 0.0 && p.r.is_finite() {
+            // Every lane's `den` is `R` (`ScreenDepth::row_constant_keys`):
+            // `ScreenRow::lanes`' arithmetic once serves all 8.
+            let w = p.num / p.r;
+            let z = w as f32;
+            let zf = f64::from(z);
+            let all = |b: bool| if b { 0xff } else { 0 };
+            let ok = (zf >= p.near) & (zf <= p.far);
+            return ([z; CHUNK], all(ok), all(rounds_alone(w, p.eu)));
+        }
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
-        l.screen_row(&self.row_params(rays, row, eu), sx)
+        l.screen_row(&p, sx)
     }
 
     /// The keys of the 8x8 block at tile pixel `(base, r0)` (its rows
@@ -731,6 +742,12 @@ mod tests {
         each_row(|r| {
             let (row, base) = r.at;
             let (z, ok, sure) = r.s.row(Portable, r.rays, row, base, r.bound.eu);
+            // The definition, lane by lane (`row` takes one lane's where
+            // `a` is a zero).
+            let sx: &[f64; CHUNK] = r.rays.sx()[base..base + CHUNK].try_into().unwrap();
+            let def = r.s.row_params(r.rays, row, r.bound.eu).lanes(sx);
+            assert_eq!(def.0.map(f32::to_bits), z.map(f32::to_bits));
+            assert_eq!((def.1, def.2), (ok, sure));
             #[cfg(target_arch = "x86_64")]
             if let Some(avx) = crate::raster_edges::Avx2::detect() {
                 let wide = r.s.row(avx, r.rays, row, base, r.bound.eu);
