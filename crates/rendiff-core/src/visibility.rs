@@ -261,8 +261,10 @@ pub const NO_HIT: u64 = u64::MAX;
 /// filled with [`NO_HIT`] and handed back as keys. Visibility passes fill
 /// their bands this way inside their parallel loops, each on its own
 /// thread, rather than pre-filling the buffer serially (or having `calloc`
-/// zero reused memory) before the loop: the raster, and the Embree backend
-/// so that its timed region pays no serial fill either. The one home of the
+/// zero reused memory) before the loop: the tracer, and the Embree backend
+/// so that its timed region pays no serial fill either. (The raster goes
+/// one step further: each tile writes its own keys, `NO_HIT` only where no
+/// triangle covers it whole, `raster::TileOut`.) The one home of this
 /// cast's safety argument.
 #[inline]
 pub fn fill_no_hit(band: &mut [std::mem::MaybeUninit<u64>]) -> &mut [u64] {
