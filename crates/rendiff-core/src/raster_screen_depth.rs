@@ -905,30 +905,18 @@ mod tests {
                     assert_eq!(&by_box, want);
                     boxed_blocks += 1;
                 }
-                let mut got = start.clone();
-                let done = r.s.block_keys(
-                    Portable,
-                    r.rays,
-                    (row, base),
-                    r.bound.eu,
-                    &mut rows_of(&mut got, stride),
-                    5,
-                    fresh,
-                );
-                assert_eq!((done, &got), (rows, want));
+                // `block_keys` on a copy of `start`, with lanes `l`.
+                fn keys_by<L: Lanes>(l: L, r: &Row, start: &[u64], fresh: bool) -> (u32, Vec<u64>) {
+                    let (mut got, (row, base)) = (start.to_vec(), r.at);
+                    let rows = &mut rows_of(&mut got, start.len() / CHUNK);
+                    let done =
+                        r.s.block_keys(l, r.rays, (row, base), r.bound.eu, rows, 5, fresh);
+                    (done, got)
+                }
+                assert_eq!(keys_by(Portable, r, start, fresh), (rows, want.clone()));
                 #[cfg(target_arch = "x86_64")]
                 if let Some(avx) = crate::raster_edges::Avx2::detect() {
-                    let mut wide = start.clone();
-                    let done = r.s.block_keys(
-                        avx,
-                        r.rays,
-                        (row, base),
-                        r.bound.eu,
-                        &mut rows_of(&mut wide, stride),
-                        5,
-                        fresh,
-                    );
-                    assert_eq!((done, &wide), (rows, want));
+                    assert_eq!(keys_by(avx, r, start, fresh), (rows, want.clone()));
                 }
             }
         });
