@@ -641,8 +641,9 @@ fn fast_tile<L: Lanes>(
             c.fast_decided += n;
             continue;
         }
-        // Only this triangle can have written the keys it reads from here on
-        // (each pixel once), so those the tile started with are `NO_HIT`.
+        // No earlier triangle wrote in the tile: its keys are `NO_HIT` (or
+        // not yet written), so a box this triangle covers with one key per
+        // row can set them without the z-test (`box_keys` below).
         let fresh_box = std::mem::replace(&mut fresh, false);
         let whole = whole.filter(|g| g.inside_pos() | g.inside_neg() == 0xff);
         // Set up with the first covered block: the screen-space depth (`None`:
@@ -731,7 +732,7 @@ fn fast_tile<L: Lanes>(
                     let done = match (s, bound) {
                         (Some(s), Some(b)) => {
                             let at = (r0, base);
-                            screen_block(l, cam, prim, rays, &s, d, b, at, fresh_box, out);
+                            screen_block(l, cam, prim, rays, &s, d, b, at, out);
                             true
                         }
                         _ => false,
@@ -848,12 +849,11 @@ fn screen_block<L: Lanes>(
     d: &ChunkDepth,
     bound: BlockBound,
     (r0, base): (usize, usize),
-    fresh: bool,
     out: &mut TileOut,
 ) {
     let done = if bound.all_hit {
         let mut rows = out.block_rows(base, r0);
-        s.block_keys(l, rays, (r0, base), bound.eu, &mut rows, prim, fresh)
+        s.block_keys(l, rays, (r0, base), bound.eu, &mut rows, prim)
     } else {
         0
     };

@@ -205,9 +205,8 @@ pub trait Lanes: Copy {
     /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass over the 8
     /// rows of a block whose lanes all hit: row `i` has `R = r[i]` (the
     /// rest of `p` is the block's) and its keys `rows[i]`.
-    /// A row whose every lane is certified has its keys lowered (set, when
-    /// `fresh`: the keys are all `NO_HIT`), and its bit set in the returned
-    /// mask; other rows are left as they were.
+    /// A row whose every lane is certified has its keys lowered, and its
+    /// bit set in the returned mask; other rows are left as they were.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn screen_keys(
@@ -217,39 +216,20 @@ pub trait Lanes: Copy {
         sx: &[f64; CHUNK],
         rows: &mut BlockRows,
         prim: u32,
-        fresh: bool,
     ) -> u32 {
         let mut done = 0;
         for (i, &r) in r.iter().enumerate() {
             let (z, _, sure) = ScreenRow { r, ..*p }.lanes(sx);
             if sure == 0xff {
-                let row = &mut *rows[i];
-                if fresh {
-                    for (k, &z) in row.iter_mut().zip(&z) {
-                        *k = hit_key(z, prim);
-                    }
-                } else {
-                    self.min_keys(row, &z, 0xff, prim);
-                }
+                self.min_keys(rows[i], &z, 0xff, prim);
                 done |= 1 << i;
             }
         }
         done
     }
 
-    /// [`Lanes::min_key_rows`] on rows whose keys are all `NO_HIT`: the
-    /// rows of mask `rows` set to their key, without reading them.
-    #[inline(always)]
-    fn store_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK], mask: u32) {
-        for (i, (row, &k)) in rows.iter_mut().zip(key).enumerate() {
-            if (mask >> i) & 1 == 1 {
-                row.fill(k);
-            }
-        }
-    }
-
-    /// Each of the 8 rows of keys from `keys[at]` (`stride` apart) lowered
-    /// to its row's `key` where that is smaller (`NO_HIT`: unchanged).
+    /// Each of a block's 8 rows of keys lowered to its row's `key` where
+    /// that is smaller (`NO_HIT`: unchanged).
     #[inline(always)]
     fn min_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK]) {
         for (row, &k) in rows.iter_mut().zip(key) {
@@ -774,7 +754,6 @@ impl Lanes for Avx2 {
         sx: &[f64; CHUNK],
         rows: &mut BlockRows,
         prim: u32,
-        fresh: bool,
     ) -> u32 {
         use std::arch::x86_64::*;
         let mut done = 0;
@@ -802,14 +781,8 @@ impl Lanes for Avx2 {
                 let row = rows[i].as_mut_ptr();
                 let bits0 = _mm_castps_si128(_mm256_cvtpd_ps(w0));
                 let bits1 = _mm_castps_si128(_mm256_cvtpd_ps(w1));
-                if fresh {
-                    let p = row.cast::<__m256i>();
-                    _mm256_storeu_si256(p, hit_keys4(bits0, low));
-                    _mm256_storeu_si256(p.add(1), hit_keys4(bits1, low));
-                } else {
-                    min_keys4(row, hit_keys4(bits0, low));
-                    min_keys4(row.add(4), hit_keys4(bits1, low));
-                }
+                min_keys4(row, hit_keys4(bits0, low));
+                min_keys4(row.add(4), hit_keys4(bits1, low));
                 done |= 1 << i;
             }
         }

@@ -430,9 +430,7 @@ impl ScreenDepth {
     /// `all_hit`: each row whose lanes [`rounds_alone`] all certifies gets
     /// its keys lowered to the certified depths and its bit in the returned
     /// mask; the other rows are left for the caller. [`ScreenDepth::row`]
-    /// and the z-test in one pass. `fresh`: every key of the block is
-    /// still `NO_HIT` (no triangle has written in the tile yet), so the
-    /// z-test's result is the new key itself, stored without reading.
+    /// and the z-test in one pass.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn block_keys<L: Lanes>(
@@ -443,11 +441,10 @@ impl ScreenDepth {
         eu: i64,
         rows: &mut BlockRows,
         prim: u32,
-        fresh: bool,
     ) -> u32 {
         let [a, b, c] = self.coef;
         if a == 0.0 {
-            return self.row_constant_keys(l, rays, r0, eu, rows, prim, fresh);
+            return self.row_constant_keys(l, rays, r0, eu, rows, prim);
         }
         let sx: &[f64; CHUNK] = rays.sx()[base..base + CHUNK].try_into().unwrap();
         let p = self.row_params(rays, r0, eu);
@@ -455,7 +452,7 @@ impl ScreenDepth {
         for (i, r) in r.iter_mut().enumerate() {
             *r = b * rays.sy()[r0 + i] + c;
         }
-        l.screen_keys(&p, &r, sx, rows, prim, fresh)
+        l.screen_keys(&p, &r, sx, rows, prim)
     }
 
     /// [`ScreenDepth::block_keys`] where `a` is a zero (the plane's
@@ -478,7 +475,6 @@ impl ScreenDepth {
         eu: i64,
         rows: &mut BlockRows,
         prim: u32,
-        fresh: bool,
     ) -> u32 {
         let [_, b, c] = self.coef;
         let mut key = [NO_HIT; CHUNK];
@@ -494,9 +490,7 @@ impl ScreenDepth {
                 }
             }
         }
-        if fresh {
-            l.store_key_rows(rows, &key, done);
-        } else if done != 0 {
+        if done != 0 {
             l.min_key_rows(rows, &key);
         }
         done
@@ -872,8 +866,9 @@ mod tests {
                     written += 1;
                 }
             }
-            // Over the keys as they were, and (`fresh`) over a block
-            // still all `NO_HIT`, whose z-test leaves the new keys.
+            // Over the keys as they were, and over a block still all
+            // `NO_HIT` (a tile's first triangle), whose z-test leaves the
+            // new keys.
             let empty = vec![crate::visibility::NO_HIT; keys.len()];
             let mut fresh_want = empty.clone();
             for i in (0..CHUNK).filter(|i| (rows >> i) & 1 == 1) {
@@ -888,7 +883,7 @@ mod tests {
                 let mut it = v.chunks_mut(stride);
                 std::array::from_fn(|_| (&mut it.next().unwrap()[..CHUNK]).try_into().unwrap())
             }
-            for (start, want, fresh) in [(&keys, &want, false), (&empty, &fresh_want, true)] {
+            for (start, want) in [(&keys, &want), (&empty, &fresh_want)] {
                 // The block as a box: each row one key, the row-then-z-test
                 // keys, or (None) not taken.
                 let rect = [base, base + CHUNK - 1, row, row + CHUNK - 1];
@@ -906,17 +901,16 @@ mod tests {
                     boxed_blocks += 1;
                 }
                 // `block_keys` on a copy of `start`, with lanes `l`.
-                fn keys_by<L: Lanes>(l: L, r: &Row, start: &[u64], fresh: bool) -> (u32, Vec<u64>) {
+                fn keys_by<L: Lanes>(l: L, r: &Row, start: &[u64]) -> (u32, Vec<u64>) {
                     let (mut got, (row, base)) = (start.to_vec(), r.at);
                     let rows = &mut rows_of(&mut got, start.len() / CHUNK);
-                    let done =
-                        r.s.block_keys(l, r.rays, (row, base), r.bound.eu, rows, 5, fresh);
+                    let done = r.s.block_keys(l, r.rays, (row, base), r.bound.eu, rows, 5);
                     (done, got)
                 }
-                assert_eq!(keys_by(Portable, r, start, fresh), (rows, want.clone()));
+                assert_eq!(keys_by(Portable, r, start), (rows, want.clone()));
                 #[cfg(target_arch = "x86_64")]
                 if let Some(avx) = crate::raster_edges::Avx2::detect() {
-                    assert_eq!(keys_by(avx, r, start, fresh), (rows, want.clone()));
+                    assert_eq!(keys_by(avx, r, start), (rows, want.clone()));
                 }
             }
         });
