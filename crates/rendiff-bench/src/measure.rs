@@ -178,6 +178,95 @@ pub fn embree_with(
     ))
 }
 
+/// The core's ray queries and one Embree configuration timed in alternation:
+/// one run of each per round, after a warm-up of each. On a shared machine
+/// whose speed drifts by tens of percent over minutes (other tenants' use of
+/// a shared L3), two medians taken minutes apart compare two machines; each
+/// round's ratio compares the two renderers on the same one.
+pub struct Paired {
+    /// The core's query time per round.
+    pub core_s: Vec<f64>,
+    /// Embree's trace time per round.
+    pub embree_trace_s: Vec<f64>,
+    /// Rays Embree traced per frame (the pixels plus any re-traces).
+    pub embree_rays: u64,
+    /// Rays the core traced per frame (one per pixel).
+    pub core_rays: u64,
+}
+
+impl Paired {
+    /// Core Mrays/s over Embree Mrays/s, per round.
+    pub fn ratios(&self) -> Vec<f64> {
+        self.core_s
+            .iter()
+            .zip(&self.embree_trace_s)
+            .map(|(&c, &e)| (self.core_rays as f64 / c) / (self.embree_rays as f64 / e))
+            .collect()
+    }
+
+    /// The median of the per-round ratios: the paired comparison's answer.
+    pub fn ratio(&self) -> f64 {
+        super::median(&self.ratios())
+    }
+
+    /// The rounds as JSON, with both sides' medians.
+    pub fn json(&self) -> Value {
+        let mrays = |rays: u64, s: &[f64]| rays as f64 / super::median(s) / 1e6;
+        json!({
+            "rounds": self.core_s.len(),
+            "core_rays": self.core_rays,
+            "embree_rays": self.embree_rays,
+            "core_s": self.core_s,
+            "embree_trace_s": self.embree_trace_s,
+            "core_mrays_per_s": mrays(self.core_rays, &self.core_s),
+            "embree_mrays_per_s": mrays(self.embree_rays, &self.embree_trace_s),
+            "core_over_embree_per_round": self.ratios(),
+            "core_over_embree": self.ratio(),
+        })
+    }
+}
+
+/// Times the core's queries through `bvh` and Embree's `config` in
+/// alternation, `runs` rounds after one untimed run of each, on rayon's
+/// current pool.
+pub fn paired_with_embree(
+    scene: &ResolvedScene,
+    bvh: &TraceBvh,
+    kernel: trace::TraceKernel,
+    config: (EmbreeMode, EmbreeBuild),
+    query: EmbreeQuery,
+    coherence: EmbreeCoherence,
+    runs: usize,
+) -> Result<Paired, EmbreeError> {
+    let opts = trace::TraceOptions {
+        kernel,
+        ..trace::TraceOptions::default()
+    };
+    let core = || {
+        let t = std::time::Instant::now();
+        let keys = trace::trace_keys(scene, bvh, opts, &|_| {});
+        (t.elapsed().as_secs_f64(), keys.keys.len() as u64)
+    };
+    let embree = || embree::render_timed_with(scene, config.0, config.1, query, coherence);
+    core();
+    embree()?;
+    let mut p = Paired {
+        core_s: Vec::new(),
+        embree_trace_s: Vec::new(),
+        embree_rays: 0,
+        core_rays: 0,
+    };
+    for _ in 0..runs.max(1) {
+        let (s, rays) = core();
+        p.core_s.push(s);
+        p.core_rays = rays;
+        let (_, t) = embree()?;
+        p.embree_trace_s.push(t.trace_seconds);
+        p.embree_rays = t.rays;
+    }
+    Ok(p)
+}
+
 /// A short name for an Embree configuration with the default (incoherent)
 /// context: "embree single", "embree_robust packet8", ... (the keys earlier
 /// records and pages use).
@@ -210,6 +299,30 @@ pub fn embree_name_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each round's ratio is the two speeds in that round; the answer is
+    /// their median, not the ratio of the two sides' medians.
+    #[test]
+    fn paired_ratio_is_the_median_of_per_round_ratios() {
+        let p = Paired {
+            core_s: vec![1.0, 2.0, 4.0],
+            embree_trace_s: vec![2.0, 2.0, 2.0],
+            embree_rays: 10,
+            core_rays: 20,
+        };
+        // Per round: (20/1)/(10/2) = 4, (20/2)/(10/2) = 2, (20/4)/(10/2) = 1.
+        assert_eq!(p.ratios(), vec![4.0, 2.0, 1.0]);
+        assert_eq!(p.ratio(), 2.0);
+        // Drift that slows both sides alike leaves every round's ratio as it was.
+        let drifted = Paired {
+            core_s: vec![1.0, 1.5, 3.0],
+            embree_trace_s: vec![1.0, 1.5, 3.0],
+            embree_rays: 10,
+            core_rays: 10,
+        };
+        assert_eq!(drifted.ratios(), vec![1.0; 3]);
+        assert_eq!(p.json()["core_over_embree"], 2.0);
+    }
 
     #[test]
     fn embree_names_keep_the_earlier_keys() {

@@ -202,6 +202,44 @@ fn peers_writes_throughput_ratios() {
         assert!(rows[0]["ratios"]["core_over_embree_best"]
             .as_f64()
             .is_some_and(|x| x > 0.0));
+        // The headline ratio comes from alternating rounds of the core and
+        // that configuration, recomputed here from the recorded times.
+        let b = &rows[0]["embree_best"];
+        assert_eq!(b["core_over_embree_best_basis"], "paired rounds", "{b}");
+        let p = &b["paired"];
+        let series = |k: &str| -> Vec<f64> {
+            p[k].as_array()
+                .expect("series")
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        };
+        let (core_s, embree_s) = (series("core_s"), series("embree_trace_s"));
+        assert_eq!(core_s.len(), p["rounds"].as_u64().unwrap() as usize);
+        assert_eq!(embree_s.len(), core_s.len());
+        let rays = |k: &str| p[k].as_f64().expect("ray count");
+        assert_eq!(
+            rays("core_rays"),
+            f64::from(64u32 * 48),
+            "--quick: icosphere at 64x48"
+        );
+        let mut ratios: Vec<f64> = core_s
+            .iter()
+            .zip(&embree_s)
+            .map(|(c, e)| (rays("core_rays") / c) / (rays("embree_rays") / e))
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let n = ratios.len();
+        let median = if n % 2 == 1 {
+            ratios[n / 2]
+        } else {
+            (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
+        };
+        let headline = b["core_over_embree_best"].as_f64().unwrap();
+        assert!(
+            (headline - median).abs() <= 1e-12 * median,
+            "{headline} vs {median}"
+        );
         assert!(rows[0]["ratios"]["core_trace_over_embree_single"]
             .as_f64()
             .is_some());
