@@ -248,23 +248,70 @@ pub fn paired_with_embree(
         (t.elapsed().as_secs_f64(), keys.keys.len() as u64)
     };
     let embree = || embree::render_timed_with(scene, config.0, config.1, query, coherence);
-    core();
-    embree()?;
-    let mut p = Paired {
-        core_s: Vec::new(),
-        embree_trace_s: Vec::new(),
-        embree_rays: 0,
-        core_rays: 0,
-    };
+    let (mut core_rays, mut embree_rays) = (0, 0);
+    let (core_s, embree_trace_s) = alternate(
+        runs,
+        || {
+            let (s, rays) = core();
+            core_rays = rays;
+            Ok(s)
+        },
+        || {
+            let (_, t) = embree()?;
+            embree_rays = t.rays;
+            Ok(t.trace_seconds)
+        },
+    )?;
+    Ok(Paired {
+        core_s,
+        embree_trace_s,
+        embree_rays,
+        core_rays,
+    })
+}
+
+/// One untimed call of each, then `runs` rounds of `a` then `b`: each
+/// returns the seconds its own timed phase took. The two series come back
+/// in round order, so round `i` of one pairs with round `i` of the other.
+pub fn alternate<E>(
+    runs: usize,
+    mut a: impl FnMut() -> Result<f64, E>,
+    mut b: impl FnMut() -> Result<f64, E>,
+) -> Result<(Vec<f64>, Vec<f64>), E> {
+    a()?;
+    b()?;
+    let (mut sa, mut sb) = (Vec::new(), Vec::new());
     for _ in 0..runs.max(1) {
-        let (s, rays) = core();
-        p.core_s.push(s);
-        p.core_rays = rays;
-        let (_, t) = embree()?;
-        p.embree_trace_s.push(t.trace_seconds);
-        p.embree_rays = t.rays;
+        sa.push(a()?);
+        sb.push(b()?);
     }
-    Ok(p)
+    Ok((sa, sb))
+}
+
+/// The raster's and the tracer's visibility passes (hit keys per pixel, the
+/// tracer's packets through a built BVH), timed in alternation as
+/// [`alternate`] does: the lesson's budget question on one scene, each
+/// round's ratio taken on the same machine state.
+pub fn raster_vs_trace(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Value {
+    let time = |f: &mut dyn FnMut() -> PixelKeys| -> Result<f64, std::convert::Infallible> {
+        let t = std::time::Instant::now();
+        f();
+        Ok(t.elapsed().as_secs_f64())
+    };
+    let opts = trace::TraceOptions::default();
+    let Ok((raster_s, trace_s)) = alternate(
+        runs,
+        || time(&mut || raster::render_keys(scene, RasterOptions::default(), &|_| {})),
+        || time(&mut || trace::trace_keys(scene, bvh, opts, &|_| {})),
+    );
+    let speedups: Vec<f64> = raster_s.iter().zip(&trace_s).map(|(r, t)| t / r).collect();
+    json!({
+        "rounds": raster_s.len(),
+        "raster_keys_s": raster_s,
+        "trace_keys_s": trace_s,
+        "trace_over_raster_per_round": speedups,
+        "raster_speedup_over_trace": super::median(&speedups),
+    })
 }
 
 /// A short name for an Embree configuration with the default (incoherent)
@@ -299,6 +346,29 @@ pub fn embree_name_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A warm-up of each side, then rounds of a then b, in that order.
+    #[test]
+    fn alternate_warms_up_then_pairs_rounds() {
+        let log = std::cell::RefCell::new(Vec::new());
+        let (a, b) = alternate::<()>(
+            3,
+            || {
+                log.borrow_mut().push('a');
+                Ok(log.borrow().len() as f64)
+            },
+            || {
+                log.borrow_mut().push('b');
+                Ok(-(log.borrow().len() as f64))
+            },
+        )
+        .unwrap();
+        assert_eq!(log.into_inner().iter().collect::<String>(), "abababab");
+        assert_eq!(a, vec![3.0, 5.0, 7.0]);
+        assert_eq!(b, vec![-4.0, -6.0, -8.0]);
+        let failing = alternate(2, || Ok(1.0), || Err("b failed"));
+        assert_eq!(failing, Err("b failed"));
+    }
 
     /// Each round's ratio is the two speeds in that round; the answer is
     /// their median, not the ratio of the two sides' medians.

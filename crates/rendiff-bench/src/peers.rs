@@ -176,6 +176,8 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
             (&packets_medium, BvhQuality::Medium, &core.build.last)
         };
         let raster = measure::raster(scene, runs);
+        rendiff::errln!("peers: {threads} thread(s), raster and trace passes in alternation");
+        let raster_vs_trace = measure::raster_vs_trace(scene, best_bvh, runs);
         let core_mrays = pixels / packets.median_s / 1e6;
         let single_mrays = pixels / single.median_s / 1e6;
         let mut embree = Map::new();
@@ -258,6 +260,7 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                            "raster_equals_trace": visibility_error(&raster.last, &single.last).identical()},
             "core_raster": {"timing": raster.json(), "mpixels_per_s": pixels / raster.median_s / 1e6,
                             "counters": raster.last.counters},
+            "raster_vs_trace_passes": raster_vs_trace,
             "embree": embree,
             "embree_best": best,
             "embree_best_robust": best_robust,
@@ -348,7 +351,13 @@ fn goals(record: &Value) -> Value {
         .flatten()
         .map(best_goal)
         .collect();
+    let raster_vs_trace: Vec<Value> = t
+        .iter()
+        .map(|r| json!({"threads": r["threads"],
+                        "raster_speedup_over_trace": r["raster_vs_trace_passes"]["raster_speedup_over_trace"]}))
+        .collect();
     json!({
+        "core_raster_vs_trace_passes": raster_vs_trace,
         "core_trace_vs_embree_single_ray": single,
         "core_trace_vs_embree_best": best,
         "core_trace_vs_embree_best_scanned_mesh": scanned,
@@ -807,6 +816,20 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
                 num(r["embree_best_robust"]["mrays_per_s"].as_f64(), 4),
             ));
         }
+        let rt = &r["raster_vs_trace_passes"];
+        p.note(&format!(
+            "{th} thread(s): the raster's visibility pass is {}x the tracer's speed \
+             (median of {} alternating rounds' ratios; trace / raster time per round: {}).",
+            num(rt["raster_speedup_over_trace"].as_f64(), 3),
+            super::page::compact(&rt["rounds"]),
+            rt["trace_over_raster_per_round"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|v| num(v.as_f64(), 3))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
         p.note(&format!(
             "{th} thread(s): core Mrays/s time the ray queries up to per-pixel hit keys, \
              as Embree's trace_s does; the whole core render, filling the depth, ID, \

@@ -177,6 +177,26 @@ fn peers_writes_throughput_ratios() {
         rows[0]["core_trace_single_rays"]["raster_equals_trace"],
         true
     );
+    // The raster-vs-trace passes in alternating rounds: the headline is the
+    // median of the per-round trace / raster time ratios.
+    let rt = &rows[0]["raster_vs_trace_passes"];
+    let (r_s, t_s) = (&rt["raster_keys_s"], &rt["trace_keys_s"]);
+    let mut speedups: Vec<f64> = (0..rt["rounds"].as_u64().unwrap() as usize)
+        .map(|i| t_s[i].as_f64().unwrap() / r_s[i].as_f64().unwrap())
+        .collect();
+    assert!(!speedups.is_empty());
+    speedups.sort_by(f64::total_cmp);
+    let n = speedups.len();
+    let median = (speedups[(n - 1) / 2] + speedups[n / 2]) / 2.0;
+    assert_eq!(
+        rt["raster_speedup_over_trace"].as_f64(),
+        Some(median),
+        "{rt}"
+    );
+    assert_eq!(
+        record["goals"]["core_raster_vs_trace_passes"][0]["raster_speedup_over_trace"],
+        rt["raster_speedup_over_trace"]
+    );
     assert!(record.get("goals").is_some());
     // With Embree: every configuration kept, the fastest named, the core's ratio against it.
     let embree = rows[0]["embree"].as_object().expect("embree rows");
