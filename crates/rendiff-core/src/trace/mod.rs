@@ -6,6 +6,7 @@
 //! triangles and grown by [`grow_box`], so pruning is conservative: a box is
 //! skipped only when its nearest possible key is worse than the best hit.
 
+mod frustum;
 mod nodes;
 /// A cache hint the raster's tile loop shares (for the triangles its bins name next).
 pub(crate) use nodes::prefetch;
@@ -92,6 +93,8 @@ pub struct TraceBvh {
     leaves: Vec<LeafTri>,
     /// Per-prim pixel rectangles in `prims` order, for packets ([`rect`]).
     rects: Vec<rect::PixelRect>,
+    /// Every packet's frustum planes ([`frustum`]).
+    planes: frustum::PacketPlanes,
     /// Seconds spent in obvhs's builder plus our refit.
     pub build_seconds: f64,
 }
@@ -111,6 +114,7 @@ impl TraceBvh {
                 nodes32: Nodes32::empty(),
                 leaves: Vec::new(),
                 rects: Vec::new(),
+                planes: frustum::PacketPlanes::empty(),
                 build_seconds: 0.0,
             };
         }
@@ -191,6 +195,7 @@ impl TraceBvh {
             nodes32,
             leaves,
             rects,
+            planes: frustum::PacketPlanes::new(cam),
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }

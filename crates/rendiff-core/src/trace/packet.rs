@@ -15,11 +15,18 @@
 //! lost to 8x4 by 3-6%; an AVX-512 build of this kernel and an interval-arithmetic
 //! whole-packet box test were no faster on the AMD EPYC test machine.)
 //!
-//! Counters: `bvh_nodes_visited` counts the live lanes at each box test, as
-//! before; `coverage_tests` counts the (triangle, lane) pairs that reach the
+//! Before a child is pushed, the packet's frustum ([`super::frustum`]) tests
+//! it and its sibling in one 8-lane step; a child wholly outside is never
+//! pushed, slab-tested or prefetched below. On `million` at 1080p that drops
+//! a third of the boxes popped (the kernel ran 5-10% faster, alternated in
+//! one process on the 2-vCPU Intel Xeon), with the same keys.
+//!
+//! Counters: `bvh_nodes_visited` counts the live lanes at each (per-lane)
+//! box test, so not the children the frustum culls; `coverage_tests` counts the (triangle, lane) pairs that reach the
 //! edge tests, i.e. after the rectangle culling, so it is lower than the
 //! single-ray kernel's (which tests every candidate the tree hands it).
 
+use super::frustum::Frustum;
 use super::nodes::{prefetch, Nodes32};
 use super::primary::{dir_norm_bound, LeafTri, Node32};
 use super::rect::PixelRect;
@@ -93,6 +100,9 @@ pub(crate) struct Packet {
     /// a lane's point on the image plane.
     sx: [f64; PW],
     sy: [f64; PH],
+    /// The planes every lane's ray lies inside (whole-packet culling; none
+    /// until the tree's [`super::frustum::PacketPlanes`] give them).
+    frustum: Frustum,
     /// Lanes inside the image.
     active: Mask,
     /// Per axis, the sign every lane's direction shares (+1 or -1, by the sign
@@ -188,6 +198,7 @@ impl Packet {
             *sign = i8::from(pos) - i8::from(neg);
         }
         Packet {
+            frustum: Frustum::NONE,
             axis_sign,
             d64,
             planar,
@@ -423,6 +434,7 @@ impl TraceBvh {
         if self.nodes32.is_empty() || pk.active == 0 {
             return pk.best;
         }
+        pk.frustum = self.planes.packet(x0, y0);
         // Near-to-far child order along the packet's mean direction.
         let mut mean = [0f32; 3];
         for (m, d) in mean.iter_mut().zip(&pk.dir) {
@@ -448,13 +460,28 @@ impl TraceBvh {
             }
             let (a, b) = (node.first, node.first + 1);
             let (na, nb) = (self.nodes32.get(a), self.nodes32.get(b));
-            self.prefetch_below(na);
-            self.prefetch_below(nb);
-            let da = na.center_along(&mean);
-            let db = nb.center_along(&mean);
-            let (near, far) = if da <= db { (a, b) } else { (b, a) };
-            stack.push((far, m));
-            stack.push((near, m));
+            // A child wholly outside the packet's frustum is never pushed
+            // (nor what lies below it prefetched).
+            match pk.frustum.excludes(s, na, nb) {
+                [true, true] => {}
+                [false, true] => {
+                    self.prefetch_below(na);
+                    stack.push((a, m));
+                }
+                [true, false] => {
+                    self.prefetch_below(nb);
+                    stack.push((b, m));
+                }
+                [false, false] => {
+                    self.prefetch_below(na);
+                    self.prefetch_below(nb);
+                    let da = na.center_along(&mean);
+                    let db = nb.center_along(&mean);
+                    let (near, far) = if da <= db { (a, b) } else { (b, a) };
+                    stack.push((far, m));
+                    stack.push((near, m));
+                }
+            }
         }
         pk.best
     }

@@ -1,8 +1,9 @@
 //! The packet kernel's row operations: 8 lanes at once, read off as 8 mask bits.
 //!
 //! The packet kernel decides everything per lane with f32 comparisons and then
-//! works with bit masks: the box test ([`Rows::box_out`]) and a triangle's
-//! edge signs ([`Rows::edge_signs`]). Written as plain loops over a packet,
+//! works with bit masks: the box test ([`Rows::box_out`]), a triangle's
+//! edge signs ([`Rows::edge_signs`]) and the frustum test of a node's two
+//! children ([`Rows::planes_out`]). Written as plain loops over a packet,
 //! their speed depended on the compiler's inlining and vectorizing choices
 //! (the same box test ran 2.5x slower in an LTO build, its intervals spilled
 //! to the stack), and left to itself the compiler turns `m |= (a > b) << i`
@@ -13,6 +14,7 @@
 //! same arithmetic in plain Rust for every other CPU, and the definition the
 //! tests hold the AVX2 forms to.
 
+use super::frustum::{BOX_ABS, BOX_REL};
 use super::primary::{edge_det32, max, min, Node32};
 
 /// Per axis, a box's bounds in the order a row of lanes meets them: `(near,
@@ -48,6 +50,15 @@ pub(crate) trait Rows: Copy {
         dir: [&[f32; ROW]; 3],
         dir_norm: &[f32; ROW],
     ) -> [(u32, u32); 3];
+
+    /// The frustum test of two boxes ([`super::frustum`]): lane `j` holds
+    /// plane `j % 4`'s normal `n[..][j]` against box `a` (lanes 0-3) or `b`
+    /// (lanes 4-7), given per axis as `(lo, hi)`; bit `j` is set where the
+    /// box's far corner along the normal is proven below the plane:
+    /// `s < -(BOX_REL mag + BOX_ABS)`, with `s` the sum of
+    /// `max(n lo, n hi)` over the axes in order and `mag` that of their
+    /// magnitudes.
+    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32;
 }
 
 /// Plain Rust, for any CPU.
@@ -100,6 +111,25 @@ impl Rows for Portable {
             }
         }
         out
+    }
+
+    #[inline(always)]
+    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
+        let mut s = [0f32; ROW];
+        let mut mag = [0f32; ROW];
+        for k in 0..3 {
+            for j in 0..ROW {
+                let (lo, hi) = if j < 4 { a[k] } else { b[k] };
+                let p = max(n[k][j] * lo, n[k][j] * hi);
+                s[j] += p;
+                mag[j] += p.abs();
+            }
+        }
+        let mut m = 0;
+        for j in 0..ROW {
+            m |= u32::from(s[j] < -(BOX_REL * mag[j] + BOX_ABS)) << j;
+        }
+        m
     }
 }
 
@@ -202,6 +232,38 @@ impl Rows for Avx2 {
                 );
             }
             out
+        }
+    }
+
+    #[inline(always)]
+    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
+        use std::arch::x86_64::{
+            _mm256_add_ps, _mm256_andnot_ps, _mm256_cmp_ps, _mm256_loadu_ps, _mm256_max_ps,
+            _mm256_movemask_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_set_m128, _mm256_setzero_ps,
+            _mm256_xor_ps, _mm_set1_ps, _CMP_LT_OQ,
+        };
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
+        // the loads read exactly the three 8-float arrays borrowed here. The
+        // portable form's operations in its order; `vmaxps a, b` is `max(a,
+        // b)` as the portable form uses it, and clearing or flipping the sign
+        // bit is `abs` or negation.
+        unsafe {
+            let sign = _mm256_set1_ps(-0.0);
+            let (mut s, mut mag) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+            for k in 0..3 {
+                let lo = _mm256_set_m128(_mm_set1_ps(b[k].0), _mm_set1_ps(a[k].0));
+                let hi = _mm256_set_m128(_mm_set1_ps(b[k].1), _mm_set1_ps(a[k].1));
+                let nk = _mm256_loadu_ps(n[k].as_ptr());
+                let p = _mm256_max_ps(_mm256_mul_ps(nk, lo), _mm256_mul_ps(nk, hi));
+                s = _mm256_add_ps(s, p);
+                mag = _mm256_add_ps(mag, _mm256_andnot_ps(sign, p));
+            }
+            let bound = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_set1_ps(BOX_REL), mag),
+                _mm256_set1_ps(BOX_ABS),
+            );
+            let out = _mm256_cmp_ps::<_CMP_LT_OQ>(s, _mm256_xor_ps(bound, sign));
+            _mm256_movemask_ps(out) as u32
         }
     }
 }
@@ -354,5 +416,77 @@ mod tests {
             pos > 5000 && neg > 5000 && unsure > 5000,
             "{pos} {neg} {unsure}"
         );
+    }
+
+    /// The frustum test's two forms agree bit for bit, on infinities (NaN
+    /// products), signed zeros and values near the bound, and the portable
+    /// form is the plane test lane by lane.
+    #[test]
+    fn planes_out_forms_agree() {
+        let vals = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            -3.3,
+            1e20,
+            -1e20,
+            1e-30,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        let mut s = 7u32;
+        let mut next = |n: usize| {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            (s >> 8) as usize % n
+        };
+        let (mut outs, mut ins) = (0, 0);
+        for _ in 0..4000 {
+            let n: [[f32; ROW]; 3] =
+                std::array::from_fn(|_| std::array::from_fn(|_| vals[next(9)]));
+            let mut boxes = [[(0f32, 0f32); 3]; 2];
+            for b in boxes.iter_mut().flatten() {
+                let (x, y) = (vals[next(vals.len())], vals[next(vals.len())]);
+                *b = (x.min(y), x.max(y));
+            }
+            let want = Portable.planes_out(&n, &boxes[0], &boxes[1]);
+            for j in 0..ROW {
+                let bx = &boxes[j / 4];
+                let (mut s, mut mag) = (0f32, 0f32);
+                for k in 0..3 {
+                    let (lo, hi) = bx[k];
+                    let p = if n[k][j] > 0.0 {
+                        n[k][j] * hi
+                    } else {
+                        n[k][j] * lo
+                    };
+                    let p = if n[k][j] == 0.0 {
+                        max(0.0 * lo, 0.0 * hi)
+                    } else {
+                        p
+                    };
+                    s += p;
+                    mag += p.abs();
+                }
+                let out = s < -(BOX_REL * mag + BOX_ABS);
+                assert_eq!(want >> j & 1 == 1, out, "{n:?} {bx:?}");
+                if out {
+                    outs += 1;
+                } else {
+                    ins += 1;
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = Avx2::detect() {
+                assert_eq!(
+                    avx.planes_out(&n, &boxes[0], &boxes[1]),
+                    want,
+                    "{n:?} {boxes:?}"
+                );
+            }
+        }
+        // Both answers occur often.
+        assert!(outs > 3000 && ins > 3000, "{outs} out, {ins} in");
     }
 }
