@@ -129,7 +129,7 @@ fn float_only_predicates_still_agree_between_loops_but_skip_exact_work() {
     assert!(exact.counters.exact_fallbacks > 0);
 }
 
-/// Image sizes that are not multiples of the 8x4 packet: border lanes are
+/// Image sizes that are not multiples of the 8x8 packet: border lanes are
 /// masked off and every pixel still gets the single-ray answer.
 #[test]
 fn packets_handle_partial_tiles_at_the_image_border() {

@@ -249,7 +249,7 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
         let field = |b: &Option<Value>, k: &str| b.as_ref().map_or(Value::Null, |b| b[k].clone());
         json!({
             "threads": threads,
-            "core_trace": {"kernel": "packets (8x4)", "mrays_per_s": core_mrays,
+            "core_trace": {"kernel": packets_label(), "mrays_per_s": core_mrays,
                            "bvh_quality": core_bvh.name(),
                            "mrays_per_s_by_bvh_quality": {"medium": medium_mrays, "slow": slow_mrays},
                            "queries": packets.json(), "timing": core.json(),
@@ -855,4 +855,10 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
         ],
         &rows,
     );
+}
+
+/// The core kernel's name in the JSON: its packet size, from the core.
+fn packets_label() -> String {
+    let [w, h] = rendiff_core::trace::PACKET_PIXELS;
+    format!("packets ({w}x{h})")
 }

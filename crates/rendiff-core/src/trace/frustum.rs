@@ -1,6 +1,6 @@
 //! A packet's frustum: four planes through the eye that every lane's exact
 //! ray lies inside, so a box wholly outside one of them is skipped for the
-//! whole packet with one small test instead of 32 lanes' slab tests.
+//! whole packet with one small test instead of 64 lanes' slab tests.
 //!
 //! On the million-triangle scene at 1080p, 37% of the boxes a packet popped
 //! were missed by every lane, and the frustum test catches 93% of those (the

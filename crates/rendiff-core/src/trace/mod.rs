@@ -303,12 +303,15 @@ fn lower_key(tmin: f32, ray: &PixelRay) -> u64 {
     hit_key(z, 0)
 }
 
+/// A ray packet's width and height in pixels (for reports that name the kernel).
+pub const PACKET_PIXELS: [usize; 2] = [packet::PW, packet::PH];
+
 /// How pixel rays walk the BVH. Both give the same buffers; they differ in speed
 /// (and in the traversal counters), which the benchmarks compare.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TraceKernel {
-    /// 8x4-pixel packets walk the tree together (the default).
+    /// Packets of [`PACKET_PIXELS`] walk the tree together (the default).
     #[default]
     Packets,
     /// One ray at a time.

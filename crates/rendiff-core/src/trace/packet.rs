@@ -1,9 +1,11 @@
-//! Packet traversal: 8x4 neighbouring pixel rays walk the tree together.
+//! Packet traversal: 8x8 neighbouring pixel rays walk the tree together.
 //!
 //! Pixel rays are coherent, so a packet pays for one node fetch and one
-//! 32-lane slab test where single rays pay for 32. On the million-triangle
+//! 64-lane slab test where single rays pay for 64. On the million-triangle
 //! scene at 1080p, packets ran 1.3x (4x2), 2.2-2.5x (4x4), 2.5-2.6x (8x4) and
-//! 2.1x (8x8) faster than single rays; 8x4 it is. Each lane keeps its own
+//! 2.1x (8x8) faster than single rays before the frustum culling below; with
+//! it, 8x8 beat 8x4 by 4-8% on 1 and 2 threads (minimums of 5 runs,
+//! alternated, Intel Xeon) and tied on the scanned mesh, so 8x8 it is. Each lane keeps its own
 //! mask bit, nearest key and pruning bound, and a lane is tested against a
 //! triangle only where the single-ray traversal could have reached it, so every
 //! lane's answer is the single-ray answer: the nearest key over all covering
@@ -11,8 +13,8 @@
 //!
 //! Before a leaf triangle's edge tests, the lanes outside its conservative
 //! pixel rectangle ([`super::rect`]) are dropped: they cannot be covered, so
-//! no key changes. (Sizes were measured again with that culling, 8x8 and 16x4
-//! lost to 8x4 by 3-6%; an AVX-512 build of this kernel and an interval-arithmetic
+//! no key changes. (Sizes were measured again with that culling, before the
+//! frustum: 8x8 and 16x4 lost to 8x4 by 3-6%; an AVX-512 build of this kernel and an interval-arithmetic
 //! whole-packet box test were no faster on the AMD EPYC test machine.)
 //!
 //! Before a child is pushed, the packet's frustum ([`super::frustum`]) tests
@@ -43,7 +45,7 @@ use glam::DVec3;
 /// Packet width in pixels.
 pub(crate) const PW: usize = 8;
 /// Packet height in pixels.
-pub(crate) const PH: usize = 4;
+pub(crate) const PH: usize = 8;
 /// Rays per packet.
 pub(crate) const LANES: usize = PW * PH;
 /// Rows of comparisons (vectors of [`ROW`] lanes) per packet.
@@ -67,7 +69,7 @@ fn row64(a: &[f64; LANES], r: usize) -> &[f64; ROW] {
 }
 
 /// One bit per lane.
-pub(crate) type Mask = u32;
+pub(crate) type Mask = u64;
 
 /// A packet of pixel rays and their per-lane traversal state (structure of arrays
 /// where the slab and edge tests run across lanes).
@@ -337,7 +339,7 @@ impl Packet {
         // the slab clamp).
         let d = ChunkDepth::new_inlined(cam, &TriDepth::new(cam, &leaf.tri));
         for r in 0..NROWS {
-            let need = (hit >> (r * ROW)) & ROW_BITS;
+            let need = ((hit >> (r * ROW)) & ROW_BITS) as u32;
             if need == 0 {
                 continue;
             }
@@ -362,7 +364,7 @@ impl Packet {
 impl TraceBvh {
     /// Traces the packet whose top-left pixel is `(x0, y0)` to completion and
     /// returns its lanes' nearest keys (only those: handing back the whole
-    /// 4 KB packet cost a tenth of the kernel's time in copies).
+    /// 8 KB packet cost a tenth of the kernel's time in copies, at 4 KB).
     /// On x86-64 CPUs with AVX2 the same code runs compiled for 256-bit
     /// vectors (the packet set-up's lane loops auto-vectorized; the box
     /// test and edge signs as intrinsics, rows of comparisons read off with

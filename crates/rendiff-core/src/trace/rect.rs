@@ -3,7 +3,7 @@
 //! (triangle, lane) pairs before any edge test.
 //!
 //! On the million-triangle scene triangles are about a pixel wide, so of the
-//! 32 lanes a leaf's box lets through, a triangle covers one or two: a few
+//! 64 lanes a leaf's box lets through, a triangle covers one or two: a few
 //! integer comparisons on the rectangle replace the three edge tests of the
 //! others, and a triangle whose rectangle misses the packet is not even read.
 //!
@@ -148,16 +148,16 @@ impl PixelRect {
         let (xa, xb) = span(self.x, x0, PW);
         let (ya, yb) = span(self.y, y0, PH);
         // Bits xa..xb (none when xb <= xa), and bit 0 of rows ya..yb.
-        let ones = |n: u32| (1u64 << n) - 1;
+        let ones = |n: u32| (1u128 << n) - 1;
         let cols = ones(xb) & !ones(xa);
-        let rows = ones(yb * PW as u32) & !ones(ya * PW as u32) & REPEAT as u64;
+        let rows = ones(yb * PW as u32) & !ones(ya * PW as u32) & REPEAT as u128;
         // No carries: `cols` is below 2^PW and `rows` has one bit per row.
         (cols * rows) as Mask
     }
 }
 
-// `lanes` shifts a u64 by up to `PW * PH`.
-const _: () = assert!(PW * PH < 64);
+// `lanes` shifts a u128 by up to `PW * PH`.
+const _: () = assert!(PW * PH < 128);
 
 /// Bit 0 of every packet row.
 const REPEAT: Mask = {
