@@ -226,39 +226,11 @@ mod tests {
     use crate::visibility::RayBox;
     use glam::DVec3;
 
+    /// The packet tests' cameras, and `million`'s.
     fn cameras() -> Vec<Camera> {
-        [
-            Camera::new(
-                DVec3::new(0.3, -2.0, 5.0),
-                DVec3::ZERO,
-                DVec3::Y,
-                60.0,
-                37,
-                23,
-                1e-3,
-                100.0,
-            ),
-            Camera::new(
-                DVec3::splat(1e6),
-                DVec3::new(1e6, 1e6 + 1.0, 1e6 - 3.0),
-                DVec3::Z,
-                130.0,
-                9,
-                5,
-                0.5,
-                f64::INFINITY,
-            ),
-            Camera::new(
-                DVec3::new(-1.0, 0.0, 0.0),
-                DVec3::new(1.0, 1e-3, 0.0),
-                DVec3::Y,
-                1.0,
-                1920,
-                1080,
-                1e-7,
-                1.0,
-            ),
-            Camera::new(
+        let mut cams = super::super::packet::awkward_cameras();
+        cams.extend(
+            [Camera::new(
                 DVec3::new(0.0, 1.2, 3.2),
                 DVec3::new(0.0, 0.1, 0.0),
                 DVec3::Y,
@@ -267,10 +239,10 @@ mod tests {
                 1080,
                 1e-3,
                 f64::INFINITY,
-            ),
-        ]
-        .map(Result::unwrap)
-        .into()
+            )]
+            .map(Result::unwrap),
+        );
+        cams
     }
 
     /// Whether the frustum excludes `b`, tested as either box of a pair

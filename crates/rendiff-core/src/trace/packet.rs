@@ -489,11 +489,51 @@ impl TraceBvh {
     }
 }
 
+/// Cameras that stress the packet set-up and the frustum: an image that
+/// is not a whole number of packets, an eye far from the origin with a wide
+/// field of view, and a narrow field of view at 1080p with a tiny near plane.
+#[cfg(test)]
+pub(super) fn awkward_cameras() -> Vec<Camera> {
+    [
+        Camera::new(
+            DVec3::new(0.3, -2.0, 5.0),
+            DVec3::ZERO,
+            DVec3::Y,
+            60.0,
+            37,
+            23,
+            1e-3,
+            100.0,
+        ),
+        Camera::new(
+            DVec3::splat(1e6),
+            DVec3::new(1e6, 1e6 + 1.0, 1e6 - 3.0),
+            DVec3::Z,
+            130.0,
+            9,
+            5,
+            0.5,
+            f64::INFINITY,
+        ),
+        Camera::new(
+            DVec3::new(-1.0, 0.0, 0.0),
+            DVec3::new(1.0, 1e-3, 0.0),
+            DVec3::Y,
+            1.0,
+            1920,
+            1080,
+            1e-7,
+            1.0,
+        ),
+    ]
+    .map(Result::unwrap)
+    .into()
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::primary::Ray32;
     use super::*;
-    use glam::DVec3;
 
     /// The AVX2 kernel (when the CPU has it) and the portable one give the
     /// same keys and the same counts on every packet, and every key is the
@@ -554,39 +594,7 @@ mod tests {
     /// data is that ray's, and exactly the lanes inside the image are active.
     #[test]
     fn packet_rays_are_the_pixel_rays() {
-        let cams = [
-            Camera::new(
-                DVec3::new(0.3, -2.0, 5.0),
-                DVec3::ZERO,
-                DVec3::Y,
-                60.0,
-                37,
-                23,
-                1e-3,
-                100.0,
-            ),
-            Camera::new(
-                DVec3::splat(1e6),
-                DVec3::new(1e6, 1e6 + 1.0, 1e6 - 3.0),
-                DVec3::Z,
-                130.0,
-                9,
-                5,
-                0.5,
-                f64::INFINITY,
-            ),
-            Camera::new(
-                DVec3::new(-1.0, 0.0, 0.0),
-                DVec3::new(1.0, 1e-3, 0.0),
-                DVec3::Y,
-                1.0,
-                1920,
-                1080,
-                1e-7,
-                1.0,
-            ),
-        ];
-        for cam in cams.map(Result::unwrap) {
+        for cam in awkward_cameras() {
             let (w, h) = (cam.width as usize, cam.height as usize);
             for (x0, y0) in [(0, 0), (w / PW * PW, h / PH * PH), (PW, PH)] {
                 let pk = Packet::new(&cam, x0, y0);
