@@ -272,6 +272,16 @@ impl Rows for Avx2 {
 mod tests {
     use super::*;
 
+    /// A small deterministic generator of indices below `n` (an LCG), so
+    /// each test draws the same cases on every run.
+    fn picker(seed: u32) -> impl FnMut(usize) -> usize {
+        let mut s = seed;
+        move |n| {
+            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+            (s >> 8) as usize % n
+        }
+    }
+
     /// The box test's two forms agree bit for bit, on both axis orders and on
     /// infinities, signed zeros and ties; and the portable form is the
     /// per-lane slab test of `Node32::misses` with the pruning comparison.
@@ -290,11 +300,7 @@ mod tests {
             -0.0,
             0.0,
         ];
-        let mut s = 11u32;
-        let mut next = |n: usize| {
-            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
-            (s >> 8) as usize % n
-        };
+        let mut next = picker(11);
         let (mut outs, mut ins) = (0, 0);
         for _ in 0..4000 {
             let mut axes: BoxAxes = [(0.0, 0.0, false); 3];
@@ -378,11 +384,7 @@ mod tests {
             f32::INFINITY,
             f32::MAX,
         ];
-        let mut s = 5u32;
-        let mut next = |n: usize| {
-            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
-            (s >> 8) as usize % n
-        };
+        let mut next = picker(5);
         let (mut pos, mut neg, mut unsure) = (0, 0, 0);
         for _ in 0..4000 {
             let n: [[f32; 3]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| vals[next(9)]));
@@ -436,11 +438,7 @@ mod tests {
             f32::INFINITY,
             f32::NEG_INFINITY,
         ];
-        let mut s = 7u32;
-        let mut next = |n: usize| {
-            s = s.wrapping_mul(1664525).wrapping_add(1013904223);
-            (s >> 8) as usize % n
-        };
+        let mut next = picker(7);
         let (mut outs, mut ins) = (0, 0);
         for _ in 0..4000 {
             let n: [[f32; ROW]; 3] =
