@@ -396,16 +396,16 @@ impl LazyBound {
         }
     }
 
-    /// True when triangle `prim` can change no key in its box `[lx0, lx1,
-    /// ly0, ly1]` of the tile: its lowest possible key is no smaller than
-    /// every key there (none of which may then be background). `make`
-    /// computes the tile's bound the first time one is needed.
+    /// True when triangle `prim`, of face `face` ([`crate::raster_hiz`]), can
+    /// change no key in its box `[lx0, lx1, ly0, ly1]` of the tile: its
+    /// lowest possible key is no smaller than every key there (none of which
+    /// may then be background). `make` computes the tile's bound the first
+    /// time one is needed. (The triangle's vertices are not read.)
     #[inline(always)]
     fn hidden(
         &mut self,
         make: impl FnOnce() -> Option<TileDepthBound>,
-        cam: &Camera,
-        t: &Tri,
+        face: f32,
         prim: u32,
         out: &TileOut,
         [lx0, lx1, ly0, ly1]: [usize; 4],
@@ -421,7 +421,7 @@ impl LazyBound {
         let Some(b) = bound else {
             return false;
         };
-        let low = b.lowest_key(cam, t, prim);
+        let low = b.lowest_key(face, prim);
         // `low` is 0 or a hit's key, below NO_HIT: a background pixel
         // fails `k <= low`, as does any key the triangle might beat, so the
         // scan stops at the first such key (at once, mostly, for a visible
@@ -539,14 +539,14 @@ fn render_tile_body<L: Lanes>(
     // The skipping bound the fast path uses, from the same tile frame (so
     // both skip the same triangles and their counts agree).
     let mut hiz = LazyBound::new(mode);
-    for &Binned { prim, rect } in bin {
+    for &Binned { prim, rect, face } in bin {
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         let bound = || {
             rays.fill(l, cam, x0, y0, tw, th);
             rays.depth_bound(cam)
         };
-        if hiz.hidden(bound, cam, t, prim, out, [lx0, lx1, ly0, ly1]) {
+        if hiz.hidden(bound, face, prim, out, [lx0, lx1, ly0, ly1]) {
             c.hidden_skipped += 1;
             continue;
         }
@@ -590,25 +590,19 @@ fn fast_tile<L: Lanes>(
     let mut hiz = LazyBound::new(mode);
     // No triangle has written in the tile yet: every key is `NO_HIT`.
     let mut fresh = true;
-    for (i, &Binned { prim, rect }) in bin.iter().enumerate() {
+    for (i, &Binned { prim, rect, face }) in bin.iter().enumerate() {
         // Bins name triangles scattered through memory: ask for one a few
         // entries ahead (a hint; nothing observable changes).
         if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
             crate::trace::prefetch(&scene.triangles[next.prim as usize]);
         }
-        let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
-        if hiz.hidden(
-            || rays.depth_bound(cam),
-            cam,
-            t,
-            prim,
-            out,
-            [lx0, lx1, ly0, ly1],
-        ) {
+        let bound = || rays.depth_bound(cam);
+        if hiz.hidden(bound, face, prim, out, [lx0, lx1, ly0, ly1]) {
             c.hidden_skipped += 1;
             continue;
         }
+        let t = &scene.triangles[prim as usize];
         c.triangle_setups += 1;
         if (lx1 - lx0 + 1) * (ly1 - ly0 + 1) <= SMALL_BOX {
             fresh = false;
@@ -933,7 +927,10 @@ fn small_box<L: Lanes>(
             },
         );
         if facing != 0 {
-            let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
+            // (Inlined: out of line, the call cost a few percent on a
+            // million small boxes.)
+            let d =
+                depth.get_or_insert_with(|| ChunkDepth::new_inlined(cam, &TriDepth::new(cam, t)));
             if let Some(z) = d.depth_at(cam, rays, lx, ly) {
                 out.offer(lx, ly, hit_key(z, prim), facing);
             }

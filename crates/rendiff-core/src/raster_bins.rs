@@ -9,14 +9,18 @@ use crate::scene::resolve::ResolvedScene;
 use rayon::prelude::*;
 
 /// A triangle in a tile's bin, with the part of its box in the tile (tile
-/// coordinates, `[lx0, lx1, ly0, ly1]` inclusive; [`TILE`] fits a byte), so
-/// that the tile loop reads only the triangle itself.
+/// coordinates, `[lx0, lx1, ly0, ly1]` inclusive; [`TILE`] fits a byte) and
+/// its face for early depth rejection ([`crate::raster_hiz::NearFaces::face`]), so that the tile
+/// loop reads only the triangle itself, and not even that for a triangle it
+/// skips as hidden.
 #[derive(Debug, Clone, Copy)]
 pub struct Binned {
     /// The triangle.
     pub prim: u32,
     /// Its box within the tile.
     pub rect: [u8; 4],
+    /// Its face ([`crate::raster_hiz`]).
+    pub face: f32,
 }
 
 const _: () = assert!(TILE <= 256);
@@ -59,8 +63,8 @@ impl Bins {
             .zip(scene.degenerate.par_chunks(Self::GRAIN))
             .enumerate()
             .map(|(ci, (tris, deg))| {
-                let mut rects = vec![None; tris.len()];
-                crate::raster_bounds::bounds_into(cam, tris, deg, margin, &mut rects);
+                let (mut rects, mut face) = (vec![None; tris.len()], vec![0f32; tris.len()]);
+                crate::raster_bounds::bounds_into(cam, tris, deg, margin, &mut rects, &mut face);
                 // Each box's tile range (most boxes of a dense mesh lie in one
                 // tile), computed once for both passes.
                 let spans: Vec<Option<[u32; 4]>> = rects
@@ -87,6 +91,7 @@ impl Bins {
                 let empty = Binned {
                     prim: 0,
                     rect: [0; 4],
+                    face: 0.0,
                 };
                 let mut entries = vec![empty; start[tiles] as usize];
                 for (i, (r, span)) in rects.iter().zip(&spans).enumerate() {
@@ -94,6 +99,7 @@ impl Bins {
                         continue;
                     };
                     let prim = (ci * Self::GRAIN + i) as u32;
+                    let face = face[i];
                     if tx0 == tx1 && ty0 == ty1 {
                         // One tile: no loops, and the box (inside the tile
                         // and the image) needs no clipping.
@@ -102,6 +108,7 @@ impl Bins {
                         entries[*slot as usize] = Binned {
                             prim,
                             rect: [r.x0 - x0, r.x1 - x0, r.y0 - y0, r.y1 - y0].map(|v| v as u8),
+                            face,
                         };
                         *slot += 1;
                         continue;
@@ -114,6 +121,7 @@ impl Bins {
                             entries[*slot as usize] = Binned {
                                 prim,
                                 rect: clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8),
+                                face,
                             };
                             *slot += 1;
                         }
@@ -184,7 +192,7 @@ mod tests {
 
     /// Every tile's bin is what one serial pass over the triangles gives:
     /// each triangle whose box meets the tile, in index order, with its box
-    /// clipped to the tile. The grids span several chunks, with boxes in one
+    /// clipped to the tile and its face. The grids span several chunks, with boxes in one
     /// tile and boxes across many.
     #[test]
     fn bins_are_the_serial_binning() {
@@ -195,13 +203,14 @@ mod tests {
             let margin = Some(BoxMargin::new(cam));
             let (tiles_x, tiles_y) = (cam.width.div_ceil(TILE), cam.height.div_ceil(TILE));
             let bins = Bins::new(&scene, margin, tiles_x, tiles_y);
+            let faces = crate::raster_hiz::NearFaces::new(cam);
             let mut bin = Vec::new();
             let mut entries = 0;
             for ty in 0..tiles_y {
                 for tx in 0..tiles_x {
                     let (x0, y0) = (tx * TILE, ty * TILE);
                     let (tw, th) = (TILE.min(cam.width - x0), TILE.min(cam.height - y0));
-                    let want: Vec<(u32, [u8; 4])> = (0..scene.triangles.len())
+                    let want: Vec<(u32, [u8; 4], u32)> = (0..scene.triangles.len())
                         .filter(|&i| !scene.degenerate[i])
                         .filter_map(|i| Some((i, screen_bounds(cam, &scene.triangles[i])?)))
                         .filter(|(_, r)| {
@@ -209,11 +218,14 @@ mod tests {
                         })
                         .map(|(i, r)| {
                             let c = clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8);
-                            (i as u32, c)
+                            (i as u32, c, faces.face(&scene.triangles[i]).to_bits())
                         })
                         .collect();
                     bins.tile((ty * tiles_x + tx) as usize, &mut bin);
-                    let got: Vec<(u32, [u8; 4])> = bin.iter().map(|b| (b.prim, b.rect)).collect();
+                    let got: Vec<(u32, [u8; 4], u32)> = bin
+                        .iter()
+                        .map(|b| (b.prim, b.rect, b.face.to_bits()))
+                        .collect();
                     assert_eq!(got, want, "grid {nx} at {size}, tile ({tx}, {ty})");
                     entries += got.len();
                 }

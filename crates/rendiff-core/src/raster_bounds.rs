@@ -68,6 +68,7 @@
 
 use crate::camera::Camera;
 use crate::raster::PixelRect;
+use crate::raster_hiz::{f32_below, Abs, NearFaces};
 use crate::scene::resolve::Tri;
 use glam::{DVec3, Vec3};
 
@@ -567,9 +568,10 @@ struct Axis4 {
 
 /// Vertex `i` of four triangles in camera space, as [`BoxMargin::bounds`]
 /// computes it: `x`, `y`, `z` (glam's `dot`: left to right) and `|q|_1`
-/// (`element_sum`: left to right) of `q = v - e`.
+/// (`element_sum`: left to right) of `q = v - e`; and `q`'s component on
+/// `axis` (for [`NearFaces::face`]).
 #[inline(always)]
-fn vertex4<L: Lanes4>(l: L, cam: &Camera, t: &[Tri; 4], i: usize) -> [F4<L>; 4] {
+fn vertex4<L: Lanes4>(l: L, cam: &Camera, t: &[Tri; 4], i: usize, axis: usize) -> [F4<L>; 5] {
     let (e, r, u, f) = (cam.eye, cam.right, cam.up_ortho, cam.forward);
     let qx = F4(l.load(t, i, 0), l) - e.x;
     let qy = F4(l.load(t, i, 1), l) - e.y;
@@ -579,7 +581,25 @@ fn vertex4<L: Lanes4>(l: L, cam: &Camera, t: &[Tri; 4], i: usize) -> [F4<L>; 4] 
         qx * u.x + qy * u.y + qz * u.z,
         qx * f.x + qy * f.y + qz * f.z,
         qx.abs() + qy.abs() + qz.abs(),
+        [qx, qy, qz][axis],
     ]
+}
+
+impl<L: Lanes4> Abs for F4<L> {
+    #[inline(always)]
+    fn abs(self) -> F4<L> {
+        F4::abs(self)
+    }
+}
+
+/// [`NearFaces::face_of`] for four triangles, from their vertices' `q` on
+/// the faces' axis: the same operations lane by lane.
+#[inline(always)]
+fn faces4<L: Lanes4>(faces: &NearFaces, q: [F4<L>; 3]) -> [f32; 4] {
+    let (lo, hi) = (min3(q), max3(q));
+    let v = if faces.negative() { hi * -1.0 } else { lo };
+    let w = NearFaces::w(v, lo, hi);
+    w.1.array(w.0).map(f32_below)
 }
 
 impl BoxMargin {
@@ -598,12 +618,15 @@ impl BoxMargin {
         cam: &Camera,
         t: &[Tri; 4],
         out: &mut [Option<PixelRect>; 4],
+        (faces, face_out): (&NearFaces, &mut [f32; 4]),
     ) -> u32 {
+        let k = faces.axis();
         let p = [
-            vertex4(l, cam, t, 0),
-            vertex4(l, cam, t, 1),
-            vertex4(l, cam, t, 2),
+            vertex4(l, cam, t, 0, k),
+            vertex4(l, cam, t, 1, k),
+            vertex4(l, cam, t, 2, k),
         ];
+        *face_out = faces4(faces, [p[0][4], p[1][4], p[2][4]]);
         let zmin = l.splat(cam.near * (1.0 - 1e-6));
         let far = l.splat(cam.far * (1.0 + 1e-6));
         let (mut kept, mut beyond) = (0b1111, if cam.far.is_finite() { 0b1111 } else { 0 });
@@ -688,24 +711,25 @@ impl BoxMargin {
 }
 
 /// [`BoxMargin::bounds`] of each triangle of `tris` into `out` (`None` for
-/// degenerate ones, and the whole image for all when `margin` is `None`):
-/// the binning's first step. Four triangles at a time through
-/// `BoxMargin::bounds4` (the scalar [`BoxMargin::bounds`] for lanes that
-/// need clipping), in AVX2 on x86-64 CPUs that have it (the arithmetic is
-/// the same).
+/// degenerate ones, and the whole image for all when `margin` is `None`),
+/// and its [`NearFaces::face`] into `faces`: the binning's first step. Four
+/// triangles at a time through `BoxMargin::bounds4` (the scalar
+/// [`BoxMargin::bounds`] for lanes that need clipping), in AVX2 on x86-64
+/// CPUs that have it (the arithmetic is the same).
 pub fn bounds_into(
     cam: &Camera,
     tris: &[Tri],
     degenerate: &[bool],
     margin: Option<BoxMargin>,
     out: &mut [Option<PixelRect>],
+    faces: &mut [f32],
 ) {
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = crate::raster_edges::Avx2::detect() {
         // SAFETY: the CPU has AVX2 (just detected).
-        return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out) };
+        return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out, faces) };
     }
-    bounds_chunk(Plain4, cam, tris, degenerate, margin, out)
+    bounds_chunk(Plain4, cam, tris, degenerate, margin, out, faces)
 }
 
 /// [`bounds_chunk`] compiled for AVX2.
@@ -718,8 +742,9 @@ fn bounds_avx2(
     deg: &[bool],
     margin: Option<BoxMargin>,
     out: &mut [Option<PixelRect>],
+    faces: &mut [f32],
 ) {
-    bounds_chunk(avx2, cam, tris, deg, margin, out)
+    bounds_chunk(avx2, cam, tris, deg, margin, out, faces)
 }
 
 /// [`bounds_into`] with the lanes `l`.
@@ -731,9 +756,11 @@ fn bounds_chunk<L: Lanes4>(
     deg: &[bool],
     margin: Option<BoxMargin>,
     out: &mut [Option<PixelRect>],
+    faces: &mut [f32],
 ) {
-    let n = out.len().min(tris.len()).min(deg.len());
-    let (out, tris, deg) = (&mut out[..n], &tris[..n], &deg[..n]);
+    let n = out.len().min(tris.len()).min(deg.len()).min(faces.len());
+    let (out, tris, deg, faces) = (&mut out[..n], &tris[..n], &deg[..n], &mut faces[..n]);
+    let nf = NearFaces::new(cam);
     let Some(m) = margin else {
         let whole = PixelRect {
             x0: 0,
@@ -741,19 +768,22 @@ fn bounds_chunk<L: Lanes4>(
             x1: cam.width - 1,
             y1: cam.height - 1,
         };
-        for (o, &d) in out.iter_mut().zip(deg) {
+        for (((o, &d), f), t) in out.iter_mut().zip(deg).zip(faces).zip(tris) {
             *o = (!d).then_some(whole);
+            *f = nf.face(t);
         }
         return;
     };
-    let (mut o4, mut t4, mut d4) = (
+    let (mut o4, mut t4, mut d4, mut f4) = (
         out.chunks_exact_mut(4),
         tris.chunks_exact(4),
         deg.chunks_exact(4),
+        faces.chunks_exact_mut(4),
     );
-    for ((o, t), d) in (&mut o4).zip(&mut t4).zip(&mut d4) {
+    for (((o, t), d), f) in (&mut o4).zip(&mut t4).zip(&mut d4).zip(&mut f4) {
         let (o, t): (&mut [_; 4], &[Tri; 4]) = (o.try_into().unwrap(), t.try_into().unwrap());
-        let scalar = m.bounds4(l, cam, t, o);
+        let f: &mut [f32; 4] = f.try_into().unwrap();
+        let scalar = m.bounds4(l, cam, t, o, (&nf, f));
         for j in 0..4 {
             if d[j] {
                 o[j] = None;
@@ -766,9 +796,11 @@ fn bounds_chunk<L: Lanes4>(
         .into_remainder()
         .iter_mut()
         .zip(t4.remainder())
-        .zip(d4.remainder());
-    for ((o, t), &d) in rest {
+        .zip(d4.remainder())
+        .zip(f4.into_remainder());
+    for (((o, t), &d), f) in rest {
         *o = if d { None } else { m.bounds(cam, t) };
+        *f = nf.face(t);
     }
 }
 
@@ -914,7 +946,8 @@ mod tests {
     }
 
     /// The batched path ([`bounds_into`], portable and AVX2) gives every
-    /// triangle exactly [`BoxMargin::bounds`]' box, under every camera,
+    /// triangle exactly [`BoxMargin::bounds`]' box and
+    /// [`NearFaces::face`]'s face, under every camera,
     /// margin factor, degenerate flag and batch remainder; and the batched
     /// lanes really do most of the work.
     #[test]
@@ -942,29 +975,39 @@ mod tests {
                         (false, None) => Some(whole),
                     })
                     .collect();
+                let nf = NearFaces::new(cam);
+                let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
+                let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                 for len in [tris.len(), tris.len() - 1, tris.len() - 3, 2] {
                     let (t, d) = (&tris[..len], &deg[..len]);
                     let mut got = vec![Some(whole); len];
-                    bounds_chunk(Plain4, cam, t, d, margin, &mut got);
+                    let mut faces = vec![f32::NAN; len];
+                    bounds_chunk(Plain4, cam, t, d, margin, &mut got, &mut faces);
                     assert_eq!(got, want[..len], "portable, camera {ci}");
+                    assert_eq!(bits(&faces), want_faces[..len], "portable, camera {ci}");
                     #[cfg(target_arch = "x86_64")]
                     if let Some(avx2) = crate::raster_edges::Avx2::detect() {
                         let mut got = vec![Some(whole); len];
+                        let mut faces = vec![f32::NAN; len];
                         // SAFETY: the CPU has AVX2 (just detected).
-                        unsafe { bounds_avx2(avx2, cam, t, d, margin, &mut got) };
+                        unsafe { bounds_avx2(avx2, cam, t, d, margin, &mut got, &mut faces) };
                         assert_eq!(got, want[..len], "AVX2, camera {ci}");
+                        assert_eq!(bits(&faces), want_faces[..len], "AVX2, camera {ci}");
                     }
                     let mut got = vec![None; len];
-                    bounds_into(cam, t, d, margin, &mut got);
+                    let mut faces = vec![f32::NAN; len];
+                    bounds_into(cam, t, d, margin, &mut got, &mut faces);
                     assert_eq!(got, want[..len], "bounds_into, camera {ci}");
+                    assert_eq!(bits(&faces), want_faces[..len], "bounds_into, camera {ci}");
                 }
             }
             // Most lanes are decided by the batch, not left to `bounds`.
             let mut batched = 0;
             for t in tris.chunks_exact(4) {
-                let mut o = [None; 4];
+                let (mut o, mut f) = ([None; 4], [0.0; 4]);
+                let nf = NearFaces::new(cam);
                 batched += 4 - base
-                    .bounds4(Plain4, cam, t.try_into().unwrap(), &mut o)
+                    .bounds4(Plain4, cam, t.try_into().unwrap(), &mut o, (&nf, &mut f))
                     .count_ones();
             }
             assert!(
@@ -974,7 +1017,8 @@ mod tests {
         }
     }
 
-    /// Lanes with NaN or infinite coordinates give the scalar boxes too.
+    /// Lanes with NaN or infinite coordinates give the scalar boxes (and
+    /// faces) too.
     #[test]
     fn non_finite_lanes_match_scalar() {
         let cam = &cameras()[1];
@@ -1000,11 +1044,16 @@ mod tests {
         }
         let deg = vec![false; tris.len()];
         let want: Vec<_> = tris.iter().map(|t| m.bounds(cam, t)).collect();
-        let mut got = vec![None; tris.len()];
-        bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got);
+        let nf = NearFaces::new(cam);
+        let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
+        let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
+        bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got, &mut faces);
         assert_eq!(got, want);
-        let mut got = vec![None; tris.len()];
-        bounds_into(cam, &tris, &deg, Some(m), &mut got);
+        assert_eq!(bits(&faces), want_faces);
+        let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
+        bounds_into(cam, &tris, &deg, Some(m), &mut got, &mut faces);
         assert_eq!(got, want);
+        assert_eq!(bits(&faces), want_faces);
     }
 }

@@ -1217,8 +1217,9 @@ impl TileRays {
     /// the corners, or gathered when the directions were written).
     #[inline(always)]
     pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
-        let k = crate::raster_hiz::TileDepthBound::axis(cam);
-        crate::raster_hiz::TileDepthBound::from_low(k, self.planar_low, self.d_span[k])
+        let faces = crate::raster_hiz::NearFaces::new(cam);
+        let dk = self.d_span[faces.axis()];
+        crate::raster_hiz::TileDepthBound::from_low(faces.negative(), self.planar_low, dk)
     }
 
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
@@ -1347,8 +1348,9 @@ impl ChunkDepth {
     }
 
     /// [`ChunkDepth::new`] inlined into the caller (the packet tracer's
-    /// leaf, once per triangle a packet hits: out of line, its time moved
-    /// by several percent with where the linker happened to put it).
+    /// leaf, once per triangle a packet hits, and the raster's small boxes,
+    /// once per covered one: out of line, its time moved by several percent
+    /// with where the linker happened to put it).
     #[inline(always)]
     pub fn new_inlined(cam: &Camera, d: &TriDepth) -> ChunkDepth {
         Self::with_margin(cam, d, CLAMP_FREE_MARGIN)
@@ -2027,8 +2029,9 @@ mod tests {
                     "{} far below {least}",
                     t.planar_low
                 );
-                let k = crate::raster_hiz::TileDepthBound::axis(&cam);
-                let scanned = crate::raster_hiz::TileDepthBound::new(k, &t.planar, &t.d[k]);
+                let faces = crate::raster_hiz::NearFaces::new(&cam);
+                let (k, neg) = (faces.axis(), faces.negative());
+                let scanned = crate::raster_hiz::TileDepthBound::new(neg, &t.planar, &t.d[k]);
                 let (got, scanned) = (t.depth_bound(&cam).unwrap(), scanned.unwrap());
                 assert!(got.kappa() <= scanned.kappa());
                 assert!(got.kappa() >= scanned.kappa() * (1.0 - within));

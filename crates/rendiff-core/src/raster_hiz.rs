@@ -37,7 +37,17 @@
 //! slack sits on each term, not on their difference, so cancellation cannot
 //! eat it, and `zlow` is below the recorded f64 depth by far more than the
 //! few ulps above, and `f32(zlow (1 - 10^-6))` is an f32 no
-//! larger than any f32 the depth rounds to. Recorded depths are at least
+//! larger than any f32 the depth rounds to.
+//!
+//! The triangle's factor `w = |V - e_k| (1 - 2^-40) - 2 g` needs no tile: the
+//! binning computes it once per triangle ([`NearFaces`], for the sign of the
+//! camera's own `f_k`) and stores it rounded down to an f32 beside each bin
+//! entry, so a hidden triangle is skipped without reading its vertices
+//! (they were a cache miss per skipped triangle on a million of them). A
+//! smaller `w` only lowers `zlow` (every later rounding is monotone and `κ`
+//! is positive), so the bound stays below every key the triangle can make.
+//! A tile whose rays' `D_k` sign is not the camera's (very wide fields of
+//! view) has no bound: it skips nothing. Recorded depths are at least
 //! `near > 0`, so their f32 bits order like their values and every key the
 //! triangle can make is at least `hit_key(zlow32, prim)`.
 //!
@@ -62,14 +72,110 @@ const SLACK: f64 = 1.0 / (1u64 << 40) as f64;
 /// `2^-47`: twice `grow_box`'s margin (module documentation).
 const GROW: f64 = 1.0 / (1u64 << 47) as f64;
 
-/// One tile's depth bound: the axis, the common sign of its rays' `D_k`,
-/// and `κ`.
+/// The camera's half of the bound: its most forward axis `k`, the sign of
+/// `f_k` (the sign most tiles' `D_k` share) and `e_k`, to compute each
+/// triangle's factor `w` once, at binning (module documentation).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TileDepthBound {
+pub struct NearFaces {
     /// The camera's most forward axis.
     axis: usize,
-    /// True when every ray of the tile has `D_axis < 0`.
+    /// `f_axis < 0`: the faces are the triangles' largest coordinates.
     negative: bool,
+    /// `e_axis`.
+    eye: f64,
+}
+
+impl NearFaces {
+    /// The camera's axis, sign and eye coordinate.
+    #[inline(always)]
+    pub fn new(cam: &Camera) -> NearFaces {
+        let axis = TileDepthBound::axis(cam);
+        NearFaces {
+            axis,
+            negative: cam.forward.to_array()[axis] < 0.0,
+            eye: cam.eye.to_array()[axis],
+        }
+    }
+
+    /// The axis `k`.
+    #[inline(always)]
+    pub fn axis(&self) -> usize {
+        self.axis
+    }
+
+    /// The sign the faces were taken for: `f_k < 0`.
+    #[inline(always)]
+    pub fn negative(&self) -> bool {
+        self.negative
+    }
+
+    /// Triangle `t`'s factor `w` (module documentation), rounded down to an
+    /// f32 (0, no bound, where `w` is not positive). The binning's batched
+    /// form (`raster_bounds`) performs the same operations lane by lane.
+    #[inline(always)]
+    pub fn face(&self, t: &Tri) -> f32 {
+        let (k, e) = (self.axis, self.eye);
+        // `fl(V - e_k)` per vertex (arrays, not glam's run-time component
+        // index; not array `map`, which can compile to an out-of-line call).
+        let q = |i: usize| f64::from(t[i].to_array()[k]) - e;
+        self.face_of(q(0), q(1), q(2))
+    }
+
+    /// [`NearFaces::face`] from the vertices' `fl(V - e_k)`: rounding is
+    /// monotone, so their least and largest are `fl(lo - e_k)` and
+    /// `fl(hi - e_k)`, and `fl(e_k - hi) = -fl(hi - e_k)`.
+    #[inline(always)]
+    pub(crate) fn face_of(&self, a: f64, b: f64, c: f64) -> f32 {
+        let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+        // The face entered first, relative to the eye, signed along the ray.
+        let v = if self.negative { -hi } else { lo };
+        f32_below(Self::w(v, lo, hi))
+    }
+
+    /// `w` from the signed face `v` and the extremes relative to the eye.
+    #[inline(always)]
+    pub(crate) fn w<T>(v: T, lo: T, hi: T) -> T
+    where
+        T: Copy + std::ops::Add<Output = T> + std::ops::Sub<Output = T> + Abs,
+        T: std::ops::Mul<f64, Output = T>,
+    {
+        let grow = (lo.abs() + hi.abs()) * GROW;
+        // Slack on both terms, not on their difference: safe under cancellation.
+        v * (1.0 - SLACK) - grow * 2.0
+    }
+}
+
+/// `abs` for [`NearFaces::w`]'s scalar and lane forms.
+pub(crate) trait Abs {
+    /// The absolute value, lane by lane.
+    fn abs(self) -> Self;
+}
+
+impl Abs for f64 {
+    #[inline(always)]
+    fn abs(self) -> f64 {
+        f64::abs(self)
+    }
+}
+
+/// The largest f32 no larger than `x`, where `x` is positive; 0 where it
+/// is not (or NaN): a face of 0 gives no bound. (Branch-free: the binning
+/// computes one per triangle, and a branch on the rounding's direction
+/// mispredicted half the time.)
+#[inline(always)]
+pub(crate) fn f32_below(x: f64) -> f32 {
+    // `f64::max` ignores NaN.
+    let x = x.max(0.0);
+    let y = x as f32;
+    // Rounded up: one step down (`y > x >= 0`, so `y`'s bits are at least 1;
+    // `+inf` steps down to `f32::MAX`).
+    f32::from_bits(y.to_bits() - u32::from(f64::from(y) > x))
+}
+
+/// One tile's depth bound: `κ`, for triangles whose faces
+/// ([`NearFaces`]) were taken for the sign its rays share.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TileDepthBound {
     /// `κ`: a lower bound on `planar / |D_axis|` over the tile.
     kappa: f64,
     /// Multiplies the bound (tests: above 1 it must break renders).
@@ -92,15 +198,16 @@ impl TileDepthBound {
 
     /// The bound from every one of a tile's `planar` and `D_axis` values
     /// (pairwise, any order, repeats allowed): the least `planar` itself as
-    /// the lower bound. `None` when they do not all share a strict sign or
-    /// some `planar` is not positive. Tests only: renders take the corners'
-    /// bound ([`TileDepthBound::from_low`]), which tests hold against this.
+    /// the lower bound. `None` when they do not all share the strict sign
+    /// `negative` or some `planar` is not positive. Tests only: renders take
+    /// the corners' bound ([`TileDepthBound::from_low`]), which tests hold
+    /// against this.
     #[cfg(test)]
-    pub(crate) fn new(axis: usize, planar: &[f64], dk: &[f64]) -> Option<Self> {
+    pub(crate) fn new(negative: bool, planar: &[f64], dk: &[f64]) -> Option<Self> {
         let n = planar.len().min(dk.len());
         let p = Span::of(&planar[..n]);
         Self::from_low(
-            axis,
+            negative,
             if p.finite { p.lo } else { f64::NAN },
             Span::of(&dk[..n]),
         )
@@ -108,18 +215,19 @@ impl TileDepthBound {
 
     /// The bound from a lower bound `planar_low` on the tile's `planar`
     /// values (NaN: none) and the span of its `D_axis` values (module
-    /// documentation): what renders use, from the tile's corners.
+    /// documentation), for faces taken with sign `negative`
+    /// ([`NearFaces::negative`]; a tile of the other sign has none): what
+    /// renders use, from the tile's corners.
     #[inline(always)]
-    pub fn from_low(axis: usize, planar_low: f64, dk: Span) -> Option<Self> {
-        let ok = dk.finite && planar_low > 0.0 && dk.one_strict_sign();
+    pub fn from_low(negative: bool, planar_low: f64, dk: Span) -> Option<Self> {
+        let sign = if negative { dk.hi < 0.0 } else { dk.lo > 0.0 };
+        let ok = dk.finite && planar_low > 0.0 && sign;
         // With one sign, the largest magnitude is an extreme's.
         let kappa = planar_low / (-dk.lo).max(dk.hi);
         if !(ok && kappa > 0.0 && kappa.is_finite()) {
             return None;
         }
         Some(TileDepthBound {
-            axis,
-            negative: dk.hi < 0.0,
             kappa: kappa * (1.0 - SLACK),
             factor: 1.0,
         })
@@ -137,20 +245,11 @@ impl TileDepthBound {
         self
     }
 
-    /// The smallest key triangle `t` (id `prim`) can record in the tile, or
-    /// 0 when no positive bound is known.
+    /// The smallest key triangle `prim`, of face `face` ([`NearFaces::face`]),
+    /// can record in the tile, or 0 when no positive bound is known.
     #[inline(always)]
-    pub fn lowest_key(&self, cam: &Camera, t: &Tri, prim: u32) -> u64 {
-        let k = self.axis;
-        // Arrays, not glam's run-time component index (a match per access).
-        let e = cam.eye.to_array()[k];
-        let [a, b, c] = t.map(|v| f64::from(v.to_array()[k]));
-        let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-        // The face entered first, relative to the eye, signed along the ray.
-        let v = if self.negative { e - hi } else { lo - e };
-        let grow = GROW * ((lo - e).abs() + (hi - e).abs());
-        // Slack on both terms, not on their difference: safe under cancellation.
-        let zlow = (v * (1.0 - SLACK) - 2.0 * grow) * self.kappa * (1.0 - SLACK) * self.factor;
+    pub fn lowest_key(&self, face: f32, prim: u32) -> u64 {
+        let zlow = f64::from(face) * self.kappa * (1.0 - SLACK) * self.factor;
         let z32 = (zlow * (1.0 - 1e-6)) as f32;
         if z32 > 0.0 && z32.is_finite() {
             hit_key(z32, prim)
@@ -165,9 +264,42 @@ mod tests {
     use super::*;
     use crate::predicate::tests::lcg;
 
+    /// `f32_below` gives the largest f32 not above a positive `x` (so a
+    /// face never exceeds its `w`, and loses at most one f32 step), and 0
+    /// for what is not positive.
+    #[test]
+    fn faces_round_down_to_the_next_f32() {
+        let mut s = 7u64;
+        let mut xs = vec![
+            f64::from(f32::MAX),
+            f64::from(f32::MAX) * 1.5,
+            f64::MAX,
+            f64::INFINITY,
+            f64::from(f32::MIN_POSITIVE),
+            1e-46,
+            1e-300,
+            1.0,
+        ];
+        for _ in 0..20_000 {
+            let exp = (lcg(&mut s) * 60.0).round() as i32;
+            xs.push((1.5 + lcg(&mut s)) * 2f64.powi(exp));
+        }
+        for &x in &xs {
+            let y = f32_below(x);
+            assert!(f64::from(y) <= x, "{x}: {y} above");
+            if x < f64::INFINITY {
+                assert!(f64::from(y.next_up()) > x, "{x}: {y} not the largest");
+            }
+        }
+        for x in [0.0, -0.0, -1.0, -1e-300, f64::NEG_INFINITY, f64::NAN] {
+            assert_eq!(f32_below(x).to_bits(), 0, "{x}");
+        }
+    }
+
     /// [`TileDepthBound::new`]'s conditions and `κ`, one value at a time:
-    /// the definition its lane-parallel reductions must equal.
-    fn reference(planar: &[f64], dk: &[f64]) -> Option<f64> {
+    /// the definition its lane-parallel reductions must equal (every `D_k`
+    /// of the sign `negative` says).
+    fn reference(negative: bool, planar: &[f64], dk: &[f64]) -> Option<f64> {
         let (mut ok, mut neg, mut pos) = (true, false, false);
         let (mut p_min, mut d_abs_max) = (f64::INFINITY, 0.0f64);
         for (&p, &d) in planar.iter().zip(dk) {
@@ -178,7 +310,8 @@ mod tests {
             d_abs_max = d_abs_max.max(d.abs());
         }
         let kappa = p_min / d_abs_max;
-        (ok && neg != pos && kappa > 0.0 && kappa.is_finite()).then_some(kappa * (1.0 - SLACK))
+        let sign = if negative { neg && !pos } else { pos && !neg };
+        (ok && sign && kappa > 0.0 && kappa.is_finite()).then_some(kappa * (1.0 - SLACK))
     }
 
     /// The reductions agree with the definition on every length (whole and
@@ -211,8 +344,10 @@ mod tests {
                         d[i] = v;
                     }
                 }
-                let got = TileDepthBound::new(2, &p, &d).map(|b| b.kappa);
-                let want = reference(&p, &d);
+                // The faces' sign, mostly the values' own.
+                let negative = (sign < 0.0) != (lcg(&mut s) > 0.8);
+                let got = TileDepthBound::new(negative, &p, &d).map(|b| b.kappa);
+                let want = reference(negative, &p, &d);
                 assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{p:?} {d:?}");
                 if got.is_some() {
                     some += 1;
