@@ -61,10 +61,19 @@
 //! clipping, four triangles at a time (`BoxMargin::bounds4`, one triangle
 //! per f64 lane, in AVX2 where the CPU has it): each lane performs exactly
 //! the operations of [`BoxMargin::bounds`]' no-clipping path in the same
-//! order, with `f64::max`/`min`'s NaN rule and no fused multiply-add, so
-//! its boxes are the same bit for bit; a lane that needs clipping goes to
-//! [`BoxMargin::bounds`] itself. `tests::batched_bounds_match_scalar`
-//! checks both paths against it triangle by triangle.
+//! order, with no fused multiply-add, so its boxes are the same bit for
+//! bit; a lane that needs clipping goes to [`BoxMargin::bounds`] itself,
+//! and so does a lane with a vertex as far as `|q|_1 >= 2^996` from the eye.
+//! Below that, every value a kept lane computes is finite: `|q|_1 <
+//! 2^996` bounds the camera-space coordinates by `2^998`; `z >= zmin > 0`
+//! and `16 U |q|_1 < z` give `|x| / z, |y| / z < 2^50`, so the projections,
+//! `|q|_1 / z` and every error term stay far below overflow. So `max` and
+//! `min` need no NaN rule (`maxpd` and `f64::max` agree on numbers; of `+0`
+//! and `-0` either would do, the boxes depend on values only), which saved
+//! two instructions in three of each. `tests::batched_bounds_match_scalar`
+//! checks both paths against it triangle by triangle, and
+//! `tests::non_finite_lanes_match_scalar` with NaN, infinite and huge
+//! coordinates.
 
 use crate::camera::Camera;
 use crate::raster::PixelRect;
@@ -74,6 +83,10 @@ use glam::{DVec3, Vec3};
 
 /// Unit roundoff of f64.
 const U: f64 = f64::EPSILON / 2.0;
+
+/// `2^996`: the batched lanes keep triangles whose vertices' `|q|_1` lie
+/// below it (module documentation: every value is then finite).
+const MAX_MAG: f64 = f64::from_bits((996 + 1023) << 52);
 
 /// A camera's constants for [`BoxMargin::bounds`]: the pixel-ray error in
 /// pixels (bound 1 of the module documentation) and the scale factors of
@@ -288,9 +301,10 @@ trait Lanes4: Copy {
     fn mul(self, a: Self::V, b: Self::V) -> Self::V;
     /// `a / b`.
     fn div(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `f64::max(a, b)` (a NaN operand gives the other).
+    /// `f64::max(a, b)` where neither is NaN (any rule for NaN: lanes that
+    /// can meet one are not kept, module documentation).
     fn max(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `f64::min(a, b)` (a NaN operand gives the other).
+    /// `f64::min(a, b)` where neither is NaN (as `max`).
     fn min(self, a: Self::V, b: Self::V) -> Self::V;
     /// `f64::abs`.
     fn abs(self, a: Self::V) -> Self::V;
@@ -431,21 +445,13 @@ mod avx2_lanes {
         }
         #[inline(always)]
         fn max(self, a: __m256d, b: __m256d) -> __m256d {
-            // `maxpd(b, a)` is `b > a ? b : a` (so `a` when `b` is NaN);
-            // the blend gives `b` when `a` is NaN: `f64::max`. (Of +0 and -0
-            // it gives `a`; either would do, the boxes depend on values only.)
-            unsafe {
-                let nan = _mm256_cmp_pd::<_CMP_UNORD_Q>(a, a);
-                _mm256_blendv_pd(_mm256_max_pd(b, a), b, nan)
-            }
+            // `maxpd(b, a)` is `b > a ? b : a`: `f64::max` of numbers.
+            unsafe { _mm256_max_pd(b, a) }
         }
         #[inline(always)]
         fn min(self, a: __m256d, b: __m256d) -> __m256d {
-            // As `max`, with `minpd(b, a) = b < a ? b : a`: `f64::min`.
-            unsafe {
-                let nan = _mm256_cmp_pd::<_CMP_UNORD_Q>(a, a);
-                _mm256_blendv_pd(_mm256_min_pd(b, a), b, nan)
-            }
+            // `minpd(b, a)` is `b < a ? b : a`: `f64::min` of numbers.
+            unsafe { _mm256_min_pd(b, a) }
         }
         #[inline(always)]
         fn abs(self, a: __m256d) -> __m256d {
@@ -487,12 +493,12 @@ mod avx2_lanes {
 struct F4<L: Lanes4>(L::V, L);
 
 impl<L: Lanes4> F4<L> {
-    /// `f64::max` lane by lane.
+    /// `f64::max` lane by lane (of numbers).
     #[inline(always)]
     fn max(self, o: F4<L>) -> F4<L> {
         F4(self.1.max(self.0, o.0), self.1)
     }
-    /// `f64::min` lane by lane.
+    /// `f64::min` lane by lane (of numbers).
     #[inline(always)]
     fn min(self, o: F4<L>) -> F4<L> {
         F4(self.1.min(self.0, o.0), self.1)
@@ -593,7 +599,8 @@ impl<L: Lanes4> Abs for F4<L> {
 }
 
 /// [`NearFaces::face_of`] for four triangles, from their vertices' `q` on
-/// the faces' axis: the same operations lane by lane.
+/// the faces' axis: the same operations lane by lane (for kept lanes, free
+/// of NaN; the others' are recomputed).
 #[inline(always)]
 fn faces4<L: Lanes4>(faces: &NearFaces, q: [F4<L>; 3]) -> [f32; 4] {
     let (lo, hi) = (min3(q), max3(q));
@@ -607,7 +614,8 @@ impl BoxMargin {
     /// loop), for the common case that needs no clipping: writes triangle
     /// `j`'s box to `out[j]`, or leaves `out[j]` alone and sets bit `j` of
     /// the result when the triangle needs the scalar path (clipping, a depth
-    /// not known to a relative 1/2, a NaN depth). Each lane performs exactly
+    /// not known to a relative 1/2, a NaN depth, a vertex too far to keep
+    /// every value finite), which also recomputes its face. Each lane performs exactly
     /// the scalar no-clipping path's operations, in the same order on the
     /// same operands ([`Lanes4`]), then `finish`'s checks in its order, so
     /// the boxes are the same bit for bit.
@@ -630,8 +638,11 @@ impl BoxMargin {
         let zmin = l.splat(cam.near * (1.0 - 1e-6));
         let far = l.splat(cam.far * (1.0 + 1e-6));
         let (mut kept, mut beyond) = (0b1111, if cam.far.is_finite() { 0b1111 } else { 0 });
+        let far_mag = l.splat(MAX_MAG);
         for pi in &p {
             kept &= l.ge(pi[2].0, zmin) & l.lt((16.0 * U * pi[3]).0, pi[2].0);
+            // Every value finite, so no NaN (module documentation).
+            kept &= l.lt(pi[3].0, far_mag);
             beyond &= l.gt(pi[2].0, far);
         }
         let iz = [1.0 / p[0][2], 1.0 / p[1][2], 1.0 / p[2][2]];
@@ -789,6 +800,9 @@ fn bounds_chunk<L: Lanes4>(
                 o[j] = None;
             } else if scalar & (1 << j) != 0 {
                 o[j] = m.bounds(cam, &t[j]);
+            }
+            if scalar & (1 << j) != 0 {
+                f[j] = nf.face(&t[j]);
             }
         }
     }
@@ -1021,8 +1035,6 @@ mod tests {
     /// faces) too.
     #[test]
     fn non_finite_lanes_match_scalar() {
-        let cam = &cameras()[1];
-        let m = BoxMargin::new(cam);
         let good = [
             Vec3::new(0.1, 0.2, 0.0),
             Vec3::new(0.3, 0.1, 0.0),
@@ -1042,18 +1054,32 @@ mod tests {
                 tris.extend([good, t, good, good]);
             }
         }
-        let deg = vec![false; tris.len()];
-        let want: Vec<_> = tris.iter().map(|t| m.bounds(cam, t)).collect();
-        let nf = NearFaces::new(cam);
-        let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
-        let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
-        bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got, &mut faces);
-        assert_eq!(got, want);
-        assert_eq!(bits(&faces), want_faces);
-        let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
-        bounds_into(cam, &tris, &deg, Some(m), &mut got, &mut faces);
-        assert_eq!(got, want);
-        assert_eq!(bits(&faces), want_faces);
+        // Far eyes: as far as `Camera::new` allows (its basis must
+        // normalize `look_at - eye`), and beyond the batched lanes' range
+        // (`MAX_MAG`), moved there after its checks.
+        let far = |z: f64| {
+            let e = DVec3::new(0.0, 0.0, z);
+            let at = DVec3::new(0.0, 0.0, z - z * 1e-12);
+            Camera::new(e, at, DVec3::Y, 40.0, 30, 20, 1e-3, f64::INFINITY).unwrap()
+        };
+        let mut beyond = far(1e150);
+        beyond.eye.z = 2.0 * MAX_MAG;
+        for cam in [&cameras()[1], &far(1e150), &beyond] {
+            let m = BoxMargin::new(cam);
+            let deg = vec![false; tris.len()];
+            let want: Vec<_> = tris.iter().map(|t| m.bounds(cam, t)).collect();
+            let nf = NearFaces::new(cam);
+            let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
+            let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
+            bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got, &mut faces);
+            assert_eq!(got, want);
+            assert_eq!(bits(&faces), want_faces);
+            let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
+            bounds_into(cam, &tris, &deg, Some(m), &mut got, &mut faces);
+            assert_eq!(got, want);
+            assert_eq!(bits(&faces), want_faces);
+            assert!(want.iter().any(Option::is_some));
+        }
     }
 }
