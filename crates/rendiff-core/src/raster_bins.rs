@@ -25,6 +25,12 @@ pub struct Binned {
 
 const _: () = assert!(TILE <= 256);
 
+/// A box over several tiles, in the binning's per-triangle tile index.
+const MANY: u32 = u32::MAX - 1;
+
+/// No box, in the binning's per-triangle tile index.
+const NONE: u32 = u32::MAX;
+
 /// Triangles binned into tiles, in parallel and deterministically: chunks of
 /// consecutive triangles each sort their (triangle, tile) pairs by tile
 /// (counting sort, keeping triangle order), and a tile's bin is its run in
@@ -57,6 +63,8 @@ impl Bins {
         let cam = &scene.camera;
         let (w, h) = (cam.width, cam.height);
         let tiles = (tiles_x * tiles_y) as usize;
+        // Tile indices stay below the markers.
+        assert!(tiles < MANY as usize, "{tiles_x} x {tiles_y} tiles");
         let chunks = scene
             .triangles
             .par_chunks(Self::GRAIN)
@@ -65,26 +73,36 @@ impl Bins {
             .map(|(ci, (tris, deg))| {
                 let (mut rects, mut face) = (vec![None; tris.len()], vec![0f32; tris.len()]);
                 crate::raster_bounds::bounds_into(cam, tris, deg, margin, &mut rects, &mut face);
-                // Each box's tile range (most boxes of a dense mesh lie in one
-                // tile), computed once for both passes.
-                let spans: Vec<Option<[u32; 4]>> = rects
-                    .iter()
-                    .map(|r| r.map(|r| [r.x0 / TILE, r.x1 / TILE, r.y0 / TILE, r.y1 / TILE]))
-                    .collect();
-                let mut start = vec![0u32; tiles + 1];
-                for &[tx0, tx1, ty0, ty1] in spans.iter().flatten() {
-                    if tx0 == tx1 && ty0 == ty1 {
-                        // One tile: no loops.
-                        start[(ty0 * tiles_x + tx0) as usize + 1] += 1;
-                        continue;
-                    }
-                    for ty in ty0..=ty1 {
-                        for tx in tx0..=tx1 {
-                            start[(ty * tiles_x + tx) as usize + 1] += 1;
+                // Each box's tile (most boxes of a dense mesh lie in one), or
+                // `MANY` / `NONE`, computed once for both passes; and the
+                // range of tiles the chunk meets (its triangles are
+                // neighbours in the mesh: a few rows of tiles), so that its
+                // counts and offsets span that range, not the image's tiles.
+                let span = |r: &PixelRect| [r.x0 / TILE, r.x1 / TILE, r.y0 / TILE, r.y1 / TILE];
+                let mut tile = vec![NONE; tris.len()];
+                let (mut lo, mut hi) = (u32::MAX, 0u32);
+                for (r, t) in rects.iter().zip(&mut tile) {
+                    let Some(r) = r else { continue };
+                    let [tx0, tx1, ty0, ty1] = span(r);
+                    let (first, last) = (ty0 * tiles_x + tx0, ty1 * tiles_x + tx1);
+                    *t = if first == last { first } else { MANY };
+                    (lo, hi) = (lo.min(first), hi.max(last));
+                }
+                let n = if lo > hi { 0 } else { (hi - lo + 1) as usize };
+                let mut start = vec![0u32; n + 1];
+                for (r, &t) in rects.iter().zip(&tile) {
+                    if t < MANY {
+                        start[(t - lo) as usize + 1] += 1;
+                    } else if let (MANY, Some(r)) = (t, r) {
+                        let [tx0, tx1, ty0, ty1] = span(r);
+                        for ty in ty0..=ty1 {
+                            for tx in tx0..=tx1 {
+                                start[(ty * tiles_x + tx - lo) as usize + 1] += 1;
+                            }
                         }
                     }
                 }
-                for i in 0..tiles {
+                for i in 0..n {
                     start[i + 1] += start[i];
                 }
                 let mut next = start.clone();
@@ -93,18 +111,16 @@ impl Bins {
                     rect: [0; 4],
                     face: 0.0,
                 };
-                let mut entries = vec![empty; start[tiles] as usize];
-                for (i, (r, span)) in rects.iter().zip(&spans).enumerate() {
-                    let (&Some(r), &Some([tx0, tx1, ty0, ty1])) = (r, span) else {
-                        continue;
-                    };
+                let mut entries = vec![empty; start[n] as usize];
+                for (i, (r, &t)) in rects.iter().zip(&tile).enumerate() {
                     let prim = (ci * Self::GRAIN + i) as u32;
                     let face = face[i];
-                    if tx0 == tx1 && ty0 == ty1 {
+                    if t < MANY {
                         // One tile: no loops, and the box (inside the tile
                         // and the image) needs no clipping.
-                        let slot = &mut next[(ty0 * tiles_x + tx0) as usize];
-                        let (x0, y0) = (tx0 * TILE, ty0 * TILE);
+                        let Some(r) = r else { continue };
+                        let slot = &mut next[(t - lo) as usize];
+                        let (x0, y0) = (r.x0 / TILE * TILE, r.y0 / TILE * TILE);
                         entries[*slot as usize] = Binned {
                             prim,
                             rect: [r.x0 - x0, r.x1 - x0, r.y0 - y0, r.y1 - y0].map(|v| v as u8),
@@ -113,14 +129,16 @@ impl Bins {
                         *slot += 1;
                         continue;
                     }
+                    let (MANY, Some(r)) = (t, r) else { continue };
+                    let [tx0, tx1, ty0, ty1] = span(r);
                     for ty in ty0..=ty1 {
                         for tx in tx0..=tx1 {
                             let (x0, y0) = (tx * TILE, ty * TILE);
                             let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
-                            let slot = &mut next[(ty * tiles_x + tx) as usize];
+                            let slot = &mut next[(ty * tiles_x + tx - lo) as usize];
                             entries[*slot as usize] = Binned {
                                 prim,
-                                rect: clip_to_tile(r, x0, y0, tw, th).map(|v| v as u8),
+                                rect: clip_to_tile(*r, x0, y0, tw, th).map(|v| v as u8),
                                 face,
                             };
                             *slot += 1;
@@ -128,9 +146,9 @@ impl Bins {
                     }
                 }
                 // This chunk's non-empty runs, by tile.
-                let runs: Vec<[u32; 3]> = (0..tiles)
+                let runs: Vec<[u32; 3]> = (0..n)
                     .filter(|&i| start[i + 1] > start[i])
-                    .map(|i| [i as u32, start[i], start[i + 1]])
+                    .map(|i| [lo + i as u32, start[i], start[i + 1]])
                     .collect();
                 (entries, runs)
             })
