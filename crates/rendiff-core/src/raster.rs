@@ -869,8 +869,12 @@ fn screen_block<L: Lanes>(
 /// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
 /// evaluated here for every pixel and edge at once, one pixel per lane
 /// ([`Lanes::filter4`]), so only the signs it cannot settle call it (which
-/// then counts its exact fallbacks and ties as always). Depth by
-/// [`ChunkDepth::depth_at`], [`TriDepth::depth`] bit for bit.
+/// then counts its exact fallbacks and ties as always). When the filter
+/// settles every sign of the box (nearly always), the coverage of all its
+/// pixels is read off the sign masks at once, counted as [`covers_by`]
+/// counts it (a branchy loop per pixel cost 6% of the raster's pass on
+/// `million`). Depth by [`ChunkDepth::depth_at`], [`TriDepth::depth`] bit
+/// for bit.
 ///
 /// (The three edge planes are set up whether or not an early exit would
 /// have spared one: on a million triangles, the branch per sign of the
@@ -911,7 +915,31 @@ fn small_box<L: Lanes>(
         (d[0][j], d[1][j], d[2][j]) = (v.x, v.y, v.z);
     }
     let (pos, neg) = l.filter4(&planes, &d);
+    let lanes = (1u32 << n) - 1;
+    let open = (!(pos[0] | neg[0]) | !(pos[1] | neg[1]) | !(pos[2] | neg[2])) & lanes;
     let mut depth: Option<ChunkDepth> = None;
+    if open == 0 {
+        // Every sign settled (the common case): what `covers_by` would
+        // return and count, per lane, without asking it (it would call the
+        // predicate for none of them).
+        let (front, back) = (pos[0] & pos[1] & pos[2], neg[0] & neg[1] & neg[2]);
+        let hit = (front | back) & lanes;
+        c.coverage_tests += n as u64;
+        c.covered += u64::from(hit.count_ones());
+        let mut rest = hit;
+        while rest != 0 {
+            let j = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let (lx, ly) = at[j];
+            let facing = if (front >> j) & 1 == 1 { 1 } else { -1 };
+            let d =
+                depth.get_or_insert_with(|| ChunkDepth::new_inlined(cam, &TriDepth::new(cam, t)));
+            if let Some(z) = d.depth_at(cam, rays, lx, ly) {
+                out.offer(lx, ly, hit_key(z, prim), facing);
+            }
+        }
+        return;
+    }
     for (j, &(lx, ly)) in at[..n].iter().enumerate() {
         let facing = covers_by(
             c,
