@@ -109,6 +109,7 @@ use crate::predicate::EdgePlane;
 use crate::raster_screen_depth::ScreenRow;
 #[cfg(target_arch = "x86_64")]
 use crate::raster_screen_depth::{DROPPED_MASK, MIDPOINT};
+use crate::scene::resolve::Tri;
 use crate::visibility::{hit_key, TriDepth, TriEdges, NO_HIT};
 use glam::DVec3;
 
@@ -155,6 +156,29 @@ pub trait Lanes: Copy {
             }
         }
         (pos, neg)
+    }
+
+    /// [`Lanes::filter4`] for the edge planes of triangle `t` seen from
+    /// `eye` ([`EdgePlane::new`]'s operations, edge by edge) at the first
+    /// `n` rays of `d`, folded into what a small box needs, bit `j` for ray
+    /// `j`: the rays whose three signs it settles as positive (`front`), as
+    /// negative (`back`), and those with a sign left open (`open`). This is
+    /// the definition; the AVX2 form puts one plane per lane instead of one
+    /// ray, so that a box of a pixel or two pays for its own rays only.
+    #[inline(always)]
+    fn small_signs(self, eye: DVec3, t: &Tri, d: &[[f64; 4]; 3], n: usize) -> (u32, u32, u32) {
+        let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
+        let planes = [
+            EdgePlane::new(eye, a, b),
+            EdgePlane::new(eye, b, c),
+            EdgePlane::new(eye, c, a),
+        ];
+        let (pos, neg) = Portable.filter4(&planes, d);
+        let lanes = (1u32 << n) - 1;
+        let front = pos[0] & pos[1] & pos[2] & lanes;
+        let back = neg[0] & neg[1] & neg[2] & lanes;
+        let open = (!(pos[0] | neg[0]) | !(pos[1] | neg[1]) | !(pos[2] | neg[2])) & lanes;
+        (front, back, open)
     }
 
     /// One row of one component of a tile's directions, `d[i] = (e +
@@ -598,6 +622,66 @@ impl Lanes for Avx2 {
             }
         }
         Some((z, ok, free))
+    }
+
+    #[inline(always)]
+    fn small_signs(self, eye: DVec3, t: &Tri, d: &[[f64; 4]; 3], n: usize) -> (u32, u32, u32) {
+        use std::arch::x86_64::*;
+        let (mut front, mut back, mut open) = (0u32, 0u32, 0u32);
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2; no memory is
+        // touched but the borrowed arrays, read by index. Lane `k` is edge
+        // `k` (lane 3 repeats edge 0): `EdgePlane::new`'s operations on its
+        // endpoints, then `EdgePlane::filter`'s per ray, in their orders
+        // (`abs` and negation by sign bit, exact).
+        unsafe {
+            let sign = _mm256_set1_pd(-0.0);
+            // Per component, `v - eye` for the vertices a, b, c, a (each
+            // widened exactly), and the edges' second endpoints b, c, a, b.
+            // (No closures around intrinsics: see `filter4`.)
+            let (v0, v1, v2) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
+            let ax = _mm256_sub_pd(_mm256_set_pd(v0.x, v2.x, v1.x, v0.x), _mm256_set1_pd(eye.x));
+            let ay = _mm256_sub_pd(_mm256_set_pd(v0.y, v2.y, v1.y, v0.y), _mm256_set1_pd(eye.y));
+            let az = _mm256_sub_pd(_mm256_set_pd(v0.z, v2.z, v1.z, v0.z), _mm256_set1_pd(eye.z));
+            const NEXT: i32 = 0b01_00_10_01;
+            let bx = _mm256_permute4x64_pd::<NEXT>(ax);
+            let by = _mm256_permute4x64_pd::<NEXT>(ay);
+            let bz = _mm256_permute4x64_pd::<NEXT>(az);
+            let (yz, zy) = (_mm256_mul_pd(ay, bz), _mm256_mul_pd(az, by));
+            let (zx, xz) = (_mm256_mul_pd(az, bx), _mm256_mul_pd(ax, bz));
+            let (xy, yx) = (_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
+            let nx = _mm256_sub_pd(yz, zy);
+            let ny = _mm256_sub_pd(zx, xz);
+            let nz = _mm256_sub_pd(xy, yx);
+            let px = _mm256_add_pd(_mm256_andnot_pd(sign, yz), _mm256_andnot_pd(sign, zy));
+            let py = _mm256_add_pd(_mm256_andnot_pd(sign, zx), _mm256_andnot_pd(sign, xz));
+            let pz = _mm256_add_pd(_mm256_andnot_pd(sign, xy), _mm256_andnot_pd(sign, yx));
+            let bound_a = _mm256_set1_pd(crate::predicate::O3D_ERRBOUND_A);
+            let [dx, dy, dz] = d;
+            for (j, ((&x, &y), &z)) in dx.iter().zip(dy).zip(dz).take(n).enumerate() {
+                let (vx, vy, vz) = (_mm256_set1_pd(x), _mm256_set1_pd(y), _mm256_set1_pd(z));
+                let det = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(vx, nx), _mm256_mul_pd(vy, ny)),
+                    _mm256_mul_pd(vz, nz),
+                );
+                let (ux, uy, uz) = (
+                    _mm256_andnot_pd(sign, vx),
+                    _mm256_andnot_pd(sign, vy),
+                    _mm256_andnot_pd(sign, vz),
+                );
+                let sum = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(ux, px), _mm256_mul_pd(uy, py)),
+                    _mm256_mul_pd(uz, pz),
+                );
+                let bound = _mm256_mul_pd(bound_a, sum);
+                let minus = _mm256_xor_pd(det, sign);
+                let pos = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(det, bound)) as u32 & 7;
+                let neg = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(minus, bound)) as u32 & 7;
+                front |= u32::from(pos == 7) << j;
+                back |= u32::from(neg == 7) << j;
+                open |= u32::from((pos | neg) != 7) << j;
+            }
+        }
+        (front, back, open)
     }
 
     #[inline(always)]
@@ -1786,6 +1870,53 @@ mod tests {
                 assert_eq!(avx.gt(&a, b), want, "{a:?} > {b}");
             }
         }
+    }
+
+    /// [`Lanes::small_signs`] in AVX2 (one plane per lane) gives the bits
+    /// of its definition (one ray per lane, from [`Lanes::filter4`]) for
+    /// every ray count of a small box: rays through the edges, anywhere,
+    /// with zero and NaN components; all three outcomes occur.
+    #[test]
+    fn small_signs_forms_agree() {
+        let mut s = 29u64;
+        let mut seen = [0u32; 3];
+        for case in 0..3000 {
+            let scale = [1.0, 1e-3, 1e5][case % 3];
+            let p = |s: &mut u64| DVec3::new(lcg(s), lcg(s), lcg(s)) * scale;
+            let eye = p(&mut s);
+            let tri: Tri = [p(&mut s), p(&mut s), p(&mut s)].map(|v| v.as_vec3());
+            let (a, b, c) = (tri[0].as_dvec3(), tri[1].as_dvec3(), tri[2].as_dvec3());
+            let mut d = [[0f64; 4]; 3];
+            for j in 0..4 {
+                let t = lcg(&mut s);
+                let v = match (case + j) % 4 {
+                    0 => a + (b - a) * t - eye,
+                    1 => b + (c - b) * t - eye,
+                    2 => c + (a - c) * t - eye,
+                    _ => (a + b + c) / 3.0 + p(&mut s) * 0.1 - eye,
+                };
+                let mut v = v.to_array();
+                match (case / 4 + j) % 9 {
+                    0 => v[j % 3] = 0.0,
+                    1 if case % 5 == 0 => v[j % 3] = f64::NAN,
+                    _ => {}
+                }
+                for k in 0..3 {
+                    d[k][j] = v[k];
+                }
+            }
+            for n in 1..=4 {
+                let want = Portable.small_signs(eye, &tri, &d, n);
+                seen[0] += want.0.count_ones();
+                seen[1] += want.1.count_ones();
+                seen[2] += want.2.count_ones();
+                #[cfg(target_arch = "x86_64")]
+                if let Some(avx) = Avx2::detect() {
+                    assert_eq!(avx.small_signs(eye, &tri, &d, n), want, "{tri:?} {d:?} {n}");
+                }
+            }
+        }
+        assert!(seen.iter().all(|&k| k > 500), "{seen:?}");
     }
 
     /// [`Lanes::filter4`] settles exactly the signs the predicate's filter
