@@ -1872,6 +1872,43 @@ mod tests {
         }
     }
 
+    /// Four rays from `eye` for the filter tests, one per lane: through a
+    /// point of an edge of `v` (on its plane up to rounding), near its
+    /// centroid, or anywhere within `scale`; sometimes a zero or NaN
+    /// component, or all zero (det = bound = 0: the filter settles nothing).
+    fn probe_rays(
+        s: &mut u64,
+        case: usize,
+        eye: DVec3,
+        v: [DVec3; 3],
+        scale: f64,
+    ) -> [[f64; 4]; 3] {
+        let [a, b, c] = v;
+        let mut d = [[0f64; 4]; 3];
+        for j in 0..4 {
+            let t = lcg(s);
+            let r = DVec3::new(lcg(s), lcg(s), lcg(s)) * scale;
+            let p = match (case + j) % 5 {
+                0 => a + (b - a) * t,
+                1 => b + (c - b) * t,
+                2 => c + (a - c) * t,
+                3 => (a + b + c) / 3.0 + r * 0.1,
+                _ => r,
+            };
+            let mut q = (p - eye).to_array();
+            match (case / 5 + j) % 7 {
+                0 => q[j % 3] = 0.0,
+                1 if case % 4 == 1 => q[j % 3] = f64::NAN,
+                2 if case.is_multiple_of(11) => q = [0.0; 3],
+                _ => {}
+            }
+            for k in 0..3 {
+                d[k][j] = q[k];
+            }
+        }
+        d
+    }
+
     /// [`Lanes::small_signs`] in AVX2 (one plane per lane) gives the bits
     /// of its definition (one ray per lane, from [`Lanes::filter4`]) for
     /// every ray count of a small box: rays through the edges, anywhere,
@@ -1885,26 +1922,8 @@ mod tests {
             let p = |s: &mut u64| DVec3::new(lcg(s), lcg(s), lcg(s)) * scale;
             let eye = p(&mut s);
             let tri: Tri = [p(&mut s), p(&mut s), p(&mut s)].map(|v| v.as_vec3());
-            let (a, b, c) = (tri[0].as_dvec3(), tri[1].as_dvec3(), tri[2].as_dvec3());
-            let mut d = [[0f64; 4]; 3];
-            for j in 0..4 {
-                let t = lcg(&mut s);
-                let v = match (case + j) % 4 {
-                    0 => a + (b - a) * t - eye,
-                    1 => b + (c - b) * t - eye,
-                    2 => c + (a - c) * t - eye,
-                    _ => (a + b + c) / 3.0 + p(&mut s) * 0.1 - eye,
-                };
-                let mut v = v.to_array();
-                match (case / 4 + j) % 9 {
-                    0 => v[j % 3] = 0.0,
-                    1 if case % 5 == 0 => v[j % 3] = f64::NAN,
-                    _ => {}
-                }
-                for k in 0..3 {
-                    d[k][j] = v[k];
-                }
-            }
+            let v = [tri[0].as_dvec3(), tri[1].as_dvec3(), tri[2].as_dvec3()];
+            let d = probe_rays(&mut s, case, eye, v, scale);
             for n in 1..=4 {
                 let want = Portable.small_signs(eye, &tri, &d, n);
                 seen[0] += want.0.count_ones();
@@ -1936,28 +1955,7 @@ mod tests {
                 EdgePlane::new(eye, b, c),
                 EdgePlane::new(eye, c, a),
             ];
-            let mut d = [[0f64; 4]; 3];
-            for j in 0..4 {
-                // Through a point of an edge (on its plane up to rounding),
-                // or anywhere; sometimes a zero or NaN component.
-                let t = lcg(&mut s);
-                let v = match (case + j) % 4 {
-                    0 => a + (b - a) * t - eye,
-                    1 => c + (a - c) * t - eye,
-                    _ => p(&mut s) - eye,
-                };
-                let mut v = v.to_array();
-                match (case / 4 + j) % 7 {
-                    0 => v[j % 3] = 0.0,
-                    1 if case % 5 == 0 => v[j % 3] = f64::NAN,
-                    // det = bound = 0: the filter settles nothing.
-                    2 if case % 11 == 0 => v = [0.0; 3],
-                    _ => {}
-                }
-                for k in 0..3 {
-                    d[k][j] = v[k];
-                }
-            }
+            let d = probe_rays(&mut s, case, eye, [a, b, c], scale);
             let (pos, neg) = Portable.filter4(&planes, &d);
             let dirs: [DVec3; 4] = std::array::from_fn(|j| DVec3::new(d[0][j], d[1][j], d[2][j]));
             for (k, e) in planes.iter().enumerate() {
