@@ -925,8 +925,7 @@ fn small_box<L: Lanes>(
             let facing = if (front >> j) & 1 == 1 { 1 } else { -1 };
             // (Inlined: out of line, the call cost a few percent on a
             // million small boxes.)
-            let d =
-                depth.get_or_insert_with(|| ChunkDepth::new_inlined(cam, &TriDepth::new(cam, t)));
+            let d = depth.get_or_insert_with(|| l.chunk_depth(cam, t));
             if let Some(z) = d.depth_at(cam, rays, lx, ly) {
                 out.offer(lx, ly, hit_key(z, prim), facing);
             }
@@ -960,8 +959,7 @@ fn small_box<L: Lanes>(
         if facing != 0 {
             // (Inlined: out of line, the call cost a few percent on a
             // million small boxes.)
-            let d =
-                depth.get_or_insert_with(|| ChunkDepth::new_inlined(cam, &TriDepth::new(cam, t)));
+            let d = depth.get_or_insert_with(|| l.chunk_depth(cam, t));
             if let Some(z) = d.depth_at(cam, rays, lx, ly) {
                 out.offer(lx, ly, hit_key(z, prim), facing);
             }

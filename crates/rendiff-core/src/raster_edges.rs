@@ -181,6 +181,15 @@ pub trait Lanes: Copy {
         (front, back, open)
     }
 
+    /// [`ChunkDepth::new`] of [`TriDepth::new`] for triangle `t`: the
+    /// definition. The AVX2 form does the three axes' f64 arithmetic in one
+    /// vector each (the tracer sets this up once per triangle a packet
+    /// hits, for a pixel or four, and the raster once per covered small box).
+    #[inline(always)]
+    fn chunk_depth(self, cam: &Camera, t: &Tri) -> ChunkDepth {
+        ChunkDepth::new_inlined(cam, &TriDepth::new(cam, t))
+    }
+
     /// One row of one component of a tile's directions, `d[i] = (e +
     /// (across[i] + up)) - e` ([`Camera::screen_ray`]'s roundings, see
     /// [`TileRays::fill`]), its values taken into `ext` as they are written
@@ -531,6 +540,102 @@ impl Avx2 {
 
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx2 {
+    #[inline(always)]
+    fn chunk_depth(self, cam: &Camera, t: &Tri) -> ChunkDepth {
+        use std::arch::x86_64::*;
+        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`);
+        // the stores write 4 f64 into the 4-element arrays here. Lanes are
+        // the axes x, y, z (lane 3 carries zeros and is dropped), and each
+        // lane is the scalar definition's arithmetic, operation for operation:
+        // * `glam`'s `Vec3::min` / `max` are `a < b ? a : b` / `a > b ? a : b`,
+        //   which is what `vminps a, b` / `vmaxps a, b` compute, ties and all;
+        //   f32 to f64 is exact either way;
+        // * `DVec3::cross` is `a.y b.z - b.y a.z` and so on: products of
+        //   the rotated lanes, then one subtraction;
+        // * `DVec3::dot` is `(x + y) + z` over the products, summed in that order;
+        // * `grow_box`'s `DVec3::max` is `vmaxpd` by the same rule; `f64::max`
+        //   of two magnitudes in `ChunkDepth` differs from `vmaxpd` only where
+        //   an operand is NaN, and none is: each is the magnitude of a
+        //   difference of two finite values (the vertices are finite f32,
+        //   `resolve` rejects others; the eye is finite, or `Camera::new`'s
+        //   basis would be zero; a grown bound is a vertex moved by a finite
+        //   margin), which may overflow to infinity but is never NaN;
+        // * `abs` clears the sign bit, as `f64::abs` does.
+        unsafe {
+            let v = |p: glam::Vec3| _mm256_cvtps_pd(_mm_setr_ps(p.x, p.y, p.z, 0.0));
+            let e = _mm256_setr_pd(cam.eye.x, cam.eye.y, cam.eye.z, 0.0);
+            let (a, b, c) = (v(t[0]), v(t[1]), v(t[2]));
+            let (e1, e2) = (_mm256_sub_pd(b, a), _mm256_sub_pd(c, a));
+            // Lanes (y, z, x, w) and (z, x, y, w).
+            const YZX: i32 = 0b11_00_10_01;
+            const ZXY: i32 = 0b11_01_00_10;
+            let normal = _mm256_sub_pd(
+                _mm256_mul_pd(
+                    _mm256_permute4x64_pd::<YZX>(e1),
+                    _mm256_permute4x64_pd::<ZXY>(e2),
+                ),
+                _mm256_mul_pd(
+                    _mm256_permute4x64_pd::<YZX>(e2),
+                    _mm256_permute4x64_pd::<ZXY>(e1),
+                ),
+            );
+            let p = _mm256_mul_pd(normal, _mm256_sub_pd(a, e));
+            let (pxy, pz) = (_mm256_castpd256_pd128(p), _mm256_extractf128_pd::<1>(p));
+            let num = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(pxy, _mm_unpackhi_pd(pxy, pxy)), pz));
+            let q = |p: glam::Vec3| _mm_setr_ps(p.x, p.y, p.z, 0.0);
+            let (qa, qb, qc) = (q(t[0]), q(t[1]), q(t[2]));
+            let lo = _mm256_cvtps_pd(_mm_min_ps(_mm_min_ps(qa, qb), qc));
+            let hi = _mm256_cvtps_pd(_mm_max_ps(_mm_max_ps(qa, qb), qc));
+            let sign = _mm256_set1_pd(-0.0);
+            let m = _mm256_mul_pd(
+                _mm256_max_pd(
+                    _mm256_andnot_pd(sign, _mm256_sub_pd(lo, e)),
+                    _mm256_andnot_pd(sign, _mm256_sub_pd(hi, e)),
+                ),
+                _mm256_set1_pd(crate::visibility::BOX_MARGIN),
+            );
+            let (blo, bhi) = (_mm256_sub_pd(lo, m), _mm256_add_pd(hi, m));
+            let (slo, shi) = (_mm256_sub_pd(blo, e), _mm256_sub_pd(bhi, e));
+            let mm = _mm256_mul_pd(
+                _mm256_set1_pd(CLAMP_FREE_MARGIN),
+                _mm256_max_pd(_mm256_andnot_pd(sign, slo), _mm256_andnot_pd(sign, shi)),
+            );
+            let misses = _mm256_or_pd(
+                _mm256_cmp_pd::<_CMP_LT_OQ>(e, blo),
+                _mm256_cmp_pd::<_CMP_GT_OQ>(e, bhi),
+            );
+            let settles = _mm256_cmp_pd::<_CMP_GE_OQ>(
+                _mm256_andnot_pd(sign, mm),
+                _mm256_set1_pd(CLAMP_FREE_MIN_MARGIN),
+            );
+            let free_lo = _mm256_blendv_pd(
+                _mm256_set1_pd(f64::INFINITY),
+                _mm256_add_pd(slo, mm),
+                settles,
+            );
+            let free_hi = _mm256_blendv_pd(
+                _mm256_set1_pd(f64::NEG_INFINITY),
+                _mm256_sub_pd(shi, mm),
+                settles,
+            );
+            let mut out = [[0f64; 4]; 5];
+            for (o, x) in out.iter_mut().zip([normal, slo, shi, free_lo, free_hi]) {
+                _mm256_storeu_pd(o.as_mut_ptr(), x);
+            }
+            let three = |o: [f64; 4]| [o[0], o[1], o[2]];
+            let bits = _mm256_movemask_pd(misses);
+            ChunkDepth {
+                normal: three(out[0]),
+                num,
+                lo: three(out[1]),
+                hi: three(out[2]),
+                zero_misses: [bits & 1 != 0, bits & 2 != 0, bits & 4 != 0],
+                clamp_free_lo: three(out[3]),
+                clamp_free_hi: three(out[4]),
+            }
+        }
+    }
+
     #[inline(always)]
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32 {
         use std::arch::x86_64::{
@@ -1907,6 +2012,74 @@ mod tests {
             }
         }
         d
+    }
+
+    /// Every field of a [`ChunkDepth`] as bits (NaN and signed zeros included).
+    fn depth_bits(d: &ChunkDepth) -> Vec<u64> {
+        let mut v: Vec<u64> = [d.normal, d.lo, d.hi, d.clamp_free_lo, d.clamp_free_hi]
+            .iter()
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect();
+        v.push(d.num.to_bits());
+        v.extend(d.zero_misses.map(u64::from));
+        v
+    }
+
+    /// [`Lanes::chunk_depth`] in AVX2 is its definition bit for bit: on
+    /// vertices with signed-zero and equal coordinates (the min/max ties),
+    /// f32's extremes, tiny ones, and eyes from the origin out to 1e308
+    /// (bounds minus the eye overflowing to infinity, the clamp-free
+    /// thresholds NaN); the eye inside and outside the triangle's slabs.
+    #[test]
+    fn chunk_depth_forms_agree() {
+        let vals = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            3.25,
+            1e-30,
+            -1e-38,
+            f32::MAX,
+            f32::MIN,
+            1e20,
+        ];
+        let mut s = 41u64;
+        let pick = |s: &mut u64| vals[((lcg(s) + 1.0) * 5.5) as usize % vals.len()];
+        let (mut misses, mut nan) = (0, 0);
+        for case in 0..4000 {
+            let eye = match case % 5 {
+                0 => DVec3::ZERO,
+                1 => DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)),
+                2 => DVec3::splat(1e7),
+                3 => DVec3::new(f64::MAX, -f64::MAX, 0.25),
+                _ => DVec3::new(0.0, -0.0, 1e-300),
+            };
+            let cam = Camera::new(
+                eye,
+                eye + DVec3::new(0.3, 0.2, -1.0),
+                DVec3::Y,
+                60.0,
+                8,
+                8,
+                1e-3,
+                f64::INFINITY,
+            )
+            .unwrap();
+            let tri: Tri =
+                std::array::from_fn(|_| glam::Vec3::new(pick(&mut s), pick(&mut s), pick(&mut s)));
+            let want = Portable.chunk_depth(&cam, &tri);
+            misses += want.zero_misses.iter().filter(|&&m| m).count();
+            nan += usize::from(want.clamp_free_lo.iter().any(|x| x.is_nan()));
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx) = Avx2::detect() {
+                let got = avx.chunk_depth(&cam, &tri);
+                assert_eq!(depth_bits(&got), depth_bits(&want), "{tri:?} from {eye}");
+            }
+        }
+        assert!(misses > 1000 && nan > 10, "{misses} {nan}");
     }
 
     /// [`Lanes::small_signs`] in AVX2 (one plane per lane) gives the bits

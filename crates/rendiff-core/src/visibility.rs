@@ -140,7 +140,7 @@ pub fn covers_by(c: &mut Counters, mut sign: impl FnMut(usize, &mut Counters) ->
 /// Relative margin by which boxes grow, per axis, proportional to their distance
 /// from the eye: it absorbs the rounding of the ray direction `D = P - eye`, so
 /// a box the exact pixel ray passes through is never reported as missed.
-const BOX_MARGIN: f64 = 1.0 / (1u64 << 48) as f64;
+pub(crate) const BOX_MARGIN: f64 = 1.0 / (1u64 << 48) as f64;
 
 /// A box in f64, grown for robust slab tests (see [`grow_box`]).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -16,7 +16,7 @@
 //!   [`crate::visibility::edge_sign`] (f64 filter, exact arithmetic, tie rule),
 //!   so coverage, depth and the operation counts are unchanged bit for bit.
 
-use super::rows::{Rows, ROW};
+use super::rows::{Rows, ROW, ROW2};
 use crate::camera::PixelRay;
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::Tri;
@@ -254,6 +254,17 @@ impl LeafTri {
         dir_norm: &[f32; ROW],
     ) -> [(u32, u32); 3] {
         s.edge_signs(&self.n, &self.beta, dir, dir_norm)
+    }
+
+    /// [`LeafTri::edge_rows`] for two neighbouring rows of lanes.
+    #[inline(always)]
+    pub fn edge_rows2<S: Rows>(
+        &self,
+        s: S,
+        dir: [&[f32; ROW2]; 3],
+        dir_norm: &[f32; ROW2],
+    ) -> [(u32, u32); 3] {
+        s.edge_signs2(&self.n, &self.beta, dir, dir_norm)
     }
 }
 

@@ -25,6 +25,16 @@ pub(crate) type BoxAxes = [(f32, f32, bool); 3];
 /// Lanes per row: one 256-bit vector of f32.
 pub(crate) const ROW: usize = 8;
 
+/// Lanes in two neighbouring rows: one 512-bit vector of f32 ([`Rows::PAIRS`]).
+pub(crate) const ROW2: usize = 2 * ROW;
+
+/// The first and second row of a pair of rows.
+#[inline(always)]
+fn halves(a: &[f32; ROW2]) -> (&[f32; ROW], &[f32; ROW]) {
+    let (lo, hi) = a.split_at(ROW);
+    (lo.try_into().unwrap(), hi.try_into().unwrap())
+}
+
 /// The packet kernel's row operations, one implementation per instruction set.
 pub(crate) trait Rows: Copy {
     /// The packet box test for one row of lanes: bit `j` set where lane `j`
@@ -59,6 +69,52 @@ pub(crate) trait Rows: Copy {
     /// `max(n lo, n hi)` over the axes in order and `mag` that of their
     /// magnitudes.
     fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32;
+
+    /// Whether [`Rows::box_out2`] and [`Rows::edge_signs2`] take two rows in
+    /// one step (AVX-512's 16 lanes); where not, the kernel keeps to single
+    /// rows, which skip more work when a triangle meets one row only.
+    const PAIRS: bool = false;
+
+    /// [`Rows::box_out`] for two neighbouring rows (bits 0-7 the first, 8-15
+    /// the second): the same answers, by definition the two single rows'.
+    #[inline(always)]
+    fn box_out2(
+        self,
+        axes: &BoxAxes,
+        inv: [&[f32; ROW2]; 3],
+        zscale: &[f32; ROW2],
+        best_z: &[f32; ROW2],
+    ) -> u32 {
+        let ([i0, j0], [i1, j1], [i2, j2]) = (
+            <[_; 2]>::from(halves(inv[0])),
+            <[_; 2]>::from(halves(inv[1])),
+            <[_; 2]>::from(halves(inv[2])),
+        );
+        let (z0, z1) = halves(zscale);
+        let (b0, b1) = halves(best_z);
+        self.box_out(axes, [i0, i1, i2], z0, b0) | self.box_out(axes, [j0, j1, j2], z1, b1) << ROW
+    }
+
+    /// [`Rows::edge_signs`] for two neighbouring rows (bits 0-7 the first,
+    /// 8-15 the second): the same answers, by definition the two single rows'.
+    #[inline(always)]
+    fn edge_signs2(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW2]; 3],
+        dir_norm: &[f32; ROW2],
+    ) -> [(u32, u32); 3] {
+        let ([d0, e0], [d1, e1], [d2, e2]) = (
+            <[_; 2]>::from(halves(dir[0])),
+            <[_; 2]>::from(halves(dir[1])),
+            <[_; 2]>::from(halves(dir[2])),
+        );
+        let (n0, n1) = halves(dir_norm);
+        let a = self.edge_signs(n, beta, [d0, d1, d2], n0);
+        let b = self.edge_signs(n, beta, [e0, e1, e2], n1);
+        [0, 1, 2].map(|k| (a[k].0 | b[k].0 << ROW, a[k].1 | b[k].1 << ROW))
+    }
 }
 
 /// Plain Rust, for any CPU.
@@ -268,6 +324,146 @@ impl Rows for Avx2 {
     }
 }
 
+/// Proof that the running CPU has AVX-512F and AVX2: only
+/// [`Avx512::detect`] makes one. Single rows and the frustum test are
+/// [`Avx2`]'s; pairs of rows are one 512-bit vector.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct Avx512(());
+
+#[cfg(target_arch = "x86_64")]
+impl Avx512 {
+    /// The token, when the CPU has AVX-512F and AVX2.
+    #[inline]
+    pub fn detect() -> Option<Avx512> {
+        (std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx2"))
+            .then_some(Avx512(()))
+    }
+
+    /// The AVX2 token this one implies.
+    #[inline(always)]
+    fn avx2(self) -> Avx2 {
+        Avx2(())
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Rows for Avx512 {
+    const PAIRS: bool = true;
+
+    #[inline(always)]
+    fn box_out(
+        self,
+        axes: &BoxAxes,
+        inv: [&[f32; ROW]; 3],
+        zscale: &[f32; ROW],
+        best_z: &[f32; ROW],
+    ) -> u32 {
+        self.avx2().box_out(axes, inv, zscale, best_z)
+    }
+
+    #[inline(always)]
+    fn edge_signs(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW]; 3],
+        dir_norm: &[f32; ROW],
+    ) -> [(u32, u32); 3] {
+        self.avx2().edge_signs(n, beta, dir, dir_norm)
+    }
+
+    #[inline(always)]
+    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
+        self.avx2().planes_out(n, a, b)
+    }
+
+    #[inline(always)]
+    fn box_out2(
+        self,
+        axes: &BoxAxes,
+        inv: [&[f32; ROW2]; 3],
+        zscale: &[f32; ROW2],
+        best_z: &[f32; ROW2],
+    ) -> u32 {
+        use std::arch::x86_64::{
+            _mm512_cmp_ps_mask, _mm512_loadu_ps, _mm512_max_ps, _mm512_min_ps, _mm512_mul_ps,
+            _mm512_set1_ps, _mm512_setzero_ps, _CMP_GT_OQ,
+        };
+        // SAFETY: an `Avx512` exists only on a CPU with AVX-512F (see
+        // `detect`), and the loads read exactly the five 16-float arrays
+        // borrowed here. `Avx2::box_out`'s operations, 16 lanes at a time
+        // (`vminps`/`vmaxps` pick the same operand at every width).
+        unsafe {
+            let mut tmin = _mm512_setzero_ps();
+            let mut tmax = _mm512_set1_ps(f32::INFINITY);
+            for (&(near, far, mixed), inv) in axes.iter().zip(inv) {
+                let inv = _mm512_loadu_ps(inv.as_ptr());
+                let t0 = _mm512_mul_ps(_mm512_set1_ps(near), inv);
+                let t1 = _mm512_mul_ps(_mm512_set1_ps(far), inv);
+                let (t0, t1) = if mixed {
+                    (_mm512_min_ps(t0, t1), _mm512_max_ps(t0, t1))
+                } else {
+                    (t0, t1)
+                };
+                tmin = _mm512_max_ps(tmin, t0);
+                tmax = _mm512_min_ps(tmax, t1);
+            }
+            let slack = _mm512_mul_ps(tmax, _mm512_set1_ps(Node32::TMAX_SLACK));
+            let entry_z = _mm512_mul_ps(tmin, _mm512_loadu_ps(zscale.as_ptr()));
+            let miss = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(tmin, slack);
+            let pruned =
+                _mm512_cmp_ps_mask::<_CMP_GT_OQ>(entry_z, _mm512_loadu_ps(best_z.as_ptr()));
+            u32::from(miss | pruned)
+        }
+    }
+
+    #[inline(always)]
+    fn edge_signs2(
+        self,
+        n: &[[f32; 3]; 3],
+        beta: &[f32; 3],
+        dir: [&[f32; ROW2]; 3],
+        dir_norm: &[f32; ROW2],
+    ) -> [(u32, u32); 3] {
+        use std::arch::x86_64::{
+            _mm512_add_ps, _mm512_cmp_ps_mask, _mm512_loadu_ps, _mm512_mul_ps, _mm512_set1_ps,
+            _CMP_GT_OQ, _CMP_LT_OQ,
+        };
+        // SAFETY: an `Avx512` exists only on a CPU with AVX-512F (see
+        // `detect`), and the loads read exactly the four 16-float arrays
+        // borrowed here. `edge_det32`'s operations in its order. `-det >
+        // beta |D|` is taken as `det < (-beta) |D|`: negation is exact and
+        // rounding symmetric, so `(-beta) |D|` is `-(beta |D|)` bit for bit,
+        // and `-x > y` is `x < -y` for every pair, NaN included (both false).
+        unsafe {
+            let d = [
+                _mm512_loadu_ps(dir[0].as_ptr()),
+                _mm512_loadu_ps(dir[1].as_ptr()),
+                _mm512_loadu_ps(dir[2].as_ptr()),
+            ];
+            let dn = _mm512_loadu_ps(dir_norm.as_ptr());
+            let mut out = [(0, 0); 3];
+            for ((n, &beta), out) in n.iter().zip(beta).zip(&mut out) {
+                let det = _mm512_add_ps(
+                    _mm512_add_ps(
+                        _mm512_mul_ps(_mm512_set1_ps(n[0]), d[0]),
+                        _mm512_mul_ps(_mm512_set1_ps(n[1]), d[1]),
+                    ),
+                    _mm512_mul_ps(_mm512_set1_ps(n[2]), d[2]),
+                );
+                let bound = _mm512_mul_ps(_mm512_set1_ps(beta), dn);
+                let low = _mm512_mul_ps(_mm512_set1_ps(-beta), dn);
+                *out = (
+                    u32::from(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(det, bound)),
+                    u32::from(_mm512_cmp_ps_mask::<_CMP_LT_OQ>(det, low)),
+                );
+            }
+            out
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -364,6 +560,86 @@ mod tests {
         }
         // Both answers occur often.
         assert!(outs > 1000 && ins > 1000, "{outs} out, {ins} in");
+    }
+
+    /// The AVX-512 pairs of rows give the two single rows' bits (the
+    /// definition, `Rows`' default pair forms), box test and edge signs, on
+    /// the single-row tests' kinds of values: both axis orders, infinities,
+    /// signed zeros, NaN products, overflow and ties.
+    #[test]
+    fn pair_forms_agree() {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(wide) = Avx512::detect() {
+            let vals = [
+                0.5,
+                -0.5,
+                2.0,
+                -3.0,
+                0.0,
+                -0.0,
+                1e-20,
+                1e20,
+                -1e20,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::MAX,
+            ];
+            let mut next = picker(13);
+            let mut seen = [0u32; 3];
+            for _ in 0..4000 {
+                let mut axes: BoxAxes = [(0.0, 0.0, false); 3];
+                let mut inv = [[0f32; ROW2]; 3];
+                for (k, a) in axes.iter_mut().enumerate() {
+                    let (x, y) = (vals[next(9)], vals[next(9)]);
+                    let (lo, hi) = (x.min(y), x.max(y));
+                    let sign = next(3);
+                    *a = match sign {
+                        0 => (lo, hi, true),
+                        1 => (lo, hi, false),
+                        _ => (hi, lo, false),
+                    };
+                    for v in inv[k].iter_mut() {
+                        let x = vals[next(vals.len())];
+                        *v = match sign {
+                            0 => x,
+                            1 => x.abs(),
+                            _ => -x.abs(),
+                        };
+                    }
+                }
+                let lanes = |next: &mut dyn FnMut(usize) -> usize| -> [f32; ROW2] {
+                    std::array::from_fn(|_| vals[next(vals.len())].abs())
+                };
+                let (zscale, best_z) = (lanes(&mut next), lanes(&mut next));
+                let inv_rows = [&inv[0], &inv[1], &inv[2]];
+                let want = Portable.box_out2(&axes, inv_rows, &zscale, &best_z);
+                assert_eq!(
+                    wide.box_out2(&axes, inv_rows, &zscale, &best_z),
+                    want,
+                    "{axes:?} {inv:?}"
+                );
+                seen[0] += want.count_ones();
+                let n: [[f32; 3]; 3] =
+                    std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
+                let beta: [f32; 3] = std::array::from_fn(|_| vals[next(vals.len())].abs());
+                let dir: [[f32; ROW2]; 3] =
+                    std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
+                let dir_norm = lanes(&mut next);
+                let rows = [&dir[0], &dir[1], &dir[2]];
+                let want = Portable.edge_signs2(&n, &beta, rows, &dir_norm);
+                assert_eq!(
+                    wide.edge_signs2(&n, &beta, rows, &dir_norm),
+                    want,
+                    "{n:?} {beta:?}"
+                );
+                for (p, q) in want {
+                    seen[1] += p.count_ones();
+                    seen[2] += q.count_ones();
+                }
+            }
+            // Both answers of each test occur often.
+            assert!(seen.iter().all(|&k| k > 5000), "{seen:?}");
+        }
     }
 
     /// The edge signs' two forms agree bit for bit, and the portable form is
