@@ -77,6 +77,19 @@ fn row2(a: &[f32; LANES], r: usize) -> &[f32; ROW2] {
     a[r * ROW..][..ROW2].try_into().unwrap()
 }
 
+/// The first and last rows with a lane in `m` (not 0): loops over the rows
+/// between them, rather than over all rows with a branch on each, ran 4%
+/// faster twice over in the leaf (edge signs, then depths; `million`,
+/// alternated in one process).
+#[inline(always)]
+fn live_rows(m: Mask) -> (usize, usize) {
+    debug_assert!(m != 0);
+    (
+        m.trailing_zeros() as usize / ROW,
+        (Mask::BITS - 1 - m.leading_zeros()) as usize / ROW,
+    )
+}
+
 /// Lanes `r * ROW ..` of a per-lane f64 array.
 #[inline(always)]
 fn row64(a: &[f64; LANES], r: usize) -> &[f64; ROW] {
@@ -325,39 +338,44 @@ impl Packet {
     ) {
         let mut pos = [0 as Mask; 3];
         let mut neg = [0 as Mask; 3];
-        let mut r = 0;
-        while r < NROWS {
-            // A row of lanes is one 256-bit vector: skip rows the box let no lane into.
-            if (m >> (r * ROW)) & ROW_BITS == 0 {
-                r += 1;
-                continue;
-            }
-            // Two live rows in one step, where the rows come in pairs.
-            if S::PAIRS && r + 1 < NROWS && (m >> ((r + 1) * ROW)) & ROW_BITS != 0 {
+        let (first, last) = live_rows(m);
+        if S::PAIRS {
+            // Pairs of rows from the first live row to the last (a pair
+            // that would pass the packet's end starts a row earlier). A
+            // rectangle's rows are contiguous, so a pair rarely takes a row
+            // without a live lane. Lanes outside `m` get signs nothing reads.
+            let mut r = first;
+            while r <= last {
+                let at = r.min(NROWS - 2);
                 let dir = [
-                    row2(&self.dir[0], r),
-                    row2(&self.dir[1], r),
-                    row2(&self.dir[2], r),
+                    row2(&self.dir[0], at),
+                    row2(&self.dir[1], at),
+                    row2(&self.dir[2], at),
                 ];
-                let signs = leaf.edge_rows2(s, dir, row2(&self.dir_norm, r));
+                let signs = leaf.edge_rows2(s, dir, row2(&self.dir_norm, at));
+                for (k, &(p, n)) in signs.iter().enumerate() {
+                    pos[k] |= Mask::from(p) << (at * ROW);
+                    neg[k] |= Mask::from(n) << (at * ROW);
+                }
+                r += 2;
+            }
+        } else {
+            for r in first..=last {
+                // A row of lanes is one 256-bit vector: skip rows the box let no lane into.
+                if (m >> (r * ROW)) & ROW_BITS == 0 {
+                    continue;
+                }
+                let dir = [
+                    row(&self.dir[0], r),
+                    row(&self.dir[1], r),
+                    row(&self.dir[2], r),
+                ];
+                let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
                 for (k, &(p, n)) in signs.iter().enumerate() {
                     pos[k] |= Mask::from(p) << (r * ROW);
                     neg[k] |= Mask::from(n) << (r * ROW);
                 }
-                r += 2;
-                continue;
             }
-            let dir = [
-                row(&self.dir[0], r),
-                row(&self.dir[1], r),
-                row(&self.dir[2], r),
-            ];
-            let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
-            for (k, &(p, n)) in signs.iter().enumerate() {
-                pos[k] |= Mask::from(p) << (r * ROW);
-                neg[k] |= Mask::from(n) << (r * ROW);
-            }
-            r += 1;
         }
         let [p0, p1, p2] = pos;
         let [n0, n1, n2] = neg;
@@ -383,7 +401,8 @@ impl Packet {
         // them (`ChunkDepth`: `TriDepth::depth` bit for bit, mostly without
         // the slab clamp).
         let d = l.chunk_depth(cam, &leaf.tri);
-        for r in 0..NROWS {
+        let (first, last) = live_rows(hit);
+        for r in first..=last {
             let need = ((hit >> (r * ROW)) & ROW_BITS) as u32;
             if need == 0 {
                 continue;
