@@ -323,6 +323,12 @@ trait Lanes<const N: usize>: Copy {
     fn gt(self, a: Self::V, b: Self::V) -> u32;
     /// The lanes.
     fn array(self, a: Self::V) -> [f64; N];
+    /// `a as u32` for the lanes that hold whole numbers in `[0, 2^31)`; any
+    /// value in the others. (A box's ends are such numbers wherever they are
+    /// read: clamped to the image, whose side is below 2^31, and a box
+    /// whose ends are not, is empty, and its ends are not read. Per lane,
+    /// Rust's saturating cast cost three scalar instructions and a spill.)
+    fn pixels(self, a: Self::V) -> [u32; N];
 }
 
 /// [`Lanes`] in plain Rust, for any CPU.
@@ -406,6 +412,10 @@ impl Lanes<4> for Plain4 {
     fn array(self, a: [f64; 4]) -> [f64; 4] {
         a
     }
+    #[inline(always)]
+    fn pixels(self, a: [f64; 4]) -> [u32; 4] {
+        a.map(|v| v as u32)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -484,6 +494,14 @@ mod avx2_lanes {
         fn array(self, a: __m256d) -> [f64; 4] {
             let mut out = [0.0; 4];
             unsafe { _mm256_storeu_pd(out.as_mut_ptr(), a) };
+            out
+        }
+        #[inline(always)]
+        fn pixels(self, a: __m256d) -> [u32; 4] {
+            // `vcvttpd2dq` truncates as `as` does, on the lanes whose
+            // values the trait asks for.
+            let mut out = [0u32; 4];
+            unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), _mm256_cvttpd_epi32(a)) };
             out
         }
     }
@@ -583,6 +601,13 @@ mod avx512_lanes {
             unsafe { _mm512_storeu_pd(out.as_mut_ptr(), a) };
             out
         }
+        #[inline(always)]
+        fn pixels(self, a: __m512d) -> [u32; 8] {
+            // As AVX2's `pixels`.
+            let mut out = [0u32; 8];
+            unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), _mm512_cvttpd_epi32(a)) };
+            out
+        }
     }
 }
 #[cfg(target_arch = "x86_64")]
@@ -668,10 +693,10 @@ struct AxisWide<const N: usize> {
     finite: u32,
     /// The clamped ends are empty (else: no pixel).
     empty: u32,
-    /// The clamped first pixel index.
-    lo: [f64; N],
-    /// The clamped last pixel index.
-    hi: [f64; N],
+    /// The clamped first pixel index (meaningful where not `empty`).
+    lo: [u32; N],
+    /// The clamped last pixel index (meaningful where not `empty`).
+    hi: [u32; N],
 }
 
 /// Vertex `i` of `N` triangles in camera space, as [`BoxMargin::bounds`]
@@ -772,10 +797,10 @@ impl BoxMargin {
         let empty = x.empty | y.empty;
         for (j, o) in out.iter_mut().enumerate() {
             let rect = PixelRect {
-                x0: x.lo[j] as u32,
-                y0: y.lo[j] as u32,
-                x1: x.hi[j] as u32,
-                y1: y.hi[j] as u32,
+                x0: x.lo[j],
+                y0: y.lo[j],
+                x1: x.hi[j],
+                y1: y.hi[j],
             };
             let bit = 1 << j;
             if common & bit != 0 {
@@ -824,8 +849,8 @@ impl BoxMargin {
         AxisWide {
             finite,
             empty: l.gt(a, b),
-            lo: l.array(a),
-            hi: l.array(b),
+            lo: l.pixels(a),
+            hi: l.pixels(b),
         }
     }
 }
