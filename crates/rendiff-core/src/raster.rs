@@ -881,6 +881,39 @@ fn screen_block<L: Lanes>(
 /// (The three edge planes are set up whether or not an early exit would
 /// have spared one: on a million triangles, the branch per sign of the
 /// lazy form cost more than the planes.)
+/// A small box's pixels row by row, one lane each (spare lanes repeat the
+/// first), and their count; from tables by the box's width, without a
+/// loop whose branches follow the box's shape (mispredicted on a mesh of
+/// small triangles of every orientation).
+#[inline(always)]
+fn small_box_pixels([lx0, lx1, ly0, ly1]: [usize; 4]) -> ([(usize, usize); SMALL_BOX], usize) {
+    /// Per width `w` (index `w - 1`), lane `j`'s column and row: `(j % w,
+    /// j / w)`.
+    const STEP: [[(u8, u8); SMALL_BOX]; SMALL_BOX] = {
+        let mut t = [[(0, 0); SMALL_BOX]; SMALL_BOX];
+        let mut w = 1;
+        while w <= SMALL_BOX {
+            let mut j = 0;
+            while j < SMALL_BOX {
+                t[w - 1][j] = ((j % w) as u8, (j / w) as u8);
+                j += 1;
+            }
+            w += 1;
+        }
+        t
+    };
+    let (w, n) = (lx1 - lx0 + 1, (lx1 - lx0 + 1) * (ly1 - ly0 + 1));
+    debug_assert!((1..=SMALL_BOX).contains(&n));
+    let step = &STEP[w - 1];
+    let mut at = [(lx0, ly0); SMALL_BOX];
+    for (j, (a, &(dx, dy))) in at.iter_mut().zip(step).enumerate() {
+        if j < n {
+            *a = (lx0 + usize::from(dx), ly0 + usize::from(dy));
+        }
+    }
+    (at, n)
+}
+
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn small_box<L: Lanes>(
@@ -893,15 +926,7 @@ fn small_box<L: Lanes>(
     out: &mut TileOut,
     c: &mut Counters,
 ) {
-    // The box's pixels, row by row, one lane each (spare lanes repeat the first).
-    let mut at = [(lx0, ly0); SMALL_BOX];
-    let mut n = 0;
-    for ly in ly0..=ly1 {
-        for lx in lx0..=lx1 {
-            at[n] = (lx, ly);
-            n += 1;
-        }
-    }
+    let (at, n) = small_box_pixels([lx0, lx1, ly0, ly1]);
     let mut d = [[0f64; 4]; 3];
     for (j, &(lx, ly)) in at.iter().enumerate() {
         let v = rays.dir(lx, ly);
@@ -1443,6 +1468,32 @@ mod tests {
     /// in the fast and the predicate path, and skips some; with the depth
     /// bound 1% too high some buffer changes (the bound is tight enough to
     /// matter and this test would notice a wrong one).
+    /// A small box's lanes are its pixels row by row, then the first
+    /// repeated, for every box shape and position.
+    #[test]
+    fn small_box_lanes_are_its_pixels_row_by_row() {
+        for (lx0, ly0) in [(0, 0), (5, 30), (28, 1)] {
+            for w in 1..=SMALL_BOX {
+                for h in (1..=SMALL_BOX).filter(|h| w * h <= SMALL_BOX) {
+                    let (lx1, ly1) = (lx0 + w - 1, ly0 + h - 1);
+                    let mut want = vec![];
+                    for ly in ly0..=ly1 {
+                        for lx in lx0..=lx1 {
+                            want.push((lx, ly));
+                        }
+                    }
+                    let n = want.len();
+                    want.resize(SMALL_BOX, (lx0, ly0));
+                    assert_eq!(
+                        small_box_pixels([lx0, lx1, ly0, ly1]),
+                        (want.try_into().unwrap(), n),
+                        "{w}x{h} at ({lx0}, {ly0})"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn hidden_triangles_are_skipped_exactly() {
         let (mut skipped, mut broken) = (0, 0);
