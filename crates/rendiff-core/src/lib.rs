@@ -16,6 +16,7 @@ pub mod camera;
 pub mod deadline;
 pub mod exr_io;
 pub mod frame;
+mod huge_pages;
 pub mod names;
 pub mod pending;
 pub mod predicate;

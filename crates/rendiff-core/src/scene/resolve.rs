@@ -193,7 +193,9 @@ impl ResolvedScene {
         }
         let total = super::MAX_SCENE_TRIANGLES - budget;
         let total = usize::try_from(total).unwrap_or(usize::MAX);
-        let mut triangles: Vec<Tri> = Vec::with_capacity(total);
+        // (On huge pages where the OS has them: the raster's bins name
+        // triangles all over the array, `crate::huge_pages`.)
+        let mut triangles: Vec<Tri> = crate::huge_pages::with_capacity(total);
         let mut object_ids = Vec::with_capacity(total);
         let mut degenerate = Vec::with_capacity(total);
         let mut objects = Vec::new();

@@ -179,7 +179,11 @@ impl TraceBvh {
             .collect();
         let nodes32 = Nodes32::new(&nodes32);
         let slack = rect::RectSlack::new(cam);
-        let (leaves, rects) = prims
+        // Leaves and rectangles on huge pages where the OS has them, as
+        // the tree's nodes (`crate::huge_pages`).
+        let mut leaves = crate::huge_pages::with_capacity(prims.len());
+        let mut rects = crate::huge_pages::with_capacity(prims.len());
+        prims
             .par_iter()
             .map(|&p| {
                 let t = &scene.triangles[p as usize];
@@ -188,7 +192,7 @@ impl TraceBvh {
                     rect::PixelRect::new(cam, &slack, t),
                 )
             })
-            .unzip();
+            .unzip_into_vecs(&mut leaves, &mut rects);
         TraceBvh {
             nodes,
             prims,

@@ -50,7 +50,11 @@ impl Nodes32 {
         if nodes.is_empty() {
             return Nodes32::empty();
         }
-        let mut pairs = vec![NodePair([nodes[0]; 2]); nodes.len().div_ceil(2) + 1];
+        // On huge pages where the OS has them (`crate::huge_pages`): pops
+        // land all over the tree.
+        let n = nodes.len().div_ceil(2) + 1;
+        let mut pairs = crate::huge_pages::with_capacity(n);
+        pairs.resize(n, NodePair([nodes[0]; 2]));
         let mut next = 2u32;
         // (old index, new index)
         let mut stack = vec![(0u32, Nodes32::ROOT)];
