@@ -90,6 +90,16 @@ fn live_rows(m: Mask) -> (usize, usize) {
     )
 }
 
+/// Ors the edge signs of the rows from row `r` (one or two rows' bits per
+/// edge, certainly positive and certainly negative) into the packet's masks.
+#[inline(always)]
+fn or_signs((pos, neg): (&mut [Mask; 3], &mut [Mask; 3]), signs: &[(u32, u32); 3], r: usize) {
+    for (k, &(p, n)) in signs.iter().enumerate() {
+        pos[k] |= Mask::from(p) << (r * ROW);
+        neg[k] |= Mask::from(n) << (r * ROW);
+    }
+}
+
 /// Lanes `r * ROW ..` of a per-lane f64 array.
 #[inline(always)]
 fn row64(a: &[f64; LANES], r: usize) -> &[f64; ROW] {
@@ -353,10 +363,7 @@ impl Packet {
                     row2(&self.dir[2], at),
                 ];
                 let signs = leaf.edge_rows2(s, dir, row2(&self.dir_norm, at));
-                for (k, &(p, n)) in signs.iter().enumerate() {
-                    pos[k] |= Mask::from(p) << (at * ROW);
-                    neg[k] |= Mask::from(n) << (at * ROW);
-                }
+                or_signs((&mut pos, &mut neg), &signs, at);
                 r += 2;
             }
         } else {
@@ -371,10 +378,7 @@ impl Packet {
                     row(&self.dir[2], r),
                 ];
                 let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
-                for (k, &(p, n)) in signs.iter().enumerate() {
-                    pos[k] |= Mask::from(p) << (r * ROW);
-                    neg[k] |= Mask::from(n) << (r * ROW);
-                }
+                or_signs((&mut pos, &mut neg), &signs, r);
             }
         }
         let [p0, p1, p2] = pos;
