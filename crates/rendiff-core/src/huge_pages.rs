@@ -15,6 +15,7 @@
 const MIN_BYTES: usize = 4 << 20;
 
 /// A 2 MiB huge page.
+#[cfg(target_os = "linux")]
 const HUGE: usize = 2 << 20;
 
 /// An empty vector with room for `n` elements, its allocation advised to

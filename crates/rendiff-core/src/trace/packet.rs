@@ -655,25 +655,30 @@ mod tests {
                         &mut c,
                         &mut stack,
                     );
+                    // Each wide kernel the CPU has, against the portable one.
                     #[cfg(target_arch = "x86_64")]
-                    if let Some(avx2) = Avx2::detect().zip(edges::Avx2::detect()) {
-                        let mut c2 = Counters::default();
-                        // SAFETY: the tokens prove the CPU supports AVX2.
-                        let fast = unsafe {
-                            bvh.trace_packet_avx2(avx2, &scene, x0, y0, &mut c2, &mut stack)
-                        };
-                        assert_eq!(fast, portable, "{path} packet ({x0}, {y0})");
-                        assert_eq!(c2, c, "{path} packet ({x0}, {y0})");
-                    }
-                    #[cfg(target_arch = "x86_64")]
-                    if let Some(avx512) = Avx512::detect().zip(edges::Avx2::detect()) {
-                        let mut c3 = Counters::default();
-                        // SAFETY: the tokens prove the CPU supports AVX-512F and AVX2.
-                        let wide = unsafe {
-                            bvh.trace_packet_avx512(avx512, &scene, x0, y0, &mut c3, &mut stack)
-                        };
-                        assert_eq!(wide, portable, "{path} packet ({x0}, {y0})");
-                        assert_eq!(c3, c, "{path} packet ({x0}, {y0})");
+                    {
+                        let mut wide = Vec::new();
+                        if let Some(avx2) = Avx2::detect().zip(edges::Avx2::detect()) {
+                            let mut c2 = Counters::default();
+                            // SAFETY: the tokens prove the CPU supports AVX2.
+                            let k = unsafe {
+                                bvh.trace_packet_avx2(avx2, &scene, x0, y0, &mut c2, &mut stack)
+                            };
+                            wide.push(("avx2", k, c2));
+                        }
+                        if let Some(avx512) = Avx512::detect().zip(edges::Avx2::detect()) {
+                            let mut c2 = Counters::default();
+                            // SAFETY: the tokens prove the CPU supports AVX-512F and AVX2.
+                            let k = unsafe {
+                                bvh.trace_packet_avx512(avx512, &scene, x0, y0, &mut c2, &mut stack)
+                            };
+                            wide.push(("avx512", k, c2));
+                        }
+                        for (kernel, k, c2) in wide {
+                            assert_eq!(k, portable, "{kernel}: {path} packet ({x0}, {y0})");
+                            assert_eq!(c2, c, "{kernel}: {path} packet ({x0}, {y0})");
+                        }
                     }
                     let active = Packet::new(cam, x0, y0).active;
                     for i in (0..LANES).filter(|i| active >> i & 1 == 1) {

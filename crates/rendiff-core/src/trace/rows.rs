@@ -12,7 +12,9 @@
 //! spelled out: [`Avx2`] is a token that exists only once the CPU is known to
 //! have AVX2, so its safe methods can use the intrinsics; [`Portable`] is the
 //! same arithmetic in plain Rust for every other CPU, and the definition the
-//! tests hold the AVX2 forms to.
+//! tests hold the AVX2 forms to. The box test and edge signs also come for
+//! two rows at once ([`Rows::box_out2`], [`Rows::edge_signs2`]), defined as
+//! the two single rows; [`Avx512`] does them in one 512-bit vector.
 
 use super::frustum::{BOX_ABS, BOX_REL};
 use super::primary::{edge_det32, max, min, Node32};
