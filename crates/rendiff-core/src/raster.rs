@@ -4,7 +4,8 @@
 //! Triangles are clipped against the near plane only to find a conservative
 //! screen bounding box, with a margin derived from the rounding errors
 //! ([`crate::raster_bounds`]: a triangle smaller than a pixel usually gets
-//! none), and binned into tiles, in parallel and in triangle order; bands of
+//! none), and binned into tiles in parallel, those facing the eye first
+//! ([`crate::raster_bins`]); bands of
 //! tiles render in parallel straight into the image's key buffer. The
 //! decision per pixel is [`crate::visibility`]'s, exactly as in the tracer:
 //! the edge-function fast path ([`crate::raster_edges`]) settles only the

@@ -748,7 +748,9 @@ impl BoxMargin {
     /// `j`'s box to `out[j]`, or leaves `out[j]` alone and sets bit `j` of
     /// the result when the triangle needs the scalar path (clipping, a depth
     /// not known to a relative 1/2, a NaN depth, a vertex too far to keep
-    /// every value finite), which also recomputes its face. Each lane performs exactly
+    /// every value finite), which also recomputes its face; and as the
+    /// second result, [`faces_away`] of each lane's triangle (the scalar
+    /// lanes' too: the same operations, on the same camera-space vertices). Each lane performs exactly
     /// the scalar no-clipping path's operations, in the same order on the
     /// same operands ([`Lanes`]), then `finish`'s checks in its order, so
     /// the boxes are the same bit for bit.
@@ -760,7 +762,7 @@ impl BoxMargin {
         t: &[Tri; N],
         out: &mut [Option<PixelRect>; N],
         (faces, face_out): (&NearFaces, &mut [f32; N]),
-    ) -> u32 {
+    ) -> (u32, u32) {
         let k = faces.axis();
         let p = [
             vertex_wide(l, cam, t, 0, k),
@@ -768,6 +770,14 @@ impl BoxMargin {
             vertex_wide(l, cam, t, 2, k),
         ];
         *face_out = faces_wide(faces, [p[0][4], p[1][4], p[2][4]]);
+        // `faces_away`, lane by lane: the same operations in its order.
+        let ([x0, y0, z0], [x1, y1, z1], [x2, y2, z2]) = (
+            [p[0][0], p[0][1], p[0][2]],
+            [p[1][0], p[1][1], p[1][2]],
+            [p[2][0], p[2][1], p[2][2]],
+        );
+        let det = x0 * (y1 * z2 - z1 * y2) - y0 * (x1 * z2 - z1 * x2) + z0 * (x1 * y2 - y1 * x2);
+        let away = l.lt(det.0, l.splat(0.0));
         let zmin = l.splat(cam.near * (1.0 - 1e-6));
         let far = l.splat(cam.far * (1.0 + 1e-6));
         let all = (1u32 << N) - 1;
@@ -821,7 +831,7 @@ impl BoxMargin {
                 };
             }
         }
-        !kept & all
+        (!kept & all, away)
     }
 
     /// `bounds`' error `err` and [`BoxMargin::finish`]'s steps for axis `k`
@@ -855,9 +865,44 @@ impl BoxMargin {
     }
 }
 
-/// [`BoxMargin::bounds`] of each triangle of `tris` into `out` (`None` for
+/// True when triangle `t`'s vertices, seen from the eye, run clockwise:
+/// its front (the side its winding's normal points to) faces away, as the
+/// far side of a closed, outward-wound mesh does. The binning lists these
+/// triangles after the others in each tile ([`crate::raster_bins`]), so
+/// that a closed mesh's near side fills the tile first and its far side is
+/// skipped as hidden. Only an order: no key depends on it.
+///
+/// The sign of the determinant of the vertices' camera-space coordinates
+/// (as [`BoxMargin::bounds`] computes them), which is minus the world-space
+/// `((b - a) x (c - a)) . (e - a)`: the camera's basis (right, up, forward)
+/// has determinant -1 (`right = forward x up`, `up = right x forward`).
+/// Rounding can flip it for a triangle seen edge-on, which costs time only.
+/// NaN: false.
+pub fn faces_away(cam: &Camera, t: &Tri) -> bool {
+    let c = |v: Vec3| {
+        let q = v.as_dvec3() - cam.eye;
+        [q.dot(cam.right), q.dot(cam.up_ortho), q.dot(cam.forward)]
+    };
+    let ([x0, y0, z0], [x1, y1, z1], [x2, y2, z2]) = (c(t[0]), c(t[1]), c(t[2]));
+    let det = x0 * (y1 * z2 - z1 * y2) - y0 * (x1 * z2 - z1 * x2) + z0 * (x1 * y2 - y1 * x2);
+    det < 0.0
+}
+
+/// Where [`bounds_into`] writes, one element per triangle (the shortest
+/// slice, input or output, sets how many).
+pub struct BoundsOut<'a> {
+    /// Its box ([`BoxMargin::bounds`]).
+    pub boxes: &'a mut [Option<PixelRect>],
+    /// Its face ([`NearFaces::face`]).
+    pub faces: &'a mut [f32],
+    /// Its side ([`faces_away`]).
+    pub away: &'a mut [bool],
+}
+
+/// [`BoxMargin::bounds`] of each triangle of `tris` into `out.boxes` (`None` for
 /// degenerate ones, and the whole image for all when `margin` is `None`),
-/// and its [`NearFaces::face`] into `faces`: the binning's first step. Four
+/// its [`NearFaces::face`] into `out.faces` and [`faces_away`] into `out.away`: the
+/// binning's first step. Four
 /// triangles at a time through `BoxMargin::bounds_wide` (the scalar
 /// [`BoxMargin::bounds`] for lanes that need clipping), in AVX2 on x86-64
 /// CPUs that have it (the arithmetic is the same).
@@ -866,20 +911,19 @@ pub fn bounds_into(
     tris: &[Tri],
     degenerate: &[bool],
     margin: Option<BoxMargin>,
-    out: &mut [Option<PixelRect>],
-    faces: &mut [f32],
+    out: BoundsOut<'_>,
 ) {
     #[cfg(target_arch = "x86_64")]
     if let Some(wide) = Avx512::detect() {
         // SAFETY: the CPU has AVX-512F (just detected).
-        return unsafe { bounds_avx512(wide, cam, tris, degenerate, margin, out, faces) };
+        return unsafe { bounds_avx512(wide, cam, tris, degenerate, margin, out) };
     }
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = crate::raster_edges::Avx2::detect() {
         // SAFETY: the CPU has AVX2 (just detected).
-        return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out, faces) };
+        return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out) };
     }
-    bounds_chunk(Plain4, cam, tris, degenerate, margin, out, faces)
+    bounds_chunk(Plain4, cam, tris, degenerate, margin, out)
 }
 
 /// [`bounds_chunk`] compiled for AVX-512F, eight triangles at a time.
@@ -891,10 +935,9 @@ fn bounds_avx512(
     tris: &[Tri],
     deg: &[bool],
     margin: Option<BoxMargin>,
-    out: &mut [Option<PixelRect>],
-    faces: &mut [f32],
+    out: BoundsOut<'_>,
 ) {
-    bounds_chunk(wide, cam, tris, deg, margin, out, faces)
+    bounds_chunk(wide, cam, tris, deg, margin, out)
 }
 
 /// [`bounds_chunk`] compiled for AVX2.
@@ -906,10 +949,9 @@ fn bounds_avx2(
     tris: &[Tri],
     deg: &[bool],
     margin: Option<BoxMargin>,
-    out: &mut [Option<PixelRect>],
-    faces: &mut [f32],
+    out: BoundsOut<'_>,
 ) {
-    bounds_chunk(avx2, cam, tris, deg, margin, out, faces)
+    bounds_chunk(avx2, cam, tris, deg, margin, out)
 }
 
 /// [`bounds_into`] with the lanes `l`.
@@ -920,11 +962,26 @@ fn bounds_chunk<L: Lanes<N>, const N: usize>(
     tris: &[Tri],
     deg: &[bool],
     margin: Option<BoxMargin>,
-    out: &mut [Option<PixelRect>],
-    faces: &mut [f32],
+    out: BoundsOut<'_>,
 ) {
-    let n = out.len().min(tris.len()).min(deg.len()).min(faces.len());
-    let (out, tris, deg, faces) = (&mut out[..n], &tris[..n], &deg[..n], &mut faces[..n]);
+    let BoundsOut {
+        boxes: out,
+        faces,
+        away,
+    } = out;
+    let n = out
+        .len()
+        .min(tris.len())
+        .min(deg.len())
+        .min(faces.len())
+        .min(away.len());
+    let (out, tris, deg, faces, away) = (
+        &mut out[..n],
+        &tris[..n],
+        &deg[..n],
+        &mut faces[..n],
+        &mut away[..n],
+    );
     let nf = NearFaces::new(cam);
     let Some(m) = margin else {
         let whole = PixelRect {
@@ -933,22 +990,32 @@ fn bounds_chunk<L: Lanes<N>, const N: usize>(
             x1: cam.width - 1,
             y1: cam.height - 1,
         };
-        for (((o, &d), f), t) in out.iter_mut().zip(deg).zip(faces).zip(tris) {
+        for ((((o, &d), f), a), t) in out.iter_mut().zip(deg).zip(faces).zip(away).zip(tris) {
             *o = (!d).then_some(whole);
             *f = nf.face(t);
+            *a = faces_away(cam, t);
         }
         return;
     };
-    let (mut o4, mut t4, mut d4, mut f4) = (
+    let (mut o4, mut t4, mut d4, mut f4, mut a4) = (
         out.chunks_exact_mut(N),
         tris.chunks_exact(N),
         deg.chunks_exact(N),
         faces.chunks_exact_mut(N),
+        away.chunks_exact_mut(N),
     );
-    for (((o, t), d), f) in (&mut o4).zip(&mut t4).zip(&mut d4).zip(&mut f4) {
+    for ((((o, t), d), f), a) in (&mut o4)
+        .zip(&mut t4)
+        .zip(&mut d4)
+        .zip(&mut f4)
+        .zip(&mut a4)
+    {
         let (o, t): (&mut [_; N], &[Tri; N]) = (o.try_into().unwrap(), t.try_into().unwrap());
         let f: &mut [f32; N] = f.try_into().unwrap();
-        let scalar = m.bounds_wide(l, cam, t, o, (&nf, f));
+        let (scalar, back) = m.bounds_wide(l, cam, t, o, (&nf, f));
+        for (j, a) in a.iter_mut().enumerate() {
+            *a = (back >> j) & 1 == 1;
+        }
         for j in 0..N {
             if d[j] {
                 o[j] = None;
@@ -965,10 +1032,12 @@ fn bounds_chunk<L: Lanes<N>, const N: usize>(
         .iter_mut()
         .zip(t4.remainder())
         .zip(d4.remainder())
-        .zip(f4.into_remainder());
-    for (((o, t), &d), f) in rest {
+        .zip(f4.into_remainder())
+        .zip(a4.into_remainder());
+    for ((((o, t), &d), f), a) in rest {
         *o = if d { None } else { m.bounds(cam, t) };
         *f = nf.face(t);
+        *a = faces_away(cam, t);
     }
 }
 
@@ -1113,9 +1182,9 @@ mod tests {
         out
     }
 
-    /// The batched path ([`bounds_into`], portable and AVX2) gives every
-    /// triangle exactly [`BoxMargin::bounds`]' box and
-    /// [`NearFaces::face`]'s face, under every camera,
+    /// The batched path ([`bounds_into`], portable, AVX2 and AVX-512) gives
+    /// every triangle exactly [`BoxMargin::bounds`]' box,
+    /// [`NearFaces::face`]'s face and [`faces_away`]' side, under every camera,
     /// margin factor, degenerate flag and batch remainder; and the batched
     /// lanes really do most of the work.
     #[test]
@@ -1146,36 +1215,40 @@ mod tests {
                 let nf = NearFaces::new(cam);
                 let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
                 let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                let want_away: Vec<bool> = tris.iter().map(|t| faces_away(cam, t)).collect();
+                // Both sides occur.
+                assert!(want_away.iter().any(|&a| a) && want_away.iter().any(|&a| !a));
                 for len in [tris.len(), tris.len() - 1, tris.len() - 3, 2] {
                     let (t, d) = (&tris[..len], &deg[..len]);
-                    let mut got = vec![Some(whole); len];
-                    let mut faces = vec![f32::NAN; len];
-                    bounds_chunk(Plain4, cam, t, d, margin, &mut got, &mut faces);
-                    assert_eq!(got, want[..len], "portable, camera {ci}");
-                    assert_eq!(bits(&faces), want_faces[..len], "portable, camera {ci}");
-                    #[cfg(target_arch = "x86_64")]
-                    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+                    let check = |what: &str, run: &dyn Fn(BoundsOut)| {
                         let mut got = vec![Some(whole); len];
                         let mut faces = vec![f32::NAN; len];
+                        let mut away = vec![false; len];
+                        run(BoundsOut {
+                            boxes: &mut got,
+                            faces: &mut faces,
+                            away: &mut away,
+                        });
+                        assert_eq!(got, want[..len], "{what}, camera {ci}");
+                        assert_eq!(bits(&faces), want_faces[..len], "{what}, camera {ci}");
+                        assert_eq!(away, want_away[..len], "{what}, camera {ci}");
+                    };
+                    check("portable", &|o| bounds_chunk(Plain4, cam, t, d, margin, o));
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
                         // SAFETY: the CPU has AVX2 (just detected).
-                        unsafe { bounds_avx2(avx2, cam, t, d, margin, &mut got, &mut faces) };
-                        assert_eq!(got, want[..len], "AVX2, camera {ci}");
-                        assert_eq!(bits(&faces), want_faces[..len], "AVX2, camera {ci}");
+                        check("AVX2", &|o| unsafe {
+                            bounds_avx2(avx2, cam, t, d, margin, o)
+                        });
                     }
                     #[cfg(target_arch = "x86_64")]
                     if let Some(wide) = Avx512::detect() {
-                        let mut got = vec![Some(whole); len];
-                        let mut faces = vec![f32::NAN; len];
                         // SAFETY: the CPU has AVX-512F (just detected).
-                        unsafe { bounds_avx512(wide, cam, t, d, margin, &mut got, &mut faces) };
-                        assert_eq!(got, want[..len], "AVX-512, camera {ci}");
-                        assert_eq!(bits(&faces), want_faces[..len], "AVX-512, camera {ci}");
+                        check("AVX-512", &|o| unsafe {
+                            bounds_avx512(wide, cam, t, d, margin, o)
+                        });
                     }
-                    let mut got = vec![None; len];
-                    let mut faces = vec![f32::NAN; len];
-                    bounds_into(cam, t, d, margin, &mut got, &mut faces);
-                    assert_eq!(got, want[..len], "bounds_into, camera {ci}");
-                    assert_eq!(bits(&faces), want_faces[..len], "bounds_into, camera {ci}");
+                    check("bounds_into", &|o| bounds_into(cam, t, d, margin, o));
                 }
             }
             // Most lanes are decided by the batch, not left to `bounds`.
@@ -1185,6 +1258,7 @@ mod tests {
                 let nf = NearFaces::new(cam);
                 batched += 4 - base
                     .bounds_wide(Plain4, cam, t.try_into().unwrap(), &mut o, (&nf, &mut f))
+                    .0
                     .count_ones();
             }
             assert!(
@@ -1195,7 +1269,7 @@ mod tests {
     }
 
     /// Lanes with NaN or infinite coordinates give the scalar boxes (and
-    /// faces) too.
+    /// faces and sides) too.
     #[test]
     fn non_finite_lanes_match_scalar() {
         let good = [
@@ -1234,14 +1308,38 @@ mod tests {
             let nf = NearFaces::new(cam);
             let want_faces: Vec<u32> = tris.iter().map(|t| nf.face(t).to_bits()).collect();
             let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
-            bounds_chunk(Plain4, cam, &tris, &deg, Some(m), &mut got, &mut faces);
+            let want_away: Vec<bool> = tris.iter().map(|t| faces_away(cam, t)).collect();
+            let n = tris.len();
+            fn out<'a>(
+                boxes: &'a mut [Option<PixelRect>],
+                faces: &'a mut [f32],
+                away: &'a mut [bool],
+            ) -> BoundsOut<'a> {
+                BoundsOut { boxes, faces, away }
+            }
+            let (mut got, mut faces, mut away) = (vec![None; n], vec![f32::NAN; n], vec![true; n]);
+            bounds_chunk(
+                Plain4,
+                cam,
+                &tris,
+                &deg,
+                Some(m),
+                out(&mut got, &mut faces, &mut away),
+            );
             assert_eq!(got, want);
             assert_eq!(bits(&faces), want_faces);
-            let (mut got, mut faces) = (vec![None; tris.len()], vec![f32::NAN; tris.len()]);
-            bounds_into(cam, &tris, &deg, Some(m), &mut got, &mut faces);
+            assert_eq!(away, want_away);
+            let (mut got, mut faces, mut away) = (vec![None; n], vec![f32::NAN; n], vec![true; n]);
+            bounds_into(
+                cam,
+                &tris,
+                &deg,
+                Some(m),
+                out(&mut got, &mut faces, &mut away),
+            );
             assert_eq!(got, want);
             assert_eq!(bits(&faces), want_faces);
+            assert_eq!(away, want_away);
             assert!(want.iter().any(Option::is_some));
         }
     }
