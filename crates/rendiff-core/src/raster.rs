@@ -592,15 +592,24 @@ fn fast_tile<L: Lanes>(
     let mut hiz = LazyBound::new(mode);
     // No triangle has written in the tile yet: every key is `NO_HIT`.
     let mut fresh = true;
+    // Prefetch while triangles are drawn, not while they are skipped as
+    // hidden (a closed mesh's far side, last in the bin: its vertices are
+    // never read, and fetching them only cost memory traffic; alternated
+    // on `million`, 1-2% faster on 1 thread, 3.5% on 2).
+    let mut ahead = true;
     for (i, &Binned { prim, rect, face }) in bin.iter().enumerate() {
         // Bins name triangles scattered through memory: ask for one a few
         // entries ahead (a hint; nothing observable changes).
-        if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
-            crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+        if ahead {
+            if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
+                crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+            }
         }
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         let bound = || rays.depth_bound(cam);
-        if hiz.hidden(bound, face, prim, out, [lx0, lx1, ly0, ly1]) {
+        let hidden = hiz.hidden(bound, face, prim, out, [lx0, lx1, ly0, ly1]);
+        ahead = !hidden;
+        if hidden {
             c.hidden_skipped += 1;
             continue;
         }
