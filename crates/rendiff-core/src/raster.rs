@@ -175,7 +175,7 @@ fn keys_impl(
             let mut setups = TriSetups::default();
             let mut written = 0;
             for tx in 0..tiles_x {
-                bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
+                let front = bins.tile((ty as u32 * tiles_x + tx) as usize, &mut bin);
                 let (x0, y0) = (tx * TILE, ty as u32 * TILE);
                 let mut out = TileOut {
                     keys: &mut kband[..],
@@ -190,7 +190,7 @@ fn keys_impl(
                 if !bin.is_empty() && !crate::deadline::past(opts.deadline) {
                     render_tile(
                         scene,
-                        &bin,
+                        (&bin, front),
                         x0,
                         y0,
                         mode,
@@ -340,7 +340,7 @@ impl TileOut<'_> {
 #[allow(clippy::too_many_arguments)]
 fn render_tile(
     scene: &ResolvedScene,
-    bin: &[Binned],
+    bin: (&[Binned], usize),
     x0: u32,
     y0: u32,
     mode: Mode,
@@ -363,7 +363,7 @@ fn render_tile(
 fn render_tile_avx2(
     avx2: Avx2,
     scene: &ResolvedScene,
-    bin: &[Binned],
+    bin: (&[Binned], usize),
     x0: u32,
     y0: u32,
     mode: Mode,
@@ -428,6 +428,45 @@ impl LazyBound {
         // scan stops at the first such key (at once, mostly, for a visible
         // triangle over a tile already drawn).
         low != 0 && (ly0..=ly1).all(|ly| out.row(lx0, ly, lx1 - lx0 + 1).iter().all(|&k| k <= low))
+    }
+
+    /// The largest key in the tile, when the tile has no background pixel
+    /// left and a bound: every key there is then at most that, and stays so
+    /// (keys only fall), so a triangle whose lowest possible key is no
+    /// smaller is one [`LazyBound::hidden`] would skip ([`LazyBound::beaten`]),
+    /// without reading its box. Checked once, where the bin's triangles
+    /// facing away begin (mostly a closed mesh's far side).
+    #[inline(always)]
+    fn closed(
+        &mut self,
+        make: impl FnOnce() -> Option<TileDepthBound>,
+        out: &TileOut,
+    ) -> Option<u64> {
+        if !self.on || !out.filled {
+            return None;
+        }
+        let most = (0..out.th)
+            .map(|ly| out.row(0, ly, out.tw).iter().fold(0, |m, &k| m.max(k)))
+            .fold(0, u64::max);
+        if most == NO_HIT {
+            return None;
+        }
+        let factor = self.factor;
+        self.bound
+            .get_or_insert_with(|| make().map(|b| b.scaled(factor)))
+            .map(|_| most)
+    }
+
+    /// True when triangle `prim` of face `face` cannot beat key `most`,
+    /// the largest in a tile without background ([`LazyBound::closed`]):
+    /// [`LazyBound::hidden`]'s test against that key for every pixel.
+    #[inline(always)]
+    fn beaten(&self, face: f32, prim: u32, most: u64) -> bool {
+        let Some(Some(b)) = self.bound else {
+            return false;
+        };
+        let low = b.lowest_key(face, prim);
+        low != 0 && most <= low
     }
 }
 
@@ -515,7 +554,7 @@ const _: () = assert!(SMALL_BOX <= 4);
 fn render_tile_body<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
-    bin: &[Binned],
+    (bin, front): (&[Binned], usize),
     x0: u32,
     y0: u32,
     mode: Mode,
@@ -529,7 +568,7 @@ fn render_tile_body<L: Lanes>(
     let th = TILE.min(cam.height - y0);
     if mode.fast {
         rays.fill(l, cam, x0, y0, tw, th);
-        fast_tile(l, scene, bin, mode, out, rays, setups, c);
+        fast_tile(l, scene, (bin, front), mode, out, rays, setups, c);
         return;
     }
     out.fill();
@@ -581,7 +620,7 @@ fn render_tile_body<L: Lanes>(
 fn fast_tile<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
-    bin: &[Binned],
+    (bin, front): (&[Binned], usize),
     mode: Mode,
     out: &mut TileOut,
     rays: &mut TileRays,
@@ -597,12 +636,26 @@ fn fast_tile<L: Lanes>(
     // never read, and fetching them only cost memory traffic; alternated
     // on `million`, 1-2% faster on 1 thread, 3.5% on 2).
     let mut ahead = true;
+    let mut closed = None;
     for (i, &Binned { prim, rect, face }) in bin.iter().enumerate() {
         // Bins name triangles scattered through memory: ask for one a few
         // entries ahead (a hint; nothing observable changes).
         if ahead {
             if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
                 crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+            }
+        }
+        // Where the triangles facing away begin, a tile left without
+        // background lets each be tested against its largest key alone
+        // (`LazyBound::closed`; on `million` 7-9% off the pass, alternated).
+        if i == front {
+            closed = hiz.closed(|| rays.depth_bound(cam), out);
+        }
+        if let Some(most) = closed {
+            if hiz.beaten(face, prim, most) {
+                c.hidden_skipped += 1;
+                ahead = false;
+                continue;
             }
         }
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);

@@ -107,14 +107,24 @@ impl Bins {
     }
 
     /// Tile `i`'s bin into `bin` (cleared first): its triangles facing the
-    /// eye, then the others, each in triangle order.
-    pub fn tile(&self, i: usize, bin: &mut Vec<Binned>) {
+    /// eye, then the others, each in triangle order; returns how many face
+    /// the eye.
+    pub fn tile(&self, i: usize, bin: &mut Vec<Binned>) -> usize {
         bin.clear();
         // Keys `2i` and `2i + 1`: their runs are consecutive.
-        let runs = &self.runs[self.key_runs[2 * i] as usize..self.key_runs[2 * i + 2] as usize];
-        for &[c, a, b] in runs {
-            bin.extend_from_slice(&self.entries[c as usize][a as usize..b as usize]);
+        let (a, mid, b) = (
+            self.key_runs[2 * i] as usize,
+            self.key_runs[2 * i + 1] as usize,
+            self.key_runs[2 * i + 2] as usize,
+        );
+        let mut front = 0;
+        for (j, &[c, s, e]) in self.runs[a..b].iter().enumerate() {
+            bin.extend_from_slice(&self.entries[c as usize][s as usize..e as usize]);
+            if a + j < mid {
+                front = bin.len();
+            }
         }
+        front
     }
 }
 
@@ -284,7 +294,8 @@ mod tests {
     /// order, then those facing away, with its box clipped to the tile and
     /// its face. The grids span several chunks, with boxes in one tile and
     /// boxes across many; every fourth triangle is turned round, so that
-    /// both sides occur in a tile.
+    /// both sides occur in a tile. The bin's count of triangles facing the
+    /// eye is where the others begin.
     #[test]
     fn bins_are_the_serial_binning() {
         for (nx, size) in [(64, 200), (3, 200), (1, 100), (100, 70)] {
@@ -319,14 +330,16 @@ mod tests {
                             (i as u32, c, faces.face(&scene.triangles[i]).to_bits())
                         })
                         .collect();
-                    bins.tile((ty * tiles_x + tx) as usize, &mut bin);
+                    let front = bins.tile((ty * tiles_x + tx) as usize, &mut bin);
                     let got: Vec<(u32, [u8; 4], u32)> = bin
                         .iter()
                         .map(|b| (b.prim, b.rect, b.face.to_bits()))
                         .collect();
                     assert_eq!(got, want, "grid {nx} at {size}, tile ({tx}, {ty})");
+                    let facing = got.iter().filter(|e| !away(e.0 as usize)).count();
+                    assert_eq!(front, facing, "grid {nx} at {size}, tile ({tx}, {ty})");
                     entries += got.len();
-                    turned += got.iter().filter(|e| away(e.0 as usize)).count();
+                    turned += got.len() - facing;
                 }
             }
             assert!(entries > 0);
