@@ -175,45 +175,30 @@ fn bin_chunk(
         };
         crate::raster_bounds::bounds_into(cam, tris, deg, margin, out);
         for (((r, &side), t), l) in rects.iter().zip(&*away).zip(tile).zip(local) {
-            // Without a branch on the box's presence (a mesh of triangles
-            // about a pixel big has empty boxes at random).
-            let some = r.is_some();
-            let r = r.unwrap_or(PixelRect {
-                x0: 0,
-                y0: 0,
-                x1: 0,
-                y1: 0,
-            });
-            let [tx0, tx1, ty0, ty1] = span(&r);
+            let Some(r) = r else { continue };
+            let [tx0, tx1, ty0, ty1] = span(r);
             let (a, b) = (ty0 * tiles_x + tx0, ty1 * tiles_x + tx1);
-            let (x0, y0) = (tx0 * TILE, ty0 * TILE);
-            // Inside the tile and the image, for one tile: no clipping.
-            *l = [r.x0 - x0, r.x1 - x0, r.y0 - y0, r.y1 - y0].map(|v| v as u8);
-            *t = if !some {
-                NONE
-            } else if a == b {
-                a
+            if a == b {
+                // Inside the tile and the image: no clipping.
+                let (x0, y0) = (tx0 * TILE, ty0 * TILE);
+                *t = a;
+                *l = [r.x0 - x0, r.x1 - x0, r.y0 - y0, r.y1 - y0].map(|v| v as u8);
             } else {
-                MANY
-            };
-            if some & (a != b) {
-                many.push((r, side));
+                *t = MANY;
+                many.push((*r, side));
             }
-            lo = if some { lo.min(a) } else { lo };
-            hi = if some { hi.max(b) } else { hi };
+            (lo, hi) = (lo.min(a), hi.max(b));
         }
     }
     let m = if lo > hi { 0 } else { (hi - lo + 1) as usize };
     // Two buckets per tile, by key (`Bins::runs`): its triangles facing the
-    // eye, then the others. Bucket `2m` after them takes the triangles with
-    // no box and holds the places of those over several tiles, so that the
-    // loops below need no branch on them; it is cut off the end.
-    let sink = 2 * m;
+    // eye, then the others.
     let key = |t: u32, away: bool| 2 * (t - lo) as usize + usize::from(away);
-    let bucket = |t: u32, away: bool| if t < MANY { key(t, away) } else { sink };
-    let mut start = vec![0u32; sink + 2];
+    let mut start = vec![0u32; 2 * m + 1];
     for (&t, &a) in tile.iter().zip(&away) {
-        start[bucket(t, a) + 1] += 1;
+        if t < MANY {
+            start[key(t, a) + 1] += 1;
+        }
     }
     for (r, a) in &many {
         let [tx0, tx1, ty0, ty1] = span(r);
@@ -223,7 +208,7 @@ fn bin_chunk(
             }
         }
     }
-    for i in 0..=sink {
+    for i in 0..2 * m {
         start[i + 1] += start[i];
     }
     let mut next = start.clone();
@@ -232,15 +217,18 @@ fn bin_chunk(
         rect: [0; 4],
         face: 0.0,
     };
-    let mut entries = vec![empty; start[sink + 1] as usize];
+    let mut entries = vec![empty; start[2 * m] as usize];
     let mut many = many.iter();
     let triangles = tile.iter().zip(&local).zip(face.iter().zip(&away));
     for (i, ((&t, &rect), (&face, &away))) in triangles.enumerate() {
         let prim = (first + i) as u32;
-        let slot = &mut next[bucket(t, away)];
-        entries[*slot as usize] = Binned { prim, rect, face };
-        *slot += 1;
-        if t != MANY {
+        if t < MANY {
+            let slot = &mut next[key(t, away)];
+            entries[*slot as usize] = Binned { prim, rect, face };
+            *slot += 1;
+            continue;
+        }
+        if t == NONE {
             continue;
         }
         let (r, _) = many
@@ -261,9 +249,8 @@ fn bin_chunk(
             }
         }
     }
-    entries.truncate(start[sink] as usize);
     // The non-empty runs, by key.
-    let runs: Vec<[u32; 3]> = (0..sink)
+    let runs: Vec<[u32; 3]> = (0..2 * m)
         .filter(|&i| start[i + 1] > start[i])
         .map(|i| [2 * lo + i as u32, start[i], start[i + 1]])
         .collect();
