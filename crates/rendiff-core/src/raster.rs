@@ -415,11 +415,7 @@ impl LazyBound {
         if !self.on || !out.filled || out.row(lx0, ly0, 1)[0] == NO_HIT {
             return false;
         }
-        let factor = self.factor;
-        let bound = self
-            .bound
-            .get_or_insert_with(|| make().map(|b| b.scaled(factor)));
-        let Some(b) = bound else {
+        let Some(b) = self.bound(make) else {
             return false;
         };
         let low = b.lowest_key(face, prim);
@@ -451,10 +447,16 @@ impl LazyBound {
         if most == NO_HIT {
             return None;
         }
+        self.bound(make).map(|_| most)
+    }
+
+    /// The tile's bound, made by `make` the first time.
+    #[inline(always)]
+    fn bound(&mut self, make: impl FnOnce() -> Option<TileDepthBound>) -> Option<TileDepthBound> {
         let factor = self.factor;
-        self.bound
+        *self
+            .bound
             .get_or_insert_with(|| make().map(|b| b.scaled(factor)))
-            .map(|_| most)
     }
 
     /// True when triangle `prim` of face `face` cannot beat key `most`,

@@ -128,8 +128,9 @@ impl Bins {
     }
 }
 
-/// Boxes computed at a time in [`bin_chunk`]: few enough that they stay in
-/// the first-level cache until each is reduced to its tile.
+/// Boxes computed at a time in [`bin_chunk`], each reduced to its tile
+/// while it is in the first-level cache (5 KB of boxes rather than a
+/// chunk's 80 KB; alternated on `million`, no measurable change either way).
 const BOXES: usize = 256;
 
 /// One chunk's binning: its triangles' boxes, faces and sides, each box

@@ -770,13 +770,13 @@ impl BoxMargin {
             vertex_wide(l, cam, t, 2, k),
         ];
         *face_out = faces_wide(faces, [p[0][4], p[1][4], p[2][4]]);
-        // `faces_away`, lane by lane: the same operations in its order.
-        let ([x0, y0, z0], [x1, y1, z1], [x2, y2, z2]) = (
+        // `faces_away`, lane by lane: the same expression.
+        // (Not array `map`: it can compile to out-of-line calls.)
+        let det = det3([
             [p[0][0], p[0][1], p[0][2]],
             [p[1][0], p[1][1], p[1][2]],
             [p[2][0], p[2][1], p[2][2]],
-        );
-        let det = x0 * (y1 * z2 - z1 * y2) - y0 * (x1 * z2 - z1 * x2) + z0 * (x1 * y2 - y1 * x2);
+        ]);
         let away = l.lt(det.0, l.splat(0.0));
         let zmin = l.splat(cam.near * (1.0 - 1e-6));
         let far = l.splat(cam.far * (1.0 + 1e-6));
@@ -883,9 +883,18 @@ pub fn faces_away(cam: &Camera, t: &Tri) -> bool {
         let q = v.as_dvec3() - cam.eye;
         [q.dot(cam.right), q.dot(cam.up_ortho), q.dot(cam.forward)]
     };
-    let ([x0, y0, z0], [x1, y1, z1], [x2, y2, z2]) = (c(t[0]), c(t[1]), c(t[2]));
-    let det = x0 * (y1 * z2 - z1 * y2) - y0 * (x1 * z2 - z1 * x2) + z0 * (x1 * y2 - y1 * x2);
-    det < 0.0
+    det3([c(t[0]), c(t[1]), c(t[2])]) < 0.0
+}
+
+/// The determinant of three camera-space vertices (rows), [`faces_away`]'s
+/// sign: one expression for the scalar path and the batched lanes, so that
+/// both round alike.
+#[inline(always)]
+fn det3<T>([[x0, y0, z0], [x1, y1, z1], [x2, y2, z2]]: [[T; 3]; 3]) -> T
+where
+    T: Copy + std::ops::Mul<Output = T> + std::ops::Sub<Output = T> + std::ops::Add<Output = T>,
+{
+    x0 * (y1 * z2 - z1 * y2) - y0 * (x1 * z2 - z1 * x2) + z0 * (x1 * y2 - y1 * x2)
 }
 
 /// Where [`bounds_into`] writes, one element per triangle (the shortest
@@ -902,10 +911,10 @@ pub struct BoundsOut<'a> {
 /// [`BoxMargin::bounds`] of each triangle of `tris` into `out.boxes` (`None` for
 /// degenerate ones, and the whole image for all when `margin` is `None`),
 /// its [`NearFaces::face`] into `out.faces` and [`faces_away`] into `out.away`: the
-/// binning's first step. Four
-/// triangles at a time through `BoxMargin::bounds_wide` (the scalar
-/// [`BoxMargin::bounds`] for lanes that need clipping), in AVX2 on x86-64
-/// CPUs that have it (the arithmetic is the same).
+/// binning's first step. Several triangles at a time through
+/// `BoxMargin::bounds_wide` (the scalar [`BoxMargin::bounds`] for lanes that
+/// need clipping): eight in AVX-512, else four in AVX2 or plain Rust (the
+/// arithmetic is the same).
 pub fn bounds_into(
     cam: &Camera,
     tris: &[Tri],
