@@ -60,9 +60,35 @@ pub fn crossings(xs: &[f64], a: &[f64], b: &[f64]) -> Vec<f64> {
     out
 }
 
+/// Seconds of paired rounds each size gets at least (unless `--quick`):
+/// a two-triangle round takes a few milliseconds, and five such rounds on a
+/// machine whose speed moves within seconds left the raster's speed-up at
+/// 7.7x in one run and 11.6x in the next; at 8M triangles a round takes
+/// about 0.3 s and `runs` already fills this.
+const PAIRED_SECONDS: f64 = 1.0;
+
+/// At most this many paired rounds per size.
+const PAIRED_MAX_ROUNDS: usize = 201;
+
+/// Paired rounds for a size whose raster and trace passes take `round_s`
+/// together: `runs`, or as many more as fill [`PAIRED_SECONDS`] (up to
+/// [`PAIRED_MAX_ROUNDS`]).
+pub fn paired_rounds(runs: usize, round_s: f64, quick: bool) -> usize {
+    let runs = runs.max(1);
+    // (NaN, zero or negative: no estimate to fill from.)
+    if quick || round_s.is_nan() || round_s <= 0.0 {
+        return runs;
+    }
+    let fill = (PAIRED_SECONDS / round_s).ceil();
+    // `fill` is positive and finite here, or +inf (saturates) for tiny rounds.
+    (fill.min(PAIRED_MAX_ROUNDS as f64) as usize).max(runs)
+}
+
 /// Times both loops on one grid (visibility pass, shared assembly, whole
-/// frame) and records their operation counts.
-fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
+/// frame), their passes again in alternation (the ratio each round takes
+/// on one machine state, [`measure::raster_vs_trace`]), and records their
+/// operation counts.
+fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize, quick: bool) -> Value {
     // Each loop's phases back to back (its frames, then its pass alone), so
     // that one loop's allocations (an 8M-triangle BVH) do not sit in the
     // middle of the other's measurements.
@@ -71,6 +97,8 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
     let asm = measure::assembly(scene, &rk.last, runs);
     let t = measure::trace(scene, BvhQuality::Medium, runs);
     let tk = measure::trace_queries(scene, &t.build.last, TraceKernel::Packets, runs);
+    let rounds = paired_rounds(runs, rk.median_s + tk.median_s, quick);
+    let paired = measure::raster_vs_trace(scene, &t.build.last, rounds);
     let tris = scene.triangles.len() as f64;
     let px = f64::from(size) * f64::from(size);
     json!({
@@ -91,6 +119,8 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize) -> Value {
         "trace_runs_s": t.trace.runs_s,
         "raster_counters": r.last.counters,
         "trace_counters": t.trace.last.counters,
+        "raster_speedup_paired": paired["raster_speedup_over_trace"],
+        "paired": paired,
         "raster_equals_trace": visibility_error(&r.last, &t.trace.last).identical()
             && visibility_error(&rk.last, &tk.last).identical(),
     })
@@ -116,7 +146,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
                 scene.triangles.len(),
                 if aligned { ", pixel-aligned" } else { "" }
             );
-            rows.push(pool.install(|| row(&scene, nx, opts.size, runs)));
+            rows.push(pool.install(|| row(&scene, nx, opts.size, runs, opts.common.quick)));
         }
         Ok(rows)
     };
@@ -132,6 +162,8 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
     let trace_only = crossings(&tris, &col("raster_keys_s"), &col("trace_keys_s"));
     let frames_with_build = crossings(&tris, &col("raster_s"), &col("trace_total_s"));
     let frames_trace_only = crossings(&tris, &col("raster_s"), &col("trace_s"));
+    // Where the paired rounds' median speed-up passes 1.
+    let paired_crossing = crossings(&tris, &vec![1.0; tris.len()], &col("raster_speedup_paired"));
     let mut record = json!({
         "benchmark": "crossover",
         "environment": environment,
@@ -139,7 +171,9 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             "scene": "grid at z=0 seen from (0,0,1), vfov 90, overhanging the image by small non-dyadic margins: screen-filling at every nx, few ties",
             "size": [opts.size, opts.size], "nx": opts.nx, "threads": opts.threads,
             "runs": runs, "quick": opts.common.quick, "bvh": "medium",
-            "timing": "median of `runs` timed runs after one untimed warm-up",
+            "timing": "median of `runs` timed runs after one untimed warm-up; `paired`: the two visibility passes again in alternation, one of each per round after a warm-up of each, `runs` rounds or as many more as fill PAIRED_SECONDS (at most PAIRED_MAX_ROUNDS), the raster's speed-up being the median of the rounds' trace / raster ratios",
+            "paired_seconds": if opts.common.quick { 0.0 } else { PAIRED_SECONDS },
+            "paired_max_rounds": PAIRED_MAX_ROUNDS,
             "allocator": allocator,
             "phases": "raster_keys_s / trace_keys_s: each loop's visibility pass alone (hit keys per pixel; the tracer's packet kernel through a built BVH); assembly_s: keys to depth, ID and normal buffers, shared code timed once; raster_s / trace_s: whole frames (pass + assembly); bvh_build_s apart",
         },
@@ -149,6 +183,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
         "crossover_triangles": {
             "raster_vs_trace_with_build": with_build,
             "raster_vs_trace_without_build": trace_only,
+            "raster_vs_trace_paired": paired_crossing,
             "whole_frames_with_build": frames_with_build,
             "whole_frames_without_build": frames_trace_only,
             "compared": "visibility passes (keys); whole_frames_*: frames including the shared assembly",
@@ -258,10 +293,11 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
 fn page(record: &Value, svgs: &[(String, String)]) -> String {
     let mut p = Page::new("rendiff bench crossover: raster vs trace as triangles shrink");
     p.para(&format!(
-        "{}. Times are medians after a warm-up. Each loop's visibility pass (hit keys per pixel) is timed alone, the frame assembly both loops share (keys to depth, ID and normal buffers) apart, and whole frames too. Crossover of the visibility passes (interpolated, triangles): with the BVH build {}; tracing alone {}. Of whole frames: with the build {}; tracing alone {}. Raster == trace at every size: {}.",
+        "{}. Times are medians after a warm-up. Each loop's visibility pass (hit keys per pixel) is timed alone, the frame assembly both loops share (keys to depth, ID and normal buffers) apart, and whole frames too; then the two passes again in alternation, one of each per round, whose per-round ratios give the raster's paired speed-up (the median; both passes met the same machine state). Crossover of the visibility passes (interpolated, triangles): with the BVH build {}; tracing alone {}; paired rounds {}. Of whole frames: with the build {}; tracing alone {}. Raster == trace at every size: {}.",
         super::page::compact(&record["config"]["scene"]),
         list(&record["crossover_triangles"]["raster_vs_trace_with_build"]),
         list(&record["crossover_triangles"]["raster_vs_trace_without_build"]),
+        list(&record["crossover_triangles"]["raster_vs_trace_paired"]),
         list(&record["crossover_triangles"]["whole_frames_with_build"]),
         list(&record["crossover_triangles"]["whole_frames_without_build"]),
         record["raster_equals_trace_everywhere"]
@@ -293,6 +329,7 @@ fn table(p: &mut Page, rows: &Value) {
                 num(f("pixels_per_triangle"), 3),
                 num(f("raster_keys_s"), 4),
                 num(f("trace_keys_s"), 4),
+                paired_cell(&r["paired"]),
                 num(f("assembly_s"), 4),
                 num(f("raster_s"), 4),
                 num(f("trace_s"), 4),
@@ -318,6 +355,7 @@ fn table(p: &mut Page, rows: &Value) {
             "px/triangle",
             "raster pass s",
             "trace pass s",
+            "raster speed-up, paired: median (rounds; range)",
             "assembly s (shared)",
             "raster frame s",
             "trace frame s",
@@ -332,6 +370,31 @@ fn table(p: &mut Page, rows: &Value) {
         ],
         &rows,
     );
+}
+
+/// The paired rounds' median speed-up, their count and their range.
+fn paired_cell(p: &Value) -> String {
+    let per_round: Vec<f64> = p["trace_over_raster_per_round"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_f64)
+        .collect();
+    let (lo, hi) = per_round
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+    match p["raster_speedup_over_trace"].as_f64() {
+        Some(m) if !per_round.is_empty() => format!(
+            "{} ({}; {}-{})",
+            num(Some(m), 3),
+            per_round.len(),
+            num(Some(lo), 3),
+            num(Some(hi), 3)
+        ),
+        _ => "-".to_string(),
+    }
 }
 
 fn list(v: &Value) -> String {
@@ -367,7 +430,7 @@ mod tests {
     #[test]
     fn rows_time_passes_assembly_and_frames() {
         let s = grid_scene(2, 16, false).unwrap();
-        let r = row(&s, 2, 16, 1);
+        let r = row(&s, 2, 16, 1, false);
         for k in [
             "raster_keys_s",
             "trace_keys_s",
@@ -379,6 +442,42 @@ mod tests {
             assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k}: {}", r[k]);
         }
         assert_eq!(r["raster_equals_trace"], json!(true));
+        // The paired rounds: as many as fill the budget on a tiny grid, each
+        // with both passes, and the speed-up their ratios' median.
+        let p = &r["paired"];
+        let rounds = p["rounds"].as_u64().unwrap() as usize;
+        assert!(rounds > 1, "{p}");
+        let per_round: Vec<f64> = p["trace_over_raster_per_round"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(per_round.len(), rounds);
+        assert_eq!(p["raster_keys_s"].as_array().unwrap().len(), rounds);
+        assert_eq!(
+            r["raster_speedup_paired"].as_f64(),
+            Some(crate::median(&per_round))
+        );
+        assert!(
+            paired_cell(p).contains(&format!("({rounds}; ")),
+            "{}",
+            paired_cell(p)
+        );
+    }
+
+    /// `runs` rounds at least; more where rounds are short, up to the cap;
+    /// `--quick` and unusable times take `runs`.
+    #[test]
+    fn paired_rounds_fill_the_budget_within_bounds() {
+        assert_eq!(paired_rounds(5, 0.3, false), 5);
+        assert_eq!(paired_rounds(5, PAIRED_SECONDS / 50.0, false), 50);
+        assert_eq!(paired_rounds(5, 1e-9, false), PAIRED_MAX_ROUNDS);
+        assert_eq!(paired_rounds(5, 0.0, false), 5);
+        assert_eq!(paired_rounds(5, f64::NAN, false), 5);
+        assert_eq!(paired_rounds(5, 1e-3, true), 5);
+        assert_eq!(paired_rounds(0, 10.0, false), 1);
+        assert_eq!(paired_rounds(500, 1e-9, false), 500);
     }
 
     #[test]

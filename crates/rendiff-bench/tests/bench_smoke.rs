@@ -282,7 +282,11 @@ fn crossover_writes_rows_with_operation_counts() {
     for r in rows {
         assert!(r["raster_counters"]["triangle_setups"].as_u64().is_some());
         assert!(r["trace_counters"]["bvh_nodes_visited"].as_u64().is_some());
+        // The two passes timed again in alternation, with their speed-up.
+        assert!(r["paired"]["rounds"].as_u64().is_some_and(|n| n >= 1));
+        assert!(r["raster_speedup_paired"].as_f64().is_some_and(|x| x > 0.0));
     }
+    assert!(record["crossover_triangles"]["raster_vs_trace_paired"].is_array());
     assert_eq!(record["raster_equals_trace_everywhere"], true);
 }
 
