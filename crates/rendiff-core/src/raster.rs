@@ -26,7 +26,9 @@ use crate::raster_bins::{Binned, Bins};
 use crate::raster_bounds::BoxMargin;
 #[cfg(target_arch = "x86_64")]
 use crate::raster_edges::Avx2;
-use crate::raster_edges::{ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileRays, CHUNK};
+use crate::raster_edges::{
+    ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileColumns, TileRays, CHUNK,
+};
 use crate::raster_hiz::TileDepthBound;
 use crate::raster_screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
@@ -150,6 +152,7 @@ fn keys_impl(
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
     let bins = Bins::new(scene, margin, tiles_x, tiles_y);
+    let columns = TileColumns::new(cam, TILE);
     let band = (w * TILE) as usize;
     // Never filled before the parallel loop (neither serially nor by
     // calloc, which zeroes reused memory): each tile writes its own keys
@@ -191,7 +194,7 @@ fn keys_impl(
                     render_tile(
                         scene,
                         (&bin, front),
-                        x0,
+                        (x0, &columns),
                         y0,
                         mode,
                         &mut out,
@@ -341,7 +344,7 @@ impl TileOut<'_> {
 fn render_tile(
     scene: &ResolvedScene,
     bin: (&[Binned], usize),
-    x0: u32,
+    x0: (u32, &TileColumns),
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
@@ -364,7 +367,7 @@ fn render_tile_avx2(
     avx2: Avx2,
     scene: &ResolvedScene,
     bin: (&[Binned], usize),
-    x0: u32,
+    x0: (u32, &TileColumns),
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
@@ -557,7 +560,7 @@ fn render_tile_body<L: Lanes>(
     l: L,
     scene: &ResolvedScene,
     (bin, front): (&[Binned], usize),
-    x0: u32,
+    (x0, columns): (u32, &TileColumns),
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
@@ -568,8 +571,9 @@ fn render_tile_body<L: Lanes>(
     let cam = &scene.camera;
     let tw = TILE.min(cam.width - x0);
     let th = TILE.min(cam.height - y0);
+    let col = columns.at(x0);
     if mode.fast {
-        rays.fill(l, cam, x0, y0, tw, th);
+        rays.fill(l, cam, col, y0, th);
         fast_tile(l, scene, (bin, front), mode, out, rays, setups, c);
         return;
     }
@@ -586,7 +590,7 @@ fn render_tile_body<L: Lanes>(
         let t = &scene.triangles[prim as usize];
         let [lx0, lx1, ly0, ly1] = rect.map(usize::from);
         let bound = || {
-            rays.fill(l, cam, x0, y0, tw, th);
+            rays.fill(l, cam, col, y0, th);
             rays.depth_bound(cam)
         };
         if hiz.hidden(bound, face, prim, out, [lx0, lx1, ly0, ly1]) {
