@@ -488,6 +488,12 @@ struct TriSetup {
     /// Its screen-space depth, before a tile's subnormal check
     /// ([`ScreenDepth::for_plane`]).
     screen: Option<Option<ScreenDepth>>,
+    /// Its screen-space depth's bound over the band's rows across the whole
+    /// image ([`ScreenDepth::between`]), made the first time it covers one
+    /// of the band's tiles whole: it holds in each of them, so their keys
+    /// need no bound of their own (`None` inside: the proof fails over the
+    /// band, and each tile takes its own).
+    band: Option<Option<BlockBound>>,
 }
 
 impl TriSetup {
@@ -499,6 +505,7 @@ impl TriSetup {
             edges: TriEdges::new(cam, t),
             depth: None,
             screen: None,
+            band: None,
         }
     }
 
@@ -686,12 +693,12 @@ fn fast_tile<L: Lanes>(
         // A big triangle's setups come from the band's (it meets the band's
         // other tiles too); a smaller one's are its own.
         let (mut own_edges, mut own_depth, mut own_screen) = (None, None, None);
-        let (edges, depth, plane_screen) = if big {
+        let (edges, depth, plane_screen, band) = if big {
             let s = setups.get(cam, t, prim);
-            (&s.edges, &mut s.depth, &mut s.screen)
+            (&s.edges, &mut s.depth, &mut s.screen, Some(&mut s.band))
         } else {
             let e = &*own_edges.insert(TriEdges::new(cam, t));
-            (e, &mut own_depth, &mut own_screen)
+            (e, &mut own_depth, &mut own_screen, None)
         };
         let f = FastEdges::new(edges, rays);
         // A box of a block or more, by its corners: rejected, it adds its
@@ -718,16 +725,35 @@ fn fast_tile<L: Lanes>(
         // takes one key per row (`ScreenDepth::box_keys`), without blocks.
         if whole.is_some() && out.cov.is_empty() {
             let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-            let &mut (s, bound) = screen.get_or_insert_with(|| {
-                let s = TriSetup::screen_depth(plane_screen, cam, d, rays);
-                let whole = s.and_then(|s| s.rect(rays, [lx0, lx1, ly0, ly1]));
-                (s, whole)
-            });
             let rect = [lx0, lx1, ly0, ly1];
-            let keys = match (s, bound) {
-                (Some(s), Some(b)) if b.all_hit => s.box_keys(rays, rect, b.eu, prim),
+            // A triangle covering the tile whole takes the band's bound
+            // where it holds (made once per band; alternated in one
+            // process, 7-8% off the pass on two screen-filling triangles at
+            // 512x512 on 1 and 2 threads, `million` and finer grids
+            // unchanged), else the tile's own.
+            let banded = match band {
+                Some(band) if rect == [0, out.tw - 1, 0, out.th - 1] => {
+                    match TriSetup::screen_depth(plane_screen, cam, d, rays) {
+                        Some(s) => match *band.get_or_insert_with(|| s.band(cam, rays)) {
+                            Some(b) if b.all_hit => s.box_keys(rays, rect, b.eu, prim),
+                            _ => None,
+                        },
+                        None => None,
+                    }
+                }
                 _ => None,
             };
+            let keys = banded.or_else(|| {
+                let &mut (s, bound) = screen.get_or_insert_with(|| {
+                    let s = TriSetup::screen_depth(plane_screen, cam, d, rays);
+                    let whole = s.and_then(|s| s.rect(rays, rect));
+                    (s, whole)
+                });
+                match (s, bound) {
+                    (Some(s), Some(b)) if b.all_hit => s.box_keys(rays, rect, b.eu, prim),
+                    _ => None,
+                }
+            });
             if let Some(keys) = keys {
                 let keys = &keys[..bh];
                 if fresh_box && !out.filled && rect == [0, out.tw - 1, 0, out.th - 1] {

@@ -305,8 +305,27 @@ impl ScreenDepth {
     #[inline(always)]
     pub fn rect(&self, rays: &TileRays, [lx0, lx1, ly0, ly1]: [usize; 4]) -> Option<BlockBound> {
         let (sx, sy) = (rays.sx(), rays.sy());
-        let (sx0, sx1) = (sx[lx0], sx[lx1]);
-        let (sy0, sy1) = (sy[ly0], sy[ly1]);
+        self.between((sx[lx0], sx[lx1]), (sy[ly0], sy[ly1]))
+    }
+
+    /// The bound over the rows of `rays`' tile (its band's) across every
+    /// column of the image: it holds in each of the band's tiles. (The first
+    /// and last columns' `sx` are the image's extremes:
+    /// [`Camera::screen_x`] is monotone in the column.)
+    #[inline(always)]
+    pub fn band(&self, cam: &Camera, rays: &TileRays) -> Option<BlockBound> {
+        let sy = rays.sy();
+        let columns = (cam.screen_x(0), cam.screen_x(cam.width - 1));
+        self.between(columns, (sy[0], sy[sy.len() - 1]))
+    }
+
+    /// [`ScreenDepth::rect`] for the rectangle of pixel centers whose first
+    /// and last columns have screen coordinates `sx0`, `sx1` and whose first
+    /// and last rows `sy0`, `sy1` ([`crate::camera::Camera::screen_x`] and
+    /// `screen_y`), in or beyond one tile: a bound over a band's rows across
+    /// the whole image holds in each of its tiles.
+    #[inline(always)]
+    pub fn between(&self, (sx0, sx1): (f64, f64), (sy0, sy1): (f64, f64)) -> Option<BlockBound> {
         let [a, b, c] = self.coef;
         let (row0, row1) = (b * sy0 + c, b * sy1 + c);
         let corners = [
@@ -919,6 +938,70 @@ mod tests {
         assert!(
             row_constant - flat > 100 && flat > 100,
             "{row_constant} blocks with a = 0, {flat} of them with b = 0"
+        );
+    }
+
+    /// A band's bound ([`ScreenDepth::band`]) holds in every tile of the
+    /// band: each lane it certifies is [`TriDepth::depth`]'s, bit for bit,
+    /// and it is never tighter than a block's own bound (`e`), nor says
+    /// `all_hit` where a block's does not. Many of the trials' bands have one
+    /// and many do not (the test is not vacuous).
+    #[test]
+    fn band_bounds_hold_in_every_tile_of_the_band() {
+        let (mut bands, mut with_bound, mut certified) = (0, 0, 0usize);
+        for (c, cam) in cameras().iter().enumerate() {
+            for t in triangles(cam, 7 + c as u64) {
+                let td = TriDepth::new(cam, &t);
+                let cd = ChunkDepth::new(cam, &td);
+                for y0 in (0..cam.height).step_by(TILE as usize) {
+                    let th = TILE.min(cam.height - y0);
+                    bands += 1;
+                    let first = TileRays::new(cam, 0, y0, TILE.min(cam.width), th);
+                    let Some(b) =
+                        ScreenDepth::new(cam, &cd, &first).and_then(|s| s.band(cam, &first))
+                    else {
+                        continue;
+                    };
+                    with_bound += 1;
+                    for x0 in (0..cam.width).step_by(TILE as usize) {
+                        let tw = TILE.min(cam.width - x0);
+                        let rays = TileRays::new(cam, x0, y0, tw, th);
+                        let Some(s) = ScreenDepth::new(cam, &cd, &rays) else {
+                            continue;
+                        };
+                        assert_eq!(s.band(cam, &rays), Some(b), "tile ({x0}, {y0})");
+                        for r0 in (0..th as usize + 1 - CHUNK).step_by(CHUNK) {
+                            for base in (0..tw as usize + 1 - CHUNK).step_by(CHUNK) {
+                                if let Some(own) = s.block(&rays, r0, base) {
+                                    assert!(b.e >= own.e, "band e {} < block e {}", b.e, own.e);
+                                    assert!(!b.all_hit || own.all_hit);
+                                }
+                                for row in r0..r0 + CHUNK {
+                                    let (z, ok, sure) = s.row(Portable, &rays, row, base, b.eu);
+                                    for j in (0..CHUNK).filter(|j| (sure >> j) & 1 == 1) {
+                                        let (x, y) = (x0 + (base + j) as u32, y0 + row as u32);
+                                        let want = td.depth(cam, &cam.pixel_ray(x, y));
+                                        let got = ((ok >> j) & 1 == 1).then_some(z[j]);
+                                        assert_eq!(
+                                            got.map(f32::to_bits),
+                                            want.map(f32::to_bits),
+                                            "pixel ({x}, {y})"
+                                        );
+                                        assert!(!b.all_hit || got.is_some());
+                                        certified += 1;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // (The trials' planes span the image; their small triangles do not,
+        // and their bands take each tile's own bound.)
+        assert!(
+            with_bound > 100 && bands - with_bound > 100 && certified > 100_000,
+            "{with_bound} of {bands} bands with a bound, {certified} lanes certified"
         );
     }
 
