@@ -1154,10 +1154,12 @@ pub struct TileRays {
 pub struct TileColumn {
     /// Columns in the tile.
     width: usize,
-    /// `sx` per column (padding lanes repeat the last column).
-    sx: Vec<f64>,
-    /// `forward_k + right_k sx` per column and component.
-    across: [Vec<f64>; 3],
+    /// Lanes per row: the width and its padding.
+    stride: usize,
+    /// `sx` per column (padding lanes repeat the last column), then
+    /// `forward_k + right_k sx` per column for each component `k`: one
+    /// allocation, `stride` values each.
+    values: Vec<f64>,
 }
 
 impl TileColumn {
@@ -1166,16 +1168,34 @@ impl TileColumn {
     pub fn new(cam: &Camera, x0: u32, tw: u32) -> TileColumn {
         // At least CHUNK - 1 padding lanes, rounded up to whole 4-lane vectors.
         let stride = (tw as usize + CHUNK - 1).next_multiple_of(4);
-        let sx: Vec<f64> = (0..stride)
-            .map(|lx| cam.screen_x(x0 + (lx as u32).min(tw - 1)))
-            .collect();
+        let mut values = vec![0.0; 4 * stride];
+        let (sx, across) = values.split_at_mut(stride);
+        for (lx, v) in sx.iter_mut().enumerate() {
+            *v = cam.screen_x(x0 + (lx as u32).min(tw - 1));
+        }
         let (f, r) = (cam.forward.to_array(), cam.right.to_array());
-        let across = [0, 1, 2].map(|k| sx.iter().map(|&sx| f[k] + r[k] * sx).collect());
+        for (k, across) in across.chunks_exact_mut(stride).enumerate() {
+            for (a, &sx) in across.iter_mut().zip(&*sx) {
+                *a = f[k] + r[k] * sx;
+            }
+        }
         TileColumn {
             width: tw as usize,
-            sx,
-            across,
+            stride,
+            values,
         }
+    }
+
+    /// `sx` per column.
+    #[inline(always)]
+    fn sx(&self) -> &[f64] {
+        &self.values[..self.stride]
+    }
+
+    /// `forward_k + right_k sx` per column.
+    #[inline(always)]
+    fn across(&self, k: usize) -> &[f64] {
+        &self.values[(k + 1) * self.stride..(k + 2) * self.stride]
     }
 }
 
@@ -1228,12 +1248,12 @@ impl TileRays {
     pub fn fill<L: Lanes>(&mut self, l: L, cam: &Camera, col: &TileColumn, y0: u32, th: u32) {
         let t = self;
         t.width = col.width;
-        t.stride = col.sx.len();
+        t.stride = col.stride;
         t.sx.clear();
-        t.sx.extend_from_slice(&col.sx);
-        for (across, from) in t.across.iter_mut().zip(&col.across) {
+        t.sx.extend_from_slice(col.sx());
+        for (k, across) in t.across.iter_mut().enumerate() {
             across.clear();
-            across.extend_from_slice(from);
+            across.extend_from_slice(col.across(k));
         }
         // The rows are the band's: the same for each of its tiles.
         if t.rows != Some((y0, th)) || t.sy.len() != th as usize {
