@@ -344,7 +344,7 @@ impl TileOut<'_> {
 fn render_tile(
     scene: &ResolvedScene,
     bin: (&[Binned], usize),
-    x0: (u32, &TileColumns),
+    column: (u32, &TileColumns),
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
@@ -355,9 +355,11 @@ fn render_tile(
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = Avx2::detect().filter(|_| mode.fast) {
         // SAFETY: the token proves the CPU has AVX2 and POPCNT.
-        return unsafe { render_tile_avx2(avx2, scene, bin, x0, y0, mode, out, rays, setups, c) };
+        return unsafe {
+            render_tile_avx2(avx2, scene, bin, column, y0, mode, out, rays, setups, c)
+        };
     }
-    render_tile_body(Portable, scene, bin, x0, y0, mode, out, rays, setups, c)
+    render_tile_body(Portable, scene, bin, column, y0, mode, out, rays, setups, c)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -367,7 +369,7 @@ fn render_tile_avx2(
     avx2: Avx2,
     scene: &ResolvedScene,
     bin: (&[Binned], usize),
-    x0: (u32, &TileColumns),
+    column: (u32, &TileColumns),
     y0: u32,
     mode: Mode,
     out: &mut TileOut,
@@ -375,7 +377,7 @@ fn render_tile_avx2(
     setups: &mut TriSetups,
     c: &mut Counters,
 ) {
-    render_tile_body(avx2, scene, bin, x0, y0, mode, out, rays, setups, c)
+    render_tile_body(avx2, scene, bin, column, y0, mode, out, rays, setups, c)
 }
 
 /// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
@@ -475,9 +477,10 @@ impl LazyBound {
     }
 }
 
-/// A triangle's setups that depend on the camera and the triangle alone:
-/// its edges, its depth function's 8-lane form and its screen-space depth
-/// (the last two made when first needed).
+/// A big triangle's setups over one band of tiles: its edges, its depth
+/// function's 8-lane form and its screen-space depth, which depend on the
+/// camera and the triangle alone, and that depth's bound over the band (the
+/// last three made when first needed).
 struct TriSetup {
     /// The triangle.
     prim: u32,
@@ -489,7 +492,7 @@ struct TriSetup {
     /// ([`ScreenDepth::for_plane`]).
     screen: Option<Option<ScreenDepth>>,
     /// Its screen-space depth's bound over the band's rows across the whole
-    /// image ([`ScreenDepth::between`]), made the first time it covers one
+    /// image ([`ScreenDepth::band`]), made the first time it covers one
     /// of the band's tiles whole: it holds in each of them, so their keys
     /// need no bound of their own (`None` inside: the proof fails over the
     /// band, and each tile takes its own).
@@ -526,7 +529,8 @@ impl TriSetup {
 
 /// The setups of the big triangles a band's tiles meet (a triangle of a
 /// block or more in a tile usually spans several of the band's tiles),
-/// by triangle, a few at a time.
+/// by triangle, a few at a time. Made afresh for each band: a setup's band
+/// bound ([`TriSetup::band`]) holds in that band alone.
 #[derive(Default)]
 struct TriSetups {
     /// Slot `prim % SETUP_SLOTS`.

@@ -1256,7 +1256,7 @@ impl TileRays {
             across.extend_from_slice(col.across(k));
         }
         // The rows are the band's: the same for each of its tiles.
-        if t.rows != Some((y0, th)) || t.sy.len() != th as usize {
+        if t.rows != Some((y0, th)) {
             t.sy.clear();
             t.sy.extend((0..th).map(|ly| cam.screen_y(y0 + ly)));
             t.rows = Some((y0, th));
