@@ -13,7 +13,9 @@
 //! Everything here is a measurement, never an assertion: tests only check that
 //! the benchmarks run and write well-formed output. Timings are medians of
 //! several runs after a warm-up, and each record carries the machine's load
-//! average before and after, because a busy machine skews every number.
+//! average before and after and how its CPU time divided among the
+//! benchmark, other processes and the hypervisor ([`machine_cpu`]), because a
+//! busy machine skews every number.
 
 pub mod cli;
 pub mod core_loops;
@@ -21,6 +23,7 @@ pub mod crossover;
 pub mod direct;
 pub mod harness;
 pub mod knobs;
+pub mod machine_cpu;
 pub mod measure;
 pub mod outputs;
 pub mod page;
@@ -150,7 +153,8 @@ pub fn cpus() -> usize {
 }
 
 /// The 1, 5 and 15 minute load averages (Linux), or None elsewhere: a number
-/// above the idle level means other work competed with the benchmark.
+/// above the idle level means other work competed with the benchmark, or
+/// (after the run) counts the benchmark's own threads; `cpu_during_run` says which.
 pub fn load_average() -> Option<[f64; 3]> {
     let text = std::fs::read_to_string("/proc/loadavg").ok()?;
     let mut it = text.split_whitespace().map(|w| w.parse::<f64>().ok());
@@ -171,6 +175,7 @@ pub fn environment() -> Value {
         "cpus": cpus(),
         "cpu_model": cpu_model(),
         "load_average_before": load_average(),
+        CPU_AT_START: machine_cpu::read(),
         "rendiff_version": env!("CARGO_PKG_VERSION"),
         "build": if cfg!(debug_assertions) { "debug assertions on (not for numbers)" } else { "release" },
         "unix_time": std::time::SystemTime::now()
@@ -207,11 +212,26 @@ pub fn keep_freed_memory() -> Value {
     json!("the platform allocator's defaults")
 }
 
-/// Closes a record: the load average after the run, next to the one before.
+/// Where [`environment`] keeps the CPU counters read at the start, until
+/// [`finish_environment`] turns them into the run's shares.
+const CPU_AT_START: &str = "cpu_counters_at_start";
+
+/// Closes a record: the load average after the run, next to the one before,
+/// and how the machine's CPU time divided while it ran (`cpu_during_run`,
+/// null where the counters cannot be read).
 pub fn finish_environment(record: &mut Value) {
-    if let Some(env) = record.get_mut("environment") {
-        env["load_average_after"] = json!(load_average());
-    }
+    let Some(env) = record.get_mut("environment").and_then(Value::as_object_mut) else {
+        return;
+    };
+    env.insert("load_average_after".into(), json!(load_average()));
+    let start = env
+        .remove(CPU_AT_START)
+        .and_then(|v| serde_json::from_value::<machine_cpu::CpuCounters>(v).ok());
+    let during = match (start, machine_cpu::read()) {
+        (Some(a), Some(b)) => machine_cpu::shares(&a, &b),
+        _ => Value::Null,
+    };
+    env.insert("cpu_during_run".into(), during);
 }
 
 /// A scratch folder removed when dropped, and registered with the shutdown

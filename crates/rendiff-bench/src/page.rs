@@ -126,12 +126,17 @@ impl Page {
         self
     }
 
-    /// The environment record (CPU, load before/after, build) as a table.
+    /// The environment record (CPU, load before/after, build) as a table; an
+    /// entry with a `summary` (the CPU time's shares) shows that sentence.
     pub fn environment(&mut self, env: &Value) -> &mut Self {
         self.heading("Environment");
+        let shown = |v: &Value| match v.get("summary") {
+            Some(Value::String(s)) => s.clone(),
+            _ => compact(v),
+        };
         let rows: Vec<Vec<String>> = env
             .as_object()
-            .map(|m| m.iter().map(|(k, v)| vec![k.clone(), compact(v)]).collect())
+            .map(|m| m.iter().map(|(k, v)| vec![k.clone(), shown(v)]).collect())
             .unwrap_or_default();
         self.table(&["what", "value"], &rows)
     }

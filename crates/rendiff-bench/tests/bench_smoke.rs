@@ -37,11 +37,39 @@ fn bench_with(what: &str, dir: &Path, extra: &[&str]) -> Value {
     let env = &record["environment"];
     assert!(env["cpus"].as_u64().is_some_and(|n| n >= 1));
     assert!(env.get("load_average_before").is_some() && env.get("load_average_after").is_some());
+    assert!(
+        env.get("cpu_counters_at_start").is_none(),
+        "the start counters are consumed, not left in the record"
+    );
+    if std::path::Path::new("/proc/stat").exists() {
+        let cpu = &env["cpu_during_run"];
+        let share = |k: &str| cpu[k].as_f64().unwrap_or_else(|| panic!("{what}: no {k}"));
+        let parts = [
+            "this_benchmark",
+            "other_processes",
+            "hypervisor_steal",
+            "idle",
+        ];
+        assert!(parts.iter().all(|k| share(k) >= 0.0), "{what}: {cpu}");
+        assert!(
+            share("this_benchmark") > 0.0,
+            "{what}: the benchmark's own time: {cpu}"
+        );
+        assert!(cpu["summary"]
+            .as_str()
+            .is_some_and(|s| s.contains("other processes")));
+    }
     let html = std::fs::read_to_string(dir.join(format!("{what}.html"))).expect("HTML written");
     assert!(
         html.starts_with("<!DOCTYPE html>") && html.contains("<svg"),
         "{what}.html has no plot"
     );
+    if env["cpu_during_run"].is_object() {
+        assert!(
+            html.contains("other processes"),
+            "{what}.html shows who used the CPUs"
+        );
+    }
     let svgs: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
