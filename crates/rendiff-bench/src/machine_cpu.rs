@@ -84,7 +84,8 @@ fn own_cpu_seconds() -> Option<f64> {
 
 /// How the machine's CPU time between two readings divides among this
 /// benchmark, other processes, the hypervisor and idleness, as fractions of
-/// the whole (CPUs × wall time), with a one-line summary for the page.
+/// the whole (CPUs × wall time), with a one-line summary for the page; a
+/// run within one tick of the counters gets the summary alone.
 ///
 /// "Others" is the busy time less this process's own: the two clocks differ
 /// in granularity (ticks against microseconds), so a small negative
@@ -93,7 +94,11 @@ pub fn shares(before: &CpuCounters, after: &CpuCounters) -> Value {
     let d = |i: usize| after.ticks[i].saturating_sub(before.ticks[i]) as f64 / after.ticks_per_s;
     let total: f64 = (0..COLUMNS).map(d).sum();
     if total <= 0.0 {
-        return Value::Null;
+        // A run shorter than the counters' tick has no shares to give.
+        return json!({
+            "cpu_seconds": 0.0,
+            "summary": "shorter than one tick of the kernel's CPU counters: no shares",
+        });
     }
     let busy = d(USER) + d(NICE) + d(SYSTEM) + d(IRQ) + d(SOFTIRQ);
     let own = (after.own_s - before.own_s).max(0.0);
@@ -164,7 +169,9 @@ mod tests {
         let after = counters([100, 0, 0, 100, 0, 0, 0, 0], 1.05);
         let s = shares(&before, &after);
         assert_eq!(s["other_processes"].as_f64(), Some(0.0));
-        assert_eq!(shares(&after, &after), Value::Null, "no time elapsed");
+        let none = shares(&after, &after);
+        assert_eq!(none["cpu_seconds"].as_f64(), Some(0.0), "no time elapsed");
+        assert!(none.get("other_processes").is_none(), "no shares: {none}");
     }
 
     #[test]
