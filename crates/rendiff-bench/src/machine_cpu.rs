@@ -89,7 +89,9 @@ fn own_cpu_seconds() -> Option<f64> {
 ///
 /// "Others" is the busy time less this process's own: the two clocks differ
 /// in granularity (ticks against microseconds), so a small negative
-/// difference means none and is reported as zero.
+/// difference means none and is reported as zero, and on a run of a few
+/// ticks the benchmark's own share may read slightly above what the ticks
+/// count as busy (over 100% on the shortest runs).
 pub fn shares(before: &CpuCounters, after: &CpuCounters) -> Value {
     let d = |i: usize| after.ticks[i].saturating_sub(before.ticks[i]) as f64 / after.ticks_per_s;
     let total: f64 = (0..COLUMNS).map(d).sum();
