@@ -162,3 +162,61 @@ fn packets_handle_partial_tiles_at_the_image_border() {
         );
     }
 }
+
+/// Thousands of triangles sharing one box (exact copies, rotations of one
+/// triangle, the same box's other diagonal) beside distinct ones: the tracer
+/// hands each shared box to the BVH builder once and expands its leaf
+/// afterwards (`trace::same_box`), and every pixel must still get the raster's
+/// key, in packets and in single rays, at every BVH quality.
+#[test]
+fn triangles_sharing_a_box_by_the_thousand_render_identically() {
+    let mut tris = Vec::new();
+    let (a, b, c, d) = (
+        [-0.9f32, -0.9, 0.0],
+        [0.9, -0.9, 0.0],
+        [-0.9, 0.9, 0.0],
+        [0.9, 0.9, 0.0],
+    );
+    for k in 0..3000 {
+        tris.push(match k % 4 {
+            0 => tri(a, b, c),
+            1 => tri(b, c, a),
+            2 => tri(d, c, b), // the box's other half
+            _ => tri(a, b, c),
+        });
+        if k % 100 == 0 {
+            // Distinct triangles, some in front and some behind the stack.
+            let s = k as f32 / 3000.0;
+            let z = if k % 200 == 0 { 0.3 } else { -0.3 };
+            tris.push(tri([-0.5 + s, -0.5, z], [0.5, -0.4 + s, z], [0.0, 0.6, z]));
+        }
+    }
+    let scene = ResolvedScene::from_triangles(exact_camera(32), tris);
+    let (r, t) = both(&scene, true);
+    assert_identical("shared boxes", &r, &t);
+    assert_eq!(&r.coverage, &t.coverage, "coverage counts differ");
+    for kernel in [TraceKernel::Packets, TraceKernel::SingleRays] {
+        assert_identical("shared boxes", &r, &trace_kernel(&scene, kernel));
+    }
+    for quality in [
+        rendiff::trace::BvhQuality::Fastest,
+        rendiff::trace::BvhQuality::Slow,
+    ] {
+        let bvh = rendiff::trace::TraceBvh::build(&scene, quality);
+        let keys = rendiff::trace::trace_keys(
+            &scene,
+            &bvh,
+            rendiff::trace::TraceOptions::default(),
+            &|_| {},
+        );
+        let raster = rendiff::raster::render_keys(
+            &scene,
+            rendiff::raster::RasterOptions::default(),
+            &|_| {},
+        );
+        assert!(
+            keys.keys == raster.keys,
+            "{quality:?}: keys differ from the raster's"
+        );
+    }
+}

@@ -14,6 +14,7 @@ mod packet;
 mod primary;
 mod rect;
 mod rows;
+mod same_box;
 mod timing;
 
 use crate::camera::{Camera, PixelRay};
@@ -129,7 +130,24 @@ impl TraceBvh {
                 }
             })
             .collect();
-        let bvh = build_bvh2_from_tris(&tris, quality.params(), &mut Duration::default());
+        // Triangles sharing a box go to the builder as one primitive
+        // (`same_box`: its merging is quadratic in them otherwise).
+        let groups = same_box::SameBoxGroups::find(&tris);
+        let build_input = groups.as_ref().map_or(&tris[..], |g| &g.reps[..]);
+        let mut bvh = build_bvh2_from_tris(build_input, quality.params(), &mut Duration::default());
+        if let Some(g) = &groups {
+            let mut first_count: Vec<(u32, u32)> = bvh
+                .nodes
+                .iter()
+                .map(|nd| (nd.first_index, nd.prim_count))
+                .collect();
+            g.expand(&mut first_count, &mut bvh.primitive_indices);
+            for (nd, &(first, count)) in bvh.nodes.iter_mut().zip(&first_count) {
+                if count > 0 {
+                    (nd.first_index, nd.prim_count) = (first, count);
+                }
+            }
+        }
         let prims: Vec<u32> = bvh
             .primitive_indices
             .iter()
