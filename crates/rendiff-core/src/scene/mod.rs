@@ -420,7 +420,7 @@ pub const MAX_IMAGE_PIXELS: u64 = 1 << 26;
 /// (64 Mi).
 ///
 /// Derivation: peak memory per triangle measured by `rendiff bench stability`
-/// (README, "Triangle count"; marginal bytes from 4M to 16M triangles) is
+/// (docs/benchmarks.md, "Triangle count"; marginal bytes from 4M to 16M triangles) is
 /// 113 B for the raster, 305 B for the tracer (BVH included) and 185 B for
 /// Embree, so this limit is about 7 GiB for the raster and 19 GiB for the
 /// tracer: the most a well-equipped workstation can render, four times the
