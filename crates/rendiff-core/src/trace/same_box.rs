@@ -7,7 +7,8 @@
 //! take milliseconds. No box can separate such triangles anyway (a node's box
 //! would be the same for any split of them), so nothing is lost by handing the
 //! builder one primitive per distinct box and expanding each leaf's range
-//! afterwards into the triangles that share it. Leaves come out in the builder's
+//! afterwards into the triangles that share it (only where enough share one
+//! box for it to matter: [`MIN_GROUP`]). Leaves come out in the builder's
 //! order, each group's triangles in ascending ID order, so a scene without
 //! shared boxes gets exactly the tree it got before.
 
@@ -32,6 +33,36 @@ fn box_key(t: &Triangle) -> BoxKey {
     ]
 }
 
+/// The fewest triangles sharing a box that are grouped. PLOC's ties cost
+/// about the square of a group's size; below this the cost per triangle is a
+/// small constant (a quad's two halves share a box, so pairs are everywhere,
+/// and grouping them would cost a second pass over the scene for nothing).
+pub(super) const MIN_GROUP: usize = 16;
+
+/// True when some [`MIN_GROUP`] adjacent items of sorted `v` are all `eq`.
+fn has_run<T>(v: &[T], eq: impl Fn(&T, &T) -> bool) -> bool {
+    let mut run = 1;
+    for w in v.windows(2) {
+        run = if eq(&w[0], &w[1]) { run + 1 } else { 1 };
+        if run >= MIN_GROUP {
+            return true;
+        }
+    }
+    false
+}
+
+/// A 64-bit mix of a box key, for finding equal boxes by sorting eight bytes
+/// per triangle rather than twenty-eight (equal hashes are then checked on
+/// the whole key).
+fn box_hash(k: &BoxKey) -> u64 {
+    let mut h = 0u64;
+    for &w in k {
+        h = (h ^ u64::from(w)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        h ^= h >> 29;
+    }
+    h
+}
+
 /// The input triangles grouped by box: `reps` are the triangles handed to the
 /// builder (the first of each group) and `members` the input indices of each.
 pub(super) struct SameBoxGroups {
@@ -43,38 +74,76 @@ pub(super) struct SameBoxGroups {
 }
 
 impl SameBoxGroups {
-    /// Groups `tris`; `None` when every box is distinct (the common case), so
-    /// the caller builds over `tris` as they are.
+    /// Groups `tris` where at least [`MIN_GROUP`] of them share a box;
+    /// `None` when none do (the common case), so the caller builds over `tris`
+    /// as they are. That case costs a hash per triangle and a sort of the
+    /// hashes.
     pub fn find(tris: &[Triangle]) -> Option<SameBoxGroups> {
-        let mut keyed: Vec<(BoxKey, u32)> = tris
-            .par_iter()
-            .enumerate()
-            .map(|(i, t)| (box_key(t), i as u32))
-            .collect();
-        // Ties broken by index, so each group lists its triangles in ascending order
-        // and the first is its lowest index.
-        keyed.par_sort_unstable();
-        if keyed.windows(2).all(|w| w[0].0 != w[1].0) {
+        let mut hashes: Vec<u64> = tris.par_iter().map(|t| box_hash(&box_key(t))).collect();
+        hashes.par_sort_unstable();
+        if !has_run(&hashes, |a, b| a == b) {
             return None;
         }
-        let mut runs: Vec<(u32, u32, u32)> = Vec::new(); // (lowest index, start, len)
-        let mut start = 0usize;
+        drop(hashes);
+        // Some hashes repeat: sort (hash, index) pairs, then split each run of
+        // one hash by its whole key.
+        let mut keyed: Vec<(u64, u32)> = tris
+            .par_iter()
+            .enumerate()
+            .map(|(i, t)| (box_hash(&box_key(t)), i as u32))
+            .collect();
+        keyed.par_sort_unstable();
+        // rep_of[i]: the lowest index with triangle i's box.
+        let mut rep_of: Vec<u32> = (0..tris.len() as u32).collect();
+        let mut run = 0usize;
         for i in 1..=keyed.len() {
-            if i == keyed.len() || keyed[i].0 != keyed[start].0 {
-                runs.push((keyed[start].1, start as u32, (i - start) as u32));
-                start = i;
+            if i < keyed.len() && keyed[i].0 == keyed[run].0 {
+                continue;
+            }
+            if i - run >= MIN_GROUP {
+                let mut members: Vec<(BoxKey, u32)> = keyed[run..i]
+                    .iter()
+                    .map(|&(_, j)| (box_key(&tris[j as usize]), j))
+                    .collect();
+                members.sort_unstable();
+                let mut s = 0usize;
+                for k in 1..=members.len() {
+                    if k == members.len() || members[k].0 != members[s].0 {
+                        for m in &members[s..k] {
+                            rep_of[m.1 as usize] = members[s].1;
+                        }
+                        s = k;
+                    }
+                }
+            }
+            run = i;
+        }
+        // Groups in order of their lowest index; members in ascending order.
+        let mut group_of_rep = vec![u32::MAX; tris.len()];
+        let mut reps = Vec::new();
+        for (i, &r) in rep_of.iter().enumerate() {
+            if r == i as u32 {
+                group_of_rep[i] = reps.len() as u32;
+                reps.push(tris[i]);
             }
         }
-        runs.sort_unstable_by_key(|r| r.0);
-        let mut reps = Vec::with_capacity(runs.len());
-        let mut members = Vec::with_capacity(keyed.len());
-        let mut starts = Vec::with_capacity(runs.len() + 1);
-        for &(lowest, s, n) in &runs {
-            reps.push(tris[lowest as usize]);
-            starts.push(members.len() as u32);
-            members.extend(keyed[s as usize..(s + n) as usize].iter().map(|k| k.1));
+        let mut starts = vec![0u32; reps.len() + 1];
+        for &r in &rep_of {
+            starts[group_of_rep[r as usize] as usize + 1] += 1;
         }
-        starts.push(members.len() as u32);
+        for g in 0..reps.len() {
+            starts[g + 1] += starts[g];
+        }
+        let mut cursor = starts.clone();
+        let mut members = vec![0u32; tris.len()];
+        for (i, &r) in rep_of.iter().enumerate() {
+            let g = group_of_rep[r as usize] as usize;
+            members[cursor[g] as usize] = i as u32;
+            cursor[g] += 1;
+        }
+        if reps.len() == tris.len() {
+            return None; // every long run of one hash was collisions
+        }
         Some(SameBoxGroups {
             reps,
             members,
@@ -140,22 +209,40 @@ mod tests {
         let c = tri([0.0; 3], [3.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
         // -0.0 bounds the same box as 0.0.
         let d = tri([-0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-        let g = SameBoxGroups::find(&[c, a, b, d]).expect("a group");
+        let mut tris = vec![c, a, b, d];
+        tris.extend(std::iter::repeat_n(a, MIN_GROUP - 3));
+        let g = SameBoxGroups::find(&tris).expect("a group");
         assert_eq!(g.reps.len(), 2);
         assert_eq!(g.group(0), &[0]);
-        assert_eq!(g.group(1), &[1, 2, 3]);
+        let expected: Vec<u32> = (1..tris.len() as u32).collect();
+        assert_eq!(g.group(1), &expected[..]);
+        // One fewer sharing the box: no group.
+        assert!(SameBoxGroups::find(&tris[..tris.len() - 1]).is_none());
     }
 
     #[test]
     fn expand_keeps_leaf_order_and_covers_every_member_once() {
         let a = tri([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
         let c = tri([0.0; 3], [3.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-        let g = SameBoxGroups::find(&[a, c, a, a, c]).expect("groups");
+        // c, then a and c alternating: a's group is the odd indices.
+        let n = 2 * MIN_GROUP as u32 + 1;
+        let tris: Vec<Triangle> = (0..n).map(|i| if i % 2 == 1 { a } else { c }).collect();
+        let g = SameBoxGroups::find(&tris).expect("groups");
+        assert_eq!(g.reps.len(), 2);
         // Two leaves laid out in reverse node order: node 2 owns group 1, node 1 group 0.
         let mut fc = vec![(0, 0), (1, 1), (0, 1)];
         let mut prims = vec![1, 0];
         g.expand(&mut fc, &mut prims);
-        assert_eq!(prims, vec![1, 4, 0, 2, 3]);
-        assert_eq!(fc, vec![(0, 0), (2, 3), (0, 2)]);
+        let odd: Vec<u32> = (0..n).filter(|i| i % 2 == 1).collect();
+        let even: Vec<u32> = (0..n).filter(|i| i % 2 == 0).collect();
+        assert_eq!(prims, [odd.clone(), even.clone()].concat());
+        assert_eq!(
+            fc,
+            vec![
+                (0, 0),
+                (odd.len() as u32, even.len() as u32),
+                (0, odd.len() as u32)
+            ]
+        );
     }
 }
