@@ -425,74 +425,90 @@ mod avx2_lanes {
     use crate::raster_edges::Avx2;
     use std::arch::x86_64::*;
 
-    // SAFETY (every `unsafe` below): an `Avx2` exists only on a CPU with
-    // AVX2 (`Avx2::detect`), and the only memory access is the store into
-    // an array borrowed here.
+    // Every `unsafe` below: an `Avx2` exists only on a CPU with AVX2
+    // (`Avx2::detect`), and the only memory accesses are stores into arrays
+    // borrowed here (each block's SAFETY line says which).
     impl Lanes<4> for Avx2 {
         type V = __m256d;
         #[inline(always)]
         fn splat(self, v: f64) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_set1_pd(v) }
         }
         #[inline(always)]
         fn load(self, t: &[Tri; 4], i: usize, c: usize) -> __m256d {
             // Widening f32 to f64 is exact, as `f64::from`.
             let v = [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]];
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_cvtps_pd(_mm_set_ps(v[3], v[2], v[1], v[0])) }
         }
         #[inline(always)]
         fn add(self, a: __m256d, b: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_add_pd(a, b) }
         }
         #[inline(always)]
         fn sub(self, a: __m256d, b: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_sub_pd(a, b) }
         }
         #[inline(always)]
         fn mul(self, a: __m256d, b: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_mul_pd(a, b) }
         }
         #[inline(always)]
         fn div(self, a: __m256d, b: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_div_pd(a, b) }
         }
         #[inline(always)]
         fn max(self, a: __m256d, b: __m256d) -> __m256d {
             // `maxpd(b, a)` is `b > a ? b : a`: `f64::max` of numbers.
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_max_pd(b, a) }
         }
         #[inline(always)]
         fn min(self, a: __m256d, b: __m256d) -> __m256d {
             // `minpd(b, a)` is `b < a ? b : a`: `f64::min` of numbers.
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_min_pd(b, a) }
         }
         #[inline(always)]
         fn abs(self, a: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_and_pd(a, _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX))) }
         }
         #[inline(always)]
         fn ceil(self, a: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
         }
         #[inline(always)]
         fn floor(self, a: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
         }
         #[inline(always)]
         fn ge(self, a: __m256d, b: __m256d) -> u32 {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(a, b)) as u32 }
         }
         #[inline(always)]
         fn lt(self, a: __m256d, b: __m256d) -> u32 {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(a, b)) as u32 }
         }
         #[inline(always)]
         fn gt(self, a: __m256d, b: __m256d) -> u32 {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(a, b)) as u32 }
         }
         #[inline(always)]
         fn array(self, a: __m256d) -> [f64; 4] {
             let mut out = [0.0; 4];
+            // SAFETY: `self` proves AVX2;
+            // the store writes 32 bytes into `out`, a `[f64; 4]` borrowed here.
             unsafe { _mm256_storeu_pd(out.as_mut_ptr(), a) };
             out
         }
@@ -501,6 +517,8 @@ mod avx2_lanes {
             // `vcvttpd2dq` truncates as `as` does, on the lanes whose
             // values the trait asks for.
             let mut out = [0u32; 4];
+            // SAFETY: `self` proves AVX2;
+            // the store writes 16 bytes into `out`, a `[u32; 4]` borrowed here (unaligned store).
             unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), _mm256_cvttpd_epi32(a)) };
             out
         }
@@ -527,13 +545,15 @@ mod avx512_lanes {
         }
     }
 
-    // SAFETY (every `unsafe` below): an `Avx512` exists only on a CPU with
-    // AVX-512F (`Avx512::detect`), and the only memory accesses are the
-    // load of an array and the store into one, both borrowed here.
+    // Every `unsafe` below: an `Avx512` exists only on a CPU with AVX-512F
+    // (`Avx512::detect`), and the only memory accesses are the load of an
+    // array and stores into arrays, all borrowed here (each block's SAFETY
+    // line says which).
     impl Lanes<8> for Avx512 {
         type V = __m512d;
         #[inline(always)]
         fn splat(self, v: f64) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_set1_pd(v) }
         }
         #[inline(always)]
@@ -544,60 +564,76 @@ mod avx512_lanes {
                 t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c], t[4][i][c], t[5][i][c], t[6][i][c],
                 t[7][i][c],
             ];
+            // SAFETY: `self` proves AVX-512F;
+            // the load reads 32 bytes from `v`, a `[f32; 8]` borrowed here.
             unsafe { _mm512_cvtps_pd(_mm256_loadu_ps(v.as_ptr())) }
         }
         #[inline(always)]
         fn add(self, a: __m512d, b: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_add_pd(a, b) }
         }
         #[inline(always)]
         fn sub(self, a: __m512d, b: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_sub_pd(a, b) }
         }
         #[inline(always)]
         fn mul(self, a: __m512d, b: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_mul_pd(a, b) }
         }
         #[inline(always)]
         fn div(self, a: __m512d, b: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_div_pd(a, b) }
         }
         #[inline(always)]
         fn max(self, a: __m512d, b: __m512d) -> __m512d {
             // As AVX2's: `b > a ? b : a`, `f64::max` of numbers.
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_max_pd(b, a) }
         }
         #[inline(always)]
         fn min(self, a: __m512d, b: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_min_pd(b, a) }
         }
         #[inline(always)]
         fn abs(self, a: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_abs_pd(a) }
         }
         #[inline(always)]
         fn ceil(self, a: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_roundscale_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
         }
         #[inline(always)]
         fn floor(self, a: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_roundscale_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
         }
         #[inline(always)]
         fn ge(self, a: __m512d, b: __m512d) -> u32 {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(a, b)) }
         }
         #[inline(always)]
         fn lt(self, a: __m512d, b: __m512d) -> u32 {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_LT_OQ>(a, b)) }
         }
         #[inline(always)]
         fn gt(self, a: __m512d, b: __m512d) -> u32 {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(a, b)) }
         }
         #[inline(always)]
         fn array(self, a: __m512d) -> [f64; 8] {
             let mut out = [0.0; 8];
+            // SAFETY: `self` proves AVX-512F;
+            // the store writes 64 bytes into `out`, a `[f64; 8]` borrowed here.
             unsafe { _mm512_storeu_pd(out.as_mut_ptr(), a) };
             out
         }
@@ -605,6 +641,8 @@ mod avx512_lanes {
         fn pixels(self, a: __m512d) -> [u32; 8] {
             // As AVX2's `pixels`.
             let mut out = [0u32; 8];
+            // SAFETY: `self` proves AVX-512F;
+            // the store writes 32 bytes into `out`, a `[u32; 8]` borrowed here (unaligned store).
             unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), _mm512_cvttpd_epi32(a)) };
             out
         }
