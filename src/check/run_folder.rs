@@ -12,6 +12,15 @@
 //!    signal handler, or by the next check if rendiff was SIGKILLed).
 //! 3. [`Staging::publish`] renames RUN away, renames the staging folder to
 //!    RUN (it has no marker) and removes the old one.
+//!
+//! One run per folder at a time: before step 1, [`Staging::begin`] takes an
+//! advisory lock (`flock`) on `PARENT/.NAME.lock` and holds it until the run
+//! is published or dropped. A second `check -o RUN` (or `merge -o RUN`) is
+//! refused, naming the process that holds it, before it writes the marker
+//! or sweeps a staging folder; two runs used to both print success, the
+//! last writer's buffers beside the first's verdicts. The kernel drops the
+//! lock with its process, so a killed run leaves no stale lock; the file
+//! itself stays (removing a lock file races with the next run's open).
 
 use super::manifest::INCOMPLETE_MARKER;
 use anyhow::{bail, Context, Result};
@@ -24,6 +33,67 @@ pub struct Staging {
     /// Where this run is written until it is published.
     pub dir: PathBuf,
     _guard: crate::shutdown::PathGuard,
+    /// Held until this value is dropped (after the staging folder is removed
+    /// or published): declared last, so it is released last.
+    _lock: RunLock,
+}
+
+/// How the lock file beside a run folder `NAME` ends: `.NAME.lock`.
+pub const LOCK_SUFFIX: &str = ".lock";
+
+/// The advisory lock of one run folder (see the module's doc); released
+/// when dropped, or by the kernel when the process dies.
+struct RunLock {
+    _file: std::fs::File,
+}
+
+/// Takes `run_dir`'s lock without waiting; refused with the holder's
+/// process id (which it writes into the lock file) when another run has it.
+fn lock_run_folder(run_dir: &Path) -> Result<RunLock> {
+    use std::io::{Read, Seek, Write};
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::AsRawFd;
+    let path = beside(run_dir, LOCK_SUFFIX.trim_start_matches('.'))?;
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("{}: cannot create the folder", parent.display()))?;
+    }
+    // Never through a link, never blocking on a FIFO planted there.
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .open(&path)
+        .with_context(|| format!("{}: cannot open the run folder's lock", path.display()))?;
+    if !file.metadata().is_ok_and(|m| m.is_file()) {
+        bail!(
+            "{}: the run folder's lock is not a regular file; remove it",
+            path.display()
+        );
+    }
+    // SAFETY: a valid open descriptor, owned by `file` for the call.
+    if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        let err = std::io::Error::last_os_error();
+        if err.raw_os_error() != Some(libc::EWOULDBLOCK) {
+            bail!("{}: cannot lock the run folder: {err}", path.display());
+        }
+        let mut text = String::new();
+        let _ = (&file).take(64).read_to_string(&mut text);
+        let holder = match text.trim().parse::<u32>() {
+            Ok(pid) => format!("process {pid}"),
+            Err(_) => "a process that has not yet written its id".into(),
+        };
+        bail!(
+            "{}: another rendiff ({holder}) is writing this run folder; wait for it to finish, or choose another -o",
+            run_dir.display()
+        );
+    }
+    let _ = file.set_len(0);
+    let _ = file.rewind();
+    let _ = writeln!(file, "{}", std::process::id());
+    Ok(RunLock { _file: file })
 }
 
 /// A folder `check` may replace: missing, empty, or a rendiff run (it has a
@@ -53,7 +123,8 @@ fn replaceable(run_dir: &Path) -> Result<()> {
     )
 }
 
-fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
+/// `PARENT/.NAME.<tail>` for the run folder `PARENT/NAME`.
+fn beside(run_dir: &Path, tail: &str) -> Result<PathBuf> {
     let name = run_dir
         .file_name()
         .with_context(|| format!("{}: not a folder name", run_dir.display()))?
@@ -63,7 +134,12 @@ fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    Ok(parent.join(format!(".{name}.{what}-{}", std::process::id())))
+    Ok(parent.join(format!(".{name}.{tail}")))
+}
+
+/// This process's `PARENT/.NAME.<what>-PID`.
+fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
+    beside(run_dir, &format!("{what}-{}", std::process::id()))
 }
 
 /// Removes staging folders of this run folder left by a rendiff that was
@@ -109,6 +185,7 @@ pub(crate) fn remove_abandoned(parent: &Path, prefixes: &[String]) {
 impl Staging {
     /// Marks `run_dir` incomplete and creates a fresh staging folder for the run.
     pub fn begin(run_dir: &Path) -> Result<Staging> {
+        let lock = lock_run_folder(run_dir)?;
         replaceable(run_dir)?;
         std::fs::create_dir_all(run_dir)
             .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
@@ -131,6 +208,7 @@ impl Staging {
             run_dir: run_dir.to_path_buf(),
             dir,
             _guard: guard,
+            _lock: lock,
         })
     }
 
@@ -164,6 +242,10 @@ impl Drop for Staging {
     }
 }
 
+/// The records of a run folder that `gate`, `bless`, `report` and `merge`
+/// read as the run's own ([`ensure_complete`] refuses links).
+pub const RUN_RECORDS: [&str; 2] = ["manifest.json", "results.json"];
+
 /// Most of a marker's text that is read: check writes one line naming its
 /// process; a marker is never read whole (a 1.3 MB one was quoted whole).
 const MARKER_READ_BYTES: u64 = 4096;
@@ -173,7 +255,24 @@ const MARKER_READ_BYTES: u64 = 4096;
 /// that name marks the run, whatever it is (a dangling symlink passed as no
 /// marker); only a regular file's first bytes are read, never through a
 /// link: a FIFO there blocked every reader, `/dev/zero` ran them out of memory.
+///
+/// A record that is a symbolic link is refused here too: a run's verdicts
+/// are the files its check wrote, and a `results.json` linked to a file out
+/// of the run (another run's, a hand-written one) was gated, blessed and
+/// reported as this run's.
 pub fn ensure_complete(run_dir: &Path) -> Result<()> {
+    for name in RUN_RECORDS {
+        let path = run_dir.join(name);
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink()) {
+            let to = std::fs::read_link(&path)
+                .map(|t| crate::scene::printable(&t.display().to_string(), 200))
+                .unwrap_or_default();
+            bail!(
+                "{}: a symbolic link (to {to}), not a record of this run; a run's records are files of its own: run rendiff check again",
+                path.display()
+            );
+        }
+    }
     let marker = run_dir.join(INCOMPLETE_MARKER);
     let Ok(meta) = std::fs::symlink_metadata(&marker) else {
         return Ok(());
@@ -198,6 +297,17 @@ pub fn ensure_complete(run_dir: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// The entries of `dir` but the run folders' lock files (which stay).
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.ends_with(LOCK_SUFFIX))
+            .collect();
+        v.sort();
+        v
+    }
+
     fn finished_run(dir: &Path) {
         std::fs::create_dir_all(dir.join("scenes/a")).unwrap();
         std::fs::write(dir.join("manifest.json"), "{}").unwrap();
@@ -219,11 +329,7 @@ mod tests {
         assert!(!staged.exists(), "staging folder left behind");
         let err = ensure_complete(&run).unwrap_err().to_string();
         assert!(err.contains("incomplete run"), "{err}");
-        assert_eq!(
-            std::fs::read_dir(t.path()).unwrap().count(),
-            1,
-            "only the run folder remains"
-        );
+        assert_eq!(entries(t.path()), ["latest"], "only the run folder remains");
     }
 
     #[test]
@@ -240,7 +346,7 @@ mod tests {
             std::fs::read_to_string(run.join("manifest.json")).unwrap(),
             "{\"new\":1}"
         );
-        assert_eq!(std::fs::read_dir(t.path()).unwrap().count(), 1);
+        assert_eq!(entries(t.path()), ["latest"]);
     }
 
     #[test]
@@ -253,6 +359,34 @@ mod tests {
         assert!(err.contains("holds no rendiff run"), "{err}");
         assert!(docs.join("thesis.tex").exists());
         assert!(!docs.join(INCOMPLETE_MARKER).exists());
+    }
+
+    /// Two runs into one folder at once: the second is refused, naming the
+    /// first's process, before it touches anything; once the first is done,
+    /// the folder is free again (a lock, not a file whose presence counts:
+    /// a crashed run leaves nothing stale).
+    #[test]
+    fn a_second_run_into_the_same_folder_is_refused_while_the_first_runs() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let first = Staging::begin(&run).unwrap();
+        let err = Staging::begin(&run)
+            .err()
+            .expect("second run refused")
+            .to_string();
+        let me = format!("process {}", std::process::id());
+        assert!(
+            err.contains("another rendiff") && err.contains(&me),
+            "{err}"
+        );
+        assert!(
+            first.dir.is_dir(),
+            "the refused run removed the first's staging"
+        );
+        first.publish().unwrap();
+        let again = Staging::begin(&run).unwrap();
+        drop(again);
     }
 
     #[test]
@@ -306,6 +440,26 @@ mod tests {
             } else {
                 std::fs::remove_file(&marker).unwrap();
             }
+        }
+        ensure_complete(&run).unwrap();
+    }
+
+    #[test]
+    fn records_that_are_links_are_refused() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let elsewhere = t.path().join("elsewhere.json");
+        std::fs::write(&elsewhere, "{}").unwrap();
+        for name in RUN_RECORDS {
+            let record = run.join(name);
+            let keep = std::fs::read(&record).unwrap();
+            std::fs::remove_file(&record).unwrap();
+            std::os::unix::fs::symlink(&elsewhere, &record).unwrap();
+            let err = ensure_complete(&run).unwrap_err().to_string();
+            assert!(err.contains(name) && err.contains("symbolic link"), "{err}");
+            std::fs::remove_file(&record).unwrap();
+            std::fs::write(&record, keep).unwrap();
         }
         ensure_complete(&run).unwrap();
     }
