@@ -254,6 +254,11 @@ enum Command {
         /// baseline's (scenes added or removed) instead of refusing.
         #[arg(long)]
         allow_scene_changes: bool,
+        /// Accept a run that lacks entries (scene, backend, buffer) of the
+        /// baseline's scenes, and record WHY in the baseline; without it such
+        /// a run is refused, naming the entries it would drop.
+        #[arg(long, value_name = "WHY")]
+        drop_reason: Option<String>,
     },
 }
 
@@ -467,11 +472,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             baseline,
             allow_failures,
             allow_scene_changes,
+            drop_reason,
         } => {
             let opts = rendiff::gate::BlessOptions {
                 command: rendiff::check::process::shell_line(std::env::args()),
                 allow_failures,
                 allow_scene_changes,
+                drop_reason,
             };
             let b = rendiff::gate::bless(&run, &baseline, &opts)?;
             rendiff::outln!(
