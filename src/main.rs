@@ -270,7 +270,10 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            rendiff::errln!("error: {e:#}");
+            // Errors quote file names and renderers' output: control
+            // characters are escaped (lines stay lines).
+            let text = rendiff::check::process::printable_lines(&format!("{e:#}"));
+            rendiff::errln!("error: {text}");
             ExitCode::from(2)
         }
     }
@@ -484,8 +487,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             rendiff::outln!(
                 "blessed {} entries from {} into {}",
                 b.entries.len(),
-                run.display(),
-                baseline.display()
+                rendiff::scene::printable(&run.display().to_string(), 500),
+                rendiff::scene::printable(&baseline.display().to_string(), 500)
             );
             Ok(ExitCode::SUCCESS)
         }
@@ -589,6 +592,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 scenes
             };
             let mut scenes = rendiff::check::collect_scenes(&scenes)?;
+            let mut split = None;
             if let Some(shard) = shard {
                 use rendiff::check::shard;
                 let costs = match &shard_costs {
@@ -596,6 +600,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     None => shard::recorded_costs(&output, false)?,
                 };
                 let all = scenes.len();
+                split = Some(shard::deal(&scenes, shard, &costs)?);
                 scenes = shard::select(&scenes, shard, &costs);
                 rendiff::errln!(
                     "shard {}/{}: {} of {all} scenes",
@@ -635,7 +640,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     .map_or_else(rendiff::check::pool::default_memory_budget, |mib| mib << 20),
             };
             // On failure the run folder keeps its INCOMPLETE marker: no report.
-            let outcome = rendiff::check::run(&opts)?;
+            let outcome = match split {
+                Some(record) => rendiff::check::run_shard(&opts, record)?,
+                None => rendiff::check::run(&opts)?,
+            };
             Ok(finish_run("check", &outcome, &output))
         }
     }
@@ -697,13 +705,17 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 /// exit 1 when any verdict fails.
 fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
     let tally = rendiff::check::tally(&outcome.results);
-    rendiff::out!("{}", outcome.table);
+    // The table quotes scene names: control characters escaped.
+    rendiff::out!(
+        "{}",
+        rendiff::check::process::printable_lines(&outcome.table)
+    );
     rendiff::outln!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,
         tally.failed,
         tally.skipped,
-        output.join("results.json").display()
+        rendiff::scene::printable(&output.join("results.json").display().to_string(), 500)
     );
     write_report(output);
     if tally.failed > 0 {
