@@ -13,14 +13,17 @@
 //! 3. [`Staging::publish`] renames RUN away, renames the staging folder to
 //!    RUN (it has no marker) and removes the old one.
 //!
-//! One run per folder at a time: before step 1, [`Staging::begin`] takes an
-//! advisory lock (`flock`) on `PARENT/.NAME.lock` and holds it until the run
-//! is published or dropped. A second `check -o RUN` (or `merge -o RUN`) is
-//! refused, naming the process that holds it, before it writes the marker
-//! or sweeps a staging folder; two runs used to both print success, the
-//! last writer's buffers beside the first's verdicts. The kernel drops the
-//! lock with its process, so a killed run leaves no stale lock; the file
-//! itself stays (removing a lock file races with the next run's open).
+//! One run per folder at a time: [`Staging::begin`] takes an advisory lock
+//! (`flock`) on RUN itself before it writes the marker, and one on the
+//! staging folder as it creates it, and holds both until the run is published
+//! or dropped; [`Staging::publish`] swaps the two folders in one step
+//! (`renameat2` with `RENAME_EXCHANGE`), so the path RUN always names a
+//! folder this run has locked. A second `check -o RUN` (or `merge -o RUN`) is
+//! refused, naming the process in RUN's marker, before it writes anything or
+//! sweeps a staging folder: two runs used to both print success, the last
+//! writer's buffers beside the first's verdicts. The kernel drops the locks
+//! with their process, so a killed run leaves no stale lock, and no lock
+//! file is left beside RUN.
 
 use super::manifest::INCOMPLETE_MARKER;
 use anyhow::{bail, Context, Result};
@@ -33,67 +36,93 @@ pub struct Staging {
     /// Where this run is written until it is published.
     pub dir: PathBuf,
     _guard: crate::shutdown::PathGuard,
-    /// Held until this value is dropped (after the staging folder is removed
-    /// or published): declared last, so it is released last.
-    _lock: RunLock,
+    /// The locks on RUN and on the staging folder, held until this value is
+    /// dropped (after the staging folder is removed or published): declared
+    /// last, so they are released last.
+    _locks: [FolderLock; 2],
 }
 
-/// How the lock file beside a run folder `NAME` ends: `.NAME.lock`.
-pub const LOCK_SUFFIX: &str = ".lock";
-
-/// The advisory lock of one run folder (see the module's doc); released
-/// when dropped, or by the kernel when the process dies.
-struct RunLock {
-    _file: std::fs::File,
+/// An advisory lock on a folder (see the module's doc); released when
+/// dropped, or by the kernel when the process dies.
+struct FolderLock {
+    _folder: std::fs::File,
 }
 
-/// Takes `run_dir`'s lock without waiting; refused with the holder's
-/// process id (which it writes into the lock file) when another run has it.
-fn lock_run_folder(run_dir: &Path) -> Result<RunLock> {
-    use std::io::{Read, Seek, Write};
-    use std::os::unix::fs::OpenOptionsExt;
+/// Why a folder's lock was not taken.
+enum NotLocked {
+    /// Another process holds it.
+    Held,
+    /// It could not be taken at all.
+    Failed(anyhow::Error),
+}
+
+/// Locks `dir` (a folder, never through a link) without waiting, and makes
+/// sure the path still names the folder locked: one swapped in meanwhile
+/// (a run published between the open and the lock) is locked afresh.
+fn lock_folder(dir: &Path) -> std::result::Result<FolderLock, NotLocked> {
+    use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
     use std::os::unix::io::AsRawFd;
-    let path = beside(run_dir, LOCK_SUFFIX.trim_start_matches('.'))?;
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("{}: cannot create the folder", parent.display()))?;
-    }
-    // Never through a link, never blocking on a FIFO planted there.
-    let mut file = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(false)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
-        .open(&path)
-        .with_context(|| format!("{}: cannot open the run folder's lock", path.display()))?;
-    if !file.metadata().is_ok_and(|m| m.is_file()) {
-        bail!(
-            "{}: the run folder's lock is not a regular file; remove it",
-            path.display()
-        );
-    }
-    // SAFETY: a valid open descriptor, owned by `file` for the call.
-    if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
-        let err = std::io::Error::last_os_error();
-        if err.raw_os_error() != Some(libc::EWOULDBLOCK) {
-            bail!("{}: cannot lock the run folder: {err}", path.display());
+    for _ in 0..100 {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC)
+            .open(dir)
+            .with_context(|| format!("{}: cannot open the run folder to lock it", dir.display()))
+            .map_err(NotLocked::Failed)?;
+        // SAFETY: flock(2) on a descriptor `file` owns for the call.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let err = std::io::Error::last_os_error();
+            return Err(if err.raw_os_error() == Some(libc::EWOULDBLOCK) {
+                NotLocked::Held
+            } else {
+                NotLocked::Failed(anyhow::anyhow!(
+                    "{}: cannot lock the run folder: {err}",
+                    dir.display()
+                ))
+            });
         }
-        let mut text = String::new();
-        let _ = (&file).take(64).read_to_string(&mut text);
-        let holder = match text.trim().parse::<u32>() {
-            Ok(pid) => format!("process {pid}"),
-            Err(_) => "a process that has not yet written its id".into(),
+        let same = match (file.metadata(), std::fs::symlink_metadata(dir)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
         };
-        bail!(
-            "{}: another rendiff ({holder}) is writing this run folder; wait for it to finish, or choose another -o",
-            run_dir.display()
-        );
+        if same {
+            return Ok(FolderLock { _folder: file });
+        }
     }
-    let _ = file.set_len(0);
-    let _ = file.rewind();
-    let _ = writeln!(file, "{}", std::process::id());
-    Ok(RunLock { _file: file })
+    Err(NotLocked::Failed(anyhow::anyhow!(
+        "{}: the folder kept changing while it was being locked",
+        dir.display()
+    )))
+}
+
+/// Locks the run folder for this run; refused, naming the process that
+/// holds it (from its INCOMPLETE marker), when another run has it.
+fn lock_run_folder(run_dir: &Path) -> Result<FolderLock> {
+    match lock_folder(run_dir) {
+        Ok(lock) => Ok(lock),
+        Err(NotLocked::Failed(e)) => Err(e),
+        Err(NotLocked::Held) => {
+            use std::io::Read;
+            let marker = run_dir.join(INCOMPLETE_MARKER);
+            let mut text = String::new();
+            if std::fs::symlink_metadata(&marker).is_ok_and(|m| m.is_file()) {
+                let _ = std::fs::File::open(&marker)
+                    .map(|f| f.take(MARKER_READ_BYTES).read_to_string(&mut text));
+            }
+            let pid = text
+                .split("(process ")
+                .nth(1)
+                .and_then(|t| t.split(')').next())
+                .and_then(|n| n.parse::<u32>().ok());
+            let holder = pid.map_or("another rendiff".to_string(), |p| {
+                format!("another rendiff (process {p})")
+            });
+            bail!(
+                "{}: {holder} is writing this run folder; wait for it to finish, or choose another -o",
+                run_dir.display()
+            )
+        }
+    }
 }
 
 /// A folder `check` may replace: missing, empty, or a rendiff run (it has a
@@ -123,8 +152,7 @@ fn replaceable(run_dir: &Path) -> Result<()> {
     )
 }
 
-/// `PARENT/.NAME.<tail>` for the run folder `PARENT/NAME`.
-fn beside(run_dir: &Path, tail: &str) -> Result<PathBuf> {
+fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
     let name = run_dir
         .file_name()
         .with_context(|| format!("{}: not a folder name", run_dir.display()))?
@@ -134,12 +162,7 @@ fn beside(run_dir: &Path, tail: &str) -> Result<PathBuf> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    Ok(parent.join(format!(".{name}.{tail}")))
-}
-
-/// This process's `PARENT/.NAME.<what>-PID`.
-fn sibling(run_dir: &Path, what: &str) -> Result<PathBuf> {
-    beside(run_dir, &format!("{what}-{}", std::process::id()))
+    Ok(parent.join(format!(".{name}.{what}-{}", std::process::id())))
 }
 
 /// Removes staging folders of this run folder left by a rendiff that was
@@ -185,10 +208,10 @@ pub(crate) fn remove_abandoned(parent: &Path, prefixes: &[String]) {
 impl Staging {
     /// Marks `run_dir` incomplete and creates a fresh staging folder for the run.
     pub fn begin(run_dir: &Path) -> Result<Staging> {
-        let lock = lock_run_folder(run_dir)?;
         replaceable(run_dir)?;
         std::fs::create_dir_all(run_dir)
             .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
+        let run_lock = lock_run_folder(run_dir)?;
         let marker = run_dir.join(INCOMPLETE_MARKER);
         std::fs::write(
             &marker,
@@ -204,16 +227,26 @@ impl Staging {
         let guard = crate::shutdown::track_path(&dir);
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create staging folder", dir.display()))?;
+        let staging_lock = lock_folder(&dir).map_err(|e| match e {
+            NotLocked::Held => anyhow::anyhow!("{}: locked by another process", dir.display()),
+            NotLocked::Failed(e) => e,
+        })?;
         Ok(Staging {
             run_dir: run_dir.to_path_buf(),
             dir,
             _guard: guard,
-            _lock: lock,
+            _locks: [run_lock, staging_lock],
         })
     }
 
     /// Puts the finished run in place of the old one.
     pub fn publish(self) -> Result<()> {
+        // One step where the file system allows it: RUN never goes missing,
+        // and always names a folder this run holds locked.
+        if exchange(&self.dir, &self.run_dir).is_ok() {
+            // The staging path now holds the previous run (removed on drop).
+            return Ok(());
+        }
         let old = sibling(&self.run_dir, "old")?;
         let _old_guard = crate::shutdown::track_path(&old);
         std::fs::rename(&self.run_dir, &old).with_context(|| {
@@ -231,6 +264,31 @@ impl Staging {
         })?;
         let _ = std::fs::remove_dir_all(&old);
         Ok(())
+    }
+}
+
+/// Swaps two folders atomically (`renameat2(RENAME_EXCHANGE)`, Linux 3.15+;
+/// an error where the file system has no such operation).
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    let c = |p: &Path| {
+        std::ffi::CString::new(p.as_os_str().as_encoded_bytes())
+            .map_err(|_| std::io::Error::from(std::io::ErrorKind::InvalidInput))
+    };
+    let (ca, cb) = (c(a)?, c(b)?);
+    // SAFETY: two valid NUL-terminated paths, relative to the current folder.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
     }
 }
 
@@ -297,12 +355,11 @@ pub fn ensure_complete(run_dir: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
-    /// The entries of `dir` but the run folders' lock files (which stay).
+    /// The entries of `dir`.
     fn entries(dir: &Path) -> Vec<String> {
         let mut v: Vec<String> = std::fs::read_dir(dir)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| !n.ends_with(LOCK_SUFFIX))
             .collect();
         v.sort();
         v
