@@ -254,6 +254,11 @@ enum Command {
         /// baseline's (scenes added or removed) instead of refusing.
         #[arg(long)]
         allow_scene_changes: bool,
+        /// Accept a run that lacks entries (scene, backend, buffer) of the
+        /// baseline's scenes, and record WHY in the baseline; without it such
+        /// a run is refused, naming the entries it would drop.
+        #[arg(long, value_name = "WHY")]
+        drop_reason: Option<String>,
     },
 }
 
@@ -265,7 +270,10 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            rendiff::errln!("error: {e:#}");
+            // Errors quote file names and renderers' output: control
+            // characters are escaped (lines stay lines).
+            let text = rendiff::check::process::printable_lines(&format!("{e:#}"));
+            rendiff::errln!("error: {text}");
             ExitCode::from(2)
         }
     }
@@ -467,18 +475,20 @@ fn run(cli: Cli) -> Result<ExitCode> {
             baseline,
             allow_failures,
             allow_scene_changes,
+            drop_reason,
         } => {
             let opts = rendiff::gate::BlessOptions {
                 command: rendiff::check::process::shell_line(std::env::args()),
                 allow_failures,
                 allow_scene_changes,
+                drop_reason,
             };
             let b = rendiff::gate::bless(&run, &baseline, &opts)?;
             rendiff::outln!(
                 "blessed {} entries from {} into {}",
                 b.entries.len(),
-                run.display(),
-                baseline.display()
+                rendiff::scene::printable(&run.display().to_string(), 500),
+                rendiff::scene::printable(&baseline.display().to_string(), 500)
             );
             Ok(ExitCode::SUCCESS)
         }
@@ -582,6 +592,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 scenes
             };
             let mut scenes = rendiff::check::collect_scenes(&scenes)?;
+            let mut split = None;
             if let Some(shard) = shard {
                 use rendiff::check::shard;
                 let costs = match &shard_costs {
@@ -589,6 +600,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     None => shard::recorded_costs(&output, false)?,
                 };
                 let all = scenes.len();
+                split = Some(shard::deal(&scenes, shard, &costs)?);
                 scenes = shard::select(&scenes, shard, &costs);
                 rendiff::errln!(
                     "shard {}/{}: {} of {all} scenes",
@@ -628,7 +640,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     .map_or_else(rendiff::check::pool::default_memory_budget, |mib| mib << 20),
             };
             // On failure the run folder keeps its INCOMPLETE marker: no report.
-            let outcome = rendiff::check::run(&opts)?;
+            let outcome = match split {
+                Some(record) => rendiff::check::run_shard(&opts, record)?,
+                None => rendiff::check::run(&opts)?,
+            };
             Ok(finish_run("check", &outcome, &output))
         }
     }
@@ -690,13 +705,17 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 /// exit 1 when any verdict fails.
 fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
     let tally = rendiff::check::tally(&outcome.results);
-    rendiff::out!("{}", outcome.table);
+    // The table quotes scene names: control characters escaped.
+    rendiff::out!(
+        "{}",
+        rendiff::check::process::printable_lines(&outcome.table)
+    );
     rendiff::outln!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,
         tally.failed,
         tally.skipped,
-        output.join("results.json").display()
+        rendiff::scene::printable(&output.join("results.json").display().to_string(), 500)
     );
     write_report(output);
     if tally.failed > 0 {

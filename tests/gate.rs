@@ -392,15 +392,31 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         "{err}"
     );
     assert_eq!(std::fs::read(&baseline).unwrap(), before);
-    let out = rendiff()
-        .arg("bless")
-        .arg(&run)
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg("--allow-failures")
-        .arg("--allow-scene-changes")
-        .output()
-        .unwrap();
+    // The entry the gate found missing is not dropped silently: bless names
+    // it and wants a reason (issue 40: it used to bless it away).
+    let bless_all = |extra: &[&str]| {
+        rendiff()
+            .arg("bless")
+            .arg(&run)
+            .arg("--baseline")
+            .arg(&baseline)
+            .arg("--allow-failures")
+            .arg("--allow-scene-changes")
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = bless_all(&[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("1 entry of the baseline's scenes is not in the run")
+            && err.contains("three_triangles::trace::Z")
+            && err.contains("--drop-reason"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&baseline).unwrap(), before);
+    let out = bless_all(&["--drop-reason", "trace no longer writes depth"]);
     assert_eq!(
         out.status.code(),
         Some(0),

@@ -40,6 +40,61 @@ pub struct Manifest {
     pub rendiff_version: String,
     /// One entry per scene.
     pub scenes: Vec<SceneRuns>,
+    /// The options that decide the run's verdicts besides its scenes and
+    /// renderers (absent in runs of older rendiffs): `merge` refuses shards
+    /// run with different ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub options: Option<RunOptions>,
+    /// The split this run is a shard of (`check --shard K/N`); absent in a
+    /// run of all scenes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<ShardRecord>,
+}
+
+/// What a check was told that changes its verdicts: shards of one run must
+/// agree on every field (`merge`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RunOptions {
+    /// `--only`, as given (None: every backend).
+    pub only: Option<Vec<String>>,
+    /// Hash of the run's copy of the `--renderers` file (`sha256:` and hex;
+    /// empty without one): the declarations, precision included.
+    #[serde(default)]
+    pub renderers_sha256: String,
+    /// Whether the calibration probes ran.
+    pub calibration: bool,
+    /// The core's path-tracing seed.
+    pub seed: u64,
+    /// The core's samples per pixel (None: each scene's own).
+    pub spp: Option<u32>,
+    /// The injected shading error, if any (`--inject-bias`).
+    pub bias: Option<String>,
+}
+
+/// A shard's place in its split: its index and the whole deal, so that
+/// `merge` can tell a missing shard, a shard of another split and a scene
+/// of the same name from another file apart.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ShardRecord {
+    /// This shard, 1-based.
+    pub index: usize,
+    /// Shards in the split.
+    pub total: usize,
+    /// Every scene of the split (all shards), in the order given.
+    pub deal: Vec<DealtScene>,
+}
+
+/// One scene of a split and the shard it was dealt to.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DealtScene {
+    /// Scene name (the file's stem).
+    pub scene: String,
+    /// The scene file, as given to check.
+    pub file: String,
+    /// Hash of the scene file's bytes (`sha256:` and hex).
+    pub sha256: String,
+    /// The shard (1-based) that renders it.
+    pub shard: usize,
 }
 
 /// All renders of one scene.
@@ -51,6 +106,11 @@ pub struct SceneRuns {
     pub scene_file: String,
     /// Resolved scene folder, relative to the run.
     pub resolved: String,
+    /// Hash of that folder as exported (`sha256:` and hex, `check::inputs`):
+    /// every external render reads a copy of it and is checked against it
+    /// afterwards; empty in runs of older rendiffs.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub resolved_sha256: String,
     /// Features the scene requires.
     pub requires: Vec<String>,
     /// Why the scene is in the run: empty for an ordinary scene,

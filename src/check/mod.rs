@@ -11,6 +11,7 @@
 //! calibration probes (`CheckOptions::calibration`) run first, as scenes with
 //! `role: "calibration"`.
 
+pub mod inputs;
 pub mod isolated;
 use crate::vocab::Feature;
 pub mod manifest;
@@ -576,11 +577,18 @@ fn in_process(
     rec
 }
 
+/// One progress line on stderr. It names scene files and quotes renderers'
+/// messages, which may hold any text: control characters (a terminal escape
+/// in a file name, a newline that split the line) are written as escapes.
 fn say(opts: &CheckOptions, line: String) {
     if !opts.quiet {
-        crate::errln!("{line}");
+        crate::errln!("{}", crate::scene::printable(&line, SAY_MAX_CHARS));
     }
 }
+
+/// Most characters of one progress line (a renderer's message is six lines
+/// of its stderr at most: this keeps them whole and a runaway one short).
+const SAY_MAX_CHARS: usize = 4000;
 
 fn describe(rec: &RenderRecord) -> String {
     match rec.status.as_str() {
@@ -602,6 +610,20 @@ pub fn run(opts: &CheckOptions) -> Result<CheckOutcome> {
 /// through `rendiff render`, the external renderers as always. A separate
 /// entry point, so that `CheckOptions` stays as it was.
 pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<CheckOutcome> {
+    run_recorded(opts, isolate, None)
+}
+
+/// [`run`] of one shard of a split (`check --shard K/N`): `shard` (from
+/// [`shard::deal`]) is recorded in manifest.json, where `merge` checks it.
+pub fn run_shard(opts: &CheckOptions, shard: manifest::ShardRecord) -> Result<CheckOutcome> {
+    run_recorded(opts, None, Some(shard))
+}
+
+fn run_recorded(
+    opts: &CheckOptions,
+    isolate: Option<&Path>,
+    shard: Option<manifest::ShardRecord>,
+) -> Result<CheckOutcome> {
     if opts.scenes.is_empty() {
         bail!("no scenes to check");
     }
@@ -637,9 +659,35 @@ pub fn run_isolating(opts: &CheckOptions, isolate: Option<&Path>) -> Result<Chec
         renderers_snapshot,
         ..opts.clone()
     };
-    let outcome = render_and_compare(&staged, &jobs, isolate, &opts.run_dir)?;
+    let outcome = render_and_compare(&staged, &jobs, isolate, &opts.run_dir, shard)
+        .map_err(|e| anyhow::anyhow!(unstage(&format!("{e:#}"), &staging.dir, &opts.run_dir)))?;
     staging.publish()?;
     Ok(outcome)
+}
+
+/// `text` with the staging folder's path replaced by the run folder's: the
+/// staging folder (`.NAME.partial-PID`) is gone once the run is published
+/// or abandoned, so no message, record or verdict may send a user there.
+pub(crate) fn unstage(text: &str, staged: &Path, shown: &Path) -> String {
+    text.replace(&staged.display().to_string(), &shown.display().to_string())
+}
+
+/// What the run's verdicts depend on besides scenes and renderers
+/// ([`manifest::RunOptions`]).
+fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
+    use rendiff_core::names::Named;
+    let renderers_sha256 = match &opts.renderers_snapshot {
+        Some(copy) => inputs::file_digest(copy)?,
+        None => String::new(),
+    };
+    Ok(manifest::RunOptions {
+        only: opts.only.clone(),
+        renderers_sha256,
+        calibration: opts.calibration.is_some(),
+        seed: opts.core.seed,
+        spp: opts.core.spp,
+        bias: opts.core.bias.map(|b| b.name().to_string()),
+    })
 }
 
 /// The run itself, written to `opts.run_dir` (the staging folder); commands in
@@ -649,8 +697,16 @@ fn render_and_compare(
     jobs: &[(PathBuf, &'static str)],
     isolate: Option<&Path>,
     shown_dir: &Path,
+    shard: Option<manifest::ShardRecord>,
 ) -> Result<CheckOutcome> {
     let run_dir = &opts.run_dir;
+    let (staged_dir, shown) = (run_dir.clone(), shown_dir.to_path_buf());
+    // Messages name the published run folder, never the staging folder.
+    let unstaged = |rec: &mut RenderRecord| {
+        for text in [&mut rec.command, &mut rec.message, &mut rec.reason] {
+            *text = unstage(text, &staged_dir, &shown);
+        }
+    };
     let scratch = run_dir.join("scratch");
     let externals = harness_backends(opts, &scratch.join("info"));
     if let Err(e) = &externals {
@@ -669,6 +725,7 @@ fn render_and_compare(
             scene: name.clone(),
             scene_file: scene_path.display().to_string(),
             resolved: format!("{rel_dir}/resolved"),
+            resolved_sha256: String::new(),
             requires: Vec::new(),
             role: role.to_string(),
             renders: Vec::new(),
@@ -682,26 +739,36 @@ fn render_and_compare(
             opts,
             format!("[{}/{}] {}{what}", si + 1, jobs.len(), scene_path.display()),
         );
+        // The export is sealed (inputs.rs): its hash is recorded, its files
+        // are read-only, and every external render reads a copy of it.
         let resolved = Scene::load(scene_path)
             .map_err(anyhow::Error::from)
             .and_then(|s| ResolvedScene::resolve(&s).map_err(anyhow::Error::from))
-            .and_then(|r| export(&r, &dir.join("resolved")).map(|_| r));
-        let scene = match resolved {
+            .and_then(|r| export(&r, &dir.join("resolved")).map(|_| r))
+            .and_then(|r| {
+                let folder = dir.join("resolved");
+                inputs::make_read_only(&folder)?;
+                Ok((r, inputs::Seal::of(&folder)?))
+            });
+        let (scene, seal) = match resolved {
             Ok(s) => s,
             Err(e) => {
-                say(opts, format!("  scene ERROR: {e:#}"));
-                runs.renders.push(RenderRecord {
+                let mut rec = RenderRecord {
                     backend: REFERENCE.into(),
                     status: "error".into(),
                     message: format!("cannot load scene: {e:#}"),
                     ..RenderRecord::default()
-                });
+                };
+                unstaged(&mut rec);
+                say(opts, format!("  scene ERROR: {}", rec.message));
+                runs.renders.push(rec);
                 scenes.push(runs);
                 pending.push(None);
                 continue;
             }
         };
         runs.requires = scene.requires.iter().cloned().collect();
+        runs.resolved_sha256 = seal.digest.clone();
         let core_missing = missing(&runs.requires, &core_features());
         let scene_arg = scene_path.display().to_string();
         for name in CORE_LOOPS {
@@ -754,6 +821,8 @@ fn render_and_compare(
                     opts.timeout,
                 )
             };
+            let mut rec = rec;
+            unstaged(&mut rec);
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
             runs.renders.push(rec);
         }
@@ -799,6 +868,7 @@ fn render_and_compare(
             if let Capability::VisibilityOnly(m) = &capability {
                 visibility_only(&mut rec, m);
             }
+            unstaged(&mut rec);
             say(opts, format!("  {:<14} {}", name, describe(&rec)));
             runs.renders.push(rec);
         }
@@ -806,6 +876,7 @@ fn render_and_compare(
             dir,
             rel_dir,
             triangles: scene.triangles.len() as u64,
+            seal,
         }));
         scenes.push(runs);
     }
@@ -859,7 +930,9 @@ fn render_and_compare(
                 },
                 |slot, &(si, b)| {
                     let p = pending[si].as_ref().expect("tasks are loaded scenes");
-                    let rec = external(opts, b, &scenes[si], p, &scratch, isolate, slot.as_mut());
+                    let mut rec =
+                        external(opts, b, &scenes[si], p, &scratch, isolate, slot.as_mut());
+                    unstaged(&mut rec);
                     let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                     say(
                         opts,
@@ -878,13 +951,18 @@ fn render_and_compare(
             }
         }
     }
-    // Commands name the published run folder, not the staging folder.
-    let (staged, shown) = (
-        run_dir.display().to_string(),
-        shown_dir.display().to_string(),
-    );
-    for rec in scenes.iter_mut().flat_map(|s| s.renders.iter_mut()) {
-        rec.command = rec.command.replace(&staged, &shown);
+    // The comparison reads the run's own resolved scenes: still as exported?
+    for (runs, p) in scenes.iter().zip(&pending) {
+        let Some(p) = p else { continue };
+        let folder = p.dir.join("resolved");
+        let now = inputs::Seal::of(&folder)?;
+        if let Some(what) = p.seal.changes(&now) {
+            bail!(
+                "{}: the resolved scene of {:?} changed during the run ({what}), though every render read a copy of its own: its verdicts cannot be trusted; run rendiff check again",
+                folder.display(),
+                crate::scene::printable(&runs.scene, 100)
+            );
+        }
     }
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),
@@ -895,12 +973,14 @@ fn render_and_compare(
             .unwrap_or(0),
         rendiff_version: env!("CARGO_PKG_VERSION").into(),
         scenes,
+        options: Some(run_options(opts)?),
+        shard,
     };
     crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {
         std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
         Ok(())
     })?;
-    let (results, table) = compare(opts, &scratch)?;
+    let (results, table) = compare(opts, &scratch, shown_dir)?;
     Ok(CheckOutcome {
         manifest,
         results,
@@ -916,6 +996,9 @@ struct ExternalScene {
     rel_dir: String,
     /// Triangles of the resolved scene, for the pool's estimates.
     triangles: u64,
+    /// What `dir/resolved` held when exported: each render's copy is
+    /// checked against it (inputs.rs).
+    seal: inputs::Seal,
 }
 
 /// One external render through the harness: on `slot`'s long-lived worker
@@ -989,6 +1072,23 @@ fn external(
         process::shell_quote(&opts.root.join("harness").display().to_string()),
         shell_line(&words)
     );
+    // The render reads a copy of its own (inputs.rs); the record names the
+    // run's resolved scene, which the copy equals.
+    let input = scratch
+        .join("inputs")
+        .join(format!("{}-{}", runs.scene, b.name));
+    if let Err(e) = inputs::private_copy(&resolved, &input) {
+        rec.status = "error".into();
+        rec.message = format!("cannot copy the resolved scene for the render: {e:#}");
+        let _ = std::fs::remove_dir_all(&input);
+        return rec;
+    }
+    let scene_arg = args
+        .iter()
+        .position(|a| a == "--scene")
+        .expect("the arguments name the scene")
+        + 1;
+    args[scene_arg] = input.display().to_string();
     let mut cmd = harness_command(opts);
     cmd.args(&args);
     // The harness enforces the timeout on its own subprocesses; this one also
@@ -1063,6 +1163,20 @@ fn external(
             }
         }
     }
+    // A render that changed its input is judged on nothing it wrote.
+    let tampered = match inputs::Seal::of(&input) {
+        Ok(now) => scene.seal.changes(&now),
+        Err(e) => Some(format!("{e:#}")),
+    };
+    let _ = std::fs::remove_dir_all(&input);
+    if let Some(what) = tampered {
+        rec.status = "error".into();
+        rec.reason.clear();
+        rec.message = format!(
+            "{} changed its input, the resolved scene {{scene}}, during the render ({what}); a renderer may only read it: its buffers are not judged (every render reads a copy of its own: no other verdict is affected)",
+            b.name
+        );
+    }
     if let Capability::VisibilityOnly(m) = &capability {
         visibility_only(&mut rec, m);
     }
@@ -1075,7 +1189,11 @@ fn external(
 
 /// Runs the harness's comparison: results.json, and the verdict table it
 /// prints on stdout (its one formatter, `results.format_table`).
-fn compare(opts: &CheckOptions, scratch: &Path) -> Result<(Results, String)> {
+///
+/// The comparison runs in the staging folder and may name it (a buffer's
+/// path in an error); results.json and the table are rewritten to name
+/// `shown`, the run folder, instead ([`unstage`]).
+fn compare(opts: &CheckOptions, scratch: &Path, shown: &Path) -> Result<(Results, String)> {
     let results_path = opts.run_dir.join("results.json");
     let _ = std::fs::remove_file(&results_path);
     let mut cmd = harness_command(opts);
@@ -1102,14 +1220,27 @@ fn compare(opts: &CheckOptions, scratch: &Path) -> Result<(Results, String)> {
     }
     let text = std::fs::read_to_string(&results_path)
         .with_context(|| format!("{}: comparison wrote no results", results_path.display()))?;
+    let in_json = |p: &Path| {
+        let quoted = serde_json::to_string(&p.display().to_string()).unwrap_or_default();
+        quoted.trim_matches('"').to_string()
+    };
+    let (staged, final_dir) = (in_json(&opts.run_dir), in_json(shown));
+    let text = if text.contains(&staged) {
+        let text = text.replace(&staged, &final_dir);
+        crate::exr_io::write_atomically(&results_path, |tmp| Ok(std::fs::write(tmp, &text)?))?;
+        text
+    } else {
+        text
+    };
     let results = serde_json::from_str(&text)
         .with_context(|| format!("{}: unreadable", results_path.display()))?;
+    let table = unstage(&o.stdout, &opts.run_dir, shown);
     // The comparison's notes (expectations that matched no verdict: a typo
     // in a backend's name passed silently), in its own words.
     for line in o.stderr.lines().filter(|l| l.starts_with(COMPARE_NOTE)) {
         say(opts, crate::scene::printable(line, 2000));
     }
-    Ok((results, o.stdout))
+    Ok((results, table))
 }
 
 /// How the comparison begins a line meant for the user (`compare.py`).

@@ -48,18 +48,35 @@ struct Budget {
 }
 
 impl Budget {
-    fn acquire(&self, need: Bytes) {
+    /// Waits until `need` fits and takes it; what is taken is given back when
+    /// the returned guard drops, so a render that panics releases its share
+    /// too (a panic used to keep it, and every render waiting on the budget
+    /// then waited forever).
+    fn acquire(&self, need: Bytes) -> Held<'_> {
         let mut used = self.in_flight.lock().unwrap_or_else(|e| e.into_inner());
         while *used > 0 && used.saturating_add(need) > self.limit {
             used = self.freed.wait(used).unwrap_or_else(|e| e.into_inner());
         }
         *used += need;
+        Held { budget: self, need }
     }
+}
 
-    fn release(&self, need: Bytes) {
-        let mut used = self.in_flight.lock().unwrap_or_else(|e| e.into_inner());
-        *used = used.saturating_sub(need);
-        self.freed.notify_all();
+/// A render's share of the [`Budget`], released on drop (unwinding included).
+struct Held<'a> {
+    budget: &'a Budget,
+    need: Bytes,
+}
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        let mut used = self
+            .budget
+            .in_flight
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        *used = used.saturating_sub(self.need);
+        self.budget.freed.notify_all();
     }
 }
 
@@ -76,6 +93,11 @@ pub struct PoolOptions {
 /// made by `new_slot` (its workers); items are taken in decreasing `cost`
 /// (ties in item order) and admitted by `memory`. Results come back in item
 /// order, so records keep the order of a sequential run.
+///
+/// A panic in `f` is a bug: its memory share is released, no slot starts
+/// another item, the renders in flight finish, and the first panic is then
+/// resumed with its own payload (a slot's state may be half-updated, so the
+/// pool does not go on with it; nothing waits forever, nothing is hidden).
 pub fn run<T: Sync, R: Send, S>(
     opts: PoolOptions,
     items: &[T],
@@ -94,24 +116,42 @@ pub fn run<T: Sync, R: Send, S>(
         freed: Condvar::new(),
     };
     let out: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
+    let panicked: Mutex<Option<Box<dyn std::any::Any + Send>>> = Mutex::new(None);
+    let stop = std::sync::atomic::AtomicBool::new(false);
     std::thread::scope(|s| {
         for slot_index in 0..jobs {
             let (order, next, budget, out) = (&order, &next, &budget, &out);
             let (new_slot, f, memory) = (&new_slot, &f, &memory);
+            let (panicked, stop) = (&panicked, &stop);
             s.spawn(move || {
                 let mut slot = new_slot(slot_index);
-                loop {
+                while !stop.load(Ordering::Acquire) {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&i) = order.get(k) else { break };
                     let need = memory(&items[i]);
-                    budget.acquire(need);
-                    let r = f(&mut slot, &items[i]);
-                    budget.release(need);
-                    out.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+                    let held = budget.acquire(need);
+                    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        f(&mut slot, &items[i])
+                    }));
+                    drop(held);
+                    match r {
+                        Ok(r) => out.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r),
+                        Err(payload) => {
+                            stop.store(true, Ordering::Release);
+                            panicked
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .get_or_insert(payload);
+                            break;
+                        }
+                    }
                 }
             });
         }
     });
+    if let Some(payload) = panicked.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        std::panic::resume_unwind(payload);
+    }
     out.into_inner()
         .unwrap_or_else(|e| e.into_inner())
         .into_iter()
@@ -202,6 +242,47 @@ mod tests {
         };
         let out = run(opts, &items, |m| *m as f64, |m| *m, |_| (), |_, m| *m);
         assert_eq!(out, vec![100, 1]);
+    }
+
+    /// A render that panics while holding the memory budget: the others
+    /// still get it (no wait forever), and the pool ends with that panic,
+    /// its own message, not a generic one or none.
+    #[test]
+    fn a_panicking_render_releases_its_budget_and_its_panic_is_passed_on() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let got = std::panic::catch_unwind(|| {
+                let items = [10u64, 10, 10];
+                let opts = PoolOptions {
+                    jobs: 2,
+                    memory_budget: 10,
+                };
+                run(
+                    opts,
+                    &items,
+                    |_| 1.0,
+                    |m| *m,
+                    |_| (),
+                    |_, m| {
+                        std::thread::sleep(Duration::from_millis(20));
+                        if *m == 10 {
+                            panic!("render of {m} went wrong");
+                        }
+                        *m
+                    },
+                )
+            });
+            let _ = tx.send(got.map_err(|p| {
+                p.downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default()
+            }));
+        });
+        let got = rx
+            .recv_timeout(Duration::from_secs(20))
+            .expect("the pool waited forever for the budget a panicked render held");
+        assert_eq!(got, Err("render of 10 went wrong".to_string()));
     }
 
     #[test]

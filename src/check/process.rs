@@ -233,6 +233,20 @@ pub fn shell_line<I: IntoIterator<Item = S>, S: AsRef<str>>(words: I) -> String 
         .join(" ")
 }
 
+/// `text` for the terminal, line by line ([`crate::scene::printable`] on
+/// each, at most [`PRINTABLE_LINE_CHARS`] characters a line): the lines an
+/// error has stay lines, every other control character (a terminal escape
+/// in a file name or a renderer's stderr) is written as an escape.
+pub fn printable_lines(text: &str) -> String {
+    text.split('\n')
+        .map(|l| crate::scene::printable(l, PRINTABLE_LINE_CHARS))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Most characters of one line of an error (see [`printable_lines`]).
+pub const PRINTABLE_LINE_CHARS: usize = 4000;
+
 #[cfg(test)]
 mod tests {
     use super::*;

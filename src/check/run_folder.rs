@@ -12,6 +12,18 @@
 //!    signal handler, or by the next check if rendiff was SIGKILLed).
 //! 3. [`Staging::publish`] renames RUN away, renames the staging folder to
 //!    RUN (it has no marker) and removes the old one.
+//!
+//! One run per folder at a time: [`Staging::begin`] takes an advisory lock
+//! (`flock`) on RUN itself before it writes the marker, and one on the
+//! staging folder as it creates it, and holds both until the run is published
+//! or dropped; [`Staging::publish`] swaps the two folders in one step
+//! (`renameat2` with `RENAME_EXCHANGE`), so the path RUN always names a
+//! folder this run has locked. A second `check -o RUN` (or `merge -o RUN`) is
+//! refused, naming the process in RUN's marker, before it writes anything or
+//! sweeps a staging folder: two runs used to both print success, the last
+//! writer's buffers beside the first's verdicts. The kernel drops the locks
+//! with their process, so a killed run leaves no stale lock, and no lock
+//! file is left beside RUN.
 
 use super::manifest::INCOMPLETE_MARKER;
 use anyhow::{bail, Context, Result};
@@ -24,6 +36,93 @@ pub struct Staging {
     /// Where this run is written until it is published.
     pub dir: PathBuf,
     _guard: crate::shutdown::PathGuard,
+    /// The locks on RUN and on the staging folder, held until this value is
+    /// dropped (after the staging folder is removed or published): declared
+    /// last, so they are released last.
+    _locks: [FolderLock; 2],
+}
+
+/// An advisory lock on a folder (see the module's doc); released when
+/// dropped, or by the kernel when the process dies.
+struct FolderLock {
+    _folder: std::fs::File,
+}
+
+/// Why a folder's lock was not taken.
+enum NotLocked {
+    /// Another process holds it.
+    Held,
+    /// It could not be taken at all.
+    Failed(anyhow::Error),
+}
+
+/// Locks `dir` (a folder, never through a link) without waiting, and makes
+/// sure the path still names the folder locked: one swapped in meanwhile
+/// (a run published between the open and the lock) is locked afresh.
+fn lock_folder(dir: &Path) -> std::result::Result<FolderLock, NotLocked> {
+    use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
+    use std::os::unix::io::AsRawFd;
+    for _ in 0..100 {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC)
+            .open(dir)
+            .with_context(|| format!("{}: cannot open the run folder to lock it", dir.display()))
+            .map_err(NotLocked::Failed)?;
+        // SAFETY: flock(2) on a descriptor `file` owns for the call.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let err = std::io::Error::last_os_error();
+            return Err(if err.raw_os_error() == Some(libc::EWOULDBLOCK) {
+                NotLocked::Held
+            } else {
+                NotLocked::Failed(anyhow::anyhow!(
+                    "{}: cannot lock the run folder: {err}",
+                    dir.display()
+                ))
+            });
+        }
+        let same = match (file.metadata(), std::fs::symlink_metadata(dir)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        };
+        if same {
+            return Ok(FolderLock { _folder: file });
+        }
+    }
+    Err(NotLocked::Failed(anyhow::anyhow!(
+        "{}: the folder kept changing while it was being locked",
+        dir.display()
+    )))
+}
+
+/// Locks the run folder for this run; refused, naming the process that
+/// holds it (from its INCOMPLETE marker), when another run has it.
+fn lock_run_folder(run_dir: &Path) -> Result<FolderLock> {
+    match lock_folder(run_dir) {
+        Ok(lock) => Ok(lock),
+        Err(NotLocked::Failed(e)) => Err(e),
+        Err(NotLocked::Held) => {
+            use std::io::Read;
+            let marker = run_dir.join(INCOMPLETE_MARKER);
+            let mut text = String::new();
+            if std::fs::symlink_metadata(&marker).is_ok_and(|m| m.is_file()) {
+                let _ = std::fs::File::open(&marker)
+                    .map(|f| f.take(MARKER_READ_BYTES).read_to_string(&mut text));
+            }
+            let pid = text
+                .split("(process ")
+                .nth(1)
+                .and_then(|t| t.split(')').next())
+                .and_then(|n| n.parse::<u32>().ok());
+            let holder = pid.map_or("another rendiff".to_string(), |p| {
+                format!("another rendiff (process {p})")
+            });
+            bail!(
+                "{}: {holder} is writing this run folder; wait for it to finish, or choose another -o",
+                run_dir.display()
+            )
+        }
+    }
 }
 
 /// A folder `check` may replace: missing, empty, or a rendiff run (it has a
@@ -112,6 +211,7 @@ impl Staging {
         replaceable(run_dir)?;
         std::fs::create_dir_all(run_dir)
             .with_context(|| format!("{}: cannot create run folder", run_dir.display()))?;
+        let run_lock = lock_run_folder(run_dir)?;
         let marker = run_dir.join(INCOMPLETE_MARKER);
         std::fs::write(
             &marker,
@@ -127,15 +227,26 @@ impl Staging {
         let guard = crate::shutdown::track_path(&dir);
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create staging folder", dir.display()))?;
+        let staging_lock = lock_folder(&dir).map_err(|e| match e {
+            NotLocked::Held => anyhow::anyhow!("{}: locked by another process", dir.display()),
+            NotLocked::Failed(e) => e,
+        })?;
         Ok(Staging {
             run_dir: run_dir.to_path_buf(),
             dir,
             _guard: guard,
+            _locks: [run_lock, staging_lock],
         })
     }
 
     /// Puts the finished run in place of the old one.
     pub fn publish(self) -> Result<()> {
+        // One step where the file system allows it: RUN never goes missing,
+        // and always names a folder this run holds locked.
+        if exchange(&self.dir, &self.run_dir).is_ok() {
+            // The staging path now holds the previous run (removed on drop).
+            return Ok(());
+        }
         let old = sibling(&self.run_dir, "old")?;
         let _old_guard = crate::shutdown::track_path(&old);
         std::fs::rename(&self.run_dir, &old).with_context(|| {
@@ -156,6 +267,31 @@ impl Staging {
     }
 }
 
+/// Swaps two folders atomically (`renameat2(RENAME_EXCHANGE)`, Linux 3.15+;
+/// an error where the file system has no such operation).
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    let c = |p: &Path| {
+        std::ffi::CString::new(p.as_os_str().as_encoded_bytes())
+            .map_err(|_| std::io::Error::from(std::io::ErrorKind::InvalidInput))
+    };
+    let (ca, cb) = (c(a)?, c(b)?);
+    // SAFETY: two valid NUL-terminated paths, relative to the current folder.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 impl Drop for Staging {
     /// A run that was not published leaves no staging folder behind (the
     /// run folder keeps its marker).
@@ -163,6 +299,10 @@ impl Drop for Staging {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
+
+/// The records of a run folder that `gate`, `bless`, `report` and `merge`
+/// read as the run's own ([`ensure_complete`] refuses links).
+pub const RUN_RECORDS: [&str; 2] = ["manifest.json", "results.json"];
 
 /// Most of a marker's text that is read: check writes one line naming its
 /// process; a marker is never read whole (a 1.3 MB one was quoted whole).
@@ -173,7 +313,24 @@ const MARKER_READ_BYTES: u64 = 4096;
 /// that name marks the run, whatever it is (a dangling symlink passed as no
 /// marker); only a regular file's first bytes are read, never through a
 /// link: a FIFO there blocked every reader, `/dev/zero` ran them out of memory.
+///
+/// A record that is a symbolic link is refused here too: a run's verdicts
+/// are the files its check wrote, and a `results.json` linked to a file out
+/// of the run (another run's, a hand-written one) was gated, blessed and
+/// reported as this run's.
 pub fn ensure_complete(run_dir: &Path) -> Result<()> {
+    for name in RUN_RECORDS {
+        let path = run_dir.join(name);
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink()) {
+            let to = std::fs::read_link(&path)
+                .map(|t| crate::scene::printable(&t.display().to_string(), 200))
+                .unwrap_or_default();
+            bail!(
+                "{}: a symbolic link (to {to}), not a record of this run; a run's records are files of its own: run rendiff check again",
+                path.display()
+            );
+        }
+    }
     let marker = run_dir.join(INCOMPLETE_MARKER);
     let Ok(meta) = std::fs::symlink_metadata(&marker) else {
         return Ok(());
@@ -198,6 +355,16 @@ pub fn ensure_complete(run_dir: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// The entries of `dir`.
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
     fn finished_run(dir: &Path) {
         std::fs::create_dir_all(dir.join("scenes/a")).unwrap();
         std::fs::write(dir.join("manifest.json"), "{}").unwrap();
@@ -219,11 +386,7 @@ mod tests {
         assert!(!staged.exists(), "staging folder left behind");
         let err = ensure_complete(&run).unwrap_err().to_string();
         assert!(err.contains("incomplete run"), "{err}");
-        assert_eq!(
-            std::fs::read_dir(t.path()).unwrap().count(),
-            1,
-            "only the run folder remains"
-        );
+        assert_eq!(entries(t.path()), ["latest"], "only the run folder remains");
     }
 
     #[test]
@@ -240,7 +403,7 @@ mod tests {
             std::fs::read_to_string(run.join("manifest.json")).unwrap(),
             "{\"new\":1}"
         );
-        assert_eq!(std::fs::read_dir(t.path()).unwrap().count(), 1);
+        assert_eq!(entries(t.path()), ["latest"]);
     }
 
     #[test]
@@ -253,6 +416,34 @@ mod tests {
         assert!(err.contains("holds no rendiff run"), "{err}");
         assert!(docs.join("thesis.tex").exists());
         assert!(!docs.join(INCOMPLETE_MARKER).exists());
+    }
+
+    /// Two runs into one folder at once: the second is refused, naming the
+    /// first's process, before it touches anything; once the first is done,
+    /// the folder is free again (a lock, not a file whose presence counts:
+    /// a crashed run leaves nothing stale).
+    #[test]
+    fn a_second_run_into_the_same_folder_is_refused_while_the_first_runs() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let first = Staging::begin(&run).unwrap();
+        let err = Staging::begin(&run)
+            .err()
+            .expect("second run refused")
+            .to_string();
+        let me = format!("process {}", std::process::id());
+        assert!(
+            err.contains("another rendiff") && err.contains(&me),
+            "{err}"
+        );
+        assert!(
+            first.dir.is_dir(),
+            "the refused run removed the first's staging"
+        );
+        first.publish().unwrap();
+        let again = Staging::begin(&run).unwrap();
+        drop(again);
     }
 
     #[test]
@@ -306,6 +497,26 @@ mod tests {
             } else {
                 std::fs::remove_file(&marker).unwrap();
             }
+        }
+        ensure_complete(&run).unwrap();
+    }
+
+    #[test]
+    fn records_that_are_links_are_refused() {
+        let t = tempfile::tempdir().unwrap();
+        let run = t.path().join("latest");
+        finished_run(&run);
+        let elsewhere = t.path().join("elsewhere.json");
+        std::fs::write(&elsewhere, "{}").unwrap();
+        for name in RUN_RECORDS {
+            let record = run.join(name);
+            let keep = std::fs::read(&record).unwrap();
+            std::fs::remove_file(&record).unwrap();
+            std::os::unix::fs::symlink(&elsewhere, &record).unwrap();
+            let err = ensure_complete(&run).unwrap_err().to_string();
+            assert!(err.contains(name) && err.contains("symbolic link"), "{err}");
+            std::fs::remove_file(&record).unwrap();
+            std::fs::write(&record, keep).unwrap();
         }
         ensure_complete(&run).unwrap();
     }

@@ -16,7 +16,7 @@
 //! what one machine's run would give (the comparison is deterministic given
 //! the buffers).
 
-use super::manifest::{Manifest, SceneRuns, MANIFEST_FORMAT};
+use super::manifest::{DealtScene, Manifest, SceneRuns, ShardRecord, MANIFEST_FORMAT};
 use super::run_folder::{ensure_complete, Staging};
 use super::{stem, CheckOptions, CheckOutcome, CALIBRATION_ROLE};
 use anyhow::{bail, Context, Result};
@@ -87,6 +87,44 @@ pub fn recorded_costs(previous_run: &Path, given: bool) -> Result<BTreeMap<Strin
 /// longest-processing-time assignment: scenes by cost (unknown cost: the mean
 /// of the known ones, or 1), largest first, each to the least loaded shard.
 pub fn select(scenes: &[PathBuf], shard: Shard, costs: &BTreeMap<String, f64>) -> Vec<PathBuf> {
+    scenes
+        .iter()
+        .zip(assign(scenes, shard.total, costs))
+        .filter(|(_, k)| *k == shard.index - 1)
+        .map(|(p, _)| p.clone())
+        .collect()
+}
+
+/// The whole split as shard `shard` records it in its manifest (every
+/// scene, its file's hash and its shard): what `merge` checks the shards
+/// against. A scene file that cannot be read is refused here, naming it.
+pub fn deal(
+    scenes: &[PathBuf],
+    shard: Shard,
+    costs: &BTreeMap<String, f64>,
+) -> Result<ShardRecord> {
+    let owners = assign(scenes, shard.total, costs);
+    let deal = scenes
+        .iter()
+        .zip(owners)
+        .map(|(p, k)| {
+            Ok(DealtScene {
+                scene: stem(p),
+                file: p.display().to_string(),
+                sha256: super::inputs::file_digest(p)?,
+                shard: k + 1,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ShardRecord {
+        index: shard.index,
+        total: shard.total,
+        deal,
+    })
+}
+
+/// The 0-based shard of each scene (see [`select`]).
+fn assign(scenes: &[PathBuf], total: usize, costs: &BTreeMap<String, f64>) -> Vec<usize> {
     let known: Vec<f64> = costs.values().copied().filter(|c| *c > 0.0).collect();
     let default = if known.is_empty() {
         1.0
@@ -106,7 +144,7 @@ pub fn select(scenes: &[PathBuf], shard: Shard, costs: &BTreeMap<String, f64>) -
             .total_cmp(&cost(&scenes[a]))
             .then_with(|| scenes[a].cmp(&scenes[b]))
     });
-    let mut load = vec![0.0f64; shard.total];
+    let mut load = vec![0.0f64; total];
     let mut owner = vec![0usize; scenes.len()];
     for i in order {
         let (k, _) = load
@@ -117,12 +155,7 @@ pub fn select(scenes: &[PathBuf], shard: Shard, costs: &BTreeMap<String, f64>) -
         load[k] += cost(&scenes[i]);
         owner[i] = k;
     }
-    scenes
-        .iter()
-        .zip(owner)
-        .filter(|(_, k)| *k == shard.index - 1)
-        .map(|(p, _)| p.clone())
-        .collect()
+    owner
 }
 
 fn copy_tree(from: &Path, to: &Path) -> Result<()> {
@@ -172,19 +205,8 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         manifests.push((run.clone(), m));
     }
     let first = &manifests[0].1;
-    for (run, m) in &manifests[1..] {
-        if m.rendiff_version != first.rendiff_version || m.reference != first.reference {
-            bail!(
-                "{}: made by rendiff {} with reference {}, but {} by rendiff {} with reference {}: shards must come from one build",
-                run.display(), m.rendiff_version, m.reference,
-                manifests[0].0.display(), first.rendiff_version, first.reference
-            );
-        }
-    }
-    // Every scene is checked before the output is touched: a refused merge
-    // left the marker in a good run given as -o.
-    let mut seen: BTreeMap<String, PathBuf> = BTreeMap::new();
-    let mut taken: Vec<(&PathBuf, &SceneRuns)> = Vec::new();
+    // Every scene name is checked before the set (a name that leaves the
+    // run is the worst problem a shard can have).
     for (run, m) in &manifests {
         for s in &m.scenes {
             if !super::is_folder_name(&s.scene) {
@@ -194,6 +216,40 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
                     crate::scene::printable(&s.scene, 100)
                 );
             }
+        }
+    }
+    for (run, m) in &manifests[1..] {
+        if m.rendiff_version != first.rendiff_version || m.reference != first.reference {
+            bail!(
+                "{}: made by rendiff {} with reference {}, but {} by rendiff {} with reference {}: shards must come from one build",
+                run.display(), m.rendiff_version, m.reference,
+                manifests[0].0.display(), first.rendiff_version, first.reference
+            );
+        }
+    }
+    check_shard_set(&manifests)?;
+    // The merge judges with the renderers file it is given: the shards' own.
+    let recorded = first
+        .options
+        .as_ref()
+        .map_or("", |o| o.renderers_sha256.as_str());
+    let given = match &opts.renderers {
+        Some(f) => super::inputs::file_digest(f)?,
+        None => String::new(),
+    };
+    if given != recorded {
+        bail!(
+            "the shards were run {}, but this merge {}: pass the renderers file the shards used, so their declared precision judges their renders",
+            if recorded.is_empty() { "without --renderers" } else { "with a --renderers file" },
+            if given.is_empty() { "has no --renderers" } else { "has a different one" }
+        );
+    }
+    // Every scene is checked before the output is touched: a refused merge
+    // left the marker in a good run given as -o.
+    let mut seen: BTreeMap<String, PathBuf> = BTreeMap::new();
+    let mut taken: Vec<(&PathBuf, &SceneRuns)> = Vec::new();
+    for (run, m) in &manifests {
+        for s in &m.scenes {
             if let Some(prev) = seen.get(&s.scene) {
                 if s.role == CALIBRATION_ROLE {
                     continue; // every shard renders the probes; one copy is kept
@@ -246,6 +302,8 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
             .unwrap_or(0),
         rendiff_version: first.rendiff_version.clone(),
         scenes,
+        options: first.options.clone(),
+        shard: None,
     };
     crate::exr_io::write_atomically(&staging.dir.join("manifest.json"), |tmp| {
         std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
@@ -255,13 +313,228 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         run_dir: staging.dir.clone(),
         ..opts.clone()
     };
-    let (results, table) = super::compare(&staged, &staging.dir.join("scratch"))?;
+    let (results, table) = super::compare(&staged, &staging.dir.join("scratch"), &opts.run_dir)
+        .map_err(|e| {
+            anyhow::anyhow!(super::unstage(
+                &format!("{e:#}"),
+                &staging.dir,
+                &opts.run_dir
+            ))
+        })?;
     staging.publish()?;
     Ok(CheckOutcome {
         manifest,
         results,
         table,
     })
+}
+
+/// Refuses a set of shard runs that is not one whole split run one way:
+/// a run that is no shard, shards of different splits (another count, other
+/// scenes, a same-named scene from another file), a shard given twice or
+/// missing, shards run with different options (`--only`, `--renderers`,
+/// calibration, the core's seed and samples), a shard whose scenes are not
+/// the ones its split dealt it, a backend of two versions, and a probe that
+/// differs between shards. Each refusal names the runs.
+fn check_shard_set(manifests: &[(PathBuf, Manifest)]) -> Result<()> {
+    let file = |run: &Path| run.join("manifest.json").display().to_string();
+    let mut shards: Vec<(&PathBuf, &ShardRecord)> = Vec::new();
+    for (run, m) in manifests {
+        let Some(rec) = &m.shard else {
+            bail!(
+                "{}: not a shard run (no shard record: made without `check --shard K/N`, or by an older rendiff); merge joins the shard runs of one split",
+                file(run)
+            );
+        };
+        shards.push((run, rec));
+    }
+    let (first_run, first) = shards[0];
+    for &(run, rec) in &shards[1..] {
+        if let Some(why) = split_difference(first, rec) {
+            bail!(
+                "{} and {} are shards of different splits ({why}): merge the shard runs of one `check --shard K/N` over one set of scene files",
+                first_run.display(),
+                run.display()
+            );
+        }
+    }
+    let mut by_index: BTreeMap<usize, &PathBuf> = BTreeMap::new();
+    for &(run, rec) in &shards {
+        if let Some(prev) = by_index.insert(rec.index, run) {
+            bail!(
+                "{} and {} are both shard {}/{}: its scenes would be in two shards; merge each shard once",
+                prev.display(),
+                run.display(),
+                rec.index,
+                rec.total
+            );
+        }
+    }
+    let missing: Vec<String> = (1..=first.total)
+        .filter(|k| !by_index.contains_key(k))
+        .map(|k| format!("{k}/{}", first.total))
+        .collect();
+    if !missing.is_empty() {
+        let lost: Vec<String> = first
+            .deal
+            .iter()
+            .filter(|d| !by_index.contains_key(&d.shard))
+            .take(5)
+            .map(|d| format!("{:?}", crate::scene::printable(&d.scene, 100)))
+            .collect();
+        bail!(
+            "shard{} {} of the split missing (its scenes, e.g. {}, would have no verdicts): merge all {} shard runs",
+            if missing.len() == 1 { "" } else { "s" },
+            missing.join(", "),
+            lost.join(", "),
+            first.total
+        );
+    }
+    for (run, m) in manifests {
+        let rec = m.shard.as_ref().expect("checked above");
+        let mut have: Vec<&str> = m
+            .scenes
+            .iter()
+            .filter(|s| s.role != CALIBRATION_ROLE)
+            .map(|s| s.scene.as_str())
+            .collect();
+        let mut dealt: Vec<&str> = rec
+            .deal
+            .iter()
+            .filter(|d| d.shard == rec.index)
+            .map(|d| d.scene.as_str())
+            .collect();
+        have.sort_unstable();
+        dealt.sort_unstable();
+        if have != dealt {
+            bail!(
+                "{}: shard {}/{} holds scenes {:?}, but its split dealt it {:?}",
+                file(run),
+                rec.index,
+                rec.total,
+                have.iter()
+                    .map(|n| crate::scene::printable(n, 100))
+                    .collect::<Vec<_>>(),
+                dealt
+                    .iter()
+                    .map(|n| crate::scene::printable(n, 100))
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
+    let (first_run, first_m) = (&manifests[0].0, &manifests[0].1);
+    for (run, m) in &manifests[1..] {
+        if m.options != first_m.options {
+            bail!(
+                "{} and {} were run with different options ({}): shards must be run alike",
+                first_run.display(),
+                run.display(),
+                options_difference(first_m.options.as_ref(), m.options.as_ref())
+            );
+        }
+    }
+    // One version per backend, one resolved scene per probe.
+    let mut versions: BTreeMap<&str, (&str, &PathBuf)> = BTreeMap::new();
+    let mut probes: BTreeMap<&str, (&str, &PathBuf)> = BTreeMap::new();
+    for (run, m) in manifests {
+        for s in &m.scenes {
+            if s.role == CALIBRATION_ROLE {
+                let (was, at) = *probes
+                    .entry(s.scene.as_str())
+                    .or_insert((s.resolved_sha256.as_str(), run));
+                if was != s.resolved_sha256 {
+                    bail!(
+                        "calibration probe {:?} differs between {} and {} (another resolved scene): shards must render the same probes",
+                        crate::scene::printable(&s.scene, 100),
+                        at.display(),
+                        run.display()
+                    );
+                }
+            }
+            for r in s.renders.iter().filter(|r| r.status == "ok") {
+                let (was, at) = *versions
+                    .entry(r.backend.as_str())
+                    .or_insert((r.version.as_str(), run));
+                if was != r.version {
+                    bail!(
+                        "{} is version {:?} in {} but {:?} in {}: shards must run the same renderers",
+                        crate::scene::printable(&r.backend, 100),
+                        crate::scene::printable(was, 200),
+                        at.display(),
+                        crate::scene::printable(&r.version, 200),
+                        run.display()
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// How two shards' splits differ, in words; None when they are one split.
+fn split_difference(a: &ShardRecord, b: &ShardRecord) -> Option<String> {
+    if a.total != b.total {
+        return Some(format!("of {} and of {} shards", a.total, b.total));
+    }
+    let index = |r: &ShardRecord| -> BTreeMap<String, DealtScene> {
+        r.deal
+            .iter()
+            .map(|d| (d.scene.clone(), d.clone()))
+            .collect()
+    };
+    let (x, y) = (index(a), index(b));
+    let name = |n: &str| format!("{:?}", crate::scene::printable(n, 100));
+    if let Some(n) = x.keys().find(|n| !y.contains_key(*n)) {
+        return Some(format!("scene {} is in one split only", name(n)));
+    }
+    if let Some(n) = y.keys().find(|n| !x.contains_key(*n)) {
+        return Some(format!("scene {} is in one split only", name(n)));
+    }
+    for (n, d) in &x {
+        let e = &y[n];
+        if d.sha256 != e.sha256 {
+            return Some(format!(
+                "scene {} is another file in each ({} and {})",
+                name(n),
+                crate::scene::printable(&d.file, 200),
+                crate::scene::printable(&e.file, 200)
+            ));
+        }
+        if d.shard != e.shard {
+            return Some(format!(
+                "scene {} was dealt to shard {} in one and {} in the other (different --shard-costs?)",
+                name(n),
+                d.shard,
+                e.shard
+            ));
+        }
+    }
+    (a.deal != b.deal).then(|| "the scene files are listed differently".to_string())
+}
+
+/// The first option two shards were run with differently, in words.
+fn options_difference(
+    a: Option<&super::manifest::RunOptions>,
+    b: Option<&super::manifest::RunOptions>,
+) -> String {
+    let (Some(a), Some(b)) = (a, b) else {
+        return "one records no options".into();
+    };
+    let only = |o: &Option<Vec<String>>| {
+        o.as_ref().map_or("(every backend)".to_string(), |v| {
+            crate::scene::printable(&v.join(","), 200)
+        })
+    };
+    if a.only != b.only {
+        return format!("--only {} and --only {}", only(&a.only), only(&b.only));
+    }
+    if a.renderers_sha256 != b.renderers_sha256 {
+        return "different --renderers files".into();
+    }
+    if a.calibration != b.calibration {
+        return "one without calibration (--no-calibration)".into();
+    }
+    "the core's seed, samples per pixel or injected bias".into()
 }
 
 #[cfg(test)]

@@ -47,6 +47,57 @@ pub struct BlessOptions {
     pub allow_failures: bool,
     /// Bless even if the run's set of scenes differs from the current baseline's.
     pub allow_scene_changes: bool,
+    /// Why entries of the baseline's scenes that the run lacks may be dropped
+    /// (`--drop-reason`); recorded in the provenance. Without it such a run
+    /// is refused: `gate` fails on exactly those entries ("missing result"),
+    /// and a bless used to drop them silently.
+    pub drop_reason: Option<String>,
+}
+
+/// Most dropped entries a refusal names one by one (the rest are counted).
+const DROPPED_NAMED: usize = 10;
+
+/// The baseline's entries (`scene::backend::buffer`) of scenes the run still
+/// has but that the run does not: what blessing it would drop. Entries of
+/// scenes the run no longer has are [`scene_changes`]' business.
+pub fn dropped_entries(before: &Baseline, now: &Baseline) -> Vec<String> {
+    let scenes = scene_set(now.entries.iter().map(|e| e.scene.as_str()));
+    let keys: std::collections::BTreeSet<(&str, &str, &str)> = now
+        .entries
+        .iter()
+        .map(|e| (e.scene.as_str(), e.backend.as_str(), e.buffer.as_str()))
+        .collect();
+    before
+        .entries
+        .iter()
+        .filter(|e| scenes.contains(&e.scene))
+        .filter(|e| !keys.contains(&(e.scene.as_str(), e.backend.as_str(), e.buffer.as_str())))
+        .map(|e| {
+            format!(
+                "{}::{}::{}",
+                crate::scene::printable(&e.scene, 100),
+                crate::scene::printable(&e.backend, 100),
+                crate::scene::printable(&e.buffer, 100)
+            )
+        })
+        .collect()
+}
+
+/// One line naming what would be dropped (the first [`DROPPED_NAMED`], then a count).
+fn dropped_summary(dropped: &[String]) -> String {
+    let shown = dropped[..dropped.len().min(DROPPED_NAMED)].join(", ");
+    let more = dropped.len().saturating_sub(DROPPED_NAMED);
+    let more = if more > 0 {
+        format!(" and {more} more")
+    } else {
+        String::new()
+    };
+    format!(
+        "{} entr{} of the baseline's scenes {} not in the run and would be dropped: {shown}{more}",
+        dropped.len(),
+        if dropped.len() == 1 { "y" } else { "ies" },
+        if dropped.len() == 1 { "is" } else { "are" },
+    )
 }
 
 /// True for the entry of a scene that could not be loaded (buffer `scene`).
@@ -228,6 +279,7 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
     Ok(Baseline {
         format: BASELINE_FORMAT.into(),
         provenance: Provenance {
+            dropped: None,
             blessed: utc(now),
             command: opts.command.clone(),
             run: run.display().to_string(),
@@ -244,20 +296,53 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
 }
 
 /// `rendiff bless`: writes the baseline from a run, atomically. Refuses (see
-/// [`BlessOptions`]) a run with failures, or one whose scenes differ from
-/// those of the baseline it would replace.
+/// [`BlessOptions`]) a run with failures, one whose scenes differ from those
+/// of the baseline it would replace, and one that lacks entries of the
+/// baseline's scenes (unless a reason for dropping them is given).
 pub fn bless(run: &Path, baseline_path: &Path, opts: &BlessOptions) -> Result<Baseline> {
-    let b = baseline_from_run(run, opts)?;
-    if !opts.allow_scene_changes && baseline_path.exists() {
-        let old = load_baseline(baseline_path).context(
-            "cannot compare the run's scenes with the current baseline; pass --allow-scene-changes to replace it",
-        )?;
-        if let Some(why) = scene_change_summary(&old, &b) {
-            bail!(
-                "{}: {why}; pass --allow-scene-changes to bless them into {}",
-                run.display(),
-                baseline_path.display()
-            );
+    let mut b = baseline_from_run(run, opts)?;
+    if let Some(reason) = &opts.drop_reason {
+        if reason.trim().is_empty() {
+            bail!("--drop-reason is empty: say why the entries may be dropped");
+        }
+    }
+    if std::fs::symlink_metadata(baseline_path).is_ok() {
+        let old = match load_baseline(baseline_path) {
+            Ok(old) => Some(old),
+            // Replacing what cannot be read is what --allow-scene-changes says.
+            Err(_) if opts.allow_scene_changes => None,
+            Err(e) => {
+                return Err(e.context(
+                    "cannot compare the run with the current baseline; pass --allow-scene-changes to replace it",
+                ))
+            }
+        };
+        if let Some(old) = old {
+            if !opts.allow_scene_changes {
+                if let Some(why) = scene_change_summary(&old, &b) {
+                    bail!(
+                        "{}: {why}; pass --allow-scene-changes to bless them into {}",
+                        run.display(),
+                        baseline_path.display()
+                    );
+                }
+            }
+            let dropped = dropped_entries(&old, &b);
+            match (&opts.drop_reason, dropped.is_empty()) {
+                (_, true) => {}
+                (None, false) => bail!(
+                    "{}: {}; gate fails on each (missing result): fix the run, or pass --drop-reason \"WHY\" to bless without them into {}",
+                    run.display(),
+                    dropped_summary(&dropped),
+                    baseline_path.display()
+                ),
+                (Some(reason), false) => {
+                    b.provenance.dropped = Some(Dropped {
+                        reason: reason.clone(),
+                        entries: dropped,
+                    });
+                }
+            }
         }
     }
     let text = serde_json::to_string_pretty(&b)? + "\n";

@@ -14,6 +14,14 @@ pub fn md(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '|' => out.push_str("\\|"),
             '\n' | '\r' => out.push(' '),
+            // Other control characters (a terminal escape in a scene's file
+            // name) and bidi overrides are written as escapes: the summary
+            // is printed on the terminal too.
+            c if c.is_control()
+                || matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}') =>
+            {
+                out.extend(c.escape_unicode())
+            }
             '\\' | '`' | '*' | '[' | ']' | '~' => {
                 out.push('\\');
                 out.push(c);

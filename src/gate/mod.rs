@@ -73,6 +73,18 @@ pub const COUNT_METRICS: &[&str] = &[
     "mask_mismatches",
 ];
 
+/// Pixel counts results.json records beside [`COUNT_METRICS`] (the pixels
+/// compared, the failing and clustered RGB pixels): not gated, but a verdict
+/// whose count is negative or fractional is no verdict, so `gate` and
+/// `bless` refuse it like a bad mismatch count (`bless` used to write such a
+/// run into the baseline).
+pub const PIXEL_COUNTS: &[&str] = &[
+    "pixels",
+    "compared_pixels",
+    "failing_pixels",
+    "cluster_failures",
+];
+
 /// Buffer of the entry a scene that could not be loaded gets (backend: the reference).
 pub const SCENE_BUFFER: &str = "scene";
 
@@ -174,6 +186,9 @@ fn verdict(e: &ResultEntry) -> std::result::Result<Verdict, String> {
         if let Some(c) = typed_count(e.details.get(*m)).map_err(|why| format!("{m}: {why}"))? {
             counts.insert(m.to_string(), c);
         }
+    }
+    for m in PIXEL_COUNTS {
+        typed_count(e.details.get(*m)).map_err(|why| format!("{m}: {why}"))?;
     }
     let mut errors = BTreeMap::new();
     for m in ERROR_METRICS {
@@ -308,6 +323,19 @@ pub struct Provenance {
     pub seeds: BTreeMap<String, Value>,
     /// Expectations file the run was judged with.
     pub expectations: Option<String>,
+    /// Entries of the previous baseline's scenes this bless dropped, and
+    /// why (`bless --drop-reason`); absent when it dropped none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dropped: Option<Dropped>,
+}
+
+/// What a bless dropped from the baseline it replaced, and the reason given.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Dropped {
+    /// The `--drop-reason` text.
+    pub reason: String,
+    /// `scene::backend::buffer` of each dropped entry.
+    pub entries: Vec<String>,
 }
 
 /// One blessed verdict.
@@ -403,5 +431,17 @@ mod tests {
             s, "&lt;img src=x onerror=alert(1)&gt;\\|\\[a\\](b)\\`",
             "no tag, link, cell break or code span survives"
         );
+    }
+
+    #[test]
+    fn markdown_cells_carry_no_terminal_escapes_and_no_line_breaks() {
+        // The summary is printed on the terminal: a scene named with an
+        // escape sequence recoloured it, a bidi override reordered it.
+        let s = md("a\u{1b}[31mred\u{7}\u{202e}txt\nrow");
+        assert!(
+            !s.chars().any(|c| c.is_control() || c == '\u{202e}'),
+            "{s:?}"
+        );
+        assert!(s.contains("\\u{1b}") && s.contains("\\u{202e}"), "{s:?}");
     }
 }
