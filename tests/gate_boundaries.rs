@@ -1,0 +1,221 @@
+//! Every boundary of the gate's policy, from both sides: each count metric one
+//! above and one below its baseline on an exact and an external backend, each
+//! error metric at its limit and one ulp past it, and the whole table of
+//! status transitions. A change that moves a boundary (a count the gate stops
+//! holding, a limit that admits one ulp more, a transition that turns from a
+//! regression into a note) fails one of these.
+
+use rendiff::check::manifest::{ResultEntry, Results};
+use rendiff::gate::{self, Baseline, BaselineEntry, ChangeKind, Noise, Provenance, Status};
+use rendiff::vocab::MismatchClass;
+use serde_json::{Map, Value};
+
+/// The farthest reference depth the baselines below are blessed with.
+const Z_FAR: f64 = 4.0;
+
+fn entry(backend: &str, buffer: &str, status: Status, metrics: &[(&str, f64)]) -> ResultEntry {
+    let mut details = Map::new();
+    for (k, v) in metrics {
+        let v = if gate::COUNT_METRICS.contains(k) {
+            Value::from(*v as u64)
+        } else {
+            Value::from(*v)
+        };
+        details.insert((*k).to_string(), v);
+    }
+    ResultEntry {
+        scene: "s".into(),
+        backend: backend.into(),
+        buffer: buffer.into(),
+        status: status.as_str().into(),
+        reason: String::new(),
+        details,
+    }
+}
+
+fn baseline(e: &ResultEntry) -> Baseline {
+    Baseline {
+        format: gate::BASELINE_FORMAT.into(),
+        provenance: Provenance::default(),
+        policy: String::new(),
+        entries: vec![BaselineEntry {
+            scene: e.scene.clone(),
+            backend: e.backend.clone(),
+            buffer: e.buffer.clone(),
+            status: Status::parse(&e.status).unwrap(),
+            reason: e.reason.clone(),
+            metrics: e
+                .details
+                .iter()
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect(),
+            noise: Noise::for_backend(&e.backend, Z_FAR),
+        }],
+    }
+}
+
+/// The gate's changes for one entry blessed as `before` and run as `now`.
+fn changes(before: &ResultEntry, now: &ResultEntry) -> Vec<(ChangeKind, String)> {
+    let run = gate::verdicts(&Results {
+        format: "rendiff-results/1".into(),
+        reference: "raster".into(),
+        results: vec![now.clone()],
+    })
+    .unwrap();
+    gate::compare(&baseline(before), &run)
+        .changes
+        .into_iter()
+        .map(|c| (c.kind, c.what))
+        .collect()
+}
+
+#[test]
+fn every_mismatch_class_has_a_count_the_gate_holds() {
+    for class in MismatchClass::names() {
+        let m = format!("{class}_mismatches");
+        assert!(
+            gate::COUNT_METRICS.contains(&m.as_str()),
+            "the verifier's class {class:?} has no count the gate holds ({m})"
+        );
+    }
+}
+
+#[test]
+fn every_count_grows_by_one_into_a_regression_and_shrinks_by_one_into_an_improvement() {
+    for backend in ["trace", "raster", "povray", "embree", "my_renderer"] {
+        for m in gate::COUNT_METRICS {
+            let base = entry(backend, "id", Status::Pass, &[(m, 5.0)]);
+            let same = changes(&base, &base);
+            assert!(same.is_empty(), "{backend} {m} unchanged: {same:?}");
+            let up = changes(&base, &entry(backend, "id", Status::Pass, &[(m, 6.0)]));
+            assert_eq!(
+                up,
+                vec![(ChangeKind::Regression, format!("{m} worse"))],
+                "{backend}: {m} 5 -> 6"
+            );
+            let down = changes(&base, &entry(backend, "id", Status::Pass, &[(m, 4.0)]));
+            assert_eq!(
+                down,
+                vec![(ChangeKind::Improvement, format!("{m} better"))],
+                "{backend}: {m} 5 -> 4"
+            );
+        }
+    }
+}
+
+#[test]
+fn an_error_at_its_limit_passes_and_one_ulp_past_it_fails() {
+    for backend in ["trace", "povray", "my_renderer"] {
+        let noise = Noise::for_backend(backend, Z_FAR);
+        for m in gate::ERROR_METRICS {
+            for base_v in [0.0, 1e-6, 0.25] {
+                let base = entry(backend, gate::ERROR_BUFFER, Status::Pass, &[(m, base_v)]);
+                let at = |v: f64| {
+                    changes(
+                        &base,
+                        &entry(backend, gate::ERROR_BUFFER, Status::Pass, &[(m, v)]),
+                    )
+                };
+                let limit = noise.limit(m, base_v);
+                assert!(
+                    limit >= base_v,
+                    "{backend} {m}: limit {limit} below base {base_v}"
+                );
+                assert!(
+                    at(limit).is_empty(),
+                    "{backend} {m} {base_v}: at the limit {limit}"
+                );
+                assert_eq!(
+                    at(limit.next_up()),
+                    vec![(ChangeKind::Regression, format!("{m} worse"))],
+                    "{backend} {m} {base_v}: one ulp past the limit {limit}"
+                );
+                let better = noise.improved_below(m, base_v);
+                if better > 0.0 {
+                    assert!(at(better).is_empty(), "{backend} {m} {base_v}: at {better}");
+                    assert_eq!(
+                        at(better.next_down()),
+                        vec![(ChangeKind::Improvement, format!("{m} better"))],
+                        "{backend} {m} {base_v}: one ulp below {better}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_exact_loops_may_not_move_at_all_and_external_ones_by_their_f32_noise() {
+    let exact = Noise::for_backend("trace", Z_FAR);
+    assert_eq!(exact.limit("max_abs_error", 0.0), 0.0);
+    assert_eq!(exact.limit("max_abs_error", 1e-3), 1e-3);
+    let external = Noise::for_backend("povray", Z_FAR);
+    // Derivation (src/gate/mod.rs): x1.5 plus two f32 roundings of the farthest depth.
+    assert_eq!(
+        external.limit("max_abs_error", 0.0),
+        gate::F32_SLACK * Z_FAR
+    );
+    assert_eq!(external.limit("max_rel_error", 0.0), gate::F32_SLACK);
+    assert_eq!(
+        external.limit("max_abs_error", 2.0),
+        3.0 + gate::F32_SLACK * Z_FAR
+    );
+    for n in [exact, external] {
+        for m in gate::COUNT_METRICS {
+            assert_eq!(n.limit(m, 7.0), 7.0, "a count may not grow: {m}");
+        }
+    }
+}
+
+#[test]
+fn errors_are_held_on_depth_entries_only() {
+    for buffer in ["id", "N", "RGB"] {
+        let base = entry("povray", buffer, Status::Pass, &[("max_abs_error", 1e-6)]);
+        let now = entry("povray", buffer, Status::Pass, &[("max_abs_error", 1.0)]);
+        assert!(changes(&base, &now).is_empty(), "{buffer}");
+    }
+}
+
+/// The whole transition table, written out: what the gate says when an entry
+/// blessed with the row's status comes back with the column's.
+#[test]
+fn every_status_transition_gets_its_verdict() {
+    use ChangeKind::{Improvement as I, Note as N, Regression as R};
+    use Status::*;
+    let none: Option<(ChangeKind, &str)> = None;
+    let new = Some((R, "new failure"));
+    let lost = Some((R, "no longer compared"));
+    let fixed = Some((I, "fixed"));
+    let now_compared = Some((I, "now compared"));
+    let still = Some((N, "still failing (accepted in the baseline)"));
+    let changed = Some((N, "status changed"));
+    let statuses = [Pass, Fail, Skipped, Error, ExpectedFail, UnexpectedPass];
+    #[rustfmt::skip]
+    let table = [
+        //               Pass          Fail   Skipped Error  ExpectedFail  UnexpectedPass
+        /* Pass */         [none,         new,   lost,   new,   changed,      new],
+        /* Fail */         [fixed,        still, lost,   still, fixed,        still],
+        /* Skipped */      [now_compared, new,   none,   new,   now_compared, new],
+        /* Error */        [fixed,        still, lost,   still, fixed,        still],
+        /* ExpectedFail */ [changed,      new,   lost,   new,   none,         new],
+        /* UnexpectedPass */ [fixed,      still, lost,   still, fixed,        still],
+    ];
+    for (i, &was) in statuses.iter().enumerate() {
+        for (j, &is) in statuses.iter().enumerate() {
+            let got = changes(
+                &entry("povray", "id", was, &[]),
+                &entry("povray", "id", is, &[]),
+            );
+            let want: Vec<(ChangeKind, String)> = table[i][j]
+                .iter()
+                .map(|(k, w)| (*k, w.to_string()))
+                .collect();
+            assert_eq!(got, want, "{was} -> {is}");
+        }
+    }
+    assert_eq!(
+        statuses.len(),
+        Status::names().len(),
+        "a status missing from the table"
+    );
+}
