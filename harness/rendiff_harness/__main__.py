@@ -30,9 +30,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import command_renderers, exrbuf, registry, resolved, vocab
+from . import command_renderers, registry
+from .contract import exrbuf, resolved, vocab
+from .contract.text import printable
 from .errors import BackendError, BackendSkipped
-from .text import printable
 
 EXIT_OK, EXIT_ERROR = 0, 2
 EXIT_SKIPPED = vocab.EXIT_SKIPPED

@@ -74,16 +74,18 @@ from typing import Any
 
 import numpy as np
 
-from . import command_renderers, exrbuf, resolved
-from .manifest import EntryError, render_reason, run_path
-from .results import Entry
+from . import command_renderers
+from .contract import exrbuf, resolved
+from .contract.camera import Camera
+from .contract.manifest import EntryError, render_reason, run_path
+from .contract.results import Entry
+from .contract.vocab import BACKGROUND_ID
 from .tolerance import F32_U, MAX_REL
 
 ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
 BUFFER = "camera"
 """The results.json `buffer` of a calibration entry."""
-BACKGROUND_ID = exrbuf.BACKGROUND_ID
 F64_U = 2.0**-53
 MIN_PIXELS = 64
 """Fewer usable pixels than this cannot identify the nine entries of G with any precision."""
@@ -422,7 +424,7 @@ class CalibrationReport:
     measurements: list[Calibration]
 
 
-def _screen_points(cam: resolved.Camera) -> np.ndarray:
+def _screen_points(cam: Camera) -> np.ndarray:
     """(5, 2) image-plane points where the displacement is judged: the center and the four corners."""
     a = cam.tan_half_vfov * cam.width / cam.height
     t = cam.tan_half_vfov
@@ -530,7 +532,7 @@ def measure(
     sx_all, sy_all = cam.screen_coords()
     sx, sy = sx_all[ok], sy_all[ok]
     zk = z64[ok]
-    pixel = 2.0 * cam.tan_half_vfov / cam.height
+    pixel = cam.pixel_size()
     n_perp = np.hypot(nr, nu)
     if np.any(n_perp * pixel <= 0.0):
         raise CalibrationError(

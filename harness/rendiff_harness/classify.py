@@ -6,10 +6,8 @@ test's prim at that pixel); anything else is an *interior* mismatch, i.e. a bug.
 module computes that distance, in pixels, in float64, for the mismatched pixels only
 (scenes have up to millions of triangles, mismatches are few).
 
-Projection (docs/resolved-scene.md): camera-space x = (p - eye).right,
-y = (p - eye).up_ortho, z = (p - eye).forward; pixel coordinates
-px = (x/z / (tan_half_vfov W/H) + 1) W/2, py = (1 - y/z / tan_half_vfov) H/2, with pixel
-centers at k + 0.5. A triangle is first clipped in camera space against the near plane
+Projection: the camera's own (contract/camera.py: `Camera.to_camera`, `Camera.to_pixel`),
+pixel centers at k + 0.5. A triangle is first clipped in camera space against the near plane
 (z >= near) and, when finite, the far plane (z <= far): the visible part of a triangle
 that crosses the eye plane is a polygon (up to 5 vertices) whose projection is finite.
 The clip edges count as edges: they bound what a renderer may show.
@@ -26,20 +24,12 @@ import math
 
 import numpy as np
 
-from .resolved import Camera, ResolvedScene
+from .contract.camera import Camera
+from .contract.resolved import ResolvedScene
 
-BACKGROUND_ID = 0xFFFFFFFF
 CHUNK = 1 << 17
 """Triangles per vectorized batch: bounds temporary memory if a renderer is badly broken."""
 DEGENERATE_REL_AREA = 1e-12
-
-
-def camera_space(camera: Camera, tris: np.ndarray) -> np.ndarray:
-    """(M, 3, 3) world triangles -> (M, 3, 3) camera-space (x right, y up, z forward), float64."""
-    rel = np.asarray(tris, dtype=np.float64) - camera.eye
-    basis = np.stack([camera.right, camera.up_ortho, camera.forward], axis=1)  # (3, 3): columns
-    cam_tris: np.ndarray = rel @ basis
-    return cam_tris
 
 
 def _clip(verts: np.ndarray, count: np.ndarray, plane: float, sign: float) -> tuple[np.ndarray, np.ndarray]:
@@ -76,7 +66,7 @@ def clip_and_project(camera: Camera, tris: np.ndarray) -> tuple[np.ndarray, np.n
 
     Counts are 0 (nothing between near and far) or 3-5. Unused slots are zero.
     """
-    cam_tris = camera_space(camera, tris)
+    cam_tris = camera.to_camera(tris)
     m = cam_tris.shape[0]
     near = camera.near if camera.near > 0.0 else 1e-12 * max(1.0, float(np.abs(cam_tris).max(initial=0.0)))
     poly, count = _clip(cam_tris, np.full(m, 3, dtype=np.int64), near, 1.0)
@@ -84,16 +74,11 @@ def clip_and_project(camera: Camera, tris: np.ndarray) -> tuple[np.ndarray, np.n
         poly, count = _clip(poly, count, camera.far, -1.0)
     else:  # keep the shape (M, 5, 3) either way
         poly = np.concatenate([poly, np.zeros((m, 1, 3))], axis=1)
-    w, h = camera.width, camera.height
     z = np.where(np.arange(poly.shape[1])[None, :] < count[:, None], poly[..., 2], 1.0)
-    sx = poly[..., 0] / z
-    sy = poly[..., 1] / z
-    px = (sx / (camera.tan_half_vfov * (w / h)) + 1.0) * (w / 2.0)
-    py = (1.0 - sy / camera.tan_half_vfov) * (h / 2.0)
-    return np.stack([px, py], axis=-1), count
+    return camera.to_pixel(poly[..., 0], poly[..., 1], z), count
 
 
-def _segment_distance(cx: np.ndarray, cy: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def segment_distance(cx: np.ndarray, cy: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from (cx, cy) to the segments a-b ((M, 2) each); zero-length segments -> point distance."""
     ex, ey = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
     dx, dy = cx - a[:, 0], cy - a[:, 1]
@@ -104,7 +89,7 @@ def _segment_distance(cx: np.ndarray, cy: np.ndarray, a: np.ndarray, b: np.ndarr
     return distance
 
 
-def _polygon_distance(poly: np.ndarray, count: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+def polygon_distance(poly: np.ndarray, count: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
     m, k_max, _ = poly.shape
     rows = np.arange(m)
     dist = np.full(m, np.inf)
@@ -114,7 +99,7 @@ def _polygon_distance(poly: np.ndarray, count: np.ndarray, cx: np.ndarray, cy: n
         valid = k < count
         nxt = np.where(k + 1 < count, k + 1, 0)
         a, b = poly[:, k], poly[rows, nxt]
-        d = _segment_distance(cx, cy, a, b)
+        d = segment_distance(cx, cy, a, b)
         dist = np.where(valid, np.minimum(dist, d), dist)
         # Shoelace relative to the first vertex keeps the area accurate far from the origin.
         a0, b0 = a - poly[:, 0], b - poly[:, 0]
@@ -141,7 +126,7 @@ def edge_distance(camera: Camera, tris: np.ndarray, cx: np.ndarray, cy: np.ndarr
         for s in range(0, tris.shape[0], CHUNK):
             e = s + CHUNK
             poly, count = clip_and_project(camera, tris[s:e])
-            out[s:e] = _polygon_distance(poly, count, cx[s:e], cy[s:e])
+            out[s:e] = polygon_distance(poly, count, cx[s:e], cy[s:e])
     return out
 
 

@@ -57,13 +57,13 @@ from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import vocab
 from .children import Capture, run_in_group
+from .contract import vocab
+from .contract.userfile import UserFileError, read_regular
 from .errors import BackendError, BackendSkipped, BackendUnavailable
-from .userfile import UserFileError, read_regular
 
 if TYPE_CHECKING:
-    from .resolved import ResolvedScene
+    from .contract.resolved import ResolvedScene
 
 ENV_VAR = "RENDIFF_RENDERERS"
 # The copy of that file `rendiff check` takes as its run begins (RUN/renderers.toml): the
@@ -610,7 +610,7 @@ class CommandBackend:
 
     def _write(self, src: Path, out_exr: Path, wanted: Sequence[str]) -> None:
         """Copy the wanted buffers (and the renderer's own rendiff: attributes) to `out_exr` atomically."""
-        from . import exrbuf
+        from .contract import exrbuf
 
         try:
             bufs = exrbuf.read_buffers(src)

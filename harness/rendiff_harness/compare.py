@@ -57,29 +57,29 @@ from typing import Any
 
 import numpy as np
 
-from . import diffimages, expectations, exrbuf, lighting, radiance, tolerance, verify, vocab
-from .manifest import MANIFEST_FORMAT as MANIFEST_FORMAT
-from .manifest import EntryError as EntryError
-from .manifest import ManifestError as ManifestError
-from .manifest import Reference as Reference
-from .manifest import declared_buffers, read_test_buffers, render_info, render_reason
-from .manifest import load_manifest as load_manifest
-from .manifest import load_reference as load_reference
-from .manifest import run_path as run_path
-from .results import NUMERIC_FIELDS as NUMERIC_FIELDS
-from .results import RESULTS_FORMAT as RESULTS_FORMAT
-from .results import RGB_FIELDS as RGB_FIELDS
-from .results import Entry, document, finite
-from .results import base_entry as base_entry
-from .results import blank_if_not_compared as blank_if_not_compared
-from .results import format_table as format_table
-from .results import write_results as write_results
-from .text import printable
-from .vocab import Buffer, Status
+from . import diffimages, expectations, radiance, tolerance, verify
+from .contract import exrbuf, lighting, vocab
+from .contract.manifest import MANIFEST_FORMAT as MANIFEST_FORMAT
+from .contract.manifest import EntryError as EntryError
+from .contract.manifest import ManifestError as ManifestError
+from .contract.manifest import Reference as Reference
+from .contract.manifest import declared_buffers, read_test_buffers, render_info, render_reason
+from .contract.manifest import load_manifest as load_manifest
+from .contract.manifest import load_reference as load_reference
+from .contract.manifest import run_path as run_path
+from .contract.results import NUMERIC_FIELDS as NUMERIC_FIELDS
+from .contract.results import RESULTS_FORMAT as RESULTS_FORMAT
+from .contract.results import RGB_FIELDS as RGB_FIELDS
+from .contract.results import Entry, document, finite
+from .contract.results import base_entry as base_entry
+from .contract.results import blank_if_not_compared as blank_if_not_compared
+from .contract.results import format_table as format_table
+from .contract.results import write_results as write_results
+from .contract.text import printable
+from .contract.vocab import BACKGROUND_ID, Buffer, Status
 
 SHADING_FEATURES = frozenset(f.value for f in vocab.SHADED_FEATURES)
 CACHED_REFERENCE_BACKEND = "mitsuba_ref"
-BACKGROUND_ID = exrbuf.BACKGROUND_ID
 EXAMPLES = 3  # example pixels quoted in a failure's reason
 EXIT_OK, EXIT_ERROR = 0, 2
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
@@ -124,16 +124,13 @@ def eye_norm(ref: Reference) -> float:
 
 def pixel_size(ref: Reference) -> float:
     """One pixel on the image plane at distance 1."""
-    return 2.0 * ref.scene.camera.tan_half_vfov / ref.scene.camera.height
+    return ref.scene.camera.pixel_size()
 
 
 def point_norm(ref: Reference, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
     """|X| of the points at planar depth z along pixel rays (distance from the world origin)."""
     cam = ref.scene.camera
-    w, h = cam.width, cam.height
-    sx = (2.0 * (cols + 0.5) / w - 1.0) * cam.tan_half_vfov * (w / h)
-    sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
-    d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
+    d = cam.center_directions(rows, cols)
     zz = np.where(np.isfinite(z), z, 0.0)
     norms: np.ndarray = np.linalg.norm(cam.eye[None, :] + zz[:, None] * d, axis=1)
     return norms
@@ -464,7 +461,7 @@ def compare_normals(
     e.pixels = ref.pixels
     judged = judge_normals(ref, backend, buffers, e)
     if judged is not None:
-        e.apply_verdict(exps, judged.details)
+        expectations.apply_verdict(e, exps, judged.details)
     return e
 
 
@@ -798,7 +795,7 @@ def compare_buffer(spec: BufferSpec, r: BackendRender, exps: expectations.Expect
 
 def finish(e: Entry, judged: Judged, exps: expectations.Expectations, run: Path, diff_dir: Path | None) -> None:
     """The verdict, the notes, and the heat map RUN/scenes/<scene>/diff/<backend>.<buffer>.png."""
-    e.apply_verdict(exps, judged.details)
+    expectations.apply_verdict(e, exps, judged.details)
     for note in judged.notes:
         e.add_reason(note)
     if diff_dir is None or judged.heat_map is None:

@@ -23,7 +23,8 @@ from types import ModuleType
 
 import numpy as np
 
-from . import atomic, exrbuf
+from .contract import atomic, exrbuf
+from .contract.vocab import BACKGROUND_ID
 
 BG, MATCH, EDGE, INTERIOR = 0, 1, 2, 3
 ID_COLORS = (
@@ -103,7 +104,7 @@ def write_id_diff(
     test_prim: np.ndarray,
     edge: np.ndarray,
     interior: np.ndarray,
-    background: int = 0xFFFFFFFF,
+    background: int = BACKGROUND_ID,
 ) -> Path:
     """Write the ID-mismatch map; `edge`/`interior` are (H, W) boolean masks of mismatches."""
     path = Path(path)

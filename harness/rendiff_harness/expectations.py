@@ -51,7 +51,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .userfile import UserFileError, read_regular
+from .contract.results import Entry
+from .contract.userfile import UserFileError, read_regular
+from .contract.vocab import MismatchClass, Status
 
 # Largest expectations file read: 1 MiB. rendiff's own is 2.5 KiB for a
 # dozen entries (about 200 bytes each), so this is some 5,000 entries; a
@@ -357,3 +359,23 @@ def evaluate(counts: Mapping[str, int], expectation: Expectation | None, cracks_
         detail = "; ".join(f"{k} {bad[k]} below bound {_fmt_bound(e.bound(k))}" for k in below)
         return Verdict("unexpected_pass", f"{detail}: better than recorded, tighten the bound [{tag}]")
     return Verdict("expected_fail", f"known failure ({_counts_text(bad)}): {tag}")
+
+
+def apply_verdict(e: Entry, exps: Expectations, details: list[str]) -> None:
+    """An entry's status, bound and reason from its counts and the matching expectation.
+
+    `details` (examples of mismatches) join the reason of a failing or surprising verdict.
+    """
+    exp = exps.lookup(e.scene, e.backend, e.buffer)
+    counts = {k: int(getattr(e, k) or 0) for k in COUNT_KEYS}
+    declared = exps.declared(e.backend, MismatchClass.CRACK)
+    verdict = evaluate(counts, exp, cracks_allowed=declared is not None)
+    e.status = verdict.status
+    if exp is not None:
+        e.bound = exp.bound_json()
+    parts = [verdict.reason] if verdict.reason else []
+    if verdict.status in (Status.FAIL, Status.EXPECTED_FAIL, Status.UNEXPECTED_PASS):
+        parts += details
+    if declared is not None and int(e.crack_mismatches or 0) > 0:
+        parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
+    e.reason = "; ".join(parts)

@@ -53,17 +53,26 @@ from typing import Any
 
 import numpy as np
 
-from . import atomic, classify, compare, expectations, exrbuf, resolved, tolerance
-from . import results as results_table
-from .manifest import EntryError, ManifestError, load_manifest, load_reference, render_info, render_reason, run_path
-from .results import finite, write_results
-from .text import printable
-from .userfile import open_regular, read_regular
+from . import classify, compare, expectations, tolerance
+from .contract import atomic, exrbuf, resolved
+from .contract import results as results_table
+from .contract.manifest import (
+    EntryError,
+    ManifestError,
+    load_manifest,
+    load_reference,
+    render_info,
+    render_reason,
+    run_path,
+)
+from .contract.results import finite, write_results
+from .contract.text import printable
+from .contract.userfile import open_regular, read_regular
+from .contract.vocab import BACKGROUND_ID
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
 CORE = ("raster", "trace")
-BACKGROUND_ID = exrbuf.BACKGROUND_ID
 EXIT_OK, EXIT_ERROR = 0, 2
 # Largest SPEC read: 64 MiB. A spec is a few cases, each with one prim_map entry per variant
 # triangle (under 10 bytes of JSON each): about 7M triangles of maps.

@@ -58,8 +58,8 @@ from typing import Any
 
 import numpy as np
 
-from . import atomic, exrbuf, resolved
-from .userfile import UserFileError, read_regular, sha256_regular
+from .contract import atomic, exrbuf, resolved
+from .contract.userfile import UserFileError, read_regular, sha256_regular
 
 FORMAT = "rendiff-reference/1"
 DEFAULT_SPP = 4096

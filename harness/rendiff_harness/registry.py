@@ -34,10 +34,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
-from . import command_renderers, vocab
+from . import command_renderers
 from .backends import MEMBERS, BackendModule
+from .contract import vocab
+from .contract.resolved import ResolvedScene
 from .errors import BackendError, BackendUnavailable
-from .resolved import ResolvedScene
 
 if TYPE_CHECKING:
     # mypy checks every shipped module against the protocol; nothing is imported at run time.

@@ -36,9 +36,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import classify
-from .resolved import Camera, ResolvedScene
+from .contract.camera import Camera
+from .contract.resolved import ResolvedScene
+from .contract.vocab import BACKGROUND_ID
 
-BACKGROUND_ID = classify.BACKGROUND_ID
 CLASSES = ("edge", "tie", "crack", "interior")
 EDGE, TIE, CRACK, INTERIOR = range(4)
 F32_ULP = 2.0**-23
@@ -111,12 +112,8 @@ class Side:
 
 
 def _project(cam: Camera, p: np.ndarray) -> np.ndarray:
-    """Camera-space points (..., 3) with z > 0 -> pixel coordinates (..., 2)."""
-    w, h = cam.width, cam.height
-    z = np.where(p[..., 2] > 0.0, p[..., 2], 1.0)
-    px = (p[..., 0] / z / (cam.tan_half_vfov * (w / h)) + 1.0) * (w / 2.0)
-    py = (1.0 - p[..., 1] / z / cam.tan_half_vfov) * (h / 2.0)
-    return np.stack([px, py], axis=-1)
+    """Camera-space points (..., 3) in front of the eye -> pixel coordinates (..., 2)."""
+    return cam.to_pixel(p[..., 0], p[..., 1], np.where(p[..., 2] > 0.0, p[..., 2], 1.0))
 
 
 def _near_far(cam: Camera, cam_tris: np.ndarray) -> tuple[float, float]:
@@ -144,7 +141,7 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
     cx = np.asarray(cols, dtype=np.float64).ravel()[idx] + 0.5
     cy = np.asarray(rows, dtype=np.float64).ravel()[idx] + 0.5
     with np.errstate(all="ignore"):
-        ct = classify.camera_space(cam, tris)
+        ct = cam.to_camera(tris)
         near, far = _near_far(cam, ct)
         for i in range(3):
             a, b = ct[:, i], ct[:, (i + 1) % 3]
@@ -165,13 +162,13 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
             ok = (t0 <= t1) & ~flat_out
             pa = _project(cam, a + t0[:, None] * (b - a))
             pb = _project(cam, a + t1[:, None] * (b - a))
-            d = classify._segment_distance(cx, cy, pa, pb)
+            d = classify.segment_distance(cx, cy, pa, pb)
             edge_d[idx, i] = np.where(ok & np.isfinite(d), d, np.inf)
             vin = (a[:, 2] >= near) & (a[:, 2] <= far)
             pv = _project(cam, a)
             vert_d[idx, i] = np.where(vin, np.hypot(pv[:, 0] - cx, pv[:, 1] - cy), np.inf)
         poly, count = classify.clip_and_project(cam, tris)
-        poly_d[idx] = classify._polygon_distance(poly, count, cx, cy)
+        poly_d[idx] = classify.polygon_distance(poly, count, cx, cy)
         # Inside: the center is on one side of every edge of the (convex) visible polygon.
         m = idx.size
         rows_i = np.arange(m)
@@ -186,10 +183,7 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
             neg &= ~valid_j | (cr <= 0.0)
         inside[idx] = (count >= 3) & (pos | neg)
         # Planar depth of the plane along d = f + sx r + sy u (d.f = 1, so t is Z).
-        w, h = cam.width, cam.height
-        sx = (2.0 * cx / w - 1.0) * cam.tan_half_vfov * (w / h)
-        sy = (1.0 - 2.0 * cy / h) * cam.tan_half_vfov
-        d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
+        d = cam.direction(*cam.screen_at(cx, cy))
         nrm = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
         nd = np.einsum("ij,ij->i", nrm, d)
         t = np.einsum("ij,ij->i", nrm, tris[:, 0] - cam.eye[None, :]) / nd

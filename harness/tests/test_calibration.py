@@ -19,13 +19,13 @@ import pytest
 
 import fixtures
 from rendiff_harness import calibration as cal
-from rendiff_harness import exrbuf, resolved
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.contract.resolved import ResolvedScene
 
 REPO = Path(__file__).resolve().parents[2]
 PROBES = REPO / "scenes" / "calibration"
 PROBE_NAMES = ("camera_near", "camera_far")
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 
 def probe_scene(directory: Path, name: str = "camera_near") -> ResolvedScene:

@@ -9,9 +9,10 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import exrbuf, registry
+from rendiff_harness import registry
 from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.backends import povray
+from rendiff_harness.contract import exrbuf
 
 
 def test_info_lists_radiance_features(capsys: pytest.CaptureFixture[str]) -> None:

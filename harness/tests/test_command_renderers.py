@@ -24,15 +24,16 @@ import pytest
 import backend_cases as cases
 import fixtures
 from fixtures import cli, write_scene
-from rendiff_harness import calibration, command_renderers, compare, exrbuf, registry, resolved, tolerance
+from rendiff_harness import calibration, command_renderers, compare, registry, tolerance
 from rendiff_harness.command_renderers import ENV_VAR, RenderersError
+from rendiff_harness.contract import exrbuf, resolved, vocab
 from rendiff_harness.errors import BackendError, BackendSkipped
 
 HARNESS = Path(__file__).resolve().parents[1]
 RENDIFF = fixtures.rendiff_binary()
 NOT_BUILT = "rendiff binary not built (cargo build --release -p rendiff; scripts/test.sh does)"
 PY = json.dumps(sys.executable)
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # The quads of test_compare.py: two quads share the edge x = 5/32, whose projection is
 # exactly the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).

@@ -12,10 +12,11 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import compare, diffimages, exrbuf, resolved, tolerance
+from rendiff_harness import compare, diffimages, tolerance
 from rendiff_harness.__main__ import main as harness_main
+from rendiff_harness.contract import exrbuf, resolved, vocab
 
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
 # px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
@@ -675,7 +676,7 @@ def test_scenes_compared_in_processes_give_the_same_results(tmp_path: Path) -> N
 
 
 def test_the_verdict_table_puts_failures_first_and_escapes_reasons() -> None:
-    from rendiff_harness import results
+    from rendiff_harness.contract import results
 
     def row(scene: str, status: str, reason: str = "") -> dict[str, Any]:
         return {"scene": scene, "backend": "b", "buffer": "id", "status": status, "reason": reason}

@@ -23,9 +23,10 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import command_renderers, compare, expectations, exrbuf, references, resolved
+from rendiff_harness import command_renderers, compare, expectations, references
 from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.userfile import UserFileError
+from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.contract.userfile import UserFileError
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent
@@ -71,7 +72,8 @@ def _refs(tmp_path: Path) -> tuple[Path, Path]:
 
 LOAD = """
 import sys
-from rendiff_harness import references, resolved
+from rendiff_harness import references
+from rendiff_harness.contract import resolved
 print(references.regenerate_command(sys.argv[1], sys.argv[2]))
 try:
     references.load(sys.argv[2], resolved.load(sys.argv[1]))

@@ -11,10 +11,11 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import exrbuf, metamorphic, resolved
+from rendiff_harness import metamorphic
 from rendiff_harness.__main__ import main as harness_main
+from rendiff_harness.contract import exrbuf, resolved, vocab
 
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # vfov 90, 32x32, eye (0, 0, 5) looking at -z: at world z = 0, px = (x/5 + 1) * 16, so the
 # vertical line x = X projects to px = 16.5, through the centers of column 16.

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import exrbuf, resolved
 from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.contract.resolved import ResolvedScene
 from rendiff_harness.errors import BackendError, BackendUnavailable
-from rendiff_harness.resolved import ResolvedScene
 
 REASON = mb.unavailable_reason()
 needs_mitsuba = pytest.mark.skipif(REASON is not None, reason=f"mitsuba backend unavailable: {REASON}")

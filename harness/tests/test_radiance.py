@@ -12,9 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from rendiff_harness import lighting, radiance, resolved, tolerance
+from rendiff_harness import radiance, tolerance
 from rendiff_harness.backends import povray
 from rendiff_harness.backends import pyrender_backend as pb
+from rendiff_harness.contract import lighting, resolved
 
 H, W = 32, 32
 N_SPP = 64

@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import exrbuf, lighting, radiance, resolved, tolerance
+from rendiff_harness import radiance, tolerance
 from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.backends import povray
 from rendiff_harness.backends import pyrender_backend as pb
+from rendiff_harness.contract import exrbuf, lighting, resolved
 from rendiff_harness.errors import BackendError
 
 POINT = [{"kind": "point", "position": [0.3, 0.2, 1.5], "intensity": [10.0, 5.0, 2.0]}]

@@ -21,8 +21,9 @@ import pytest
 import backend_cases as cases
 from fixtures import write_scene
 from rendiff_harness import __main__ as cli
-from rendiff_harness import atomic, metamorphic, references
+from rendiff_harness import metamorphic, references
 from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness.contract import atomic
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent

@@ -13,7 +13,8 @@ import pytest
 
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import backends, exrbuf, registry, resolved
+from rendiff_harness import backends, registry
+from rendiff_harness.contract import exrbuf, resolved, vocab
 
 HARNESS = Path(__file__).resolve().parents[1]
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
@@ -216,7 +217,7 @@ def test_render_success_json(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert msg["backend"] == "povray" and msg["version"].startswith("POV-Ray 3.7")
     assert msg["time_s"] > 0 and "passes" in msg["info"]
     buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
-    assert (buf["id.prim"] != exrbuf.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
+    assert (buf["id.prim"] != vocab.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
 
 
 def test_compare_is_wired(capsys: pytest.CaptureFixture[str]) -> None:

@@ -23,9 +23,10 @@ import numpy as np
 import pytest
 
 from fixtures import cli, write_scene
-from rendiff_harness import command_renderers, exrbuf
+from rendiff_harness import command_renderers
 from rendiff_harness.children import OUTPUT_KEEP_BYTES, Capture, run_in_group
 from rendiff_harness.command_renderers import ENV_VAR, MAX_NAME_CHARS, VERSION_MAX_BYTES, RenderersError
+from rendiff_harness.contract import exrbuf, vocab
 
 HARNESS = Path(__file__).resolve().parents[1]
 MiB = 1 << 20
@@ -58,7 +59,7 @@ def scene_and_answer(tmp_path: Path) -> tuple[Path, Path]:
     """A one-triangle scene and an EXR of the right size and channels (its content is not judged here)."""
     sdir = write_scene(tmp_path / "scene", [[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], [0], width=W, height=H)
     z = np.full((H, W), np.inf, dtype=np.float32)
-    ids = np.full((H, W), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+    ids = np.full((H, W), vocab.BACKGROUND_ID, dtype=np.uint32)
     answer = tmp_path / "answer.exr"
     exrbuf.write_buffers(answer, Z=z, prim=ids, obj=ids)
     return sdir, answer

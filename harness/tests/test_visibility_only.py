@@ -18,7 +18,8 @@ import pytest
 
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import backends, exrbuf, registry, resolved, vocab
+from rendiff_harness import backends, registry
+from rendiff_harness.contract import exrbuf, resolved, vocab
 
 REPO = Path(__file__).resolve().parents[2]
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
@@ -38,7 +39,7 @@ BUFFERS = frozenset({{"Z", "id", "RGB"}})
 def version(): return "fake 1"
 def unavailable_reason(): return None
 def render(scene, out_exr, workdir, timeout_s{kw}):
-    from rendiff_harness import exrbuf
+    from rendiff_harness.contract import exrbuf
     import numpy as np
     h, w = scene.camera.height, scene.camera.width
     prim = np.zeros((h, w), dtype=np.uint32)
@@ -125,9 +126,9 @@ def _check_visibility(scene_dir: Path, out: Path) -> None:
     buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
     assert "RGB" not in buf and "R" not in buf
     prim = buf["id.prim"]
-    assert set(np.unique(prim).tolist()) == {0, 1, exrbuf.BACKGROUND_ID}
-    assert np.isfinite(buf["Z"][prim != exrbuf.BACKGROUND_ID]).all()
-    assert np.isinf(buf["Z"][prim == exrbuf.BACKGROUND_ID]).all()
+    assert set(np.unique(prim).tolist()) == {0, 1, vocab.BACKGROUND_ID}
+    assert np.isfinite(buf["Z"][prim != vocab.BACKGROUND_ID]).all()
+    assert np.isinf(buf["Z"][prim == vocab.BACKGROUND_ID]).all()
 
 
 @needs_povray

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
-    from ..resolved import ResolvedScene
+    from ..contract.resolved import ResolvedScene
 
 
 class BackendModule(Protocol):

@@ -94,8 +94,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..contract.camera import Camera
+from ..contract.resolved import ResolvedScene
+from ..contract.vocab import BACKGROUND_ID
 from ..errors import BackendError, BackendSkipped, BackendUnavailable
-from ..resolved import Camera, ResolvedScene
 from ..tolerance import (
     F32_U,
     MAX_REL,
@@ -134,7 +136,6 @@ VARIANCE_PASSES = 64
 TWO_SIDED_EMITTER_OFFSET_REL = 1e-5
 DEFAULT_SEED = 0
 
-BACKGROUND_ID = 0xFFFFFFFF
 MAX_TRIANGLES = 1 << 24  # prim_index travels through a float32 film channel
 DEFAULT_VARIANT = "scalar_rgb"
 LLVM_VARIANT = "llvm_ad_rgb"
@@ -457,7 +458,7 @@ def _tri_mesh(mi: ModuleType, name: str, tris: np.ndarray, bsdf: Any, emitter: A
 
 def radiance_shapes(mi: ModuleType, scene: ResolvedScene, emitters: bool) -> dict[str, Any]:
     """Per-material meshes (keys sorted = material order), plus flipped emitter copies when two-sided."""
-    from .. import lighting
+    from ..contract import lighting
 
     two_sided = "two_sided" in scene.requires
     albedo, emission = scene.material_arrays()
@@ -487,7 +488,7 @@ def radiance_shapes(mi: ModuleType, scene: ResolvedScene, emitters: bool) -> dic
 
 def light_dicts(scene: ResolvedScene) -> list[dict[str, Any]]:
     """Mitsuba emitter dicts of the scene's point and directional lights, in scene order."""
-    from .. import lighting
+    from ..contract import lighting
 
     points, dirs = lighting.lights_of(scene)
     out: list[dict[str, Any]] = []
@@ -640,7 +641,7 @@ def render(
     `visibility_only` (a scene whose shading features Mitsuba cannot model, e.g.
     `shadowless`) skips radiance: depth, IDs and normals are still compared.
     """
-    from .. import exrbuf
+    from ..contract import exrbuf
 
     if max_depth is not None and "global_illumination" not in scene.requires:
         raise BackendError("mitsuba: max_depth applies to path-traced (global_illumination) scenes only")

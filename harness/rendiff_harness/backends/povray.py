@@ -91,10 +91,12 @@ from typing import Any
 
 import numpy as np
 
-from .. import exrbuf
 from ..children import die_with_parent
+from ..contract import exrbuf
+from ..contract.camera import Camera
+from ..contract.resolved import ResolvedScene
+from ..contract.vocab import BACKGROUND_ID
 from ..errors import BackendError, BackendUnavailable
-from ..resolved import Camera, ResolvedScene
 from ..tolerance import (
     F32_U,
     DepthContext,
@@ -295,7 +297,7 @@ _PRELUDE = (
 def ids_sdl(scene: ResolvedScene, mesh: MeshSdl) -> str:
     """One flat texture per face: colour (id+1) split into 16-bit R (low) and G (high)."""
     n = mesh.faces.shape[0]
-    if n >= 0xFFFFFFFF:
+    if n >= BACKGROUND_ID:
         raise BackendError(f"{NAME}: {n} triangles do not fit the 32-bit id encoding")
     code = np.arange(1, n + 1, dtype=np.int64)
     lows, highs = (code & 0xFFFF).tolist(), (code >> 16).tolist()
@@ -560,7 +562,7 @@ def decode_ids(png: np.ndarray, n_tris: int) -> np.ndarray:
     code = png[..., 0].astype(np.uint64) + (png[..., 1].astype(np.uint64) << 16)
     if png[..., 2].any() or int(code.max(initial=0)) > n_tris:
         raise BackendError(f"{NAME}: ID pass decoded a colour that is no triangle (conversion bug)")
-    prim = np.where(code == 0, np.uint64(exrbuf.BACKGROUND_ID), code - 1)
+    prim = np.where(code == 0, np.uint64(BACKGROUND_ID), code - 1)
     return prim.astype(np.uint32)
 
 
@@ -605,7 +607,7 @@ def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, fin
 
 def fade_distance(scene: ResolvedScene, position: np.ndarray, points: np.ndarray) -> float:
     """FADE_REL x the smallest distance from `position` to the visible hit points (> 0)."""
-    from .. import lighting
+    from ..contract import lighting
 
     if points.size:
         dmin = float(np.sqrt(((points - position[None, :]) ** 2).sum(axis=1)).min())
@@ -618,7 +620,7 @@ def fade_distance(scene: ResolvedScene, position: np.ndarray, points: np.ndarray
 
 def lights_sdl(scene: ResolvedScene, scale: float, hit_points: np.ndarray) -> tuple[str, list[dict[str, float]]]:
     """light_source blocks for the lit pass (see the module docstring), and their fade distances."""
-    from .. import lighting
+    from ..contract import lighting
 
     shadowless = " shadowless" if "shadowless" in scene.requires else ""
     points, dirs = lighting.lights_of(scene)
@@ -715,7 +717,7 @@ def render(
         info["visibility_only"] = True
     n = scene.triangle_count
     if n == 0:
-        prim = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+        prim = np.full((h, w), BACKGROUND_ID, dtype=np.uint32)
         z = np.full((h, w), np.inf, dtype=np.float32)
         rgb = np.zeros((h, w, 3), dtype=np.float32) if shaded else None
         exrbuf.write_buffers(out_exr, Z=z, prim=prim, obj=prim, RGB=rgb, attrs={"backend": NAME})
@@ -755,13 +757,13 @@ def render(
     info["passes"] = passes
 
     prim = decode_ids(pngs["ids"], n)
-    hit = prim != exrbuf.BACKGROUND_ID
+    hit = prim != BACKGROUND_ID
     depth = decode_depth(pngs["depth"], r)
     # Both passes trace the same mesh2, so their hit masks must agree; a depth-pass hit
     # reads nonzero unless its depth is below one fixed-point step.
     info["mask_disagree_px"] = int(np.count_nonzero(~hit & pngs["depth"][..., :2].any(axis=-1)))
     z = np.where(hit, depth, np.inf).astype(np.float32)
-    obj = np.full((h, w), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+    obj = np.full((h, w), BACKGROUND_ID, dtype=np.uint32)
     obj[hit] = scene.object_ids[prim[hit]]
     attrs: dict[str, str | float | int] = {
         "backend": NAME,
@@ -818,11 +820,11 @@ def _radiance(
     With antialiasing a pixel averages its area, so partly covered background pixels keep
     their value and the clipping check covers every pixel, not only center-sample hits.
     """
-    from .. import lighting
+    from ..contract import lighting
 
     cam = scene.camera
     h, w = cam.height, cam.width
-    hit = prim != exrbuf.BACKGROUND_ID
+    hit = prim != BACKGROUND_ID
     points = lighting.hit_points(scene, z)[hit]
     checked = np.ones_like(hit) if settings.antialiased else hit
     rgb = np.zeros((h, w, 3))

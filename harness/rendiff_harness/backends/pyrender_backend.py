@@ -70,8 +70,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ..contract.camera import Camera
+from ..contract.resolved import ResolvedScene
+from ..contract.vocab import BACKGROUND_ID
 from ..errors import BackendError, BackendUnavailable
-from ..resolved import Camera, ResolvedScene
 from ..tolerance import (
     F32_U,
     MAX_REL,
@@ -103,7 +105,6 @@ EXPOSURE_MARGIN = 1.02
 MAX_RESCALES = 3
 MAX_LIGHTS_PER_KIND = 4  # pyrender.constants.MAX_N_LIGHTS
 
-BACKGROUND_ID = 0xFFFFFFFF
 DEPTH_BITS = 24
 ID_BITS = 24
 MAX_TRIANGLES = (1 << ID_BITS) - 1  # id + 1 must fit in 24 bits; 0 is the background
@@ -549,7 +550,7 @@ def _light_pose(direction: np.ndarray) -> np.ndarray:
 def _lit_scene(
     pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, scale: float
 ) -> Any:
-    from .. import lighting
+    from ..contract import lighting
 
     cam = scene.camera
     pscene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.0, 0.0, 0.0])
@@ -610,7 +611,7 @@ def render_radiance(
     scene: ResolvedScene, prim: np.ndarray, z: np.ndarray, near: float, far: float
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """(RGB (H, W, 3) float64 decoded, info) for a shaded scene; `prim`/`z` from this backend's ID pass."""
-    from .. import lighting
+    from ..contract import lighting
 
     pyrender, GL = _import_gl()
     cam = scene.camera
@@ -653,7 +654,7 @@ def render(
     pass (no RGB), so a scene needing a shading feature pyrender lacks (`shadows`,
     `one_sided`, ...) is still rendered for depth and IDs (registry.plan).
     """
-    from .. import exrbuf
+    from ..contract import exrbuf
 
     buffers, info = render_arrays(scene)
     t0 = time.perf_counter()

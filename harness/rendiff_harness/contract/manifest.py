@@ -142,11 +142,7 @@ class Reference:
 
     def ray_cos(self, rows: np.ndarray, cols: np.ndarray, prims: np.ndarray) -> np.ndarray:
         """|cos| between the pixel rays and the triangles' normals, (K,) float64 in [0, 1]."""
-        cam = self.scene.camera
-        w, h = cam.width, cam.height
-        sx = (2.0 * (cols + 0.5) / w - 1.0) * cam.tan_half_vfov * (w / h)
-        sy = (1.0 - 2.0 * (rows + 0.5) / h) * cam.tan_half_vfov
-        d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
+        d = self.scene.camera.center_directions(rows, cols)
         n = self.unit_normals()[prims.astype(np.int64)]
         cos: np.ndarray = np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
         return cos

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .camera import Camera
 from .userfile import UserFileError, open_regular, read_regular
 
 FORMAT = "rendiff-resolved/1"
@@ -22,42 +23,6 @@ FORMAT = "rendiff-resolved/1"
 
 class SceneError(Exception):
     """A resolved scene that cannot be read; the message names the file."""
-
-
-@dataclass(frozen=True)
-class Camera:
-    """Pinhole camera exactly as docs/DESIGN.md defines it (pixel centers, row 0 on top)."""
-
-    eye: np.ndarray
-    look_at: np.ndarray
-    up: np.ndarray
-    forward: np.ndarray
-    right: np.ndarray
-    up_ortho: np.ndarray
-    vfov_deg: float
-    tan_half_vfov: float
-    width: int
-    height: int
-    near: float
-    far: float  # math.inf when unbounded
-
-    def screen_coords(self) -> tuple[np.ndarray, np.ndarray]:
-        """(sx, sy) of every pixel center, each shaped (H, W), float64."""
-        w, h = self.width, self.height
-        xs = (2.0 * (np.arange(w, dtype=np.float64) + 0.5) / w - 1.0) * self.tan_half_vfov * (w / h)
-        ys = (1.0 - 2.0 * (np.arange(h, dtype=np.float64) + 0.5) / h) * self.tan_half_vfov
-        sx, sy = np.meshgrid(xs, ys)
-        return sx, sy
-
-    def pixel_directions(self) -> np.ndarray:
-        """Unnormalized ray directions d(x, y), shaped (H, W, 3); t along d is planar depth."""
-        sx, sy = self.screen_coords()
-        directions: np.ndarray = (
-            self.forward[None, None, :]
-            + sx[..., None] * self.right[None, None, :]
-            + sy[..., None] * self.up_ortho[None, None, :]
-        )
-        return directions
 
 
 @dataclass(frozen=True)

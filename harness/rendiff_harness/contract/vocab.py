@@ -11,6 +11,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from enum import StrEnum
 
+BACKGROUND_ID = 0xFFFFFFFF
+"""The id.prim / id.object of a pixel that shows no triangle (Rust's ``rendiff_core::frame::BACKGROUND_ID``,
+u32::MAX); its depth is +inf. The harness's one copy: everything else names this constant."""
+
 
 class Feature(StrEnum):
     """What a scene requires of a renderer (``requires = [...]``)."""

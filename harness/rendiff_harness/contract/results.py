@@ -18,9 +18,9 @@ import unicodedata
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
-from . import atomic, expectations, vocab
+from . import atomic, vocab
 from .vocab import FAILING_STATUSES, Buffer, Status
 
 RESULTS_FORMAT = vocab.RESULTS_FORMAT
@@ -161,25 +161,6 @@ class Entry:
                     setattr(self, k, None)
         return self
 
-    def apply_verdict(self, exps: expectations.Expectations, details: list[str]) -> None:
-        """Status, bound and reason from the counts and the matching expectation (expectations.py).
-
-        `details` (examples of mismatches) join the reason of a failing or surprising verdict.
-        """
-        exp = exps.lookup(self.scene, self.backend, self.buffer)
-        counts = {k: int(getattr(self, k) or 0) for k in expectations.COUNT_KEYS}
-        declared = exps.declared(self.backend, vocab.MismatchClass.CRACK)
-        verdict = expectations.evaluate(counts, exp, cracks_allowed=declared is not None)
-        self.status = verdict.status
-        if exp is not None:
-            self.bound = exp.bound_json()
-        parts = [verdict.reason] if verdict.reason else []
-        if verdict.status in (Status.FAIL, Status.EXPECTED_FAIL, Status.UNEXPECTED_PASS):
-            parts += details
-        if declared is not None and int(self.crack_mismatches or 0) > 0:
-            parts.append(f"cracks allowed: {declared.reason} (declaration {declared.index})")
-        self.reason = "; ".join(parts)
-
 
 def base_entry(scene: str, backend: str, buffer: str, render: Mapping[str, Any]) -> dict[str, Any]:
     """`Entry.for_render(...).to_json()`: a results.json entry with every common field present."""
@@ -200,11 +181,24 @@ def blank_if_not_compared(entry: dict[str, Any]) -> dict[str, Any]:
 # --------------------------------------------------------------------------- the document
 
 
+class UnusedExpectation(Protocol):
+    """An expectation that matched no compared result, as results.json lists it (expectations.py)."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def scene(self) -> str: ...
+    @property
+    def backend(self) -> str: ...
+    @property
+    def buffer(self) -> str: ...
+
+
 def document(
     reference: str,
     calibration: Mapping[str, Any],
     expectations_path: str | Path | None,
-    unused: Sequence[expectations.Expectation],
+    unused: Sequence[UnusedExpectation],
     results: list[dict[str, Any]],
 ) -> dict[str, Any]:
     """RUN/results.json's top level (docs/run-format.md)."""

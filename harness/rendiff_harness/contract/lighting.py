@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .resolved import ResolvedScene
+from .vocab import BACKGROUND_ID
 
 INV_PI = 1.0 / math.pi
 SHADOW_OFFSET_SIZE = 1e-7
@@ -98,7 +99,7 @@ def _shading_frame(
     scene: ResolvedScene, prim: np.ndarray, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(hit mask, x (K,3), n_geo (K,3), view cos sign (K,), material index (K,)) for hit pixels."""
-    hit = (prim != 0xFFFFFFFF) & np.isfinite(z)
+    hit = (prim != BACKGROUND_ID) & np.isfinite(z)
     hit &= prim.astype(np.uint64) < np.uint64(scene.triangle_count)
     idx = np.flatnonzero(hit)
     p = prim.ravel()[idx].astype(np.int64)
@@ -258,7 +259,7 @@ def shadow_ambiguity(
         return None
     pr = prim[rows, cols]
     zz = z[rows, cols].astype(np.float64)
-    ok = (pr != 0xFFFFFFFF) & (pr.astype(np.uint64) < np.uint64(n_tri)) & np.isfinite(zz)
+    ok = (pr != BACKGROUND_ID) & (pr.astype(np.uint64) < np.uint64(n_tri)) & np.isfinite(zz)
     if not ok.any():
         return out
     d = scene.camera.pixel_directions()[rows, cols]

@@ -36,11 +36,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import atomic
+from .vocab import BACKGROUND_ID
 
 if TYPE_CHECKING:
     import OpenImageIO
-
-BACKGROUND_ID = 0xFFFFFFFF
 
 
 def depth_hits(z: np.ndarray) -> np.ndarray:
