@@ -6,7 +6,7 @@ one JSON line on stdout for results, messages on stderr, and exit codes
 3 = skipped (the backend cannot model a feature the scene requires; with
 `render --visibility-only`, only a missing visibility feature skips, a missing
 shading feature drops RGB alone: registry.plan; or a renderer declared by a command
-exited 3, command_renderers.py). Renderers declared in the file RENDIFF_RENDERERS names
+exited 3, renderers/command.py). Renderers declared in the file RENDIFF_RENDERERS names
 are listed and run like the built-in backends; a malformed file fails every command.
 Expected failures print one line naming the backend and the problem, never a
 traceback; a traceback means a bug in rendiff.
@@ -30,10 +30,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import command_renderers, registry
 from .contract import exrbuf, resolved, vocab
 from .contract.text import printable
-from .errors import BackendError, BackendSkipped
+from .renderers import command, registry
+from .renderers.errors import BackendError, BackendSkipped
 
 EXIT_OK, EXIT_ERROR = 0, 2
 EXIT_SKIPPED = vocab.EXIT_SKIPPED
@@ -55,16 +55,14 @@ def _describe(backend: registry.Backend) -> dict[str, Any]:
             reason = str(exc)
     return {
         "name": backend.name,
-        "module": backend.module_name,
+        "module": backend.key,
         "version": version,
         "features": sorted(backend.features),
         "buffers": sorted(backend.buffers),
         "peak_memory": list(backend.peak_memory),
         "available": reason is None,
         "reason": reason,
-        "declared_in": str(backend.module.spec.source)
-        if isinstance(backend.module, command_renderers.CommandBackend)
-        else None,
+        "declared_in": str(backend.declared_in) if backend.declared_in is not None else None,
     }
 
 
@@ -201,7 +199,7 @@ def cmd_metamorphic(args: argparse.Namespace) -> int:
     """Delegates to metamorphic.py (relations per backend), which owns its options."""
     from .metamorphic import main as metamorphic_main
 
-    return int(metamorphic_main(list(args.rest)) or 0)
+    return int(metamorphic_main(list(args.rest), registry.spec) or 0)
 
 
 def cmd_expectations(args: argparse.Namespace) -> int:
@@ -217,7 +215,7 @@ def cmd_expectations(args: argparse.Namespace) -> int:
 
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
-    from .worker import serve
+    from .renderers.worker import serve
 
     return serve(main)
 
@@ -364,8 +362,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         # Renderers declared in RENDIFF_RENDERERS: a malformed file fails every command clearly.
-        command_renderers.from_env()
-    except command_renderers.RenderersError as exc:
+        command.from_env(registry.RESERVED_NAMES)
+    except command.RenderersError as exc:
         return _fail(str(exc))
     if argv[:1] == ["compare"]:
         # compare.py owns its own options; argparse.REMAINDER would reject "--run".

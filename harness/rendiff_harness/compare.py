@@ -23,7 +23,7 @@ applies, which function compares it and which fields its entry has:
   convention N = normalize((b-a) x (c-a)) of the prim the backend's id.prim names.
 * `RGB` (scenes that require `lambert`, `emission` or `global_illumination` only):
   radiance.py. Deterministic renders (no var.* channels): |a - b| <= abs + rel |b| with
-  the test backend's precision (tolerance.rgb_model); failing pixels at ID edge
+  the test backend's precision (its spec's rgb_tolerance, judge/precision.py); failing pixels at ID edge
   mismatches or on ambiguous shadow rays are edge, the rest interior. Monte Carlo renders
   (var.* channels): Welch t per pixel-channel and a 3x3 cluster test, Sidak-corrected at
   family-wise alpha 0.01; every failure is interior. Extra fields on RGB entries:
@@ -57,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from . import diffimages, expectations, radiance, tolerance, verify
+from . import diffimages, expectations, radiance, verify
 from .contract import exrbuf, lighting, vocab
 from .contract.manifest import MANIFEST_FORMAT as MANIFEST_FORMAT
 from .contract.manifest import EntryError as EntryError
@@ -77,9 +77,12 @@ from .contract.results import format_table as format_table
 from .contract.results import write_results as write_results
 from .contract.text import printable
 from .contract.vocab import BACKGROUND_ID, Buffer, Status
+from .judge import precision, tolerance
+from .renderers import registry
+from .renderers.spec import BackendSpec, SpecLookup
 
 SHADING_FEATURES = frozenset(f.value for f in vocab.SHADED_FEATURES)
-CACHED_REFERENCE_BACKEND = "mitsuba_ref"
+CACHED_REFERENCE_BACKEND = vocab.CACHED_REFERENCE_BACKEND
 EXAMPLES = 3  # example pixels quoted in a failure's reason
 EXIT_OK, EXIT_ERROR = 0, 2
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
@@ -455,17 +458,20 @@ def compare_normals(
     ref: Reference,
     buffers: Mapping[str, np.ndarray],
     exps: expectations.Expectations,
+    spec: BackendSpec | None,
 ) -> Entry:
     """A backend's N (or the reference's own) against the winding convention: see `judge_normals`."""
     e = Entry.for_render(scene_name, backend, Buffer.N, render, N_FIELDS)
     e.pixels = ref.pixels
-    judged = judge_normals(ref, backend, buffers, e)
+    judged = judge_normals(ref, backend, buffers, e, spec)
     if judged is not None:
         expectations.apply_verdict(e, exps, judged.details)
     return e
 
 
-def judge_normals(ref: Reference, backend: str, buffers: Mapping[str, np.ndarray], e: Entry) -> Judged | None:
+def judge_normals(
+    ref: Reference, backend: str, buffers: Mapping[str, np.ndarray], e: Entry, spec: BackendSpec | None
+) -> Judged | None:
     """N against the documented winding convention: N = normalize((b-a) x (c-a)).
 
     Judged at every pixel where the backend's own id.prim names a triangle (its
@@ -495,7 +501,7 @@ def judge_normals(ref: Reference, backend: str, buffers: Mapping[str, np.ndarray
         # atan2 of |cross| and dot is accurate at small angles, where acos is not.
         angle = np.arctan2(np.linalg.norm(np.cross(got, expect), axis=1) / got_len, cosang)
     angle = np.where(np.isfinite(angle) & (length > 0), angle, np.pi)
-    tol, text = tolerance.normal_tolerance(backend, np.where(np.isfinite(cond), cond, np.inf))
+    tol, text = precision.normal_tolerance(spec, np.where(np.isfinite(cond), cond, np.inf))
     unit_ok = np.abs(got_len - 1.0) <= 4.0 * tolerance.F32_U + tol
     bad = ~(angle <= tol) | ~unit_ok
     e.compared_pixels = int(valid.size)
@@ -542,6 +548,7 @@ def compare_rgb(
     backend: str,
     render: Mapping[str, Any],
     id_edge_mask: np.ndarray | None,
+    spec: BackendSpec | None,
 ) -> radiance.RgbResult:
     """Deterministic or statistical comparison of R,G,B (radiance.py decides by the var channels)."""
     a, b = test["RGB"], ref.buffers["RGB"]
@@ -562,7 +569,7 @@ def compare_rgb(
             side = backend if var_a is None else "the reference"
             res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
         return res
-    model = tolerance.rgb_model(backend, b, attrs, render_info(render))
+    model = precision.rgb_tolerance(spec, backend, b, attrs, render_info(render))
     shadow_edges: radiance.ShadowEdges | None = None
     scene = ref.scene
     if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
@@ -622,6 +629,7 @@ class BackendRender:
     attrs: Mapping[str, Any]
     exr: Path
     model: tolerance.Model
+    spec: BackendSpec | None  # its precision (None: it has none, and is compared exactly)
     declared: set[str] | None  # the buffers the manifest says it wrote (None: it does not say)
     diff_dir: Path | None  # where heat maps go (None: none are written)
     id_result: IdResult | None = None  # the id comparison, once done (Z and RGB use its classes)
@@ -652,7 +660,11 @@ def judge_ids(r: BackendRender, e: Entry) -> Judged:
     e.interior_mismatches = res.interior
     e.tolerance = res.tolerance
     e.explanations = res.explanations
-    notes = [] if r.model.known else [f"no precision model for {r.backend} in tolerance.py: compared exactly"]
+    notes = (
+        []
+        if r.model.known
+        else [f"no precision model for {r.backend} in the registry (renderers/registry.py): compared exactly"]
+    )
     ref_ids, test_ids = r.ref.buffers["id.prim"], r.test["id.prim"]
 
     def heat_map(path: Path) -> None:
@@ -695,13 +707,15 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
 
 
 def judge_rendered_normals(r: BackendRender, e: Entry) -> Judged | None:
-    return judge_normals(r.ref, r.backend, r.test, e)
+    return judge_normals(r.ref, r.backend, r.test, e, r.spec)
 
 
 def judge_rgb(r: BackendRender, e: Entry) -> Judged | None:
     ids = r.id_result
     try:
-        res = compare_rgb(r.ref, r.test, r.attrs, r.backend, r.render, ids.edge_mask if ids is not None else None)
+        res = compare_rgb(
+            r.ref, r.test, r.attrs, r.backend, r.render, ids.edge_mask if ids is not None else None, r.spec
+        )
     except (tolerance.ToleranceError, radiance.RadianceError) as exc:
         e.reason = str(exc)
         return None
@@ -818,10 +832,11 @@ def compare_backend(
     ref: Reference,
     exps: expectations.Expectations,
     images: bool,
+    spec: BackendSpec | None,
 ) -> list[Entry]:
     """The entries of one ok render of one backend: one per applicable row of BUFFER_TABLE."""
     backend = render["backend"]
-    model = tolerance.model_for(backend)
+    model = precision.depth_model(spec, backend)
     got = read_test_buffers(run, render, ref)
     diff_dir = None
     if images and _SAFE_NAME.match(scene_name) and _SAFE_NAME.match(backend):
@@ -836,6 +851,7 @@ def compare_backend(
         got.attrs,
         got.exr,
         model,
+        spec,
         declared_buffers(render),
         diff_dir,
     )
@@ -865,9 +881,11 @@ def compare_scene(
     scene_entry: Mapping[str, Any],
     reference: str,
     exps: expectations.Expectations,
+    specs: SpecLookup,
     images: bool = True,
     references_dir: Path | None = None,
 ) -> list[Entry]:
+    """Every entry of one scene; each backend judged with its spec (`specs`)."""
     name = scene_entry["scene"]
     renders = [r for r in scene_entry.get("renders", []) if r.get("backend") != reference]
     bufs = buffers_for(scene_entry)
@@ -893,14 +911,14 @@ def compare_scene(
     results: list[Entry] = []
     if "N" in ref.buffers:  # the reference's own normals, against the winding convention
         own = [r for r in scene_entry.get("renders", []) if r.get("backend") == reference][0]
-        results.append(compare_normals(name, reference, own, ref, ref.buffers, exps))
+        results.append(compare_normals(name, reference, own, ref, ref.buffers, exps, specs(reference)))
     for r in renders:
         status = r.get("status")
         if status in (vocab.RenderStatus.SKIPPED, vocab.RenderStatus.ERROR):
             results += status_entries(name, r, status, render_reason(r), bufs)
             continue
         try:
-            results += compare_backend(run, name, r, ref, exps, images)
+            results += compare_backend(run, name, r, ref, exps, images, specs(r["backend"]))
         except EntryError as exc:
             results += status_entries(name, r, Status.ERROR, str(exc), bufs)
         except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
@@ -909,12 +927,18 @@ def compare_scene(
                 name, r, Status.ERROR, f"internal error in compare (a rendiff bug): {type(exc).__name__}: {exc}", bufs
             )
     if references_dir is not None and vocab.Feature.GLOBAL_ILLUMINATION in ref.scene.requires:
-        results.append(compare_cached_reference(run, name, ref, references_dir, exps, images))
+        results.append(compare_cached_reference(run, name, ref, references_dir, exps, images, specs))
     return [e.blank_if_not_compared() for e in results]
 
 
 def compare_cached_reference(
-    run: Path, name: str, ref: Reference, references_dir: Path, exps: expectations.Expectations, images: bool
+    run: Path,
+    name: str,
+    ref: Reference,
+    references_dir: Path,
+    exps: expectations.Expectations,
+    images: bool,
+    specs: SpecLookup,
 ) -> Entry:
     """The reference render's RGB against the cached Mitsuba reference DIR/<name>.exr (references.py)."""
     from . import references
@@ -934,7 +958,9 @@ def compare_cached_reference(
         return e
     test = {"RGB": cached.rgb, "var": cached.var}
     try:
-        res = compare_rgb(ref, test, cached.attrs, CACHED_REFERENCE_BACKEND, render, None)
+        res = compare_rgb(
+            ref, test, cached.attrs, CACHED_REFERENCE_BACKEND, render, None, specs(CACHED_REFERENCE_BACKEND)
+        )
     except (tolerance.ToleranceError, radiance.RadianceError) as exc:
         e.reason = str(exc)
         return e
@@ -957,10 +983,10 @@ def calibrate(
     renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
     say so, by name, instead of fails blamed on the renderer.
     """
-    from . import calibration
+    from .judge import calibration
 
     try:
-        rep = calibration.calibrate_run(run, manifest)
+        rep = calibration.calibrate_run(run, manifest, registry.spec)
     except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
         traceback.print_exc(file=sys.stderr)
         e = Entry.for_render(
@@ -1000,7 +1026,7 @@ def _scene_task(
         _PROCESS_EXPECTATIONS[key] = expectations.load(expectations_path)
     exps = _PROCESS_EXPECTATIONS[key]
     exps.used.clear()
-    entries = compare_scene(run, scene_entry, reference, exps, images, references_dir)
+    entries = compare_scene(run, scene_entry, reference, exps, registry.spec, images, references_dir)
     return entries, set(exps.used)
 
 
@@ -1026,7 +1052,7 @@ def compare_scenes(
     if jobs <= 1 or len(scenes) <= 1:
         out: list[Entry] = []
         for sc in scenes:
-            out += compare_scene(run, sc, reference, exps, images, references_dir)
+            out += compare_scene(run, sc, reference, exps, registry.spec, images, references_dir)
         return out
     order = sorted(range(len(scenes)), key=lambda i: -_scene_cost(scenes[i]))
     done: dict[int, list[Entry]] = {}

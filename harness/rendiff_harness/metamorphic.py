@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, compare, expectations, tolerance
+from . import classify, compare, expectations
 from .contract import atomic, exrbuf, resolved
 from .contract import results as results_table
 from .contract.manifest import (
@@ -69,6 +69,8 @@ from .contract.results import finite, write_results
 from .contract.text import printable
 from .contract.userfile import open_regular, read_regular
 from .contract.vocab import BACKGROUND_ID
+from .judge import precision, tolerance
+from .renderers.spec import SpecLookup
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
@@ -233,7 +235,7 @@ def load_expectations(path: str | Path | None) -> expectations.Expectations:
 # --------------------------------------------------------------------------- bounds
 
 
-def stated_bound(relation: str, backend: str, depth_scale: float = 1.0) -> str:
+def stated_bound(relation: str, backend: str, m: tolerance.Model, depth_scale: float = 1.0) -> str:
     """The bound this relation holds `backend` to, in words (results.json and docs/metamorphic.md)."""
     s = "" if depth_scale == 1.0 else f"/{depth_scale:g}"
     if backend in CORE:
@@ -241,7 +243,6 @@ def stated_bound(relation: str, backend: str, depth_scale: float = 1.0) -> str:
         ids = "identical IDs" if b.edge_px == 0 else f"IDs may differ only within {b.edge_px:g} px of an edge"
         z = "bit-identical Z" if b.depth_rel == 0 else f"|Z_v{s} - Z_b| <= {b.depth_rel:g} Z_b"
         return f"{ids}; {z} ({b.why})"
-    m = tolerance.model_for(backend)
     return (
         f"IDs may differ only within {m.edge_px:.3g} px of an edge of a triangle involved ({backend}'s edge "
         f"tolerance); |Z_v{s} - Z_b| <= tol_{backend}(base) + tol_{backend}(variant){s} where both show the same "
@@ -261,6 +262,7 @@ def core_model(relation: str, backend: str) -> tolerance.Model:
 
 
 def summed_model(
+    m: tolerance.Model,
     backend: str,
     base_render: Mapping[str, Any],
     base_attrs: Mapping[str, Any],
@@ -268,8 +270,7 @@ def summed_model(
     var_attrs: Mapping[str, Any],
     scale: float,
 ) -> tolerance.Model:
-    """The backend's own model for each side, each with its render's parameters, summed."""
-    m = tolerance.model_for(backend)
+    """The backend's own model `m` for each side, each with its render's parameters, summed."""
     base_info, var_info = render_info(base_render), render_info(var_render)
 
     def depth(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
@@ -355,7 +356,7 @@ def relation_edge_distance(
 # --------------------------------------------------------------------------- one case, one backend
 
 
-def _entry(case: Case, backend: str, buffer: str) -> dict[str, Any]:
+def _entry(case: Case, backend: str, buffer: str, m: tolerance.Model) -> dict[str, Any]:
     return {
         "relation": case.relation,
         "description": case.description,
@@ -372,7 +373,7 @@ def _entry(case: Case, backend: str, buffer: str) -> dict[str, Any]:
         "compared_pixels": None,
         "max_abs_error": None,
         "max_rel_error": None,
-        "stated_bound": stated_bound(case.relation, backend, case.depth_scale),
+        "stated_bound": stated_bound(case.relation, backend, m, case.depth_scale),
         "tolerance": "",
     }
 
@@ -397,10 +398,16 @@ def _render(scene_entry: Mapping[str, Any], backend: str) -> Mapping[str, Any] |
 
 
 def compare_case(
-    run: Path, scenes: Mapping[str, Mapping[str, Any]], case: Case, backend: str, exps: expectations.Expectations
+    run: Path,
+    scenes: Mapping[str, Mapping[str, Any]],
+    case: Case,
+    backend: str,
+    exps: expectations.Expectations,
+    specs: SpecLookup,
 ) -> list[dict[str, Any]]:
-    """The `id` and `Z` entries of one (relation, backend)."""
-    e_id, e_z = _entry(case, backend, "id"), _entry(case, backend, "Z")
+    """The `id` and `Z` entries of one (relation, backend); its precision is its spec's (`specs`)."""
+    m = precision.depth_model(specs(backend), backend)
+    e_id, e_z = _entry(case, backend, "id", m), _entry(case, backend, "Z", m)
 
     def all_as(status: str, reason: str) -> list[dict[str, Any]]:
         for e in (e_id, e_z):
@@ -441,7 +448,7 @@ def compare_case(
     if backend in CORE:
         model = core_model(case.relation, backend)
     else:
-        model = summed_model(backend, renders["base"], base_attrs, renders["variant"], var_attrs, case.depth_scale)
+        model = summed_model(m, backend, renders["base"], base_attrs, renders["variant"], var_attrs, case.depth_scale)
     pixels = ref.shape[0] * ref.shape[1]
     distance = relation_edge_distance(ref.scene, var_scene, case, test_raw["id.prim"])
     ids = compare.compare_ids(ref, test, model, edge_distance=distance)
@@ -483,8 +490,11 @@ def _check_maps(case: Case, base: resolved.ResolvedScene, variant: resolved.Reso
 # --------------------------------------------------------------------------- run
 
 
-def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None, out: Path) -> dict[str, Any]:
+def run_metamorphic(
+    run: Path, spec: Path, expectations_path: str | Path | None, out: Path, specs: SpecLookup
+) -> dict[str, Any]:
     """Every case on every backend that rendered the base scene; writes OUT and returns the document.
+    `specs`: the backends' specs by name (the registry's lookup).
 
     RunError for an incomplete run, before anything is read."""
     ensure_complete(run)
@@ -497,7 +507,7 @@ def run_metamorphic(run: Path, spec: Path, expectations_path: str | Path | None,
         base = scenes.get(case.base)
         backends = [r["backend"] for r in base.get("renders", [])] if base is not None else ["?"]
         for backend in backends:
-            results += compare_case(run, scenes, case, backend, exps)
+            results += compare_case(run, scenes, case, backend, exps, specs)
     doc = {
         "format": RESULTS_FORMAT,
         "spec": str(spec),
@@ -536,7 +546,7 @@ def format_table(results: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join([*results_table.fixed_width(header, rows, range(4, 8)), results_table.count_line(results)])
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None, specs: SpecLookup) -> int:
     p = argparse.ArgumentParser(
         prog="python -m rendiff_harness metamorphic",
         description="Compare each backend's variant renders with its base renders (metamorphic relations).",
@@ -565,7 +575,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"rendiff_harness metamorphic: {problem}", file=sys.stderr)
         return EXIT_ERROR
     try:
-        doc = run_metamorphic(run, Path(args.spec), args.expectations, out)
+        doc = run_metamorphic(run, Path(args.spec), args.expectations, out, specs)
     except (SpecError, RunError, ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness metamorphic: {exc}", file=sys.stderr)
         return EXIT_ERROR

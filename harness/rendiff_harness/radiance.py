@@ -6,7 +6,7 @@ by the files, never by the scene name:
 Deterministic (no var.* channels on either side: local shading at pixel centers)
 -------------------------------------------------------------------------------
 Per pixel and channel, |a - b| <= abs_tol + rel_tol * |b| (b = reference, a = test), with
-abs_tol / rel_tol from the *test* backend's output precision (tolerance.rgb_model: 16-bit
+abs_tol / rel_tol from the *test* backend's output precision (its spec's rgb_tolerance: 16-bit
 PNG -> half a code of its exposure scale; 8-bit gamma -> half a code through the inverse
 transfer at b; float32 -> a few ulps). A pixel fails when any channel fails, or when a
 value is not finite. Failing pixels are classified:

@@ -1,7 +1,7 @@
 """Cached Mitsuba references for Monte Carlo scenes: generate once, verify on every load.
 
 A path-traced scene has no closed form, so the core's path tracer is compared with a
-high-spp Mitsuba `path` render (backends/mitsuba_backend.py, `global_illumination`:
+high-spp Mitsuba `path` render (renderers/mitsuba/backend.py, `global_illumination`:
 R,G,B + var.R/G/B, K independent passes). Rendering that at every check would cost
 minutes, so it is cached in tests/references/<scene>.exr with its provenance beside it
 in <scene>.json:
@@ -69,7 +69,7 @@ HASHED_FILES = ("scene.json", "triangles.f32", "object_ids.u32")
 # crates/rendiff-core/src/scene/mod.rs, 16x the references' 4096), mirrored here.
 MAX_SPP = 1 << 16
 # Largest seed: 2^31 - 1. It is stored as the EXR's rendiff:seed int attribute, a signed 32-bit
-# int (exrbuf), and the pass seeds (seed * passes + k, mitsuba_backend) are taken mod 2^32.
+# int (exrbuf), and the pass seeds (seed * passes + k, renderers/mitsuba/backend.py) are taken mod 2^32.
 MAX_SEED = 2**31 - 1
 EXR_SUFFIX = ".exr"
 
@@ -218,7 +218,7 @@ def generate(
     scene_dir: str | Path, out: str | Path, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED
 ) -> dict[str, Any]:
     """Render the reference with Mitsuba `path` and write <out> (EXR) and its <.json>; returns the provenance."""
-    from .backends import mitsuba_backend as mb
+    from .renderers.mitsuba import backend as mb
 
     scene_dir, out = Path(scene_dir), Path(out)
     problem = check_request(scene_dir, out, spp, seed)
@@ -392,7 +392,7 @@ def main(argv: list[str]) -> int:
     if problem is not None:
         print(f"rendiff_harness reference: {problem}", file=sys.stderr)
         return 2
-    from .errors import BackendError
+    from .renderers.errors import BackendError
 
     try:
         prov = generate(args.scene, args.out, args.spp, args.seed)

@@ -12,9 +12,9 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import compare, expectations, references
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.backends import pyrender_backend as pb
 from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.pyrender import backend as pb
 
 LIGHTS = [{"kind": "point", "position": [0.3, 0.2, 1.5], "intensity": [10.0, 5.0, 2.0]}]
 LIT_REQ = ("depth", "ids", "lambert", "point_light", "shadowless", "two_sided")

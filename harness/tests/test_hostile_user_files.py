@@ -23,10 +23,12 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import command_renderers, compare, expectations, references
-from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness import compare, expectations, references
 from rendiff_harness.contract import exrbuf, resolved
 from rendiff_harness.contract.userfile import UserFileError
+from rendiff_harness.renderers import command as command_renderers
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.mitsuba import backend as mb
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent
@@ -341,7 +343,7 @@ def test_bad_renderers_files_are_one_line(tmp_path: Path, text: str, needle: str
     path = tmp_path / "renderers.toml"
     path.write_text(text)
     with pytest.raises(command_renderers.RenderersError) as info:
-        command_renderers.load(path)
+        command_renderers.load(path, registry.RESERVED_NAMES)
     msg = str(info.value)
     assert msg.startswith(f"{path}: ") and needle in msg and "\n" not in msg, msg
 
@@ -355,4 +357,4 @@ def test_renderer_number_too_large_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(
         command_renderers.RenderersError, match="timeout_s must be a finite number >= 0, got an integer of 20000 bits"
     ):
-        command_renderers.load(path)
+        command_renderers.load(path, registry.RESERVED_NAMES)

@@ -14,6 +14,7 @@ from fixtures import write_scene
 from rendiff_harness import metamorphic
 from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID
 
@@ -92,7 +93,7 @@ class Run:
         )
         spec = self.root / "spec.json"
         spec.write_text(json.dumps({"format": metamorphic.SPEC_FORMAT, "cases": self.cases}))
-        doc = metamorphic.run_metamorphic(self.root, spec, expectations, self.root / "metamorphic.json")
+        doc = metamorphic.run_metamorphic(self.root, spec, expectations, self.root / "metamorphic.json", registry.spec)
         return {(r["relation"], r["backend"], r["buffer"]): r for r in doc["results"]}
 
 

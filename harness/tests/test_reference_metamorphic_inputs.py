@@ -22,8 +22,9 @@ import backend_cases as cases
 from fixtures import write_scene
 from rendiff_harness import __main__ as cli
 from rendiff_harness import metamorphic, references
-from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.contract import atomic
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.mitsuba import backend as mb
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent
@@ -244,7 +245,7 @@ def test_metamorphic_refuses_an_incomplete_run(tmp_path: Path, capsys: pytest.Ca
         assert "marker is not a regular file" in line
     assert not (run / "metamorphic.json").exists()
     with pytest.raises(metamorphic.RunError):
-        metamorphic.run_metamorphic(run, spec, None, tmp_path / "m.json")
+        metamorphic.run_metamorphic(run, spec, None, tmp_path / "m.json", registry.spec)
     assert not (tmp_path / "m.json").exists()
 
 

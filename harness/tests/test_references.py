@@ -14,8 +14,8 @@ import backend_cases as cases
 import fixtures
 from rendiff_harness import __main__ as cli
 from rendiff_harness import radiance, references
-from rendiff_harness.backends import mitsuba_backend as mb
 from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.renderers.mitsuba import backend as mb
 
 REPO = Path(__file__).resolve().parents[2]
 needs_mitsuba = pytest.mark.skipif(mb.unavailable_reason() is not None, reason=f"{mb.unavailable_reason()}")

@@ -15,6 +15,10 @@ BACKGROUND_ID = 0xFFFFFFFF
 """The id.prim / id.object of a pixel that shows no triangle (Rust's ``rendiff_core::frame::BACKGROUND_ID``,
 u32::MAX); its depth is +inf. The harness's one copy: everything else names this constant."""
 
+CACHED_REFERENCE_BACKEND = "mitsuba_ref"
+"""The backend name results.json gives a comparison with a cached Mitsuba reference (references.py):
+no renderer may take it."""
+
 
 class Feature(StrEnum):
     """What a scene requires of a renderer (``requires = [...]``)."""

@@ -16,31 +16,24 @@ eps * t / |cos|: at grazing angles the same vertex rounding costs more depth. Ev
 relative model below therefore scales with 1/|cos|, capped at MAX_REL (1e-3) so that a
 triangle seen exactly edge-on does not make the tolerance infinite.
 
-Where the models live: the core's (raster, trace, and Embree, which the core drives) are
-here (`MODELS`, `RGB_MODELS`). Each external backend's sits beside its exporter, in its
-module in backends/ (`PRECISION_MODULES`: povray.py, pyrender_backend.py, mitsuba_backend.py)
-as `PRECISION` (a `Model`) and `rgb_tolerance`, with the derivations in their docstrings.
-`model_for` and `rgb_model` look them up by backend name; this module holds the shared
-machinery (the contexts, `Model`, `param`, and the grazing and position-shift helpers).
-
-Renderers declared by a command (command_renderers.py) bring their own numbers: their model
-is built here from the `[renderer.precision]` they declare (`declared_model`, `DeclaredPrecision`).
-
-Backends without a model are compared exactly (`edge_px = 0`, depth tolerance 0),
-and the tolerance text says so: a new backend fails loudly until its model is written.
+Where the models live: every backend's sits in its `BackendSpec` (renderers/spec.py), the
+core's in renderers/core.py, each external backend's beside its exporter in its folder
+(renderers/povray/backend.py, ...) with the derivations in their docstrings, a declared
+renderer's built from the numbers it declares (renderers/command.py). This module holds the
+shared machinery (the contexts, `Model`, `param`, the grazing and position-shift helpers and the
+models several backends share); judge/precision.py finds a backend's through its spec, and a
+backend without one is compared exactly (`strict_model`, `edge_px = 0`, depth tolerance 0), and
+the tolerance text says so: a new backend fails loudly until its model is written.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import Any
 
 import numpy as np
-
-from . import command_renderers
 
 MAX_REL = 1e-3
 """Cap on every relative depth tolerance (reached only within ~1/1000 of edge-on)."""
@@ -212,165 +205,43 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     )
 
 
-MODELS: dict[str, Model] = {
-    "trace": Model(
-        "trace",
-        0.0,
-        "the rendiff tracer shares the coverage predicate with raster: must be identical",
-        exact_depth,
-    ),
-    "raster": Model(
-        "raster",
-        0.0,
-        "the rendiff rasterizer shares the coverage predicate with trace: must be identical",
-        exact_depth,
-    ),
-    "embree": Model(
-        "embree",
-        1e-4,
-        "float32 ray-triangle tests: measured ID differences within 1e-4 of shared edges",
-        embree_depth,
-        edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
-        position=f32_origin,
-    ),
-    "embree_robust": Model(
-        "embree_robust",
-        1e-4,
-        "float32 watertight ray-triangle tests (ROBUST): measured ID differences within 1e-4 of shared edges",
-        embree_depth,
-        edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
-        position=f32_origin,
-    ),
-}
-"""The core's models (raster, trace, and Embree, which the core drives). The external
-backends' models are their modules' `PRECISION` (`PRECISION_MODULES`)."""
-
-
-# --------------------------------------------------------------------------- external backends
-
-PRECISION_MODULES = {"povray": "povray", "pyrender": "pyrender_backend", "mitsuba": "mitsuba_backend"}
-"""Backend name -> its module in backends/, which holds its precision model (`BackendPrecision`)."""
-
-
-class BackendPrecision(Protocol):
-    """What a backend module in `PRECISION_MODULES` provides (backends/povray.py is one)."""
-
-    PRECISION: Model
-    """Its edge, position and depth model."""
-
-    def rgb_tolerance(self, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
-        """Its deterministic RGB tolerance at the reference values `ref` (H, W, 3)."""
-        ...
-
-
-if TYPE_CHECKING:
-    # mypy checks every such module against the protocol; nothing is imported here at run time.
-    from .backends import mitsuba_backend, povray, pyrender_backend
-
-    _POVRAY: BackendPrecision = povray
-    _PYRENDER: BackendPrecision = pyrender_backend
-    _MITSUBA: BackendPrecision = mitsuba_backend
-
-
-def backend_precision(backend: str) -> BackendPrecision | None:
-    """The module holding `backend`'s precision model, imported on first use (a declared renderer's
-    `DeclaredPrecision`); None: not an external one."""
-    module = PRECISION_MODULES.get(backend)
-    if module is None:
-        declared = command_renderers.find(backend)
-        return None if declared is None else DeclaredPrecision(declared)
-    return cast(BackendPrecision, importlib.import_module(f".backends.{module}", __package__))
-
-
-# --------------------------------------------------------------------------- declared renderers
-
-
-def declared_model(r: command_renderers.Renderer) -> Model:
-    """The `Model` of a renderer declared by a command, from the numbers it declares, nothing else.
-
-    Edge: `edge_px` (0 when it writes no ids). Depth: |dZ| <= depth_absolute + depth_relative Z,
-    the relative term over |cos| (capped at MAX_REL Z) when `depth_grazing` is set.
-    """
-    p = r.precision
-    rel, absolute, grazing = p.depth_relative or 0.0, p.depth_absolute, p.depth_grazing
-
-    def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
-        if grazing:
-            tol = absolute + relative_grazing(ctx, rel)
-            term = f"Z*min({rel:g}/|cos|, {MAX_REL:g})"
-        else:
-            tol = absolute + rel * np.abs(ctx.z_ref)
-            term = f"{rel:g}*Z"
-        return np.asarray(tol, dtype=np.float64), f"|dZ| <= {absolute:g} + {term}, declared by the user in {r.declared}"
-
-    if p.edge_px is None:
-        edge, reason = 0.0, f"{r.declared} writes no ids"
-    else:
-        edge, reason = p.edge_px, f"edge_px declared by the user in {r.declared}"
-    return Model(r.name, edge, reason, depth)
-
-
-class DeclaredPrecision:
-    """A declared renderer's precision in the shape of a backend module's (`BackendPrecision`)."""
-
-    def __init__(self, renderer: command_renderers.Renderer) -> None:
-        self.renderer = renderer
-        self.PRECISION = declared_model(renderer)
-
-    def rgb_tolerance(self, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
-        p = self.renderer.precision
-        rel = p.rgb_relative or 0.0
-        return RgbTolerance(
-            p.rgb_absolute,
-            rel,
-            f"|dL| <= {p.rgb_absolute:g} + {rel:g}*|L|, declared by the user in {self.renderer.declared}",
-        )
-
-
-def model_for(backend: str) -> Model:
-    """The precision model of `backend`; unknown backends get a strict, exact one."""
-    model = MODELS.get(backend)
-    if model is None:
-        external = backend_precision(backend)
-        if external is not None:
-            model = external.PRECISION
-    if model is not None:
-        return model
+def strict_model(backend: str) -> Model:
+    """The model of a backend that has none: exact (`known` False), and the texts say so."""
 
     def strict(ctx: DepthContext) -> tuple[np.ndarray, str]:
         tol, _ = exact_depth(ctx)
-        return tol, f"exact: no precision model for backend {backend!r} in tolerance.py"
+        return tol, f"exact: no precision model for backend {backend!r} in the registry (renderers/registry.py)"
 
-    return Model(backend, 0.0, f"no precision model for backend {backend!r} in tolerance.py", strict, known=False)
+    return Model(
+        backend,
+        0.0,
+        f"no precision model for backend {backend!r} in the registry (renderers/registry.py)",
+        strict,
+        known=False,
+    )
 
 
 # --------------------------------------------------------------------------- normals (N)
 
-CORE_NORMAL_BACKENDS = frozenset({"raster", "trace", "embree", "embree_robust"})
-"""Backends whose N is the core's `geometric_normal` of the prim they hit (frame.rs)."""
+NormalModel = Callable[[np.ndarray], tuple[np.ndarray, str]]
+"""cond = |e1| |e2| / |e1 x e2| >= 1 per pixel (K,) -> allowed angle (radians) between a backend's N
+and normalize((b - a) x (c - a)) (K,), and the sentence that derives it."""
 
 
-def normal_tolerance(backend: str, cond: np.ndarray) -> tuple[np.ndarray, str]:
-    """Allowed angle (radians) between a backend's N and normalize((b - a) x (c - a)).
+def core_normals(cond: np.ndarray) -> tuple[np.ndarray, str]:
+    """The core's N (and Embree's, whose buffers the core fills from its hit keys): `geometric_normal`
+    of the prim hit (frame.rs), the cross product taken in f64 from the f32 vertices and the unit
+    vector rounded to f32: each component moves by <= u = 2^-24 of its size, the vector by
+    <= sqrt(3) u, and with the f64 terms 4u bounds the angle."""
+    tol = np.full(cond.shape, 4.0 * F32_U)
+    return tol, "angle <= 4 * 2^-24 (f64 cross product of the f32 vertices, unit vector rounded to f32)"
 
-    `cond` = |e1| |e2| / |e1 x e2| >= 1 per pixel (1 / sin of the triangle's angle at a:
-    large for slivers). The core (and Embree, whose buffers the core fills from its hit
-    keys) takes the cross product in f64 from the f32 vertices and rounds the unit vector
-    to f32: each component moves by <= u = 2^-24 of its size, the vector by <= sqrt(3) u,
-    and with the f64 terms 4u bounds the angle. A renderer that works in f32 (Mitsuba's
-    `geo_normal`) rounds the edges (<= u |e| each: 2u |e1||e2| on the cross product), each
-    cross component (two products and a difference: 3u |e1||e2|, sqrt(3) of that on the
-    vector) and normalizes and stores (about 3u + sqrt(3) u): angle <= 8u cond + 6u.
-    A renderer declared by a command gets the angle it declares (`normal_relative`).
-    """
-    if backend in CORE_NORMAL_BACKENDS:
-        tol = np.full(cond.shape, 4.0 * F32_U)
-        return tol, "angle <= 4 * 2^-24 (f64 cross product of the f32 vertices, unit vector rounded to f32)"
-    declared = command_renderers.find(backend)
-    if declared is not None and declared.precision.normal_relative is not None:
-        angle = declared.precision.normal_relative
-        text = f"angle <= {angle:g} rad (normal_relative), declared by the user in {declared.declared}"
-        return np.full(cond.shape, angle), text
+
+def f32_normals(cond: np.ndarray) -> tuple[np.ndarray, str]:
+    """A renderer that works in f32 (Mitsuba's `geo_normal`) rounds the edges (<= u |e| each:
+    2u |e1||e2| on the cross product), each cross component (two products and a difference:
+    3u |e1||e2|, sqrt(3) of that on the vector) and normalizes and stores (about 3u + sqrt(3) u):
+    angle <= 8u cond + 6u (cond is large for slivers)."""
     tol = 8.0 * F32_U * cond + 6.0 * F32_U
     return tol, (
         "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "
@@ -415,28 +286,15 @@ def f32_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) 
 RgbModel = Callable[[np.ndarray, Mapping[str, Any], Mapping[str, Any]], RgbTolerance]
 """(reference values (H, W, 3), EXR attributes, render info) -> the deterministic RGB tolerance."""
 
-RGB_MODELS: dict[str, RgbModel] = {
-    "raster": exact_rgb,
-    "trace": exact_rgb,
-}
-"""The core's RGB models; the external backends' are their modules' `rgb_tolerance`."""
 
-
-def rgb_model(backend: str, ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
-    """Deterministic RGB tolerance of `backend` at the reference values `ref` (H, W, 3).
-
-    Unknown backends: f32 output at 4 ulps when the EXR says rgb_encoding = float32, else
-    exact, and the text says there is no model (so a new backend fails loudly).
-    """
-    model = RGB_MODELS.get(backend)
-    if model is None:
-        external = backend_precision(backend)
-        if external is not None:
-            model = external.rgb_tolerance
-    if model is not None:
-        return model(ref, attrs, info)
+def rgb_fallback(backend: str, attrs: Mapping[str, Any]) -> RgbTolerance:
+    """The RGB tolerance of a backend without an RGB model: f32 output at 4 ulps when the EXR
+    says rgb_encoding = float32, else exact, and the text says there is no model (so a new
+    backend fails loudly)."""
     enc = attrs.get("rgb_encoding") if isinstance(attrs, Mapping) else None
     if enc == "float32":
-        t = f32_rgb(ref, attrs, info)
+        t = f32_rgb(np.zeros(0), attrs, {})
         return RgbTolerance(t.abs_tol, t.rel, t.text + f" (no RGB model for {backend!r}; its EXR says float32)")
-    return RgbTolerance(0.0, 0.0, f"exact: no RGB precision model for backend {backend!r} in tolerance.py")
+    return RgbTolerance(
+        0.0, 0.0, f"exact: no RGB precision model for backend {backend!r} in the registry (renderers/registry.py)"
+    )

@@ -91,13 +91,17 @@ from typing import Any
 
 import numpy as np
 
-from ..children import die_with_parent
-from ..contract import exrbuf
-from ..contract.camera import Camera
-from ..contract.resolved import ResolvedScene
-from ..contract.vocab import BACKGROUND_ID
-from ..errors import BackendError, BackendUnavailable
-from ..tolerance import (
+from ...contract import exrbuf, vocab
+from ...contract.camera import Camera
+from ...contract.resolved import ResolvedScene
+from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
+from ...judge.camera_budget import (
+    F64_U,
+    ErrorBudget,
+    ProbePixels,
+    probe_param,
+)
+from ...judge.tolerance import (
     F32_U,
     DepthContext,
     EdgeContext,
@@ -108,28 +112,30 @@ from ..tolerance import (
     param,
     shift_depth,
 )
+from ..children import die_with_parent
+from ..errors import BackendError, BackendUnavailable
+from ..spec import BackendSpec
 
 NAME = "povray"
-FEATURES: frozenset[str] = frozenset(
+FEATURES = frozenset(
     {
-        "depth",
-        "ids",
-        "emission",
-        "lambert",
-        "point_light",
-        "directional_light",
-        "shadows",
-        "shadowless",
-        "two_sided",
+        Feature.DEPTH,
+        Feature.IDS,
+        Feature.EMISSION,
+        Feature.LAMBERT,
+        Feature.POINT_LIGHT,
+        Feature.DIRECTIONAL_LIGHT,
+        Feature.SHADOWS,
+        Feature.SHADOWLESS,
+        Feature.TWO_SIDED,
     }
 )
-BUFFERS: frozenset[str] = frozenset({"Z", "id", "RGB"})
+BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.RGB})
 PEAK_MEMORY = (70 * 2**20, 1800)
 """(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
 memory budget (check/pool.rs): GNU time's max RSS, 64 MiB on three_triangles and 1.05 GiB on
 `million` (1,310,722 triangles) for one POV-Ray process, counted twice since the ID and depth
 passes run side by side (1,720 B per triangle), rounded up."""
-SHADING_FEATURES = frozenset({"lambert", "emission"})
 EXPOSURE_MARGIN = 1.0 + 2.0**-6
 """Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""
 FADE_REL = 1e-4
@@ -583,7 +589,7 @@ _RADIANCE_PRELUDE = (
 
 
 def is_shaded(scene: ResolvedScene) -> bool:
-    return bool(scene.requires & SHADING_FEATURES)
+    return vocab.needs_shading(scene.requires)
 
 
 def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, finish: str) -> str:
@@ -607,7 +613,7 @@ def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, fin
 
 def fade_distance(scene: ResolvedScene, position: np.ndarray, points: np.ndarray) -> float:
     """FADE_REL x the smallest distance from `position` to the visible hit points (> 0)."""
-    from ..contract import lighting
+    from ...contract import lighting
 
     if points.size:
         dmin = float(np.sqrt(((points - position[None, :]) ** 2).sum(axis=1)).min())
@@ -620,7 +626,7 @@ def fade_distance(scene: ResolvedScene, position: np.ndarray, points: np.ndarray
 
 def lights_sdl(scene: ResolvedScene, scale: float, hit_points: np.ndarray) -> tuple[str, list[dict[str, float]]]:
     """light_source blocks for the lit pass (see the module docstring), and their fade distances."""
-    from ..contract import lighting
+    from ...contract import lighting
 
     shadowless = " shadowless" if "shadowless" in scene.requires else ""
     points, dirs = lighting.lights_of(scene)
@@ -820,7 +826,7 @@ def _radiance(
     With antialiasing a pixel averages its area, so partly covered background pixels keep
     their value and the clipping check covers every pixel, not only center-sample hits.
     """
-    from ..contract import lighting
+    from ...contract import lighting
 
     cam = scene.camera
     h, w = cam.height, cam.width
@@ -873,9 +879,9 @@ def _radiance(
 
 # --------------------------------------------------------------------------- precision model
 #
-# How far this backend may legitimately differ from the reference; tolerance.py
-# (`model_for`, `rgb_model`) looks these up by the backend's NAME and holds the shared
-# machinery (contexts, `Model`, grazing and position-shift helpers).
+# How far this backend may legitimately differ from the reference: `SPEC` (at the end) carries
+# these to the judge; judge/tolerance.py holds the shared machinery (contexts, `Model`, grazing
+# and position-shift helpers).
 
 POVRAY_RGB_REL = 1e-5
 
@@ -958,7 +964,7 @@ PRECISION = Model(
 
 
 def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
-    """POV-Ray: two 16-bit linear passes, L = S k/65535 + S_e k_e/65535 (backends/povray.py).
+    """POV-Ray: two 16-bit linear passes, L = S k/65535 + S_e k_e/65535 (renderers/povray/backend.py).
 
     Each pass rounds to the nearest code (measured: max 0.502 codes on a point-lit plane,
     the excess being POV-Ray's float32 colour arithmetic), so abs = (S + S_e)/65535/2;
@@ -976,3 +982,39 @@ def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, 
         f"+ {POVRAY_RGB_REL:g}*|L| (float32 colour arithmetic)"
     )
     return RgbTolerance(abs_tol, POVRAY_RGB_REL, text)
+
+
+# --------------------------------------------------------------------------- camera calibration model
+
+
+def camera_model(px: ProbePixels) -> ErrorBudget:
+    """POV-Ray: f64 camera, mesh2 planes with f32 normal and offset, 32-bit fixed-point depth."""
+    step = probe_param(px, "depth_step")
+    if step is None:
+        r = probe_param(px, "depth_range")
+        if r is None:
+            r = float(px.z.max()) * (1.0 + 2.0**-6) if px.z.size else 1.0
+        step = r / 65536.0 / 65535.0
+    vertex = F32_U * (3.0 * px.vertex_norm + px.tri_extent[:, None])
+    return ErrorBudget(
+        px.depth_rel(step / px.z + F32_U) + px.sample(4.0 * F64_U * px.d_norm),
+        "mesh2 keeps each plane's normal and offset in f32 (plane off by <= 2^-24 (3|V| + extent) "
+        f"at each vertex V); f64 camera rays (4 2^-53 |d|); 32-bit fixed-point depth "
+        f"(step {step:.3g}) and Z stored as f32 (2^-24)",
+        vertex=vertex,
+    )
+
+
+SPEC = BackendSpec(
+    NAME,
+    FEATURES,
+    BUFFERS,
+    PRECISION,
+    calibration=camera_model,
+    rgb_tolerance=rgb_tolerance,
+    peak_memory=PEAK_MEMORY,
+    render=render,
+    version=version,
+    unavailable_reason=unavailable_reason,
+)
+"""What the registry, the judge and calibration know of this backend (renderers/spec.py)."""

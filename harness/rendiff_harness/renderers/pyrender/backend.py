@@ -33,7 +33,7 @@ roughness 1): 2.6-6% off Lambert at metallic 0 / roughness 1, and its point-ligh
 shadows are not implemented. Comparing the contract's L against that would test
 nothing but the difference of the two models, so the lit pass replaces pyrender's
 program cache (`renderer._renderer._program_cache`, pyrender 0.1.45 is pinned) with one
-reading `pyrender_shaders/mesh.vert` and `mesh.frag`, which compute exactly
+reading `shaders/mesh.vert` and `mesh.frag`, which compute exactly
 docs/radiance.md's local shading from the uniforms pyrender binds itself:
 
 * albedo rho -> `MetallicRoughnessMaterial.baseColorFactor` (rgb, alpha 1);
@@ -70,11 +70,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..contract.camera import Camera
-from ..contract.resolved import ResolvedScene
-from ..contract.vocab import BACKGROUND_ID
-from ..errors import BackendError, BackendUnavailable
-from ..tolerance import (
+from ...contract import vocab
+from ...contract.camera import Camera
+from ...contract.resolved import ResolvedScene
+from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
+from ...judge.camera_budget import (
+    CalibrationError,
+    ErrorBudget,
+    ProbePixels,
+    probe_param,
+)
+from ...judge.tolerance import (
     F32_U,
     MAX_REL,
     DepthContext,
@@ -87,18 +93,28 @@ from ..tolerance import (
     position_error,
     shift_depth,
 )
+from ..errors import BackendError, BackendUnavailable
+from ..spec import BackendSpec
 
 NAME = "pyrender"
 FEATURES = frozenset(
-    {"depth", "ids", "emission", "lambert", "point_light", "directional_light", "shadowless", "two_sided"}
+    {
+        Feature.DEPTH,
+        Feature.IDS,
+        Feature.EMISSION,
+        Feature.LAMBERT,
+        Feature.POINT_LIGHT,
+        Feature.DIRECTIONAL_LIGHT,
+        Feature.SHADOWLESS,
+        Feature.TWO_SIDED,
+    }
 )
-BUFFERS = frozenset({"Z", "id", "RGB"})
+BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.RGB})
 PEAK_MEMORY = (210 * 2**20, 400)
 """(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
 memory budget (check/pool.rs): GNU time's max RSS, 200 MiB on three_triangles and 651 MiB on
 `million` (1,310,722 triangles: 361 B per triangle), rounded up."""
-SHADING_FEATURES = frozenset({"lambert", "emission"})
-SHADER_DIR = Path(__file__).with_name("pyrender_shaders")
+SHADER_DIR = Path(__file__).with_name("shaders")
 RGB_GAMMA = 2.2
 RGB_CODES = 255
 EXPOSURE_MARGIN = 1.02
@@ -509,7 +525,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
             "far": far,
             "step": "z^2*(far-near)/(far*near)*2^-24",
             "tolerance": "4*step + ulp_f32(z)",
-            "tolerance_function": "rendiff_harness.backends.pyrender_backend.depth_tolerance",
+            "tolerance_function": "rendiff_harness.renderers.pyrender.backend.depth_tolerance",
         },
         "fill_rule": "GL top-left in window coordinates (bottom-left in row-down image coordinates)",
         "edge_tolerance_px": EDGE_TOLERANCE_PX,
@@ -522,7 +538,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
 
 
 def is_shaded(scene: ResolvedScene) -> bool:
-    return bool(scene.requires & SHADING_FEATURES)
+    return vocab.needs_shading(scene.requires)
 
 
 def decode_rgb8(color: np.ndarray, scale: float) -> np.ndarray:
@@ -550,7 +566,7 @@ def _light_pose(direction: np.ndarray) -> np.ndarray:
 def _lit_scene(
     pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, scale: float
 ) -> Any:
-    from ..contract import lighting
+    from ...contract import lighting
 
     cam = scene.camera
     pscene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.0, 0.0, 0.0])
@@ -611,7 +627,7 @@ def render_radiance(
     scene: ResolvedScene, prim: np.ndarray, z: np.ndarray, near: float, far: float
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """(RGB (H, W, 3) float64 decoded, info) for a shaded scene; `prim`/`z` from this backend's ID pass."""
-    from ..contract import lighting
+    from ...contract import lighting
 
     pyrender, GL = _import_gl()
     cam = scene.camera
@@ -654,7 +670,7 @@ def render(
     pass (no RGB), so a scene needing a shading feature pyrender lacks (`shadows`,
     `one_sided`, ...) is still rendered for depth and IDs (registry.plan).
     """
-    from ..contract import exrbuf
+    from ...contract import exrbuf
 
     buffers, info = render_arrays(scene)
     t0 = time.perf_counter()
@@ -680,9 +696,9 @@ def render(
 
 # --------------------------------------------------------------------------- precision model
 #
-# How far this backend may legitimately differ from the reference; tolerance.py
-# (`model_for`, `rgb_model`) looks these up by the backend's NAME and holds the shared
-# machinery (contexts, `Model`, grazing and position-shift helpers).
+# How far this backend may legitimately differ from the reference: `SPEC` (at the end) carries
+# these to the judge; judge/tolerance.py holds the shared machinery (contexts, `Model`, grazing
+# and position-shift helpers).
 
 
 def f32_view_transform(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
@@ -750,7 +766,7 @@ PYRENDER_CODE_SLACK = 0.01
 
 
 def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
-    """pyrender: 8-bit (L/S)^(1/2.2) from rendiff's Lambert shader (backends/pyrender_backend.py).
+    """pyrender: 8-bit (L/S)^(1/2.2) from rendiff's Lambert shader (renderers/pyrender/backend.py).
 
     GL rounds to the nearest code (measured: max 0.49997 codes), so at the reference value
     b, with c = 255 (b/S)^(1/2.2), the decoded value may be off by
@@ -772,3 +788,58 @@ def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, 
         f"+{PYRENDER_CODE_SLACK:g} code for float32 shading) + {PYRENDER_RGB_REL:g}*|L|"
     )
     return RgbTolerance(abs_tol, PYRENDER_RGB_REL, text)
+
+
+# --------------------------------------------------------------------------- camera calibration model
+
+
+PYRENDER_VERTEX_DEPTH_STEPS = 4.0
+"""Window depth of a vertex computed in f32 (projection, divide, viewport: <= 4 x 2^-24 in [0, 1],
+i.e. 4 steps of the 24-bit buffer)."""
+PYRENDER_PIXEL_DEPTH_STEPS = 2.5
+"""Window depth interpolated in f32 at the pixel (2 steps) and rounded to 24 bits (half a step)."""
+
+
+def camera_model(px: ProbePixels) -> ErrorBudget:
+    """pyrender (GL on llvmpipe): f32 vertex transform, 24-bit depth buffer."""
+    znear, zfar = probe_param(px, "znear"), probe_param(px, "zfar")
+    if znear is None or zfar is None or not 0.0 < znear < zfar:
+        raise CalibrationError(
+            f"pyrender render gives no valid GL planes (znear={znear}, zfar={zfar}): its depth precision is unknown"
+        )
+    scale = (zfar - znear) / (zfar * znear) * 2.0**-24
+
+    def step(z: np.ndarray) -> np.ndarray:
+        return np.asarray(z * z * scale)
+
+    window = 8.0 * F32_U * px.vertex_d_norm + 2.0 * F32_U * max(px.width, px.height) * px.pixel
+    vertex = (
+        4.0 * math.sqrt(3.0) * F32_U * (px.vertex_norm + px.eye_norm)
+        + px.vertex_depth * window
+        + PYRENDER_VERTEX_DEPTH_STEPS * step(px.vertex_depth)
+    )
+    return ErrorBudget(
+        px.depth_rel(PYRENDER_PIXEL_DEPTH_STEPS * step(px.z) / px.z + F32_U),
+        "per vertex: f32 view transform (4 sqrt(3) 2^-24 (|V| + |eye|)), projection, divide and viewport in "
+        "f32 (Z (8 2^-24 |d| + 2 2^-24 max(W, H) px)), window depth in f32 "
+        f"({PYRENDER_VERTEX_DEPTH_STEPS:g} steps z^2 (f - n)/(f n) 2^-24 at znear {znear:.4g}, zfar {zfar:.4g}); "
+        f"per pixel: depth interpolated in f32 and rounded to 24 bits ({PYRENDER_PIXEL_DEPTH_STEPS:g} steps), "
+        "Z stored as f32. llvmpipe interpolates depth from the float vertex positions, so its 1/256 px "
+        "vertex snapping moves coverage (IDs), not depth samples",
+        vertex=vertex,
+    )
+
+
+SPEC = BackendSpec(
+    NAME,
+    FEATURES,
+    BUFFERS,
+    PRECISION,
+    calibration=camera_model,
+    rgb_tolerance=rgb_tolerance,
+    peak_memory=PEAK_MEMORY,
+    render=render,
+    version=version,
+    unavailable_reason=unavailable_reason,
+)
+"""What the registry, the judge and calibration know of this backend (renderers/spec.py)."""

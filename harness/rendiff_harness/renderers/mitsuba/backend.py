@@ -94,11 +94,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..contract.camera import Camera
-from ..contract.resolved import ResolvedScene
-from ..contract.vocab import BACKGROUND_ID
-from ..errors import BackendError, BackendSkipped, BackendUnavailable
-from ..tolerance import (
+from ...contract import vocab
+from ...contract.camera import Camera
+from ...contract.resolved import ResolvedScene
+from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
+from ...judge.camera_budget import (
+    RAY_TRIANGLE_ROUNDINGS,
+    ErrorBudget,
+    ProbePixels,
+    f32_origin_error,
+    probe_param,
+)
+from ...judge.tolerance import (
     F32_U,
     MAX_REL,
     DepthContext,
@@ -109,29 +116,30 @@ from ..tolerance import (
     relative_grazing,
     shift_depth,
 )
+from ..errors import BackendError, BackendSkipped, BackendUnavailable
+from ..spec import BackendSpec
 
 NAME = "mitsuba"
 FEATURES = frozenset(
     {
-        "depth",
-        "ids",
-        "emission",
-        "lambert",
-        "point_light",
-        "directional_light",
-        "shadows",
-        "area_light",
-        "global_illumination",
-        "two_sided",
-        "one_sided",
+        Feature.DEPTH,
+        Feature.IDS,
+        Feature.EMISSION,
+        Feature.LAMBERT,
+        Feature.POINT_LIGHT,
+        Feature.DIRECTIONAL_LIGHT,
+        Feature.SHADOWS,
+        Feature.AREA_LIGHT,
+        Feature.GLOBAL_ILLUMINATION,
+        Feature.TWO_SIDED,
+        Feature.ONE_SIDED,
     }
 )
-BUFFERS = frozenset({"Z", "id", "N", "RGB"})
+BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N, Buffer.RGB})
 PEAK_MEMORY = (120 * 2**20, 250)
 """(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
 memory budget (check/pool.rs): GNU time's max RSS, 108 MiB on three_triangles and 382 MiB on
 `million` (1,310,722 triangles: 219 B per triangle), rounded up."""
-SHADING_FEATURES = frozenset({"lambert", "emission", "global_illumination"})
 VARIANCE_PASSES = 64
 TWO_SIDED_EMITTER_OFFSET_REL = 1e-5
 DEFAULT_SEED = 0
@@ -146,9 +154,10 @@ LLVM_PATH_ENV = "DRJIT_LIBLLVM_PATH"
 DEBIAN_LIBLLVM19 = Path("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 FAR_FACTOR = 2.0
 AOVS = "z:depth,pi:prim_index,ng:geo_normal"
-# Measured |Z - float64 reference| / Z <= 6e-7 (f32 ray setup + intersection); 1e-5 leaves room
-# for grazing angles, where the f32 ray-triangle t is known to lose more (notes: Embree 9e-6).
 DEPTH_REL_TOLERANCE = 1e-5
+"""Relative depth precision (the one number; `mitsuba_depth` and the render's info use it): measured
+|Z - float64 reference| / Z <= 6e-7 (f32 ray setup + intersection); 1e-5 leaves room for grazing
+angles, where the f32 ray-triangle t is known to lose more (notes: Embree 9e-6)."""
 
 
 def depth_tolerance(z: npt.ArrayLike, near: float | None = None, far: float | None = None) -> np.ndarray:
@@ -428,7 +437,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
 
 
 def is_shaded(scene: ResolvedScene) -> bool:
-    return bool(scene.requires & SHADING_FEATURES)
+    return vocab.needs_shading(scene.requires)
 
 
 def _rgb(value: np.ndarray) -> dict[str, Any]:
@@ -458,7 +467,7 @@ def _tri_mesh(mi: ModuleType, name: str, tris: np.ndarray, bsdf: Any, emitter: A
 
 def radiance_shapes(mi: ModuleType, scene: ResolvedScene, emitters: bool) -> dict[str, Any]:
     """Per-material meshes (keys sorted = material order), plus flipped emitter copies when two-sided."""
-    from ..contract import lighting
+    from ...contract import lighting
 
     two_sided = "two_sided" in scene.requires
     albedo, emission = scene.material_arrays()
@@ -488,7 +497,7 @@ def radiance_shapes(mi: ModuleType, scene: ResolvedScene, emitters: bool) -> dic
 
 def light_dicts(scene: ResolvedScene) -> list[dict[str, Any]]:
     """Mitsuba emitter dicts of the scene's point and directional lights, in scene order."""
-    from ..contract import lighting
+    from ...contract import lighting
 
     points, dirs = lighting.lights_of(scene)
     out: list[dict[str, Any]] = []
@@ -641,7 +650,7 @@ def render(
     `visibility_only` (a scene whose shading features Mitsuba cannot model, e.g.
     `shadowless`) skips radiance: depth, IDs and normals are still compared.
     """
-    from ..contract import exrbuf
+    from ...contract import exrbuf
 
     if max_depth is not None and "global_illumination" not in scene.requires:
         raise BackendError("mitsuba: max_depth applies to path-traced (global_illumination) scenes only")
@@ -686,9 +695,9 @@ def render(
 
 # --------------------------------------------------------------------------- precision model
 #
-# How far this backend may legitimately differ from the reference; tolerance.py
-# (`model_for`, `rgb_model`) looks these up by the backend's NAME and holds the shared
-# machinery (contexts, `Model`, grazing and position-shift helpers).
+# How far this backend may legitimately differ from the reference: `SPEC` (at the end) carries
+# these to the judge; judge/tolerance.py holds the shared machinery (contexts, `Model`, grazing
+# and position-shift helpers).
 
 
 def f32_sensor(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
@@ -699,9 +708,6 @@ def f32_sensor(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
     return np.full(point.shape, offset + 2.0 * math.sqrt(3.0) * F32_U * eye_norm)
 
 
-MITSUBA_REL = 1e-5
-
-
 def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """Mitsuba 3 (scalar_rgb / llvm): float32 ray tracing.
 
@@ -710,9 +716,9 @@ def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     facing the camera; the f32 ray-triangle t loses more at grazing angles (Embree,
     same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3.
     """
-    tol = relative_grazing(ctx, MITSUBA_REL) + shift_depth(ctx, position_error(ctx, f32_sensor))
+    tol = relative_grazing(ctx, DEPTH_REL_TOLERANCE) + shift_depth(ctx, position_error(ctx, f32_sensor))
     return tol, (
-        f"mitsuba: |dZ| <= Z*min({MITSUBA_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
+        f"mitsuba: |dZ| <= Z*min({DEPTH_REL_TOLERANCE:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
         f"+ min(o / |cos|, depth span), o = |f32(eye) - eye| ({ctx.origin_offset:.3g}) + 2 sqrt(3) 2^-24 |eye| "
         "(f32 sensor transform)"
     )
@@ -747,3 +753,44 @@ def rgb_tolerance(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, 
         "(float32 ray tracing and shading; measured <= 1e-5 relative)"
     )
     return RgbTolerance(abs_tol, MITSUBA_RGB_REL, text)
+
+
+# --------------------------------------------------------------------------- camera calibration model
+
+
+MITSUBA_RAY_ROUNDINGS = 6.0
+"""f32 roundings of a Mitsuba camera ray's direction, relative to |d|: sample-to-camera
+projection (3), normalization (1), to_world product (2)."""
+
+
+def camera_model(px: ProbePixels) -> ErrorBudget:
+    """Mitsuba 3 (scalar_rgb / llvm): an f32 sensor transform, rays from the near plane in f32."""
+    near = probe_param(px, "near_clip") or 0.0
+    origin = f32_origin_error(px.eye, near * px.d)
+    film = F32_U * max(px.width, px.height) * px.pixel
+    return ErrorBudget(
+        px.shift(px.origin_offset + origin)
+        + px.sample((math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS) * F32_U * px.d_norm + film)
+        + px.depth_rel(3.0 * F32_U + RAY_TRIANGLE_ROUNDINGS * F32_U / px.cos),
+        "to_world rounded to f32 (translation |f32(eye) - eye| = "
+        f"{px.origin_offset:.3g}, rotation sqrt(3) 2^-24 |d|); each ray's origin f32(eye) + near d rounded "
+        f"to f32 (per coordinate <= min(half a float32 step, |f32(eye) - eye| + near |d|): up to "
+        f"{float(origin.max()) if origin.size else 0.0:.3g}); film position and ray direction in f32 "
+        f"(2^-24 max(W, H) px + {MITSUBA_RAY_ROUNDINGS:g} 2^-24 |d|); f32 ray-triangle t "
+        f"({RAY_TRIANGLE_ROUNDINGS:g} 2^-24 / |cos|); depth AOV, conversion and Z in f32 (3 2^-24)",
+    )
+
+
+SPEC = BackendSpec(
+    NAME,
+    FEATURES,
+    BUFFERS,
+    PRECISION,
+    calibration=camera_model,
+    rgb_tolerance=rgb_tolerance,
+    peak_memory=PEAK_MEMORY,
+    render=render,
+    version=version,
+    unavailable_reason=unavailable_reason,
+)
+"""What the registry, the judge and calibration know of this backend (renderers/spec.py)."""

@@ -7,7 +7,7 @@ therefore stays in the harness's group, and is also started with Linux's
 nobody can catch (SIGKILL). Without both, an interrupted ``rendiff check`` left
 POV-Ray running and writing into a run folder that no longer existed.
 
-A user's renderer declared by a command (command_renderers.py) is different: it may start
+A user's renderer declared by a command (renderers/command.py) is different: it may start
 processes of its own, which a timeout must end too, so `run_in_group` runs it in a process
 group of its own (stdin from /dev/null) and kills that whole group when it exits, when the
 timeout passes, and when the harness is interrupted while waiting. A group of its own is

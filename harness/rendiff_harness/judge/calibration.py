@@ -44,7 +44,7 @@ fitted by least squares. G = identity is the convention. Writing G = k [[1, -t],
 * `max_shift_px`: the largest displacement of the fitted camera at the image center and
   the four image corners; `bound_px`: what that may reach from the backend's own rounding.
 
-The bound is derived, never fitted: each backend's model (`MODELS`) bounds, per pixel, the
+The bound is derived, never fitted: each backend's model (its spec's `calibration`) bounds, per pixel, the
 error its arithmetic can put into that pixel's equation (f32 depth storage, depth-buffer
 quantization, f32 ray setup and camera transforms), and, per triangle vertex, how far its
 plane may sit from the true one (f32 plane equations, f32 vertex transforms). Through the
@@ -67,26 +67,26 @@ pixel centers offset by (0.03555, 0.01388) px (bound 0.001428 px)", "... y flipp
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import command_renderers
-from .contract import exrbuf, resolved
-from .contract.camera import Camera
-from .contract.manifest import EntryError, render_reason, run_path
-from .contract.results import Entry
-from .contract.vocab import BACKGROUND_ID
-from .tolerance import F32_U, MAX_REL
+from ..contract import exrbuf, resolved
+from ..contract.camera import Camera
+from ..contract.manifest import EntryError, render_reason, run_path
+from ..contract.results import Entry
+from ..contract.vocab import BACKGROUND_ID
+from ..renderers.spec import SpecLookup
+from . import precision
+from .camera_budget import CalibrationError, ProbePixels
 
 ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
 BUFFER = "camera"
 """The results.json `buffer` of a calibration entry."""
-F64_U = 2.0**-53
 MIN_PIXELS = 64
 """Fewer usable pixels than this cannot identify the nine entries of G with any precision."""
 MAX_CONDITION = 1e8
@@ -94,7 +94,6 @@ MAX_CONDITION = 1e8
 parameters (too few plane orientations): the probe, not the backend, is at fault."""
 FOV_AXIS_TOL = 1e-3
 """How close a scale must be to H/W (or W/H) to be named a field of view on the wrong axis."""
-CORE_BACKENDS = frozenset({"raster", "trace"})
 MEASURED_FIELDS = (
     "offset_x_px",
     "offset_y_px",
@@ -114,253 +113,6 @@ MEASURED_FIELDS = (
     "pixels",
     "plane_mismatches",
 )
-
-
-class CalibrationError(Exception):
-    """One (probe, backend) cannot be measured; becomes an `error` entry with this reason."""
-
-
-# --------------------------------------------------------------------------- precision models
-
-
-@dataclass(frozen=True)
-class ProbePixels:
-    """What a precision model may look at: the K pixels used in the fit ((K,) float64) and the
-    probe's triangles ((N, 3) per vertex)."""
-
-    z: np.ndarray  # planar depth the backend wrote
-    n_dot_d: np.ndarray  # |n.d|: the plane's normal against the unnormalized pixel ray
-    n_perp: np.ndarray  # |(n.r, n.u)|: the plane's tilt; the equation's sensitivity to (sx, sy)
-    d: np.ndarray  # (K, 3) the convention's unnormalized pixel ray
-    d_norm: np.ndarray  # |d|
-    cos: np.ndarray  # |n.d| / |d|
-    point_norm: np.ndarray  # |X|: the hit point's distance from the world origin
-    extent: np.ndarray  # longest edge of the triangle seen
-    vertex_norm: np.ndarray  # (N, 3) |V|: each vertex's distance from the world origin
-    vertex_depth: np.ndarray  # (N, 3) planar depth of each vertex
-    vertex_d_norm: np.ndarray  # (N, 3) |d| of the ray through each vertex
-    tri_extent: np.ndarray  # (N,) longest edge of each triangle
-    eye: np.ndarray  # (3,)
-    origin_offset: float  # |f32(eye) - eye|
-    pixel: float  # one pixel on the image plane at distance 1: 2 tan(vfov/2) / H
-    width: int
-    height: int
-    info: Mapping[str, Any]  # the render's info from manifest.json
-    attrs: Mapping[str, Any]  # the EXR's rendiff attributes
-
-    @property
-    def eye_norm(self) -> float:
-        return float(np.linalg.norm(self.eye))
-
-    # Per-pixel error bounds in the equation's units (h/Z), from the three kinds of error:
-    def depth_rel(self, rel: np.ndarray | float) -> np.ndarray:
-        """A relative planar-depth error rel: d(h/Z) = |n.d| rel."""
-        return np.asarray(self.n_dot_d * rel, dtype=np.float64)
-
-    def shift(self, e: np.ndarray | float) -> np.ndarray:
-        """A ray origin (or plane) moved by e world units: the plane's offset changes by <= e, d(h/Z) <= e/Z."""
-        return np.asarray(np.asarray(e, dtype=np.float64) / self.z)
-
-    def sample(self, ds: np.ndarray | float) -> np.ndarray:
-        """A sample moved by ds on the image plane at distance 1 (s units): d(h/Z) <= |(n.r, n.u)| ds."""
-        return np.asarray(self.n_perp * ds, dtype=np.float64)
-
-
-@dataclass(frozen=True)
-class ErrorBudget:
-    """A backend's error bounds (module docstring).
-
-    * `pixel` (K,): per-pixel bounds, in h/Z units, of the error in each pixel's equation;
-    * `vertex` (N, 3) or None: bounds, in world units, on how far the backend's plane of each
-      triangle may sit from the true one at each of its vertices.
-    """
-
-    pixel: np.ndarray
-    text: str
-    vertex: np.ndarray | None = None
-
-
-Model = Callable[[ProbePixels], ErrorBudget]
-
-
-def _param(px: ProbePixels, key: str) -> float | None:
-    for source in (px.attrs, px.info):
-        value = source.get(key)
-        if isinstance(value, bool):
-            continue
-        try:
-            f = float(value) if isinstance(value, (int, float, str)) else math.nan
-        except ValueError:
-            continue
-        if math.isfinite(f):
-            return f
-    return None
-
-
-def f32_origin_error(eye: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """(K,) bound on |f32(f32(eye) + offset) - (eye + offset)| for per-pixel offsets (K, 3).
-
-    Rounding to nearest moves each coordinate by at most half a float32 step, and never
-    farther than f32(eye_j), itself a float32 candidate: |f32(eye_j) - eye_j| + |offset_j|.
-    """
-    e = np.asarray(eye, dtype=np.float64)[None, :]
-    o = e + offset
-    half = np.spacing(np.abs(o).astype(np.float32)).astype(np.float64) / 2.0
-    eye_err = np.abs(e.astype(np.float32).astype(np.float64) - e)
-    return np.asarray(np.linalg.norm(np.minimum(half, eye_err + np.abs(offset)), axis=1))
-
-
-def core_model(px: ProbePixels) -> ErrorBudget:
-    """raster/trace: pixel rays in f64, one depth function rounded once to f32."""
-    return ErrorBudget(
-        px.depth_rel(F32_U) + px.sample(2.0 * math.sqrt(3.0) * F64_U * (px.eye_norm + px.d_norm)),
-        "Z rounded once to f32 (2^-24 Z) + f64 pixel rays (P = eye + d rounded: "
-        "2 sqrt(3) 2^-53 (|eye| + |d|) on the image plane)",
-    )
-
-
-RAY_TRIANGLE_ROUNDINGS = 8.0
-"""Roundings of an f32 ray-triangle t relative to itself (the watertight test's shear, three 2x2
-determinants, their sum and the quotient; Moeller-Trumbore's cross and dot products alike),
-amplified by 1/|cos| as a plane's t is."""
-
-
-def embree_model(px: ProbePixels) -> ErrorBudget:
-    """Embree: the core's pixel rays with origin and direction rounded to f32, f32 intersection."""
-    return ErrorBudget(
-        px.shift(px.origin_offset)
-        + px.sample(F32_U * px.d_norm)
-        + px.depth_rel(F32_U + RAY_TRIANGLE_ROUNDINGS * F32_U / px.cos),
-        f"rays start at f32(eye), |f32(eye) - eye| = {px.origin_offset:.3g}; direction "
-        f"rounded to f32 (2^-24 |d|), f32 ray-triangle t ({RAY_TRIANGLE_ROUNDINGS:g} 2^-24 / |cos|), "
-        "Z stored as f32 (2^-24)",
-    )
-
-
-MITSUBA_RAY_ROUNDINGS = 6.0
-"""f32 roundings of a Mitsuba camera ray's direction, relative to |d|: sample-to-camera
-projection (3), normalization (1), to_world product (2)."""
-
-
-def mitsuba_model(px: ProbePixels) -> ErrorBudget:
-    """Mitsuba 3 (scalar_rgb / llvm): an f32 sensor transform, rays from the near plane in f32."""
-    near = _param(px, "near_clip") or 0.0
-    origin = f32_origin_error(px.eye, near * px.d)
-    film = F32_U * max(px.width, px.height) * px.pixel
-    return ErrorBudget(
-        px.shift(px.origin_offset + origin)
-        + px.sample((math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS) * F32_U * px.d_norm + film)
-        + px.depth_rel(3.0 * F32_U + RAY_TRIANGLE_ROUNDINGS * F32_U / px.cos),
-        "to_world rounded to f32 (translation |f32(eye) - eye| = "
-        f"{px.origin_offset:.3g}, rotation sqrt(3) 2^-24 |d|); each ray's origin f32(eye) + near d rounded "
-        f"to f32 (per coordinate <= min(half a float32 step, |f32(eye) - eye| + near |d|): up to "
-        f"{float(origin.max()) if origin.size else 0.0:.3g}); film position and ray direction in f32 "
-        f"(2^-24 max(W, H) px + {MITSUBA_RAY_ROUNDINGS:g} 2^-24 |d|); f32 ray-triangle t "
-        f"({RAY_TRIANGLE_ROUNDINGS:g} 2^-24 / |cos|); depth AOV, conversion and Z in f32 (3 2^-24)",
-    )
-
-
-def povray_model(px: ProbePixels) -> ErrorBudget:
-    """POV-Ray: f64 camera, mesh2 planes with f32 normal and offset, 32-bit fixed-point depth."""
-    step = _param(px, "depth_step")
-    if step is None:
-        r = _param(px, "depth_range")
-        if r is None:
-            r = float(px.z.max()) * (1.0 + 2.0**-6) if px.z.size else 1.0
-        step = r / 65536.0 / 65535.0
-    vertex = F32_U * (3.0 * px.vertex_norm + px.tri_extent[:, None])
-    return ErrorBudget(
-        px.depth_rel(step / px.z + F32_U) + px.sample(4.0 * F64_U * px.d_norm),
-        "mesh2 keeps each plane's normal and offset in f32 (plane off by <= 2^-24 (3|V| + extent) "
-        f"at each vertex V); f64 camera rays (4 2^-53 |d|); 32-bit fixed-point depth "
-        f"(step {step:.3g}) and Z stored as f32 (2^-24)",
-        vertex=vertex,
-    )
-
-
-PYRENDER_VERTEX_DEPTH_STEPS = 4.0
-"""Window depth of a vertex computed in f32 (projection, divide, viewport: <= 4 x 2^-24 in [0, 1],
-i.e. 4 steps of the 24-bit buffer)."""
-PYRENDER_PIXEL_DEPTH_STEPS = 2.5
-"""Window depth interpolated in f32 at the pixel (2 steps) and rounded to 24 bits (half a step)."""
-
-
-def pyrender_model(px: ProbePixels) -> ErrorBudget:
-    """pyrender (GL on llvmpipe): f32 vertex transform, 24-bit depth buffer."""
-    znear, zfar = _param(px, "znear"), _param(px, "zfar")
-    if znear is None or zfar is None or not 0.0 < znear < zfar:
-        raise CalibrationError(
-            f"pyrender render gives no valid GL planes (znear={znear}, zfar={zfar}): its depth precision is unknown"
-        )
-    scale = (zfar - znear) / (zfar * znear) * 2.0**-24
-
-    def step(z: np.ndarray) -> np.ndarray:
-        return np.asarray(z * z * scale)
-
-    window = 8.0 * F32_U * px.vertex_d_norm + 2.0 * F32_U * max(px.width, px.height) * px.pixel
-    vertex = (
-        4.0 * math.sqrt(3.0) * F32_U * (px.vertex_norm + px.eye_norm)
-        + px.vertex_depth * window
-        + PYRENDER_VERTEX_DEPTH_STEPS * step(px.vertex_depth)
-    )
-    return ErrorBudget(
-        px.depth_rel(PYRENDER_PIXEL_DEPTH_STEPS * step(px.z) / px.z + F32_U),
-        "per vertex: f32 view transform (4 sqrt(3) 2^-24 (|V| + |eye|)), projection, divide and viewport in "
-        "f32 (Z (8 2^-24 |d| + 2 2^-24 max(W, H) px)), window depth in f32 "
-        f"({PYRENDER_VERTEX_DEPTH_STEPS:g} steps z^2 (f - n)/(f n) 2^-24 at znear {znear:.4g}, zfar {zfar:.4g}); "
-        f"per pixel: depth interpolated in f32 and rounded to 24 bits ({PYRENDER_PIXEL_DEPTH_STEPS:g} steps), "
-        "Z stored as f32. llvmpipe interpolates depth from the float vertex positions, so its 1/256 px "
-        "vertex snapping moves coverage (IDs), not depth samples",
-        vertex=vertex,
-    )
-
-
-MODELS: dict[str, Model] = {
-    "raster": core_model,
-    "trace": core_model,
-    "embree": embree_model,
-    "embree_robust": embree_model,
-    "mitsuba": mitsuba_model,
-    "povray": povray_model,
-    "pyrender": pyrender_model,
-}
-
-
-def declared_model(r: command_renderers.Renderer) -> Model:
-    """A renderer declared by a command: its declared numbers, as errors of each pixel's equation.
-
-    A planar depth off by depth_absolute + depth_relative Z (over |cos| with depth_grazing) is a
-    relative error of depth_absolute / Z + depth_relative; edge_px bounds how far from the
-    pixel center it may sample (edge_px pixels on the image plane); Z is stored as f32 (2^-24).
-    """
-    p = r.precision
-    rel = p.depth_relative or 0.0
-    edge = p.edge_px or 0.0
-
-    def model(px: ProbePixels) -> ErrorBudget:
-        if p.depth_grazing:
-            relative = np.minimum(rel / np.maximum(px.cos, 1e-300), MAX_REL) if rel > 0 else np.zeros_like(px.z)
-        else:
-            relative = np.full(px.z.shape, rel)
-        return ErrorBudget(
-            px.depth_rel(relative + p.depth_absolute / px.z + F32_U) + px.sample(edge * px.pixel),
-            f"declared by the user in {r.declared}: depth {p.depth_absolute:g} + {rel:g} Z"
-            + (" / |cos|" if p.depth_grazing else "")
-            + f", samples within edge_px {edge:g} px of the pixel center; Z stored as f32 (2^-24)",
-        )
-
-    return model
-
-
-def model_for(backend: str) -> tuple[Model, bool]:
-    """The backend's precision model, and whether it has one (else strict: exact f32 depth)."""
-    model = MODELS.get(backend)
-    if model is not None:
-        return model, True
-    declared = command_renderers.find(backend)
-    if declared is not None:
-        return declared_model(declared), True
-    return core_model, False
 
 
 # --------------------------------------------------------------------------- the fit
@@ -395,6 +147,7 @@ class Calibration:
     width: int = 0  # the probe's image size (what a scale or rotation does at the edges)
     height: int = 0
     pixel: float = 0.0  # one pixel on the image plane at distance 1
+    owner: str = ""  # whose convention a failure blames (judge.precision.camera_owner)
     render: Mapping[str, Any] = field(default_factory=dict, repr=False)
 
     def fields(self) -> dict[str, Any]:
@@ -501,8 +254,10 @@ def measure(
     attrs: Mapping[str, Any] | None = None,
     reference_obj: np.ndarray | None = None,
     render: Mapping[str, Any] | None = None,
+    specs: SpecLookup,
 ) -> Calibration:
-    """Fit and judge one backend's Z (and its own id.prim) on one probe scene.
+    """Fit and judge one backend's Z (and its own id.prim) on one probe scene; its camera-error
+    model is its spec's (`specs`, the registry's lookup).
 
     `calibrate_run` calls this for every render; tests call it with synthetic buffers.
     Raises CalibrationError when the buffers cannot identify the camera.
@@ -593,7 +348,8 @@ def measure(
         info=info or {},
         attrs=attrs or {},
     )
-    model, known = model_for(backend)
+    spec = specs(backend)
+    model, known = precision.camera_model(spec)
     budget = model(ctx)
     pixel_bound = np.abs(budget.pixel) / g
     text = (
@@ -629,6 +385,7 @@ def measure(
     cal = Calibration(
         scene=scene.name,
         backend=backend,
+        owner=precision.camera_owner(spec, backend),
         status="pass",
         reason="",
         offset_x_px=float(shift[0, 0]),
@@ -658,10 +415,6 @@ def measure(
         render=render or {},
     )
     return judge(cal)
-
-
-def _exporter(backend: str) -> str:
-    return f"the rendiff core's camera ({backend})" if backend in CORE_BACKENDS else f"the {backend} exporter"
 
 
 def _num(x: float) -> str:
@@ -714,7 +467,7 @@ def judge(cal: Calibration) -> Calibration:
         return _replace(cal, status="pass", reason="")
     parts = []
     if problems:
-        parts.append(f"convention error in {_exporter(cal.backend)}: {'; '.join(problems)} (bound {_num(b)} px)")
+        parts.append(f"convention error in {cal.owner}: {'; '.join(problems)} (bound {_num(b)} px)")
     if rms_bad:
         parts.append(
             f"its samples fit no pinhole camera at its precision: rms residual {_num(cal.rms_px or 0.0)} px > "
@@ -774,7 +527,7 @@ def _has_z(render: Mapping[str, Any]) -> bool | None:
     return None
 
 
-def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str) -> list[Calibration]:
+def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str, specs: SpecLookup) -> list[Calibration]:
     """Every backend (the reference included) measured on one probe scene of a run."""
     name = str(scene_entry.get("scene"))
     renders = [
@@ -830,6 +583,7 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str) -
                     attrs=attrs,
                     reference_obj=ref_obj,
                     render=r,
+                    specs=specs,
                 )
             )
         except CalibrationError as exc:
@@ -882,7 +636,9 @@ def summarize(measurements: Sequence[Calibration]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def calibrate_run(run: Path, manifest: Mapping[str, Any], scenes: Collection[str] | None = None) -> CalibrationReport:
+def calibrate_run(
+    run: Path, manifest: Mapping[str, Any], specs: SpecLookup, scenes: Collection[str] | None = None
+) -> CalibrationReport:
     """Measure every backend's camera on the run's probe scenes (module docstring).
 
     `manifest` is RUN/manifest.json as loaded (manifest.load_manifest). Probes are its scenes
@@ -892,7 +648,7 @@ def calibrate_run(run: Path, manifest: Mapping[str, Any], scenes: Collection[str
     reference = str(manifest.get("reference", "raster"))
     measurements: list[Calibration] = []
     for sc in probe_scenes(manifest, scenes):
-        measurements += calibrate_scene(run, sc, reference)
+        measurements += calibrate_scene(run, sc, reference, specs)
     return CalibrationReport(
         entries=[entry(m) for m in measurements],
         summary=summarize(measurements),

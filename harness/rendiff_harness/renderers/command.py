@@ -4,9 +4,9 @@ A user lists renderers in a TOML file (docs/your-renderer.md has the format, wit
 and a worked example) and names it in the environment variable `RENDIFF_RENDERERS` (an
 absolute path; `rendiff check --renderers FILE` sets it for every harness invocation). Every
 harness command then knows them exactly like the built-in backends: the registry lists and
-runs them (`CommandBackend` satisfies `backends.BackendModule`), and the comparison, the
-verifier and calibration judge them with the precision they declare (tolerance.py,
-calibration.py look it up with `find`).
+runs them, each as a `BackendSpec` (renderers/declared.py) whose render is `CommandBackend`'s
+here, and the comparison, the verifier and calibration judge them with the precision they
+declare (the spec's models, built from it).
 
     [[renderer]]
     name = "myrender"
@@ -57,13 +57,13 @@ from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..contract import vocab
+from ..contract.userfile import UserFileError, read_regular
 from .children import Capture, run_in_group
-from .contract import vocab
-from .contract.userfile import UserFileError, read_regular
 from .errors import BackendError, BackendSkipped, BackendUnavailable
 
 if TYPE_CHECKING:
-    from .contract.resolved import ResolvedScene
+    from ..contract.resolved import ResolvedScene
 
 ENV_VAR = "RENDIFF_RENDERERS"
 # The copy of that file `rendiff check` takes as its run begins (RUN/renderers.toml): the
@@ -89,25 +89,6 @@ NAME_PATTERN = re.compile(r"[a-z][a-z0-9_-]*\Z")
 # results table; a 300-character name loaded fine and then failed every render with
 # "File name too long". 64 leaves room for a scene's name beside it.
 MAX_NAME_CHARS = 64
-RESERVED_NAMES = frozenset(
-    {
-        # the Rust core's own renderers
-        "raster",
-        "trace",
-        "embree",
-        "embree_robust",
-        # the harness's built-in backends (registry.BACKEND_MODULES), by name and module name
-        "povray",
-        "pyrender",
-        "pyrender_backend",
-        "mitsuba",
-        "mitsuba_backend",
-        # compare.py's cached Mitsuba references
-        "mitsuba_ref",
-    }
-)
-"""Names a declared renderer cannot take (tests/test_command_renderers.py checks the registry's)."""
-
 RENDERER_KEYS = frozenset({"name", "command", "version", "features", "buffers", "timeout_s", "precision"})
 REQUIRED_KEYS = ("name", "command", "features", "buffers", "precision")
 PRECISION_NUMBERS = ("edge_px", "depth_relative", "depth_absolute", "normal_relative", "rgb_relative", "rgb_absolute")
@@ -339,8 +320,9 @@ def _entry(path: Path, i: int, entry: object, taken: dict[str, int], reserved: C
     )
 
 
-def parse(path: Path, text: str, reserved: Collection[str] = RESERVED_NAMES) -> tuple[Renderer, ...]:
-    """Validate the renderers file's content; RenderersError (one line) on the first problem."""
+def parse(path: Path, text: str, reserved: Collection[str]) -> tuple[Renderer, ...]:
+    """Validate the renderers file's content; RenderersError (one line) on the first problem.
+    `reserved`: the names a declared renderer cannot take (the registry's `RESERVED_NAMES`)."""
     try:
         data = tomllib.loads(text)
     except ValueError as exc:  # tomllib.TOMLDecodeError, or an integer of over 4300 digits
@@ -357,7 +339,7 @@ def parse(path: Path, text: str, reserved: Collection[str] = RESERVED_NAMES) -> 
     return tuple(_entry(path, i, e, taken, reserved) for i, e in enumerate(entries))
 
 
-def load(path: str | Path, text_from: str | Path | None = None) -> tuple[Renderer, ...]:
+def load(path: str | Path, reserved: Collection[str], text_from: str | Path | None = None) -> tuple[Renderer, ...]:
     """Read and validate a renderers file (relative paths are taken from the current folder).
     With `text_from`, the declarations are read from that copy of it (`SNAPSHOT_ENV_VAR`),
     while `path` still names the file and resolves its relative commands."""
@@ -373,16 +355,19 @@ def load(path: str | Path, text_from: str | Path | None = None) -> tuple[Rendere
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise RenderersError(f"{source}: not UTF-8 text: {exc}") from None
-    return parse(path, text)
+    return parse(path, text, reserved)
 
 
 @lru_cache(maxsize=8)
-def _load_cached(path: str, text_from: str | None, mtime_ns: int, size: int) -> tuple[Renderer, ...]:
-    return load(path, text_from)
+def _load_cached(
+    path: str, reserved: frozenset[str], text_from: str | None, mtime_ns: int, size: int
+) -> tuple[Renderer, ...]:
+    return load(path, reserved, text_from)
 
 
-def from_env() -> tuple[Renderer, ...]:
-    """The renderers declared in the file `RENDIFF_RENDERERS` names (none when unset or empty)."""
+def from_env(reserved: frozenset[str]) -> tuple[Renderer, ...]:
+    """The renderers declared in the file `RENDIFF_RENDERERS` names (none when unset or empty);
+    `reserved` as in `parse`."""
     value = os.environ.get(ENV_VAR, "")
     if not value:
         return ()
@@ -399,15 +384,7 @@ def from_env() -> tuple[Renderer, ...]:
         raise RenderersError(
             f"{read_from}: cannot read the renderers file ({ENV_VAR}): {exc.strerror or exc}"
         ) from None
-    return _load_cached(str(path), snapshot or None, st.st_mtime_ns, st.st_size)
-
-
-def find(name: str) -> Renderer | None:
-    """The declared renderer called `name`, or None (RenderersError when the file is malformed)."""
-    for r in from_env():
-        if r.name == name:
-            return r
-    return None
+    return _load_cached(str(path), reserved, snapshot or None, st.st_mtime_ns, st.st_size)
 
 
 # --------------------------------------------------------------------------- running it
@@ -492,13 +469,12 @@ def check_exr(path: Path, width: int, height: int, channels: Sequence[tuple[str,
 
 
 class CommandBackend:
-    """A declared renderer as a `backends.BackendModule` (the registry uses nothing else)."""
+    """How a declared renderer runs: its version, availability and render (renderers/declared.py
+    makes the `BackendSpec` that points at them)."""
 
     def __init__(self, spec: Renderer) -> None:
         self.spec = spec
         self.NAME = spec.name
-        self.FEATURES = spec.features
-        self.BUFFERS = spec.buffers
         self._version: str | None = None
 
     def unavailable_reason(self) -> str | None:
@@ -610,7 +586,7 @@ class CommandBackend:
 
     def _write(self, src: Path, out_exr: Path, wanted: Sequence[str]) -> None:
         """Copy the wanted buffers (and the renderer's own rendiff: attributes) to `out_exr` atomically."""
-        from .contract import exrbuf
+        from ..contract import exrbuf
 
         try:
             bufs = exrbuf.read_buffers(src)
@@ -631,11 +607,6 @@ class CommandBackend:
         )
 
 
-def backends() -> list[CommandBackend]:
-    """A `CommandBackend` for every renderer of `RENDIFF_RENDERERS` (RenderersError if malformed)."""
-    return [CommandBackend(r) for r in from_env()]
-
-
 __all__ = [
     "ENV_VAR",
     "SNAPSHOT_ENV_VAR",
@@ -643,10 +614,8 @@ __all__ = [
     "Precision",
     "Renderer",
     "RenderersError",
-    "backends",
     "check_exr",
     "expand",
-    "find",
     "from_env",
     "load",
     "parse",
