@@ -178,33 +178,29 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    """Delegates to compare.py (owned by the comparison work); absent until it lands."""
-    try:
-        from .compare import main as compare_main
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__package__}.compare":
-            raise
-        return _fail("compare not available yet (rendiff_harness/compare.py is missing)")
+    """Delegates to compare.py (a run's buffers -> results.json), which owns its options."""
+    from .compare import main as compare_main
+
     return int(compare_main(list(args.rest)) or 0)
 
 
 def cmd_reference(args: argparse.Namespace) -> int:
-    """Delegates to references.py (cached Mitsuba references), which owns its options."""
-    from .references import main as reference_main
+    """Delegates to renderers/mitsuba/reference.py (cached Mitsuba references), which owns its options."""
+    from .renderers.mitsuba.reference import main as reference_main
 
     return int(reference_main(list(args.rest)) or 0)
 
 
 def cmd_metamorphic(args: argparse.Namespace) -> int:
-    """Delegates to metamorphic.py (relations per backend), which owns its options."""
-    from .metamorphic import main as metamorphic_main
+    """Delegates to judge/metamorphic.py (relations per backend), which owns its options."""
+    from .judge.metamorphic import main as metamorphic_main
 
     return int(metamorphic_main(list(args.rest), registry.spec) or 0)
 
 
 def cmd_expectations(args: argparse.Namespace) -> int:
     """Load and validate an expectations file as the comparison will; silent when it is valid."""
-    from . import expectations
+    from .judge import expectations
 
     try:
         expectations.load(args.file)
@@ -345,13 +341,17 @@ def build_parser() -> argparse.ArgumentParser:
         "it is valid, else one line naming the file and the problem, exit 2",
     )
     p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
-    p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
+    p_compare = sub.add_parser(
+        "compare", help="compare a check run's buffers, write RUN/results.json (see compare.py)", add_help=False
+    )
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
-    p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)
+    p_ref = sub.add_parser(
+        "reference", help="render a cached Mitsuba reference (see renderers/mitsuba/reference.py)", add_help=False
+    )
     p_ref.add_argument("rest", nargs=argparse.REMAINDER)
     p_meta = sub.add_parser(
         "metamorphic",
-        help="compare variant renders with base renders per backend (see metamorphic.py)",
+        help="compare variant renders with base renders per backend (see judge/metamorphic.py)",
         add_help=False,
     )
     p_meta.add_argument("rest", nargs=argparse.REMAINDER)

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from fixtures import write_scene
-from rendiff_harness import classify
 from rendiff_harness.contract import resolved, vocab
 from rendiff_harness.contract.camera import Camera
+from rendiff_harness.judge import geometry as classify
 
 # Camera of every test here: eye (0, 0, 5) looking down -z, vfov 90 (tan_half = 1), W = H = 16.
 # For a point at planar depth z: px = (x/z + 1) * 8, py = (1 - y/z) * 8.

@@ -12,10 +12,10 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import compare, diffimages
+from rendiff_harness import compare
 from rendiff_harness.__main__ import main as harness_main
-from rendiff_harness.contract import exrbuf, resolved, vocab
-from rendiff_harness.judge import precision, tolerance
+from rendiff_harness.contract import exrbuf, resolved, results, vocab
+from rendiff_harness.judge import diffimages, precision, tolerance
 from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID
@@ -274,7 +274,7 @@ def test_skipped_and_error_pass_through(compared: Any) -> None:
         assert e["time_s"] == 600.0 and e["command"] == "rendiff render --backend embree_robust"
         assert e["images"] == {}
         for r in (s, e):  # not compared: null, never "0 mismatches"
-            assert all(r[k] is None for k in compare.NUMERIC_FIELDS)
+            assert all(r[k] is None for k in results.NUMERIC_FIELDS)
 
 
 def test_missing_reference_makes_every_entry_an_error(compared: Any) -> None:

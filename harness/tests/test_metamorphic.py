@@ -11,9 +11,9 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import metamorphic
 from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.judge import metamorphic
 from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID

@@ -12,9 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from rendiff_harness import radiance
 from rendiff_harness.contract import lighting, resolved
-from rendiff_harness.judge import precision, tolerance
+from rendiff_harness.judge import precision, radiance, tolerance
 from rendiff_harness.renderers import registry
 from rendiff_harness.renderers.povray import backend as povray
 from rendiff_harness.renderers.pyrender import backend as pb

@@ -18,9 +18,8 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import radiance
 from rendiff_harness.contract import exrbuf, lighting, resolved
-from rendiff_harness.judge import precision
+from rendiff_harness.judge import precision, radiance
 from rendiff_harness.renderers import registry
 from rendiff_harness.renderers.errors import BackendError
 from rendiff_harness.renderers.mitsuba import backend as mb

@@ -13,8 +13,8 @@ import pytest
 import backend_cases as cases
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import radiance, references
-from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.contract import exrbuf, references, resolved
+from rendiff_harness.judge import radiance
 from rendiff_harness.renderers.mitsuba import backend as mb
 
 REPO = Path(__file__).resolve().parents[2]

@@ -226,13 +226,6 @@ def test_render_success_json(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert (buf["id.prim"] != vocab.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
 
 
-def test_compare_is_wired(capsys: pytest.CaptureFixture[str]) -> None:
-    if (HARNESS / "rendiff_harness" / "compare.py").exists():
-        pytest.skip("compare.py exists; its own tests cover it")
-    assert cli.main(["compare", "a.exr", "b.exr"]) == 2
-    assert "compare not available yet" in capsys.readouterr().err
-
-
 def test_every_shipped_backend_declares_its_measured_peak_memory() -> None:
     # check/pool.rs budgets memory with these; a backend without a measurement gets the guess.
     for name in registry.BUILT_IN:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from fixtures import write_scene
-from rendiff_harness import verify
 from rendiff_harness.contract import resolved, vocab
+from rendiff_harness.judge import verify
 
 BG = vocab.BACKGROUND_ID
 

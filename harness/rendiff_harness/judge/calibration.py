@@ -67,6 +67,8 @@ pixel centers offset by (0.03555, 0.01388) px (bound 0.001428 px)", "... y flipp
 from __future__ import annotations
 
 import math
+import sys
+import traceback
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -78,7 +80,7 @@ from ..contract import exrbuf, resolved
 from ..contract.camera import Camera
 from ..contract.manifest import EntryError, render_reason, run_path
 from ..contract.results import Entry
-from ..contract.vocab import BACKGROUND_ID
+from ..contract.vocab import BACKGROUND_ID, Buffer, Status
 from ..renderers.spec import SpecLookup
 from . import precision
 from .camera_budget import CalibrationError, ProbePixels
@@ -654,3 +656,39 @@ def calibrate_run(
         summary=summarize(measurements),
         measurements=measurements,
     )
+
+
+# --------------------------------------------------------------------------- a run's verdicts
+
+
+def calibrate_and_blame(
+    run: Path, manifest: Mapping[str, Any], results: list[Entry], specs: SpecLookup
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Camera calibration from the run's probe scenes (`calibrate_run`): returns the summary
+    for results.json's `calibration` and the `camera` entries that follow `results`.
+
+    A backend whose camera fails calibration has a convention error in its exporter, not a
+    renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
+    say so, by name, instead of fails blamed on the renderer.
+    """
+    try:
+        rep = calibrate_run(run, manifest, specs)
+    except Exception as exc:  # noqa: BLE001 - a bug must not lose the other results
+        traceback.print_exc(file=sys.stderr)
+        e = Entry.for_render(
+            "calibration",
+            str(manifest.get("reference", "raster")),
+            Buffer.CAMERA,
+            {},
+            reason=f"internal error in calibration (a rendiff bug): {type(exc).__name__}: {exc}",
+        )
+        return {}, [e.blank_if_not_compared().to_json()]
+    probes = {str(sc["scene"]) for sc in manifest["scenes"] if sc.get("role") == "calibration"}
+    bad = {b: v for b, v in rep.summary.items() if v.get("status") == Status.FAIL}
+    for e in results:
+        cal = bad.get(e.backend)
+        if cal is None or e.scene in probes or e.status not in (Status.FAIL, Status.UNEXPECTED_PASS):
+            continue
+        e.status = Status.ERROR
+        e.reason = f"not judged: {e.backend}'s camera failed calibration ({cal.get('reason', '')}); was: {e.reason}"
+    return rep.summary, rep.entries

@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from .contract.camera import Camera
-from .contract.resolved import ResolvedScene
+from ..contract.camera import Camera
+from ..contract.resolved import ResolvedScene
 
 CHUNK = 1 << 17
 """Triangles per vectorized batch: bounds temporary memory if a renderer is badly broken."""

@@ -23,8 +23,8 @@ from types import ModuleType
 
 import numpy as np
 
-from .contract import atomic, exrbuf
-from .contract.vocab import BACKGROUND_ID
+from ..contract import atomic, exrbuf
+from ..contract.vocab import BACKGROUND_ID
 
 BG, MATCH, EDGE, INTERIOR = 0, 1, 2, 3
 ID_COLORS = (

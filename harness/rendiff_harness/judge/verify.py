@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import classify
-from .contract.camera import Camera
-from .contract.resolved import ResolvedScene
-from .contract.vocab import BACKGROUND_ID
+from ..contract.camera import Camera
+from ..contract.resolved import ResolvedScene
+from ..contract.vocab import BACKGROUND_ID
+from . import geometry
 
 CLASSES = ("edge", "tie", "crack", "interior")
 EDGE, TIE, CRACK, INTERIOR = range(4)
@@ -162,13 +162,13 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
             ok = (t0 <= t1) & ~flat_out
             pa = _project(cam, a + t0[:, None] * (b - a))
             pb = _project(cam, a + t1[:, None] * (b - a))
-            d = classify.segment_distance(cx, cy, pa, pb)
+            d = geometry.segment_distance(cx, cy, pa, pb)
             edge_d[idx, i] = np.where(ok & np.isfinite(d), d, np.inf)
             vin = (a[:, 2] >= near) & (a[:, 2] <= far)
             pv = _project(cam, a)
             vert_d[idx, i] = np.where(vin, np.hypot(pv[:, 0] - cx, pv[:, 1] - cy), np.inf)
-        poly, count = classify.clip_and_project(cam, tris)
-        poly_d[idx] = classify.polygon_distance(poly, count, cx, cy)
+        poly, count = geometry.clip_and_project(cam, tris)
+        poly_d[idx] = geometry.polygon_distance(poly, count, cx, cy)
         # Inside: the center is on one side of every edge of the (convex) visible polygon.
         m = idx.size
         rows_i = np.arange(m)

@@ -51,9 +51,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .contract.results import Entry
-from .contract.userfile import UserFileError, read_regular
-from .contract.vocab import MismatchClass, Status
+from ..contract.results import Entry
+from ..contract.userfile import UserFileError, read_regular
+from ..contract.vocab import MismatchClass, Status
 
 # Largest expectations file read: 1 MiB. rendiff's own is 2.5 KiB for a
 # dozen entries (about 200 bytes each), so this is some 5,000 entries; a

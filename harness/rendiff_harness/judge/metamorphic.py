@@ -11,7 +11,7 @@ IDs mapped back, within the bound stated for the relation and the backend. RUN i
      "object_map": [...],  # variant object -> base object
      "depth_scale": 64.0}  # variant Z = base Z x this (a power of two)
 
-The comparison is compare.py's own, with the base render as the reference:
+The comparison is the judge's own (judge/ids.py, judge/depth.py), with the base render as the reference:
 
 * `id`: variant IDs are mapped to base IDs, then compared exactly. A mismatch is *edge*
   when the pixel center lies within the backend's `edge_px` (tolerance.py) of an edge of a
@@ -53,10 +53,9 @@ from typing import Any
 
 import numpy as np
 
-from . import classify, compare, expectations
-from .contract import atomic, exrbuf, resolved
-from .contract import results as results_table
-from .contract.manifest import (
+from ..contract import atomic, exrbuf, resolved
+from ..contract import results as results_table
+from ..contract.manifest import (
     EntryError,
     ManifestError,
     load_manifest,
@@ -65,12 +64,14 @@ from .contract.manifest import (
     render_reason,
     run_path,
 )
-from .contract.results import finite, write_results
-from .contract.text import printable
-from .contract.userfile import open_regular, read_regular
-from .contract.vocab import BACKGROUND_ID
-from .judge import precision, tolerance
-from .renderers.spec import SpecLookup
+from ..contract.results import finite, write_results
+from ..contract.text import printable
+from ..contract.userfile import open_regular, read_regular
+from ..contract.vocab import BACKGROUND_ID
+from ..renderers.spec import SpecLookup
+from . import expectations, geometry, precision, tolerance
+from .depth import compare_depth
+from .ids import EdgeDistance, compare_ids
 
 SPEC_FORMAT = "rendiff-metamorphic-spec/1"
 RESULTS_FORMAT = "rendiff-metamorphic/1"
@@ -326,22 +327,22 @@ def preimage(prim_map: np.ndarray, base_count: int) -> np.ndarray:
 def _dist(scene: resolved.ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     prims = np.asarray(prims, dtype=np.int64)
     safe = np.where(prims >= 0, prims, BACKGROUND_ID).astype(np.uint64)
-    return classify.prim_edge_distance(scene, safe, rows, cols)
+    return geometry.prim_edge_distance(scene, safe, rows, cols)
 
 
 def relation_edge_distance(
     base: resolved.ResolvedScene, variant: resolved.ResolvedScene, case: Case, variant_prims: np.ndarray
-) -> compare.EdgeDistance:
+) -> EdgeDistance:
     """Distance to the nearest edge of any triangle involved, in either scene (module docstring)."""
     table = preimage(case.prim_map, base.triangle_count)
 
     def distance(r_ids: np.ndarray, t_ids: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         raw = variant_prims[rows, cols]
         d: np.ndarray = np.minimum(
-            classify.prim_edge_distance(base, r_ids, rows, cols),
-            classify.prim_edge_distance(variant, raw, rows, cols),
+            geometry.prim_edge_distance(base, r_ids, rows, cols),
+            geometry.prim_edge_distance(variant, raw, rows, cols),
         )
-        d = np.minimum(d, classify.prim_edge_distance(base, t_ids, rows, cols))
+        d = np.minimum(d, geometry.prim_edge_distance(base, t_ids, rows, cols))
         r = np.asarray(r_ids, dtype=np.int64)
         known = (r_ids != BACKGROUND_ID) & (r < base.triangle_count)
         for j in range(table.shape[1]):
@@ -451,11 +452,11 @@ def compare_case(
         model = summed_model(m, backend, renders["base"], base_attrs, renders["variant"], var_attrs, case.depth_scale)
     pixels = ref.shape[0] * ref.shape[1]
     distance = relation_edge_distance(ref.scene, var_scene, case, test_raw["id.prim"])
-    ids = compare.compare_ids(ref, test, model, edge_distance=distance)
+    ids = compare_ids(ref, test, model, edge_distance=distance)
     e_id.update(pixels=pixels, edge_mismatches=ids.edge, interior_mismatches=ids.interior, tolerance=ids.tolerance)
     _verdict(e_id, exps, ids.details)
     try:
-        z = compare.compare_depth(ref, test, model, renders["variant"], var_attrs, ids.edge_mask)
+        z = compare_depth(ref, test, model, renders["variant"], var_attrs, ids.edge_mask)
     except tolerance.ToleranceError as exc:
         e_z["reason"] = str(exc)
         return [e_id, e_z]
