@@ -1,4 +1,4 @@
-"""A `rendiff check` run folder as compare.py reads it: RUN/manifest.json and the buffer EXRs.
+"""A `rendiff check` run folder as the comparison reads it: RUN/manifest.json and the buffer EXRs.
 
 RUN/manifest.json (docs/run-format.md) lists every scene with its resolved scene.json and
 every backend's render of it (status, EXR, time, version, command, info). This module

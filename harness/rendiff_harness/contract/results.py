@@ -1,7 +1,7 @@
 """RUN/results.json: one typed record per verdict (`Entry`), the document, writing it, the table.
 
 Every entry has the fields of `Entry` up to `images` (`COMMON_FIELDS`, docs/run-format.md),
-then the fields only its buffer has (`Entry.own_fields`, from compare.py's buffer table:
+then the fields only its buffer has (`Entry.own_fields`, from judge/buffers.py's buffer table:
 `explanations` on id and N, `max_angle_rad` on N, the radiance fields on RGB), then any
 further fields (`Entry.extra`: calibration's measurements on `camera` entries).
 `Entry.to_json()` is the entry exactly as results.json holds it.

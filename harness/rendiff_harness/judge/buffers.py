@@ -12,9 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..contract import vocab
-from ..contract.manifest import (
-    Reference,
-)
+from ..contract.manifest import Reference
 from ..contract.results import Entry, finite
 from ..contract.vocab import Buffer, Status
 from ..renderers.spec import BackendSpec

@@ -10,10 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..contract import exrbuf
-from ..contract.manifest import (
-    Reference,
-    render_info,
-)
+from ..contract.manifest import Reference, render_info
 from ..contract.vocab import BACKGROUND_ID
 from . import tolerance, verify
 from .ids import eye_norm, origin_offset, pixel_size, point_norm

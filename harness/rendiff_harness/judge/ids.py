@@ -11,9 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..contract import vocab
-from ..contract.manifest import (
-    Reference,
-)
+from ..contract.manifest import Reference
 from ..contract.vocab import BACKGROUND_ID
 from . import tolerance, verify
 from .verdict import EXAMPLES

@@ -41,6 +41,6 @@ def camera_model(spec: BackendSpec | None) -> tuple[CameraModel, bool]:
 
 def camera_owner(spec: BackendSpec | None, backend: str) -> str:
     """Whose convention a calibration failure blames: the core's camera, or the backend's exporter."""
-    if spec is not None and spec.core_camera:
+    if spec is not None and spec.core_loop:
         return f"the rendiff core's camera ({backend})"
     return f"the {backend} exporter"

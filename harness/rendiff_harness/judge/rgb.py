@@ -11,10 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..contract import lighting
-from ..contract.manifest import (
-    Reference,
-    render_info,
-)
+from ..contract.manifest import Reference, render_info
 from ..contract.results import Entry, finite
 from ..renderers.spec import BackendSpec
 from . import diffimages, precision, radiance

@@ -4,7 +4,7 @@ Two numbers per backend, both derived from what the renderer computes in
 (docs/external-renderers.md, docs/DESIGN.md "Comparing"):
 
 * `edge_px`: an ID mismatch is an *edge* mismatch when the pixel center lies within
-  this many pixels of an edge of one of the triangles involved (classify.py). Inside
+  this many pixels of an edge of one of the triangles involved (geometry.py). Inside
   that band the renderer's own rounding may put the center on either side.
 * `depth(ctx)`: the allowed |Z_test - Z_reference| per compared pixel, plus a sentence
   saying how it was derived (it goes into results.json as `tolerance`).
@@ -61,7 +61,7 @@ class DepthContext:
 
 @dataclass(frozen=True)
 class EdgeContext:
-    """What an edge model may look at, for the K mismatched pixels (classify's `eps`)."""
+    """What an edge model may look at, for the K mismatched pixels (the verifier's `eps`)."""
 
     z: np.ndarray  # (K,) planar depth at the pixel (the reference's, else the test's; inf: none)
     point_norm: np.ndarray  # (K,) |X| of that point from the world origin

@@ -24,7 +24,7 @@ def _loop(name: str, what: str, other: str) -> BackendSpec:
         calibration=core_camera,
         rgb_tolerance=exact_rgb,
         normals=core_normals,
-        core_camera=True,
+        core_loop=True,
     )
 
 

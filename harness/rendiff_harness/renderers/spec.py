@@ -74,8 +74,10 @@ class BackendSpec:
     """The renderer's version; may raise BackendUnavailable."""
     unavailable_reason: Callable[[], str | None] | None = None
     """None when usable here, else what to install."""
-    core_camera: bool = False
-    """True: its camera is the rendiff core's own (a calibration failure names the core, not an exporter)."""
+    core_loop: bool = False
+    """True for the rendiff core's own loops (raster, trace): one camera, coverage predicate and depth
+    function, so calibration blames the core's camera, and metamorphic relations hold them to the
+    core's own bounds (judge/metamorphic.py)."""
 
 
 SpecLookup = Callable[[str], "BackendSpec | None"]
