@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .tolerance import F32_U
+from .tolerance import F32_U, render_param
 
 F64_U = 2.0**-53
 
@@ -86,18 +86,8 @@ CameraModel = Callable[[ProbePixels], ErrorBudget]
 
 
 def probe_param(px: ProbePixels, key: str) -> float | None:
-    """A finite float parameter of the render: its EXR attributes first, then its info."""
-    for source in (px.attrs, px.info):
-        value = source.get(key)
-        if isinstance(value, bool):
-            continue
-        try:
-            f = float(value) if isinstance(value, (int, float, str)) else math.nan
-        except ValueError:
-            continue
-        if math.isfinite(f):
-            return f
-    return None
+    """`render_param` of the probe render being fitted."""
+    return render_param(px.attrs, px.info, key)
 
 
 def f32_origin_error(eye: np.ndarray, offset: np.ndarray) -> np.ndarray:

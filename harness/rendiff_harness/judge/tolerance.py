@@ -114,9 +114,10 @@ class Model:
         return base + extra, f"{self.edge_text()} + {text}"
 
 
-def param(ctx: DepthContext, key: str) -> float | None:
-    """A float parameter from the EXR attributes (they travel with the pixels), else from info."""
-    for source in (ctx.attrs, ctx.info):
+def render_param(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:
+    """A finite float parameter of a render: from its EXR attributes (they travel with the pixels),
+    else from its info; a number or a numeric string, never a bool."""
+    for source in (attrs, info):
         value = source.get(key)
         if isinstance(value, bool):
             continue
@@ -130,6 +131,11 @@ def param(ctx: DepthContext, key: str) -> float | None:
             if math.isfinite(f):
                 return f
     return None
+
+
+def param(ctx: DepthContext, key: str) -> float | None:
+    """`render_param` of the render a depth model is judging."""
+    return render_param(ctx.attrs, ctx.info, key)
 
 
 def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
@@ -266,12 +272,11 @@ F32_RGB_REL = 4 * 2.0**-24
 
 def exposure_scale(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:
     """An RGB exposure scale (e.g. `rgb_scale`) from the EXR attributes, else the info, else info's `radiance`."""
-    ctx = DepthContext(z_ref=np.zeros(0), cos=np.zeros(0), info=info, attrs=attrs)
-    v = param(ctx, key)
+    v = render_param(attrs, info, key)
     if v is None:
         radiance = info.get("radiance") if isinstance(info, Mapping) else None
         if isinstance(radiance, Mapping):
-            v = param(DepthContext(np.zeros(0), np.zeros(0), radiance, {}), key)
+            v = render_param({}, radiance, key)
     return v
 
 
