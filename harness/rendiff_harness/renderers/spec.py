@@ -3,8 +3,8 @@
 Why one record: the registry lists, plans and runs a backend from it (renderers/registry.py),
 the judge finds its precision in it (judge/precision.py), and calibration its camera-error
 model, so that adding a built-in backend is its own folder (renderers/<name>/backend.py,
-whose `SPEC` is one of these), one line in the registry and its tests. Nothing else names a
-backend.
+whose `SPEC` is one of these), one line in the registry and its tests. No other table lists
+backends.
 
 What the judge may import from here is this module alone (the types), never the registry:
 whoever starts a comparison passes the registry's lookup in (`SpecLookup`), so the judge stands
