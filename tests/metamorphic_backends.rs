@@ -9,7 +9,7 @@
 //! (every backend, with its timeouts and skip rules); then
 //! `python -m rendiff_harness metamorphic` compares each backend's variant with
 //! the same backend's base, IDs mapped back, against the bound stated for that
-//! relation and backend (harness/rendiff_harness/metamorphic.py). One test per
+//! relation and backend (harness/rendiff_harness/judge/metamorphic.py). One test per
 //! (relation, backend, buffer); skipped ones show as ignored with the reason.
 //!
 //! The core's own relations are also held exactly by proptest in

@@ -19,7 +19,7 @@ fn python_spells_the_vocabulary_as_rust_does() {
         .env("PYTHONPATH", root.join("harness"))
         .args([
             "-c",
-            "import json; from rendiff_harness import vocab; print(json.dumps(vocab.as_json()))",
+            "import json; from rendiff_harness.contract import vocab; print(json.dumps(vocab.as_json()))",
         ])
         .output()
         .unwrap();
@@ -32,7 +32,7 @@ fn python_spells_the_vocabulary_as_rust_does() {
     let rust = rendiff::vocab::json();
     assert_eq!(
         python, rust,
-        "harness/rendiff_harness/vocab.py and crates/rendiff-core/src/vocab.rs differ"
+        "harness/rendiff_harness/contract/vocab.py and crates/rendiff-core/src/vocab.rs differ"
     );
     // The CLI prints the same.
     let cli = Command::new(env!("CARGO_BIN_EXE_rendiff"))

@@ -37,7 +37,7 @@ except ImportError:
 
 # The harness's EXR writer (float32 Z and N, exact uint32 ids); any OpenEXR writer will do.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from rendiff_harness import exrbuf  # noqa: E402
+from rendiff_harness.contract import exrbuf  # noqa: E402
 
 BACKGROUND = 0xFFFFFFFF
 

@@ -6,7 +6,7 @@ one JSON line on stdout for results, messages on stderr, and exit codes
 3 = skipped (the backend cannot model a feature the scene requires; with
 `render --visibility-only`, only a missing visibility feature skips, a missing
 shading feature drops RGB alone: registry.plan; or a renderer declared by a command
-exited 3, command_renderers.py). Renderers declared in the file RENDIFF_RENDERERS names
+exited 3, renderers/command.py). Renderers declared in the file RENDIFF_RENDERERS names
 are listed and run like the built-in backends; a malformed file fails every command.
 Expected failures print one line naming the backend and the problem, never a
 traceback; a traceback means a bug in rendiff.
@@ -30,9 +30,10 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import command_renderers, exrbuf, registry, resolved, vocab
-from .errors import BackendError, BackendSkipped
-from .text import printable
+from .contract import exrbuf, resolved, vocab
+from .contract.text import printable
+from .renderers import command, registry
+from .renderers.errors import BackendError, BackendSkipped
 
 EXIT_OK, EXIT_ERROR = 0, 2
 EXIT_SKIPPED = vocab.EXIT_SKIPPED
@@ -54,16 +55,14 @@ def _describe(backend: registry.Backend) -> dict[str, Any]:
             reason = str(exc)
     return {
         "name": backend.name,
-        "module": backend.module_name,
+        "module": backend.key,
         "version": version,
         "features": sorted(backend.features),
         "buffers": sorted(backend.buffers),
         "peak_memory": list(backend.peak_memory),
         "available": reason is None,
         "reason": reason,
-        "declared_in": str(backend.module.spec.source)
-        if isinstance(backend.module, command_renderers.CommandBackend)
-        else None,
+        "declared_in": str(backend.declared_in) if backend.declared_in is not None else None,
     }
 
 
@@ -179,33 +178,29 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    """Delegates to compare.py (owned by the comparison work); absent until it lands."""
-    try:
-        from .compare import main as compare_main
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__package__}.compare":
-            raise
-        return _fail("compare not available yet (rendiff_harness/compare.py is missing)")
+    """Delegates to compare.py (a run's buffers -> results.json), which owns its options."""
+    from .compare import main as compare_main
+
     return int(compare_main(list(args.rest)) or 0)
 
 
 def cmd_reference(args: argparse.Namespace) -> int:
-    """Delegates to references.py (cached Mitsuba references), which owns its options."""
-    from .references import main as reference_main
+    """Delegates to renderers/mitsuba/reference.py (cached Mitsuba references), which owns its options."""
+    from .renderers.mitsuba.reference import main as reference_main
 
     return int(reference_main(list(args.rest)) or 0)
 
 
 def cmd_metamorphic(args: argparse.Namespace) -> int:
-    """Delegates to metamorphic.py (relations per backend), which owns its options."""
-    from .metamorphic import main as metamorphic_main
+    """Delegates to judge/metamorphic.py (relations per backend), which owns its options."""
+    from .judge.metamorphic import main as metamorphic_main
 
-    return int(metamorphic_main(list(args.rest)) or 0)
+    return int(metamorphic_main(list(args.rest), registry.spec) or 0)
 
 
 def cmd_expectations(args: argparse.Namespace) -> int:
     """Load and validate an expectations file as the comparison will; silent when it is valid."""
-    from . import expectations
+    from .judge import expectations
 
     try:
         expectations.load(args.file)
@@ -216,7 +211,7 @@ def cmd_expectations(args: argparse.Namespace) -> int:
 
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
-    from .worker import serve
+    from .renderers.worker import serve
 
     return serve(main)
 
@@ -346,13 +341,17 @@ def build_parser() -> argparse.ArgumentParser:
         "it is valid, else one line naming the file and the problem, exit 2",
     )
     p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
-    p_compare = sub.add_parser("compare", help="compare buffer EXRs (see compare.py)", add_help=False)
+    p_compare = sub.add_parser(
+        "compare", help="compare a check run's buffers, write RUN/results.json (see compare.py)", add_help=False
+    )
     p_compare.add_argument("rest", nargs=argparse.REMAINDER)
-    p_ref = sub.add_parser("reference", help="render a cached Mitsuba reference (see references.py)", add_help=False)
+    p_ref = sub.add_parser(
+        "reference", help="render a cached Mitsuba reference (see renderers/mitsuba/reference.py)", add_help=False
+    )
     p_ref.add_argument("rest", nargs=argparse.REMAINDER)
     p_meta = sub.add_parser(
         "metamorphic",
-        help="compare variant renders with base renders per backend (see metamorphic.py)",
+        help="compare variant renders with base renders per backend (see judge/metamorphic.py)",
         add_help=False,
     )
     p_meta.add_argument("rest", nargs=argparse.REMAINDER)
@@ -363,8 +362,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         # Renderers declared in RENDIFF_RENDERERS: a malformed file fails every command clearly.
-        command_renderers.from_env()
-    except command_renderers.RenderersError as exc:
+        command.from_env(registry.RESERVED_NAMES)
+    except command.RenderersError as exc:
         return _fail(str(exc))
     if argv[:1] == ["compare"]:
         # compare.py owns its own options; argparse.REMAINDER would reject "--run".

@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fixtures import write_scene
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract.resolved import ResolvedScene
 
 BACKGROUND_ID = 0xFFFFFFFF
 

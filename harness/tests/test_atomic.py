@@ -9,7 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rendiff_harness import atomic, compare, diffimages, exrbuf, references
+from rendiff_harness import compare
+from rendiff_harness.contract import atomic, exrbuf
+from rendiff_harness.judge import diffimages
+from rendiff_harness.renderers.mitsuba import reference as mitsuba_reference
 
 
 def _names(directory: Path) -> list[str]:
@@ -117,7 +120,7 @@ def test_results_json_temp_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
 
 def test_reference_provenance_temp_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     seen = _temp_names(monkeypatch)
-    references._write_json_atomically(tmp_path / "ref.json", {"spp": 4})
+    mitsuba_reference._write_json_atomically(tmp_path / "ref.json", {"spp": 4})
     assert (tmp_path / "ref.json").read_text(encoding="utf-8") == '{\n "spp": 4\n}\n'
     assert seen[0].startswith(".ref.json.") and seen[0].endswith(".tmp")
 

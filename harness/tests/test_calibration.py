@@ -18,14 +18,15 @@ import numpy as np
 import pytest
 
 import fixtures
-from rendiff_harness import calibration as cal
-from rendiff_harness import exrbuf, resolved
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.contract.resolved import ResolvedScene
+from rendiff_harness.judge import calibration as cal
+from rendiff_harness.renderers import registry
 
 REPO = Path(__file__).resolve().parents[2]
 PROBES = REPO / "scenes" / "calibration"
 PROBE_NAMES = ("camera_near", "camera_far")
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 
 def probe_scene(directory: Path, name: str = "camera_near") -> ResolvedScene:
@@ -92,7 +93,7 @@ def cast(scene: ResolvedScene, g: np.ndarray | None = None, radial: bool = False
 
 def measure(scene: ResolvedScene, g: np.ndarray | None = None, **kw: Any) -> cal.Calibration:
     z, prim = cast(scene, g, **kw)
-    return cal.measure(scene, "raster", z, prim)
+    return cal.measure(scene, "raster", z, prim, specs=registry.spec)
 
 
 def pixel(scene: ResolvedScene) -> float:
@@ -230,20 +231,20 @@ def test_nothing_seen_is_an_error(near: ResolvedScene) -> None:
     z = np.full((cam.height, cam.width), np.inf, dtype=np.float32)
     prim = np.full(z.shape, BG, dtype=np.uint32)
     with pytest.raises(cal.CalibrationError, match="saw \\(almost\\) none of the probe"):
-        cal.measure(near, "raster", z, prim)
+        cal.measure(near, "raster", z, prim, specs=registry.spec)
 
 
 def test_backend_models_give_finite_bounds(near: ResolvedScene) -> None:
     z, prim = cast(near)
     info = {"near_clip": near.camera.near, "znear": 2.0, "zfar": 10.0, "depth_step": 1e-9}
     for backend in ("raster", "trace", "embree", "embree_robust", "povray", "pyrender", "mitsuba", "unknown"):
-        m = cal.measure(near, backend, z, prim, info=info)
+        m = cal.measure(near, backend, z, prim, info=info, specs=registry.spec)
         assert m.status == "pass", (backend, m.reason)
         assert m.bound_px is not None and 0 < m.bound_px < 0.01, backend
         assert backend in m.bound_text
-    assert "no camera precision model" in cal.measure(near, "unknown", z, prim).bound_text
+    assert "no camera precision model" in cal.measure(near, "unknown", z, prim, specs=registry.spec).bound_text
     with pytest.raises(cal.CalibrationError, match="GL planes"):
-        cal.measure(near, "pyrender", z, prim)
+        cal.measure(near, "pyrender", z, prim, specs=registry.spec)
 
 
 # --------------------------------------------------------------------------- a run folder
@@ -307,7 +308,7 @@ def test_calibrate_run_entries_and_summary(near: ResolvedScene, tmp_path: Path) 
     manifest = _write_run(
         run, near, {"raster": cast(near), "mitsuba": cast(near, shifted), "povray": "missing features: x"}
     )
-    report = cal.calibrate_run(run, manifest)
+    report = cal.calibrate_run(run, manifest, registry.spec)
     by = {e["backend"]: e for e in report.entries}
     assert set(by) == {"raster", "mitsuba", "povray"}
     for e in report.entries:
@@ -332,8 +333,8 @@ def test_calibrate_run_entries_and_summary(near: ResolvedScene, tmp_path: Path) 
     assert s["status"] == "fail" and s["probes"] == ["camera_near"] and s["bound_px"] > 0
     assert s["offset_x_px"] == pytest.approx(0.25, abs=1e-5)
     # explicit names instead of roles; an unknown name selects nothing
-    assert len(cal.calibrate_run(run, manifest, ["camera_near"]).entries) == 3
-    assert cal.calibrate_run(run, manifest, ["nope"]).entries == []
+    assert len(cal.calibrate_run(run, manifest, registry.spec, ["camera_near"]).entries) == 3
+    assert cal.calibrate_run(run, manifest, registry.spec, ["nope"]).entries == []
 
 
 def test_summary_shows_a_failing_probe_else_the_tightest_bound() -> None:
@@ -372,7 +373,7 @@ def test_every_available_backend_passes_on_the_committed_probes(tmp_path: Path) 
     # A failure, not a skip: a skip here once hid a rendiff change that refused this command.
     assert manifest_path.is_file(), f"rendiff check wrote no manifest (rebuild it?): {proc.stderr[-300:]}"
     manifest = json.loads(manifest_path.read_text())
-    report = cal.calibrate_run(run, manifest, PROBE_NAMES)
+    report = cal.calibrate_run(run, manifest, registry.spec, PROBE_NAMES)
     rendered = {(r["backend"], sc["scene"]) for sc in manifest["scenes"] for r in sc["renders"] if r["status"] == "ok"}
     measured = {(m.backend, m.scene) for m in report.measurements if m.status in ("pass", "fail")}
     assert measured == rendered

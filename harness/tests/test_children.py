@@ -12,8 +12,8 @@ from typing import Any, cast
 
 import pytest
 
-from rendiff_harness.backends import povray
-from rendiff_harness.children import die_with_parent
+from rendiff_harness.renderers.children import die_with_parent
+from rendiff_harness.renderers.povray import backend as povray
 
 HARNESS = Path(__file__).resolve().parents[1]
 
@@ -36,7 +36,7 @@ def _gone(pid: int, limit_s: float) -> bool:
 def test_a_child_dies_when_the_harness_is_killed() -> None:
     script = (
         "import subprocess\n"
-        "from rendiff_harness.children import die_with_parent\n"
+        "from rendiff_harness.renderers.children import die_with_parent\n"
         "p = subprocess.Popen(['sleep', '600'], preexec_fn=die_with_parent)\n"
         "print(p.pid, flush=True)\n"
         "p.wait()\n"

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from fixtures import write_scene
-from rendiff_harness import classify, resolved
-from rendiff_harness.resolved import Camera
+from rendiff_harness.contract import resolved, vocab
+from rendiff_harness.contract.camera import Camera
+from rendiff_harness.judge import geometry as classify
 
 # Camera of every test here: eye (0, 0, 5) looking down -z, vfov 90 (tan_half = 1), W = H = 16.
 # For a point at planar depth z: px = (x/z + 1) * 8, py = (1 - y/z) * 8.
@@ -149,7 +150,7 @@ def test_triangle_behind_the_eye_or_beyond_far_is_infinitely_far(tmp_path: Path)
 def test_prim_distances_ignore_background_and_unknown_ids(tmp_path: Path) -> None:
     d = write_scene(tmp_path / "s", [TRI], width=16, height=16, vfov_deg=90.0)
     scene = resolved.load(d)
-    bg = classify.BACKGROUND_ID
+    bg = vocab.BACKGROUND_ID
     rows, cols = np.array([7, 7, 7, 7]), np.array([8, 8, 8, 8])
     ref = np.array([0, bg, bg, 5], dtype=np.uint32)
     test = np.array([bg, 0, bg, bg], dtype=np.uint32)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -9,9 +10,10 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import exrbuf, registry
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.backends import povray
+from rendiff_harness.contract import exrbuf
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.povray import backend as povray
 
 
 def test_info_lists_radiance_features(capsys: pytest.CaptureFixture[str]) -> None:
@@ -29,8 +31,9 @@ def test_options_reach_only_backends_that_accept_them(monkeypatch: pytest.Monkey
         seen["called"] = True
         return {}
 
-    backend = registry.load("povray")
-    monkeypatch.setattr(backend.module, "render", fake_render)
+    loaded = registry.load("povray")
+    assert loaded.spec is not None
+    backend = dataclasses.replace(loaded, spec=dataclasses.replace(loaded.spec, render=fake_render))
     backend.render(None, tmp_path / "x.exr", tmp_path, 1.0, spp=16, seed=3)  # type: ignore[arg-type]
     assert seen == {"called": True}
 

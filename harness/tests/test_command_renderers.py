@@ -24,15 +24,18 @@ import pytest
 import backend_cases as cases
 import fixtures
 from fixtures import cli, write_scene
-from rendiff_harness import calibration, command_renderers, compare, exrbuf, registry, resolved, tolerance
-from rendiff_harness.command_renderers import ENV_VAR, RenderersError
-from rendiff_harness.errors import BackendError, BackendSkipped
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.judge import calibration, camera_budget, precision, tolerance
+from rendiff_harness.renderers import command as command_renderers
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.command import ENV_VAR, RenderersError
+from rendiff_harness.renderers.errors import BackendError, BackendSkipped
 
 HARNESS = Path(__file__).resolve().parents[1]
 RENDIFF = fixtures.rendiff_binary()
 NOT_BUILT = "rendiff binary not built (cargo build --release -p rendiff; scripts/test.sh does)"
 PY = json.dumps(sys.executable)
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # The quads of test_compare.py: two quads share the edge x = 5/32, whose projection is
 # exactly the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).
@@ -119,7 +122,7 @@ edge_px = 0.004
 depth_relative = 1e-6
 """,
     )
-    (r,) = command_renderers.load(path)
+    (r,) = command_renderers.load(path, registry.RESERVED_NAMES)
     assert r.name == "myrender" and r.source == path and r.index == 0
     assert r.command[0] == "./bin/myrender" and r.version_command == ("./bin/myrender", "--version")
     assert r.features == {"depth", "ids"} and r.buffers == {"Z", "id"} and r.timeout_s == 60.0
@@ -178,7 +181,7 @@ GOOD = entry("good", ["/bin/true", "{out}"])
 def test_a_malformed_file_is_one_line_naming_the_file_and_entry(tmp_path: Path, text: str, expected: str) -> None:
     path = declare(tmp_path, text)
     with pytest.raises(RenderersError) as err:
-        command_renderers.load(path)
+        command_renderers.load(path, registry.RESERVED_NAMES)
     message = str(err.value)
     assert message.startswith(f"{path}: ") and "\n" not in message, message
     assert expected in message, message
@@ -215,16 +218,17 @@ def test_a_renderers_file_is_a_regular_file_within_the_limit(tmp_path: Path, mon
 
 
 def test_reserved_names_cover_every_built_in_backend() -> None:
-    builtin = {b.name for b in registry.all_backends()} | set(registry.BACKEND_MODULES)
-    core = set(tolerance.MODELS) | set(calibration.MODELS) | {compare.CACHED_REFERENCE_BACKEND}
-    assert builtin | core <= command_renderers.RESERVED_NAMES
+    builtin = {b.name for b in registry.all_backends()} | set(registry.BUILT_IN)
+    core = {name for name in ("raster", "trace", "embree", "embree_robust") if registry.spec(name) is not None}
+    assert core == {"raster", "trace", "embree", "embree_robust"}
+    assert builtin | core | {vocab.CACHED_REFERENCE_BACKEND} <= registry.RESERVED_NAMES
 
 
 def test_loading_imports_no_heavy_module(tmp_path: Path) -> None:
     path = declare(tmp_path, GOOD)
     code = (
-        "import sys\nfrom rendiff_harness import command_renderers as c\n"
-        f"assert c.load({str(path)!r})[0].name == 'good'\n"
+        "import sys\nfrom rendiff_harness.renderers import command as c\n"
+        f"assert c.load({str(path)!r}, ('povray',))[0].name == 'good'\n"
         "print(sorted(m for m in ('numpy', 'OpenImageIO', 'mitsuba', 'pyrender') if m in sys.modules))\n"
     )
     env = dict(os.environ, PYTHONPATH=str(HARNESS))
@@ -357,18 +361,20 @@ def test_declared_precision_reaches_every_model(tmp_path: Path, monkeypatch: pyt
         "rgb_absolute = 0.002\n",
     )
     monkeypatch.setenv(ENV_VAR, str(path))
-    model = tolerance.model_for("full")
+    full = registry.spec("full")
+    model = precision.depth_model(full, "full")
     assert model.known and model.edge_px == 0.01 and str(path) in model.edge_reason
     ctx = tolerance.DepthContext(z_ref=np.array([2.0, 2.0]), cos=np.array([1.0, 0.01]), info={}, attrs={})
     tol, text = model.depth(ctx)
     assert np.allclose(tol, [1e-7 + 2e-5, 1e-7 + 2e-3]) and str(path) in text and "/|cos|" in text
-    angle, ntext = tolerance.normal_tolerance("full", np.array([1.0, 50.0]))
+    angle, ntext = precision.normal_tolerance(full, np.array([1.0, 50.0]))
     assert np.array_equal(angle, [3e-6, 3e-6]) and str(path) in ntext
-    rgb = tolerance.rgb_model("full", np.zeros((2, 2, 3)), {}, {})
+    rgb = precision.rgb_tolerance(full, "full", np.zeros((2, 2, 3)), {}, {})
     assert (rgb.abs_tol, rgb.rel) == (0.002, 1e-4) and str(path) in rgb.text
-    cal, known = calibration.model_for("full")
-    assert known and cal is not calibration.core_model
-    assert tolerance.model_for("undeclared").known is False  # unknown names stay strict
+    cal, known = precision.camera_model(full)
+    assert known and cal is not camera_budget.core_camera
+    assert registry.spec("undeclared") is None
+    assert precision.depth_model(None, "undeclared").known is False  # unknown names stay strict
 
 
 def test_scene_path_with_spaces_and_shell_characters_arrives_as_one_argument(
@@ -740,7 +746,7 @@ def _use_examples(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_the_worked_example_renders_the_fixture_and_passes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _use_examples(monkeypatch)
-    (tiny,) = command_renderers.from_env()
+    (tiny,) = command_renderers.from_env(registry.RESERVED_NAMES)
     assert tiny.name == "tiny" and tiny.precision.depth_relative == 1.2e-7
     run = tmp_path / "run"
     sdir, ref = quads(run / "scenes/quads/resolved")
@@ -798,8 +804,8 @@ def test_calibration_judges_a_declared_renderer_at_its_declared_precision(
     g = np.eye(3)
     g[1, 0] = 0.004 * probes.pixel(scene)  # samples 0.004 px right of the centers
     z, prim = probes.cast(scene, g)
-    coarse = calibration.measure(scene, "coarse", z, prim)
+    coarse = calibration.measure(scene, "coarse", z, prim, specs=registry.spec)
     assert coarse.status == "pass", coarse.reason
     assert str(path) in coarse.bound_text and coarse.bound_px is not None and coarse.bound_px > 0.004
-    fine = calibration.measure(scene, "fine", z, prim)
+    fine = calibration.measure(scene, "fine", z, prim, specs=registry.spec)
     assert fine.status == "fail" and "pixel centers offset by (0.004" in fine.reason, fine.reason

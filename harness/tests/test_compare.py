@@ -12,10 +12,13 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import compare, diffimages, exrbuf, resolved, tolerance
+from rendiff_harness import compare
 from rendiff_harness.__main__ import main as harness_main
+from rendiff_harness.contract import exrbuf, resolved, results, vocab
+from rendiff_harness.judge import diffimages, precision, tolerance
+from rendiff_harness.renderers import registry
 
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
 # px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
@@ -271,7 +274,7 @@ def test_skipped_and_error_pass_through(compared: Any) -> None:
         assert e["time_s"] == 600.0 and e["command"] == "rendiff render --backend embree_robust"
         assert e["images"] == {}
         for r in (s, e):  # not compared: null, never "0 mismatches"
-            assert all(r[k] is None for k in compare.NUMERIC_FIELDS)
+            assert all(r[k] is None for k in results.NUMERIC_FIELDS)
 
 
 def test_missing_reference_makes_every_entry_an_error(compared: Any) -> None:
@@ -514,18 +517,18 @@ def _ctx(
 
 
 def test_relative_models_scale_with_grazing_angle_and_cap() -> None:
-    m = tolerance.model_for("mitsuba")
+    m = precision.depth_model(registry.spec("mitsuba"), "mitsuba")
     facing, _ = m.depth(_ctx(10.0, 1.0))
     grazing, _ = m.depth(_ctx(10.0, 0.1))
     edge_on, _ = m.depth(_ctx(10.0, 0.0))
     assert facing[0] == pytest.approx(1e-4)
     assert grazing[0] == pytest.approx(1e-3)
     assert edge_on[0] == pytest.approx(10.0 * tolerance.MAX_REL)
-    assert tolerance.model_for("embree").depth(_ctx(10.0, 0.5))[0][0] == pytest.approx(2e-4)
+    assert precision.depth_model(registry.spec("embree"), "embree").depth(_ctx(10.0, 0.5))[0][0] == pytest.approx(2e-4)
 
 
 def test_povray_depth_step_sources() -> None:
-    m = tolerance.model_for("povray")
+    m = precision.depth_model(registry.spec("povray"), "povray")
     # Without a hit point, |X| defaults to Z = 2: plane 2^-24 * 3 * 2, storage 2^-23 * 2.
     rest = 10 * 2.0**-24
     tol, text = m.depth(_ctx(2.0, 1.0, attrs={"depth_step": 1e-7}))
@@ -537,7 +540,7 @@ def test_povray_depth_step_sources() -> None:
 
 
 def test_povray_depth_grows_with_distance_from_the_origin_not_depth() -> None:
-    m = tolerance.model_for("povray")
+    m = precision.depth_model(registry.spec("povray"), "povray")
     near = tolerance.DepthContext(
         np.array([2.0]), np.array([1.0]), {}, {"depth_step": 0.0}, point_norm=np.array([3.0]), extent=np.array([0.5])
     )
@@ -552,12 +555,12 @@ def test_povray_depth_grows_with_distance_from_the_origin_not_depth() -> None:
 
 
 def test_edge_tolerances() -> None:
-    assert tolerance.model_for("trace").edge_px == 0.0
-    assert tolerance.model_for("povray").edge_px == 1e-3
-    assert tolerance.model_for("pyrender").edge_px == pytest.approx(math.sqrt(2) / 512)
-    assert tolerance.model_for("mitsuba").edge_px == 1e-4
-    assert tolerance.model_for("embree_robust").edge_px == 1e-4
-    unknown = tolerance.model_for("zzz")
+    assert precision.depth_model(registry.spec("trace"), "trace").edge_px == 0.0
+    assert precision.depth_model(registry.spec("povray"), "povray").edge_px == 1e-3
+    assert precision.depth_model(registry.spec("pyrender"), "pyrender").edge_px == pytest.approx(math.sqrt(2) / 512)
+    assert precision.depth_model(registry.spec("mitsuba"), "mitsuba").edge_px == 1e-4
+    assert precision.depth_model(registry.spec("embree_robust"), "embree_robust").edge_px == 1e-4
+    unknown = precision.depth_model(registry.spec("zzz"), "zzz")
     assert unknown.edge_px == 0.0 and not unknown.known
     assert unknown.depth(_ctx(1.0, 1.0))[0][0] == 0.0
 
@@ -675,7 +678,7 @@ def test_scenes_compared_in_processes_give_the_same_results(tmp_path: Path) -> N
 
 
 def test_the_verdict_table_puts_failures_first_and_escapes_reasons() -> None:
-    from rendiff_harness import results
+    from rendiff_harness.contract import results
 
     def row(scene: str, status: str, reason: str = "") -> dict[str, Any]:
         return {"scene": scene, "backend": "b", "buffer": "id", "status": status, "reason": reason}

@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import compare, expectations, exrbuf, references, resolved
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.backends import pyrender_backend as pb
+from rendiff_harness import compare
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.judge import expectations
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.mitsuba import reference as mitsuba_reference
+from rendiff_harness.renderers.pyrender import backend as pb
 
 LIGHTS = [{"kind": "point", "position": [0.3, 0.2, 1.5], "intensity": [10.0, 5.0, 2.0]}]
 LIT_REQ = ("depth", "ids", "lambert", "point_light", "shadowless", "two_sided")
@@ -205,7 +208,7 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
     scene = resolved.load(sd)
     refs = tmp_path / "refs"
     refs.mkdir()
-    references.generate(sd, refs / "box.exr", spp=256, seed=1)
+    mitsuba_reference.generate(sd, refs / "box.exr", spp=256, seed=1)
     rgb, var, info = mb.render_radiance(scene, spp=64, seed=2)  # stands in for the core's path tracer
     aov, _ = mb.render_arrays(scene)
     exr = _exr(
@@ -222,16 +225,16 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
         [{"scene": "box", "resolved": "scenes/box/resolved", "requires": sorted(scene.requires), "renders": renders}],
     )
     res = _index(compare.run_compare(run, None, references_dir=refs))
-    e = res[("box", compare.CACHED_REFERENCE_BACKEND, "RGB")]
+    e = res[("box", vocab.CACHED_REFERENCE_BACKEND, "RGB")]
     assert e["status"] == "pass" and e["mode"] == "statistical" and e["version"].startswith("mitsuba 3.9.1")
     assert "python -m rendiff_harness reference" in e["command"]
     # without --references: no such entry
-    assert ("box", compare.CACHED_REFERENCE_BACKEND, "RGB") not in _index(compare.run_compare(run, None))
+    assert ("box", vocab.CACHED_REFERENCE_BACKEND, "RGB") not in _index(compare.run_compare(run, None))
     # stale: the run's scene changed
     meta = json.loads((sd / "scene.json").read_text())
     meta["materials"][3]["emission"] = [18.0, 12.0, 4.0]
     (sd / "scene.json").write_text(json.dumps(meta))
-    e = _index(compare.run_compare(run, None, references_dir=refs))[("box", compare.CACHED_REFERENCE_BACKEND, "RGB")]
+    e = _index(compare.run_compare(run, None, references_dir=refs))[("box", vocab.CACHED_REFERENCE_BACKEND, "RGB")]
     assert (
         e["status"] == "error"
         and "reference is stale: regenerate with python -m rendiff_harness reference" in e["reason"]
@@ -240,7 +243,7 @@ def test_cached_reference_entries(tmp_path: Path) -> None:
     # missing
     shutil.rmtree(refs)
     refs.mkdir()
-    e = _index(compare.run_compare(run, None, references_dir=refs))[("box", compare.CACHED_REFERENCE_BACKEND, "RGB")]
+    e = _index(compare.run_compare(run, None, references_dir=refs))[("box", vocab.CACHED_REFERENCE_BACKEND, "RGB")]
     assert e["status"] == "error" and "cached reference missing: generate it with" in e["reason"]
 
 

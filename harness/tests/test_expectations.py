@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rendiff_harness import expectations as ex
+from rendiff_harness.judge import expectations as ex
 
 REPO = Path(__file__).resolve().parents[2]
 

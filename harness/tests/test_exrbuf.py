@@ -9,8 +9,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from rendiff_harness import exrbuf
-from rendiff_harness.exrbuf import BufferError
+from rendiff_harness.contract import exrbuf, vocab
+from rendiff_harness.contract.exrbuf import BufferError
 
 DATA = Path(__file__).parent / "data"
 EDGE_IDS = [0, 1, 2**24 - 1, 2**24, 2**24 + 1, 2**31 - 1, 2**31, 2**31 + 1, 2**32 - 2, 2**32 - 1]
@@ -55,7 +55,7 @@ def test_zip_compresses_typical_buffers(tmp_path: Path) -> None:
     h, w = 120, 160
     z = np.full((h, w), np.inf, np.float32)
     z[20:80, 40:120] = 5.0
-    prim = np.where(np.isfinite(z), 7, exrbuf.BACKGROUND_ID).astype(np.uint32)
+    prim = np.where(np.isfinite(z), 7, vocab.BACKGROUND_ID).astype(np.uint32)
     raw, zipped = tmp_path / "raw.exr", tmp_path / "zip.exr"
     exrbuf.write_buffers(raw, Z=z, prim=prim, compression="none")
     exrbuf.write_buffers(zipped, Z=z, prim=prim, compression="zip")

@@ -23,9 +23,14 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import command_renderers, compare, expectations, exrbuf, references, resolved
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.userfile import UserFileError
+from rendiff_harness import compare
+from rendiff_harness.contract import exrbuf, references, resolved, vocab
+from rendiff_harness.contract.userfile import UserFileError
+from rendiff_harness.judge import expectations
+from rendiff_harness.renderers import command as command_renderers
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.mitsuba import reference as mitsuba_reference
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent
@@ -71,7 +76,8 @@ def _refs(tmp_path: Path) -> tuple[Path, Path]:
 
 LOAD = """
 import sys
-from rendiff_harness import references, resolved
+from rendiff_harness.contract import references
+from rendiff_harness.contract import resolved
 print(references.regenerate_command(sys.argv[1], sys.argv[2]))
 try:
     references.load(sys.argv[2], resolved.load(sys.argv[1]))
@@ -154,7 +160,7 @@ def test_generate_refuses_a_reference_load_would_refuse(tmp_path: Path, monkeypa
     scene_dir = cases.cornell(tmp_path / "scene", width=8, height=8)
     monkeypatch.setattr(references, "MAX_EXR_BYTES", 100, raising=False)
     with pytest.raises(references.ReferenceError, match="the written reference is larger than 100 bytes"):
-        references.generate(scene_dir, tmp_path / "box.exr", spp=2, seed=0)
+        mitsuba_reference.generate(scene_dir, tmp_path / "box.exr", spp=2, seed=0)
 
 
 def test_deeply_nested_provenance_is_one_error(tmp_path: Path) -> None:
@@ -220,7 +226,7 @@ def test_bad_reference_is_that_scenes_error_entry(tmp_path: Path) -> None:
     (refs / "box.json").write_text(DEEP_JSON)
     doc = compare.run_compare(run, None, images=False, references_dir=refs)
     entry = {(r["scene"], r["backend"], r["buffer"]): r for r in doc["results"]}[
-        ("box", compare.CACHED_REFERENCE_BACKEND, "RGB")
+        ("box", vocab.CACHED_REFERENCE_BACKEND, "RGB")
     ]
     assert entry["status"] == "error"
     assert entry["reason"].startswith(f"{refs / 'box.json'}: cached reference corrupt (provenance unreadable")
@@ -339,7 +345,7 @@ def test_bad_renderers_files_are_one_line(tmp_path: Path, text: str, needle: str
     path = tmp_path / "renderers.toml"
     path.write_text(text)
     with pytest.raises(command_renderers.RenderersError) as info:
-        command_renderers.load(path)
+        command_renderers.load(path, registry.RESERVED_NAMES)
     msg = str(info.value)
     assert msg.startswith(f"{path}: ") and needle in msg and "\n" not in msg, msg
 
@@ -353,4 +359,4 @@ def test_renderer_number_too_large_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(
         command_renderers.RenderersError, match="timeout_s must be a finite number >= 0, got an integer of 20000 bits"
     ):
-        command_renderers.load(path)
+        command_renderers.load(path, registry.RESERVED_NAMES)

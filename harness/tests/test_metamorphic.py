@@ -11,10 +11,12 @@ import pytest
 
 import backend_cases as cases
 from fixtures import write_scene
-from rendiff_harness import exrbuf, metamorphic, resolved
 from rendiff_harness.__main__ import main as harness_main
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.judge import metamorphic
+from rendiff_harness.renderers import registry
 
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # vfov 90, 32x32, eye (0, 0, 5) looking at -z: at world z = 0, px = (x/5 + 1) * 16, so the
 # vertical line x = X projects to px = 16.5, through the centers of column 16.
@@ -91,7 +93,7 @@ class Run:
         )
         spec = self.root / "spec.json"
         spec.write_text(json.dumps({"format": metamorphic.SPEC_FORMAT, "cases": self.cases}))
-        doc = metamorphic.run_metamorphic(self.root, spec, expectations, self.root / "metamorphic.json")
+        doc = metamorphic.run_metamorphic(self.root, spec, expectations, self.root / "metamorphic.json", registry.spec)
         return {(r["relation"], r["backend"], r["buffer"]): r for r in doc["results"]}
 
 

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import exrbuf, resolved
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.errors import BackendError, BackendUnavailable
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.contract.resolved import ResolvedScene
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.errors import BackendError, BackendUnavailable
+from rendiff_harness.renderers.mitsuba import backend as mb
 
 REASON = mb.unavailable_reason()
 needs_mitsuba = pytest.mark.skipif(REASON is not None, reason=f"mitsuba backend unavailable: {REASON}")
@@ -254,17 +255,17 @@ def test_to_world_is_the_float64_basis_rounded_once(tmp_path: Path, probe: str) 
 def test_far_probe_calibrates_and_the_old_look_at_does_not(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """2.5e4 from the origin, the float64 to_world keeps Mitsuba's camera within its f32 rounding;
     the float32 look_at turned it by ~5e-4 rad (0.036 px): a convention error, named as such."""
-    from rendiff_harness import calibration
+    from rendiff_harness.judge import calibration
     from test_calibration import probe_scene
 
     scene = probe_scene(tmp_path / "far", "camera_far")
     buf, info = mb.render_arrays(scene)
-    now = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info)
+    now = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info, specs=registry.spec)
     assert now.status == "pass", now.reason
     assert now.max_shift_px is not None and now.max_shift_px < 1e-4
     monkeypatch.setattr(mb, "sensor_to_world", _old_look_at)
     buf, info = mb.render_arrays(scene)
-    before = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info)
+    before = calibration.measure(scene, mb.NAME, buf["Z"], buf["prim"], info=info, specs=registry.spec)
     assert before.status == "fail"
     assert before.reason.startswith("convention error in the mitsuba exporter: camera turned by (")
     assert before.max_shift_px is not None and before.max_shift_px > 0.01
@@ -274,7 +275,7 @@ def test_clip_ranges_float32_cannot_hold_are_clamped_or_declined(tmp_path: Path)
     # Mitsuba keeps clip distances in float32: a far of 1e308 overflowed to inf and rendered a
     # blank image reported as ok; a near of 1e-300 was rejected as an error.
     from fixtures import write_scene
-    from rendiff_harness.errors import BackendSkipped
+    from rendiff_harness.renderers.errors import BackendSkipped
 
     tri = [[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]]
     far = resolved.load(write_scene(tmp_path / "far", tri, far=1e308))

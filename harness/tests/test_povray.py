@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 import fixtures
-from rendiff_harness import exrbuf, resolved
-from rendiff_harness.backends import povray
-from rendiff_harness.errors import BackendError, BackendUnavailable
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.contract.resolved import ResolvedScene
+from rendiff_harness.renderers.errors import BackendError, BackendUnavailable
+from rendiff_harness.renderers.povray import backend as povray
 
 HAVE_POVRAY = shutil.which("povray") is not None
 needs_povray = pytest.mark.skipif(not HAVE_POVRAY, reason="povray binary not on PATH (apt-get install povray)")
-BG = exrbuf.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 
 # --------------------------------------------------------------------------- float64 reference

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import exrbuf, resolved
-from rendiff_harness.backends import pyrender_backend as pb
-from rendiff_harness.errors import BackendError
-from rendiff_harness.resolved import ResolvedScene
+from rendiff_harness.contract import exrbuf, resolved
+from rendiff_harness.contract.resolved import ResolvedScene
+from rendiff_harness.renderers.errors import BackendError
+from rendiff_harness.renderers.pyrender import backend as pb
 
 REASON = pb.unavailable_reason()
 pytestmark = pytest.mark.skipif(REASON is not None, reason=f"pyrender backend unavailable: {REASON}")

@@ -12,11 +12,11 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness import __main__ as cli
-from rendiff_harness import exrbuf
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.backends import povray
-from rendiff_harness.backends import pyrender_backend as pr
-from rendiff_harness.errors import BackendError
+from rendiff_harness.contract import exrbuf
+from rendiff_harness.renderers.errors import BackendError
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.povray import backend as povray
+from rendiff_harness.renderers.pyrender import backend as pr
 
 needs_povray = pytest.mark.skipif(povray.unavailable_reason() is not None, reason=f"{povray.unavailable_reason()}")
 needs_mitsuba = pytest.mark.skipif(mb.unavailable_reason() is not None, reason=f"{mb.unavailable_reason()}")

@@ -12,9 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from rendiff_harness import lighting, radiance, resolved, tolerance
-from rendiff_harness.backends import povray
-from rendiff_harness.backends import pyrender_backend as pb
+from rendiff_harness.contract import lighting, resolved
+from rendiff_harness.judge import precision, radiance, tolerance
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.povray import backend as povray
+from rendiff_harness.renderers.pyrender import backend as pb
 
 H, W = 32, 32
 N_SPP = 64
@@ -195,12 +197,16 @@ def test_shadow_edge_callback_moves_failures_to_edge() -> None:
 
 def test_povray_tolerance_is_half_a_code_of_each_pass() -> None:
     ref = np.full((2, 2, 3), 0.3)
-    tol = tolerance.rgb_model("povray", ref, {"rgb_scale": 2.0, "emission_scale": "1.0"}, {})
+    tol = precision.rgb_tolerance(
+        registry.spec("povray"), "povray", ref, {"rgb_scale": 2.0, "emission_scale": "1.0"}, {}
+    )
     assert tol.abs_tol == pytest.approx(3.0 / 65535 / 2) and tol.rel == povray.POVRAY_RGB_REL
     with pytest.raises(tolerance.ToleranceError):
-        tolerance.rgb_model("povray", ref, {}, {})
+        precision.rgb_tolerance(registry.spec("povray"), "povray", ref, {}, {})
     # info from the manifest works too (nested under "radiance" as the backend returns it)
-    tol2 = tolerance.rgb_model("povray", ref, {}, {"radiance": {"rgb_scale": 2.0, "emission_scale": 1.0}})
+    tol2 = precision.rgb_tolerance(
+        registry.spec("povray"), "povray", ref, {}, {"radiance": {"rgb_scale": 2.0, "emission_scale": 1.0}}
+    )
     assert tol2.abs_tol == tol.abs_tol
 
 
@@ -209,7 +215,7 @@ def test_pyrender_tolerance_is_half_an_8bit_code_through_the_gamma() -> None:
     scale = 1.7
     truth = rng.uniform(0.0, scale, (64, 64, 3))
     decoded = pb.decode_rgb8(pb.encode_rgb8(truth, scale).astype(np.uint8), scale)
-    tol = tolerance.rgb_model("pyrender", truth, {"rgb_scale": scale}, {})
+    tol = precision.rgb_tolerance(registry.spec("pyrender"), "pyrender", truth, {"rgb_scale": scale}, {})
     err = np.abs(decoded - truth)
     assert np.all(err <= tol.abs_tol + tol.rel * truth)
     # a code more than 0.6 codes from the exact one is outside the tolerance
@@ -223,10 +229,10 @@ def test_pyrender_tolerance_is_half_an_8bit_code_through_the_gamma() -> None:
 
 def test_unknown_backend_rgb_model_is_strict() -> None:
     ref = np.ones((2, 2, 3))
-    assert tolerance.rgb_model("newthing", ref, {}, {}).abs_tol == 0.0
-    f32 = tolerance.rgb_model("newthing", ref, {"rgb_encoding": "float32"}, {})
+    assert precision.rgb_tolerance(registry.spec("newthing"), "newthing", ref, {}, {}).abs_tol == 0.0
+    f32 = precision.rgb_tolerance(registry.spec("newthing"), "newthing", ref, {"rgb_encoding": "float32"}, {})
     assert f32.rel > 0 and "newthing" in f32.text
-    assert tolerance.rgb_model("trace", ref, {}, {}).rel == 0.0
+    assert precision.rgb_tolerance(registry.spec("trace"), "trace", ref, {}, {}).rel == 0.0
 
 
 def test_flip_is_reported_not_gating() -> None:

@@ -18,11 +18,13 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from rendiff_harness import exrbuf, lighting, radiance, resolved, tolerance
-from rendiff_harness.backends import mitsuba_backend as mb
-from rendiff_harness.backends import povray
-from rendiff_harness.backends import pyrender_backend as pb
-from rendiff_harness.errors import BackendError
+from rendiff_harness.contract import exrbuf, lighting, resolved
+from rendiff_harness.judge import precision, radiance
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.errors import BackendError
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.povray import backend as povray
+from rendiff_harness.renderers.pyrender import backend as pb
 
 POINT = [{"kind": "point", "position": [0.3, 0.2, 1.5], "intensity": [10.0, 5.0, 2.0]}]
 POINT2 = POINT + [{"kind": "point", "position": [-1.3, 0.4, 0.5], "intensity": [1.0, 5.0, 2.0]}]
@@ -63,7 +65,7 @@ def _render(module: Any, tmp_path: Path, case: str, shadows: str, sides: str) ->
 
 
 def _check(backend: str, got: np.ndarray, want: np.ndarray, attrs: dict, info: dict, case: str) -> None:
-    tol = tolerance.rgb_model(backend, want, attrs, info)
+    tol = precision.rgb_tolerance(registry.spec(backend), backend, want, attrs, info)
     err = np.abs(got.astype(np.float64) - want)
     allowed = tol.abs_tol + tol.rel * np.abs(want)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -277,7 +279,7 @@ def _check_occluded(backend: str, scene: resolved.ResolvedScene, bufs: dict, att
     """Within tolerance of the float64 formula with shadow rays, except where the shadow ray is ambiguous."""
     prim, z = bufs["id.prim"], bufs["Z"]
     want = lighting.local_radiance(scene, prim, z.astype(np.float64))
-    tol = tolerance.rgb_model(backend, want, attrs, info)
+    tol = precision.rgb_tolerance(registry.spec(backend), backend, want, attrs, info)
     bad = ~(np.abs(bufs["RGB"] - want) <= tol.abs_tol + tol.rel * want).all(axis=2)
     shadowed = (want == 0).all(axis=2) & (prim != 0xFFFFFFFF)
     if "shadows" in scene.requires:

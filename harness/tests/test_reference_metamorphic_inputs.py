@@ -21,8 +21,11 @@ import pytest
 import backend_cases as cases
 from fixtures import write_scene
 from rendiff_harness import __main__ as cli
-from rendiff_harness import atomic, metamorphic, references
-from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness.contract import atomic, references
+from rendiff_harness.judge import metamorphic
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.mitsuba import backend as mb
+from rendiff_harness.renderers.mitsuba import reference as mitsuba_reference
 
 HARNESS = Path(__file__).resolve().parents[1]
 REPO = HARNESS.parent
@@ -132,7 +135,7 @@ def test_reference_scene_that_is_a_file_is_one_line(
 
 def test_generate_checks_the_request_too(scene: Path, tmp_path: Path, no_render: None) -> None:
     with pytest.raises(references.ReferenceError, match="--seed"):
-        references.generate(scene, tmp_path / "ref.exr", 2, 2**31)
+        mitsuba_reference.generate(scene, tmp_path / "ref.exr", 2, 2**31)
 
 
 @pytest.mark.skipif(mb.unavailable_reason() is not None, reason=f"{mb.unavailable_reason()}")
@@ -243,7 +246,7 @@ def test_metamorphic_refuses_an_incomplete_run(tmp_path: Path, capsys: pytest.Ca
         assert "marker is not a regular file" in line
     assert not (run / "metamorphic.json").exists()
     with pytest.raises(metamorphic.RunError):
-        metamorphic.run_metamorphic(run, spec, None, tmp_path / "m.json")
+        metamorphic.run_metamorphic(run, spec, None, tmp_path / "m.json", registry.spec)
     assert not (tmp_path / "m.json").exists()
 
 

@@ -13,8 +13,9 @@ import pytest
 import backend_cases as cases
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import exrbuf, radiance, references, resolved
-from rendiff_harness.backends import mitsuba_backend as mb
+from rendiff_harness.contract import exrbuf, references, resolved
+from rendiff_harness.judge import radiance
+from rendiff_harness.renderers.mitsuba import backend as mb
 
 REPO = Path(__file__).resolve().parents[2]
 needs_mitsuba = pytest.mark.skipif(mb.unavailable_reason() is not None, reason=f"{mb.unavailable_reason()}")

@@ -13,17 +13,21 @@ import pytest
 
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import backends, exrbuf, registry, resolved
+from rendiff_harness import renderers
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.renderers import registry
 
 HARNESS = Path(__file__).resolve().parents[1]
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
 
 
-def test_registry_lists_one_module_per_backend() -> None:
-    assert registry.BACKEND_MODULES[0] == "povray"
-    assert len(set(registry.BACKEND_MODULES)) == len(registry.BACKEND_MODULES)
+def test_registry_lists_one_folder_per_backend() -> None:
+    assert registry.BUILT_IN[0] == "povray"
+    assert len(set(registry.BUILT_IN)) == len(registry.BUILT_IN)
+    for name in registry.BUILT_IN:
+        assert (HARNESS / "rendiff_harness" / "renderers" / name / "backend.py").is_file(), name
     pov = registry.load("povray")
-    assert pov.module is not None and pov.name == "povray"
+    assert pov.spec is not None and pov.name == "povray"
     assert pov.features == frozenset(
         {
             "depth",
@@ -38,54 +42,58 @@ def test_registry_lists_one_module_per_backend() -> None:
         }
     )
     assert pov.buffers == frozenset({"Z", "id", "RGB"})
-    assert registry.get("povray").module_name == "povray"
+    assert registry.get("povray").key == "povray"
 
 
 def test_every_registered_module_loads_or_says_why() -> None:
     for backend in registry.all_backends():
-        if backend.module is None:
-            assert backend.import_error, backend.module_name
+        if backend.spec is None:
+            assert backend.import_error, backend.key
         else:
             assert backend.buffers <= registry.KNOWN_BUFFERS
 
 
 def test_missing_module_is_unavailable_not_an_exception(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(registry, "BACKEND_MODULES", ["povray", "nosuch_backend"])
-    b = registry.load("nosuch_backend")
-    assert b.module is None and b.name == "nosuch"
+    monkeypatch.setattr(registry, "BUILT_IN", ("povray", "nosuch"))
+    b = registry.load("nosuch")
+    assert b.spec is None and b.name == "nosuch"
     assert "not found" in (b.unavailable_reason() or "")
-    assert registry.get("nosuch").module_name == "nosuch_backend"
+    assert registry.get("nosuch").key == "nosuch"
 
 
 def _extra_backends_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, files: dict[str, str]) -> None:
+    """Backend folders <name>/backend.py in tmp_path, found as renderers.<name> for this test."""
     for name, text in files.items():
-        (tmp_path / f"{name}.py").write_text(text)
-    monkeypatch.setattr(backends, "__path__", [*backends.__path__, str(tmp_path)])
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "backend.py").write_text(text)
+    monkeypatch.setattr(renderers, "__path__", [*renderers.__path__, str(tmp_path)])
     for name in files:
-        monkeypatch.delitem(sys.modules, f"rendiff_harness.backends.{name}", raising=False)
+        for mod in (f"rendiff_harness.renderers.{name}", f"rendiff_harness.renderers.{name}.backend"):
+            monkeypatch.delitem(sys.modules, mod, raising=False)
 
 
 def test_import_error_of_a_dependency_becomes_the_reason(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _extra_backends_dir(tmp_path, monkeypatch, {"broken_backend": "import definitely_not_installed_pkg\n"})
-    b = registry.load("broken_backend")
+    _extra_backends_dir(tmp_path, monkeypatch, {"broken": "import definitely_not_installed_pkg\n"})
+    b = registry.load("broken")
     reason = b.unavailable_reason() or ""
-    assert b.module is None and "definitely_not_installed_pkg" in reason and "setup.sh" in reason
+    assert b.spec is None and "definitely_not_installed_pkg" in reason and "setup.sh" in reason
     with pytest.raises(registry.BackendUnavailable):
         b.version()
 
 
+HALF = """
+from rendiff_harness.judge.tolerance import exact_depth, Model
+from rendiff_harness.renderers.spec import BackendSpec
+SPEC = BackendSpec("half", frozenset(), frozenset(), Model("half", 0.0, "", exact_depth))
+"""
+
+
 def test_incomplete_module_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    _extra_backends_dir(tmp_path, monkeypatch, {"half_backend": "NAME = 'half'\n"})
-    b = registry.load("half_backend")
-    assert b.module is None and "lacks" in (b.unavailable_reason() or "")
-
-
-def test_load_checks_every_member_of_the_protocol() -> None:
-    """`registry.load`'s run-time check (backends.MEMBERS) is the whole BackendModule protocol."""
-    protocol = backends.BackendModule
-    methods = {n for n, v in vars(protocol).items() if callable(v) and not n.startswith("_")}
-    assert set(backends.MEMBERS) == set(protocol.__annotations__) | methods
-    assert len(backends.MEMBERS) == len(set(backends.MEMBERS))
+    """No SPEC, or a spec the harness cannot run (no render, version or probe), is unavailable."""
+    _extra_backends_dir(tmp_path, monkeypatch, {"nospec": "NAME = 'half'\n", "half": HALF})
+    for name in ("nospec", "half"):
+        b = registry.load(name)
+        assert b.spec is None and "lacks" in (b.unavailable_reason() or ""), name
 
 
 def test_missing_features(tmp_path: Path) -> None:
@@ -95,7 +103,6 @@ def test_missing_features(tmp_path: Path) -> None:
     scene = resolved.load(d)
     pov = registry.load("povray")
     assert registry.missing_features(pov, scene) == ["area_light", "one_sided"]
-    assert registry.missing_features(pov.module, scene) == ["area_light", "one_sided"]  # a module works too
 
 
 def fixtures_quad() -> list[list[list[float]]]:
@@ -216,21 +223,14 @@ def test_render_success_json(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert msg["backend"] == "povray" and msg["version"].startswith("POV-Ray 3.7")
     assert msg["time_s"] > 0 and "passes" in msg["info"]
     buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
-    assert (buf["id.prim"] != exrbuf.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
-
-
-def test_compare_is_wired(capsys: pytest.CaptureFixture[str]) -> None:
-    if (HARNESS / "rendiff_harness" / "compare.py").exists():
-        pytest.skip("compare.py exists; its own tests cover it")
-    assert cli.main(["compare", "a.exr", "b.exr"]) == 2
-    assert "compare not available yet" in capsys.readouterr().err
+    assert (buf["id.prim"] != vocab.BACKGROUND_ID).any() and np.isfinite(buf["Z"]).any()
 
 
 def test_every_shipped_backend_declares_its_measured_peak_memory() -> None:
     # check/pool.rs budgets memory with these; a backend without a measurement gets the guess.
-    for name in registry.BACKEND_MODULES:
+    for name in registry.BUILT_IN:
         backend = registry.load(name)
-        assert backend.module is not None, backend.import_error
+        assert backend.spec is not None, backend.import_error
         fixed, per_triangle = backend.peak_memory
         assert backend.peak_memory != registry.UNMEASURED_MEMORY, name
         assert 0 < fixed < registry.UNMEASURED_MEMORY[0] and 0 < per_triangle < registry.UNMEASURED_MEMORY[1]

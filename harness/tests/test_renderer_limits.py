@@ -23,9 +23,11 @@ import numpy as np
 import pytest
 
 from fixtures import cli, write_scene
-from rendiff_harness import command_renderers, exrbuf
-from rendiff_harness.children import OUTPUT_KEEP_BYTES, Capture, run_in_group
-from rendiff_harness.command_renderers import ENV_VAR, MAX_NAME_CHARS, VERSION_MAX_BYTES, RenderersError
+from rendiff_harness.contract import exrbuf, vocab
+from rendiff_harness.renderers import command as command_renderers
+from rendiff_harness.renderers import registry
+from rendiff_harness.renderers.children import OUTPUT_KEEP_BYTES, Capture, run_in_group
+from rendiff_harness.renderers.command import ENV_VAR, MAX_NAME_CHARS, VERSION_MAX_BYTES, RenderersError
 
 HARNESS = Path(__file__).resolve().parents[1]
 MiB = 1 << 20
@@ -58,7 +60,7 @@ def scene_and_answer(tmp_path: Path) -> tuple[Path, Path]:
     """A one-triangle scene and an EXR of the right size and channels (its content is not judged here)."""
     sdir = write_scene(tmp_path / "scene", [[[-1, -1, 0], [1, -1, 0], [0, 1, 0]]], [0], width=W, height=H)
     z = np.full((H, W), np.inf, dtype=np.float32)
-    ids = np.full((H, W), exrbuf.BACKGROUND_ID, dtype=np.uint32)
+    ids = np.full((H, W), vocab.BACKGROUND_ID, dtype=np.uint32)
     answer = tmp_path / "answer.exr"
     exrbuf.write_buffers(answer, Z=z, prim=ids, obj=ids)
     return sdir, answer
@@ -258,7 +260,7 @@ def test_a_huge_version_output_costs_a_bounded_read(tmp_path: Path) -> None:
         entry("ver", [sys.executable], f"version = {json.dumps([sys.executable, str(ver)])}")
         + entry("long", [sys.executable], f"version = {json.dumps([sys.executable, str(long)])}"),
     )
-    ver_spec, long_spec = command_renderers.load(path)
+    ver_spec, long_spec = command_renderers.load(path, registry.RESERVED_NAMES)
     tracemalloc.start()
     try:
         t0 = time.monotonic()
@@ -279,11 +281,13 @@ def test_a_renderer_name_longer_than_the_limit_is_one_clear_load_error(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     longest = "r" * MAX_NAME_CHARS
-    assert command_renderers.parse(tmp_path / "ok.toml", entry(longest, ["x"]))[0].name == longest
+    assert (
+        command_renderers.parse(tmp_path / "ok.toml", entry(longest, ["x"]), registry.RESERVED_NAMES)[0].name == longest
+    )
     text = entry("fine", ["x"]) + entry("n" * 300, ["x"])
     path = declare(tmp_path, text)
     with pytest.raises(RenderersError) as caught:
-        command_renderers.parse(path, text)
+        command_renderers.parse(path, text, registry.RESERVED_NAMES)
     msg = str(caught.value)
     assert msg.startswith(f"{path}: [[renderer]] #2: name 'nnnnnnnnnnnnnnnnnnnn...' is 300 characters long")
     assert f"at most {MAX_NAME_CHARS}" in msg and "\n" not in msg and len(msg) < 300

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from fixtures import write_scene
-from rendiff_harness import manifest, resolved
+from rendiff_harness.contract import manifest, resolved
 
 HARNESS = Path(__file__).resolve().parents[1]
 
@@ -31,7 +31,7 @@ def _in_child(code: str, *args: str) -> subprocess.CompletedProcess[str]:
 
 LOAD_SCENE = """
 import sys
-from rendiff_harness import resolved
+from rendiff_harness.contract import resolved
 try:
     resolved.load(sys.argv[1])
 except resolved.SceneError as e:

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from fixtures import write_scene
-from rendiff_harness import resolved, verify
+from rendiff_harness.contract import resolved, vocab
+from rendiff_harness.judge import verify
 
-BG = verify.BACKGROUND_ID
+BG = vocab.BACKGROUND_ID
 
 # Camera: eye (0, 0, 5) looking down -z, vfov 90, 16 x 16. A point at depth z = 5 - world_z
 # projects to px = (x/z + 1) * 8, py = (1 - y/z) * 8.

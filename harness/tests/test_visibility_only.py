@@ -18,7 +18,9 @@ import pytest
 
 import fixtures
 from rendiff_harness import __main__ as cli
-from rendiff_harness import backends, exrbuf, registry, resolved, vocab
+from rendiff_harness import renderers
+from rendiff_harness.contract import exrbuf, resolved, vocab
+from rendiff_harness.renderers import registry
 
 REPO = Path(__file__).resolve().parents[2]
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None, reason="povray binary not on PATH")
@@ -38,27 +40,35 @@ BUFFERS = frozenset({{"Z", "id", "RGB"}})
 def version(): return "fake 1"
 def unavailable_reason(): return None
 def render(scene, out_exr, workdir, timeout_s{kw}):
-    from rendiff_harness import exrbuf
+    from rendiff_harness.contract import exrbuf
     import numpy as np
     h, w = scene.camera.height, scene.camera.width
     prim = np.zeros((h, w), dtype=np.uint32)
     rgb = None if {no_rgb} else np.zeros((h, w, 3), dtype=np.float32)
     exrbuf.write_buffers(out_exr, Z=np.ones((h, w), dtype=np.float32), prim=prim, obj=prim, RGB=rgb)
     return {{"visibility_only": {no_rgb}}}
+from rendiff_harness.judge.tolerance import Model, exact_depth
+from rendiff_harness.renderers.spec import BackendSpec
+SPEC = BackendSpec(
+    NAME, FEATURES, BUFFERS, Model(NAME, 0.0, "", exact_depth),
+    render=render, version=version, unavailable_reason=unavailable_reason,
+)
 """
 
 
 def _fake_backends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """`vis_backend` takes visibility_only; `full_backend` (like Mitsuba's) does not."""
     files = {
-        "vis_backend": FAKE.format(name="vis", kw=", *, visibility_only=False", no_rgb="visibility_only"),
-        "full_backend": FAKE.format(name="full", kw="", no_rgb="False"),
+        "vis": FAKE.format(name="vis", kw=", *, visibility_only=False", no_rgb="visibility_only"),
+        "full": FAKE.format(name="full", kw="", no_rgb="False"),
     }
     for name, text in files.items():
-        (tmp_path / f"{name}.py").write_text(text)
-        monkeypatch.delitem(sys.modules, f"rendiff_harness.backends.{name}", raising=False)
-    monkeypatch.setattr(backends, "__path__", [*backends.__path__, str(tmp_path)])
-    monkeypatch.setattr(registry, "BACKEND_MODULES", [*registry.BACKEND_MODULES, *files])
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "backend.py").write_text(text)
+        for mod in (f"rendiff_harness.renderers.{name}", f"rendiff_harness.renderers.{name}.backend"):
+            monkeypatch.delitem(sys.modules, mod, raising=False)
+    monkeypatch.setattr(renderers, "__path__", [*renderers.__path__, str(tmp_path)])
+    monkeypatch.setattr(registry, "BUILT_IN", (*registry.BUILT_IN, *files))
 
 
 def _scene(tmp_path: Path, requires: tuple[str, ...]) -> Path:
@@ -125,9 +135,9 @@ def _check_visibility(scene_dir: Path, out: Path) -> None:
     buf = exrbuf.read_buffers(out, require=["Z", "id.prim", "id.object"])
     assert "RGB" not in buf and "R" not in buf
     prim = buf["id.prim"]
-    assert set(np.unique(prim).tolist()) == {0, 1, exrbuf.BACKGROUND_ID}
-    assert np.isfinite(buf["Z"][prim != exrbuf.BACKGROUND_ID]).all()
-    assert np.isinf(buf["Z"][prim == exrbuf.BACKGROUND_ID]).all()
+    assert set(np.unique(prim).tolist()) == {0, 1, vocab.BACKGROUND_ID}
+    assert np.isfinite(buf["Z"][prim != vocab.BACKGROUND_ID]).all()
+    assert np.isinf(buf["Z"][prim == vocab.BACKGROUND_ID]).all()
 
 
 @needs_povray
@@ -145,8 +155,8 @@ def test_povray_visibility_only_on_a_scene_it_cannot_shade(tmp_path: Path, capsy
 @pytest.mark.parametrize(
     ("module", "requires", "missing"),
     [
-        ("pyrender_backend", SHADED, "one_sided, shadows"),
-        ("mitsuba_backend", ("depth", "ids", "lambert", "directional_light", "shadowless", "one_sided"), "shadowless"),
+        ("pyrender", SHADED, "one_sided, shadows"),
+        ("mitsuba", ("depth", "ids", "lambert", "directional_light", "shadowless", "one_sided"), "shadowless"),
     ],
 )
 def test_in_process_backends_render_visibility_on_a_scene_they_cannot_shade(
@@ -154,7 +164,7 @@ def test_in_process_backends_render_visibility_on_a_scene_they_cannot_shade(
 ) -> None:
     import importlib
 
-    mod = importlib.import_module(f"rendiff_harness.backends.{module}")
+    mod = importlib.import_module(f"rendiff_harness.renderers.{module}.backend")
     reason = mod.unavailable_reason()
     if reason is not None:
         pytest.skip(f"{module} unavailable: {reason}")

@@ -10,7 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from rendiff_harness import worker
+from rendiff_harness.renderers import worker
 
 HARNESS = Path(__file__).resolve().parents[1]
 
@@ -52,7 +52,7 @@ def test_serve_process_answers_in_order_and_native_stdout_goes_to_stderr(tmp_pat
     # write to fd 1 by native code (simulated with os.write) must land in stderr.
     script = (
         "import os, sys\n"
-        "from rendiff_harness import worker\n"
+        "from rendiff_harness.renderers import worker\n"
         "def run(argv):\n"
         "    os.write(1, b'native noise\\n')\n"
         "    print('reply for ' + argv[-1])\n"

@@ -10,7 +10,7 @@ the image sees planes tilted every way), at a planar depth of 4 to 6 at its cent
 separate triangles (one object each) with a diagonal gap of SPLIT px between them: no
 shared edges, so no renderer can crack them apart. On such a plane 1/Z is affine in the
 image-plane point sampled, so the Z buffers reveal where each backend sampled every pixel
-(harness/rendiff_harness/calibration.py). Vertices are intersections of pixel-corner rays
+(harness/rendiff_harness/judge/calibration.py). Vertices are intersections of pixel-corner rays
 with the plane, computed here in float64 and written with 12 significant digits; the core
 rounds them to f32 when it resolves the scene and the calibration uses those f32
 vertices, so nothing here needs to be exact.

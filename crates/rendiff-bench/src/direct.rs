@@ -11,7 +11,7 @@
 //! reference's own error is estimated by the K/2 point (`reference_floor_rmse`).
 //!
 //! IDs and depth are never antialiased: the harness passes these settings to
-//! POV-Ray's radiance passes only (harness/rendiff_harness/backends/povray.py).
+//! POV-Ray's radiance passes only (harness/rendiff_harness/renderers/povray/backend.py).
 
 use super::harness::{number_at, Harness, HarnessRun};
 use super::knobs::{point, Group, SceneSpec};

@@ -1,0 +1,185 @@
+"""The `Z` buffer: hit/miss masks exactly, depth where both sides see the same prim within the
+backend's tolerance model (tolerance.py), the rest interior mismatches."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..contract import exrbuf
+from ..contract.manifest import Reference, render_info
+from ..contract.vocab import BACKGROUND_ID
+from . import tolerance, verify
+from .ids import eye_norm, origin_offset, pixel_size, point_norm
+from .verdict import EXAMPLES
+
+
+@dataclass
+class DepthResult:
+    edge: int
+    interior: int
+    mask: int
+    compared: int
+    max_abs: float
+    mean_abs: float
+    max_rel: float
+    tolerance: str
+    details: list[str]
+    tie: int = 0
+    crack: int = 0
+
+
+def depth_context(
+    ref: Reference,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    z_ref: np.ndarray,
+    prims: np.ndarray | None,
+    render: Mapping[str, Any],
+    attrs: Mapping[str, Any],
+) -> tolerance.DepthContext:
+    """Everything a depth model may look at for the K pixels (rows, cols) seen at z_ref."""
+    span = None
+    if prims is not None:
+        cos = ref.ray_cos(rows, cols, prims)
+        t = ref.scene.triangles[prims.astype(np.int64)].astype(np.float64)
+        extent = np.max(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2), axis=1)
+        vz = (t - ref.scene.camera.eye[None, None, :]) @ ref.scene.camera.forward
+        span = vz.max(axis=1) - vz.min(axis=1)
+    else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
+        cos = np.zeros(z_ref.size)
+        extent = None
+    return tolerance.DepthContext(
+        z_ref=z_ref,
+        cos=cos,
+        info=render_info(render),
+        attrs=attrs,
+        pixel_size=pixel_size(ref),
+        point_norm=point_norm(ref, rows, cols, z_ref),
+        extent=extent,
+        origin_offset=origin_offset(ref),
+        eye_norm=eye_norm(ref),
+        depth_span=span,
+    )
+
+
+def depth_tolerance_fn(
+    ref: Reference, model: tolerance.Model, render: Mapping[str, Any], attrs: Mapping[str, Any]
+) -> verify.DepthTolerance:
+    """The test renderer's depth tolerance at (z, cos), for the verifier's tie test."""
+
+    def tol(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        ctx = tolerance.DepthContext(
+            z_ref=z,
+            cos=cos,
+            info=render_info(render),
+            attrs=attrs,
+            pixel_size=pixel_size(ref),
+            point_norm=np.abs(z) + eye_norm(ref),
+            origin_offset=origin_offset(ref),
+            eye_norm=eye_norm(ref),
+        )
+        try:
+            t, _ = model.depth(ctx)
+        except tolerance.ToleranceError:
+            return np.zeros_like(z)
+        return np.broadcast_to(np.asarray(t, dtype=np.float64), z.shape)
+
+    return tol
+
+
+def compare_depth(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    model: tolerance.Model,
+    render: Mapping[str, Any],
+    attrs: Mapping[str, Any],
+    id_edge_mask: np.ndarray | None,
+    id_classes: np.ndarray | None = None,
+) -> DepthResult:
+    """Hit/miss masks exact except at allowed ID classes; depth within the backend's model.
+
+    With `id_classes` (the verifier's classes of the ID mismatches), a mask mismatch at an
+    edge or tie pixel is allowed, at a crack pixel it is a crack, elsewhere interior.
+    Without it, `id_edge_mask` marks the allowed pixels (the metamorphic comparison).
+    """
+    zr = ref.buffers["Z"].astype(np.float64)
+    zt = test["Z"].astype(np.float64)
+    h, w = zr.shape
+    hr, ht = exrbuf.depth_hits(zr), exrbuf.depth_hits(zt)
+    mask_mm = hr != ht
+    tie_mask = np.zeros_like(mask_mm)
+    crack_mask = np.zeros_like(mask_mm)
+    if id_classes is not None:
+        edge_mask = mask_mm & (id_classes == verify.EDGE)
+        tie_mask = mask_mm & (id_classes == verify.TIE)
+        crack_mask = mask_mm & (id_classes == verify.CRACK)
+    else:
+        edge_mask = mask_mm & id_edge_mask if id_edge_mask is not None else np.zeros_like(mask_mm)
+    interior_mask = mask_mm & ~edge_mask & ~tie_mask & ~crack_mask
+    details: list[str] = []
+    notes: list[str] = []
+
+    have_ref_ids = "id.prim" in ref.buffers
+    if have_ref_ids and "id.prim" in test:
+        rp = ref.buffers["id.prim"]
+        same = hr & ht & (rp == test["id.prim"]) & (rp != BACKGROUND_ID)
+        same &= rp.astype(np.uint64) < np.uint64(ref.scene.triangle_count)
+        scope = "where both hit the same prim"
+    else:
+        same = hr & ht
+        scope = "where both hit (no id.prim on the test side: prims not checked)"
+        if have_ref_ids:
+            rp = ref.buffers["id.prim"]
+            same &= (rp != BACKGROUND_ID) & (rp.astype(np.uint64) < np.uint64(ref.scene.triangle_count))
+    idx = np.flatnonzero(same)
+    rows, cols = idx // w, idx % w
+    z_ref = zr.ravel()[idx]
+    z_test = zt.ravel()[idx]
+    prims = ref.buffers["id.prim"].ravel()[idx] if have_ref_ids else None
+    if prims is None:
+        notes.append("reference has no id.prim: grazing factor at its cap")
+    ctx = depth_context(ref, rows, cols, z_ref, prims, render, attrs)
+    tol, tol_text = model.depth(ctx)
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), z_ref.shape)
+    err = np.abs(z_test - z_ref)
+    beyond = ~(err <= tol)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(z_ref != 0.0, err / np.abs(z_ref), np.where(err == 0.0, 0.0, np.inf))
+    interior_mask.ravel()[idx[beyond]] = True
+
+    if mask_mm.any():
+        mi = np.flatnonzero(interior_mask & mask_mm)[:EXAMPLES]
+        if mi.size:
+            ex = ", ".join(f"({k % w},{k // w}) ref {zr.ravel()[k]:.7g} test {zt.ravel()[k]:.7g}" for k in mi)
+            details.append(f"hit/miss mask mismatches e.g. {ex}")
+    bi = np.nonzero(beyond)[0]
+    if bi.size:
+        worst = bi[np.argsort(-(err[bi] / np.maximum(tol[bi], 1e-300)))[:EXAMPLES]]
+        ex = ", ".join(
+            f"({cols[k]},{rows[k]}) ref {z_ref[k]:.9g} test {z_test[k]:.9g} |d| {err[k]:.3g} > tol {tol[k]:.3g}"
+            for k in worst
+        )
+        details.append(f"{bi.size} depths beyond tolerance, worst {ex}")
+    text = (
+        f"{tol_text}; compared {scope}; hit/miss masks exact except where the ID mismatch is an allowed class "
+        "(edge, tie; crack only where declared)"
+    )
+    if notes:
+        text += "; " + "; ".join(notes)
+    return DepthResult(
+        edge=int(edge_mask.sum()),
+        interior=int(interior_mask.sum()),
+        mask=int(mask_mm.sum()),
+        compared=int(idx.size),
+        max_abs=float(err.max()) if idx.size else 0.0,
+        mean_abs=float(err.mean()) if idx.size else 0.0,
+        max_rel=float(rel.max()) if idx.size else 0.0,
+        tolerance=text,
+        details=details,
+        tie=int(tie_mask.sum()),
+        crack=int(crack_mask.sum()),
+    )

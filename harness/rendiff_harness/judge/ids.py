@@ -1,0 +1,198 @@
+"""The `id` buffer: prim IDs compared exactly, each mismatch classed by the verifier (verify.py) as
+edge, tie, crack or interior (docs/DESIGN.md "Comparing", docs/verifier.md)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..contract import vocab
+from ..contract.manifest import Reference
+from ..contract.vocab import BACKGROUND_ID
+from . import tolerance, verify
+from .verdict import EXAMPLES
+
+
+@dataclass
+class IdResult:
+    edge: int
+    interior: int
+    edge_mask: np.ndarray  # (H, W) bool: allowed ID differences (edge, tie, declared-or-not crack)
+    interior_mask: np.ndarray  # (H, W) bool
+    tolerance: str
+    details: list[str]
+    tie: int = 0
+    crack: int = 0
+    classes: np.ndarray | None = None  # (H, W) int8: verify.EDGE..INTERIOR, -1 where the IDs agree
+    explanations: list[dict[str, Any]] = field(default_factory=list)
+
+
+EdgeDistance = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(ref ids, test ids, rows, cols) of the mismatched pixels -> pixel distance to an edge involved."""
+
+
+def origin_offset(ref: Reference) -> float:
+    """|f32(eye) - eye|: how far a renderer whose camera origin is f32 moves every ray."""
+    eye = np.asarray(ref.scene.camera.eye, dtype=np.float64)
+    return float(np.linalg.norm(eye.astype(np.float32).astype(np.float64) - eye))
+
+
+def eye_norm(ref: Reference) -> float:
+    """|eye|: the size of the camera's coordinates, which f32 arithmetic rounds relative to."""
+    return float(np.linalg.norm(np.asarray(ref.scene.camera.eye, dtype=np.float64)))
+
+
+def pixel_size(ref: Reference) -> float:
+    """One pixel on the image plane at distance 1."""
+    return ref.scene.camera.pixel_size()
+
+
+def point_norm(ref: Reference, rows: np.ndarray, cols: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """|X| of the points at planar depth z along pixel rays (distance from the world origin)."""
+    cam = ref.scene.camera
+    d = cam.center_directions(rows, cols)
+    zz = np.where(np.isfinite(z), z, 0.0)
+    norms: np.ndarray = np.linalg.norm(cam.eye[None, :] + zz[:, None] * d, axis=1)
+    return norms
+
+
+def compare_ids(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    model: tolerance.Model,
+    edge_distance: EdgeDistance | None = None,
+    depth_tol: verify.DepthTolerance | None = None,
+    backend: str = "the test renderer",
+) -> IdResult:
+    """Exact id.prim / id.object comparison; every mismatch gets a class (verify.py).
+
+    With `edge_distance` (the metamorphic comparison, metamorphic.py, which also looks at
+    the variant's scene) a mismatch is only edge (within `model.edge_px` of an edge
+    involved) or interior. Otherwise the verifier classifies each mismatch as edge, tie,
+    crack or interior, with the test renderer's per-pixel rounding distance
+    (`model.edge_eps`) and depth tolerance `depth_tol` (for ties; default: exact).
+    """
+    rp, tp = ref.buffers["id.prim"], test["id.prim"]
+    h, w = rp.shape
+    mism = rp != tp
+    idx = np.flatnonzero(mism)
+    rows, cols = idx // w, idx % w
+    r_ids, t_ids = rp.ravel()[idx], tp.ravel()[idx]
+    n = ref.scene.triangle_count
+    details: list[str] = []
+    classes = np.full((h, w), -1, dtype=np.int8)
+    explanations: list[dict[str, Any]] = []
+    if edge_distance is not None:
+        dist = edge_distance(r_ids, t_ids, rows, cols)
+        invalid = (t_ids != BACKGROUND_ID) & (t_ids.astype(np.uint64) >= np.uint64(n))
+        cls = np.where((dist <= model.edge_px) & ~invalid, verify.EDGE, verify.INTERIOR).astype(np.int8)
+        tol_text = model.edge_text()
+        bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
+        if invalid.any():
+            details.append(f"{int(invalid.sum())} pixels carry IDs naming no triangle (scene has {n})")
+        if bad.size:
+            ex = ", ".join(
+                f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])} d={_dist(dist[k])}" for k in bad
+            )
+            details.append(f"interior e.g. {ex}")
+    else:
+        zr = ref.buffers.get("Z")
+        zt = test.get("Z")
+        z_here = np.full(idx.size, np.inf)
+        if zr is not None:
+            z_here = zr.ravel()[idx].astype(np.float64)
+        if zt is not None:
+            zt_here = zt.ravel()[idx].astype(np.float64)
+            z_here = np.where(np.isfinite(z_here), z_here, zt_here)
+        ectx = tolerance.EdgeContext(
+            z=z_here,
+            point_norm=point_norm(ref, rows, cols, z_here),
+            pixel_size=pixel_size(ref),
+            origin_offset=origin_offset(ref),
+            eye_norm=eye_norm(ref),
+        )
+        eps, tol_text = model.edge_eps(ectx)
+
+        def exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+            return np.zeros_like(z)
+
+        slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm)
+        result = verify.classify_mismatches(
+            ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend, slack
+        )
+        cls = result.cls
+        explanations = result.groups
+        tol_text += (
+            "; tie: both triangles cover the center and their depths agree within the depth tolerance; "
+            "crack: a leak through a closed edge (allowed only where the backend declares it)"
+        )
+        bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
+        if bad.size:
+            details.append(
+                "interior e.g. "
+                + "; ".join(
+                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in bad
+                )
+            )
+        cracks = np.nonzero(cls == verify.CRACK)[0][:EXAMPLES]
+        if cracks.size:
+            details.append(
+                "crack e.g. "
+                + "; ".join(
+                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in cracks
+                )
+            )
+    classes.ravel()[idx] = cls
+    edge_mask = (classes == verify.EDGE) | (classes == verify.TIE) | (classes == verify.CRACK)
+    interior_mask = classes == verify.INTERIOR
+    # id.object must follow id.prim: where the prims agree the objects must too.
+    if "id.object" in ref.buffers and "id.object" in test:
+        obj_bad = ~mism & (ref.buffers["id.object"] != test["id.object"])
+        if obj_bad.any():
+            interior_mask |= obj_bad
+            oi = np.flatnonzero(obj_bad)
+            y, x = oi[0] // w, oi[0] % w
+            details.append(
+                f"{oi.size} pixels with the same id.prim but a different id.object, e.g. ({x},{y}) "
+                f"ref {_id(ref.buffers['id.object'][y, x])} test {_id(test['id.object'][y, x])}"
+            )
+            explanations.insert(
+                0,
+                {
+                    "class": vocab.MismatchClass.INTERIOR,
+                    "ref_prim": None,
+                    "test_prim": None,
+                    "pixels": int(oi.size),
+                    "example": [int(x), int(y)],
+                    "why": f"same prim, different object id (ref {_id(ref.buffers['id.object'][y, x])}, "
+                    f"test {_id(test['id.object'][y, x])}): the exporter or renderer mislabels objects",
+                },
+            )
+        tol_text += "; id.object must match wherever id.prim does"
+    else:
+        tol_text += "; id.object not compared (missing on one side)"
+    return IdResult(
+        int(np.count_nonzero(classes == verify.EDGE)),
+        int(interior_mask.sum()),
+        edge_mask,
+        interior_mask,
+        tol_text,
+        details,
+        tie=int(np.count_nonzero(classes == verify.TIE)),
+        crack=int(np.count_nonzero(classes == verify.CRACK)),
+        classes=classes,
+        explanations=explanations,
+    )
+
+
+def _id(v: Any) -> str:
+    v = int(v)
+    return "bg" if v == BACKGROUND_ID else str(v)
+
+
+def _dist(d: float) -> str:
+    return "inf" if not math.isfinite(d) else f"{d:.3g}px"

@@ -1,0 +1,97 @@
+"""The `RGB` buffer: deterministic renders against the backend's RGB tolerance, Monte Carlo ones
+statistically (radiance.py decides by the var channels), with the FLIP score for people."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..contract import lighting
+from ..contract.manifest import Reference, render_info
+from ..contract.results import Entry, finite
+from ..renderers.spec import BackendSpec
+from . import diffimages, precision, radiance
+from .verdict import Judged
+
+RGB_ENTRY_FIELDS = ("mode", "failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean", "flip_note")
+"""An RGB entry's own fields (results.Entry.own_fields)."""
+
+
+def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:
+    return radiance.degrees_of_freedom({**(info or {}), **attrs})
+
+
+def compare_rgb(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    attrs: Mapping[str, Any],
+    backend: str,
+    render: Mapping[str, Any],
+    id_edge_mask: np.ndarray | None,
+    spec: BackendSpec | None,
+) -> radiance.RgbResult:
+    """Deterministic or statistical comparison of R,G,B (radiance.py decides by the var channels)."""
+    a, b = test["RGB"], ref.buffers["RGB"]
+    var_a, var_b = test.get("var"), ref.buffers.get("var")
+    if var_a is not None or var_b is not None:
+        test_attrs = {**render_info(render), **attrs}
+        res = radiance.compare_statistical(
+            b,
+            var_b,
+            _side_dof(ref.attrs) if var_b is not None else math.inf,
+            a,
+            var_a,
+            _side_dof(attrs, render_info(render)) if var_a is not None else math.inf,
+            ref_n=radiance.samples_per_pixel(ref.attrs),
+            test_n=radiance.samples_per_pixel(test_attrs),
+        )
+        if var_a is None or var_b is None:
+            side = backend if var_a is None else "the reference"
+            res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
+        return res
+    model = precision.rgb_tolerance(spec, backend, b, attrs, render_info(render))
+    shadow_edges: radiance.ShadowEdges | None = None
+    scene = ref.scene
+    if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
+        eps = radiance.SHADOW_EDGE_REL * lighting.scene_size(scene)
+
+        def ambiguous(rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
+            return lighting.shadow_ambiguity(scene, ref.buffers["id.prim"], ref.buffers["Z"], rows, cols, eps)
+
+        shadow_edges = ambiguous
+
+    text = model.text
+    if shadow_edges is not None:
+        text += (
+            f"; failing pixels at ID edge mismatches, or whose shadow ray passes within "
+            f"{radiance.SHADOW_EDGE_REL:g} x scene size of an occluder edge or end, count as edge"
+        )
+    else:
+        text += "; failing pixels at ID edge mismatches count as edge"
+    return radiance.compare_deterministic(b, a, model.abs_tol, model.rel, text, id_edge_mask, shadow_edges)
+
+
+def record_rgb(e: Entry, res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> Judged:
+    """Fill an RGB entry from radiance.py's result (FLIP too); the heat map shows |a-b|/tol."""
+    e.mode = res.mode
+    e.edge_mismatches = res.edge
+    e.interior_mismatches = res.interior
+    e.failing_pixels = res.failing_pixels
+    e.compared_pixels = res.pixels
+    e.max_abs_error = finite(res.max_abs)
+    e.mean_abs_error = finite(res.mean_abs)
+    e.max_rel_error = finite(res.max_rel)
+    e.tolerance = res.tolerance
+    e.min_p = None if res.min_p is None else float(res.min_p)
+    e.alpha = res.alpha
+    e.cluster_failures = res.cluster_failures
+    e.flip_mean, e.flip_note = radiance.flip_mean(ref_rgb, test_rgb)
+
+    def heat_map(path: Path) -> None:
+        diffimages.write_rgb_diff(path, res.score, res.edge_mask, res.fail_mask & ~res.edge_mask)
+
+    return Judged(res.details, res.notes, heat_map)

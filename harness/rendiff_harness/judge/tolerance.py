@@ -1,0 +1,305 @@
+"""Per-backend precision models: how far a renderer may legitimately differ from the reference.
+
+Two numbers per backend, both derived from what the renderer computes in
+(docs/external-renderers.md, docs/DESIGN.md "Comparing"):
+
+* `edge_px`: an ID mismatch is an *edge* mismatch when the pixel center lies within
+  this many pixels of an edge of one of the triangles involved (geometry.py). Inside
+  that band the renderer's own rounding may put the center on either side.
+* `depth(ctx)`: the allowed |Z_test - Z_reference| per compared pixel, plus a sentence
+  saying how it was derived (it goes into results.json as `tolerance`).
+
+Depth is compared only where both sides see the same triangle, so `ctx.cos` (|cos| of
+the angle between the pixel ray and that triangle's normal) is known. A ray-plane
+intersection whose plane is perturbed by a relative eps moves t by about
+eps * t / |cos|: at grazing angles the same vertex rounding costs more depth. Every
+relative model below therefore scales with 1/|cos|, capped at MAX_REL (1e-3) so that a
+triangle seen exactly edge-on does not make the tolerance infinite.
+
+Where the models live: every backend's sits in its `BackendSpec` (renderers/spec.py), the
+core's in renderers/core.py, each external backend's beside its exporter in its folder
+(renderers/povray/backend.py, ...) with the derivations in their docstrings, a declared
+renderer's built from the numbers it declares (renderers/command.py). This module holds the
+shared machinery (the contexts, `Model`, `param`, the grazing and position-shift helpers and the
+models several backends share); judge/precision.py finds a backend's through its spec, and a
+backend without one is compared exactly (`strict_model`, `edge_px = 0`, depth tolerance 0), and
+the tolerance text says so: a new backend fails loudly until its model is written.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+MAX_REL = 1e-3
+"""Cap on every relative depth tolerance (reached only within ~1/1000 of edge-on)."""
+
+
+class ToleranceError(Exception):
+    """A tolerance cannot be derived (e.g. the render lacks the parameters it depends on)."""
+
+
+@dataclass(frozen=True)
+class DepthContext:
+    """What a depth model may look at, for the K compared pixels."""
+
+    z_ref: np.ndarray  # (K,) float64 reference planar depth (finite, > 0 for visible hits)
+    cos: np.ndarray  # (K,) float64 |cos| between the pixel ray and the triangle normal, in [0, 1]
+    info: Mapping[str, Any]  # the render's `info` from manifest.json
+    attrs: Mapping[str, Any]  # the test EXR's rendiff attributes (exrbuf.read_attrs)
+    pixel_size: float = 0.0  # side of one pixel on the image plane at distance 1 (2 tan(vfov/2) / H)
+    point_norm: np.ndarray | None = None  # (K,) |X|: distance of the hit point from the world origin
+    extent: np.ndarray | None = None  # (K,) longest edge of the triangle seen
+    origin_offset: float = 0.0  # |f32(eye) - eye|: how far an f32 camera origin moves the rays
+    eye_norm: float = 0.0  # |eye|: distance of the eye from the world origin
+    depth_span: np.ndarray | None = None  # (K,) max - min planar depth of the triangle's vertices
+
+
+@dataclass(frozen=True)
+class EdgeContext:
+    """What an edge model may look at, for the K mismatched pixels (the verifier's `eps`)."""
+
+    z: np.ndarray  # (K,) planar depth at the pixel (the reference's, else the test's; inf: none)
+    point_norm: np.ndarray  # (K,) |X| of that point from the world origin
+    pixel_size: float  # one pixel on the image plane at distance 1
+    origin_offset: float  # |f32(eye) - eye|
+    eye_norm: float = 0.0  # |eye|
+
+
+DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
+EdgeModel = Callable[[EdgeContext], tuple[np.ndarray, str]]
+PositionError = Callable[[float, float, np.ndarray], np.ndarray]
+"""(|f32(eye) - eye|, |eye|, |X| (K,)) -> how far the renderer's f32 arithmetic may move the
+point X it renders relative to its camera, world units (K,)."""
+
+F32_U = 2.0**-24
+"""Unit roundoff of f32: rounding to nearest moves a value by at most this times its size."""
+
+
+@dataclass(frozen=True)
+class Model:
+    backend: str
+    edge_px: float
+    edge_reason: str
+    depth: DepthModel
+    known: bool = True  # False: a strict fallback for a backend without a model
+    edge_extra: EdgeModel | None = None  # per-pixel growth of edge_px (f32 camera origin, plane offsets)
+    position: PositionError | None = None  # how far f32 arithmetic moves a point relative to the camera
+
+    def eye_uncertainty(self, origin_offset: float, eye_norm: float, point_norm: np.ndarray) -> float:
+        """World distance by which the renderer may see the eye moved relative to the geometry.
+
+        The verifier calls an edge closed only if the eye is farther than this from both
+        triangles' planes (verify.py): closer, either may turn edge-on and the edge become
+        an outline for this renderer.
+        """
+        if self.position is None or point_norm.size == 0:
+            return 0.0
+        return float(np.max(self.position(origin_offset, eye_norm, point_norm), initial=0.0))
+
+    def edge_text(self) -> str:
+        return f"edge: pixel center within {self.edge_px:.3g} px of a triangle edge ({self.edge_reason})"
+
+    def edge_eps(self, ctx: EdgeContext) -> tuple[np.ndarray, str]:
+        """Per-pixel rounding distance (px) and the sentence that derives it."""
+        base = np.full(ctx.z.shape, self.edge_px, dtype=np.float64)
+        if self.edge_extra is None:
+            return base, self.edge_text()
+        extra, text = self.edge_extra(ctx)
+        extra = np.where(np.isfinite(extra), extra, 0.0)
+        return base + extra, f"{self.edge_text()} + {text}"
+
+
+def render_param(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:
+    """A finite float parameter of a render: from its EXR attributes (they travel with the pixels),
+    else from its info; a number or a numeric string, never a bool."""
+    for source in (attrs, info):
+        value = source.get(key)
+        if isinstance(value, bool):
+            continue
+        if isinstance(value, (int, float)) and math.isfinite(float(value)):
+            return float(value)
+        if isinstance(value, str):
+            try:
+                f = float(value)
+            except ValueError:
+                continue
+            if math.isfinite(f):
+                return f
+    return None
+
+
+def param(ctx: DepthContext, key: str) -> float | None:
+    """`render_param` of the render a depth model is judging."""
+    return render_param(ctx.attrs, ctx.info, key)
+
+
+def relative_grazing(ctx: DepthContext, rel: float) -> np.ndarray:
+    """|z| * min(rel / |cos|, MAX_REL), without dividing by zero."""
+    tol: np.ndarray = np.abs(ctx.z_ref) * (rel / np.maximum(ctx.cos, rel / MAX_REL))
+    return tol
+
+
+def f32_origin(offset: float, eye_norm: float, point: np.ndarray) -> np.ndarray:
+    """Rays that start at the f32-rounded eye (Embree: `org` is `eye.as_vec3()`): exactly that offset."""
+    return np.full(point.shape, offset)
+
+
+def shift_depth(ctx: DepthContext, moved: np.ndarray) -> np.ndarray:
+    """|dZ| from a point moved by `moved` relative to the camera: moved / |cos| along the plane.
+
+    A hit on the same triangle stays inside it, so the change is also at most the triangle's
+    planar-depth span (when known); that bounds edge-on triangles without a fitted cap.
+    """
+    with np.errstate(all="ignore"):
+        d = moved / np.maximum(ctx.cos, 1e-300)
+    if ctx.depth_span is not None:
+        d = np.minimum(d, np.maximum(ctx.depth_span, moved))
+    else:
+        d = np.minimum(d, np.maximum(MAX_REL * np.abs(ctx.z_ref), moved))
+    return np.where(np.isfinite(d), d, 0.0)
+
+
+def shift_edge(moved: np.ndarray, ctx: EdgeContext) -> np.ndarray:
+    """A point moved by `moved` at depth z moves by moved / (z pixel) px on the image."""
+    with np.errstate(all="ignore"):
+        px = moved / (np.abs(ctx.z) * ctx.pixel_size)
+    return np.where(np.isfinite(px), px, 0.0)
+
+
+def position_edge(position: PositionError, text: str) -> EdgeModel:
+    """An edge model from a backend's position error."""
+
+    def edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+        moved = position(ctx.origin_offset, ctx.eye_norm, ctx.point_norm)
+        return shift_edge(moved, ctx), f"{text} / (z * pixel)"
+
+    return edge
+
+
+def position_error(ctx: DepthContext, position: PositionError) -> np.ndarray:
+    """A backend's position error at the compared pixels' points (|X| estimated when unknown)."""
+    point = ctx.point_norm if ctx.point_norm is not None else np.abs(ctx.z_ref) + ctx.eye_norm
+    return position(ctx.origin_offset, ctx.eye_norm, point)
+
+
+# --------------------------------------------------------------------------- models
+
+
+def exact_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """The rendiff loops share one depth function (docs/DESIGN.md): equal inputs give equal bits."""
+    return np.zeros_like(ctx.z_ref), "exact: Z must be bit-identical (one shared depth function)"
+
+
+EMBREE_REL = 1e-5
+
+
+def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+    """Embree 3: float32 watertight/Moeller intersection.
+
+    Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
+    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3.
+    """
+    tol = relative_grazing(ctx, EMBREE_REL) + shift_depth(ctx, position_error(ctx, f32_origin))
+    return tol, (
+        f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
+        f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye)"
+    )
+
+
+def strict_model(backend: str) -> Model:
+    """The model of a backend that has none: exact (`known` False), and the texts say so."""
+
+    def strict(ctx: DepthContext) -> tuple[np.ndarray, str]:
+        tol, _ = exact_depth(ctx)
+        return tol, f"exact: no precision model for backend {backend!r} in the registry (renderers/registry.py)"
+
+    return Model(
+        backend,
+        0.0,
+        f"no precision model for backend {backend!r} in the registry (renderers/registry.py)",
+        strict,
+        known=False,
+    )
+
+
+# --------------------------------------------------------------------------- normals (N)
+
+NormalModel = Callable[[np.ndarray], tuple[np.ndarray, str]]
+"""cond = |e1| |e2| / |e1 x e2| >= 1 per pixel (K,) -> allowed angle (radians) between a backend's N
+and normalize((b - a) x (c - a)) (K,), and the sentence that derives it."""
+
+
+def core_normals(cond: np.ndarray) -> tuple[np.ndarray, str]:
+    """The core's N (and Embree's, whose buffers the core fills from its hit keys): `geometric_normal`
+    of the prim hit (frame.rs), the cross product taken in f64 from the f32 vertices and the unit
+    vector rounded to f32: each component moves by <= u = 2^-24 of its size, the vector by
+    <= sqrt(3) u, and with the f64 terms 4u bounds the angle."""
+    tol = np.full(cond.shape, 4.0 * F32_U)
+    return tol, "angle <= 4 * 2^-24 (f64 cross product of the f32 vertices, unit vector rounded to f32)"
+
+
+def f32_normals(cond: np.ndarray) -> tuple[np.ndarray, str]:
+    """A renderer that works in f32 (Mitsuba's `geo_normal`) rounds the edges (<= u |e| each:
+    2u |e1||e2| on the cross product), each cross component (two products and a difference:
+    3u |e1||e2|, sqrt(3) of that on the vector) and normalizes and stores (about 3u + sqrt(3) u):
+    angle <= 8u cond + 6u (cond is large for slivers)."""
+    tol = 8.0 * F32_U * cond + 6.0 * F32_U
+    return tol, (
+        "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "
+        "slivers amplify the cross product's rounding)"
+    )
+
+
+# --------------------------------------------------------------------------- radiance (RGB)
+
+
+@dataclass(frozen=True)
+class RgbTolerance:
+    """Deterministic RGB tolerance: |a - b| <= abs_tol(b) + rel * |b| per channel."""
+
+    abs_tol: np.ndarray | float  # scalar or (H, W, 3), evaluated at the reference values
+    rel: float
+    text: str
+
+
+F32_RGB_REL = 4 * 2.0**-24
+
+
+def exposure_scale(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:
+    """An RGB exposure scale (e.g. `rgb_scale`) from the EXR attributes, else the info, else info's `radiance`."""
+    v = render_param(attrs, info, key)
+    if v is None:
+        radiance = info.get("radiance") if isinstance(info, Mapping) else None
+        if isinstance(radiance, Mapping):
+            v = render_param({}, radiance, key)
+    return v
+
+
+def exact_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    return RgbTolerance(0.0, 0.0, "exact: the rendiff loops share visibility and shading code")
+
+
+def f32_rgb(ref: np.ndarray, attrs: Mapping[str, Any], info: Mapping[str, Any]) -> RgbTolerance:
+    return RgbTolerance(0.0, F32_RGB_REL, f"float32: |dL| <= {F32_RGB_REL:.3g}*|L| (4 ulps)")
+
+
+RgbModel = Callable[[np.ndarray, Mapping[str, Any], Mapping[str, Any]], RgbTolerance]
+"""(reference values (H, W, 3), EXR attributes, render info) -> the deterministic RGB tolerance."""
+
+
+def rgb_fallback(backend: str, attrs: Mapping[str, Any]) -> RgbTolerance:
+    """The RGB tolerance of a backend without an RGB model: f32 output at 4 ulps when the EXR
+    says rgb_encoding = float32, else exact, and the text says there is no model (so a new
+    backend fails loudly)."""
+    enc = attrs.get("rgb_encoding") if isinstance(attrs, Mapping) else None
+    if enc == "float32":
+        t = f32_rgb(np.zeros(0), attrs, {})
+        return RgbTolerance(t.abs_tol, t.rel, t.text + f" (no RGB model for {backend!r}; its EXR says float32)")
+    return RgbTolerance(
+        0.0, 0.0, f"exact: no RGB precision model for backend {backend!r} in the registry (renderers/registry.py)"
+    )

@@ -1,0 +1,56 @@
+"""The rendiff core's own backends (rendered by the Rust side, never by the harness): their specs
+carry precision only. raster and trace share one coverage predicate and one depth function, so
+they must agree with each other bit for bit; Embree is driven by the core (its buffers are filled
+from its hit keys) with float32 ray-triangle tests."""
+
+from __future__ import annotations
+
+from ..contract.vocab import VISIBILITY_FEATURES, Buffer, Feature
+from ..judge.camera_budget import core_camera, embree_camera
+from ..judge.tolerance import Model, core_normals, embree_depth, exact_depth, exact_rgb, f32_origin, position_edge
+from .spec import BackendSpec
+
+_ALL_BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N, Buffer.RGB})
+
+
+def _loop(name: str, what: str, other: str) -> BackendSpec:
+    """raster or trace: the rendiff loops share visibility and shading code."""
+    reason = f"the rendiff {what} shares the coverage predicate with {other}: must be identical"
+    return BackendSpec(
+        name,
+        frozenset(Feature),
+        _ALL_BUFFERS,
+        Model(name, 0.0, reason, exact_depth),
+        calibration=core_camera,
+        rgb_tolerance=exact_rgb,
+        normals=core_normals,
+        core_loop=True,
+    )
+
+
+def _embree(name: str, what: str) -> BackendSpec:
+    """Embree (default or ROBUST): float32 ray-triangle tests on rays from the f32 eye."""
+    return BackendSpec(
+        name,
+        frozenset(VISIBILITY_FEATURES),
+        frozenset({Buffer.Z, Buffer.ID, Buffer.N}),
+        Model(
+            name,
+            1e-4,
+            f"{what}: measured ID differences within 1e-4 of shared edges",
+            embree_depth,
+            edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
+            position=f32_origin,
+        ),
+        calibration=embree_camera,
+        normals=core_normals,
+    )
+
+
+SPECS = (
+    _loop("trace", "tracer", "raster"),
+    _loop("raster", "rasterizer", "trace"),
+    _embree("embree", "float32 ray-triangle tests"),
+    _embree("embree_robust", "float32 watertight ray-triangle tests (ROBUST)"),
+)
+"""The core's backends, in the order the registry lists them."""

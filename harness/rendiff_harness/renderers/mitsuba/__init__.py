@@ -1,0 +1,1 @@
+"""Mitsuba 3 (backend.py: exporter, reader, precision and `SPEC`)."""

@@ -1,0 +1,1 @@
+"""pyrender on OSMesa (backend.py: exporter, reader, precision and `SPEC`; shaders/: its GLSL)."""
