@@ -394,7 +394,9 @@ struct Tally {
 
 fn mkfifo(p: &Path) {
     let c = std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
-    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0, "mkfifo");
+    // SAFETY: mkfifo reads the NUL-terminated path `c`, which outlives the call.
+    let rc = unsafe { libc::mkfifo(c.as_ptr(), 0o644) };
+    assert_eq!(rc, 0, "mkfifo");
 }
 
 /// Writes the case's folder: `root/scenes/` with the scene and its meshes

@@ -189,9 +189,10 @@ pub fn peak_rss_main(report: &Path, argv: &[std::ffi::OsString]) -> Result<i32> 
     let pid = child.id() as libc::pid_t;
     let (status, usage) = loop {
         let mut status: libc::c_int = 0;
-        // SAFETY: a zeroed rusage is a valid plain C struct; wait4 writes only
-        // through the two pointers, which outlive the call.
+        // SAFETY: a zeroed rusage is a valid plain C struct (integers only).
         let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: wait4 writes only through the two pointers, which point to
+        // locals that outlive the call.
         let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
         if r == pid {
             break (status, usage);

@@ -71,8 +71,9 @@ pub fn read() -> Option<CpuCounters> {
 fn own_cpu_seconds() -> Option<f64> {
     let mut total = 0.0;
     for who in [libc::RUSAGE_SELF, libc::RUSAGE_CHILDREN] {
-        // SAFETY: getrusage writes one rusage into the zeroed value we own.
+        // SAFETY: a zeroed rusage is a valid plain C struct (integers only).
         let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: getrusage writes one rusage into `u`, which we own.
         if unsafe { libc::getrusage(who, &mut u) } != 0 {
             return None;
         }

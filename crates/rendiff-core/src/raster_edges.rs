@@ -494,10 +494,14 @@ impl WideExtremes {
     #[inline(always)]
     unsafe fn load(ext: &Extremes) -> Self {
         use std::arch::x86_64::_mm256_loadu_pd;
-        WideExtremes {
-            lo: _mm256_loadu_pd(ext.lo.as_ptr()),
-            hi: _mm256_loadu_pd(ext.hi.as_ptr()),
-            bad: _mm256_loadu_pd(ext.bad.as_ptr()),
+        // SAFETY: the caller holds an `Avx2` (this fn's contract);
+        // the loads read four f64 from each of `ext`'s arrays, borrowed here.
+        unsafe {
+            WideExtremes {
+                lo: _mm256_loadu_pd(ext.lo.as_ptr()),
+                hi: _mm256_loadu_pd(ext.hi.as_ptr()),
+                bad: _mm256_loadu_pd(ext.bad.as_ptr()),
+            }
         }
     }
 
@@ -509,9 +513,12 @@ impl WideExtremes {
     #[inline(always)]
     unsafe fn add(&mut self, v: std::arch::x86_64::__m256d) {
         use std::arch::x86_64::*;
-        self.lo = _mm256_min_pd(v, self.lo);
-        self.hi = _mm256_max_pd(v, self.hi);
-        self.bad = _mm256_add_pd(self.bad, _mm256_mul_pd(v, _mm256_setzero_pd()));
+        // SAFETY: the caller holds an `Avx2` (this fn's contract); no memory access.
+        unsafe {
+            self.lo = _mm256_min_pd(v, self.lo);
+            self.hi = _mm256_max_pd(v, self.hi);
+            self.bad = _mm256_add_pd(self.bad, _mm256_mul_pd(v, _mm256_setzero_pd()));
+        }
     }
 
     /// Back into `ext`.
@@ -521,9 +528,13 @@ impl WideExtremes {
     #[inline(always)]
     unsafe fn store(self, ext: &mut Extremes) {
         use std::arch::x86_64::_mm256_storeu_pd;
-        _mm256_storeu_pd(ext.lo.as_mut_ptr(), self.lo);
-        _mm256_storeu_pd(ext.hi.as_mut_ptr(), self.hi);
-        _mm256_storeu_pd(ext.bad.as_mut_ptr(), self.bad);
+        // SAFETY: the caller holds an `Avx2` (this fn's contract);
+        // the stores write four f64 into each of `ext`'s arrays, borrowed mutably here.
+        unsafe {
+            _mm256_storeu_pd(ext.lo.as_mut_ptr(), self.lo);
+            _mm256_storeu_pd(ext.hi.as_mut_ptr(), self.hi);
+            _mm256_storeu_pd(ext.bad.as_mut_ptr(), self.bad);
+        }
     }
 }
 
@@ -1033,19 +1044,22 @@ unsafe fn rounds_alone4(
     eu: std::arch::x86_64::__m256i,
 ) -> std::arch::x86_64::__m256i {
     use std::arch::x86_64::*;
-    let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
-    let d = _mm256_sub_epi64(
-        _mm256_and_si256(_mm256_castpd_si256(w), mask),
-        _mm256_set1_epi64x(MIDPOINT),
-    );
-    let neg = _mm256_sub_epi64(_mm256_setzero_si256(), d);
-    // |d|: the negation where d's sign bit is set.
-    let abs = _mm256_blendv_pd(
-        _mm256_castsi256_pd(d),
-        _mm256_castsi256_pd(neg),
-        _mm256_castsi256_pd(d),
-    );
-    _mm256_cmpgt_epi64(_mm256_castpd_si256(abs), eu)
+    // SAFETY: the caller holds an `Avx2` (this fn's contract); no memory access.
+    unsafe {
+        let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
+        let d = _mm256_sub_epi64(
+            _mm256_and_si256(_mm256_castpd_si256(w), mask),
+            _mm256_set1_epi64x(MIDPOINT),
+        );
+        let neg = _mm256_sub_epi64(_mm256_setzero_si256(), d);
+        // |d|: the negation where d's sign bit is set.
+        let abs = _mm256_blendv_pd(
+            _mm256_castsi256_pd(d),
+            _mm256_castsi256_pd(neg),
+            _mm256_castsi256_pd(d),
+        );
+        _mm256_cmpgt_epi64(_mm256_castpd_si256(abs), eu)
+    }
 }
 
 /// The z-test on four keys at `ptr`: each lowered to `new` where that is
@@ -1057,12 +1071,16 @@ unsafe fn rounds_alone4(
 #[inline(always)]
 unsafe fn min_keys4(ptr: *mut u64, new: std::arch::x86_64::__m256i) {
     use std::arch::x86_64::*;
-    let sign = _mm256_set1_epi64x(i64::MIN);
-    let p = ptr.cast::<__m256i>();
-    let old = _mm256_loadu_si256(p);
-    // Unsigned comparison as signed, with the top bits flipped.
-    let old_bigger = _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
-    _mm256_storeu_si256(p, _mm256_blendv_epi8(old, new, old_bigger));
+    // SAFETY: the caller guarantees AVX2 and that `ptr` points to four keys it may write (this fn's contract).
+    unsafe {
+        let sign = _mm256_set1_epi64x(i64::MIN);
+        let p = ptr.cast::<__m256i>();
+        let old = _mm256_loadu_si256(p);
+        // Unsigned comparison as signed, with the top bits flipped.
+        let old_bigger =
+            _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
+        _mm256_storeu_si256(p, _mm256_blendv_epi8(old, new, old_bigger));
+    }
 }
 
 /// `hit_key` on four lanes: the f32 bits (`bits`) above, `low` (the prim,
@@ -1077,7 +1095,8 @@ unsafe fn hit_keys4(
     low: std::arch::x86_64::__m256i,
 ) -> std::arch::x86_64::__m256i {
     use std::arch::x86_64::*;
-    _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low)
+    // SAFETY: the caller guarantees AVX2 (this fn's contract); no memory access.
+    unsafe { _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low) }
 }
 
 /// One direction component of a pixel ray, `(e + (across + up)) - e`:
