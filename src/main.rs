@@ -648,19 +648,21 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let l = &outcome.ledger;
             for f in &l.findings {
                 let s = &f.signature;
+                let families: Vec<String> =
+                    f.families.iter().map(|(k, n)| format!("{k} {n}")).collect();
                 rendiff::outln!(
-                    "{}: {} fails {} ({}) on {} {} scene(s), e.g. {}",
+                    "{}: {} fails {} ({}) on {} scene(s) ({})",
                     f.id,
                     s.backend,
                     s.buffer,
                     s.class,
                     f.hits,
-                    s.family,
-                    f.scenes[0]
+                    families.join(", ")
                 );
                 match &f.reduced {
                     Some(r) if r.error.is_empty() => rendiff::outln!(
-                        "  reduced{}: {} -> {} triangles, {} -> {} bytes: {}\n  reproduce: {}",
+                        "  reduced {}{}: {} -> {} triangles, {} -> {} bytes: {}\n  reproduce: {}",
+                        r.from,
                         if r.complete { "" } else { " (budget ran out)" },
                         r.triangles_before,
                         r.triangles_after,
@@ -669,7 +671,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         folder.join(&r.scene).display(),
                         r.command
                     ),
-                    Some(r) => rendiff::outln!("  not reduced: {}", r.error),
+                    Some(r) => rendiff::outln!("  not reduced {}: {}", r.from, r.error),
                     None => {}
                 }
             }

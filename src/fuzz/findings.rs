@@ -4,9 +4,10 @@
 //! A failure is one failing verdict of results.json (fail, error or
 //! unexpected pass) on a generated scene; its class is what the verifier
 //! counted ([`failure_class`]). Two failures with the same signature
-//! (backend, buffer, class, the scene's primary grammar family) are
-//! presumed one cause: the finding keeps every scene that hit it and
-//! reduces the first.
+//! (backend, buffer, class) are presumed one cause: the finding keeps every
+//! scene that hit it, counts them by grammar family, and the smallest is
+//! reduced. (The fuller signature, with the reduced geometry's
+//! situation, is not computed yet: docs/fuzzing.md.)
 
 use crate::gate::{Status, Verdict};
 use serde::Serialize;
@@ -73,13 +74,13 @@ pub struct Signature {
     pub buffer: String,
     /// [`failure_class`].
     pub class: String,
-    /// The generated scene's primary grammar family (its situation).
-    pub family: String,
 }
 
 /// A reduced repro, as findings.json records it.
 #[derive(Debug, Clone, Serialize)]
 pub struct ReducedRecord {
+    /// The scene it was reduced from (a generated scene's name in findings.json).
+    pub from: String,
     /// The standalone scene, relative to FOLDER.
     pub scene: String,
     /// The one command that reproduces the failure from it.
@@ -118,6 +119,8 @@ pub struct Finding {
     pub hits: usize,
     /// Their names, in generation order.
     pub scenes: Vec<String>,
+    /// How many of them each grammar family (a scene's primary one) made.
+    pub families: BTreeMap<String, usize>,
     /// The example's reason.
     pub reason: String,
     /// The reduction of the first scene, when one ran.
@@ -152,7 +155,7 @@ pub fn group(
 ) -> (Vec<Failure>, Vec<Failure>, Vec<Finding>) {
     let mut failures = Vec::new();
     let mut camera = Vec::new();
-    let mut by_sig: BTreeMap<Signature, Vec<&Verdict>> = BTreeMap::new();
+    let mut by_sig: BTreeMap<Signature, Vec<(&Verdict, &String)>> = BTreeMap::new();
     for v in verdicts {
         let Some(class) = failure_class(v) else {
             continue;
@@ -171,10 +174,9 @@ pub fn group(
                         backend: v.backend.clone(),
                         buffer: v.buffer.clone(),
                         class,
-                        family: family.clone(),
                     })
                     .or_default()
-                    .push(v);
+                    .push((v, family));
                 failures.push(f);
             }
             None => camera.push(f),
@@ -184,13 +186,18 @@ pub fn group(
         .into_iter()
         .enumerate()
         .map(|(i, (signature, mut vs))| {
-            vs.sort_by(|a, b| a.scene.cmp(&b.scene));
+            vs.sort_by(|a, b| a.0.scene.cmp(&b.0.scene));
+            let mut families = BTreeMap::new();
+            for (_, f) in &vs {
+                *families.entry(f.to_string()).or_insert(0) += 1;
+            }
             Finding {
                 id: format!("F{}", i + 1),
                 signature,
                 hits: vs.len(),
-                scenes: vs.iter().map(|v| v.scene.clone()).collect(),
-                reason: crate::scene::printable(&vs[0].reason, 300),
+                scenes: vs.iter().map(|(v, _)| v.scene.clone()).collect(),
+                families,
+                reason: crate::scene::printable(&vs[0].0.reason, 300),
                 reduced: None,
             }
         })
@@ -248,18 +255,20 @@ mod tests {
         let i = [("interior_mismatches", 3)];
         let vs = vec![
             verdict("b", "id", Status::Fail, &i),
+            verdict("b", "Z", Status::Fail, &[]),
             verdict("a", "id", Status::Fail, &i),
             verdict("a", "Z", Status::Pass, &[]),
             verdict("c", "id", Status::Fail, &i),
             verdict("camera_near", "camera", Status::Fail, &[]),
         ];
         let (failures, camera, findings) = group(&vs, &gen);
-        assert_eq!(failures.len(), 3);
+        assert_eq!(failures.len(), 4);
         assert_eq!(camera.len(), 1);
-        assert_eq!(findings.len(), 2);
-        assert_eq!(findings[0].signature.family, "coplanar");
-        assert_eq!(findings[0].scenes, vec!["a", "b"]);
-        assert_eq!(findings[0].hits, 2);
-        assert_eq!(findings[1].scenes, vec!["c"]);
+        assert_eq!(findings.len(), 1);
+        assert_eq!(findings[0].signature.class, "interior");
+        assert_eq!(findings[0].scenes, vec!["a", "b", "c"]);
+        assert_eq!(findings[0].hits, 3);
+        assert_eq!(findings[0].families["coplanar"], 2);
+        assert_eq!(findings[0].families["sliver"], 1);
     }
 }

@@ -156,12 +156,17 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     })
 }
 
-/// Reduces a finding's first scene; a reduction that fails is recorded with its reason.
+/// Reduces a finding's smallest scene (fewest bytes, then first: the
+/// quickest to reduce); a reduction that fails is recorded with its reason.
 fn reduce_finding(opts: &FuzzOptions, f: &Finding, budget: Duration) -> ReducedRecord {
-    let scene_file = opts
-        .folder
-        .join("scenes")
-        .join(format!("{}.toml", f.scenes[0]));
+    let file = |s: &String| opts.folder.join("scenes").join(format!("{s}.toml"));
+    let size = |s: &String| std::fs::metadata(file(s)).map_or(u64::MAX, |m| m.len());
+    let smallest = f
+        .scenes
+        .iter()
+        .min_by_key(|s| size(s))
+        .unwrap_or(&f.scenes[0]);
+    let scene_file = file(smallest);
     let out = opts.folder.join("reduced").join(format!("{}.toml", f.id));
     let target = Target {
         backend: f.signature.backend.clone(),
@@ -172,9 +177,11 @@ fn reduce_finding(opts: &FuzzOptions, f: &Finding, budget: Duration) -> ReducedR
     match reduce_file(&scene_file, &target, &opts.check, &work, Some(budget), &out) {
         Ok(mut r) => {
             r.scene = format!("reduced/{}.toml", f.id);
+            r.from = smallest.clone();
             r
         }
         Err(e) => ReducedRecord {
+            from: smallest.clone(),
             scene: String::new(),
             command: String::new(),
             triangles_before: 0,
@@ -224,6 +231,7 @@ pub fn reduce_file(
     }
     crate::exr_io::write_atomically(out, |tmp| Ok(std::fs::write(tmp, &text)?))?;
     Ok(ReducedRecord {
+        from: scene_file.display().to_string(),
         scene: out.display().to_string(),
         command: reproduce_command(out, &target.backend, template.renderers.as_deref()),
         triangles_before: start.triangle_count(),
