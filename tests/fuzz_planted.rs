@@ -1,11 +1,13 @@
-//! `rendiff fuzz` finds a planted bug on its own and `rendiff reduce`
-//! shrinks it (docs/fuzzing.md): a declared command renderer
-//! (tests/fuzz_renderers/coplanar_bias.py) drops a triangle that lies in
-//! front of a near-coplanar neighbour drawn before it. Within 200 generated
-//! scenes the fuzzer must report it as an interior failure, reduce it to at
-//! most 8 triangles, and the reduced scene must (a) still fail on its own,
-//! checked from a fresh folder with calibration, and (b) come back from a
-//! second reduction byte for byte unchanged.
+//! `rendiff fuzz` finds planted bugs on its own and `rendiff reduce`
+//! shrinks them (docs/fuzzing.md). Declared command renderers
+//! (tests/fuzz_renderers/planted.py) each carry one fault: `coplanar_bias`
+//! drops a triangle that lies in front of a near-coplanar neighbour drawn
+//! before it; `subpixel_shift` moves one vertex of every sub-pixel triangle
+//! by 1e-3 px. Within 200 generated scenes the fuzzer must report each
+//! and reduce it to at most 8 triangles; for the first, the
+//! reduced scene must also (a) still fail on its own, checked from a fresh
+//! folder with calibration, and (b) come back from a second reduction byte
+//! for byte unchanged.
 
 mod common_cli;
 
@@ -46,23 +48,13 @@ fn text(o: &std::process::Output) -> String {
     )
 }
 
-#[test]
-fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
-    need_venv();
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
+/// `rendiff fuzz --seed 1 --count 200 --only BACKEND` into `dir/fuzz`:
+/// it must exit 1 (failures found); the ledger.
+fn fuzz(dir: &Path, backend: &str) -> Value {
     let out = output_within(
         rendiff(dir)
-            .args([
-                "fuzz",
-                "--seed",
-                "1",
-                "--count",
-                "200",
-                "--only",
-                BACKEND,
-                "--renderers",
-            ])
+            .args(["fuzz", "--seed", "1", "--count", "200", "--only", backend])
+            .arg("--renderers")
             .arg(renderers())
             .args(["--no-calibration", "--jobs", "2", "--quiet", "-o", "fuzz"]),
         900,
@@ -78,15 +70,38 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
             .unwrap();
     assert_eq!(ledger["format"], "rendiff-findings/1");
     assert_eq!(ledger["scenes"], 200);
-    let findings = ledger["findings"].as_array().unwrap();
-    // The planted bug: interior ID mismatches, coplanar scenes among them.
-    let f = findings
+    ledger
+}
+
+/// The first finding of `backend` failing `buffer` (any buffer when None)
+/// with one of `classes` (any class when empty).
+fn finding<'a>(
+    ledger: &'a Value,
+    backend: &str,
+    buffer: Option<&str>,
+    classes: &[&str],
+) -> &'a Value {
+    ledger["findings"]
+        .as_array()
+        .unwrap()
         .iter()
         .find(|f| {
             let s = &f["signature"];
-            s["backend"] == BACKEND && s["buffer"] == "id" && s["class"] == "interior"
+            s["backend"] == backend
+                && buffer.is_none_or(|b| s["buffer"] == b)
+                && (classes.is_empty() || classes.iter().any(|c| s["class"] == *c))
         })
-        .unwrap_or_else(|| panic!("the planted bug was not found: {}", text(&out)));
+        .unwrap_or_else(|| panic!("the planted bug of {backend} was not found: {ledger}"))
+}
+
+#[test]
+fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
+    need_venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let ledger = fuzz(dir, BACKEND);
+    // The planted bug: interior ID mismatches, coplanar scenes among them.
+    let f = finding(&ledger, BACKEND, Some("id"), &["interior"]);
     assert!(f["hits"].as_u64().unwrap() >= 1);
     assert!(f["families"]["coplanar"].as_u64().unwrap() >= 1, "{f}");
     let r = &f["reduced"];
@@ -212,5 +227,27 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
         String::from_utf8_lossy(&std::fs::read(fresh.join("again.toml")).unwrap()),
         String::from_utf8_lossy(&reduced),
         "a second reduction changed the reduced scene"
+    );
+}
+
+#[test]
+fn a_planted_subpixel_vertex_shift_is_found_and_reduced() {
+    need_venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let backend = "subpixel_shift";
+    let ledger = fuzz(tmp.path(), backend);
+    // The moved vertex tilts the triangle: its normals and depths leave
+    // the declared precision (and a center the shift moves an edge across
+    // changes its ID), whichever buffer the verifier sees it in first.
+    let f = finding(&ledger, backend, None, &[]);
+    let r = &f["reduced"];
+    assert!(r["error"].is_null(), "reduction failed: {r}");
+    let before = r["triangles_before"].as_u64().unwrap();
+    let after = r["triangles_after"].as_u64().unwrap();
+    assert!(after <= 8, "reduced to {after} triangles: {r}");
+    assert!(after < before || before == 1, "{r}");
+    assert!(
+        r["complete"].as_bool().unwrap(),
+        "reduction stopped early: {r}"
     );
 }
