@@ -49,3 +49,35 @@ fn the_same_seed_writes_the_same_files_byte_for_byte() {
         rendiff::scene::resolve::ResolvedScene::resolve(&scene).unwrap();
     }
 }
+
+/// Bad input to `fuzz` and `reduce` is one clear line and exit 2, before
+/// anything renders: a folder fuzz did not write is never emptied, and a
+/// run without the named failure says so.
+#[test]
+fn bad_fuzz_and_reduce_input_is_one_clear_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::create_dir(dir.join("mine")).unwrap();
+    std::fs::write(dir.join("mine/keep.txt"), "mine").unwrap();
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_rendiff"))
+            .current_dir(dir)
+            .env("RENDIFF_HOME", env!("CARGO_MANIFEST_DIR"))
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        (out.status.code(), err)
+    };
+    let (code, err) = run(&["fuzz", "--count", "3", "-o", "mine"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("not a fuzz folder"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(dir.join("mine/keep.txt").is_file());
+    let (code, err) = run(&["fuzz", "--count", "0"]);
+    assert_eq!(code, Some(2), "{err}");
+    let (code, err) = run(&["reduce", "nope", "s1_00000", "--backend", "trace"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("nope"), "{err}");
+}
