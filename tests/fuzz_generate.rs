@@ -81,3 +81,33 @@ fn bad_fuzz_and_reduce_input_is_one_clear_line() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("nope"), "{err}");
 }
+
+/// A fuzz whose check is refused (an unknown backend) leaves a folder the
+/// next fuzz may reuse: it holds only what fuzz writes.
+#[test]
+fn a_refused_fuzz_leaves_a_reusable_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fuzz = |dir: &Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_rendiff"))
+            .current_dir(dir)
+            .env("RENDIFF_HOME", env!("CARGO_MANIFEST_DIR"))
+            .args([
+                "fuzz",
+                "--count",
+                "2",
+                "--only",
+                "no_such_backend",
+                "-o",
+                "f",
+            ])
+            .output()
+            .unwrap()
+    };
+    for _ in 0..2 {
+        let out = fuzz(tmp.path());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains("no_such_backend"), "{err}");
+        assert!(!err.contains("not a fuzz folder"), "{err}");
+    }
+}

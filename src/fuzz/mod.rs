@@ -66,8 +66,7 @@ pub fn scene_name(seed: u64, index: u64) -> String {
     format!("s{seed}_{index:05}")
 }
 
-/// The file marking a folder as a fuzz folder (so a rerun may replace its
-/// contents, and no other folder is ever emptied).
+/// The ledger's file name in a fuzz folder.
 const MARKER: &str = "findings.json";
 
 /// Writes the `count` scenes of `seed` into `dir` (created); returns their
@@ -92,19 +91,28 @@ pub fn write_scenes(
     Ok((files, families))
 }
 
-/// Makes `folder` ready for a fuzz run: created when absent; a previous fuzz
-/// folder (it has findings.json) has its scenes and reductions cleared; any
-/// other non-empty folder is refused.
+/// What a fuzz folder holds: its own entries, and the check's staging
+/// folders (hidden, beside `run`). A folder holding anything else is not one.
+fn fuzz_entry(name: &std::ffi::OsStr) -> bool {
+    let name = name.to_string_lossy();
+    ["scenes", "run", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
+}
+
+/// Makes `folder` ready for a fuzz run: created when absent; a folder that
+/// holds only what a fuzz writes (a finished one, or one whose check was
+/// refused or interrupted) has its scenes and reductions cleared; any other
+/// non-empty folder is refused, untouched.
 fn prepare(folder: &Path) -> Result<()> {
     if folder.exists() {
-        let empty = std::fs::read_dir(folder)
-            .with_context(|| format!("{}: cannot list", folder.display()))?
-            .next()
-            .is_none();
-        if !empty && !folder.join(MARKER).is_file() {
+        let mut entries = std::fs::read_dir(folder)
+            .with_context(|| format!("{}: cannot list", folder.display()))?;
+        if let Some(other) =
+            entries.find_map(|e| e.ok().map(|e| e.file_name()).filter(|n| !fuzz_entry(n)))
+        {
             bail!(
-                "{}: not empty and not a fuzz folder (no {MARKER}): give a new folder with -o",
-                folder.display()
+                "{}: not a fuzz folder (it holds {}): give a new folder with -o",
+                folder.display(),
+                crate::scene::printable(&other.to_string_lossy(), 100)
             );
         }
         for sub in ["scenes", "reduced"] {
