@@ -264,11 +264,19 @@ mod tests {
         let (failures, camera, findings) = group(&vs, &gen);
         assert_eq!(failures.len(), 4);
         assert_eq!(camera.len(), 1);
-        assert_eq!(findings.len(), 1);
-        assert_eq!(findings[0].signature.class, "interior");
-        assert_eq!(findings[0].scenes, vec!["a", "b", "c"]);
-        assert_eq!(findings[0].hits, 3);
-        assert_eq!(findings[0].families["coplanar"], 2);
-        assert_eq!(findings[0].families["sliver"], 1);
+        // id/interior on a, b, c; Z/depth on b: two signatures ("Z" sorts first).
+        assert_eq!(findings.len(), 2);
+        let (z, id) = (&findings[0], &findings[1]);
+        assert_eq!(
+            (z.signature.buffer.as_str(), z.signature.class.as_str()),
+            ("Z", "depth")
+        );
+        assert_eq!(z.scenes, vec!["b"]);
+        assert_eq!(id.signature.class, "interior");
+        assert_eq!(id.scenes, vec!["a", "b", "c"]);
+        assert_eq!(id.hits, 3);
+        assert_eq!(id.families["coplanar"], 2);
+        assert_eq!(id.families["sliver"], 1);
+        assert_eq!((z.id.as_str(), id.id.as_str()), ("F1", "F2"));
     }
 }
