@@ -238,6 +238,81 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, required = true)]
         command: Vec<std::ffi::OsString>,
     },
+    /// Generate scenes nobody wrote (docs/fuzzing.md), check them all in one
+    /// run, group the failures into findings and reduce each to a small repro.
+    ///
+    /// Writes FOLDER/scenes/ (the generated scenes), FOLDER/run/ (the check
+    /// run), FOLDER/reduced/ (one standalone scene per finding) and
+    /// FOLDER/findings.json. Exit 1 when anything failed.
+    Fuzz {
+        /// Seed: the same seed and count give the same scene files, byte for byte.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// How many scenes to generate.
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..=rendiff::fuzz::MAX_COUNT))]
+        count: u64,
+        /// The fuzz folder (a new folder, or one an earlier fuzz wrote).
+        #[arg(short, long, default_value = "reports/fuzz/latest")]
+        output: PathBuf,
+        /// Only these backends, comma-separated (the raster reference always runs).
+        #[arg(long, value_delimiter = ',')]
+        only: Option<Vec<String>>,
+        /// Your own renderers, declared by command in a TOML file (docs/your-renderer.md).
+        #[arg(long)]
+        renderers: Option<PathBuf>,
+        /// External renders run this many at a time (default: the cores).
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
+        jobs: Option<usize>,
+        /// Seconds before an external renderer is killed (1 to a week).
+        #[arg(long, default_value_t = 600, value_parser = rendiff::args::parse_timeout)]
+        timeout: u64,
+        /// Known divergences with their bounds (default: rendiff's tests/expectations.toml).
+        #[arg(long)]
+        expectations: Option<PathBuf>,
+        /// Render no calibration probes (the comparison then measures no camera).
+        #[arg(long)]
+        no_calibration: bool,
+        /// Seconds of reduction per finding (0: reduce nothing).
+        #[arg(long, default_value_t = 180)]
+        reduce_budget: u64,
+        /// Print only the summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Shrink a failing scene of a check run to a small standalone repro
+    /// (docs/fuzzing.md): ddmin over objects, then triangles, then snapping
+    /// coordinates to coarser grids, while the backend still fails the same
+    /// buffer with the same class.
+    Reduce {
+        /// The check run (holds manifest.json and results.json).
+        run: PathBuf,
+        /// The scene's name in the run (its file stem).
+        scene: String,
+        /// The backend whose failure to keep.
+        #[arg(long)]
+        backend: String,
+        /// The buffer whose failure to keep (default: the first failing one).
+        #[arg(long)]
+        buffer: Option<String>,
+        /// The reduced scene file (default: reduced/SCENE.BACKEND.toml).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// The renderers file the run used, when BACKEND is declared there.
+        #[arg(long)]
+        renderers: Option<PathBuf>,
+        /// Known divergences with their bounds (default: rendiff's tests/expectations.toml).
+        #[arg(long)]
+        expectations: Option<PathBuf>,
+        /// External renders run this many at a time (default: the cores).
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
+        jobs: Option<usize>,
+        /// Seconds before an external renderer is killed (1 to a week).
+        #[arg(long, default_value_t = 600, value_parser = rendiff::args::parse_timeout)]
+        timeout: u64,
+        /// Stop reducing after this many seconds and keep what was reached.
+        #[arg(long, value_parser = rendiff::args::parse_timeout)]
+        budget: Option<u64>,
+    },
     /// Make a run's verdicts and numbers the new baseline (the only way thresholds change).
     Bless {
         /// Run folder (holds manifest.json and results.json).
@@ -552,6 +627,131 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(ExitCode::from(u8::try_from(code).unwrap_or(255)))
         }
         Command::Bench { args } => bench(&args),
+        Command::Fuzz {
+            seed,
+            count,
+            output,
+            only,
+            renderers,
+            jobs,
+            timeout,
+            expectations,
+            no_calibration,
+            reduce_budget,
+            quiet,
+        } => {
+            let mut check = check_template(only, renderers, jobs, timeout, expectations)?;
+            check.quiet = quiet;
+            if no_calibration {
+                check.calibration = None;
+            }
+            let folder = std::path::absolute(&output)?;
+            let opts = rendiff::fuzz::FuzzOptions {
+                seed,
+                count,
+                folder: folder.clone(),
+                check,
+                reduce_budget: (reduce_budget > 0)
+                    .then(|| std::time::Duration::from_secs(reduce_budget)),
+            };
+            let outcome = rendiff::fuzz::run(&opts)?;
+            let l = &outcome.ledger;
+            for f in &l.findings {
+                let s = &f.signature;
+                let families: Vec<String> =
+                    f.families.iter().map(|(k, n)| format!("{k} {n}")).collect();
+                rendiff::outln!(
+                    "{}: {} fails {} ({}) on {} scene(s) ({})",
+                    f.id,
+                    s.backend,
+                    s.buffer,
+                    s.class,
+                    f.hits,
+                    families.join(", ")
+                );
+                match &f.reduced {
+                    Some(r) if r.error.is_empty() => rendiff::outln!(
+                        "  reduced {}{}: {} -> {} triangles, {} -> {} bytes: {}\n  reproduce: {}",
+                        r.from,
+                        if r.complete { "" } else { " (budget ran out)" },
+                        r.triangles_before,
+                        r.triangles_after,
+                        r.bytes_before,
+                        r.bytes_after,
+                        folder.join(&r.scene).display(),
+                        r.command
+                    ),
+                    Some(r) => rendiff::outln!("  not reduced {}: {}", r.from, r.error),
+                    None => {}
+                }
+            }
+            rendiff::outln!(
+                "fuzz: seed {seed}, {count} scenes, {} failing verdicts, {} findings{} -> {}",
+                l.failures.len(),
+                l.findings.len(),
+                if l.camera_failures.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {} camera calibration failures", l.camera_failures.len())
+                },
+                folder.join("findings.json").display()
+            );
+            let failed = !l.failures.is_empty() || !l.camera_failures.is_empty();
+            Ok(if failed {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+        Command::Reduce {
+            run,
+            scene,
+            backend,
+            buffer,
+            output,
+            renderers,
+            expectations,
+            jobs,
+            timeout,
+            budget,
+        } => {
+            let mut check = check_template(None, renderers, jobs, timeout, expectations)?;
+            check.quiet = true;
+            let (target, scene_file) =
+                rendiff::fuzz::target_in_run(&run, &scene, &backend, buffer.as_deref())?;
+            let out = output.unwrap_or_else(|| {
+                // The scene name is one plain folder name in a run (docs/run-format.md).
+                PathBuf::from("reduced").join(format!("{scene}.{backend}.toml"))
+            });
+            let out = std::path::absolute(&out)?;
+            let work = out.with_extension("work");
+            let r = rendiff::fuzz::reduce_file(
+                &scene_file,
+                &target,
+                &check,
+                &work,
+                budget.map(std::time::Duration::from_secs),
+                &out,
+            )?;
+            rendiff::outln!(
+                "{} fails {} with class {}: {} -> {} triangles, {} -> {} objects, {} -> {} bytes ({} check runs, {} candidates{})",
+                target.backend,
+                target.buffer,
+                target.class,
+                r.triangles_before,
+                r.triangles_after,
+                r.objects_before,
+                r.objects_after,
+                r.bytes_before,
+                r.bytes_after,
+                r.check_runs,
+                r.candidates,
+                if r.complete { "" } else { "; budget ran out" }
+            );
+            rendiff::outln!("reduced: {}", out.display());
+            rendiff::outln!("reproduce: {}", r.command);
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Check {
             scenes,
             output,
@@ -647,6 +847,42 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(finish_run("check", &outcome, &output))
         }
     }
+}
+
+/// The check settings `fuzz` and `reduce` run with: `check`'s defaults
+/// (rendiff's expectations, references and calibration probes, all cores)
+/// and the options they share with it; scenes and run folder are theirs to set.
+fn check_template(
+    only: Option<Vec<String>>,
+    renderers: Option<PathBuf>,
+    jobs: Option<usize>,
+    timeout: u64,
+    expectations: Option<PathBuf>,
+) -> Result<rendiff::check::CheckOptions> {
+    let root = rendiff::check::find_root()?;
+    let expectations = match expectations {
+        Some(f) => user_file(&f, "expectations")?,
+        None => own_file(&root, None, "tests/expectations.toml")?,
+    };
+    let references = own_file(&root, None, "tests/references")?;
+    let calibration = own_file(&root, None, "scenes/calibration")?;
+    Ok(rendiff::check::CheckOptions {
+        scenes: Vec::new(),
+        run_dir: PathBuf::new(),
+        root,
+        only,
+        timeout: std::time::Duration::from_secs(timeout),
+        expectations,
+        quiet: false,
+        references: Some(references),
+        core: rendiff::check::CoreShading::default(),
+        calibration: Some(calibration),
+        jobs: jobs.unwrap_or_else(rendiff::check::default_jobs),
+        workers: true,
+        renderers: renderers_file(renderers)?,
+        renderers_snapshot: None,
+        memory_budget: rendiff::check::pool::default_memory_budget(),
+    })
 }
 
 /// `rendiff bench ...`: the benchmarks are a workspace member of their own

@@ -1,0 +1,282 @@
+//! Failures of a fuzz run, grouped into findings by signature, and the
+//! ledger `FOLDER/findings.json` (format in docs/fuzzing.md).
+//!
+//! A failure is one failing verdict of results.json (fail, error or
+//! unexpected pass) on a generated scene; its class is what the verifier
+//! counted ([`failure_class`]). Two failures with the same signature
+//! (backend, buffer, class) are presumed one cause: the finding keeps every
+//! scene that hit it, counts them by grammar family, and the smallest is
+//! reduced. (The fuller signature, with the reduced geometry's
+//! situation, is not computed yet: docs/fuzzing.md.)
+
+use crate::gate::{Status, Verdict};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Format tag of findings.json.
+pub const FINDINGS_FORMAT: &str = "rendiff-findings/1";
+
+/// The class of a failing verdict, in the verifier's words: the first of
+/// `interior`, `crack`, `mask` whose count is not zero (in that order: an
+/// interior mismatch is a bug whatever else happened), else what the
+/// buffer's own judge failed on (`depth` for Z, `normal` for N, `radiance`
+/// for RGB, `camera` for a calibration probe); `error` and
+/// `unexpected_pass` for those statuses. None for a verdict that passed.
+pub fn failure_class(v: &Verdict) -> Option<String> {
+    match v.status {
+        Status::Error => return Some("error".into()),
+        Status::UnexpectedPass => return Some("unexpected_pass".into()),
+        s if !s.is_bad() => return None,
+        _ => {}
+    }
+    for (count, class) in [
+        ("interior_mismatches", "interior"),
+        ("crack_mismatches", "crack"),
+        ("mask_mismatches", "mask"),
+    ] {
+        if v.counts.get(count).is_some_and(|&n| n > 0) {
+            return Some(class.into());
+        }
+    }
+    Some(
+        match v.buffer.as_str() {
+            "Z" => "depth",
+            "N" => "normal",
+            "RGB" => "radiance",
+            "camera" => "camera",
+            _ => "other",
+        }
+        .into(),
+    )
+}
+
+/// One failing verdict on one generated scene.
+#[derive(Debug, Clone, Serialize)]
+pub struct Failure {
+    /// Scene name (file stem in FOLDER/scenes).
+    pub scene: String,
+    /// Backend.
+    pub backend: String,
+    /// Buffer.
+    pub buffer: String,
+    /// [`failure_class`].
+    pub class: String,
+    /// The verdict's reason (clipped).
+    pub reason: String,
+}
+
+/// What groups failures into one finding.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+pub struct Signature {
+    /// Backend.
+    pub backend: String,
+    /// Buffer.
+    pub buffer: String,
+    /// [`failure_class`].
+    pub class: String,
+}
+
+/// A reduced repro, as findings.json records it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReducedRecord {
+    /// The scene it was reduced from (a generated scene's name in findings.json).
+    pub from: String,
+    /// The standalone scene, relative to FOLDER.
+    pub scene: String,
+    /// The one command that reproduces the failure from it.
+    pub command: String,
+    /// Triangles, objects and bytes before and after.
+    pub triangles_before: usize,
+    /// (see above)
+    pub triangles_after: usize,
+    /// (see above)
+    pub objects_before: usize,
+    /// (see above)
+    pub objects_after: usize,
+    /// (see above)
+    pub bytes_before: usize,
+    /// (see above)
+    pub bytes_after: usize,
+    /// Check runs the reduction took, and candidate scenes in them.
+    pub check_runs: usize,
+    /// (see above)
+    pub candidates: usize,
+    /// False when the budget ran out before a fixed point.
+    pub complete: bool,
+    /// Why there is no reduced scene, when reduction failed.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub error: String,
+}
+
+/// One distinct finding.
+#[derive(Debug, Clone, Serialize)]
+pub struct Finding {
+    /// `F1`, `F2`, ... in signature order.
+    pub id: String,
+    /// What groups it.
+    pub signature: Signature,
+    /// Generated scenes that hit it.
+    pub hits: usize,
+    /// Their names, in generation order.
+    pub scenes: Vec<String>,
+    /// How many of them each grammar family (a scene's primary one) made.
+    pub families: BTreeMap<String, usize>,
+    /// The example's reason.
+    pub reason: String,
+    /// The reduction of the first scene, when one ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reduced: Option<ReducedRecord>,
+}
+
+/// FOLDER/findings.json.
+#[derive(Debug, Clone, Serialize)]
+pub struct Ledger {
+    /// [`FINDINGS_FORMAT`].
+    pub format: String,
+    /// `--seed`.
+    pub seed: u64,
+    /// Scenes generated.
+    pub scenes: u64,
+    /// The check run, relative to FOLDER.
+    pub run: String,
+    /// Every failing verdict on a generated scene.
+    pub failures: Vec<Failure>,
+    /// Calibration (camera) failures: not per scene, so not reduced.
+    pub camera_failures: Vec<Failure>,
+    /// The findings.
+    pub findings: Vec<Finding>,
+}
+
+/// Failures among `verdicts` on the `generated` scenes (name to primary
+/// family), and the findings they group into, in signature order.
+pub fn group(
+    verdicts: &[Verdict],
+    generated: &BTreeMap<String, String>,
+) -> (Vec<Failure>, Vec<Failure>, Vec<Finding>) {
+    let mut failures = Vec::new();
+    let mut camera = Vec::new();
+    let mut by_sig: BTreeMap<Signature, Vec<(&Verdict, &String)>> = BTreeMap::new();
+    for v in verdicts {
+        let Some(class) = failure_class(v) else {
+            continue;
+        };
+        let f = Failure {
+            scene: v.scene.clone(),
+            backend: v.backend.clone(),
+            buffer: v.buffer.clone(),
+            class: class.clone(),
+            reason: crate::scene::printable(&v.reason, 300),
+        };
+        match generated.get(&v.scene) {
+            Some(family) => {
+                by_sig
+                    .entry(Signature {
+                        backend: v.backend.clone(),
+                        buffer: v.buffer.clone(),
+                        class,
+                    })
+                    .or_default()
+                    .push((v, family));
+                failures.push(f);
+            }
+            None => camera.push(f),
+        }
+    }
+    let findings = by_sig
+        .into_iter()
+        .enumerate()
+        .map(|(i, (signature, mut vs))| {
+            vs.sort_by(|a, b| a.0.scene.cmp(&b.0.scene));
+            let mut families = BTreeMap::new();
+            for (_, f) in &vs {
+                *families.entry(f.to_string()).or_insert(0) += 1;
+            }
+            Finding {
+                id: format!("F{}", i + 1),
+                signature,
+                hits: vs.len(),
+                scenes: vs.iter().map(|(v, _)| v.scene.clone()).collect(),
+                families,
+                reason: crate::scene::printable(&vs[0].0.reason, 300),
+                reduced: None,
+            }
+        })
+        .collect();
+    (failures, camera, findings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn verdict(scene: &str, buffer: &str, status: Status, counts: &[(&str, u64)]) -> Verdict {
+        Verdict {
+            scene: scene.into(),
+            backend: "b".into(),
+            buffer: buffer.into(),
+            status,
+            reason: "why".into(),
+            counts: counts.iter().map(|(k, n)| (k.to_string(), *n)).collect(),
+            errors: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn classes_follow_the_verifier_counts_and_the_buffer() {
+        let c = |v: Verdict| failure_class(&v);
+        assert_eq!(c(verdict("s", "id", Status::Pass, &[])), None);
+        assert_eq!(c(verdict("s", "id", Status::ExpectedFail, &[])), None);
+        let both = [("crack_mismatches", 2), ("interior_mismatches", 1)];
+        assert_eq!(
+            c(verdict("s", "id", Status::Fail, &both)).as_deref(),
+            Some("interior")
+        );
+        let crack = [("crack_mismatches", 2), ("interior_mismatches", 0)];
+        assert_eq!(
+            c(verdict("s", "id", Status::Fail, &crack)).as_deref(),
+            Some("crack")
+        );
+        assert_eq!(
+            c(verdict("s", "Z", Status::Fail, &[])).as_deref(),
+            Some("depth")
+        );
+        assert_eq!(
+            c(verdict("s", "Z", Status::Error, &[])).as_deref(),
+            Some("error")
+        );
+    }
+
+    #[test]
+    fn failures_group_by_signature_and_probes_stay_apart() {
+        let gen: BTreeMap<String, String> = [("a", "coplanar"), ("b", "coplanar"), ("c", "sliver")]
+            .iter()
+            .map(|(s, f)| (s.to_string(), f.to_string()))
+            .collect();
+        let i = [("interior_mismatches", 3)];
+        let vs = vec![
+            verdict("b", "id", Status::Fail, &i),
+            verdict("b", "Z", Status::Fail, &[]),
+            verdict("a", "id", Status::Fail, &i),
+            verdict("a", "Z", Status::Pass, &[]),
+            verdict("c", "id", Status::Fail, &i),
+            verdict("camera_near", "camera", Status::Fail, &[]),
+        ];
+        let (failures, camera, findings) = group(&vs, &gen);
+        assert_eq!(failures.len(), 4);
+        assert_eq!(camera.len(), 1);
+        // id/interior on a, b, c; Z/depth on b: two signatures ("Z" sorts first).
+        assert_eq!(findings.len(), 2);
+        let (z, id) = (&findings[0], &findings[1]);
+        assert_eq!(
+            (z.signature.buffer.as_str(), z.signature.class.as_str()),
+            ("Z", "depth")
+        );
+        assert_eq!(z.scenes, vec!["b"]);
+        assert_eq!(id.signature.class, "interior");
+        assert_eq!(id.scenes, vec!["a", "b", "c"]);
+        assert_eq!(id.hits, 3);
+        assert_eq!(id.families["coplanar"], 2);
+        assert_eq!(id.families["sliver"], 1);
+        assert_eq!((z.id.as_str(), id.id.as_str()), ("F1", "F2"));
+    }
+}

@@ -1,0 +1,324 @@
+//! `rendiff fuzz` and `rendiff reduce` (docs/fuzzing.md): scenes nobody
+//! wrote, run through `check`, every failure shrunk to a small repro and
+//! grouped with the others of its kind.
+//!
+//! * [`grammar`]: the seeded generator of valid scenes (same seed, same
+//!   files, byte for byte), over [`rng`]'s stable stream;
+//! * [`literal`]: standalone scenes of literal triangles, the one format
+//!   both the generator and the reducer write;
+//! * [`reduce`]: ddmin over objects and triangles, then coordinate snapping,
+//!   with `check` as the interestingness test;
+//! * [`findings`]: failure classes, signatures, findings.json.
+//!
+//! All generated scenes go through one `check` run (one pool, one set of
+//! workers, calibration once), and every reduction batches its candidates
+//! into `check` runs too: no process starts per scene that `check` does
+//! not already amortise.
+
+pub mod findings;
+pub mod grammar;
+pub mod literal;
+pub mod reduce;
+pub mod rng;
+
+use crate::check::CheckOptions;
+use crate::scene::resolve::ResolvedScene;
+use crate::scene::Scene;
+use anyhow::{bail, Context, Result};
+use findings::{Finding, Ledger, ReducedRecord, FINDINGS_FORMAT};
+use literal::LiteralScene;
+use reduce::Target;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Most scenes one `fuzz` run generates: a million small scenes is days of
+/// rendering; more is a typo.
+pub const MAX_COUNT: u64 = 1_000_000;
+
+/// What `rendiff fuzz` was asked.
+#[derive(Debug, Clone)]
+pub struct FuzzOptions {
+    /// `--seed`.
+    pub seed: u64,
+    /// `--count`.
+    pub count: u64,
+    /// `-o`: the fuzz folder.
+    pub folder: PathBuf,
+    /// The check's settings (its scenes and run folder are set here).
+    pub check: CheckOptions,
+    /// Time for each finding's reduction; None reduces nothing.
+    pub reduce_budget: Option<Duration>,
+}
+
+/// What a fuzz run found.
+#[derive(Debug, Clone)]
+pub struct FuzzOutcome {
+    /// The ledger, as written to FOLDER/findings.json.
+    pub ledger: Ledger,
+    /// The check's verdict table.
+    pub table: String,
+}
+
+/// Name of generated scene `index` of run `seed` (its file stem: one folder
+/// name, unique in the run).
+pub fn scene_name(seed: u64, index: u64) -> String {
+    format!("s{seed}_{index:05}")
+}
+
+/// The ledger's file name in a fuzz folder.
+const MARKER: &str = "findings.json";
+
+/// Writes the `count` scenes of `seed` into `dir` (created); returns their
+/// files and each one's primary family, by name.
+pub fn write_scenes(
+    seed: u64,
+    count: u64,
+    dir: &Path,
+) -> Result<(Vec<PathBuf>, BTreeMap<String, String>)> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let mut files = Vec::new();
+    let mut families = BTreeMap::new();
+    for i in 0..count {
+        let g = grammar::generate(seed, i);
+        let name = scene_name(seed, i);
+        let file = dir.join(format!("{name}.toml"));
+        std::fs::write(&file, g.scene.to_toml())
+            .with_context(|| format!("{}: cannot write", file.display()))?;
+        families.insert(name, g.families[0].name().to_string());
+        files.push(file);
+    }
+    Ok((files, families))
+}
+
+/// What a fuzz folder holds: its own entries, and the check's staging
+/// folders (hidden, beside `run`). A folder holding anything else is not one.
+fn fuzz_entry(name: &std::ffi::OsStr) -> bool {
+    let name = name.to_string_lossy();
+    ["scenes", "run", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
+}
+
+/// Makes `folder` ready for a fuzz run: created when absent; a folder that
+/// holds only what a fuzz writes (a finished one, or one whose check was
+/// refused or interrupted) has its scenes and reductions cleared; any other
+/// non-empty folder is refused, untouched.
+fn prepare(folder: &Path) -> Result<()> {
+    if folder.exists() {
+        let mut entries = std::fs::read_dir(folder)
+            .with_context(|| format!("{}: cannot list", folder.display()))?;
+        if let Some(other) =
+            entries.find_map(|e| e.ok().map(|e| e.file_name()).filter(|n| !fuzz_entry(n)))
+        {
+            bail!(
+                "{}: not a fuzz folder (it holds {}): give a new folder with -o",
+                folder.display(),
+                crate::scene::printable(&other.to_string_lossy(), 100)
+            );
+        }
+        for sub in ["scenes", "reduced"] {
+            let p = folder.join(sub);
+            if p.exists() {
+                std::fs::remove_dir_all(&p)
+                    .with_context(|| format!("{}: cannot clear", p.display()))?;
+            }
+        }
+    }
+    std::fs::create_dir_all(folder).with_context(|| format!("{}: cannot create", folder.display()))
+}
+
+/// The `rendiff fuzz` run: generate, check once, group, reduce, write the ledger.
+pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
+    if opts.count == 0 || opts.count > MAX_COUNT {
+        bail!("--count {}: give 1 to {MAX_COUNT}", opts.count);
+    }
+    let folder = &opts.folder;
+    prepare(folder)?;
+    let (files, families) = write_scenes(opts.seed, opts.count, &folder.join("scenes"))?;
+    let check = CheckOptions {
+        scenes: files,
+        run_dir: folder.join("run"),
+        ..opts.check.clone()
+    };
+    let outcome = crate::check::run(&check)?;
+    let verdicts = crate::gate::verdicts(&outcome.results)?;
+    let (failures, camera_failures, mut found) = findings::group(&verdicts, &families);
+    if let Some(budget) = opts.reduce_budget {
+        for f in &mut found {
+            f.reduced = Some(reduce_finding(opts, f, budget));
+        }
+    }
+    let ledger = Ledger {
+        format: FINDINGS_FORMAT.into(),
+        seed: opts.seed,
+        scenes: opts.count,
+        run: "run".into(),
+        failures,
+        camera_failures,
+        findings: found,
+    };
+    let json = serde_json::to_string_pretty(&ledger)? + "\n";
+    crate::exr_io::write_atomically(&folder.join(MARKER), |tmp| Ok(std::fs::write(tmp, &json)?))?;
+    Ok(FuzzOutcome {
+        ledger,
+        table: outcome.table,
+    })
+}
+
+/// Reduces a finding's smallest scene (fewest bytes, then first: the
+/// quickest to reduce); a reduction that fails is recorded with its reason.
+fn reduce_finding(opts: &FuzzOptions, f: &Finding, budget: Duration) -> ReducedRecord {
+    let file = |s: &String| opts.folder.join("scenes").join(format!("{s}.toml"));
+    let size = |s: &String| std::fs::metadata(file(s)).map_or(u64::MAX, |m| m.len());
+    let smallest = f
+        .scenes
+        .iter()
+        .min_by_key(|s| size(s))
+        .unwrap_or(&f.scenes[0]);
+    let scene_file = file(smallest);
+    let out = opts.folder.join("reduced").join(format!("{}.toml", f.id));
+    let target = Target {
+        backend: f.signature.backend.clone(),
+        buffer: f.signature.buffer.clone(),
+        class: f.signature.class.clone(),
+    };
+    let work = opts.folder.join("reduced").join(format!(".{}.work", f.id));
+    match reduce_file(&scene_file, &target, &opts.check, &work, Some(budget), &out) {
+        Ok(mut r) => {
+            r.scene = format!("reduced/{}.toml", f.id);
+            r.from = smallest.clone();
+            r
+        }
+        Err(e) => ReducedRecord {
+            from: smallest.clone(),
+            scene: String::new(),
+            command: String::new(),
+            triangles_before: 0,
+            triangles_after: 0,
+            objects_before: 0,
+            objects_after: 0,
+            bytes_before: 0,
+            bytes_after: 0,
+            check_runs: 0,
+            candidates: 0,
+            complete: false,
+            error: format!("{e:#}"),
+        },
+    }
+}
+
+/// The standalone rewrite of a scene file (literal triangles, explicit near).
+pub fn standalone(scene_file: &Path) -> Result<LiteralScene> {
+    let scene = Scene::load(scene_file)?;
+    let resolved = ResolvedScene::resolve(&scene)?;
+    LiteralScene::from_resolved(&resolved, "")
+        .map_err(|e| anyhow::anyhow!("{}: {e}", scene_file.display()))
+}
+
+/// Reduces `scene_file` for `target` and writes the result to `out`
+/// (atomically); the record has its sizes and the command that reproduces it.
+pub fn reduce_file(
+    scene_file: &Path,
+    target: &Target,
+    template: &CheckOptions,
+    work: &Path,
+    budget: Option<Duration>,
+    out: &Path,
+) -> Result<ReducedRecord> {
+    let start = standalone(scene_file)?;
+    let description = format!(
+        "reduced by rendiff reduce: {} fails {} with class {}",
+        target.backend, target.buffer, target.class
+    );
+    let before_text = std::fs::read_to_string(scene_file)
+        .with_context(|| format!("{}: cannot read", scene_file.display()))?;
+    let r = reduce::reduce(&start, target, template, work, budget, &description)?;
+    let text = r.scene.to_toml();
+    if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+    }
+    crate::exr_io::write_atomically(out, |tmp| Ok(std::fs::write(tmp, &text)?))?;
+    Ok(ReducedRecord {
+        from: scene_file.display().to_string(),
+        scene: out.display().to_string(),
+        command: reproduce_command(out, &target.backend, template.renderers.as_deref()),
+        triangles_before: start.triangle_count(),
+        triangles_after: r.scene.triangle_count(),
+        objects_before: start.objects.len(),
+        objects_after: r.scene.objects.len(),
+        bytes_before: before_text.len(),
+        bytes_after: text.len(),
+        check_runs: r.check_runs,
+        candidates: r.candidates,
+        complete: r.complete,
+        error: String::new(),
+    })
+}
+
+/// `rendiff check SCENE --only B [--renderers FILE] -o RUN`, shell-quoted.
+pub fn reproduce_command(scene: &Path, backend: &str, renderers: Option<&Path>) -> String {
+    let mut words = vec![
+        "rendiff".to_string(),
+        "check".into(),
+        scene.display().to_string(),
+        "--only".into(),
+        backend.to_string(),
+    ];
+    if let Some(r) = renderers {
+        words.push("--renderers".into());
+        words.push(r.display().to_string());
+    }
+    let run = scene.with_extension("run");
+    words.push("-o".into());
+    words.push(run.display().to_string());
+    crate::check::process::shell_line(words)
+}
+
+/// The failing verdict of `scene` on `backend` in a finished run (the first
+/// failing buffer, or `buffer`), as a reduction target, and the scene's file.
+pub fn target_in_run(
+    run: &Path,
+    scene: &str,
+    backend: &str,
+    buffer: Option<&str>,
+) -> Result<(Target, PathBuf)> {
+    crate::check::run_folder::ensure_complete(run)?;
+    let verdicts = crate::gate::load_verdicts(&run.join("results.json"))?;
+    let v = verdicts
+        .iter()
+        .filter(|v| v.scene == scene && v.backend == backend)
+        .filter(|v| buffer.is_none_or(|b| v.buffer == b))
+        .find_map(|v| findings::failure_class(v).map(|c| (v, c)));
+    let Some((v, class)) = v else {
+        bail!(
+            "{}: no failing verdict for scene {} on backend {}{}",
+            run.display(),
+            crate::scene::printable(scene, 100),
+            crate::scene::printable(backend, 100),
+            buffer.map_or(String::new(), |b| format!(
+                ", buffer {}",
+                crate::scene::printable(b, 20)
+            ))
+        );
+    };
+    let manifest_path = run.join("manifest.json");
+    let text = crate::check::manifest::read_record(&manifest_path)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", manifest_path.display()))?;
+    let manifest: crate::check::manifest::Manifest = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a valid manifest", manifest_path.display()))?;
+    let Some(entry) = manifest.scenes.iter().find(|s| s.scene == scene) else {
+        bail!(
+            "{}: no scene {} in the run",
+            manifest_path.display(),
+            crate::scene::printable(scene, 100)
+        );
+    };
+    Ok((
+        Target {
+            backend: backend.to_string(),
+            buffer: v.buffer.clone(),
+            class,
+        },
+        PathBuf::from(&entry.scene_file),
+    ))
+}

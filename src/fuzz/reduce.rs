@@ -1,0 +1,464 @@
+//! `rendiff reduce`: shrinks a failing scene to a small standalone repro by
+//! delta debugging (Zeller and Hildebrandt's ddmin), first over objects,
+//! then over triangles, then over vertex precision (every coordinate
+//! snapped to a coarser power-of-two grid, the coarsest that still fails),
+//! repeated until a round changes nothing (docs/fuzzing.md).
+//!
+//! The interestingness test is "the same backend still fails the same
+//! buffer with the same class" ([`super::findings::failure_class`]), asked
+//! of `check` itself: candidates are written as scene files and checked
+//! together, a batch per `check` run, so the harness's workers, the pool
+//! and the comparison start once per batch, not per candidate. Candidates
+//! are tried in ddmin's order and the first interesting one wins, so the
+//! result is the one sequential ddmin would give. Calibration is not rerun
+//! (the run being reduced judged the camera already): a reduction asks
+//! only whether the failure persists.
+
+use super::findings::failure_class;
+use super::literal::{LiteralScene, Tri};
+use super::rng::pow2;
+use crate::check::CheckOptions;
+use crate::scene::resolve::ResolvedScene;
+use crate::scene::Scene;
+use anyhow::{bail, Context, Result};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What must keep failing.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Target {
+    /// Backend.
+    pub backend: String,
+    /// Buffer (`id`, `Z`, `N`, ...).
+    pub buffer: String,
+    /// Class ([`failure_class`]).
+    pub class: String,
+}
+
+/// Candidates per `check` run. A run costs a fixed start (the harness's
+/// `info`, a worker, the comparison's start) plus each candidate's render
+/// and comparison; 12 keeps that start under half of a batch of small
+/// scenes while a round that finds its candidate early wastes few renders.
+pub const BATCH: usize = 12;
+
+/// Most rounds of (objects, triangles, snapping) before giving up on a
+/// fixed point; each round after the first usually changes only the snap.
+pub const MAX_ROUNDS: usize = 6;
+
+/// The result of a reduction.
+#[derive(Debug, Clone)]
+pub struct Reduction {
+    /// The reduced scene.
+    pub scene: LiteralScene,
+    /// `check` runs and candidate scenes rendered.
+    pub check_runs: usize,
+    /// (see above)
+    pub candidates: usize,
+    /// False when the time budget ran out before a fixed point.
+    pub complete: bool,
+}
+
+/// Ran out of the time budget (the reduction keeps what it has).
+struct OutOfTime;
+
+/// The interestingness test, with its cache and counters.
+struct Oracle<'a> {
+    template: &'a CheckOptions,
+    work: PathBuf,
+    target: Target,
+    cache: HashMap<String, bool>,
+    check_runs: usize,
+    candidates: usize,
+    deadline: Option<Instant>,
+}
+
+/// Whether the core accepts a scene (parsed, validated, resolved): a
+/// candidate it refuses (a triangle snapped to zero area, no objects) is
+/// not interesting and is never rendered.
+pub fn valid(scene: &LiteralScene) -> bool {
+    if scene.objects.is_empty() {
+        return false;
+    }
+    Scene::parse(Path::new("candidate.toml"), &scene.to_toml())
+        .ok()
+        .is_some_and(|s| ResolvedScene::resolve(&s).is_ok())
+}
+
+impl Oracle<'_> {
+    /// The index of the first interesting candidate, testing in batches of
+    /// [`BATCH`] and stopping after the batch that holds one.
+    fn first(&mut self, cands: &[LiteralScene]) -> Result<Result<Option<usize>, OutOfTime>> {
+        let texts: Vec<String> = cands.iter().map(LiteralScene::to_toml).collect();
+        let mut i = 0;
+        while i < cands.len() {
+            if let Some(&known) = self.cache.get(&texts[i]) {
+                if known {
+                    return Ok(Ok(Some(i)));
+                }
+                i += 1;
+                continue;
+            }
+            if self.deadline.is_some_and(|d| Instant::now() >= d) {
+                return Ok(Err(OutOfTime));
+            }
+            // The next batch: uncached, valid candidates from i on.
+            let mut batch = Vec::new();
+            let mut j = i;
+            while j < cands.len() && batch.len() < BATCH {
+                if !self.cache.contains_key(&texts[j]) {
+                    if valid(&cands[j]) {
+                        batch.push(j);
+                    } else {
+                        self.cache.insert(texts[j].clone(), false);
+                    }
+                }
+                j += 1;
+            }
+            let verdicts = self.test(&batch, &texts)?;
+            for (k, interesting) in batch.iter().zip(verdicts) {
+                self.cache.insert(texts[*k].clone(), interesting);
+            }
+            // Back to i: the cache now answers this batch in order.
+            while i < j {
+                if self.cache.get(&texts[i]) == Some(&true) {
+                    return Ok(Ok(Some(i)));
+                }
+                i += 1;
+            }
+        }
+        Ok(Ok(None))
+    }
+
+    /// One `check` run over the candidates `which`; whether each still fails.
+    fn test(&mut self, which: &[usize], texts: &[String]) -> Result<Vec<bool>> {
+        if which.is_empty() {
+            return Ok(Vec::new());
+        }
+        let dir = self.work.join("candidates");
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir)
+                .with_context(|| format!("{}: cannot clear", dir.display()))?;
+        }
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let mut files = Vec::new();
+        for (n, &k) in which.iter().enumerate() {
+            let f = dir.join(format!("c{n:03}.toml"));
+            std::fs::write(&f, &texts[k])
+                .with_context(|| format!("{}: cannot write", f.display()))?;
+            files.push(f);
+        }
+        let opts = CheckOptions {
+            scenes: files,
+            run_dir: self.work.join("run"),
+            only: Some(vec![self.target.backend.clone()]),
+            calibration: None,
+            quiet: true,
+            ..self.template.clone()
+        };
+        let outcome = crate::check::run(&opts)?;
+        let verdicts = crate::gate::verdicts(&outcome.results)?;
+        self.check_runs += 1;
+        self.candidates += which.len();
+        Ok((0..which.len())
+            .map(|n| {
+                let name = format!("c{n:03}");
+                verdicts.iter().any(|v| {
+                    v.scene == name
+                        && v.backend == self.target.backend
+                        && v.buffer == self.target.buffer
+                        && failure_class(v).as_deref() == Some(self.target.class.as_str())
+                })
+            })
+            .collect())
+    }
+}
+
+/// Delta debugging over `n_units` units: `build(keep)` makes the scene
+/// holding the units whose indices are in `keep` (in order). Returns the
+/// 1-minimal subset ddmin reaches (or what it had when time ran out).
+fn ddmin(
+    n_units: usize,
+    build: &dyn Fn(&[usize]) -> LiteralScene,
+    oracle: &mut Oracle,
+) -> Result<Result<Vec<usize>, Vec<usize>>> {
+    let mut units: Vec<usize> = (0..n_units).collect();
+    let mut n = 2usize;
+    while units.len() >= 2 {
+        let chunks: Vec<Vec<usize>> = split(&units, n);
+        let mut cands: Vec<Vec<usize>> = chunks.clone();
+        if n > 2 {
+            for c in &chunks {
+                cands.push(units.iter().copied().filter(|u| !c.contains(u)).collect());
+            }
+        }
+        let scenes: Vec<LiteralScene> = cands.iter().map(|k| build(k)).collect();
+        match oracle.first(&scenes)? {
+            Err(OutOfTime) => return Ok(Err(units)),
+            Ok(Some(i)) if i < chunks.len() => {
+                units = cands[i].clone();
+                n = 2;
+            }
+            Ok(Some(i)) => {
+                units = cands[i].clone();
+                n = (n - 1).max(2);
+            }
+            Ok(None) => {
+                if n >= units.len() {
+                    break;
+                }
+                n = (2 * n).min(units.len());
+            }
+        }
+    }
+    Ok(Ok(units))
+}
+
+/// `units` in `n` nearly equal consecutive chunks.
+fn split(units: &[usize], n: usize) -> Vec<Vec<usize>> {
+    let mut out = Vec::with_capacity(n);
+    let mut start = 0;
+    for k in 0..n {
+        let end = units.len() * (k + 1) / n;
+        out.push(units[start..end].to_vec());
+        start = end;
+    }
+    out.retain(|c| !c.is_empty());
+    out
+}
+
+/// The scene with only the objects `keep`.
+fn keep_objects(s: &LiteralScene, keep: &[usize]) -> LiteralScene {
+    let mut out = s.clone();
+    out.objects = keep.iter().map(|&i| s.objects[i].clone()).collect();
+    out
+}
+
+/// The scene with only the triangles `keep` (indices over all objects in
+/// order); objects left empty are dropped.
+fn keep_triangles(s: &LiteralScene, keep: &[usize]) -> LiteralScene {
+    let mut out = s.clone();
+    let mut k = 0;
+    let mut next = keep.iter().peekable();
+    for o in &mut out.objects {
+        let mut tris = Vec::new();
+        for t in &o.triangles {
+            if next.peek() == Some(&&k) {
+                tris.push(*t);
+                next.next();
+            }
+            k += 1;
+        }
+        o.triangles = tris;
+    }
+    out.objects.retain(|o| !o.triangles.is_empty());
+    out
+}
+
+/// Every vertex coordinate rounded to the nearest multiple of `2^e`
+/// (exact: a division and a product by a power of two, and a round).
+fn snapped(s: &LiteralScene, e: i32) -> LiteralScene {
+    let g = pow2(e);
+    let mut out = s.clone();
+    for o in &mut out.objects {
+        for t in &mut o.triangles {
+            for v in t.iter_mut() {
+                for x in v.iter_mut() {
+                    *x = (*x / g).round() * g;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The binary exponent of the largest vertex coordinate's magnitude.
+fn top_exponent(s: &LiteralScene) -> i32 {
+    let m = s
+        .objects
+        .iter()
+        .flat_map(|o| o.triangles.iter())
+        .flat_map(|t: &Tri| t.iter())
+        .flat_map(|v| v.iter())
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    if m == 0.0 {
+        return 0;
+    }
+    ((m.to_bits() >> 52) & 0x7ff) as i32 - 1023
+}
+
+/// Grids tried, coarsest first: from twice the largest coordinate down to
+/// 2^-24 of it (f32's precision: finer snaps change nothing of the largest
+/// coordinates, and the reduced scene is written from f32 values anyway).
+fn snap_candidates(s: &LiteralScene) -> Vec<LiteralScene> {
+    let top = top_exponent(s);
+    let current = s.to_toml();
+    let mut out: Vec<LiteralScene> = Vec::new();
+    for e in (top - 24..=top + 1).rev() {
+        let c = snapped(s, e);
+        let text = c.to_toml();
+        if text == current {
+            // Finer grids keep it as it is too.
+            break;
+        }
+        if out.last().is_some_and(|p| p.to_toml() == text) {
+            continue;
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// Reduces `start`, which must fail as `target` says. `work` holds the
+/// candidates and the check runs (removed at the end); `template` gives
+/// the check's settings (renderers, expectations, jobs, timeout); its scenes
+/// and run folder are replaced. `budget` bounds the time (the reduction
+/// then keeps what it reached).
+pub fn reduce(
+    start: &LiteralScene,
+    target: &Target,
+    template: &CheckOptions,
+    work: &Path,
+    budget: Option<std::time::Duration>,
+    description: &str,
+) -> Result<Reduction> {
+    std::fs::create_dir_all(work).with_context(|| format!("{}: cannot create", work.display()))?;
+    let mut oracle = Oracle {
+        template,
+        work: work.to_path_buf(),
+        target: target.clone(),
+        cache: HashMap::new(),
+        check_runs: 0,
+        candidates: 0,
+        deadline: budget.map(|b| Instant::now() + b),
+    };
+    let mut cur = start.clone();
+    cur.description = description.to_string();
+    let result = reduce_with(&mut oracle, cur);
+    let _ = std::fs::remove_dir_all(work);
+    let (scene, complete) = result?;
+    Ok(Reduction {
+        scene,
+        check_runs: oracle.check_runs,
+        candidates: oracle.candidates,
+        complete,
+    })
+}
+
+fn reduce_with(oracle: &mut Oracle, mut cur: LiteralScene) -> Result<(LiteralScene, bool)> {
+    if !valid(&cur) {
+        bail!("the standalone rewrite of the scene is not a valid scene");
+    }
+    // The first deadline check comes after this test: it always runs.
+    let deadline = oracle.deadline.take();
+    let first = oracle.first(std::slice::from_ref(&cur))?;
+    oracle.deadline = deadline;
+    if !matches!(first, Ok(Some(0))) {
+        bail!(
+            "the failure ({} fails {} with class {}) does not reproduce from the scene rewritten standalone \
+             (literal triangles, checked with --only {} and no calibration)",
+            oracle.target.backend,
+            oracle.target.buffer,
+            oracle.target.class,
+            oracle.target.backend
+        );
+    }
+    for _ in 0..MAX_ROUNDS {
+        let before = cur.to_toml();
+        let s = cur.clone();
+        match ddmin(s.objects.len(), &|k| keep_objects(&s, k), oracle)? {
+            Ok(k) => cur = keep_objects(&s, &k),
+            Err(k) => return Ok((keep_objects(&s, &k), false)),
+        }
+        let s = cur.clone();
+        match ddmin(s.triangle_count(), &|k| keep_triangles(&s, k), oracle)? {
+            Ok(k) => cur = keep_triangles(&s, &k),
+            Err(k) => return Ok((keep_triangles(&s, &k), false)),
+        }
+        match oracle.first(&snap_candidates(&cur))? {
+            Ok(Some(i)) => cur = snap_candidates(&cur).swap_remove(i),
+            Ok(None) => {}
+            Err(OutOfTime) => return Ok((cur, false)),
+        }
+        if cur.to_toml() == before {
+            return Ok((cur, true));
+        }
+    }
+    Ok((cur, false))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fuzz::literal::{LiteralCamera, LiteralObject};
+
+    fn scene(objects: Vec<Vec<Tri>>) -> LiteralScene {
+        LiteralScene {
+            description: String::new(),
+            requires: vec!["depth".into(), "ids".into()],
+            camera: LiteralCamera {
+                eye: [0.0, 0.0, 4.0],
+                look_at: [0.0; 3],
+                up: [0.0, 1.0, 0.0],
+                vfov: 45.0,
+                width: 32,
+                height: 32,
+                near: 0.01,
+                far: None,
+            },
+            objects: objects
+                .into_iter()
+                .map(|triangles| LiteralObject {
+                    triangles,
+                    mirror: None,
+                })
+                .collect(),
+        }
+    }
+
+    fn tri(x: f64) -> Tri {
+        [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]
+    }
+
+    #[test]
+    fn chunks_and_keeps_preserve_order() {
+        assert_eq!(split(&[1, 2, 3, 4, 5], 2), vec![vec![1, 2], vec![3, 4, 5]]);
+        assert_eq!(split(&[1, 2], 4), vec![vec![1], vec![2]]);
+        let s = scene(vec![
+            vec![tri(0.0), tri(1.0)],
+            vec![tri(2.0)],
+            vec![tri(3.0)],
+        ]);
+        let k = keep_triangles(&s, &[1, 3]);
+        assert_eq!(k.objects.len(), 2);
+        assert_eq!(k.objects[0].triangles, vec![tri(1.0)]);
+        assert_eq!(k.objects[1].triangles, vec![tri(3.0)]);
+        assert_eq!(keep_objects(&s, &[2]).objects[0].triangles, vec![tri(3.0)]);
+    }
+
+    #[test]
+    fn snapping_goes_coarse_to_fine_and_stops_at_no_change() {
+        let s = scene(vec![vec![[
+            [0.3, 0.0, 0.0],
+            [1.7, 0.1, 0.0],
+            [0.0, 1.25, 0.0],
+        ]]]);
+        let c = snap_candidates(&s);
+        assert!(!c.is_empty());
+        // The coarsest grid is 2^(top + 1) = 2 (top exponent of 1.7 is 0).
+        assert_eq!(c[0].objects[0].triangles[0][1], [2.0, 0.0, 0.0]);
+        // Each candidate differs from the scene, and they are distinct.
+        for w in c.windows(2) {
+            assert_ne!(w[0].to_toml(), w[1].to_toml());
+        }
+        assert!(c.iter().all(|x| x.to_toml() != s.to_toml()));
+        // An already coarse scene has fewer candidates than a fine one.
+        let coarse = scene(vec![vec![[
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ]]]);
+        assert!(snap_candidates(&coarse).len() < c.len());
+    }
+}

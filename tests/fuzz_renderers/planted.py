@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""Renderers with planted bugs, for `rendiff fuzz`'s own tests (tests/fuzz_planted.rs).
+
+    planted.py BUG SCENE_DIR OUT.exr
+
+Each is harness/examples/tiny_renderer.py (one float64 ray per pixel center, closed edges,
+t rounded to float32 once) with one deliberate fault, chosen by BUG:
+
+* `coplanar_bias`: the depth test keeps the current surface unless the new one is nearer by
+  more than a relative 2^-12, `t < z * (1 - 2^-12)` instead of `t < z`, as a depth bias meant
+  to stop z-fighting would. A triangle drawn after a near-coplanar neighbour that it lies in
+  front of, by less than 2^-12 of the depth, is dropped.
+* `subpixel_shift`: a triangle whose image is smaller than a pixel (projected area below
+  1 px^2) has its first vertex moved 1e-3 px to the right (along the camera's right axis, at
+  the vertex's depth), as a snapping step applied to small triangles only would.
+
+Both are declared with the tiny renderer's honest precision (renderers.toml), so the fault
+is all the verifier sees: its pixels are interior (or crack) mismatches.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+# The harness's EXR writer (float32 Z and N, exact uint32 ids).
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
+from rendiff_harness import exrbuf  # noqa: E402
+
+BACKGROUND = 0xFFFFFFFF
+BIAS = 2.0**-12
+SHIFT_PX = 1e-3
+BUGS = ("coplanar_bias", "subpixel_shift")
+
+
+def projected_area_px(
+    tri: np.ndarray,
+    eye: np.ndarray,
+    fwd: np.ndarray,
+    right: np.ndarray,
+    up: np.ndarray,
+    tan_half: float,
+    w: int,
+    h: int,
+) -> float:
+    """The triangle's image area in square pixels (inf when a vertex is not in front of the eye)."""
+    depth = (tri - eye) @ fwd
+    if depth.min() <= 0.0:
+        return float("inf")
+    px = ((tri - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0
+    py = (1.0 - (tri - eye) @ up / depth / tan_half) * h / 2.0
+    return float(abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0])) / 2.0)
+
+
+def render(bug: str, scene_dir: Path, out: Path) -> None:
+    meta = json.loads((scene_dir / "scene.json").read_text())
+    cam = meta["camera"]
+    w, h = cam["width"], cam["height"]
+    eye, fwd, right, up = (np.array(cam[k], dtype=np.float64) for k in ("eye", "forward", "right", "up_ortho"))
+    near = cam["near"]
+    far = np.inf if cam["far"] is None else cam["far"]
+    tan_half = cam["tan_half_vfov"]
+    files = meta["files"]
+    tris = np.fromfile(scene_dir / files["triangles"], dtype="<f4").reshape(-1, 3, 3).astype(np.float64)
+    objects = np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
+
+    sx = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * tan_half * w / h
+    sy = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * tan_half
+    d = fwd + sx[None, :, None] * right + sy[:, None, None] * up
+
+    z = np.full((h, w), np.inf)
+    prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
+    normal = np.zeros((h, w, 3))
+    for i, (a, b, c) in enumerate(tris):
+        if bug == "subpixel_shift" and projected_area_px(tris[i], eye, fwd, right, up, tan_half, w, h) < 1.0:
+            # The planted bug: one vertex of a sub-pixel triangle moved 1e-3 px right.
+            pixel = 2.0 * tan_half * float((a - eye) @ fwd) / h
+            a = a + right * (SHIFT_PX * pixel)
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n)
+        if length == 0.0:
+            continue
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.dot(a - eye, n) / (d @ n)
+        p = eye + t[..., None] * d
+        e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
+        inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+        # The coplanar_bias bug: a relative depth bias in the depth test.
+        nearer = t < z * (1.0 - BIAS) if bug == "coplanar_bias" else t < z
+        hit = inside & np.isfinite(t) & (t >= near) & (t <= far) & nearer
+        z = np.where(hit, t, z)
+        prim = np.where(hit, np.uint32(i), prim)
+        normal = np.where(hit[..., None], n / length, normal)
+    seen = prim != BACKGROUND
+    obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
+    obj[seen] = objects[prim[seen]]
+    exrbuf.write_buffers(
+        out,
+        Z=z.astype(np.float32),
+        prim=prim,
+        obj=obj,
+        N=normal.astype(np.float32),
+        attrs={"renderer": bug},
+    )
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4 or sys.argv[1] not in BUGS:
+        sys.exit(f"usage: planted.py {{{','.join(BUGS)}}} SCENE_DIR OUT.exr")
+    render(sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3]))
