@@ -464,9 +464,9 @@ mod ffi {
         ) -> c_int;
     }
 
-    pub fn version() -> i64 {
+    pub fn version() -> c_long {
         // SAFETY: no arguments; creates and releases its own device.
-        i64::from(unsafe { rd_version() })
+        unsafe { rd_version() }
     }
 
     pub fn build(
@@ -558,7 +558,7 @@ mod ffi {
         }
     }
 
-    pub fn version() -> i64 {
+    pub fn version() -> std::ffi::c_long {
         -1
     }
 

@@ -13,6 +13,13 @@
 //!   process ([`super::keep_freed_memory`], recorded as `config.allocator`):
 //!   neither pays 16 MB of fresh-page faults per 1080p frame, and neither's
 //!   time depends on what the allocator happened to return to the system.
+//! - Embree at its own best: a native driver ([`super::native_embree`], C
+//!   against Embree's headers) runs every entry point, context flag and
+//!   build quality on the same rays in the same run; the binding's fastest
+//!   row is checked against the driver's fastest in paired rounds (red on
+//!   the page beyond 5%), and the headline takes the fastest row of either,
+//!   its ratio from paired rounds in alternating order with a bootstrap
+//!   interval (docs/embree-fastest-path.md).
 //! - Raster: core raster vs pyrender (OpenGL on Mesa llvmpipe), depth + IDs;
 //!   pyrender's time is its own per-pass sub-timing (scene upload, draw and
 //!   read-back; Python start-up excluded), and a one-triangle render's
@@ -132,7 +139,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             "quick": opts.common.quick, "gi_scene": opts.gi_scene, "reference": opts.reference,
             "mitsuba_spp": opts.mitsuba_spp, "seed": opts.seed, "allocator": allocator,
             "timing": "median of `runs` timed runs after one untimed warm-up",
-            "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32)",
+            "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32, prepared once per camera before its trace is timed, in the binding and the native driver alike; the core makes its rays inside its timed queries)",
             "embree_version": embree::version().ok(),
             "embree_features": embree::features().ok(),
             "embree_best": "highest Mrays/s over every Embree row at that thread count: the binding's (entry point x context flag x scene flags x build quality) and the native driver's (entry point x context flag x build quality)",
