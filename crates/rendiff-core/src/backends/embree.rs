@@ -885,8 +885,17 @@ impl BuiltScene {
 
     /// Fills `packet` with the tile of `tile_w` x `N / tile_w` pixels whose
     /// top-left pixel is (x0, y0); lane `i` is pixel `(i % tile_w, i / tile_w)`
-    /// of the tile. Lanes outside the image (x >= width or row >= `nrows`)
-    /// stay empty (tnear > tfar) and come back as `None`.
+    /// of the tile, its hit reset to none. Returns the `valid` mask: -1 for
+    /// lanes in the image, 0 for lanes outside it (x >= width or row >=
+    /// `nrows`), which keep whatever they held (an empty packet's tnear >
+    /// tfar, so the stream API, which has no mask, skips them too).
+    ///
+    /// Only the mask comes back, not the lanes' rays: a packet's hits are
+    /// turned into keys by reading the prepared rays again
+    /// ([`BuiltScene::store_packet`]). Carrying an `Option` of every lane's
+    /// ray through each call, and zeroing a fresh packet per tile, cost the
+    /// packet paths up to 40% of their speed on `million`
+    /// (docs/embree-fastest-path.md).
     fn fill_packet<const N: usize>(
         gen: &RayGen,
         packet: &mut ffi::RayHitN<N>,
@@ -894,27 +903,31 @@ impl BuiltScene {
         x0: u32,
         y0: u32,
         nrows: u32,
-    ) -> [Option<EmbreeRay>; N] {
+    ) -> ffi::Valid<N> {
         let w = gen.cam.width;
-        std::array::from_fn(|lane| {
+        let mut valid = ffi::Valid([0; N]);
+        for lane in 0..N {
             let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
-            (x < w && dy < nrows).then(|| {
+            if x < w && dy < nrows {
                 let r = gen.ray(x, y0 + dy);
                 packet.set(lane, gen.org, r.dir, r.tnear, r.tfar);
-                r
-            })
-        })
+                packet.hit.geom_id[lane] = ffi::INVALID_GEOMETRY_ID;
+                valid.0[lane] = -1;
+            }
+        }
+        valid
     }
 
-    /// Writes the keys of a traced tile (see [`BuiltScene::fill_packet`]) into
-    /// `rows`, the strip starting at row `y0`; returns the extra rays traced.
+    /// Writes the keys of a traced tile (see [`BuiltScene::fill_packet`],
+    /// whose mask is `valid`) into `rows`, the strip starting at row `y0`;
+    /// returns the extra rays traced.
     #[allow(clippy::too_many_arguments)]
     fn store_packet<const N: usize>(
         &self,
         gen: &RayGen,
         ctx: &mut ffi::IntersectContext,
         packet: &ffi::RayHitN<N>,
-        rays: &[Option<EmbreeRay>; N],
+        valid: &ffi::Valid<N>,
         tile_w: u32,
         x0: u32,
         y0: u32,
@@ -922,13 +935,16 @@ impl BuiltScene {
     ) -> u64 {
         let w = gen.cam.width;
         let mut extra = 0;
-        for (lane, r) in rays.iter().enumerate() {
-            let Some(r) = r else { continue };
+        for lane in 0..N {
+            if valid.0[lane] == 0 {
+                continue;
+            }
             let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
+            let r = gen.ray(x, y0 + dy);
             let (key, e) = self.resolve(
                 gen,
                 ctx,
-                r,
+                &r,
                 packet.hit.geom_id[lane],
                 packet.hit.prim_id[lane],
                 packet.ray.tfar[lane],
@@ -956,16 +972,17 @@ impl BuiltScene {
         let w = gen.cam.width;
         let nrows = (rows.len() / w as usize) as u32;
         let mut extra = 0;
+        // One packet for the strip: each tile rewrites its lanes' rays and
+        // hits (`fill_packet`); lanes outside the image are masked.
+        let mut packet = ffi::RayHitN::<N>::empty();
         for x0 in (0..w).step_by(tile_w as usize) {
-            let mut packet = ffi::RayHitN::<N>::empty();
-            let rays = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
-            let valid = ffi::Valid(rays.map(|r| if r.is_some() { -1 } else { 0 }));
+            let valid = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
             // SAFETY: the scene is committed and live; `intersect` is the
             // rtcIntersect<N> matching `N` (typed by `IntersectN<N>`); `valid`
             // and `packet` are 64-byte aligned with the RTCRayHit<N> layout
             // (checked in `ffi::layout`); invalid lanes are masked.
             unsafe { intersect(&valid, self.raw, ctx, &mut packet) };
-            extra += self.store_packet(gen, ctx, &packet, &rays, tile_w, x0, y0, rows);
+            extra += self.store_packet(gen, ctx, &packet, &valid, tile_w, x0, y0, rows);
         }
         extra
     }
@@ -985,7 +1002,7 @@ impl BuiltScene {
         let nrows = (rows.len() / w as usize) as u32;
         let block_w = (STREAM_RAYS / 16 * 4) as u32;
         let mut stream: Vec<ffi::RayHit> = Vec::with_capacity(STREAM_RAYS);
-        let mut pixels: Vec<(u32, u32, EmbreeRay)> = Vec::with_capacity(STREAM_RAYS);
+        let mut pixels: Vec<(u32, u32)> = Vec::with_capacity(STREAM_RAYS);
         let mut extra = 0;
         for bx in (0..w).step_by(block_w as usize) {
             stream.clear();
@@ -995,7 +1012,7 @@ impl BuiltScene {
                     for x in x0..w.min(x0 + 4) {
                         let r = gen.ray(x, y0 + dy);
                         stream.push(ffi::RayHit::new(gen.org, r.dir, r.tnear, r.tfar));
-                        pixels.push((x, dy, r));
+                        pixels.push((x, dy));
                     }
                 }
             }
@@ -1012,11 +1029,11 @@ impl BuiltScene {
                     std::mem::size_of::<ffi::RayHit>(),
                 )
             };
-            for (rh, &(x, dy, r)) in stream.iter().zip(&pixels) {
+            for (rh, &(x, dy)) in stream.iter().zip(&pixels) {
                 let (key, e) = self.resolve(
                     gen,
                     ctx,
-                    &r,
+                    &gen.ray(x, y0 + dy),
                     rh.hit.geom_id,
                     rh.hit.prim_id,
                     rh.ray.tfar,
@@ -1047,14 +1064,14 @@ impl BuiltScene {
         let per_call = (STREAM_RAYS / N).max(1);
         let tiles: Vec<u32> = (0..w).step_by(tile_w as usize).collect();
         let mut packets: Vec<ffi::RayHitN<N>> = Vec::with_capacity(per_call);
-        let mut rays: Vec<[Option<EmbreeRay>; N]> = Vec::with_capacity(per_call);
+        let mut masks: Vec<ffi::Valid<N>> = Vec::with_capacity(per_call);
         let mut extra = 0;
         for chunk in tiles.chunks(per_call) {
             packets.clear();
-            rays.clear();
+            masks.clear();
             for &x0 in chunk {
                 let mut p = ffi::RayHitN::<N>::empty();
-                rays.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
+                masks.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
                 packets.push(p);
             }
             // SAFETY: the scene is committed and live; `packets` holds
@@ -1071,8 +1088,8 @@ impl BuiltScene {
                     std::mem::size_of::<ffi::RayHitN<N>>(),
                 )
             };
-            for ((p, r), &x0) in packets.iter().zip(&rays).zip(chunk) {
-                extra += self.store_packet(gen, ctx, p, r, tile_w, x0, y0, rows);
+            for ((p, valid), &x0) in packets.iter().zip(&masks).zip(chunk) {
+                extra += self.store_packet(gen, ctx, p, valid, tile_w, x0, y0, rows);
             }
         }
         extra
