@@ -208,6 +208,10 @@ pub enum BenchCommand {
         /// Skip external renderers (pyrender, Mitsuba).
         #[arg(long)]
         no_external: bool,
+        /// Paired rounds, in alternating order, behind each core-vs-Embree
+        /// ratio and the check of Embree against the native driver (default: 11; --quick: 3).
+        #[arg(long, value_parser = rendiff::args::parse_runs)]
+        rounds: Option<usize>,
     },
     /// Raster vs trace time and operation counts as a screen-filling grid goes from 2 to millions of triangles.
     Crossover {
@@ -418,6 +422,7 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
             mitsuba_spp,
             seed,
             no_external,
+            rounds,
         } => {
             let c = common.common(home)?;
             let quick = c.quick;
@@ -439,6 +444,7 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
                 mitsuba_spp,
                 seed,
                 no_external: no_external || quick,
+                rounds: pick(rounds, quick, 3, 11),
             }))
         }
         BenchCommand::Crossover {

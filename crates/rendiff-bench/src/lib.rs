@@ -5,7 +5,8 @@
 //! - [`core_loops`]: raster and trace on one scene per thread count (the plain `rendiff bench`).
 //! - [`knobs`]: every knob that trades time for error, against one reference, with the Pareto front
 //!   (the renderers' own quality settings in [`direct`] and [`spp`]).
-//! - [`peers`]: the core against Embree, pyrender and Mitsuba on identical work, as ratios.
+//! - [`peers`]: the core against Embree, pyrender and Mitsuba on identical work, as ratios
+//!   (Embree held to its best by the native driver in [`native_embree`]).
 //! - [`crossover`]: raster against trace as triangles shrink from a few large to millions of tiny.
 //! - [`stability`]: scene families pushed to numerical extremes through `rendiff check`.
 //! - [`variance`]: whether the path tracer's variance-of-the-mean estimate is calibrated, and its bias.
@@ -25,6 +26,7 @@ pub mod harness;
 pub mod knobs;
 pub mod machine_cpu;
 pub mod measure;
+pub mod native_embree;
 pub mod outputs;
 pub mod page;
 pub mod pareto;

@@ -76,6 +76,17 @@ impl Page {
         self
     }
 
+    /// A note in red (the report's failure colour): a number the page cannot
+    /// stand behind, such as a peer measured below its own best.
+    pub fn alarm(&mut self, text: &str) -> &mut Self {
+        let _ = write!(
+            self.body,
+            "<div class=\"note s-fail\">{}</div>",
+            escape(text)
+        );
+        self
+    }
+
     /// A command to reproduce the page.
     pub fn command(&mut self, cmd: &str) -> &mut Self {
         self.body

@@ -13,6 +13,13 @@
 //!   process ([`super::keep_freed_memory`], recorded as `config.allocator`):
 //!   neither pays 16 MB of fresh-page faults per 1080p frame, and neither's
 //!   time depends on what the allocator happened to return to the system.
+//! - Embree at its own best: a native driver ([`super::native_embree`], C
+//!   against Embree's headers) runs every entry point, context flag and
+//!   build quality on the same rays in the same run; the binding's fastest
+//!   row is checked against the driver's fastest in paired rounds (red on
+//!   the page beyond 5%), and the headline takes the fastest row of either,
+//!   its ratio from paired rounds in alternating order with a bootstrap
+//!   interval (docs/embree-fastest-path.md).
 //! - Raster: core raster vs pyrender (OpenGL on Mesa llvmpipe), depth + IDs;
 //!   pyrender's time is its own per-pass sub-timing (scene upload, draw and
 //!   read-back; Python start-up excluded), and a one-triangle render's
@@ -22,6 +29,7 @@
 
 use super::harness::{number_at, Harness};
 use super::knobs::SceneSpec;
+use super::native_embree::{self, Config, NativeScene, PreparedRays, Quality};
 use super::page::{num, Page};
 use super::spp::{core_path, mitsuba_path, MitsubaPoint, MitsubaRun};
 use super::{measure, radiance, visibility_error, Common};
@@ -61,6 +69,9 @@ pub struct PeersOptions {
     pub seed: u64,
     /// Skip external renderers (pyrender, Mitsuba), recording why.
     pub no_external: bool,
+    /// Paired rounds (alternating order) behind each core-vs-Embree ratio
+    /// and behind the check of Embree's numbers against the native driver.
+    pub rounds: usize,
 }
 
 /// Runs the comparisons and returns the JSON record, the page and the SVGs.
@@ -77,7 +88,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
         cam.height,
         scene.triangles.len()
     );
-    let per_threads = throughput(&scene, &opts.threads, runs)?;
+    let per_threads = throughput(&scene, &opts.threads, runs, opts.rounds)?;
     let scanned = match &opts.scanned_scene {
         Some(spec) => {
             let s = spec.load()?;
@@ -90,7 +101,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             );
             json!({"scene": spec.path, "width": s.camera.width, "height": s.camera.height,
                    "triangles": s.triangles.len(),
-                   "trace_throughput": throughput(&s, &opts.threads, runs)?})
+                   "trace_throughput": throughput(&s, &opts.threads, runs, opts.rounds)?})
         }
         None => json!({"skipped": "no scanned scene (--quick without --scanned-scene)"}),
     };
@@ -128,10 +139,13 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             "quick": opts.common.quick, "gi_scene": opts.gi_scene, "reference": opts.reference,
             "mitsuba_spp": opts.mitsuba_spp, "seed": opts.seed, "allocator": allocator,
             "timing": "median of `runs` timed runs after one untimed warm-up",
-            "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32)",
+            "rays": "primary rays through pixel centers, the core's own (Embree gets them rounded to f32, prepared once per camera before its trace is timed, in the binding and the native driver alike; the core makes its rays inside its timed queries)",
             "embree_version": embree::version().ok(),
             "embree_features": embree::features().ok(),
-            "embree_best": "highest Mrays/s over every Embree row (entry point x context flag x scene flags) at that thread count",
+            "embree_best": "highest Mrays/s over every Embree row at that thread count: the binding's (entry point x context flag x scene flags x build quality) and the native driver's (entry point x context flag x build quality)",
+            "embree_native": "native/embree_driver.c: Embree's own headers and ray layouts, rays prepared in f32 before timing, FTZ/DAZ set while tracing (docs/embree-fastest-path.md)",
+            "paired_rounds": opts.rounds,
+            "agreement": format!("the binding's best must be within {:.0}% of the native driver's best in paired rounds, or the page says so in red", measure::AGREEMENT * 100.0),
         },
         "trace_throughput": per_threads,
         "scanned_mesh": scanned,
@@ -152,7 +166,12 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
 /// Trace throughput per thread count on one scene: the core's packet and
 /// single-ray kernels (queries alone, then whole renders), its raster, and
 /// every Embree configuration, each row with its ratios.
-fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Result<Vec<Value>> {
+fn throughput(
+    scene: &ResolvedScene,
+    thread_counts: &[usize],
+    runs: usize,
+    rounds: usize,
+) -> Result<Vec<Value>> {
     let pixels = scene.camera.pixel_count() as f64;
     let mut per_threads = Vec::new();
     for &threads in thread_counts {
@@ -183,6 +202,9 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
         let mut embree = Map::new();
         let mut skipped = Vec::new();
         let mut configs = std::collections::HashMap::new();
+        // The binding's reference keys (single rays, incoherent, default
+        // scene, medium build): the native driver must reproduce them.
+        let mut binding_single: Option<rendiff::frame::Frame> = None;
         for config in [EmbreeMode::Default, EmbreeMode::Robust]
             .into_iter()
             .flat_map(|m| EmbreeBuild::ALL.map(|b| (m, b)))
@@ -202,7 +224,7 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                             let vs_single = reference.as_ref().map(|r| visibility_error(r, &f));
                             embree.insert(
                                 name,
-                                json!({"mode": mode.name(), "build_quality": build.name(),
+                                json!({"source": "binding", "mode": mode.name(), "build_quality": build.name(),
                                        "query": query.name(),
                                        "entry_point": query.entry_point(), "layout": query.layout(),
                                        "context": coherence.name(),
@@ -216,6 +238,9 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                             if (query, coherence)
                                 == (EmbreeQuery::Single, EmbreeCoherence::Incoherent)
                             {
+                                if config == (EmbreeMode::Default, EmbreeBuild::Medium) {
+                                    binding_single = Some(f.clone());
+                                }
                                 reference = Some(f);
                             }
                         }
@@ -224,23 +249,86 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                 }
             }
         }
+        // Embree as a native application runs it, on the same rays: the
+        // yardstick for the binding's rows, and a candidate for the best.
+        let native = native_sweep(
+            scene,
+            threads,
+            &raster.last,
+            binding_single.as_ref(),
+            (core_mrays, single_mrays),
+            runs,
+        );
+        let native_best = native.best.and_then(|(config, _)| {
+            let rays = native.rays.as_ref()?;
+            match NativeScene::build(scene, config.quality, false, threads) {
+                Ok(b) => Some((config, b, rays)),
+                Err(e) => {
+                    skipped.push(json!({"what": config.name(), "reason": e}));
+                    None
+                }
+            }
+        });
+        // The check: the binding's fastest against the driver's fastest,
+        // in alternating rounds.
+        let check = match (fastest(&embree, None), &native_best) {
+            (Some((k, _)), Some((config, built, rays))) => {
+                let name = k.clone();
+                rendiff::errln!("peers: {threads} thread(s), {name} and {} in alternation", config.name());
+                let binding = configs[&name];
+                match measure::binding_vs_native(scene, binding, (built, rays), *config, rounds) {
+                    Ok(mut v) => {
+                        v["binding_best"] = json!(name);
+                        v["native_best"] = json!(config.name());
+                        v
+                    }
+                    Err(e) => json!({"error": e.to_string()}),
+                }
+            }
+            (_, None) => json!({"skipped": native.skipped.clone().unwrap_or_else(|| "no native row".into())}),
+            (None, _) => json!({"skipped": "no binding row (Embree unavailable)"}),
+        };
         // The headline ratio: the core and Embree's fastest configuration
-        // in alternating rounds (the sweep's medians were taken minutes apart).
-        let best = fastest(&embree, None).map(|(k, v)| {
-            let paired = configs.get(k).map(|&(config, query, coherence)| {
+        // (over the binding's rows and the driver's) in alternating rounds
+        // (the sweep's medians were taken minutes apart).
+        let binding_fastest = fastest(&embree, None);
+        let native_fastest = native.best_name.as_ref().and_then(|n| native.rows.get_key_value(n));
+        let native_wins = match (binding_fastest, native_fastest) {
+            (Some((_, b)), Some((_, n))) => n["mrays_per_s"].as_f64() >= b["mrays_per_s"].as_f64(),
+            (None, Some(_)) => true,
+            _ => false,
+        };
+        let best = if native_wins {
+            native_fastest.zip(native_best.as_ref()).map(|((k, v), (config, built, rays))| {
                 rendiff::errln!("peers: {threads} thread(s), core and {k} in alternation");
-                measure::paired_with_embree(
+                let paired = measure::paired_with_native(
                     scene,
                     best_bvh,
                     TraceKernel::Packets,
-                    config,
-                    query,
-                    coherence,
-                    runs,
-                )
-            });
-            best_json(k, v, core_mrays, single_mrays, paired)
-        });
+                    (built, rays),
+                    *config,
+                    rounds,
+                );
+                best_json(k, v, core_mrays, single_mrays, Some(Ok(paired)))
+            })
+        } else {
+            binding_fastest.map(|(k, v)| {
+                let paired = configs.get(k).map(|&(config, query, coherence)| {
+                    rendiff::errln!("peers: {threads} thread(s), core and {k} in alternation");
+                    measure::paired_with_embree(
+                        scene,
+                        best_bvh,
+                        TraceKernel::Packets,
+                        config,
+                        query,
+                        coherence,
+                        rounds,
+                    )
+                });
+                best_json(k, v, core_mrays, single_mrays, paired)
+            })
+        };
+        drop(native_best);
         let best_robust = fastest(&embree, Some(EmbreeMode::Robust.name()))
             .map(|(k, v)| best_json(k, v, core_mrays, single_mrays, None));
         let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
@@ -262,6 +350,8 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                             "counters": raster.last.counters},
             "raster_vs_trace_passes": raster_vs_trace,
             "embree": embree,
+            "embree_native": native.json(),
+            "embree_check": check,
             "embree_best": best,
             "embree_best_robust": best_robust,
             "ratios": {
@@ -271,6 +361,7 @@ fn throughput(scene: &ResolvedScene, thread_counts: &[usize], runs: usize) -> Re
                 "core_single_rays_over_embree_single": ratio1("embree single"),
                 "core_single_rays_over_embree_packet8": ratio1("embree packet8"),
                 "embree_best": field(&best, "name"),
+                "embree_best_source": field(&best, "source"),
                 "core_over_embree_best": field(&best, "core_over_embree_best"),
                 "core_single_rays_over_embree_best": field(&best, "core_single_rays_over_embree_best"),
                 "embree_best_robust": field(&best_robust, "name"),
@@ -296,6 +387,115 @@ fn fastest<'a>(
         .map(|(k, v, _)| (k, v))
 }
 
+/// The native driver's rows on one scene at one thread count.
+struct NativeSweep {
+    /// Every configuration's row, by [`Config::name`].
+    rows: Map<String, Value>,
+    /// The prepared rays (None when the driver is unavailable).
+    rays: Option<PreparedRays>,
+    /// The fastest configuration and its Mrays/s.
+    best: Option<(Config, f64)>,
+    /// Its row name.
+    best_name: Option<String>,
+    /// Why there are no rows.
+    skipped: Option<String>,
+    /// Seconds preparing the rays took (once per camera, outside timing).
+    prepare_s: f64,
+    /// Build seconds per quality.
+    build_s: Map<String, Value>,
+}
+
+impl NativeSweep {
+    fn json(&self) -> Value {
+        match &self.skipped {
+            Some(why) => json!({"skipped": why}),
+            None => json!({
+                "rows": self.rows,
+                "best": self.best_name,
+                "rays_prepare_s": self.prepare_s,
+                "build_s": self.build_s,
+                "version": native_embree::version().ok(),
+            }),
+        }
+    }
+}
+
+/// Every configuration of the native driver (entry point x context flag x
+/// build quality, default scene flags) on `scene` at `threads`: one build
+/// per quality, then each configuration's frames, with the same ratios and
+/// agreement checks as the binding's rows.
+fn native_sweep(
+    scene: &ResolvedScene,
+    threads: usize,
+    raster: &rendiff::frame::Frame,
+    binding_single: Option<&rendiff::frame::Frame>,
+    (core_mrays, single_mrays): (f64, f64),
+    runs: usize,
+) -> NativeSweep {
+    let mut sweep = NativeSweep {
+        rows: Map::new(),
+        rays: None,
+        best: None,
+        best_name: None,
+        skipped: None,
+        prepare_s: 0.0,
+        build_s: Map::new(),
+    };
+    if let Err(why) = native_embree::version() {
+        sweep.skipped = Some(why);
+        return sweep;
+    }
+    let t = std::time::Instant::now();
+    let rays = PreparedRays::new(&scene.camera);
+    sweep.prepare_s = t.elapsed().as_secs_f64();
+    for quality in Quality::ALL {
+        rendiff::errln!(
+            "peers: {threads} thread(s), native driver, {} build",
+            quality.name()
+        );
+        let built = match NativeScene::build(scene, quality, false, threads) {
+            Ok(b) => b,
+            Err(e) => {
+                sweep
+                    .build_s
+                    .insert(quality.name().into(), json!({"error": e}));
+                continue;
+            }
+        };
+        sweep
+            .build_s
+            .insert(quality.name().into(), json!(built.build_s));
+        for config in Config::all().into_iter().filter(|c| c.quality == quality) {
+            let (times, hits) = measure::native_frames(&built, &rays, config, runs);
+            let median_s = super::median(&times);
+            let mrays = rays.len() as f64 / median_s / 1e6;
+            let (frame, in_front) = hits.frame(scene, &rays);
+            let vs_binding = binding_single.map(|r| visibility_error(r, &frame));
+            sweep.rows.insert(
+                config.name(),
+                json!({"source": "native driver", "mode": "embree",
+                       "build_quality": quality.name(), "query": config.entry.name(),
+                       "entry_point": config.entry.entry_point(),
+                       "context": if config.coherent { "coherent" } else { "incoherent" },
+                       "timing": {"trace_s": median_s, "runs_s": times, "build_s": built.build_s},
+                       "mrays_per_s": mrays,
+                       "core_over_embree": core_mrays / mrays,
+                       "core_single_rays_over_embree": single_mrays / mrays,
+                       "vs_core_raster": visibility_error(raster, &frame),
+                       "vs_embree_single": vs_binding,
+                       "same_keys_as_embree_single": vs_binding.map(|e| e.identical()),
+                       "hits_in_front_of_near": in_front}),
+            );
+            if sweep.best.is_none_or(|(_, m)| mrays > m) {
+                sweep.best = Some((config, mrays));
+                sweep.best_name = Some(config.name());
+            }
+        }
+    }
+    sweep.rays = Some(rays);
+    sweep
+}
+
 /// What a thread count's record says about its fastest Embree configuration.
 /// With `paired` rounds (the fastest overall), `core_over_embree_best` is
 /// their median per-round ratio and the sweep's ratio is kept beside it as
@@ -319,10 +519,13 @@ fn best_json(
         ),
         None => (json!(sweep), "sweep medians", Value::Null),
     };
+    let interval = paired["core_over_embree_interval_95"].clone();
     json!({
         "name": name,
+        "source": row["source"],
         "mode": row["mode"], "query": row["query"], "entry_point": row["entry_point"],
-        "context": row["context"],
+        "context": row["context"], "build_quality": row["build_quality"],
+        "core_over_embree_best_interval_95": interval,
         "mrays_per_s": mrays,
         "core_over_embree_best": ratio,
         "core_over_embree_best_basis": basis,
@@ -369,7 +572,11 @@ fn goals(record: &Value) -> Value {
 /// One thread count's core-vs-Embree-best goal row.
 fn best_goal(r: &Value) -> Value {
     json!({"threads": r["threads"], "embree_best": r["embree_best"]["name"],
+           "embree_best_source": r["embree_best"]["source"],
            "embree_best_mrays_per_s": r["embree_best"]["mrays_per_s"],
+           "core_over_embree_best_interval_95": r["embree_best"]["core_over_embree_best_interval_95"],
+           "binding_over_native_best": r["embree_check"]["binding_over_native"],
+           "binding_within_5_percent_of_native": r["embree_check"]["within_5_percent"],
            "core_trace_mrays_per_s": r["core_trace"]["mrays_per_s"],
            "core_over_embree_best": r["embree_best"]["core_over_embree_best"],
            "core_over_embree_best_basis": r["embree_best"]["core_over_embree_best_basis"],
@@ -523,7 +730,6 @@ fn bars(record: &Value) -> String {
         )];
         // Embree's fastest configuration (overall and robust), then the
         // default-context rows earlier records showed; every row is in the table.
-        let embree = &r["embree"];
         let mut shown: Vec<(String, String)> = Vec::new();
         for (what, best) in [
             ("best", "embree_best"),
@@ -542,11 +748,11 @@ fn bars(record: &Value) -> String {
             }
         }
         for (i, (label, name)) in shown.into_iter().enumerate() {
-            if embree.get(&name).is_some() {
+            if let Some(row) = embree_row(r, &name) {
                 b.push((
                     label,
                     backend_color(i + 1),
-                    embree[&name]["timing"]["trace_s"].as_f64(),
+                    row["timing"]["trace_s"].as_f64(),
                 ));
             }
         }
@@ -757,9 +963,14 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
                 r["core_trace"]["raster_equals_trace"]
             ),
         ]);
-        // Every Embree row, fastest first; the best is marked.
-        let mut variants: Vec<(&String, &Value)> =
-            r["embree"].as_object().into_iter().flatten().collect();
+        // Every Embree row (the binding's and the native driver's), fastest
+        // first; the best is marked.
+        let mut variants: Vec<(&String, &Value)> = r["embree"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .chain(r["embree_native"]["rows"].as_object().into_iter().flatten())
+            .collect();
         variants.sort_by(|a, b| {
             let m = |v: &Value| v["mrays_per_s"].as_f64().unwrap_or(f64::NEG_INFINITY);
             m(b.1).total_cmp(&m(a.1))
@@ -801,12 +1012,14 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
             };
             let pr = &r["embree_best"]["paired"];
             p.note(&format!(
-                "{th} thread(s): Embree's fastest configuration is {name} at {} Mrays/s; \
-                 core trace / Embree best = {} ({}: {} alternating rounds, core {} Mrays/s \
-                 against {} Mrays/s; the sweep's medians gave {}): {verdict}. \
-                 Fastest robust: {} at {} Mrays/s.",
+                "{th} thread(s): Embree's fastest configuration is {name} ({}) at {} Mrays/s; \
+                 core trace / Embree best = {} (95% interval {}; {}: {} rounds in alternating \
+                 order, core {} Mrays/s against {} Mrays/s; the sweep's medians gave {}): \
+                 {verdict}. Fastest robust: {} at {} Mrays/s.",
+                super::page::compact(&r["embree_best"]["source"]),
                 num(r["embree_best"]["mrays_per_s"].as_f64(), 4),
                 num(ratio, 3),
+                interval(&r["embree_best"]["core_over_embree_best_interval_95"]),
                 super::page::compact(&r["embree_best"]["core_over_embree_best_basis"]),
                 super::page::compact(&pr["rounds"]),
                 num(pr["core_mrays_per_s"].as_f64(), 4),
@@ -816,6 +1029,7 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
                 num(r["embree_best_robust"]["mrays_per_s"].as_f64(), 4),
             ));
         }
+        check_note(p, &th, &r["embree_check"]);
         let rt = &r["raster_vs_trace_passes"];
         p.note(&format!(
             "{th} thread(s): the raster's visibility pass is {}x the tracer's speed \
@@ -861,4 +1075,50 @@ fn throughput_table(p: &mut Page, per_threads: &Value) {
 fn packets_label() -> String {
     let [w, h] = rendiff_core::trace::PACKET_PIXELS;
     format!("packets ({w}x{h})")
+}
+
+/// A row of either Embree table (the binding's or the native driver's) by name.
+fn embree_row<'a>(r: &'a Value, name: &str) -> Option<&'a Value> {
+    r["embree"]
+        .get(name)
+        .or_else(|| r["embree_native"]["rows"].get(name))
+}
+
+/// "[lo, hi]" of a recorded interval, or "none".
+fn interval(v: &Value) -> String {
+    match (v[0].as_f64(), v[1].as_f64()) {
+        (Some(lo), Some(hi)) => format!("[{}, {}]", num(Some(lo), 3), num(Some(hi), 3)),
+        _ => "none".into(),
+    }
+}
+
+/// The check of the binding's Embree numbers against the native driver: a
+/// plain note when they agree, red when they do not, and why when it could
+/// not run.
+fn check_note(p: &mut Page, th: &str, c: &Value) {
+    if let Some(why) = c["skipped"].as_str().or(c["error"].as_str()) {
+        p.alarm(&format!(
+            "{th} thread(s): Embree's numbers were NOT checked against the native driver: {why}"
+        ));
+        return;
+    }
+    let text = format!(
+        "{th} thread(s): the binding's fastest ({}) runs at {} of the native driver's \
+         fastest ({}) (95% interval {}, {} rounds in alternating order)",
+        super::page::compact(&c["binding_best"]),
+        num(c["binding_over_native"].as_f64(), 3),
+        super::page::compact(&c["native_best"]),
+        interval(&c["binding_over_native_interval_95"]),
+        super::page::compact(&c["rounds"]),
+    );
+    if c["within_5_percent"].as_bool() == Some(true) {
+        p.note(&format!(
+            "{text}: within 5%, Embree's numbers are its own best."
+        ));
+    } else {
+        p.alarm(&format!(
+            "{text}: OUTSIDE 5%: the binding's Embree rows are not Embree at its best; \
+             the headline uses the fastest row of either."
+        ));
+    }
 }

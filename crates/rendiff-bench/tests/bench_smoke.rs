@@ -249,12 +249,43 @@ fn peers_writes_throughput_ratios() {
         for (k, v) in embree {
             assert_ne!(v["same_keys_as_embree_single"], false, "{k}");
         }
+        // The native driver's rows: every entry point x context flag x
+        // build quality, each reproducing the binding's single-ray keys.
+        let native = rows[0]["embree_native"]["rows"]
+            .as_object()
+            .expect("native driver rows beside the binding's");
+        assert_eq!(native.len(), 48, "8 entry points x 2 flags x 3 qualities");
+        for (k, v) in native {
+            assert_eq!(v["same_keys_as_embree_single"], true, "{k}");
+            assert_eq!(v["hits_in_front_of_near"], 0, "{k}");
+        }
+        // The best is the fastest row of either table.
         let best = rows[0]["embree_best"]["name"].as_str().expect("best named");
         let fastest = embree
             .values()
+            .chain(native.values())
             .filter_map(|v| v["mrays_per_s"].as_f64())
             .fold(0.0, f64::max);
-        assert_eq!(embree[best]["mrays_per_s"].as_f64(), Some(fastest));
+        let best_row = embree
+            .get(best)
+            .or_else(|| native.get(best))
+            .expect("best row");
+        assert_eq!(best_row["mrays_per_s"].as_f64(), Some(fastest));
+        assert_eq!(rows[0]["embree_best"]["source"], best_row["source"]);
+        // The check of the binding against the driver: paired rounds, their
+        // median, an interval around it, and the 5% verdict from them.
+        let c = &rows[0]["embree_check"];
+        let per_round: Vec<f64> = c["binding_over_native_per_round"]
+            .as_array()
+            .expect("check rounds")
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(per_round.len(), 3, "--quick: 3 rounds");
+        let ratio = c["binding_over_native"].as_f64().unwrap();
+        let [lo, hi] = [0, 1].map(|i| c["binding_over_native_interval_95"][i].as_f64().unwrap());
+        assert!(lo <= ratio && ratio <= hi, "{c}");
+        assert_eq!(c["within_5_percent"], (ratio - 1.0).abs() <= 0.05, "{c}");
         assert_eq!(rows[0]["ratios"]["embree_best"], best);
         assert!(rows[0]["ratios"]["core_over_embree_best"]
             .as_f64()
@@ -292,6 +323,10 @@ fn peers_writes_throughput_ratios() {
         } else {
             (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
         };
+        // Three rounds under --quick, and a bootstrap interval around their median.
+        assert_eq!(core_s.len(), 3, "--quick: 3 paired rounds");
+        let [lo, hi] = [0, 1].map(|i| b["core_over_embree_best_interval_95"][i].as_f64().unwrap());
+        assert!(lo <= median && median <= hi, "{b}");
         // Within a few ulps, as for the raster-vs-trace median above.
         let headline = b["core_over_embree_best"].as_f64().unwrap();
         assert!(

@@ -261,7 +261,10 @@ pub struct EmbreeTimings {
     pub device_seconds: f64,
     /// Buffer setup and BVH build (`rtcCommitScene`).
     pub build_seconds: f64,
-    /// Tracing all pixel rays and assembling keys.
+    /// Preparing every pixel's ray in f32 (once per camera: it depends on
+    /// the camera only, and an application would keep its rays in f32).
+    pub rays_seconds: f64,
+    /// Tracing all pixel rays (copied into Embree's layout) and assembling keys.
     pub trace_seconds: f64,
     /// Rays handed to Embree (pixels plus near-plane re-traces).
     pub rays: u64,
@@ -348,9 +351,17 @@ pub fn render_timed_with(
     let t_build = Instant::now();
     let built = BuiltScene::new(device, scene, mode, build)?;
     let build_seconds = t_build.elapsed().as_secs_f64();
-    let t_trace = Instant::now();
+    // Every pixel's ray in f32 before the trace is timed: an Embree
+    // application keeps its rays in f32 and hands them over as they are;
+    // deriving them from the core's f64 pixel rays (a division per ray, and
+    // two more for tnear/tfar) is this adapter's cost, not Embree's, and
+    // inside `trace_seconds` it made the packet paths about half as fast as
+    // a native driver's (docs/embree-fastest-path.md).
+    let t_rays = Instant::now();
     let cam = &scene.camera;
     let rays = RayGen::new(cam);
+    let rays_seconds = t_rays.elapsed().as_secs_f64();
+    let t_trace = Instant::now();
     // No serial pre-fill inside the timed region (`vec![NO_HIT; n]` wrote
     // the whole buffer on one thread, about 3 ms of `million`'s 1080p on
     // this machine, charged to Embree): each strip fills its own rows in
@@ -407,6 +418,7 @@ pub fn render_timed_with(
         EmbreeTimings {
             device_seconds,
             build_seconds,
+            rays_seconds,
             trace_seconds,
             rays: cam.pixel_count() as u64 + retraces,
         },
@@ -429,13 +441,16 @@ fn strips(
         .sum()
 }
 
-/// Per-render constants that turn the core's pixel rays into Embree rays.
+/// The core's pixel rays as Embree rays, every pixel's prepared up front,
+/// with the constants that turn hits back into planar depths.
 struct RayGen<'a> {
     cam: &'a Camera,
     /// The eye rounded to f32: every ray's origin.
     org: [f32; 3],
     /// `(org - eye)·forward`: planar depth of the f32 origin.
     offset: f64,
+    /// Every pixel's ray, row-major ([`RayGen::prepare`]).
+    prepared: Vec<EmbreeRay>,
 }
 
 /// One pixel's ray in Embree's precision, with its depth conversion.
@@ -451,14 +466,27 @@ struct EmbreeRay {
 impl<'a> RayGen<'a> {
     fn new(cam: &'a Camera) -> Self {
         let org = cam.eye.as_vec3();
-        RayGen {
+        let mut gen = RayGen {
             cam,
             org: org.to_array(),
             offset: (org.as_dvec3() - cam.eye).dot(cam.forward),
-        }
+            prepared: Vec::new(),
+        };
+        let w = cam.width as usize;
+        gen.prepared = (0..cam.pixel_count())
+            .into_par_iter()
+            .map(|p| gen.prepare((p % w) as u32, (p / w) as u32))
+            .collect();
+        gen
     }
 
+    /// The prepared ray of pixel (x, y).
+    #[inline]
     fn ray(&self, x: u32, y: u32) -> EmbreeRay {
+        self.prepared[y as usize * self.cam.width as usize + x as usize]
+    }
+
+    fn prepare(&self, x: u32, y: u32) -> EmbreeRay {
         let pr: PixelRay = self.cam.pixel_ray(x, y);
         let d = pr.dir.as_vec3();
         let planar = d.as_dvec3().dot(self.cam.forward);
@@ -857,8 +885,17 @@ impl BuiltScene {
 
     /// Fills `packet` with the tile of `tile_w` x `N / tile_w` pixels whose
     /// top-left pixel is (x0, y0); lane `i` is pixel `(i % tile_w, i / tile_w)`
-    /// of the tile. Lanes outside the image (x >= width or row >= `nrows`)
-    /// stay empty (tnear > tfar) and come back as `None`.
+    /// of the tile, its hit reset to none. Returns the `valid` mask: -1 for
+    /// lanes in the image, 0 for lanes outside it (x >= width or row >=
+    /// `nrows`), which keep whatever they held (an empty packet's tnear >
+    /// tfar, so the stream API, which has no mask, skips them too).
+    ///
+    /// Only the mask comes back, not the lanes' rays: a packet's hits are
+    /// turned into keys by reading the prepared rays again
+    /// ([`BuiltScene::store_packet`]). Carrying an `Option` of every lane's
+    /// ray through each call, and zeroing a fresh packet per tile, cost the
+    /// packet paths up to 40% of their speed on `million`
+    /// (docs/embree-fastest-path.md).
     fn fill_packet<const N: usize>(
         gen: &RayGen,
         packet: &mut ffi::RayHitN<N>,
@@ -866,27 +903,31 @@ impl BuiltScene {
         x0: u32,
         y0: u32,
         nrows: u32,
-    ) -> [Option<EmbreeRay>; N] {
+    ) -> ffi::Valid<N> {
         let w = gen.cam.width;
-        std::array::from_fn(|lane| {
+        let mut valid = ffi::Valid([0; N]);
+        for lane in 0..N {
             let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
-            (x < w && dy < nrows).then(|| {
+            if x < w && dy < nrows {
                 let r = gen.ray(x, y0 + dy);
                 packet.set(lane, gen.org, r.dir, r.tnear, r.tfar);
-                r
-            })
-        })
+                packet.hit.geom_id[lane] = ffi::INVALID_GEOMETRY_ID;
+                valid.0[lane] = -1;
+            }
+        }
+        valid
     }
 
-    /// Writes the keys of a traced tile (see [`BuiltScene::fill_packet`]) into
-    /// `rows`, the strip starting at row `y0`; returns the extra rays traced.
+    /// Writes the keys of a traced tile (see [`BuiltScene::fill_packet`],
+    /// whose mask is `valid`) into `rows`, the strip starting at row `y0`;
+    /// returns the extra rays traced.
     #[allow(clippy::too_many_arguments)]
     fn store_packet<const N: usize>(
         &self,
         gen: &RayGen,
         ctx: &mut ffi::IntersectContext,
         packet: &ffi::RayHitN<N>,
-        rays: &[Option<EmbreeRay>; N],
+        valid: &ffi::Valid<N>,
         tile_w: u32,
         x0: u32,
         y0: u32,
@@ -894,13 +935,16 @@ impl BuiltScene {
     ) -> u64 {
         let w = gen.cam.width;
         let mut extra = 0;
-        for (lane, r) in rays.iter().enumerate() {
-            let Some(r) = r else { continue };
+        for lane in 0..N {
+            if valid.0[lane] == 0 {
+                continue;
+            }
             let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
+            let r = gen.ray(x, y0 + dy);
             let (key, e) = self.resolve(
                 gen,
                 ctx,
-                r,
+                &r,
                 packet.hit.geom_id[lane],
                 packet.hit.prim_id[lane],
                 packet.ray.tfar[lane],
@@ -928,16 +972,17 @@ impl BuiltScene {
         let w = gen.cam.width;
         let nrows = (rows.len() / w as usize) as u32;
         let mut extra = 0;
+        // One packet for the strip: each tile rewrites its lanes' rays and
+        // hits (`fill_packet`); lanes outside the image are masked.
+        let mut packet = ffi::RayHitN::<N>::empty();
         for x0 in (0..w).step_by(tile_w as usize) {
-            let mut packet = ffi::RayHitN::<N>::empty();
-            let rays = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
-            let valid = ffi::Valid(rays.map(|r| if r.is_some() { -1 } else { 0 }));
+            let valid = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
             // SAFETY: the scene is committed and live; `intersect` is the
             // rtcIntersect<N> matching `N` (typed by `IntersectN<N>`); `valid`
             // and `packet` are 64-byte aligned with the RTCRayHit<N> layout
             // (checked in `ffi::layout`); invalid lanes are masked.
             unsafe { intersect(&valid, self.raw, ctx, &mut packet) };
-            extra += self.store_packet(gen, ctx, &packet, &rays, tile_w, x0, y0, rows);
+            extra += self.store_packet(gen, ctx, &packet, &valid, tile_w, x0, y0, rows);
         }
         extra
     }
@@ -957,7 +1002,7 @@ impl BuiltScene {
         let nrows = (rows.len() / w as usize) as u32;
         let block_w = (STREAM_RAYS / 16 * 4) as u32;
         let mut stream: Vec<ffi::RayHit> = Vec::with_capacity(STREAM_RAYS);
-        let mut pixels: Vec<(u32, u32, EmbreeRay)> = Vec::with_capacity(STREAM_RAYS);
+        let mut pixels: Vec<(u32, u32)> = Vec::with_capacity(STREAM_RAYS);
         let mut extra = 0;
         for bx in (0..w).step_by(block_w as usize) {
             stream.clear();
@@ -967,7 +1012,7 @@ impl BuiltScene {
                     for x in x0..w.min(x0 + 4) {
                         let r = gen.ray(x, y0 + dy);
                         stream.push(ffi::RayHit::new(gen.org, r.dir, r.tnear, r.tfar));
-                        pixels.push((x, dy, r));
+                        pixels.push((x, dy));
                     }
                 }
             }
@@ -984,11 +1029,11 @@ impl BuiltScene {
                     std::mem::size_of::<ffi::RayHit>(),
                 )
             };
-            for (rh, &(x, dy, r)) in stream.iter().zip(&pixels) {
+            for (rh, &(x, dy)) in stream.iter().zip(&pixels) {
                 let (key, e) = self.resolve(
                     gen,
                     ctx,
-                    &r,
+                    &gen.ray(x, y0 + dy),
                     rh.hit.geom_id,
                     rh.hit.prim_id,
                     rh.ray.tfar,
@@ -1019,14 +1064,14 @@ impl BuiltScene {
         let per_call = (STREAM_RAYS / N).max(1);
         let tiles: Vec<u32> = (0..w).step_by(tile_w as usize).collect();
         let mut packets: Vec<ffi::RayHitN<N>> = Vec::with_capacity(per_call);
-        let mut rays: Vec<[Option<EmbreeRay>; N]> = Vec::with_capacity(per_call);
+        let mut masks: Vec<ffi::Valid<N>> = Vec::with_capacity(per_call);
         let mut extra = 0;
         for chunk in tiles.chunks(per_call) {
             packets.clear();
-            rays.clear();
+            masks.clear();
             for &x0 in chunk {
                 let mut p = ffi::RayHitN::<N>::empty();
-                rays.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
+                masks.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
                 packets.push(p);
             }
             // SAFETY: the scene is committed and live; `packets` holds
@@ -1043,8 +1088,8 @@ impl BuiltScene {
                     std::mem::size_of::<ffi::RayHitN<N>>(),
                 )
             };
-            for ((p, r), &x0) in packets.iter().zip(&rays).zip(chunk) {
-                extra += self.store_packet(gen, ctx, p, r, tile_w, x0, y0, rows);
+            for ((p, valid), &x0) in packets.iter().zip(&masks).zip(chunk) {
+                extra += self.store_packet(gen, ctx, p, valid, tile_w, x0, y0, rows);
             }
         }
         extra
