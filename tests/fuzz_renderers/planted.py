@@ -28,7 +28,7 @@ import numpy as np
 
 # The harness's EXR writer (float32 Z and N, exact uint32 ids).
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
-from rendiff_harness import exrbuf  # noqa: E402
+from rendiff_harness.contract import exrbuf  # noqa: E402
 
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
