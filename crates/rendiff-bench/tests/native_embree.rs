@@ -153,6 +153,7 @@ fn mxcsr_is_restored_after_tracing() {
         return;
     }
     #[allow(deprecated)]
+    // SAFETY: reading MXCSR (SSE, present on every x86_64) touches no memory.
     let before = unsafe { std::arch::x86_64::_mm_getcsr() };
     let s = scene("three_triangles");
     let rays = PreparedRays::new(&s.camera);
@@ -166,6 +167,7 @@ fn mxcsr_is_restored_after_tracing() {
         .unwrap()
         .install(|| sc.trace(&rays, native_embree::Entry::Sixteen, true, &mut hits));
     #[allow(deprecated)]
+    // SAFETY: as above.
     let after = unsafe { std::arch::x86_64::_mm_getcsr() };
     assert_eq!(before, after);
     // The default environment has neither FTZ (bit 15) nor DAZ (bit 6).
