@@ -809,3 +809,51 @@ def test_calibration_judges_a_declared_renderer_at_its_declared_precision(
     assert str(path) in coarse.bound_text and coarse.bound_px is not None and coarse.bound_px > 0.004
     fine = calibration.measure(scene, "fine", z, prim, specs=registry.spec)
     assert fine.status == "fail" and "pixel centers offset by (0.004" in fine.reason, fine.reason
+
+
+def test_interpreter_run_commands_and_here_work_from_the_files_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+) -> None:
+    """`["python", "./my_renderer.py", ...]` and `{here}` in any argument (issue 42, item 5): the
+    docs' Python and shell examples, from a folder whose name has spaces, braces and `$`."""
+    sdir, ref = scene
+    answer = write_exr(tmp_path / "answer.exr", ref)
+    conf = tmp_path / "my renderers {out} $HOME; x"
+    seen = tmp_path / "argv.json"
+    (conf / "data").mkdir(parents=True)
+    (conf / "my_renderer.py").write_text(
+        "import json, os, shutil, sys\n"
+        "if sys.argv[1] == '--version':\n    print('mine 1.0')\n    sys.exit(0)\n"
+        f"json.dump({{'argv': sys.argv[1:], 'cwd': os.getcwd()}}, open({str(seen)!r}, 'w'))\n"
+        f"shutil.copyfile({str(answer)!r}, sys.argv[2])\n"
+    )
+    (conf / "render.sh").write_text(f'#!/bin/sh\ncp "{answer}" "$2"\n')
+    shim = tmp_path / "path"
+    shim.mkdir()
+    (shim / "python").symlink_to(sys.executable)  # "python" found on PATH, as a user's would be
+    monkeypatch.setenv("PATH", f"{shim}{os.pathsep}{os.environ['PATH']}")
+    path = declare(
+        conf,
+        entry(
+            "py",
+            ["python", "./my_renderer.py", "{scene}", "{out}", "--data={here}/data", "../up", "a/./b"],
+            'version = ["python", "./my_renderer.py", "--version"]',
+        )
+        + entry("sh", ["sh", "{here}/render.sh", "{scene}", "{out}"])
+        + entry("direct", ["{here}/render.sh", "{scene}", "{out}"]),
+    )
+    (conf / "render.sh").chmod(0o755)
+    monkeypatch.setenv(ENV_VAR, str(path))
+    monkeypatch.chdir(tmp_path)  # not the file's folder
+    rc, line, err = render(sdir, tmp_path / "py.exr", "py")
+    assert rc == 0, err
+    assert line["version"] == "mine 1.0"
+    got = json.loads(seen.read_text())
+    assert got["argv"][0] == str(sdir.absolute())
+    assert got["argv"][2:] == [f"--data={conf}/data", f"{conf}/../up", "a/./b"]  # one argument each, unexpanded
+    assert line["info"]["command"][:2] == [str(shim / "python"), f"{conf}/./my_renderer.py"]
+    for name in ("sh", "direct"):
+        rc, line, err = render(sdir, tmp_path / f"{name}.exr", name)
+        assert rc == 0, err
+        assert np.array_equal(exrbuf.read_buffers(tmp_path / f"{name}.exr")["id.prim"], ref["prim"])
+    assert not list(tmp_path.rglob("HOME*"))

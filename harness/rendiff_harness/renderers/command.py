@@ -25,7 +25,10 @@ dropping a renderer. Whether the program exists is *not* a load error: a rendere
 program is missing is listed as unavailable, with that reason.
 
 Running (`CommandBackend.render`): the command is an argument vector, never a shell, with
-the placeholders expanded in each argument after the first; it runs in a process group of
+the placeholders expanded in each argument after the first (`{here}`, the renderers file's
+folder, in every argument, the program's included), and each argument after the first that
+is written `./...` or `../...` taken from the renderers file's folder, so an interpreter-run
+`["python", "./my_renderer.py", "{scene}", "{out}"]` finds its script; it runs in a process group of
 its own (children.run_in_group: stdin /dev/null; the group is killed on the timeout, when
 the renderer ends, and when the harness dies), in a scratch working folder inside the
 `workdir` it is given (`render` puts that beside its `--out`, in the run folder). What it
@@ -81,6 +84,10 @@ MAX_FILE_BYTES = 1 << 20
 EXIT_SKIP = vocab.EXIT_SKIPPED
 """A renderer's exit status for "cannot render this here" (the reason on its last stderr line)."""
 PLACEHOLDERS = ("scene", "out", "width", "height")
+HERE = "here"
+"""The placeholder for the renderers file's folder, allowed in every argument (the program included)."""
+RELATIVE_PREFIXES = ("./", "../")
+"""An argument after the program written with one of these is relative to the renderers file's folder."""
 BUFFERS = ("Z", "id", "N", "RGB")
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_-]*\Z")
 # Longest renderer name: 64 characters. The name becomes file and folder names (the run's
@@ -175,9 +182,26 @@ class Renderer:
         """Where it comes from, for reasons and tolerance texts."""
         return f"{self.source} (renderer {self.name!r})"
 
+    @property
+    def here(self) -> str:
+        """The folder of its renderers file: the value of `{here}`, and what `./` and `../` start from."""
+        return str(self.source.parent)
+
+    def arguments(self, argv: Sequence[str], values: Mapping[str, str]) -> list[str]:
+        """The arguments after the program: placeholders expanded (`{here}` among them), and an
+        argument written as `./...` or `../...` made a path in the renderers file's folder.
+
+        Decided on the text as written, before expansion, so a placeholder's value (a scene
+        path, `{here}` itself) is never re-read as a path, a brace or a second argument."""
+        out = []
+        for arg in argv:
+            text = expand(arg, {**values, "here": self.here})
+            out.append(os.path.join(self.here, text) if arg.startswith(RELATIVE_PREFIXES) else text)
+        return out
+
     def program(self, argv0: str | None = None) -> tuple[str | None, str | None]:
         """(the executable for `argv0` (default command[0]), None) or (None, why it cannot run)."""
-        word = self.command[0] if argv0 is None else argv0
+        word = expand(self.command[0] if argv0 is None else argv0, {"here": self.here})
         what = "command" if argv0 is None else "version command"
         if "/" in word:
             path = Path(word)
@@ -218,11 +242,11 @@ def _argv(value: object, key: str, where: str, placeholders: Sequence[str]) -> t
     for i, arg in enumerate(argv):
         if "\0" in arg:
             raise RenderersError(f"{where}: {key}[{i}] contains a NUL character")
-        allowed = () if i == 0 else placeholders
+        allowed = (HERE,) if i == 0 else (*placeholders, HERE)
         try:
             expand(arg, dict.fromkeys(allowed, ""))
         except ValueError as exc:
-            note = " (the program takes no placeholders)" if i == 0 else ""
+            note = " (the program takes only {here})" if i == 0 else ""
             raise RenderersError(f"{where}: {key}[{i}] {arg!r}: {exc}{note}") from None
     return tuple(argv)
 
@@ -496,7 +520,7 @@ class CommandBackend:
             return f"unknown ({problem})"
         try:
             ran = run_in_group(
-                [program, *(expand(a, {}) for a in argv[1:])],
+                [program, *self.spec.arguments(argv[1:], {})],
                 cwd=self.spec.source.parent,
                 env=os.environ,
                 timeout_s=VERSION_TIMEOUT_S,
@@ -548,7 +572,7 @@ class CommandBackend:
                 "width": str(cam.width),
                 "height": str(cam.height),
             }
-            argv = [program, *(expand(a, values) for a in spec.command[1:])]
+            argv = [program, *spec.arguments(spec.command[1:], values)]
             try:
                 ran = run_in_group(argv, cwd=cwd, env=os.environ, timeout_s=limit)
             except OSError as exc:
