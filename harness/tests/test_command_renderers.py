@@ -857,3 +857,37 @@ def test_interpreter_run_commands_and_here_work_from_the_files_folder(
         assert rc == 0, err
         assert np.array_equal(exrbuf.read_buffers(tmp_path / f"{name}.exr")["id.prim"], ref["prim"])
     assert not list(tmp_path.rglob("HOME*"))
+
+
+FULL = (
+    "[[renderer]]\nname = 'full'\ncommand = ['/bin/true']\nfeatures = ['depth', 'ids', 'normals', 'lambert']\n"
+    "buffers = ['Z', 'id', 'N', 'RGB']\n[renderer.precision]\nedge_px = 0.01\ndepth_relative = 1e-5\n"
+    "normal_relative = 3e-6\nrgb_relative = 1e-4\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("key", "bound"),
+    [
+        ("edge_px", 0.5),
+        ("depth_relative", tolerance.MAX_REL),
+        ("normal_relative", 1.0),
+        ("rgb_relative", 1 - 1 / np.pi),
+    ],
+)
+def test_a_precision_beyond_what_can_be_judged_is_refused(tmp_path: Path, key: str, bound: float) -> None:
+    """`edge_px = 1e6` passed a renderer writing triangle 0 everywhere (issue 40, item 5): each
+    bounded number is refused at and above its bound (docs/your-renderer.md), accepted below."""
+    assert command_renderers.PRECISION_BOUNDS[key][0] == bound
+    old = next(line for line in FULL.splitlines() if line.startswith(f"{key} ="))
+    for value in (bound, 1e6):
+        path = declare(tmp_path, FULL.replace(old, f"{key} = {value!r}"))
+        with pytest.raises(RenderersError) as err:
+            command_renderers.load(path, registry.RESERVED_NAMES)
+        message = str(err.value)
+        assert message.startswith(f"{path}: [[renderer]] #1 (full): precision.{key} = ") and "\n" not in message
+        assert f"is not below {bound:.4g}, the most that can be judged" in message, message
+    below = float(np.nextafter(bound, 0.0))
+    path = declare(tmp_path, FULL.replace(old, f"{key} = {below!r}"))
+    (r,) = command_renderers.load(path, registry.RESERVED_NAMES)
+    assert getattr(r.precision, key) == below

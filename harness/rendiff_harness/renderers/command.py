@@ -100,6 +100,33 @@ RENDERER_KEYS = frozenset({"name", "command", "version", "features", "buffers", 
 REQUIRED_KEYS = ("name", "command", "features", "buffers", "precision")
 PRECISION_NUMBERS = ("edge_px", "depth_relative", "depth_absolute", "normal_relative", "rgb_relative", "rgb_absolute")
 PRECISION_KEYS = frozenset({*PRECISION_NUMBERS, "depth_grazing"})
+# The largest number each precision key may declare: above it, the tolerance can no longer
+# tell a right answer from the smallest wrong one the contract names, so the renderer would
+# pass whatever it wrote there (issue: `edge_px = 1e6` passed a renderer writing triangle 0
+# everywhere). A declaration at or above its bound is refused. Derivations (docs/your-renderer.md,
+# "What can be judged"):
+# - edge_px < 1/2: a renderer whose pixel centers are half a pixel off along an axis (centers
+#   at integer coordinates, the commonest camera bug) differs from the right answer only at
+#   centers within 1/2 px of an edge; a band of 1/2 would class every one of them "edge".
+# - depth_relative < MAX_REL (1e-3): the cap the judge puts on every relative depth tolerance
+#   (with depth_grazing a larger number is silently that cap already). At 1e-3 Z a radial
+#   depth (planar / cos of the ray's angle off axis, relative error ~ d^2 / (2 f^2) at d px
+#   from the principal point, f the focal length in px) still fails outside a disc of radius
+#   f * sqrt(2e-3) ~ 0.045 f, and two surfaces 0.1% of Z apart are still ordered, not a tie.
+# - normal_relative < 1 rad: |N| must be 1 within it; at 1 a zero normal (a buffer never
+#   written) passes that check, and so does a normal 57 degrees off.
+# - rgb_relative < 1 - 1/pi (~0.68): Lambert's 1/pi, the factor most often dropped or applied
+#   twice, changes L by (1 - 1/pi) L or (pi - 1) L; at 1 - 1/pi the first passes, at 1 a black
+#   image passes (|0 - L| = L).
+# The absolute terms (depth_absolute, rgb_absolute) are in the scene's units and have no bound
+# that holds for every scene; they are judged as declared.
+PRECISION_BOUNDS: dict[str, tuple[float, str]] = {
+    "edge_px": (0.5, "a half-pixel offset of the pixel centers would pass as edge mismatches"),
+    "depth_relative": (1e-3, "the cap on every relative depth tolerance (MAX_REL); radial depth would pass"),
+    "normal_relative": (1.0, "a zero (unwritten) normal would pass the |N| = 1 check"),
+    "rgb_relative": (1.0 - 1.0 / math.pi, "a dropped or doubled Lambert 1/pi would pass"),
+}
+"""The bound (exclusive) on each bounded precision number, and what passes at it."""
 NEEDS = {"id": "edge_px", "Z": "depth_relative", "N": "normal_relative", "RGB": "rgb_relative"}
 """The precision key each declared buffer requires."""
 CHANNELS: dict[str, tuple[tuple[str, str], ...]] = {
@@ -273,6 +300,12 @@ def _precision(value: object, buffers: frozenset[str], where: str) -> Precision:
             f"{where}: unknown precision key {unknown[0]!r} (allowed: {', '.join(sorted(PRECISION_KEYS))})"
         )
     numbers = {k: _number(value[k], f"precision.{k}", where) for k in PRECISION_NUMBERS if k in value}
+    for key, (bound, why) in PRECISION_BOUNDS.items():
+        if numbers.get(key, 0.0) >= bound:
+            raise RenderersError(
+                f"{where}: precision.{key} = {numbers[key]:g} is not below {bound:.4g}, the most that can be "
+                f"judged ({why}; docs/your-renderer.md, 'What can be judged')"
+            )
     for buffer in sorted(buffers):
         key = NEEDS[buffer]
         if key not in numbers:
