@@ -891,3 +891,23 @@ def test_a_precision_beyond_what_can_be_judged_is_refused(tmp_path: Path, key: s
     path = declare(tmp_path, FULL.replace(old, f"{key} = {below!r}"))
     (r,) = command_renderers.load(path, registry.RESERVED_NAMES)
     assert getattr(r.precision, key) == below
+
+
+def test_a_hanging_version_command_costs_a_short_timeout_and_the_renderer_still_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+) -> None:
+    """A version command that never ends (issue 40, item 6) delays each render by seconds, not 30 s."""
+    sdir, ref = scene
+    answer = write_exr(tmp_path / "answer.exr", ref)
+    hang = script(tmp_path, "hang.py", "import time\ntime.sleep(120)\n")
+    copy = script(tmp_path, "copy.py", COPY)
+    version = f"version = {json.dumps([sys.executable, str(hang)])}"
+    path = declare(tmp_path, entry("mine", [sys.executable, str(copy), str(answer), "{out}"], version))
+    monkeypatch.setenv(ENV_VAR, str(path))
+    t0 = time.monotonic()
+    rc, line, err = render(sdir, tmp_path / "out.exr", "mine")
+    elapsed = time.monotonic() - t0
+    assert rc == 0, err
+    assert line["version"] == "unknown (the version command timed out after 5 s)"
+    assert exrbuf.read_attrs(tmp_path / "out.exr")["version"] == line["version"]
+    assert elapsed < 15.0, f"{elapsed:.1f} s"  # 5 s for the version, then the render (was 30 s and more)

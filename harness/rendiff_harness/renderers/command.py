@@ -136,7 +136,13 @@ CHANNELS: dict[str, tuple[tuple[str, str], ...]] = {
     "RGB": (("R", "float"), ("G", "float"), ("B", "float")),
 }
 """The EXR channels (and pixel types) each buffer must have (docs/resolved-scene.md)."""
-VERSION_TIMEOUT_S = 30.0
+# The version command's time limit: 5 s. It prints one line; the slowest common starts
+# (an interpreter importing a package, a JVM, a renderer loading its plugins) take a second
+# or two. Every harness process that renders probes it once (the version goes into each
+# render's EXR and line), so a hanging version command costs this per render: it was 30 s,
+# which made a run of N scenes wait N * 30 s for a line of provenance. A version command
+# that needs longer is reported "unknown (timed out)", and the renderer still runs.
+VERSION_TIMEOUT_S = 5.0
 # Most of the version command's stdout read: 4 KiB. The version is its first non-empty line,
 # a few dozen characters; the rest is drained unread, so a version command printing 1 GB
 # (which once took `info` to 3.2 GB of memory) costs 4 KiB.
