@@ -911,3 +911,27 @@ def test_a_hanging_version_command_costs_a_short_timeout_and_the_renderer_still_
     assert line["version"] == "unknown (the version command timed out after 5 s)"
     assert exrbuf.read_attrs(tmp_path / "out.exr")["version"] == line["version"]
     assert elapsed < 15.0, f"{elapsed:.1f} s"  # 5 s for the version, then the render (was 30 s and more)
+
+
+def test_depth_absolute_counts_at_most_the_relative_bound_at_each_pixel(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`depth_absolute` is in scene units, so no load-time bound holds for every scene: at each
+    pixel it counts at most MAX_REL Z (docs/your-renderer.md, "What can be judged"), so a huge
+    one no longer passes every depth, while one far below the scene's depths is kept whole."""
+    path = declare(
+        tmp_path, entry("abs", ["/bin/true"], precision="edge_px = 0\ndepth_relative = 1e-6\ndepth_absolute = 1e6")
+    )
+    monkeypatch.setenv(ENV_VAR, str(path))
+    model = precision.depth_model(registry.spec("abs"), "abs")
+    ctx = tolerance.DepthContext(z_ref=np.array([2.0, 5.0]), cos=np.array([1.0, 1.0]), info={}, attrs={})
+    tol, text = model.depth(ctx)
+    assert np.allclose(tol, [2e-3 + 2e-6, 5e-3 + 5e-6]) and "min(1e+06, 0.001*Z)" in text
+    path = declare(
+        tmp_path,
+        entry("abs", ["/bin/true"], precision="edge_px = 0\ndepth_relative = 0\ndepth_absolute = 1e-6"),
+        "small.toml",
+    )
+    monkeypatch.setenv(ENV_VAR, str(path))
+    tol, _ = precision.depth_model(registry.spec("abs"), "abs").depth(ctx)
+    assert np.array_equal(tol, [1e-6, 1e-6])

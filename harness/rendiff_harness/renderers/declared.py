@@ -34,18 +34,25 @@ def depth_model(r: Renderer) -> Model:
 
     Edge: `edge_px` (0 when it writes no ids). Depth: |dZ| <= depth_absolute + depth_relative Z,
     the relative term over |cos| (capped at MAX_REL Z) when `depth_grazing` is set.
+
+    The absolute term counts at most MAX_REL Z at each pixel, the bound on `depth_relative`
+    (command.PRECISION_BOUNDS, derived in docs/your-renderer.md, "What can be judged"): a
+    number in scene units has no bound valid for every scene, so it is bounded where it is
+    used, and a `depth_absolute` of 1e6 no longer passes any depth at all. The text says so.
     """
     p = r.precision
     rel, absolute, grazing = p.depth_relative or 0.0, p.depth_absolute, p.depth_grazing
+    cap = f"min({absolute:g}, {MAX_REL:g}*Z)" if absolute > 0 else "0"
 
     def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+        tol = np.minimum(absolute, MAX_REL * np.abs(ctx.z_ref))
         if grazing:
-            tol = absolute + relative_grazing(ctx, rel)
+            tol = tol + relative_grazing(ctx, rel)
             term = f"Z*min({rel:g}/|cos|, {MAX_REL:g})"
         else:
-            tol = absolute + rel * np.abs(ctx.z_ref)
+            tol = tol + rel * np.abs(ctx.z_ref)
             term = f"{rel:g}*Z"
-        return np.asarray(tol, dtype=np.float64), f"|dZ| <= {absolute:g} + {term}, declared by the user in {r.declared}"
+        return np.asarray(tol, dtype=np.float64), f"|dZ| <= {cap} + {term}, declared by the user in {r.declared}"
 
     if p.edge_px is None:
         edge, reason = 0.0, f"{r.declared} writes no ids"
@@ -84,8 +91,9 @@ def camera_model(r: Renderer) -> CameraModel:
     """Its declared numbers as errors of each pixel's equation in the camera fit.
 
     A planar depth off by depth_absolute + depth_relative Z (over |cos| with depth_grazing) is a
-    relative error of depth_absolute / Z + depth_relative; edge_px bounds how far from the
-    pixel center it may sample (edge_px pixels on the image plane); Z is stored as f32 (2^-24).
+    relative error of depth_absolute / Z (at most MAX_REL, as in `depth_model`) + depth_relative;
+    edge_px bounds how far from the pixel center it may sample (edge_px pixels on the image
+    plane); Z is stored as f32 (2^-24).
     """
     p = r.precision
     rel = p.depth_relative or 0.0
@@ -97,8 +105,8 @@ def camera_model(r: Renderer) -> CameraModel:
         else:
             relative = np.full(px.z.shape, rel)
         return ErrorBudget(
-            px.depth_rel(relative + p.depth_absolute / px.z + F32_U) + px.sample(edge * px.pixel),
-            f"declared by the user in {r.declared}: depth {p.depth_absolute:g} + {rel:g} Z"
+            px.depth_rel(relative + np.minimum(p.depth_absolute / px.z, MAX_REL) + F32_U) + px.sample(edge * px.pixel),
+            f"declared by the user in {r.declared}: depth min({p.depth_absolute:g}, {MAX_REL:g} Z) + {rel:g} Z"
             + (" / |cos|" if p.depth_grazing else "")
             + f", samples within edge_px {edge:g} px of the pixel center; Z stored as f32 (2^-24)",
         )
