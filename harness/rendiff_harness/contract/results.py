@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from . import atomic, vocab
+from .text import printable
 from .vocab import FAILING_STATUSES, Buffer, Status
 
 RESULTS_FORMAT = vocab.RESULTS_FORMAT
@@ -225,8 +226,13 @@ def write_results(run: Path, doc: Mapping[str, Any], name: str = "results.json")
 def fixed_width(header: Sequence[str], rows: Sequence[Sequence[str]], numeric: range) -> list[str]:
     """Rows as aligned text: columns in `numeric` right-aligned, others left-aligned, the last
     column, when it is free text, not padded. The one table layout of the project: `rendiff check`'s
-    verdict table (`format_table`) and the metamorphic table use it."""
+    verdict table (`format_table`) and the metamorphic table use it. Every cell is shown through
+    `text.printable`: scene, backend and buffer names come from file names and, in a merge, from
+    other runs' results.json, and a newline there once split a row and an escape sequence
+    reached the terminal."""
     n = len(header)
+    header = [printable(c) for c in header]
+    rows = [[printable(c) for c in row] for row in rows]
     widths = [max(len(header[i]), *(len(row[i]) for row in rows)) if rows else len(header[i]) for i in range(n)]
     lines = []
     for row in [header, *rows]:
@@ -246,13 +252,20 @@ def count_line(results: Sequence[Mapping[str, Any]], what: str = "entries") -> s
     """`N entries: fail 1, pass 3`: the count per status under a table."""
     counts: dict[str, int] = {}
     for r in results:
-        counts[str(r["status"])] = counts.get(str(r["status"]), 0) + 1
+        status = printable(str(r["status"]))
+        counts[status] = counts.get(status, 0) + 1
     return f"{len(results)} {what}: " + (", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none")
 
 
 def _table_order(r: Mapping[str, Any]) -> tuple[bool, bool, str, str, str]:
     """Failures first, then skips, then the rest, each by scene, backend and buffer."""
-    return (r["status"] not in FAILING_STATUSES, r["status"] != Status.SKIPPED, r["scene"], r["backend"], r["buffer"])
+    return (
+        r["status"] not in FAILING_STATUSES,
+        r["status"] != Status.SKIPPED,
+        str(r["scene"]),  # str: a tampered results.json may hold a number; sorting must not raise
+        str(r["backend"]),
+        str(r["buffer"]),
+    )
 
 
 def format_table(results: Sequence[Mapping[str, Any]]) -> str:

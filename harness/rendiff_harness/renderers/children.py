@@ -78,6 +78,9 @@ if os.getppid() != parent:
 pid = os.fork()
 if pid == 0:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for name in ("SIGPIPE", "SIGXFSZ"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
     try:
         os.execv(argv[0], argv)
     except OSError as exc:
@@ -91,14 +94,32 @@ while True:
     except InterruptedError:
         continue
 if os.WIFSIGNALED(status):
-    signal.signal(os.WTERMSIG(status), signal.SIG_DFL)
-    os.kill(os.getpid(), os.WTERMSIG(status))
+    sig = os.WTERMSIG(status)
+    try:
+        signal.signal(sig, signal.SIG_DFL)
+    except (OSError, ValueError):
+        pass
+    try:
+        import resource
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    except (ImportError, OSError, ValueError):
+        pass
+    os.kill(os.getpid(), sig)
+    os._exit(128 + sig)
 os._exit(os.waitstatus_to_exitcode(status))
 """
 """The group leader of `run_in_group`: `python -I -S -c SUPERVISOR HARNESS_PID PROGRAM ARGS...`
 runs PROGRAM ARGS (execv, no shell), exits with its status (or dies by its signal), and kills
 its whole group when the harness dies (SIGTERM from ``PR_SET_PDEATHSIG``; also when the
-harness is already gone at its start)."""
+harness is already gone at its start).
+
+PROGRAM starts with SIGPIPE and SIGXFSZ at their defaults, as `subprocess` gives (Python
+ignores them, and an ignored signal stays ignored across exec: a renderer writing into a
+closed pipe would otherwise spin on EPIPE instead of dying). Passing a signal death on, the
+supervisor resets that signal's handler where one can be set (SIGKILL, the out-of-memory
+killer's, has none: setting it raised, and the renderer's death read as "exited with status
+1" under the supervisor's traceback) and dumps no core of its own; the renderer's core, if
+any, is the one that matters."""
 
 
 # What is kept of each output stream of a `run_in_group` program: its first and its last

@@ -922,6 +922,11 @@ fn node_labels(root: &json::Root, mesh_nodes: &[NodeAt]) -> Vec<String> {
         .collect()
 }
 
+/// The UTF-8 byte order mark. glTF forbids writers to add one before the
+/// JSON but lets loaders ignore it (glTF 2.0, 3.2 "JSON encoding"), and
+/// editors on Windows add it: ignored, rather than refused as malformed JSON.
+const UTF8_BOM: [u8; 3] = [0xEF, 0xBB, 0xBF];
+
 /// Loads a glTF 2.0 file (`.gltf` or `.glb`, told apart by the GLB magic;
 /// a `.glb` without it is refused) as its mesh nodes and, if asked, a camera.
 ///
@@ -936,7 +941,9 @@ fn node_labels(root: &json::Root, mesh_nodes: &[NodeAt]) -> Vec<String> {
 /// held to [`MAX_MESH_FILE_BYTES`] and `budget` (the triangles the scene has
 /// left of [`MAX_SCENE_TRIANGLES`]), and its vertices to
 /// [`MAX_UNREFERENCED_VERTICES`], before geometry is read; a file whose mesh
-/// nodes make no triangle is refused like an OBJ file without faces.
+/// nodes make no triangle is refused like an OBJ file without faces. A
+/// UTF-8 byte order mark before the JSON (of a `.gltf` or a GLB's JSON
+/// chunk) is ignored.
 pub fn load_gltf(
     file: &Path,
     scene_dir: &Path,
@@ -955,6 +962,7 @@ pub fn load_gltf(
     } else {
         (&bytes[..], None)
     };
+    let json_bytes = json_bytes.strip_prefix(&UTF8_BOM[..]).unwrap_or(json_bytes);
     let root =
         json::Root::from_slice(json_bytes).map_err(|e| err(format!("malformed glTF JSON: {e}")))?;
     check_primitive_accessors(&root).map_err(err)?;
@@ -1488,6 +1496,22 @@ mod tests {
         std::fs::write(&p, d.json()).unwrap();
         let f = load(&p, dir.path()).unwrap();
         assert_eq!(f.nodes[0].triangles[0][1], DVec3::X);
+    }
+
+    #[test]
+    fn a_utf8_bom_before_the_json_is_ignored() {
+        // Editors on Windows write one; glTF tells loaders they may ignore it.
+        let dir = tempfile::tempdir().unwrap();
+        let d = Doc::tri();
+        let plain = load(&d.write(dir.path()), dir.path()).unwrap();
+        let p = dir.path().join("m.gltf");
+        std::fs::write(&p, [&UTF8_BOM[..], d.json().as_bytes()].concat()).unwrap();
+        let with_bom = load(&p, dir.path()).unwrap();
+        assert_eq!(with_bom.nodes.len(), plain.nodes.len());
+        assert_eq!(with_bom.nodes[0].triangles, plain.nodes[0].triangles);
+        // Only a leading one: a BOM anywhere else is still malformed JSON, named as such.
+        std::fs::write(&p, [b" ", &UTF8_BOM[..], d.json().as_bytes()].concat()).unwrap();
+        assert!(load_err(&p, dir.path()).contains("malformed glTF JSON"));
     }
 
     #[test]
