@@ -142,6 +142,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         )
     except OSError as exc:
         return _fail(f"{backend.name}: cannot create a scratch folder in {out.parent}: {exc.strerror or exc}")
+    command.assume_version(backend.name, args.known_version)
     try:
         version = backend.version()
         t0 = time.monotonic()
@@ -281,6 +282,12 @@ def build_parser() -> argparse.ArgumentParser:
         "ignored by backends without Monte Carlo",
     )
     p_render.add_argument("--seed", type=int, default=None, help="random seed for path-traced scenes (default 0)")
+    p_render.add_argument(
+        "--known-version",
+        default=None,
+        help="the version `info` already reported for this backend (rendiff check passes it), "
+        "so a declared renderer's version command runs once per run, not once per render",
+    )
     p_render.add_argument(
         "--visibility-only",
         action="store_true",

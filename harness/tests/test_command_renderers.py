@@ -935,3 +935,27 @@ def test_depth_absolute_counts_at_most_the_relative_bound_at_each_pixel(
     monkeypatch.setenv(ENV_VAR, str(path))
     tol, _ = precision.depth_model(registry.spec("abs"), "abs").depth(ctx)
     assert np.array_equal(tol, [1e-6, 1e-6])
+
+
+def test_a_known_version_is_taken_and_the_version_command_is_not_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+) -> None:
+    """`rendiff check` asks each renderer's version once (`info --json`) and passes it to every
+    render (`--known-version`): the version command does not run again (issue 40, item 6)."""
+    sdir, ref = scene
+    answer = write_exr(tmp_path / "answer.exr", ref)
+    ran = tmp_path / "version-ran"
+    probe = script(tmp_path, "probe.py", f"open({str(ran)!r}, 'a').write('x')\nprint('2.0 from the command')\n")
+    copy = script(tmp_path, "copy.py", COPY)
+    version = f"version = {json.dumps([sys.executable, str(probe)])}"
+    path = declare(tmp_path, entry("mine", [sys.executable, str(copy), str(answer), "{out}"], version))
+    monkeypatch.setenv(ENV_VAR, str(path))
+    rc, line, err = render(sdir, tmp_path / "out.exr", "mine", "--known-version=-1.0 (told)")
+    assert rc == 0, err
+    assert line["version"] == "-1.0 (told)"
+    assert exrbuf.read_attrs(tmp_path / "out.exr")["version"] == "-1.0 (told)"
+    assert not ran.exists(), "the version command ran although the version was known"
+    # Without it, the command is asked (the test's probe is real).
+    rc, line, err = render(sdir, tmp_path / "out2.exr", "mine")
+    assert rc == 0, err
+    assert line["version"] == "2.0 from the command" and ran.exists()

@@ -1055,6 +1055,13 @@ fn external(
         // Z and IDs without RGB; a backend that cannot do that answers "skipped".
         args.push("--visibility-only".into());
     }
+    if let Some(v) = &b.version {
+        // The harness asked the renderer once (`info --json`): each render
+        // takes that answer, so a version command runs once per run, and a
+        // hanging one costs its timeout once. One token, so a version that
+        // starts with '-' is not read as an option.
+        args.push(format!("--known-version={v}"));
+    }
     let mut words = vec![
         python(&opts.root).display().to_string(),
         "-m".into(),

@@ -143,6 +143,23 @@ CHANNELS: dict[str, tuple[tuple[str, str], ...]] = {
 # which made a run of N scenes wait N * 30 s for a line of provenance. A version command
 # that needs longer is reported "unknown (timed out)", and the renderer still runs.
 VERSION_TIMEOUT_S = 5.0
+
+
+# Versions a run already asked for, by renderer name (`assume_version`).
+_ASSUMED_VERSIONS: dict[str, str] = {}
+
+
+def assume_version(name: str, version: str | None) -> None:
+    """Takes `version` as renderer `name`'s answer for this process: `rendiff check` asks each
+    renderer once (`info --json`) and passes that answer to every render (`render
+    --known-version`), so a version command runs, and a hanging one costs its timeout, once
+    per run rather than once per render. None forgets it (a render not told asks again)."""
+    if version is None:
+        _ASSUMED_VERSIONS.pop(name, None)
+    else:
+        _ASSUMED_VERSIONS[name] = version
+
+
 # Most of the version command's stdout read: 4 KiB. The version is its first non-empty line,
 # a few dozen characters; the rest is drained unread, so a version command printing 1 GB
 # (which once took `info` to 3.2 GB of memory) costs 4 KiB.
@@ -545,7 +562,11 @@ class CommandBackend:
         return self.spec.program()[1]
 
     def version(self) -> str:
-        """The first non-empty line of its version command's stdout; "unknown" without one."""
+        """The first non-empty line of its version command's stdout; "unknown" without one.
+        A version `assume_version` was told (the run's `info` answer) is taken as it is."""
+        assumed = _ASSUMED_VERSIONS.get(self.NAME)
+        if assumed is not None:
+            return assumed
         if self._version is None:
             self._version = self._probe_version()
         return self._version
