@@ -239,10 +239,12 @@ enum Command {
         command: Vec<std::ffi::OsString>,
     },
     /// Generate scenes nobody wrote (docs/fuzzing.md), check them all in one
-    /// run, group the failures into findings and reduce each to a small repro.
+    /// run (or batches until --minutes are up), group the failures into
+    /// findings and reduce each to a small repro.
     ///
     /// Writes FOLDER/scenes/ (the generated scenes), FOLDER/run/ (the check
-    /// run), FOLDER/reduced/ (one standalone scene per finding) and
+    /// run; FOLDER/runs/b<k>/ per batch under --minutes), FOLDER/reduced/
+    /// (one standalone scene per finding) and
     /// FOLDER/findings.json. Exit 1 when anything failed.
     Fuzz {
         /// Seed: the same seed and count give the same scene files, byte for byte.
