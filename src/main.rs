@@ -239,18 +239,25 @@ enum Command {
         command: Vec<std::ffi::OsString>,
     },
     /// Generate scenes nobody wrote (docs/fuzzing.md), check them all in one
-    /// run, group the failures into findings and reduce each to a small repro.
+    /// run (or batches until --minutes are up), group the failures into
+    /// findings and reduce each to a small repro.
     ///
     /// Writes FOLDER/scenes/ (the generated scenes), FOLDER/run/ (the check
-    /// run), FOLDER/reduced/ (one standalone scene per finding) and
+    /// run; FOLDER/runs/b<k>/ per batch under --minutes), FOLDER/reduced/
+    /// (one standalone scene per finding) and
     /// FOLDER/findings.json. Exit 1 when anything failed.
     Fuzz {
         /// Seed: the same seed and count give the same scene files, byte for byte.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// How many scenes to generate.
+        /// How many scenes to generate (give this or --minutes).
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..=rendiff::fuzz::MAX_COUNT))]
-        count: u64,
+        count: Option<u64>,
+        /// Generate and check batches of 50 scenes until this many minutes
+        /// have passed (give this or --count); the first N scenes are the
+        /// same as --count N's.
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..=rendiff::fuzz::MAX_MINUTES))]
+        minutes: Option<u64>,
         /// The fuzz folder (a new folder, or one an earlier fuzz wrote).
         #[arg(short, long, default_value = "reports/fuzz/latest")]
         output: PathBuf,
@@ -630,6 +637,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Fuzz {
             seed,
             count,
+            minutes,
             output,
             only,
             renderers,
@@ -640,6 +648,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
             reduce_budget,
             quiet,
         } => {
+            // Checked here rather than by clap, whose refusal spans several
+            // lines: the one-line error every bad input gets.
+            let amount = match (count, minutes) {
+                (Some(n), None) => rendiff::fuzz::Amount::Count(n),
+                (None, Some(m)) => rendiff::fuzz::Amount::Minutes(m),
+                (Some(_), Some(_)) => {
+                    anyhow::bail!("fuzz: give --count N or --minutes M, not both")
+                }
+                (None, None) => anyhow::bail!("fuzz: give --count N or --minutes M"),
+            };
             let mut check = check_template(only, renderers, jobs, timeout, expectations)?;
             check.quiet = quiet;
             if no_calibration {
@@ -648,7 +666,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let folder = std::path::absolute(&output)?;
             let opts = rendiff::fuzz::FuzzOptions {
                 seed,
-                count,
+                amount,
                 folder: folder.clone(),
                 check,
                 reduce_budget: (reduce_budget > 0)
@@ -686,7 +704,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             rendiff::outln!(
-                "fuzz: seed {seed}, {count} scenes, {} failing verdicts, {} findings{} -> {}",
+                "fuzz: seed {seed}, {} scenes, {} failing verdicts, {} findings{} -> {}",
+                l.scenes,
                 l.failures.len(),
                 l.findings.len(),
                 if l.camera_failures.is_empty() {

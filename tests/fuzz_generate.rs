@@ -1,7 +1,11 @@
 //! `rendiff fuzz`'s generator is reproducible: the same seed writes the
 //! same scene files, byte for byte; another seed writes other scenes; and
-//! every file is a scene the core accepts.
+//! every file is a scene the core accepts; `--minutes` generates in
+//! batches whose scenes are `--count`'s, file for file.
 
+mod common_cli;
+
+use common_cli::{need_venv, output_within};
 use std::path::Path;
 
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
@@ -76,6 +80,19 @@ fn bad_fuzz_and_reduce_input_is_one_clear_line() {
     assert!(dir.join("mine/keep.txt").is_file());
     let (code, err) = run(&["fuzz", "--count", "0"]);
     assert_eq!(code, Some(2), "{err}");
+    // --count and --minutes: exactly one of them.
+    for args in [
+        &["fuzz", "--count", "3", "--minutes", "1", "-o", "both"][..],
+        &["fuzz", "-o", "neither"][..],
+    ] {
+        let (code, err) = run(args);
+        assert_eq!(code, Some(2), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("--count N or --minutes M"), "{args:?}: {err}");
+        assert!(!dir.join(args[args.len() - 1]).exists(), "{args:?}");
+    }
+    let (code, err) = run(&["fuzz", "--minutes", "0"]);
+    assert_eq!(code, Some(2), "{err}");
     let (code, err) = run(&["reduce", "nope", "s1_00000", "--backend", "trace"]);
     assert_eq!(code, Some(2), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -110,4 +127,63 @@ fn a_refused_fuzz_leaves_a_reusable_folder() {
         assert!(err.contains("no_such_backend"), "{err}");
         assert!(!err.contains("not a fuzz folder"), "{err}");
     }
+}
+
+/// `--minutes 1` through the core alone: whole batches of 50 scenes, each
+/// its own check run under `runs/`, until the minute is up; the scenes are
+/// the first N of the seed, the files `--count N` writes, byte for byte;
+/// and every scene was compared (a trace verdict for each).
+#[test]
+fn minutes_generates_whole_batches_of_the_seeds_first_scenes() {
+    need_venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = output_within(
+        std::process::Command::new(env!("CARGO_BIN_EXE_rendiff"))
+            .current_dir(tmp.path())
+            .env("RENDIFF_HOME", env!("CARGO_MANIFEST_DIR"))
+            .args(["fuzz", "--seed", "5", "--minutes", "1", "--only", "trace"])
+            .args(["--jobs", "2", "--quiet", "-o", "fuzz"]),
+        600,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let ledger: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(tmp.path().join("fuzz/findings.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(ledger["run"], "runs");
+    let scenes = ledger["scenes"].as_u64().unwrap();
+    let batch = rendiff::fuzz::BATCH;
+    assert!(scenes >= batch && scenes.is_multiple_of(batch), "{ledger}");
+    let expected = tmp.path().join("expected");
+    rendiff::fuzz::write_scenes(5, scenes, &expected).unwrap();
+    assert_eq!(files(&tmp.path().join("fuzz/scenes")), files(&expected));
+    let mut compared = 0;
+    for k in 0..scenes / batch {
+        let run = tmp
+            .path()
+            .join("fuzz")
+            .join(rendiff::fuzz::batch_run(k))
+            .join("results.json");
+        let results: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&run).unwrap()).unwrap();
+        compared += results["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| {
+                e["backend"] == "trace"
+                    && e["buffer"] == "id"
+                    && e["status"] == "pass"
+                    // Not the calibration probes (batch 0 runs them).
+                    && e["scene"].as_str().unwrap().starts_with("s5_")
+            })
+            .count() as u64;
+    }
+    assert_eq!(compared, scenes);
+    assert!(!tmp
+        .path()
+        .join("fuzz")
+        .join(rendiff::fuzz::batch_run(scenes / batch))
+        .exists());
 }

@@ -137,7 +137,8 @@ pub struct Ledger {
     pub seed: u64,
     /// Scenes generated.
     pub scenes: u64,
-    /// The check run, relative to FOLDER.
+    /// The check run, relative to FOLDER: `run`, or under `--minutes` the
+    /// folder `runs` holding batch k's run in `runs/b<k>` (`mod::batch_run`).
     pub run: String,
     /// Every failing verdict on a generated scene.
     pub failures: Vec<Failure>,

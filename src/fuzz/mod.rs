@@ -30,19 +30,40 @@ use literal::LiteralScene;
 use reduce::Target;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Most scenes one `fuzz` run generates: a million small scenes is days of
 /// rendering; more is a typo.
 pub const MAX_COUNT: u64 = 1_000_000;
+
+/// Longest `--minutes`: a week of fuzzing in one run; more is a typo.
+pub const MAX_MINUTES: u64 = 7 * 24 * 60;
+
+/// Scenes per batch under `--minutes`: batch `k` is scenes `k * BATCH` to
+/// `(k + 1) * BATCH - 1`, one check run each. 50 small scenes are about 10 s
+/// through one renderer and 25 s through every built-in one on 2 cores, so
+/// the run ends at most that long after the time is up, while the check's
+/// start-up (about 3 s) stays a small share of each batch.
+pub const BATCH: u64 = 50;
+
+/// How many scenes a fuzz run generates: a fixed count, or batches until
+/// a time is up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Amount {
+    /// `--count N`: scenes 0 to N-1, one check run.
+    Count(u64),
+    /// `--minutes M`: batches of [`BATCH`] scenes, a new one started while
+    /// less than M minutes have passed since the run began.
+    Minutes(u64),
+}
 
 /// What `rendiff fuzz` was asked.
 #[derive(Debug, Clone)]
 pub struct FuzzOptions {
     /// `--seed`.
     pub seed: u64,
-    /// `--count`.
-    pub count: u64,
+    /// `--count` or `--minutes`.
+    pub amount: Amount,
     /// `-o`: the fuzz folder.
     pub folder: PathBuf,
     /// The check's settings (its scenes and run folder are set here).
@@ -76,10 +97,20 @@ pub fn write_scenes(
     count: u64,
     dir: &Path,
 ) -> Result<(Vec<PathBuf>, BTreeMap<String, String>)> {
+    write_range(seed, 0..count, dir)
+}
+
+/// Writes scenes `indices` of `seed` into `dir` (created): a batch of a
+/// `--minutes` run, the same files `--count` writes for those indices.
+fn write_range(
+    seed: u64,
+    indices: std::ops::Range<u64>,
+    dir: &Path,
+) -> Result<(Vec<PathBuf>, BTreeMap<String, String>)> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let mut files = Vec::new();
     let mut families = BTreeMap::new();
-    for i in 0..count {
+    for i in indices {
         let g = grammar::generate(seed, i);
         let name = scene_name(seed, i);
         let file = dir.join(format!("{name}.toml"));
@@ -95,7 +126,7 @@ pub fn write_scenes(
 /// folders (hidden, beside `run`). A folder holding anything else is not one.
 fn fuzz_entry(name: &std::ffi::OsStr) -> bool {
     let name = name.to_string_lossy();
-    ["scenes", "run", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
+    ["scenes", "run", "runs", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
 }
 
 /// Makes `folder` ready for a fuzz run: created when absent; a folder that
@@ -115,7 +146,7 @@ fn prepare(folder: &Path) -> Result<()> {
                 crate::scene::printable(&other.to_string_lossy(), 100)
             );
         }
-        for sub in ["scenes", "reduced"] {
+        for sub in ["scenes", "runs", "reduced"] {
             let p = folder.join(sub);
             if p.exists() {
                 std::fs::remove_dir_all(&p)
@@ -126,21 +157,63 @@ fn prepare(folder: &Path) -> Result<()> {
     std::fs::create_dir_all(folder).with_context(|| format!("{}: cannot create", folder.display()))
 }
 
-/// The `rendiff fuzz` run: generate, check once, group, reduce, write the ledger.
+/// Folder (in the fuzz folder) of batch `k`'s check run under `--minutes`.
+pub fn batch_run(k: u64) -> String {
+    format!("runs/b{k:04}")
+}
+
+/// The `rendiff fuzz` run: generate, check (once, or once per batch under
+/// `--minutes`, calibrating in the first only), group, reduce, write the
+/// ledger.
 pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
-    if opts.count == 0 || opts.count > MAX_COUNT {
-        bail!("--count {}: give 1 to {MAX_COUNT}", opts.count);
+    match opts.amount {
+        Amount::Count(n) if n == 0 || n > MAX_COUNT => {
+            bail!("--count {n}: give 1 to {MAX_COUNT}")
+        }
+        Amount::Minutes(m) if m == 0 || m > MAX_MINUTES => {
+            bail!("--minutes {m}: give 1 to {MAX_MINUTES}")
+        }
+        _ => {}
     }
     let folder = &opts.folder;
     prepare(folder)?;
-    let (files, families) = write_scenes(opts.seed, opts.count, &folder.join("scenes"))?;
-    let check = CheckOptions {
-        scenes: files,
-        run_dir: folder.join("run"),
-        ..opts.check.clone()
+    let scenes_dir = folder.join("scenes");
+    let started = Instant::now();
+    let mut families = BTreeMap::new();
+    let mut verdicts = Vec::new();
+    let mut tables = Vec::new();
+    let (mut count, mut k) = (0, 0);
+    let run_name = loop {
+        let (indices, run_name) = match opts.amount {
+            Amount::Count(n) => (0..n, "run".to_string()),
+            Amount::Minutes(_) => (k * BATCH..(k + 1) * BATCH, batch_run(k)),
+        };
+        let (files, fams) = write_range(opts.seed, indices, &scenes_dir)?;
+        count += files.len() as u64;
+        families.extend(fams);
+        let check = CheckOptions {
+            scenes: files,
+            run_dir: folder.join(&run_name),
+            // Calibration judges the camera, not the scenes: once per run.
+            calibration: if k == 0 {
+                opts.check.calibration.clone()
+            } else {
+                None
+            },
+            ..opts.check.clone()
+        };
+        let outcome = crate::check::run(&check)?;
+        verdicts.extend(crate::gate::verdicts(&outcome.results)?);
+        tables.push(outcome.table);
+        k += 1;
+        match opts.amount {
+            Amount::Minutes(m)
+                if started.elapsed() < Duration::from_secs(m * 60) && count < MAX_COUNT => {}
+            Amount::Minutes(_) => break "runs".to_string(),
+            Amount::Count(_) => break run_name,
+        }
     };
-    let outcome = crate::check::run(&check)?;
-    let verdicts = crate::gate::verdicts(&outcome.results)?;
+    let table = tables.join("\n");
     let (failures, camera_failures, mut found) = findings::group(&verdicts, &families);
     if let Some(budget) = opts.reduce_budget {
         for f in &mut found {
@@ -150,18 +223,15 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     let ledger = Ledger {
         format: FINDINGS_FORMAT.into(),
         seed: opts.seed,
-        scenes: opts.count,
-        run: "run".into(),
+        scenes: count,
+        run: run_name,
         failures,
         camera_failures,
         findings: found,
     };
     let json = serde_json::to_string_pretty(&ledger)? + "\n";
     crate::exr_io::write_atomically(&folder.join(MARKER), |tmp| Ok(std::fs::write(tmp, &json)?))?;
-    Ok(FuzzOutcome {
-        ledger,
-        table: outcome.table,
-    })
+    Ok(FuzzOutcome { ledger, table })
 }
 
 /// Reduces a finding's smallest scene (fewest bytes, then first: the

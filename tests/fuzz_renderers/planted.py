@@ -14,7 +14,7 @@ t rounded to float32 once) with one deliberate fault, chosen by BUG:
   1 px^2) has its first vertex moved 1e-3 px to the right (along the camera's right axis, at
   the vertex's depth), as a snapping step applied to small triangles only would.
 
-Both are declared with the tiny renderer's honest precision (renderers.toml), so the fault
+All three are declared with the tiny renderer's honest precision (renderers.toml), so the fault
 is all the verifier sees: its pixels are interior (or crack) mismatches.
 """
 
@@ -33,7 +33,7 @@ from rendiff_harness.contract import exrbuf  # noqa: E402
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
 SHIFT_PX = 1e-3
-BUGS = ("coplanar_bias", "subpixel_shift")
+BUGS = ("coplanar_bias", "subpixel_shift", "far_depth")
 
 
 def projected_area_px(
@@ -95,6 +95,11 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
         prim = np.where(hit, np.uint32(i), prim)
         normal = np.where(hit[..., None], n / length, normal)
     seen = prim != BACKGROUND
+    if bug == "far_depth":
+        # The planted bug: the hit point kept in float32 world space, the depth measured from it.
+        with np.errstate(invalid="ignore"):
+            hit_point = (eye + z[..., None] * d).astype(np.float32).astype(np.float64)
+            z = np.where(seen, (hit_point - eye) @ fwd, z)
     obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
     obj[seen] = objects[prim[seen]]
     exrbuf.write_buffers(
