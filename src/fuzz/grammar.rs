@@ -708,17 +708,64 @@ mod tests {
         assert_eq!(seen.len(), Family::ALL.len(), "every family appears");
     }
 
+    /// `View::at` places geometry by the camera convention, which has its
+    /// home in `camera.rs`: the generator keeps its own copy only so that
+    /// no libm tangent enters the scene files (rng.rs), and this test holds
+    /// the copy to the core's camera. A point `at` a pixel center at planar
+    /// depth `z` must be `eye + z * Camera::direction(x, y)`: bit for bit
+    /// on the exact-centers cameras (vfov 90, power-of-two sides, the
+    /// `pixel_centers` family's promise), and within a few ulps of the
+    /// tangent elsewhere (the table's tangents against `tan_half_deg`).
     #[test]
-    fn pixel_center_vertices_are_exactly_on_centers() {
-        let v = View {
-            w: 64.0,
-            h: 32.0,
-            tan: 1.0,
-            d: 1.0,
-            min_feature: 0.0,
-        };
-        let p = v.at(3.5, 7.5, 1.0);
-        // sx = (2 * 3.5 / 64 - 1) * 2, sy = 1 - 2 * 7.5 / 32: exact dyadics.
-        assert_eq!(p, [(7.0 / 64.0 - 1.0) * 2.0, 1.0 - 15.0 / 32.0, 0.0]);
+    fn view_places_pixel_centers_where_the_core_camera_puts_them() {
+        use crate::camera::{tan_half_deg, Camera};
+        use glam::DVec3;
+        for &(vfov, tan) in &FOVS {
+            let core = tan_half_deg(vfov);
+            assert!(
+                (tan - core).abs() <= 4.0 * f64::EPSILON * core,
+                "FOVS' tangent of {vfov} degrees is {tan}, the core's {core}"
+            );
+            for (w, h, d) in [
+                (32u32, 32u32, 1.0),
+                (64, 32, 1.0),
+                (32, 64, 4.0),
+                (37, 23, 4.0),
+            ] {
+                let v = View {
+                    w: f64::from(w),
+                    h: f64::from(h),
+                    tan,
+                    d,
+                    min_feature: 0.0,
+                };
+                let cam = Camera::new(
+                    DVec3::new(0.0, 0.0, d),
+                    DVec3::ZERO,
+                    DVec3::Y,
+                    vfov,
+                    w,
+                    h,
+                    1e-4,
+                    f64::INFINITY,
+                )
+                .unwrap();
+                for (x, y) in [(0, 0), (w - 1, h - 1), (w / 3, h / 2), (w - 2, 1)] {
+                    let z = d;
+                    let ours = DVec3::from(v.at(f64::from(x) + 0.5, f64::from(y) + 0.5, z));
+                    let core_p = cam.eye + cam.direction(x, y) * z;
+                    let exact = vfov == 90.0 && w.is_power_of_two() && h.is_power_of_two();
+                    if exact {
+                        assert_eq!(ours, core_p, "{vfov} deg {w}x{h} pixel ({x}, {y})");
+                    } else {
+                        let err = (ours - core_p).abs().max_element();
+                        assert!(
+                            err <= 16.0 * f64::EPSILON * (d + core_p.abs().max_element()),
+                            "{vfov} deg {w}x{h} pixel ({x}, {y}): {ours} against {core_p}"
+                        );
+                    }
+                }
+            }
+        }
     }
 }
