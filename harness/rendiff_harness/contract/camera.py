@@ -43,6 +43,12 @@ class Camera:
         """One pixel's side on the image plane at distance 1: 2 tan(vfov/2) / H."""
         return 2.0 * self.tan_half_vfov / self.height
 
+    @staticmethod
+    def pixel_centers(cols: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous positions (cx, cy) of the centers of pixels (cols, rows): x + 0.5, y + 0.5.
+        The only place the judge writes the pixel-center offset (docs/DESIGN.md, `camera.rs`)."""
+        return np.asarray(cols, dtype=np.float64) + 0.5, np.asarray(rows, dtype=np.float64) + 0.5
+
     def screen_at(self, cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(sx, sy) of continuous pixel positions (cx, cy) (a pixel's center is x + 0.5, y + 0.5)."""
         w, h = self.width, self.height
@@ -52,9 +58,7 @@ class Camera:
 
     def screen_coords(self) -> tuple[np.ndarray, np.ndarray]:
         """(sx, sy) of every pixel center, each shaped (H, W), float64."""
-        cx, cy = np.meshgrid(
-            np.arange(self.width, dtype=np.float64) + 0.5, np.arange(self.height, dtype=np.float64) + 0.5
-        )
+        cx, cy = np.meshgrid(*self.pixel_centers(np.arange(self.width), np.arange(self.height)))
         return self.screen_at(cx, cy)
 
     def direction(self, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
@@ -64,7 +68,7 @@ class Camera:
 
     def center_directions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Ray directions (K, 3) through the centers of pixels (cols[i], rows[i])."""
-        return self.direction(*self.screen_at(cols + 0.5, rows + 0.5))
+        return self.direction(*self.screen_at(*self.pixel_centers(cols, rows)))
 
     def pixel_directions(self) -> np.ndarray:
         """Ray directions d(x, y) of every pixel center, shaped (H, W, 3)."""

@@ -141,7 +141,8 @@ def prim_edge_distance(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray
     idx = np.nonzero(valid)[0]
     if idx.size:
         tris = scene.triangles[prims[idx].astype(np.int64)]
-        dist[idx] = edge_distance(scene.camera, tris, np.asarray(cols)[idx] + 0.5, np.asarray(rows)[idx] + 0.5)
+        cx, cy = scene.camera.pixel_centers(np.asarray(cols)[idx], np.asarray(rows)[idx])
+        dist[idx] = edge_distance(scene.camera, tris, cx, cy)
     return dist
 
 

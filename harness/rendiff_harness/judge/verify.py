@@ -138,8 +138,7 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
     if idx.size == 0:
         return Side(valid, edge_d, vert_d, poly_d, inside, z, cos)
     tris = scene.triangles[prims[idx].astype(np.int64)].astype(np.float64)
-    cx = np.asarray(cols, dtype=np.float64).ravel()[idx] + 0.5
-    cy = np.asarray(rows, dtype=np.float64).ravel()[idx] + 0.5
+    cx, cy = cam.pixel_centers(np.asarray(cols).ravel()[idx], np.asarray(rows).ravel()[idx])
     with np.errstate(all="ignore"):
         ct = cam.to_camera(tris)
         near, far = _near_far(cam, ct)
