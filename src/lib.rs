@@ -45,6 +45,7 @@ macro_rules! errln {
 pub mod args;
 pub mod check;
 pub mod diff;
+pub mod doctor;
 pub mod fuzz;
 pub mod gate;
 pub mod preview;

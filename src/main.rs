@@ -227,6 +227,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// What this installation found: the binary, the harness and how it was
+    /// found (RENDIFF_HOME, the current checkout, the checkout built from, or
+    /// an installed harness through RENDIFF_PYTHON), its Python, and every
+    /// renderer's version and status. Exit 2 when the harness is missing,
+    /// with the command that fixes it.
+    Doctor {
+        /// Also list the renderers this file declares (docs/your-renderer.md).
+        #[arg(long)]
+        renderers: Option<PathBuf>,
+    },
     /// Internal: run a command and write its peak memory (max RSS, bytes) to a
     /// file; `check` measures renders through it, from a small process.
     #[command(hide = true, name = "peak-rss")]
@@ -628,6 +638,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             Ok(ExitCode::SUCCESS)
+        }
+        Command::Doctor { renderers } => {
+            let renderers = renderers_file(renderers)?;
+            Ok(if rendiff::doctor::run(renderers.as_deref()) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(2)
+            })
         }
         Command::PeakRss { report, command } => {
             let code = rendiff::check::process::peak_rss_main(&report, &command)?;

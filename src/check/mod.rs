@@ -11,6 +11,7 @@
 //! calibration probes (`CheckOptions::calibration`) run first, as scenes with
 //! `role: "calibration"`.
 
+pub mod home;
 pub mod inputs;
 pub mod isolated;
 use crate::vocab::Feature;
@@ -145,51 +146,7 @@ pub struct CheckOutcome {
     pub table: String,
 }
 
-/// Where rendiff's own files live (the Python harness and its venv, the
-/// calibration probes, expectations and references), so that `rendiff check`
-/// works from any folder: `RENDIFF_HOME` if set; else the current folder if it
-/// is a rendiff checkout; else the checkout this binary was built from (what
-/// `cargo install --path .` leaves). The error names the variable to set.
-pub fn find_root() -> Result<PathBuf> {
-    let is_root = |p: &Path| p.join("harness/rendiff_harness").is_dir();
-    if let Some(home) = std::env::var_os("RENDIFF_HOME") {
-        let home = PathBuf::from(home);
-        if !is_root(&home) {
-            bail!(
-                "RENDIFF_HOME={}: not a rendiff checkout (no harness/rendiff_harness)",
-                home.display()
-            );
-        }
-        return Ok(std::path::absolute(&home)?);
-    }
-    let cwd = std::env::current_dir().context("cannot read the current folder")?;
-    if is_root(&cwd) {
-        return Ok(cwd);
-    }
-    let built = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    if is_root(&built) {
-        return Ok(built);
-    }
-    bail!(
-        "cannot find rendiff's harness (harness/rendiff_harness): run from the rendiff checkout or set RENDIFF_HOME to it"
-    )
-}
-
-/// `rel` (one of rendiff's own files) inside `root`: relative as given when
-/// the root is the current folder (tidy paths in records), absolute otherwise.
-pub fn in_root(root: &Path, rel: &str) -> PathBuf {
-    match std::env::current_dir() {
-        Ok(cwd) if cwd == root => PathBuf::from(rel),
-        _ => root.join(rel),
-    }
-}
-
-/// The Python interpreter of the project's venv (override with `RENDIFF_PYTHON`).
-pub fn python(root: &Path) -> PathBuf {
-    std::env::var_os("RENDIFF_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join(".venv/bin/python"))
-}
+pub use home::{find_root, in_root, python};
 
 /// The environment variable that names the user's renderers file for the
 /// harness (harness `command_renderers.py`, docs/your-renderer.md).
@@ -213,9 +170,8 @@ const MAX_RENDERERS_BYTES: u64 = 1 << 20;
 fn harness_command(opts: &CheckOptions) -> Command {
     let root = &opts.root;
     let mut cmd = Command::new(python(root));
-    cmd.current_dir(root)
-        .env("PYTHONPATH", root.join("harness"))
-        .args(["-m", "rendiff_harness"]);
+    cmd.current_dir(root).args(["-m", "rendiff_harness"]);
+    home::harness_path(&mut cmd, root);
     match &opts.renderers {
         Some(file) => cmd.env(RENDERERS_ENV, file),
         None => cmd.env_remove(RENDERERS_ENV),
@@ -1075,8 +1031,8 @@ fn external(
         )
     });
     rec.command = format!(
-        "{declared}PYTHONPATH={} {}",
-        process::shell_quote(&opts.root.join("harness").display().to_string()),
+        "{declared}{}{}",
+        home::harness_path_words(&opts.root),
         shell_line(&words)
     );
     // The render reads a copy of its own (inputs.rs); the record names the
