@@ -82,6 +82,7 @@ class Buffer(StrEnum):
     RGB = "RGB"
     CAMERA = "camera"
     SCENE = "scene"
+    IMPORT = "import"
 
 
 class MismatchClass(StrEnum):
