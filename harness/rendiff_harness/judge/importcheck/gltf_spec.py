@@ -7,10 +7,11 @@ buffers from base64 `data:` URIs, relative files beside the glTF (percent-decode
 the folder) or the GLB's BIN chunk; accessors with byteOffset, byteStride, every component type,
 `normalized` integers (converted as the specification's table says, in float32), sparse
 substitution (indices, values; an accessor without a bufferView is zeros first); primitive modes
-TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN numbered as section 3.7.2.1 defines (POINTS and LINE*
+TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN numbered as the Meshes section's topology table defines (POINTS and LINE*
 make no triangle and are left out); the file's `scene` (else scene 0) depth first, pre-order;
 node `matrix` (column-major) or T * R * S, the quaternion normalized; world = parent x local; a
-node whose world matrix mirrors (negative determinant) has its triangles' winding reversed (3.7.4).
+node whose world matrix mirrors (negative determinant) has its triangles' winding reversed (the
+specification: "the determinant of the node's global transform defines the winding order").
 
 One choice follows rendiff's contract rather than the specification, which leaves it open: node
 numbers (matrix, translation, rotation, scale) are JSON numbers, read as float32 as rendiff reads
@@ -230,8 +231,7 @@ def accessor(
         )
         if n and (idx.min() < 0 or idx.max() >= count):
             raise _fail(path, f"accessors[{ai}].sparse.indices reach {int(idx.max())} of {count} elements")
-        values = values.copy()
-        values[idx] = vals
+        values = apply_sparse(values, idx, vals)
     if ct == 5126:
         return values.astype(np.float64)
     if acc.get("normalized") is True and ct in NORMALIZE:
@@ -241,8 +241,21 @@ def accessor(
     return values.astype(np.int64)
 
 
+def apply_sparse(values: np.ndarray, indices: np.ndarray, replacements: np.ndarray) -> np.ndarray:
+    """The accessor's elements with element `indices[k]` replaced by `replacements[k]` (3.6.2.3)."""
+    out = values.copy()
+    out[indices] = replacements
+    return out
+
+
+def mirrors(world: np.ndarray) -> bool:
+    """True when a node's world matrix mirrors (negative determinant of its 3x3 part): its
+    triangles' winding is then reversed (the node's global transform's determinant defines it)."""
+    return bool(np.linalg.det(world[:3, :3]) < 0)
+
+
 def triangles_of(mode: int, idx: np.ndarray) -> np.ndarray:
-    """(n, 3) vertex indices of a primitive's triangles, numbered as glTF 2.0 section 3.7.2.1 does."""
+    """(n, 3) vertex indices of a primitive's triangles, numbered as glTF 2.0's topology table does."""
     n = max(len(idx) - 2, 0)
     i = np.arange(n)
     if mode == 4:
@@ -339,7 +352,7 @@ def decode(path: Path) -> list[Part]:
     for (ni, world, world_abs, depth), label in zip(nodes, labels(doc, [n[0] for n in nodes]), strict=True):
         mi = doc["nodes"][ni]["mesh"]
         mesh = _index(doc, "meshes", mi, path)
-        flip = np.linalg.det(world[:3, :3]) < 0
+        flip = mirrors(world)
         part = empty_part(
             label,
             f"node {ni}, mesh {mi}" + (" (mirrored: winding reversed)" if flip else ""),

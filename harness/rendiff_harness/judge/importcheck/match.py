@@ -167,8 +167,8 @@ def compare(name: str, first_prim: int, r: np.ndarray, placed: Placed, decoder: 
         j = int(part.prim_tri[bad])
         detail = f"first at {prim} triangle {j} (prim_id {first_prim + bad}): "
         if bad < n_r:
-            rev = d[bad][:, [0, 2, 1]]
-            flipped, _ = _fits(r64[bad : bad + 1], rev[None], placed.slack[bad : bad + 1][:, [0, 2, 1]])
+            rev = d[bad][[0, 2, 1]]
+            flipped, _ = _fits(r64[bad : bad + 1], rev[None], placed.slack[bad][[0, 2, 1]][None])
             if flipped[0]:
                 detail += "the same vertices with the winding reversed; "
             detail += f"rendiff {_fmt(r[bad])}, {decoder} {_fmt(d[bad])}"
