@@ -23,7 +23,7 @@ import pytest
 from fixtures import REPO, rendiff_binary
 from rendiff_harness.contract import resolved
 from rendiff_harness.judge import importcheck
-from rendiff_harness.judge.importcheck import gltf_spec, match
+from rendiff_harness.judge.importcheck import gltf_spec, gltf_trimesh, match
 
 CORPUS = REPO / "scenes" / "corpus"
 
@@ -48,10 +48,10 @@ def _export(tmp: Path, mesh_name: str, mesh: bytes | Path, transform: str = "") 
     return out
 
 
-def _verdict(directory: Path) -> importcheck.Entry:
-    entries = importcheck.import_entries(resolved.load(directory))
-    assert len(entries) == 1, entries
-    return entries[0]
+def _verdict(directory: Path, decoder: str = "gltf_spec") -> importcheck.Entry:
+    """The scene's import entry of `decoder`."""
+    entries = {e.backend: e for e in importcheck.import_entries(resolved.load(directory))}
+    return entries[decoder]
 
 
 def _rewrite(directory: Path, per_object: list[np.ndarray]) -> None:
@@ -77,11 +77,13 @@ def _buggy_gltf(directory: Path, patch: Callable[[pytest.MonkeyPatch], None]) ->
     return [match.place(p, scene.objects[i]["mesh"]["transform"]).tris for i, p in enumerate(parts)]
 
 
-def _plant_and_judge(tmp_path: Path, out: Path, buggy: list[np.ndarray]) -> importcheck.Entry:
-    ok = _verdict(out)
+def _plant_and_judge(
+    tmp_path: Path, out: Path, buggy: list[np.ndarray], decoder: str = "gltf_spec"
+) -> importcheck.Entry:
+    ok = _verdict(out, decoder)
     assert ok.status == "pass", ok.reason
     _rewrite(out, buggy)
-    return _verdict(out)
+    return _verdict(out, decoder)
 
 
 def test_sparse_values_at_the_wrong_index_fail_naming_the_primitive(tmp_path: Path) -> None:
@@ -92,9 +94,13 @@ def test_sparse_values_at_the_wrong_index_fail_naming_the_primitive(tmp_path: Pa
         v[np.minimum(idx + 1, len(v) - 1)] = vals
         return v
 
-    bad = _plant_and_judge(tmp_path, out, _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "apply_sparse", off_by_one)))
+    bad = _plant_and_judge(
+        tmp_path, out, _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "apply_sparse", off_by_one))
+    )
     assert bad.status == "fail"
-    assert "object 'm/0' (node 0, mesh 0)" in bad.reason and "mesh 0 primitive 0 (TRIANGLES sparse POSITION)" in bad.reason
+    assert (
+        "object 'm/0' (node 0, mesh 0)" in bad.reason and "mesh 0 primitive 0 (TRIANGLES sparse POSITION)" in bad.reason
+    )
     assert "glTF 2.0 specification: rendiff departs from it" in bad.reason
 
 
@@ -123,8 +129,13 @@ def _mirrored_gltf() -> bytes:
         "scenes": [{"nodes": [0]}],
         "nodes": [{"children": [1], "translation": [0.5, 0, 0]}, {"name": "mirror", "mesh": 0, "scale": [-1, 1, 1]}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 1}, "indices": 0}]}],
-        "buffers": [{"uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode(), "byteLength": len(data)}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 12}, {"buffer": 0, "byteOffset": 12, "byteLength": 48}],
+        "buffers": [
+            {"uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode(), "byteLength": len(data)}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 12},
+            {"buffer": 0, "byteOffset": 12, "byteLength": 48},
+        ],
         "accessors": [
             {"bufferView": 0, "componentType": 5123, "count": 6, "type": "SCALAR"},
             {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
@@ -135,7 +146,9 @@ def _mirrored_gltf() -> bytes:
 
 def test_a_mirrored_node_whose_winding_is_kept_fails_naming_the_primitive(tmp_path: Path) -> None:
     out = _export(tmp_path, "m.gltf", _mirrored_gltf())
-    bad = _plant_and_judge(tmp_path, out, _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "mirrors", lambda w: False)))
+    bad = _plant_and_judge(
+        tmp_path, out, _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "mirrors", lambda w: False))
+    )
     assert bad.status == "fail"
     assert "object 'm/mirror' (node 1, mesh 0 (mirrored: winding reversed))" in bad.reason
     assert "mesh 0 primitive 0 (TRIANGLES) triangle 0" in bad.reason
@@ -148,12 +161,13 @@ OBJ = b"v 9 9 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf -4 -3 -2\nf -3 -1 -2\n"
 
 def test_an_obj_negative_index_off_by_one_fails_naming_the_face(tmp_path: Path) -> None:
     out = _export(tmp_path, "q.obj", OBJ)
-    verts = np.array([[float(x) for x in line.split()[1:]] for line in OBJ.decode().splitlines() if line.startswith("v ")])
+    verts = np.array(
+        [[float(x) for x in line.split()[1:]] for line in OBJ.decode().splitlines() if line.startswith("v ")]
+    )
     faces = [[int(x) for x in line.split()[1:]] for line in OBJ.decode().splitlines() if line.startswith("f ")]
     buggy = np.array([[verts[len(verts) + k - 1] for k in f] for f in faces])  # -k -> n - k (0-based n - k - 1)
-    bad = _plant_and_judge(tmp_path, out, [buggy])
+    bad = _plant_and_judge(tmp_path, out, [buggy], "trimesh")
     assert bad.status == "fail", bad.reason
-    assert bad.backend == "trimesh"
     assert "object 'm'" in bad.reason and "triangle 0 (prim_id 0)" in bad.reason and "group" in bad.reason
 
 
@@ -179,3 +193,16 @@ def test_a_scene_of_shapes_has_no_import_entry(tmp_path: Path) -> None:
     from fixtures import three_triangles
 
     assert importcheck.import_entries(resolved.load(three_triangles(tmp_path / "t"))) == []
+
+
+def test_trimesh_known_glTF_bugs_are_declared_and_an_undeclared_one_is_blamed_on_trimesh(tmp_path: Path) -> None:
+    out = _export(tmp_path, "s.gltf", CORPUS / "meshes" / "simple_sparse_accessor.gltf")
+    declared = _verdict(out, "trimesh")
+    assert declared.status == "skipped" and "ignores `accessor.sparse`" in declared.reason
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(gltf_trimesh, "KNOWN_BUGS", {})
+        mp.setattr(gltf_trimesh, "declared", lambda doc, node: [])
+        blamed = _verdict(out, "trimesh")
+    assert blamed.status == "fail"
+    assert "agrees with rendiff: trimesh departs from it" in blamed.reason
+    assert _verdict(out, "gltf_spec").status == "pass"
