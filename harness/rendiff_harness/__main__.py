@@ -210,6 +210,13 @@ def cmd_expectations(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Delegates to judge/importcheck (a resolved scene against independent decodes of its mesh files)."""
+    from .judge.importcheck import main as import_main
+
+    return import_main([args.resolved])
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
     from .renderers.worker import serve
@@ -225,6 +232,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "metamorphic": cmd_metamorphic,
     "serve": cmd_serve,
     "expectations": cmd_expectations,
+    "import": cmd_import,
 }
 
 
@@ -348,6 +356,12 @@ def build_parser() -> argparse.ArgumentParser:
         "it is valid, else one line naming the file and the problem, exit 2",
     )
     p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
+    p_imp = sub.add_parser(
+        "import",
+        help="check a resolved scene's triangles against independent decodes of its mesh files (the `import` "
+        "verdict, judge/importcheck): one line per decoder, exit 1 when one departs, 2 when DIR is unreadable",
+    )
+    p_imp.add_argument("resolved", help="resolved scene folder (`rendiff export SCENE -o DIR`)")
     p_compare = sub.add_parser(
         "compare", help="compare a check run's buffers, write RUN/results.json (see compare.py)", add_help=False
     )

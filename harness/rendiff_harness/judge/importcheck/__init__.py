@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ...contract.resolved import ResolvedScene
 from ...contract.results import Entry
-from ...contract.vocab import Buffer, Status
+from ...contract.vocab import IMPORT_DECODERS, Buffer, Status
 from . import gltf_spec, gltf_trimesh, obj_trimesh
 from .match import Outcome, compare, place
 from .parts import DecodeError, Part
@@ -44,9 +44,10 @@ def _obj(path: Path) -> Decoded:
     return list(obj_trimesh.decode(path)), []
 
 
+SPEC, TRIMESH = IMPORT_DECODERS
 DECODERS: dict[str, dict[str, Callable[[Path], Decoded]]] = {
-    "gltf_spec": {"gltf": _spec},
-    "trimesh": {"obj": _obj, "gltf": gltf_trimesh.decode},
+    SPEC: {"gltf": _spec},
+    TRIMESH: {"obj": _obj, "gltf": gltf_trimesh.decode},
 }
 """Decoder name in results.json -> the resolved scene's mesh formats it reads."""
 
@@ -204,3 +205,23 @@ def import_entries(scene: ResolvedScene) -> list[Entry]:
         if entry is not None:
             out.append(entry)
     return out
+
+
+def main(argv: list[str]) -> int:
+    """`python -m rendiff_harness import DIR`: the import entries of the resolved scene in DIR, one line
+    each; exit 0 when none fails, 1 when one fails or errs, 2 when DIR cannot be read."""
+    from ...contract import resolved
+    from ...contract.text import printable
+
+    if len(argv) != 1:
+        print("usage: python -m rendiff_harness import RESOLVED_DIR", file=sys.stderr)
+        return 2
+    try:
+        scene = resolved.load(argv[0])
+    except resolved.SceneError as exc:
+        print(f"rendiff_harness import: {printable(str(exc))}", file=sys.stderr)
+        return 2
+    entries = import_entries(scene)
+    for e in entries:
+        print(printable(f"{e.scene} {e.backend} {e.buffer} {e.status}: {e.reason}"))
+    return 1 if any(e.status in (Status.FAIL, Status.ERROR) for e in entries) else 0
