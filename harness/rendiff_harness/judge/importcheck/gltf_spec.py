@@ -61,9 +61,9 @@ MODE_NAMES = {
 }
 
 OPS_PER_LEVEL = 20
-"""Roundings one node level can add to a coordinate: quaternion normalization (4 squares, 3 sums,
-sqrt, 4 divisions), a rotation entry (2 products, 2 sums), the scale (1), the 4-term product with the
-parent (4): 19, taken as 20 (docs/verifier.md, "The import verdict")."""
+"""Roundings one node level can add to a coordinate: quaternion normalization (a 4-term sum of
+squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
+(1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
 
 OPS_POINT = 4
 """The point itself: a 3-term product plus the translation."""
