@@ -180,9 +180,9 @@ def _elements(
     end = offset + stride * (count - 1) + elem
     if offset < 0 or end > len(view):
         raise _fail(path, f"{where} reads bytes {offset}..{end} of a {len(view)}-byte bufferView")
-    raw = np.frombuffer(view, dtype=np.uint8)
-    rows = offset + stride * np.arange(count)[:, None] + np.arange(elem)[None, :]
-    out: np.ndarray = raw[rows].copy().view(dtype).reshape(count, width)
+    raw = np.frombuffer(view, dtype=np.uint8, count=end - offset, offset=offset)
+    rows = np.lib.stride_tricks.as_strided(raw, shape=(count, elem), strides=(stride, 1), writeable=False)
+    out: np.ndarray = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
     return out
 
 
