@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import json
 import shutil
+import struct
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
@@ -206,3 +207,74 @@ def test_trimesh_known_glTF_bugs_are_declared_and_an_undeclared_one_is_blamed_on
     assert blamed.status == "fail"
     assert "agrees with rendiff: trimesh departs from it" in blamed.reason
     assert _verdict(out, "gltf_spec").status == "pass"
+
+
+def _glb(doc: dict[str, object], binary: bytes) -> bytes:
+    """A GLB container (glTF 2.0 section 4): header, JSON chunk padded with spaces, BIN chunk with zeros."""
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+
+
+def test_a_glb_with_interleaved_attributes_byte_indices_two_primitives_and_a_hierarchy_passes(tmp_path: Path) -> None:
+    # Five vertices interleaved with a normal (byteStride 24), u8 indices: a TRIANGLES primitive and a
+    # fan; under a parent with a non-unit quaternion and a non-uniform scale; two mesh nodes named alike.
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 1.5, 0.25]], dtype="<f4")
+    inter = np.concatenate([pos, np.tile(np.array([[0, 0, 1]], dtype="<f4"), (5, 1))], axis=1)
+    tri_idx = np.array([0, 1, 2, 0, 2, 3], dtype="u1")
+    fan_idx = np.array([4, 3, 2, 1], dtype="u1")
+    binary = tri_idx.tobytes() + fan_idx.tobytes() + b"\0\0" + inter.tobytes()
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [
+            {
+                "children": [1, 2],
+                "rotation": [0.1, 0.2, 0.05, 0.9],
+                "scale": [1.5, 0.75, 1.0],
+                "translation": [0.1, -0.2, 0.3],
+            },
+            {"name": "twin", "mesh": 0},
+            {"name": "twin", "mesh": 0, "matrix": [0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0, 2, 0, 0, 1]},
+        ],
+        "meshes": [
+            {
+                "primitives": [
+                    {"attributes": {"POSITION": 2}, "indices": 0},
+                    {"attributes": {"POSITION": 2}, "indices": 1, "mode": 6},
+                ]
+            }
+        ],
+        "buffers": [{"byteLength": len(binary)}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 10},
+            {"buffer": 0, "byteOffset": 12, "byteLength": 120, "byteStride": 24},
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5121, "count": 6, "type": "SCALAR"},
+            {"bufferView": 0, "byteOffset": 6, "componentType": 5121, "count": 4, "type": "SCALAR"},
+            {
+                "bufferView": 1,
+                "componentType": 5126,
+                "count": 5,
+                "type": "VEC3",
+                "min": [0, 0, 0],
+                "max": [1, 1.5, 0.25],
+            },
+        ],
+    }
+    out = _export(
+        tmp_path,
+        "m.glb",
+        _glb(doc, binary),
+        "transform = { rotate = [30.0, -20.0, 75.0], scale = [2.0, 1.0, 0.5], translate = [1.0, 2.0, -3.0] }\n",
+    )
+    spec = _verdict(out)
+    assert spec.status == "pass", spec.reason
+    assert spec.extra == {"triangles": 8, "objects": 2}
+    assert [o["name"] for o in resolved.load(out).objects] == ["m/twin#1", "m/twin#2"]
+    tm = _verdict(out, "trimesh")
+    assert tm.status == "skipped" and "drops TRIANGLE_FAN" in tm.reason
