@@ -144,7 +144,7 @@ def compare_scene(
             )
     if references_dir is not None and vocab.Feature.GLOBAL_ILLUMINATION in ref.scene.requires:
         results.append(compare_cached_reference(run, name, ref, references_dir, exps, images, specs))
-    results += importcheck.import_entries(ref.scene)  # the resolved triangles against a second decoder
+    results += importcheck.import_entries(ref.scene, name)  # the resolved triangles against a second decoder
     return [e.blank_if_not_compared() for e in results]
 
 

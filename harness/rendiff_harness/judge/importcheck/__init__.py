@@ -113,13 +113,15 @@ def _pairs(
     return pairs, problems
 
 
-def _judge(scene: ResolvedScene, decoder: str, formats: dict[str, Callable[[Path], Decoded]]) -> Entry | None:
+def _judge(
+    scene: ResolvedScene, name: str, decoder: str, formats: dict[str, Callable[[Path], Decoded]]
+) -> Entry | None:
     """The entry of one decoder over the scene's objects of the formats it reads; None when there are none."""
     groups = [g for g in _groups(scene) if scene.objects[g[0]]["mesh"].get("format") in formats]
     if not groups:
         return None
     t0 = time.monotonic()
-    e = Entry(scene.name, decoder, Buffer.IMPORT, status=Status.ERROR, tolerance=TOLERANCE)
+    e = Entry(name, decoder, Buffer.IMPORT, status=Status.ERROR, tolerance=TOLERANCE)
     problems: list[str] = []
     notes: list[str] = []
     outcomes: list[Outcome] = []
@@ -196,12 +198,12 @@ def _who(scene: ResolvedScene, i: int, decoder: str, fmt: str, file: str) -> str
     return "gltf_spec disagrees with rendiff too: rendiff departs from the specification"
 
 
-def import_entries(scene: ResolvedScene) -> list[Entry]:
-    """The scene's `import` entries, one per decoder with objects to check (none for a scene of
-    generated shapes)."""
+def import_entries(scene: ResolvedScene, name: str | None = None) -> list[Entry]:
+    """The scene's `import` entries under `name` (the run's scene name; default the resolved scene's),
+    one per decoder with objects to check (none for a scene of generated shapes)."""
     out = []
     for decoder, formats in DECODERS.items():
-        entry = _judge(scene, decoder, formats)
+        entry = _judge(scene, scene.name if name is None else name, decoder, formats)
         if entry is not None:
             out.append(entry)
     return out
