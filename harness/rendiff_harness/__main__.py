@@ -1,4 +1,5 @@
-"""Command line: `python -m rendiff_harness {info,where,render,serve,compare,reference,metamorphic,expectations} ...`.
+"""Command line: `python -m rendiff_harness COMMAND ...` (info, where, render, serve, compare, reference,
+metamorphic, expectations, import).
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -241,6 +242,13 @@ def cmd_where(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Delegates to judge/importcheck (a resolved scene against independent decodes of its mesh files)."""
+    from .judge.importcheck import main as import_main
+
+    return import_main([args.resolved])
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
     from .renderers.worker import serve
@@ -257,6 +265,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "serve": cmd_serve,
     "expectations": cmd_expectations,
     "where": cmd_where,
+    "import": cmd_import,
 }
 
 
@@ -384,6 +393,12 @@ def build_parser() -> argparse.ArgumentParser:
         "it is valid, else one line naming the file and the problem, exit 2",
     )
     p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
+    p_imp = sub.add_parser(
+        "import",
+        help="check a resolved scene's triangles against independent decodes of its mesh files (the `import` "
+        "verdict, judge/importcheck): one line per decoder, exit 1 when one departs, 2 when DIR is unreadable",
+    )
+    p_imp.add_argument("resolved", help="resolved scene folder (`rendiff export SCENE -o DIR`)")
     p_compare = sub.add_parser(
         "compare", help="compare a check run's buffers, write RUN/results.json (see compare.py)", add_help=False
     )

@@ -219,7 +219,9 @@ pub struct ObjectSpec {
 }
 
 /// Affine transform applied as scale, then rotation (X, then Y, then Z), then translation.
-#[derive(Debug, Clone, Deserialize)]
+/// Serialized as written into the resolved scene's mesh provenance, so the harness's
+/// independent decoders place a mesh file's triangles as resolution did.
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Transform {
     #[serde(default = "one3")]

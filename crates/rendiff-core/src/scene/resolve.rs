@@ -28,6 +28,26 @@ pub struct ObjectInfo {
     pub first_prim: u32,
     /// Number of triangles.
     pub prim_count: u32,
+    /// For a part of a mesh file: which file and part, and the scene object's
+    /// transform, so that an independent decoder can read the same file and
+    /// check these triangles (the harness's `import` verdict); absent for shapes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<MeshSource>,
+}
+
+/// Where a mesh-file object's triangles came from (docs/resolved-scene.md,
+/// `objects[].mesh`): the import is checked against a second decoder, not trusted.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeshSource {
+    /// The mesh file as resolution opened it (confined to the scene's folder).
+    pub file: PathBuf,
+    /// `"gltf"` or `"obj"`: the loader that read it.
+    pub format: &'static str,
+    /// This object's index among the file's parts: glTF mesh nodes in
+    /// traversal order, OBJ groups in file order (0 for a one-group OBJ).
+    pub part: u32,
+    /// The scene object's transform as written, applied after the file's own.
+    pub transform: super::Transform,
 }
 
 /// A resolved material (see docs/DESIGN.md: albedo and emission).
@@ -204,6 +224,7 @@ impl ResolvedScene {
             let field = format!("objects[{si}]");
             // A mesh file's parts (OBJ groups, glTF mesh nodes) were named when
             // it was read; a generator is one object under the scene's name.
+            let from_file = mesh.is_some();
             let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (mesh, &o.shape) {
                 (Some((parts, full)), _) => (parts, full),
                 (None, Some(shape)) => (vec![(o.name.clone(), shape.triangles())], path.clone()),
@@ -216,7 +237,7 @@ impl ResolvedScene {
             let (m, tr) = transform_matrix(&o.transform);
             // Triangle index within the scene object (file order across groups), for messages.
             let mut ti = 0usize;
-            for (name, tris64) in parts {
+            for (part, (name, tris64)) in parts.into_iter().enumerate() {
                 let oi = objects.len();
                 if oi >= u32::MAX as usize {
                     return Err(SceneError::new(path, "objects", "more than 2^32-1 objects"));
@@ -259,6 +280,16 @@ impl ResolvedScene {
                     material,
                     first_prim: first as u32,
                     prim_count: (triangles.len() - first) as u32,
+                    mesh: from_file.then(|| MeshSource {
+                        file: origin.clone(),
+                        format: if o.mesh.as_deref().is_some_and(is_gltf_path) {
+                            "gltf"
+                        } else {
+                            "obj"
+                        },
+                        part: part as u32,
+                        transform: o.transform.clone(),
+                    }),
                 });
             }
         }
@@ -317,6 +348,7 @@ impl ResolvedScene {
                 material: 0,
                 first_prim: 0,
                 prim_count: n as u32,
+                mesh: None,
             }],
             materials: vec![Material {
                 name: "default".into(),
