@@ -990,7 +990,11 @@ fn write_report(run: &Path) {
 
 fn load_scene(path: &Path) -> Result<ResolvedScene> {
     let scene = Scene::load(path)?;
-    Ok(ResolvedScene::resolve(&scene)?)
+    let resolved = ResolvedScene::resolve(&scene)?;
+    for w in &resolved.warnings {
+        rendiff::errln!("warning: {w}");
+    }
+    Ok(resolved)
 }
 
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);

@@ -179,8 +179,20 @@ impl CameraSpec {
 pub struct GltfCameraSpec {
     /// Name of the scene object whose `mesh` is the `.gltf`/`.glb` file.
     pub object: String,
-    /// Node name or camera name; the first camera node (traversal order) when absent.
-    pub camera: Option<String>,
+    /// Node name or camera name, or an index into the file's `cameras`; the
+    /// first camera node (traversal order) when absent.
+    pub camera: Option<GltfRef>,
+}
+
+/// A glTF scene or camera chosen in the scene file, as glTF viewers let
+/// users choose them: by its index in the file's own array, or by its name.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum GltfRef {
+    /// Index into the file's `scenes` (or `cameras`), as the file numbers them.
+    Index(u32),
+    /// The `name` the file gives it (a camera may also be chosen by its node's name).
+    Name(String),
 }
 
 /// A diffuse material: albedo and emitted radiance.
@@ -208,6 +220,9 @@ pub struct ObjectSpec {
     pub mesh: Option<String>,
     /// A built-in generator; exactly one of `mesh` and `shape` is given.
     pub shape: Option<generators::Shape>,
+    /// For a glTF `mesh`: which of the file's scenes to show (index or name);
+    /// the file's `scene`, else its first, when absent.
+    pub gltf_scene: Option<GltfRef>,
     /// Material name; the first material (or a default grey) when absent.
     pub material: Option<String>,
     /// Scale, then rotate (XYZ Euler, degrees), then translate.
@@ -901,6 +916,13 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
                 ))
             }
             _ => {}
+        }
+        if o.gltf_scene.is_some() && !o.mesh.as_deref().is_some_and(gltf::is_gltf_path) {
+            return Err(SceneError::new(
+                path,
+                format!("{field}.gltf_scene"),
+                "chooses a glTF scene, but the object's mesh is not a glTF file (.gltf or .glb)",
+            ));
         }
         if let Some(m) = &o.material {
             if !names.contains(m.as_str()) {
