@@ -7,6 +7,7 @@
 pub mod export;
 pub mod generators;
 pub mod gltf;
+pub mod model;
 pub mod obj;
 pub mod resolve;
 
@@ -293,8 +294,12 @@ pub struct Scene {
 impl Scene {
     /// Reads, parses and validates a scene file. The file must be a regular
     /// file (never a FIFO or device: those are refused before they are opened)
-    /// of at most [`MAX_SCENE_FILE_BYTES`], in UTF-8.
+    /// of at most [`MAX_SCENE_FILE_BYTES`], in UTF-8. A model file (`.obj`,
+    /// `.gltf`, `.glb`) is taken as the scene [`model`] makes of it.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        if model::is_model_path(path) {
+            return Scene::from_model(path);
+        }
         let bytes = read_regular_file(path, MAX_SCENE_FILE_BYTES)
             .map_err(|p| SceneError::new(path, "", format!("cannot read scene file: {p}")))?;
         let text = utf8_text(bytes)
