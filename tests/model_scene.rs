@@ -53,7 +53,7 @@ fn instanced_quantized_glb() -> Vec<u8> {
                       {"bufferView": 2, "byteOffset": 24, "componentType": 5126, "count": 2,
                        "type": "VEC4"}]}"#;
     let mut json = json.as_bytes().to_vec();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut glb = Vec::new();
