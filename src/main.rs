@@ -57,7 +57,7 @@ enum SceneAction {
 enum Command {
     /// Render a scene's depth/ID/normal buffers to an EXR (plus PNG previews).
     Render {
-        /// Scene file (TOML), e.g. scenes/three_triangles.toml.
+        /// Scene file (TOML), e.g. scenes/three_triangles.toml, or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Which visibility loop to use.
         #[arg(long, value_enum)]
@@ -103,7 +103,7 @@ enum Command {
     },
     /// Write the resolved scene (triangles, IDs, camera) for external renderers.
     Export {
-        /// Scene file (TOML).
+        /// Scene file (TOML), or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Output folder (scene.json, triangles.f32, object_ids.u32).
         #[arg(short, long)]
