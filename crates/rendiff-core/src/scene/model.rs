@@ -177,6 +177,10 @@ fn scene_text(
 /// resolved once here for its bounds; every error names the model file.
 pub fn model_scene_text(model: &Path, mesh_rel: &str) -> Result<String, SceneError> {
     let own = own_name(model)?;
+    // Named as the user gave it (not as the scene's mesh field) when it is
+    // missing, a folder or a device.
+    super::open_regular_file(model, super::MAX_MESH_FILE_BYTES)
+        .map_err(|p| SceneError::new(model, "", format!("model file {p}")))?;
     // Resolved from the model's own folder, as `check model.glb` reads it.
     let draft = Scene::parse(model, &scene_text(model, &own, None))?;
     let resolved = ResolvedScene::resolve(&draft)?;
@@ -370,6 +374,12 @@ mod tests {
         std::fs::write(&model, "v 1 1 1\nf 1 1 1\n").unwrap();
         let e = Scene::from_model(&model).unwrap_err().to_string();
         assert!(e.contains("dot.obj: the model has no extent"), "{e}");
+        let e = Scene::from_model(&dir.path().join("none.glb"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("none.glb: model file cannot be opened"), "{e}");
+        let e = Scene::from_model(dir.path()).unwrap_err().to_string();
+        assert!(e.contains(": model file is a folder"), "{e}");
         std::fs::write(&model, "v 1 1 1\n").unwrap();
         let e = Scene::from_model(&model).unwrap_err().to_string();
         assert!(
