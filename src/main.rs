@@ -39,11 +39,25 @@ enum Renderer {
     EmbreeRobust,
 }
 
+/// `rendiff scene ...`.
+#[derive(Subcommand)]
+enum SceneAction {
+    /// Write the scene rendiff makes for a model file (the camera framing its
+    /// bounding sphere, docs/resolved-scene.md) to a new TOML file for editing.
+    New {
+        /// The model: .obj, .gltf or .glb.
+        model: PathBuf,
+        /// The scene file to write (never overwritten); its folder must hold the model.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene's depth/ID/normal buffers to an EXR (plus PNG previews).
     Render {
-        /// Scene file (TOML), e.g. scenes/three_triangles.toml.
+        /// Scene file (TOML), e.g. scenes/three_triangles.toml, or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Which visibility loop to use.
         #[arg(long, value_enum)]
@@ -76,6 +90,11 @@ enum Command {
         #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
     },
+    /// Make scene files (`scene new MODEL -o SCENE.toml`).
+    Scene {
+        #[command(subcommand)]
+        action: SceneAction,
+    },
     /// List scenes in a folder with the features they require.
     Scenes {
         /// Folder to list.
@@ -84,7 +103,7 @@ enum Command {
     },
     /// Write the resolved scene (triangles, IDs, camera) for external renderers.
     Export {
-        /// Scene file (TOML).
+        /// Scene file (TOML), or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Output folder (scene.json, triangles.f32, object_ids.u32).
         #[arg(short, long)]
@@ -97,7 +116,8 @@ enum Command {
     /// Writes RUN/manifest.json, the buffers, diff images and RUN/results.json.
     /// Exit 1 if any comparison fails or errors.
     Check {
-        /// Scene files or folders (default: rendiff's scenes and the real-asset corpus scenes/corpus).
+        /// Scene files or folders (default: rendiff's scenes and the real-asset corpus scenes/corpus);
+        /// a model file (.obj, .gltf, .glb) is checked as the scene `scene new` would write for it.
         scenes: Vec<PathBuf>,
         /// Run folder.
         #[arg(short, long, default_value = "reports/runs/latest")]
@@ -501,6 +521,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     );
                 }
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Scene {
+            action: SceneAction::New { model, output },
+        } => {
+            let mesh = rendiff::scene::model::write_model_scene(&model, &output)?;
+            rendiff::outln!(
+                "wrote {} (mesh = {:?})",
+                rendiff::scene::printable(&output.display().to_string(), 500),
+                rendiff::scene::printable(&mesh, 500)
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Scenes { dir } => {
@@ -1008,7 +1039,11 @@ fn write_report(run: &Path) {
 
 fn load_scene(path: &Path) -> Result<ResolvedScene> {
     let scene = Scene::load(path)?;
-    Ok(ResolvedScene::resolve(&scene)?)
+    let resolved = ResolvedScene::resolve(&scene)?;
+    for w in &resolved.warnings {
+        rendiff::errln!("warning: {w}");
+    }
+    Ok(resolved)
 }
 
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);

@@ -723,6 +723,11 @@ fn render_and_compare(
                 continue;
             }
         };
+        // What the import left out (a glTF POINTS or LINES primitive) is
+        // said even with --quiet: the scene is not all of the user's file.
+        for w in &scene.warnings {
+            crate::errln!("  warning: {w}");
+        }
         runs.requires = scene.requires.iter().cloned().collect();
         runs.resolved_sha256 = seal.digest.clone();
         let core_missing = missing(&runs.requires, &core_features());
