@@ -33,6 +33,9 @@ enum Renderer {
     Raster,
     /// Outer loop over pixels, BVH (obvhs), rows in parallel.
     Trace,
+    /// Raster or trace, whichever the cost model expects to finish sooner
+    /// (the same buffers either way; docs/benchmarks.md, "Which loop").
+    Core,
     /// Embree's rtcIntersect1 per pixel center, default scene flags (visibility only).
     Embree,
     /// Embree with RTC_SCENE_FLAG_ROBUST (visibility only).
@@ -75,6 +78,10 @@ enum Command {
         /// Deliberately wrong shading, for testing the statistical gate's power.
         #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
+        /// Seconds before the render stops, BVH build included (1 to a week);
+        /// a render stopped by it writes nothing and exits with an error.
+        #[arg(long, value_parser = rendiff::args::parse_timeout)]
+        timeout: Option<u64>,
     },
     /// List scenes in a folder with the features they require.
     Scenes {
@@ -375,7 +382,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             spp,
             seed,
             inject_bias,
+            timeout,
         } => {
+            let deadline =
+                timeout.map(|t| std::time::Instant::now() + std::time::Duration::from_secs(t));
             // Refused before the render too, not only at the write.
             if let Some(out) = &output {
                 rendiff::exr_io::check_output(out)?;
@@ -389,6 +399,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let backend = match renderer {
                 Renderer::Raster => Backend::Raster,
                 Renderer::Trace => Backend::Trace,
+                Renderer::Core => {
+                    let (b, c) = rendiff::render::core_loop(&resolved, pool.current_num_threads());
+                    rendiff::outln!(
+                        "core: {} (estimated raster {:.3} s, trace {:.3} s with its {:.3} s BVH build{})",
+                        b.name(),
+                        c.raster_s,
+                        c.trace_s,
+                        c.build_s,
+                        if rendiff::shade::needs_shading(&resolved) { " paid by shading either way" } else { "" }
+                    );
+                    b
+                }
                 Renderer::Embree => Backend::Embree(EmbreeMode::Default),
                 Renderer::EmbreeRobust => Backend::Embree(EmbreeMode::Robust),
             };
@@ -399,7 +421,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 spp,
                 seed,
                 bias: inject_bias,
-                deadline: None,
+                deadline,
             };
             let what = match backend {
                 Backend::Raster => "raster tiles",
@@ -418,6 +440,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 Err(NotRendered::Failed(why)) => anyhow::bail!("{name}: {why}"),
             };
+            if let (Some(t), true) = (timeout, rendiff::deadline::past(deadline)) {
+                anyhow::bail!("{name}: timed out: stopped at --timeout {t} s; nothing written");
+            }
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()
