@@ -401,13 +401,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Renderer::Trace => Backend::Trace,
                 Renderer::Core => {
                     let (b, c) = rendiff::render::core_loop(&resolved, pool.current_num_threads());
+                    let build = if rendiff::shade::needs_shading(&resolved) {
+                        "not counted: shading builds it either way"
+                    } else {
+                        "counted in trace"
+                    };
                     rendiff::outln!(
-                        "core: {} (estimated raster {:.3} s, trace {:.3} s with its {:.3} s BVH build{})",
+                        "core: {} (estimated raster {:.4} s, trace {:.4} s; BVH build {:.4} s, {build})",
                         b.name(),
                         c.raster_s,
                         c.trace_s,
                         c.build_s,
-                        if rendiff::shade::needs_shading(&resolved) { " paid by shading either way" } else { "" }
                     );
                     b
                 }
