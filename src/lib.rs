@@ -8,8 +8,8 @@
 //! what.
 
 pub use rendiff_core::{
-    backends, camera, deadline, exr_io, frame, names, pending, predicate, raster, render, scene,
-    shade, trace, visibility, vocab,
+    backends, camera, deadline, exr_io, frame, loop_cost, names, pending, predicate, raster,
+    render, scene, shade, trace, visibility, vocab,
 };
 
 /// `println!` that never panics: with stdout a closed pipe (`rendiff scenes |

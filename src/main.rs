@@ -33,6 +33,9 @@ enum Renderer {
     Raster,
     /// Outer loop over pixels, BVH (obvhs), rows in parallel.
     Trace,
+    /// Raster or trace, whichever the cost model expects to finish sooner
+    /// (the same buffers either way; docs/benchmarks.md, "Which loop").
+    Core,
     /// Embree's rtcIntersect1 per pixel center, default scene flags (visibility only).
     Embree,
     /// Embree with RTC_SCENE_FLAG_ROBUST (visibility only).
@@ -89,6 +92,10 @@ enum Command {
         /// Deliberately wrong shading, for testing the statistical gate's power.
         #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
+        /// Seconds before the render stops, BVH build included (1 to a week);
+        /// a render stopped by it writes nothing and exits with an error.
+        #[arg(long, value_parser = rendiff::args::parse_timeout)]
+        timeout: Option<u64>,
     },
     /// Make scene files (`scene new MODEL -o SCENE.toml`).
     Scene {
@@ -405,7 +412,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             spp,
             seed,
             inject_bias,
+            timeout,
         } => {
+            let deadline =
+                timeout.map(|t| std::time::Instant::now() + std::time::Duration::from_secs(t));
             // Refused before the render too, not only at the write.
             if let Some(out) = &output {
                 rendiff::exr_io::check_output(out)?;
@@ -419,6 +429,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let backend = match renderer {
                 Renderer::Raster => Backend::Raster,
                 Renderer::Trace => Backend::Trace,
+                Renderer::Core => {
+                    let (b, c) = rendiff::render::core_loop(&resolved, pool.current_num_threads());
+                    let build = if rendiff::shade::needs_shading(&resolved) {
+                        "not counted: shading builds it either way"
+                    } else {
+                        "counted in trace"
+                    };
+                    rendiff::outln!(
+                        "core: {} (estimated raster {:.4} s, trace {:.4} s; BVH build {:.4} s, {build})",
+                        b.name(),
+                        c.raster_s,
+                        c.trace_s,
+                        c.build_s,
+                    );
+                    b
+                }
                 Renderer::Embree => Backend::Embree(EmbreeMode::Default),
                 Renderer::EmbreeRobust => Backend::Embree(EmbreeMode::Robust),
             };
@@ -429,7 +455,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 spp,
                 seed,
                 bias: inject_bias,
-                deadline: None,
+                deadline,
             };
             let what = match backend {
                 Backend::Raster => "raster tiles",
@@ -448,6 +474,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 Err(NotRendered::Failed(why)) => anyhow::bail!("{name}: {why}"),
             };
+            if let (Some(t), true) = (timeout, rendiff::deadline::past(deadline)) {
+                anyhow::bail!("{name}: timed out: stopped at --timeout {t} s; nothing written");
+            }
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()

@@ -436,6 +436,27 @@ fn harness_names(opts: &CheckOptions) -> Result<Vec<String>, String> {
         .map(|b| b.into_iter().map(|b| b.name).collect())
 }
 
+/// The loop that renders the reference: the raster when the tracer renders
+/// too (so the run compares the two loops), else whichever the cost model
+/// expects to finish sooner (bit-identical buffers, so no verdict changes).
+fn reference_loop(
+    opts: &CheckOptions,
+    scene: &ResolvedScene,
+) -> (Backend, Option<rendiff_core::loop_cost::Choice>) {
+    if wanted(opts, "trace") {
+        return (Backend::Raster, None);
+    }
+    let (b, c) = crate::render::core_loop(scene, rayon::current_num_threads());
+    (b, Some(c))
+}
+
+/// Records in the reference's `info` which loop rendered it and why.
+fn note_loop_choice(rec: &mut RenderRecord, choice: Option<rendiff_core::loop_cost::Choice>) {
+    if let (Some(c), Some(info)) = (choice, rec.info.as_object_mut()) {
+        info.insert("loop_choice".into(), serde_json::json!(c));
+    }
+}
+
 fn wanted(opts: &CheckOptions, name: &str) -> bool {
     name == REFERENCE
         || opts
@@ -760,10 +781,10 @@ fn render_and_compare(
                 };
                 isolated::render(opts, &job, version.clone())
             } else {
-                let backend = if name == "raster" {
-                    Backend::Raster
+                let (backend, choice) = if name != REFERENCE {
+                    (Backend::Trace, None)
                 } else {
-                    Backend::Trace
+                    reference_loop(opts, &scene)
                 };
                 let render_opts = RenderOptions {
                     spp: opts.core.spp,
@@ -771,7 +792,7 @@ fn render_and_compare(
                     bias: opts.core.bias,
                     ..RenderOptions::default()
                 };
-                in_process(
+                let mut rec = in_process(
                     backend,
                     &scene,
                     &exr,
@@ -780,7 +801,9 @@ fn render_and_compare(
                     version.clone(),
                     render_opts,
                     opts.timeout,
-                )
+                );
+                note_loop_choice(&mut rec, choice);
+                rec
             };
             let mut rec = rec;
             unstaged(&mut rec);
