@@ -19,6 +19,7 @@ pub mod pool;
 pub mod process;
 pub mod run_folder;
 pub mod shard;
+pub mod table;
 pub mod worker;
 
 use crate::backends::embree::{self, EmbreeMode};
@@ -690,6 +691,22 @@ fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
     })
 }
 
+/// What the report's reproduction commands need besides the run's options.
+fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
+    let own_probes = in_root(&opts.root, "scenes/calibration");
+    manifest::Rerun {
+        cwd: std::env::current_dir()
+            .ok()
+            .map(|d| d.display().to_string()),
+        renderers_file: opts.renderers.as_ref().map(|f| f.display().to_string()),
+        calibration_dir: opts
+            .calibration
+            .as_ref()
+            .filter(|c| **c != own_probes)
+            .map(|c| c.display().to_string()),
+    }
+}
+
 /// The run itself, written to `opts.run_dir` (the staging folder); commands in
 /// the manifest name `shown_dir`, where the run will be once published.
 fn render_and_compare(
@@ -974,6 +991,7 @@ fn render_and_compare(
         rendiff_version: env!("CARGO_PKG_VERSION").into(),
         scenes,
         options: Some(run_options(opts)?),
+        rerun: Some(rerun_inputs(opts)),
         shard,
     };
     crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {

@@ -8,12 +8,9 @@ use super::data::{
 };
 use super::html::{badge, command_block, escape, page, url};
 use super::images::{Kind, SceneImages};
-use super::overview::{
-    camera_cells, camera_header, class_cells, count, expectations_arg, CLASS_WORDS,
-};
+use super::overview::{camera_cells, camera_header, class_cells, count, CLASS_WORDS};
 use super::svg;
 use crate::check::manifest::ResultEntry;
-use crate::check::process::shell_line;
 use std::fmt::Write;
 
 fn err(e: &ResultEntry, key: &str) -> String {
@@ -145,25 +142,6 @@ fn camera_section(rows: &[&ResultEntry]) -> String {
     }
     b.push_str("</table>");
     b
-}
-
-/// The command that reruns one backend on one scene and compares it again.
-pub fn verdict_command(data: &RunData, scene: &SceneData, backend: &str) -> Option<String> {
-    let file = &scene.runs.as_ref()?.scene_file;
-    let mut words = vec![
-        "rendiff".to_string(),
-        "check".into(),
-        file.clone(),
-        "--only".into(),
-        backend.to_string(),
-        "-o".into(),
-        data.dir.display().to_string(),
-    ];
-    if let Some(e) = expectations_arg(data) {
-        words.push("--expectations".into());
-        words.push(e);
-    }
-    Some(shell_line(words))
 }
 
 fn bound_text(e: &ResultEntry) -> String {
@@ -453,7 +431,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     );
 
     // ---- per backend: versions, times, commands
-    b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">Commands run from the repository root. The render command reproduces the buffer; the check command reproduces the verdict (the reference always renders too).</p>");
+    b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">The render command reproduces the buffer; the check command reproduces the verdict with the options of this run (the reference always renders too), into a new folder beside this run.</p>");
     for be in &backends {
         let _ = write!(
             b,
@@ -506,7 +484,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             }
         }
         if be != reference {
-            if let Some(cmd) = verdict_command(data, scene, be) {
+            if let Some(cmd) = super::rerun::verdict_command(data, scene, be) {
                 let _ = write!(b, "verdict: {}", command_block(&cmd));
             }
         }

@@ -89,6 +89,9 @@ ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
 BUFFER = "camera"
 """The results.json `buffer` of a calibration entry."""
+NOT_JUDGED_FIELD = "not_judged"
+"""The results.json field of an entry left unjudged because its backend's camera failed
+calibration (value "calibration"): the report groups such entries under that one cause."""
 MIN_PIXELS = 64
 """Fewer usable pixels than this cannot identify the nine entries of G with any precision."""
 MAX_CONDITION = 1e8
@@ -691,4 +694,6 @@ def calibrate_and_blame(
             continue
         e.status = Status.ERROR
         e.reason = f"not judged: {e.backend}'s camera failed calibration ({cal.get('reason', '')}); was: {e.reason}"
+        # What made it unjudged, by name: the report hangs it under that cause (docs/run-format.md).
+        e.extra[NOT_JUDGED_FIELD] = ROLE
     return rep.summary, rep.entries
