@@ -299,7 +299,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
         let tol = text(e, "tolerance");
         let _ = write!(
             b,
-            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td>{}<td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}</td></tr>",
+            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td>{}<td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}{}</td></tr>",
             url(&page_stem(&e.backend)),
             escape(&e.backend),
             escape(&e.buffer),
@@ -312,7 +312,8 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             err(e, "max_rel_error"),
             escape(&angle(e)),
             escape(&bound_text(e)),
-            format!("{}{}", escape(&e.reason), own_plane_note(e)),
+            escape(&e.reason),
+            own_plane_note(e),
             if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) },
             extra_fields(e),
         );
