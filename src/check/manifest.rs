@@ -90,6 +90,9 @@ pub struct Rerun {
     /// `--calibration`, when not rendiff's scenes/calibration.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration_dir: Option<String>,
+    /// `--expectations`, when not rendiff's tests/expectations.toml.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expectations_file: Option<String>,
 }
 
 /// A shard's place in its split: its index and the whole deal, so that

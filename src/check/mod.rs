@@ -693,7 +693,12 @@ fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
 
 /// What the report's reproduction commands need besides the run's options.
 fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
-    let own_probes = in_root(&opts.root, "scenes/calibration");
+    // rendiff's own files are check's defaults: a command without them finds them again.
+    let own = |rel: &str| std::path::absolute(in_root(&opts.root, rel)).ok();
+    let given = |file: &Path, rel: &str| {
+        let abs = std::path::absolute(file).ok();
+        (abs != own(rel)).then(|| file.display().to_string())
+    };
     manifest::Rerun {
         cwd: std::env::current_dir()
             .ok()
@@ -702,8 +707,8 @@ fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
         calibration_dir: opts
             .calibration
             .as_ref()
-            .filter(|c| **c != own_probes)
-            .map(|c| c.display().to_string()),
+            .and_then(|c| given(c, "scenes/calibration")),
+        expectations_file: given(&opts.expectations, "tests/expectations.toml"),
     }
 }
 

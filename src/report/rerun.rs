@@ -41,7 +41,13 @@ fn options(data: &RunData) -> Vec<String> {
             words.extend(["--inject-bias".to_string(), bias.clone()]);
         }
     }
-    if let Some(e) = super::overview::expectations_arg(data) {
+    // Runs that recorded their inputs name a non-default expectations file
+    // there; older ones only in results.json.
+    let expectations = match &data.manifest.rerun {
+        Some(r) => r.expectations_file.clone(),
+        None => super::overview::expectations_arg(data),
+    };
+    if let Some(e) = expectations {
         words.extend(["--expectations".to_string(), e]);
     }
     words
