@@ -121,8 +121,9 @@ details{margin:4px 0}
 svg{background:#fff;border:1px solid #ddd}
 "#;
 
-/// The only script: marks every image as loaded or failed (so a headless
-/// browser test can read the result from the DOM) and drives the flip viewers.
+/// The only script: marks every image as loaded or failed and records where
+/// the matrix's box ends against the page's width (so a headless browser
+/// test can read both from the DOM), and drives the flip viewers.
 /// It reads everything from the DOM; nothing is interpolated into it.
 const JS: &str = r#"
 (function(){
@@ -143,6 +144,13 @@ const JS: &str = r#"
     mark(i);
   });
   tally();
+  function measure(){
+    var m=document.getElementById('matrix-box');if(!m)return;
+    var r=m.getBoundingClientRect(),d=document.body.dataset;
+    d.matrixRight=Math.ceil(r.right);d.viewportWidth=document.documentElement.clientWidth;
+    d.matrixScrolls=(m.scrollWidth>m.clientWidth)?'1':'0';
+  }
+  measure();window.addEventListener('load',measure);window.addEventListener('resize',measure);
   document.querySelectorAll('.flip').forEach(function(f){
     var view=f.querySelector('.flip-view'),a=f.querySelector('.flip-a'),b=f.querySelector('.flip-b');
     var label=f.querySelector('.flip-label'),pos=f.querySelector('.flip-pos'),hover=f.querySelector('.flip-hover');

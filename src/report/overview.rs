@@ -231,11 +231,12 @@ fn attention_section(data: &RunData) -> String {
     let total: usize = causes.iter().map(|c| c.members.len()).sum();
     let _ = write!(
         b,
-        "<p class=\"muted\">{total} failing verdicts and failed renders from {} causes, one row each: failed camera calibrations first \
+        "<p class=\"muted\">{total} failing verdicts and failed renders from {} {}, one row each: failed camera calibrations first \
          (fix those before reading anything else: the verdicts they spoil hang under them), then scenes that could not be loaded, \
          renderer errors, and each class of mismatch per renderer and buffer across scenes. Classes: {}.</p>\
          <table class=\"causes\"><tr><th>cause</th><th>renderer</th><th>count</th><th>evidence</th><th>why</th></tr>",
         causes.len(),
+        if causes.len() == 1 { "cause" } else { "causes" },
         CLASS_WORDS
     );
     for (i, c) in causes.iter().enumerate() {
