@@ -297,4 +297,30 @@ fn the_printed_reproduction_reruns_to_the_same_verdicts_in_a_new_folder() {
     let original = verdicts(&results(&r.run));
     assert!(!original.is_empty());
     assert_eq!(verdicts(&again), original);
+
+    // The render command reproduces the buffer beside the run, not over it.
+    let render = unescape(
+        between(section, "render: <pre class=\"cmd\"><code>", "</code>")
+            .trim_start_matches("render: <pre class=\"cmd\"><code>"),
+    );
+    let exr = r.run.join("scenes/three_triangles/corner_sample.exr");
+    let before = std::fs::read(&exr).unwrap();
+    let out = output_within(
+        Command::new("sh")
+            .arg("-c")
+            .arg(&render)
+            .current_dir(std::env::temp_dir())
+            .env("PATH", path_env()),
+        300,
+    );
+    assert!(
+        out.status.success(),
+        "{render}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read(&exr).unwrap(), before, "{render}");
+    let copy = r
+        .cwd
+        .join("run.repro/render/scenes/three_triangles/corner_sample.exr");
+    assert!(copy.is_file(), "{render}");
 }

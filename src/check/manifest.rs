@@ -167,7 +167,8 @@ pub struct RenderRecord {
     /// Backend version string.
     #[serde(default)]
     pub version: String,
-    /// Command that reproduces this render.
+    /// Command that reproduces this render, its buffer written beside the
+    /// run (`RUN.repro/render/...`), never over the run's own.
     #[serde(default)]
     pub command: String,
     /// Buffers it produced.

@@ -691,6 +691,16 @@ fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
     })
 }
 
+/// Where a recorded render command writes its buffer: `RUN.repro/render/<rel>`,
+/// beside the run, so that running it never overwrites the run it came
+/// from (report/rerun.rs writes check reruns to `RUN.repro/` too). Given the
+/// staging folder, it names the run's once the command is unstaged.
+fn repro_out(run_dir: &Path, rel_exr: &str) -> PathBuf {
+    let mut dir = run_dir.as_os_str().to_owned();
+    dir.push(".repro");
+    PathBuf::from(dir).join("render").join(rel_exr)
+}
+
 /// What the report's reproduction commands need besides the run's options.
 fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
     // rendiff's own files are check's defaults: a command without them finds them again.
@@ -806,7 +816,7 @@ fn render_and_compare(
                 "--renderer",
                 name,
                 "-o",
-                &exr.display().to_string(),
+                &repro_out(run_dir, &rel_exr).display().to_string(),
             ]);
             let rec = if !core_missing.is_empty() {
                 skipped_for_features(name, &core_missing)
@@ -1091,6 +1101,20 @@ fn external(
         "rendiff_harness".into(),
     ];
     words.extend(args.iter().cloned());
+    // The recorded command reproduces the buffer beside the run, not over it
+    // (the harness writes only into a folder that exists).
+    let repro = repro_out(&opts.run_dir, &rel_exr);
+    if let Some(i) = words.iter().position(|w| w == "--out") {
+        if let Some(out) = words.get_mut(i + 1) {
+            *out = repro.display().to_string();
+        }
+    }
+    let mkdir = repro.parent().map_or(String::new(), |d| {
+        format!(
+            "{} && ",
+            shell_line(["mkdir", "-p", &d.display().to_string()])
+        )
+    });
     let declared = opts.renderers.as_ref().map_or(String::new(), |f| {
         format!(
             "{RENDERERS_ENV}={} ",
@@ -1098,7 +1122,7 @@ fn external(
         )
     });
     rec.command = format!(
-        "{declared}PYTHONPATH={} {}",
+        "{mkdir}{declared}PYTHONPATH={} {}",
         process::shell_quote(&opts.root.join("harness").display().to_string()),
         shell_line(&words)
     );
