@@ -40,7 +40,7 @@ def judge(ref: Reference, test: dict[str, np.ndarray]) -> DepthResult:
     model = registry.spec("mitsuba")
     assert model is not None
     buffers = {"Z": test["Z"], "id.prim": test["prim"]}
-    return compare_depth(ref, buffers, model.precision, tc._ok("mitsuba", "x"), {}, None)
+    return compare_depth(ref, buffers, model.precision, tc._ok("mitsuba", "x"), {}, None, own_plane=True)
 
 
 @pytest.fixture

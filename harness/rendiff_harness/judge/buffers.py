@@ -88,6 +88,7 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
             r.attrs,
             ids.edge_mask if ids is not None else None,
             ids.classes if ids is not None else None,
+            own_plane=True,
         )
     except tolerance.ToleranceError as exc:
         e.reason = str(exc)

@@ -187,12 +187,17 @@ def compare_depth(
     attrs: Mapping[str, Any],
     id_edge_mask: np.ndarray | None,
     id_classes: np.ndarray | None = None,
+    own_plane: bool = False,
 ) -> DepthResult:
     """Hit/miss masks exact except at allowed ID classes; depth within the backend's model.
 
     With `id_classes` (the verifier's classes of the ID mismatches), a mask mismatch at an
     edge or tie pixel is allowed, at a crack pixel it is a crack, elsewhere interior.
     Without it, `id_edge_mask` marks the allowed pixels (the metamorphic comparison).
+    With `own_plane` (the verifier's comparison with the reference), pixels where both hit other
+    prims are judged against the test's own triangle's plane (`own_plane_depths`); the
+    metamorphic comparison, whose variant buffers are mapped back onto the base scene and whose
+    core models are exact, does not ask for it.
     """
     zr = ref.buffers["Z"].astype(np.float64)
     zt = test["Z"].astype(np.float64)
@@ -238,7 +243,8 @@ def compare_depth(
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(z_ref != 0.0, err / np.abs(z_ref), np.where(err == 0.0, 0.0, np.inf))
     interior_mask.ravel()[idx[beyond]] = True
-    own = own_plane_depths(ref, test, hr & ht, same, model, render, attrs)
+    # Not asked for: every common hit counts as judged above, so none is left for the own-plane test.
+    own = own_plane_depths(ref, test, hr & ht, same if own_plane else np.ones_like(same), model, render, attrs)
     interior_mask.ravel()[own.beyond] = True
 
     if mask_mm.any():
@@ -255,10 +261,15 @@ def compare_depth(
         )
         details.append(f"{bi.size} depths beyond tolerance, worst {ex}")
     details += own.details
+    own_text = (
+        f"; where both hit other prims, the test's depth against its own triangle's plane at the pixel center "
+        f"({own.idx.size} pixels)"
+        if own_plane
+        else ""
+    )
     text = (
-        f"{tol_text}; compared {scope}; where both hit other prims, the test's depth against its own "
-        f"triangle's plane at the pixel center ({own.idx.size} pixels); hit/miss masks exact except where "
-        "the ID mismatch is an allowed class (edge, tie; crack only where declared)"
+        f"{tol_text}; compared {scope}{own_text}; hit/miss masks exact except where the ID mismatch is an "
+        "allowed class (edge, tie; crack only where declared)"
     )
     if own.not_comparable:
         notes.append("not comparable: " + ", ".join(f"{k} ({v} px)" for k, v in sorted(own.not_comparable.items())))
