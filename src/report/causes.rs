@@ -303,3 +303,109 @@ pub fn unexplained(data: &RunData, causes: &[Cause<'_>]) -> usize {
         .count();
     (failing + renders).saturating_sub(listed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::check::manifest::Manifest;
+    use serde_json::json;
+    use std::path::PathBuf;
+
+    fn entry(scene: &str, backend: &str, buffer: &str, status: &str, extra: Value) -> ResultEntry {
+        let mut v = json!({"scene": scene, "backend": backend, "buffer": buffer, "status": status,
+                           "reason": format!("{backend} {buffer} on {scene}")});
+        v.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        serde_json::from_value(v).unwrap()
+    }
+
+    fn scene(name: &str, results: Vec<ResultEntry>) -> SceneData {
+        SceneData {
+            name: name.into(),
+            page: name.into(),
+            runs: None,
+            results,
+            resolved: None,
+        }
+    }
+
+    /// A run with one cause of each kind: a failed calibration and an entry it
+    /// left unjudged, a scene that could not load, a renderer's errors on two
+    /// scenes, and one class of mismatch on one renderer across two scenes.
+    fn run() -> RunData {
+        let manifest: Manifest = serde_json::from_value(json!({
+            "format": crate::check::manifest::MANIFEST_FORMAT, "reference": "raster",
+            "created_unix": 0, "rendiff_version": "0", "scenes": []}))
+        .unwrap();
+        let interior = |n: u64| json!({"interior_mismatches": n, "edge_mismatches": 3});
+        let scenes = vec![
+            scene(
+                "a",
+                vec![
+                    entry(
+                        "a",
+                        "bent",
+                        "id",
+                        "error",
+                        json!({"not_judged": "calibration"}),
+                    ),
+                    entry("a", "crashy", "Z", "error", json!({})),
+                    entry("a", "leaky", "id", "fail", interior(2)),
+                    entry("a", "leaky", "N", "pass", json!({})),
+                ],
+            ),
+            scene(
+                "b",
+                vec![
+                    entry("b", "crashy", "Z", "error", json!({})),
+                    entry("b", "leaky", "id", "fail", interior(40)),
+                ],
+            ),
+            scene(
+                "broken",
+                vec![entry("broken", "raster", "scene", "error", json!({}))],
+            ),
+        ];
+        let mut calibration = serde_json::Map::new();
+        calibration.insert(
+            "bent".into(),
+            json!({"status": "fail", "reason": "pixel-center offset", "scene": "probe"}),
+        );
+        calibration.insert("leaky".into(), json!({"status": "pass"}));
+        RunData {
+            dir: PathBuf::from("/run"),
+            manifest,
+            results: None,
+            results_problem: None,
+            expectations: None,
+            calibration: Some(calibration),
+            scenes,
+        }
+    }
+
+    #[test]
+    fn one_cause_per_root_in_the_order_to_fix_them() {
+        let data = run();
+        let causes = group(&data);
+        let kinds: Vec<(Kind, &str, usize)> = causes
+            .iter()
+            .map(|c| (c.kind, c.backend.as_str(), c.members.len()))
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                (Kind::Calibration, "bent", 1),
+                (Kind::Scene, "raster", 1),
+                (Kind::RendererError, "crashy", 2),
+                (Kind::Mismatch, "leaky", 2),
+            ]
+        );
+        assert!(!causes[0].counts_valid && causes[3].counts_valid);
+        // A mismatch class points at its worst scene and names its class.
+        let (worst, anchor) = causes[3].evidence.as_ref().unwrap();
+        assert_eq!((worst.name.as_str(), anchor.as_str()), ("b", "#b-leaky"));
+        assert_eq!(causes[3].title, "leaky: id interior mismatches");
+        assert_eq!(unexplained(&data, &causes), 0);
+    }
+}
