@@ -86,3 +86,15 @@ def test_pixels_judged_neither_way_are_counted_with_their_reason(
     res = judge(ref, test)
     assert res.not_comparable == {"the test's id.prim names no triangle of the scene": 1}
     assert "not comparable" in res.tolerance
+
+
+def test_a_radial_depth_is_named_without_calibration(quads: tuple[Reference, dict[str, np.ndarray]]) -> None:
+    ref, base = quads
+    test = tc._copy(base)
+    hit = np.isfinite(base["Z"])
+    rows, cols = np.nonzero(hit)
+    d = ref.scene.camera.center_directions(rows, cols)
+    test["Z"][hit] = (base["Z"][hit].astype(np.float64) * np.linalg.norm(d, axis=1)).astype(np.float32)
+    res = judge(ref, test)
+    assert res.interior > 0
+    assert res.details[0].split(" depths beyond tolerance")[1].startswith(" equal the radial distance"), res.details

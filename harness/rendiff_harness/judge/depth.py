@@ -179,6 +179,32 @@ def depth_tolerance_fn(
     return tol
 
 
+def radial_hint(
+    ref: Reference,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    z_ref: np.ndarray,
+    z_test: np.ndarray,
+    tol: np.ndarray,
+    beyond: np.ndarray,
+) -> str:
+    """Names the commonest depth-convention bug when it explains the failing depths: a renderer
+    that writes the distance from the eye, Z |d| (d the contract's pixel ray, forward component 1),
+    instead of planar depth. Said only when most pixels beyond tolerance are within it of Z |d|
+    (the calibration tests this and the other depth conventions properly: judge/hypotheses.py)."""
+    if not beyond.any():
+        return ""
+    k = np.flatnonzero(beyond)
+    d_norm = np.linalg.norm(ref.scene.camera.center_directions(rows[k], cols[k]), axis=1)
+    radial = np.abs(z_test[k] - z_ref[k] * d_norm) <= tol[k] * d_norm
+    if radial.mean() < 0.9:
+        return ""
+    return (
+        f"{int(radial.sum())} of the {k.size} depths beyond tolerance equal the radial distance from the eye "
+        "(Z |d|), not the planar depth the contract asks for (docs/DESIGN.md, Buffers)"
+    )
+
+
 def compare_depth(
     ref: Reference,
     test: Mapping[str, np.ndarray],
@@ -252,6 +278,9 @@ def compare_depth(
         if mi.size:
             ex = ", ".join(f"({k % w},{k // w}) ref {zr.ravel()[k]:.7g} test {zt.ravel()[k]:.7g}" for k in mi)
             details.append(f"hit/miss mask mismatches e.g. {ex}")
+    hint = radial_hint(ref, rows, cols, z_ref, z_test, tol, beyond)
+    if hint:
+        details.append(hint)
     bi = np.nonzero(beyond)[0]
     if bi.size:
         worst = bi[np.argsort(-(err[bi] / np.maximum(tol[bi], 1e-300)))[:EXAMPLES]]
