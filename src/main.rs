@@ -141,6 +141,10 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Print every verdict, not only the failing ones (results.json and
+        /// the report always have every one).
+        #[arg(long)]
+        verbose: bool,
         /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes
         /// (default: rendiff's tests/references).
         #[arg(long)]
@@ -206,6 +210,9 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Print every verdict, not only the failing ones.
+        #[arg(long)]
+        verbose: bool,
         /// The renderers file the shard runs used (docs/your-renderer.md):
         /// their declared precision judges their renders.
         #[arg(long)]
@@ -650,6 +657,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             references,
             quiet,
+            verbose,
             renderers,
         } => {
             let root = rendiff::check::find_root()?;
@@ -682,7 +690,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
             let what = format!("merge of {} shard runs", runs.len());
-            Ok(finish_run(&what, &outcome, &output))
+            Ok(finish_run(&what, &outcome, &output, verbose))
         }
         Command::Vocab { json } => {
             let v = rendiff::vocab::json();
@@ -856,6 +864,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             timeout,
             expectations,
             quiet,
+            verbose,
             references,
             seed,
             spp,
@@ -941,7 +950,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Some(record) => rendiff::check::run_shard(&opts, record)?,
                 None => rendiff::check::run(&opts)?,
             };
-            Ok(finish_run("check", &outcome, &output))
+            Ok(finish_run("check", &outcome, &output, verbose))
         }
     }
 }
@@ -1036,13 +1045,18 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 
 /// The end of `check` and `merge`: the verdict table, the tally, the report;
 /// exit 1 when any verdict fails.
-fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
+fn finish_run(
+    what: &str,
+    outcome: &rendiff::check::CheckOutcome,
+    output: &Path,
+    verbose: bool,
+) -> ExitCode {
     let tally = rendiff::check::tally(&outcome.results);
+    let verdicts = &outcome.results.results;
+    let failing = verdicts.iter().filter(|e| e.is_failure()).count();
+    let table = rendiff::check::table::shown(&outcome.table, verdicts.len(), failing, verbose);
     // The table quotes scene names: control characters escaped.
-    rendiff::out!(
-        "{}",
-        rendiff::check::process::printable_lines(&outcome.table)
-    );
+    rendiff::out!("{}", rendiff::check::process::printable_lines(&table));
     rendiff::outln!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,

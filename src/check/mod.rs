@@ -20,6 +20,7 @@ pub mod pool;
 pub mod process;
 pub mod run_folder;
 pub mod shard;
+pub mod table;
 pub mod worker;
 
 use crate::backends::embree::{self, EmbreeMode};
@@ -667,6 +668,37 @@ fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
     })
 }
 
+/// Where a recorded render command writes its buffer: `RUN.repro/render/<rel>`,
+/// beside the run, so that running it never overwrites the run it came
+/// from (report/rerun.rs writes check reruns to `RUN.repro/` too). Given the
+/// staging folder, it names the run's once the command is unstaged.
+fn repro_out(run_dir: &Path, rel_exr: &str) -> PathBuf {
+    let mut dir = run_dir.as_os_str().to_owned();
+    dir.push(".repro");
+    PathBuf::from(dir).join("render").join(rel_exr)
+}
+
+/// What the report's reproduction commands need besides the run's options.
+fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
+    // rendiff's own files are check's defaults: a command without them finds them again.
+    let own = |rel: &str| std::path::absolute(in_root(&opts.root, rel)).ok();
+    let given = |file: &Path, rel: &str| {
+        let abs = std::path::absolute(file).ok();
+        (abs != own(rel)).then(|| file.display().to_string())
+    };
+    manifest::Rerun {
+        cwd: std::env::current_dir()
+            .ok()
+            .map(|d| d.display().to_string()),
+        renderers_file: opts.renderers.as_ref().map(|f| f.display().to_string()),
+        calibration_dir: opts
+            .calibration
+            .as_ref()
+            .and_then(|c| given(c, "scenes/calibration")),
+        expectations_file: given(&opts.expectations, "tests/expectations.toml"),
+    }
+}
+
 /// The run itself, written to `opts.run_dir` (the staging folder); commands in
 /// the manifest name `shown_dir`, where the run will be once published.
 fn render_and_compare(
@@ -766,7 +798,7 @@ fn render_and_compare(
                 "--renderer",
                 name,
                 "-o",
-                &exr.display().to_string(),
+                &repro_out(run_dir, &rel_exr).display().to_string(),
             ]);
             let rec = if !core_missing.is_empty() {
                 skipped_for_features(name, &core_missing)
@@ -958,6 +990,7 @@ fn render_and_compare(
         rendiff_version: env!("CARGO_PKG_VERSION").into(),
         scenes,
         options: Some(run_options(opts)?),
+        rerun: Some(rerun_inputs(opts)),
         shard,
     };
     crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {
@@ -1052,6 +1085,20 @@ fn external(
         "rendiff_harness".into(),
     ];
     words.extend(args.iter().cloned());
+    // The recorded command reproduces the buffer beside the run, not over it
+    // (the harness writes only into a folder that exists).
+    let repro = repro_out(&opts.run_dir, &rel_exr);
+    if let Some(i) = words.iter().position(|w| w == "--out") {
+        if let Some(out) = words.get_mut(i + 1) {
+            *out = repro.display().to_string();
+        }
+    }
+    let mkdir = repro.parent().map_or(String::new(), |d| {
+        format!(
+            "{} && ",
+            shell_line(["mkdir", "-p", &d.display().to_string()])
+        )
+    });
     let declared = opts.renderers.as_ref().map_or(String::new(), |f| {
         format!(
             "{RENDERERS_ENV}={} ",
@@ -1059,7 +1106,7 @@ fn external(
         )
     });
     rec.command = format!(
-        "{declared}{}{}",
+        "{mkdir}{declared}{}{}",
         home::harness_path_words(&opts.root),
         shell_line(&words)
     );
