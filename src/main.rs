@@ -282,6 +282,10 @@ enum Command {
         /// Seconds of reduction per finding (0: reduce nothing).
         #[arg(long, default_value_t = 180)]
         reduce_budget: u64,
+        /// Known-finding declarations that classify the findings
+        /// (default: rendiff's scenes/found/known/; docs/fuzzing.md).
+        #[arg(long)]
+        known: Option<PathBuf>,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -646,6 +650,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             no_calibration,
             reduce_budget,
+            known,
             quiet,
         } => {
             // Checked here rather than by clap, whose refusal spans several
@@ -671,6 +676,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 check,
                 reduce_budget: (reduce_budget > 0)
                     .then(|| std::time::Duration::from_secs(reduce_budget)),
+                known,
             };
             let outcome = rendiff::fuzz::run(&opts)?;
             let l = &outcome.ledger;

@@ -8,7 +8,10 @@
 //!   both the generator and the reducer write;
 //! * [`reduce`]: ddmin over objects and triangles, then coordinate snapping,
 //!   with `check` as the interestingness test;
-//! * [`findings`]: failure classes, signatures, findings.json.
+//! * [`findings`]: failure classes, signatures, findings.json;
+//! * [`situation`]: the geometric situation of a finding's scene;
+//! * [`known`]: declared findings that classify a run's findings;
+//! * [`page`]: FOLDER/findings.html.
 //!
 //! All generated scenes go through one `check` run (one pool, one set of
 //! workers, calibration once), and every reduction batches its candidates
@@ -17,9 +20,12 @@
 
 pub mod findings;
 pub mod grammar;
+pub mod known;
 pub mod literal;
+pub mod page;
 pub mod reduce;
 pub mod rng;
+pub mod situation;
 
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
@@ -70,7 +76,13 @@ pub struct FuzzOptions {
     pub check: CheckOptions,
     /// Time for each finding's reduction; None reduces nothing.
     pub reduce_budget: Option<Duration>,
+    /// `--known`: the folder of known-finding declarations; None is
+    /// rendiff's own, `scenes/found/known/` under the check's root.
+    pub known: Option<PathBuf>,
 }
+
+/// rendiff's own known findings, relative to its root.
+pub const KNOWN_DIR: &str = "scenes/found/known";
 
 /// What a fuzz run found.
 #[derive(Debug, Clone)]
@@ -126,7 +138,17 @@ fn write_range(
 /// folders (hidden, beside `run`). A folder holding anything else is not one.
 fn fuzz_entry(name: &std::ffi::OsStr) -> bool {
     let name = name.to_string_lossy();
-    ["scenes", "run", "runs", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
+    [
+        "scenes",
+        "run",
+        "runs",
+        "reduced",
+        MARKER,
+        page::PAGE,
+        page::IMAGES,
+    ]
+    .contains(&name.as_ref())
+        || name.starts_with('.')
 }
 
 /// Makes `folder` ready for a fuzz run: created when absent; a folder that
@@ -146,7 +168,7 @@ fn prepare(folder: &Path) -> Result<()> {
                 crate::scene::printable(&other.to_string_lossy(), 100)
             );
         }
-        for sub in ["scenes", "runs", "reduced"] {
+        for sub in ["scenes", "runs", "reduced", page::IMAGES] {
             let p = folder.join(sub);
             if p.exists() {
                 std::fs::remove_dir_all(&p)
@@ -175,6 +197,12 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
         }
         _ => {}
     }
+    let known_dir = opts
+        .known
+        .clone()
+        .unwrap_or_else(|| opts.check.root.join(KNOWN_DIR));
+    // Before any rendering: a bad declaration is bad input, refused at once.
+    let known = known::load(&known_dir)?;
     let folder = &opts.folder;
     prepare(folder)?;
     let scenes_dir = folder.join("scenes");
@@ -220,6 +248,17 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
             f.reduced = Some(reduce_finding(opts, f, budget));
         }
     }
+    for f in &mut found {
+        f.situation = finding_situation(folder, f);
+        let s = &f.signature;
+        f.classification = Some(known::classify(
+            &known,
+            &s.backend,
+            &s.buffer,
+            &s.class,
+            &f.situation,
+        ));
+    }
     let ledger = Ledger {
         format: FINDINGS_FORMAT.into(),
         seed: opts.seed,
@@ -231,7 +270,22 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     };
     let json = serde_json::to_string_pretty(&ledger)? + "\n";
     crate::exr_io::write_atomically(&folder.join(MARKER), |tmp| Ok(std::fs::write(tmp, &json)?))?;
+    page::write(folder, &ledger)?;
     Ok(FuzzOutcome { ledger, table })
+}
+
+/// The situation of a finding's reduced scene, else of its smallest scene
+/// (the one reduction started from); empty when neither resolves.
+fn finding_situation(folder: &Path, f: &Finding) -> Vec<String> {
+    let file = match &f.reduced {
+        Some(r) if r.error.is_empty() => folder.join(&r.scene),
+        Some(r) => folder.join("scenes").join(format!("{}.toml", r.from)),
+        None => folder.join("scenes").join(format!("{}.toml", f.scenes[0])),
+    };
+    Scene::load(&file)
+        .ok()
+        .and_then(|s| ResolvedScene::resolve(&s).ok())
+        .map_or_else(Vec::new, |r| situation::situations(&r))
 }
 
 /// Reduces a finding's smallest scene (fewest bytes, then first: the
