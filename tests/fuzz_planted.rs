@@ -127,6 +127,23 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
         .as_str()
         .unwrap()
         .contains("--only coplanar_bias"));
+    // Its situation is the reduced pair's: coplanar (within 2^-10 of the
+    // depth; the bias needs a gap under 2^-12). No declaration names a
+    // planted renderer, so it is unclassified, on the ledger and on the page.
+    let tags: Vec<&str> = f["situation"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_str().unwrap())
+        .collect();
+    assert!(tags.contains(&"coplanar"), "{f}");
+    assert_eq!(f["classification"]["kind"], "unclassified", "{f}");
+    let page = std::fs::read_to_string(dir.join("fuzz/findings.html")).unwrap();
+    assert!(page.contains("coplanar_bias fails id (interior)") && page.contains("unclassified"));
+    assert!(
+        page.contains("<img src=\"findings/"),
+        "the page shows the scene's pictures"
+    );
     let reduced = std::fs::read(dir.join("fuzz").join(r["scene"].as_str().unwrap())).unwrap();
 
     // The largest scene that hit it, reduced by hand from the fuzz's run.

@@ -148,6 +148,13 @@ pub struct Ledger {
     /// The check run, relative to FOLDER: `run`, or under `--minutes` the
     /// folder `runs` holding batch k's run in `runs/b<k>` (`mod::batch_run`).
     pub run: String,
+    /// `--from`'s scene files (empty for generated scenes).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub from: Vec<String>,
+    /// `--from`: the base scenes' own failing verdicts (the variants are held
+    /// to them: a variant failing the same way is no finding).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub base_failures: Vec<Failure>,
     /// Every failing verdict on a generated scene.
     pub failures: Vec<Failure>,
     /// Calibration (camera) failures: not per scene, so not reduced.

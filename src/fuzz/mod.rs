@@ -11,7 +11,8 @@
 //! * [`findings`]: failure classes, signatures, findings.json;
 //! * [`situation`]: the geometric situation of a finding's scene;
 //! * [`known`]: declared findings that classify a run's findings;
-//! * [`page`]: FOLDER/findings.html.
+//! * [`page`]: FOLDER/findings.html;
+//! * [`variants`]: `--from`'s metamorphic variants of real scenes.
 //!
 //! All generated scenes go through one `check` run (one pool, one set of
 //! workers, calibration once), and every reduction batches its candidates
@@ -26,6 +27,7 @@ pub mod page;
 pub mod reduce;
 pub mod rng;
 pub mod situation;
+pub mod variants;
 
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
@@ -54,13 +56,16 @@ pub const BATCH: u64 = 50;
 
 /// How many scenes a fuzz run generates: a fixed count, or batches until
 /// a time is up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Amount {
     /// `--count N`: scenes 0 to N-1, one check run.
     Count(u64),
     /// `--minutes M`: batches of [`BATCH`] scenes, a new one started while
     /// less than M minutes have passed since the run began.
     Minutes(u64),
+    /// `--from SCENE...`: no generated scenes; the variants of these scene
+    /// files (`variants.rs`), one check run.
+    Variants(Vec<PathBuf>),
 }
 
 /// What `rendiff fuzz` was asked.
@@ -211,13 +216,30 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     let mut verdicts = Vec::new();
     let mut tables = Vec::new();
     let (mut count, mut k) = (0, 0);
+    let mut from: Option<variants::Written> = None;
     let run_name = loop {
-        let (indices, run_name) = match opts.amount {
-            Amount::Count(n) => (0..n, "run".to_string()),
-            Amount::Minutes(_) => (k * BATCH..(k + 1) * BATCH, batch_run(k)),
+        let (files, fams, run_name) = match &opts.amount {
+            Amount::Count(n) => {
+                let (f, fam) = write_range(opts.seed, 0..*n, &scenes_dir)?;
+                (f, fam, "run".to_string())
+            }
+            Amount::Minutes(_) => {
+                let (f, fam) = write_range(opts.seed, k * BATCH..(k + 1) * BATCH, &scenes_dir)?;
+                (f, fam, batch_run(k))
+            }
+            Amount::Variants(sources) => {
+                let w = variants::write(sources, &scenes_dir)?;
+                for why in &w.skipped {
+                    crate::errln!("fuzz --from: variant not written: {why}");
+                }
+                let (f, fam) = (w.files.clone(), w.relation.clone());
+                from = Some(w);
+                (f, fam, "run".to_string())
+            }
         };
-        let (files, fams) = write_range(opts.seed, indices, &scenes_dir)?;
-        count += files.len() as u64;
+        // Bases are checked too (their verdicts are what the variants are held to).
+        let generated = files.len() - from.as_ref().map_or(0, |w| w.files.len() - w.base.len());
+        count += generated as u64;
         families.extend(fams);
         let check = CheckOptions {
             scenes: files,
@@ -238,10 +260,16 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
             Amount::Minutes(m)
                 if started.elapsed() < Duration::from_secs(m * 60) && count < MAX_COUNT => {}
             Amount::Minutes(_) => break "runs".to_string(),
-            Amount::Count(_) => break run_name,
+            Amount::Count(_) | Amount::Variants(_) => break run_name,
         }
     };
     let table = tables.join("\n");
+    let mut base_failures = Vec::new();
+    if let Some(w) = &from {
+        let (held, of_bases) = hold_to_bases(verdicts, w);
+        verdicts = held;
+        base_failures = of_bases;
+    }
     let (failures, camera_failures, mut found) = findings::group(&verdicts, &families);
     if let Some(budget) = opts.reduce_budget {
         for f in &mut found {
@@ -264,6 +292,11 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
         seed: opts.seed,
         scenes: count,
         run: run_name,
+        from: match &opts.amount {
+            Amount::Variants(sources) => sources.iter().map(|p| p.display().to_string()).collect(),
+            _ => Vec::new(),
+        },
+        base_failures,
         failures,
         camera_failures,
         findings: found,
@@ -272,6 +305,64 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     crate::exr_io::write_atomically(&folder.join(MARKER), |tmp| Ok(std::fs::write(tmp, &json)?))?;
     page::write(folder, &ledger)?;
     Ok(FuzzOutcome { ledger, table })
+}
+
+/// `--from`: the variants' verdicts whose class differs from their base's on
+/// the same backend and buffer (the reason then names the base's class), and
+/// the bases' own failing verdicts (reported, not reduced: the variants are
+/// the fuzz's scenes). Calibration probes pass through.
+fn hold_to_bases(
+    verdicts: Vec<crate::gate::Verdict>,
+    w: &variants::Written,
+) -> (Vec<crate::gate::Verdict>, Vec<findings::Failure>) {
+    let bases: std::collections::BTreeSet<&String> = w.base.values().collect();
+    let base_class: BTreeMap<(String, String, String), Option<String>> = verdicts
+        .iter()
+        .filter(|v| bases.contains(&v.scene))
+        .map(|v| {
+            (
+                (v.scene.clone(), v.backend.clone(), v.buffer.clone()),
+                findings::failure_class(v),
+            )
+        })
+        .collect();
+    let mut of_bases = Vec::new();
+    let mut held = Vec::new();
+    for mut v in verdicts {
+        if bases.contains(&v.scene) {
+            if let Some(class) = findings::failure_class(&v) {
+                of_bases.push(findings::Failure {
+                    scene: v.scene.clone(),
+                    backend: v.backend.clone(),
+                    buffer: v.buffer.clone(),
+                    class,
+                    reason: crate::scene::printable(&v.reason, 300),
+                });
+            }
+            continue;
+        }
+        let Some(base) = w.base.get(&v.scene) else {
+            held.push(v); // a calibration probe
+            continue;
+        };
+        let Some(class) = findings::failure_class(&v) else {
+            continue;
+        };
+        let was = base_class
+            .get(&(base.clone(), v.backend.clone(), v.buffer.clone()))
+            .cloned()
+            .flatten();
+        if was.as_deref() == Some(class.as_str()) {
+            continue;
+        }
+        v.reason = format!(
+            "base {base}: {}; this variant: {}",
+            was.as_deref().unwrap_or("pass"),
+            v.reason
+        );
+        held.push(v);
+    }
+    (held, of_bases)
 }
 
 /// The situation of a finding's reduced scene, else of its smallest scene
@@ -445,4 +536,61 @@ pub fn target_in_run(
         },
         PathBuf::from(&entry.scene_file),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gate::{Status, Verdict};
+
+    fn v(scene: &str, backend: &str, status: Status, interior: u64) -> Verdict {
+        Verdict {
+            scene: scene.into(),
+            backend: backend.into(),
+            buffer: "id".into(),
+            status,
+            reason: "why".into(),
+            counts: [("interior_mismatches".to_string(), interior)].into(),
+            errors: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn variants_are_held_to_their_base_verdict_class() {
+        let mut w = variants::Written::default();
+        for rel in ["translate", "mirror"] {
+            let name = variants::variant_name("m0_a", rel);
+            w.base.insert(name.clone(), "m0_a".into());
+            w.relation.insert(name, rel.into());
+        }
+        let verdicts = vec![
+            // The base passes on povray and fails (interior) on mitsuba.
+            v("m0_a", "povray", Status::Pass, 0),
+            v("m0_a", "mitsuba", Status::Fail, 3),
+            // translate: povray now fails (a finding); mitsuba fails as its base does (none).
+            v("m0_a__translate", "povray", Status::Fail, 5),
+            v("m0_a__translate", "mitsuba", Status::Fail, 7),
+            // mirror: both as the base (none), and a calibration probe passes through.
+            v("m0_a__mirror", "povray", Status::Pass, 0),
+            v("m0_a__mirror", "mitsuba", Status::Fail, 1),
+            v("camera_far", "povray", Status::Fail, 0),
+        ];
+        let (held, bases) = hold_to_bases(verdicts, &w);
+        let keys: Vec<(&str, &str)> = held
+            .iter()
+            .map(|v| (v.scene.as_str(), v.backend.as_str()))
+            .collect();
+        assert_eq!(
+            keys,
+            vec![("m0_a__translate", "povray"), ("camera_far", "povray")]
+        );
+        assert!(held[0]
+            .reason
+            .starts_with("base m0_a: pass; this variant: "));
+        assert_eq!(bases.len(), 1);
+        assert_eq!(
+            (bases[0].backend.as_str(), bases[0].class.as_str()),
+            ("mitsuba", "interior")
+        );
+    }
 }

@@ -41,18 +41,35 @@ pub fn write(folder: &Path, ledger: &Ledger) -> anyhow::Result<PathBuf> {
     let _ = std::fs::remove_dir_all(&img_root);
     let mut loaded: Vec<(PathBuf, Option<RunData>)> = Vec::new();
     let mut body = String::new();
+    let what = if ledger.from.is_empty() {
+        format!("seed {}, {} scenes", ledger.seed, ledger.scenes)
+    } else {
+        format!(
+            "{} variants of {} ({} scene(s))",
+            ledger.scenes,
+            ledger.from.join(", "),
+            ledger.from.len()
+        )
+    };
     let _ = write!(
         body,
-        "<h1>Findings: seed {}, {} scenes</h1>\n<p>{} failing verdicts, {} findings ({}). \
+        "<h1>Findings: {}</h1>\n<p>{} failing verdicts, {} findings ({}). \
          The ledger: <a href=\"findings.json\">findings.json</a>. \
          Classifications come from the known-finding declarations (docs/fuzzing.md); \
          a finding no declaration matches is unclassified: not explained yet.</p>\n",
-        ledger.seed,
-        ledger.scenes,
+        html::escape(&what),
         ledger.failures.len(),
         ledger.findings.len(),
         html::escape(&tally(ledger)),
     );
+    if !ledger.base_failures.is_empty() {
+        let _ = write!(
+            body,
+            "<p class=\"note\">The base scenes themselves fail {} verdict(s) (in findings.json, \
+             <code>base_failures</code>); a variant failing the same way is no finding.</p>\n",
+            ledger.base_failures.len()
+        );
+    }
     if !ledger.camera_failures.is_empty() {
         let _ = write!(
             body,
@@ -304,7 +321,7 @@ fn pictures(
             b,
             "<figure><img src=\"{}\" alt=\"{cap}\"><figcaption>{cap}</figcaption></figure>",
             html::url(&format!("{rel}/{}", p.file)),
-            cap = html::escape(&format!("{} {}", p.backend, p.caption))
+            cap = html::escape(&p.caption)
         );
     }
     b.push_str("</div>\n");
@@ -359,6 +376,8 @@ mod tests {
             seed: 1,
             scenes: 10,
             run: "run".into(),
+            from: Vec::new(),
+            base_failures: Vec::new(),
             failures: Vec::new(),
             camera_failures: Vec::new(),
             findings,
