@@ -11,7 +11,7 @@
 //! * [`findings`]: failure classes, signatures, findings.json;
 //! * [`situation`]: the geometric situation of a finding's scene;
 //! * [`known`]: declared findings that classify a run's findings;
-//! * [`page`]: FOLDER/findings.html;
+//! * [`page`]: the findings page beside the ledger;
 //! * [`variants`]: `--from`'s metamorphic variants of real scenes.
 //!
 //! All generated scenes go through one `check` run (one pool, one set of

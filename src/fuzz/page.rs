@@ -51,29 +51,29 @@ pub fn write(folder: &Path, ledger: &Ledger) -> anyhow::Result<PathBuf> {
             ledger.from.len()
         )
     };
-    let _ = write!(
+    let _ = writeln!(
         body,
         "<h1>Findings: {}</h1>\n<p>{} failing verdicts, {} findings ({}). \
          The ledger: <a href=\"findings.json\">findings.json</a>. \
          Classifications come from the known-finding declarations (docs/fuzzing.md); \
-         a finding no declaration matches is unclassified: not explained yet.</p>\n",
+         a finding no declaration matches is unclassified: not explained yet.</p>",
         html::escape(&what),
         ledger.failures.len(),
         ledger.findings.len(),
         html::escape(&tally(ledger)),
     );
     if !ledger.base_failures.is_empty() {
-        let _ = write!(
+        let _ = writeln!(
             body,
             "<p class=\"note\">The base scenes themselves fail {} verdict(s) (in findings.json, \
-             <code>base_failures</code>); a variant failing the same way is no finding.</p>\n",
+             <code>base_failures</code>); a variant failing the same way is no finding.</p>",
             ledger.base_failures.len()
         );
     }
     if !ledger.camera_failures.is_empty() {
-        let _ = write!(
+        let _ = writeln!(
             body,
-            "<p class=\"note\">{} camera calibration failures (not reduced: they are probes, not generated scenes).</p>\n",
+            "<p class=\"note\">{} camera calibration failures (not reduced: they are probes, not generated scenes).</p>",
             ledger.camera_failures.len()
         );
     }
@@ -172,9 +172,9 @@ fn finding_section(
 ) -> String {
     let s = &f.signature;
     let mut b = String::new();
-    let _ = write!(
+    let _ = writeln!(
         b,
-        "<h2 id=\"{id}\">{id}: {} fails {} ({}) {}</h2>\n",
+        "<h2 id=\"{id}\">{id}: {} fails {} ({}) {}</h2>",
         html::escape(&s.backend),
         html::escape(&s.buffer),
         html::escape(&s.class),
@@ -210,10 +210,10 @@ fn finding_section(
     if f.scenes.len() > MAX_NAMES {
         names.push("...");
     }
-    let _ = write!(
+    let _ = writeln!(
         b,
         "<p>Situation: {}. Hit by {} scene(s) (by family: {}): <span class=\"counts\">{}</span></p>\n\
-         <p>The verifier: <span class=\"reason\">{}</span></p>\n",
+         <p>The verifier: <span class=\"reason\">{}</span></p>",
         html::escape(&if f.situation.is_empty() {
             "none of the tagged ones".to_string()
         } else {
@@ -226,11 +226,11 @@ fn finding_section(
     );
     match &f.reduced {
         Some(r) if r.error.is_empty() => {
-            let _ = write!(
+            let _ = writeln!(
                 b,
                 "<h3>Reduced scene</h3>\n<p>From {}: {} &rarr; {} triangles, {} &rarr; {} objects, \
                  {} &rarr; {} bytes ({} check runs, {} candidates{}). \
-                 <a href=\"{}\">{}</a></p>\n",
+                 <a href=\"{}\">{}</a></p>",
                 html::escape(&r.from),
                 r.triangles_before,
                 r.triangles_after,
@@ -247,15 +247,15 @@ fn finding_section(
             b.push_str(&html::command_block(&r.command));
             match std::fs::read_to_string(folder.join(&r.scene)) {
                 Ok(text) if text.len() <= MAX_INLINE => {
-                    let _ = write!(b, "<details><summary>scene text</summary><pre class=\"cmd\"><code>{}</code></pre></details>\n", html::escape(&text));
+                    let _ = writeln!(b, "<details><summary>scene text</summary><pre class=\"cmd\"><code>{}</code></pre></details>", html::escape(&text));
                 }
                 Ok(_) => {
                     b.push_str("<p class=\"muted\">(too long to show here: follow the link)</p>\n")
                 }
                 Err(e) => {
-                    let _ = write!(
+                    let _ = writeln!(
                         b,
-                        "<p class=\"note\">{}: {}</p>\n",
+                        "<p class=\"note\">{}: {}</p>",
                         html::escape(&r.scene),
                         html::escape(&e.to_string())
                     );
@@ -263,9 +263,9 @@ fn finding_section(
             }
         }
         Some(r) => {
-            let _ = write!(
+            let _ = writeln!(
                 b,
-                "<p class=\"note\">Not reduced ({}): {}</p>\n",
+                "<p class=\"note\">Not reduced ({}): {}</p>",
                 html::escape(&r.from),
                 html::escape(&r.error)
             );
