@@ -326,6 +326,15 @@ enum Command {
         /// Seconds of reduction per finding (0: reduce nothing).
         #[arg(long, default_value_t = 180)]
         reduce_budget: u64,
+        /// Instead of generated scenes: metamorphic variants of these scene
+        /// files (translate, rotate, mirror, permute, flip winding,
+        /// duplicate), each held to its base's verdict class.
+        #[arg(long, num_args = 1..)]
+        from: Vec<PathBuf>,
+        /// Known-finding declarations that classify the findings
+        /// (default: rendiff's scenes/found/known/; docs/fuzzing.md).
+        #[arg(long)]
+        known: Option<PathBuf>,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -732,17 +741,25 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             no_calibration,
             reduce_budget,
+            from,
+            known,
             quiet,
         } => {
             // Checked here rather than by clap, whose refusal spans several
             // lines: the one-line error every bad input gets.
             let amount = match (count, minutes) {
+                _ if !from.is_empty() && (count.is_some() || minutes.is_some()) => {
+                    anyhow::bail!("fuzz: --from makes its own scenes; give no --count or --minutes")
+                }
+                _ if !from.is_empty() => rendiff::fuzz::Amount::Variants(from),
                 (Some(n), None) => rendiff::fuzz::Amount::Count(n),
                 (None, Some(m)) => rendiff::fuzz::Amount::Minutes(m),
                 (Some(_), Some(_)) => {
                     anyhow::bail!("fuzz: give --count N or --minutes M, not both")
                 }
-                (None, None) => anyhow::bail!("fuzz: give --count N or --minutes M"),
+                (None, None) => {
+                    anyhow::bail!("fuzz: give --count N or --minutes M (or --from SCENE...)")
+                }
             };
             let mut check = check_template(only, renderers, jobs, timeout, expectations)?;
             check.quiet = quiet;
@@ -757,6 +774,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 check,
                 reduce_budget: (reduce_budget > 0)
                     .then(|| std::time::Duration::from_secs(reduce_budget)),
+                known,
             };
             let outcome = rendiff::fuzz::run(&opts)?;
             let l = &outcome.ledger;
