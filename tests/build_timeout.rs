@@ -56,7 +56,12 @@ mesh = "near.obj"
     scene
 }
 
-fn render(scene: &Path, renderer: &str, out: &Path) -> (std::process::Output, Duration) {
+fn render(
+    scene: &Path,
+    renderer: &str,
+    timeout_s: &str,
+    out: &Path,
+) -> (std::process::Output, Duration) {
     let start = Instant::now();
     let mut cmd = rendiff();
     cmd.arg("render")
@@ -65,7 +70,7 @@ fn render(scene: &Path, renderer: &str, out: &Path) -> (std::process::Output, Du
             "--renderer",
             renderer,
             "--timeout",
-            "1",
+            timeout_s,
             "--quiet",
             "--no-preview",
             "-o",
@@ -80,10 +85,13 @@ fn render(scene: &Path, renderer: &str, out: &Path) -> (std::process::Output, Du
 fn render_timeout_stops_a_slow_bvh_build() {
     let dir = tempfile::tempdir().unwrap();
     let scene = near_duplicate_scene(dir.path());
-    let (raster, besides) = render(&scene, "raster", &dir.path().join("r.exr"));
+    // The raster's run measures the costs besides the build; it gets no tight
+    // limit of its own (on a loaded machine its 60k-triangle load and pass
+    // passed 1 s once), only the hang guard's.
+    let (raster, besides) = render(&scene, "raster", "600", &dir.path().join("r.exr"));
     assert!(raster.status.success(), "{raster:?}");
     let out = dir.path().join("t.exr");
-    let (trace, took) = render(&scene, "trace", &out);
+    let (trace, took) = render(&scene, "trace", "1", &out);
     let stderr = String::from_utf8_lossy(&trace.stderr);
     assert_eq!(trace.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("timed out"), "{stderr}");
@@ -112,7 +120,7 @@ fn check_timeout_stops_a_slow_bvh_build() {
             "--only",
             "trace",
             "--timeout",
-            "1",
+            timeout_s,
             "--quiet",
             "-o",
         ])
