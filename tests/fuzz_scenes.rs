@@ -16,8 +16,11 @@
 //! binary; a failure prints the
 //! folder's files so it can be reproduced by hand.
 
+mod common_cli;
 #[path = "fuzz_scenes/gltf.rs"]
 mod gltf;
+#[path = "fuzz_scenes/renderers.rs"]
+mod renderers;
 
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
