@@ -21,6 +21,8 @@ mod common_cli;
 mod gltf;
 #[path = "fuzz_scenes/renderers.rs"]
 mod renderers;
+#[path = "fuzz_scenes/runs.rs"]
+mod runs;
 
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
