@@ -139,7 +139,7 @@ fn base64(bytes: &[u8]) -> String {
             s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
         }
     }
-    while s.len() % 4 != 0 {
+    while !s.len().is_multiple_of(4) {
         s.push('=');
     }
     s
@@ -151,7 +151,7 @@ fn glb(json: &[u8], bin: Option<&[u8]>, extra_chunk: bool) -> Vec<u8> {
     let mut chunks = Vec::new();
     let mut chunk = |ty: &[u8; 4], data: &[u8], pad: u8| {
         let mut d = data.to_vec();
-        while d.len() % 4 != 0 {
+        while !d.len().is_multiple_of(4) {
             d.push(pad);
         }
         chunks.extend_from_slice(&(d.len() as u32).to_le_bytes());
@@ -265,7 +265,7 @@ fn put_f32(doc: &mut Doc, at: usize, x: f32) {
 /// Appends `bytes` to the buffer (4-byte aligned) as a new bufferView;
 /// returns its index.
 fn add_view(doc: &mut Doc, bytes: &[u8]) -> usize {
-    while doc.bin.len() % 4 != 0 {
+    while !doc.bin.len().is_multiple_of(4) {
         doc.bin.push(0);
     }
     let off = doc.bin.len();
