@@ -271,7 +271,10 @@ fn add_view(doc: &mut Doc, bytes: &[u8]) -> usize {
     let off = doc.bin.len();
     doc.bin.extend_from_slice(bytes);
     let len = doc.bin.len();
-    doc.json["buffers"][0]["byteLength"] = json!(len);
+    set(doc, "/buffers/0/byteLength", json!(len));
+    if !doc.json["bufferViews"].is_array() {
+        doc.json["bufferViews"] = json!([]);
+    }
     let views = doc.json["bufferViews"].as_array_mut().unwrap();
     views.push(json!({"buffer": 0, "byteOffset": off, "byteLength": bytes.len()}));
     views.len() - 1
@@ -374,7 +377,7 @@ const MUTATIONS: &[Mutation] = &[
         apply: |d, _, _| {
             d.skipped = d.container != Container::External;
             if !d.skipped {
-                d.json["buffers"][0]["uri"] = json!("b%2Ebin");
+                set(d, "/buffers/0/uri", json!("b%2Ebin"));
             }
         },
     },
@@ -388,7 +391,7 @@ const MUTATIONS: &[Mutation] = &[
                 .as_str()
                 .and_then(|u| u.strip_prefix("data:"))
             {
-                d.json["buffers"][0]["uri"] = json!(format!("DATA:{u}"));
+                set(d, "/buffers/0/uri", json!(format!("DATA:{u}")));
             }
         },
     },
@@ -513,7 +516,9 @@ const MUTATIONS: &[Mutation] = &[
         apply: |d, a, _| {
             let i = [4u16, 5, 255, u16::MAX][(a % 4) as usize];
             let at = 48 + 2 * (a as usize / 4 % 6);
-            d.bin[at..at + 2].copy_from_slice(&i.to_le_bytes());
+            if let Some(slot) = d.bin.get_mut(at..at + 2) {
+                slot.copy_from_slice(&i.to_le_bytes());
+            }
         },
     },
     Mutation {
@@ -720,7 +725,7 @@ const MUTATIONS: &[Mutation] = &[
                         4 => format!("data:application/octet-stream;base64,{data}==="),
                         _ => format!("data:application/octet-stream;base64,*{}", &data[1..]),
                     };
-                    d.json["buffers"][0]["uri"] = json!(bad);
+                    set(d, "/buffers/0/uri", json!(bad));
                 }
             }
         },
@@ -752,7 +757,7 @@ const MUTATIONS: &[Mutation] = &[
                 "sub/../../outside.bin",
                 "dir.bin/",
             ][(a % 20) as usize];
-            d.json["buffers"][0]["uri"] = json!(uri);
+            set(d, "/buffers/0/uri", json!(uri));
         },
     },
     // ---- either may be right
@@ -1027,7 +1032,15 @@ impl GltfCase {
         let mut ms: Vec<&(usize, u64, u64)> = self.mutations.iter().collect();
         // By phase; within one, the data-copying ones last (they copy what
         // the others made).
-        ms.sort_by_key(|(i, _, _)| (MUTATIONS[*i].phase, MUTATIONS[*i].class == Class::SameData));
+        // Removing a field last (the others write into the JSON's tables).
+        ms.sort_by_key(|(i, _, _)| {
+            let m = &MUTATIONS[*i];
+            (
+                m.phase,
+                m.class == Class::SameData,
+                m.name == "a field removed",
+            )
+        });
         let mut classes = Vec::new();
         for phase in [Phase::Structure, Phase::Uri, Phase::Bytes] {
             if phase == Phase::Uri {
@@ -1063,9 +1076,9 @@ impl GltfCase {
         match self.container {
             Container::DataUri => {
                 let uri = format!("data:application/octet-stream;base64,{}", base64(&d.bin));
-                d.json["buffers"][0]["uri"] = json!(uri);
+                set(d, "/buffers/0/uri", json!(uri));
             }
-            Container::External => d.json["buffers"][0]["uri"] = json!("b.bin"),
+            Container::External => set(d, "/buffers/0/uri", json!("b.bin")),
             Container::Glb => {}
         }
     }
