@@ -1,4 +1,5 @@
-//! Fuzzer: hostile scenes and meshes through the real binary.
+//! Fuzzer: hostile scenes, meshes, glTF files, renderer declarations and
+//! tampered run folders through the real binary, one test per surface.
 //!
 //! proptest generates scene folders (TOML with wrong types, huge, NaN and
 //! infinite numbers, degenerate cameras, budgets exceeded; OBJ text with bad
@@ -8,13 +9,40 @@
 //! --renderer raster` and `rendiff export`. No run may panic (exit 101 or a
 //! signal), hang past [`TIMEOUT`], exit with anything but 0 or 2, print more
 //! or less than one line (or a raw control character) on stderr when it
-//! fails, or leave a file in the output folder when it fails.
+//! fails, or leave a file in the output folder when it fails ([`judge`]).
+//! The other surfaces, each with its own oracle for a wrong verdict:
+//! fuzz_scenes/gltf.rs (glTF and GLB files), fuzz_scenes/renderers.rs
+//! (`check --renderers`), fuzz_scenes/runs.rs (gate, bless, report and
+//! merge on tampered runs).
 //!
-//! The table of counts is printed at the end (`cargo test --test fuzz_scenes
-//! -- --nocapture`). `RENDIFF_FUZZ_CASES` (default 2000) and `RENDIFF_FUZZ_SEED`
-//! change the number of scene folders and the seed, `RENDIFF_FUZZ_BIN` the
-//! binary; a failure prints the
-//! folder's files so it can be reproduced by hand.
+//! Each surface prints its table of counts by outcome (`cargo test --test
+//! fuzz_scenes -- --nocapture`). The number of cases: `RENDIFF_FUZZ_CASES`
+//! (scenes, default 2000), `RENDIFF_FUZZ_GLTF_CASES` (600),
+//! `RENDIFF_FUZZ_RENDERERS_CASES` (24: each accepted file is a whole check,
+//! about 3 s), `RENDIFF_FUZZ_RUNS_CASES` (120); the defaults keep the test
+//! near a minute on two cores. `RENDIFF_FUZZ_SEED` changes the seed,
+//! `RENDIFF_FUZZ_BIN` the binary, `RENDIFF_FUZZ_SHOW` prints every clean
+//! error; a failure prints what reproduces it by hand.
+//!
+//! Larger runs (seed 12, on a 2-core machine shared with other builds):
+//!
+//! | surface | inputs | runs | clean errors | successes | failing verdicts | panics | hangs | leftovers | bad messages | other exits | wrong verdicts |
+//! |---|---|---|---|---|---|---|---|---|---|---|---|
+//! | scenes (default) | 2000 | 4000 | 3722 | 278 | - | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | glTF files | 2000 | 4000 | 2442 | 1558 | 0 | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | renderer declarations (300 cases: each a check) | 300 | 300 | 224 | 55 | 21 | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | tampered runs | 2000 | 4802 | 2766 | 1591 | 445 | 0 | 0 | 0 | 0 | 0 | 0 |
+//!
+//! (glTF: 639 cases of the valid file's meaning, each exported the same
+//! triangles; 422 invalid by the specification, each refused. Tampered
+//! runs, before the fixes that came with them: gate passed runs whose
+//! manifest.json was damaged, merge passed shards whose resolved scene or
+//! its recorded hash had been changed. One earlier 2000-case run of the
+//! tampered runs also had 5 merges of a shard with a damaged EXR end in
+//! "the comparison failed" on several lines, its marker left in the
+//! unpublished output; not seen in the rerun above or in 30 tries by hand
+//! (the Python comparison died, the machine shared: cause not found). The
+//! message is one line now; why the comparison died is open.)
 
 mod common_cli;
 #[path = "fuzz_scenes/gltf.rs"]
