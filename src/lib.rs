@@ -8,8 +8,8 @@
 //! what.
 
 pub use rendiff_core::{
-    backends, camera, deadline, exr_io, frame, names, pending, predicate, raster, render, scene,
-    shade, trace, visibility, vocab,
+    backends, camera, deadline, exr_io, frame, loop_cost, names, pending, predicate, raster,
+    render, scene, shade, trace, visibility, vocab,
 };
 
 /// `println!` that never panics: with stdout a closed pipe (`rendiff scenes |
@@ -45,6 +45,7 @@ macro_rules! errln {
 pub mod args;
 pub mod check;
 pub mod diff;
+pub mod doctor;
 pub mod fuzz;
 pub mod gate;
 pub mod preview;

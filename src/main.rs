@@ -33,17 +33,34 @@ enum Renderer {
     Raster,
     /// Outer loop over pixels, BVH (obvhs), rows in parallel.
     Trace,
+    /// Raster or trace, whichever the cost model expects to finish sooner
+    /// (the same buffers either way; docs/benchmarks.md, "Which loop").
+    Core,
     /// Embree's rtcIntersect1 per pixel center, default scene flags (visibility only).
     Embree,
     /// Embree with RTC_SCENE_FLAG_ROBUST (visibility only).
     EmbreeRobust,
 }
 
+/// `rendiff scene ...`.
+#[derive(Subcommand)]
+enum SceneAction {
+    /// Write the scene rendiff makes for a model file (the camera framing its
+    /// bounding sphere, docs/resolved-scene.md) to a new TOML file for editing.
+    New {
+        /// The model: .obj, .gltf or .glb.
+        model: PathBuf,
+        /// The scene file to write (never overwritten); its folder must hold the model.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene's depth/ID/normal buffers to an EXR (plus PNG previews).
     Render {
-        /// Scene file (TOML), e.g. scenes/three_triangles.toml.
+        /// Scene file (TOML), e.g. scenes/three_triangles.toml, or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Which visibility loop to use.
         #[arg(long, value_enum)]
@@ -75,6 +92,15 @@ enum Command {
         /// Deliberately wrong shading, for testing the statistical gate's power.
         #[arg(long, value_parser = rendiff::args::named::<rendiff::shade::Bias>(), hide = true)]
         inject_bias: Option<rendiff::shade::Bias>,
+        /// Seconds before the render stops, BVH build included (1 to a week);
+        /// a render stopped by it writes nothing and exits with an error.
+        #[arg(long, value_parser = rendiff::args::parse_timeout)]
+        timeout: Option<u64>,
+    },
+    /// Make scene files (`scene new MODEL -o SCENE.toml`).
+    Scene {
+        #[command(subcommand)]
+        action: SceneAction,
     },
     /// List scenes in a folder with the features they require.
     Scenes {
@@ -84,7 +110,7 @@ enum Command {
     },
     /// Write the resolved scene (triangles, IDs, camera) for external renderers.
     Export {
-        /// Scene file (TOML).
+        /// Scene file (TOML), or a model (.obj, .gltf, .glb).
         scene: PathBuf,
         /// Output folder (scene.json, triangles.f32, object_ids.u32).
         #[arg(short, long)]
@@ -97,7 +123,8 @@ enum Command {
     /// Writes RUN/manifest.json, the buffers, diff images and RUN/results.json.
     /// Exit 1 if any comparison fails or errors.
     Check {
-        /// Scene files or folders (default: rendiff's scenes and the real-asset corpus scenes/corpus).
+        /// Scene files or folders (default: rendiff's scenes and the real-asset corpus scenes/corpus);
+        /// a model file (.obj, .gltf, .glb) is checked as the scene `scene new` would write for it.
         scenes: Vec<PathBuf>,
         /// Run folder.
         #[arg(short, long, default_value = "reports/runs/latest")]
@@ -114,6 +141,10 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Print every verdict, not only the failing ones (results.json and
+        /// the report always have every one).
+        #[arg(long)]
+        verbose: bool,
         /// Cached Monte Carlo references (Mitsuba) for global-illumination scenes
         /// (default: rendiff's tests/references).
         #[arg(long)]
@@ -179,6 +210,9 @@ enum Command {
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Print every verdict, not only the failing ones.
+        #[arg(long)]
+        verbose: bool,
         /// The renderers file the shard runs used (docs/your-renderer.md):
         /// their declared precision judges their renders.
         #[arg(long)]
@@ -226,6 +260,16 @@ enum Command {
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
+    },
+    /// What this installation found: the binary, the harness and how it was
+    /// found (RENDIFF_HOME, the current checkout, the checkout built from, or
+    /// an installed harness through RENDIFF_PYTHON), its Python, and every
+    /// renderer's version and status. Exit 2 when the harness is missing,
+    /// with the command that fixes it.
+    Doctor {
+        /// Also list the renderers this file declares (docs/your-renderer.md).
+        #[arg(long)]
+        renderers: Option<PathBuf>,
     },
     /// Internal: run a command and write its peak memory (max RSS, bytes) to a
     /// file; `check` measures renders through it, from a small process.
@@ -282,6 +326,15 @@ enum Command {
         /// Seconds of reduction per finding (0: reduce nothing).
         #[arg(long, default_value_t = 180)]
         reduce_budget: u64,
+        /// Instead of generated scenes: metamorphic variants of these scene
+        /// files (translate, rotate, mirror, permute, flip winding,
+        /// duplicate), each held to its base's verdict class.
+        #[arg(long, num_args = 1..)]
+        from: Vec<PathBuf>,
+        /// Known-finding declarations that classify the findings
+        /// (default: rendiff's scenes/found/known/; docs/fuzzing.md).
+        #[arg(long)]
+        known: Option<PathBuf>,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -375,7 +428,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             spp,
             seed,
             inject_bias,
+            timeout,
         } => {
+            let deadline =
+                timeout.map(|t| std::time::Instant::now() + std::time::Duration::from_secs(t));
             // Refused before the render too, not only at the write.
             if let Some(out) = &output {
                 rendiff::exr_io::check_output(out)?;
@@ -389,6 +445,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let backend = match renderer {
                 Renderer::Raster => Backend::Raster,
                 Renderer::Trace => Backend::Trace,
+                Renderer::Core => {
+                    let (b, c) = rendiff::render::core_loop(&resolved, pool.current_num_threads());
+                    let build = if rendiff::shade::needs_shading(&resolved) {
+                        "not counted: shading builds it either way"
+                    } else {
+                        "counted in trace"
+                    };
+                    rendiff::outln!(
+                        "core: {} (estimated raster {:.4} s, trace {:.4} s; BVH build {:.4} s, {build})",
+                        b.name(),
+                        c.raster_s,
+                        c.trace_s,
+                        c.build_s,
+                    );
+                    b
+                }
                 Renderer::Embree => Backend::Embree(EmbreeMode::Default),
                 Renderer::EmbreeRobust => Backend::Embree(EmbreeMode::Robust),
             };
@@ -399,7 +471,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 spp,
                 seed,
                 bias: inject_bias,
-                deadline: None,
+                deadline,
             };
             let what = match backend {
                 Backend::Raster => "raster tiles",
@@ -418,6 +490,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 Err(NotRendered::Failed(why)) => anyhow::bail!("{name}: {why}"),
             };
+            if let (Some(t), true) = (timeout, rendiff::deadline::past(deadline)) {
+                anyhow::bail!("{name}: timed out: stopped at --timeout {t} s; nothing written");
+            }
             let out = output.unwrap_or_else(|| {
                 let stem = scene
                     .file_stem()
@@ -491,6 +566,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     );
                 }
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Scene {
+            action: SceneAction::New { model, output },
+        } => {
+            let mesh = rendiff::scene::model::write_model_scene(&model, &output)?;
+            rendiff::outln!(
+                "wrote {} (mesh = {:?})",
+                rendiff::scene::printable(&output.display().to_string(), 500),
+                rendiff::scene::printable(&mesh, 500)
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Scenes { dir } => {
@@ -580,6 +666,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             references,
             quiet,
+            verbose,
             renderers,
         } => {
             let root = rendiff::check::find_root()?;
@@ -612,7 +699,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             };
             let outcome = rendiff::check::shard::merge(&runs, &opts)?;
             let what = format!("merge of {} shard runs", runs.len());
-            Ok(finish_run(&what, &outcome, &output))
+            Ok(finish_run(&what, &outcome, &output, verbose))
         }
         Command::Vocab { json } => {
             let v = rendiff::vocab::json();
@@ -628,6 +715,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
             }
             Ok(ExitCode::SUCCESS)
+        }
+        Command::Doctor { renderers } => {
+            let renderers = renderers_file(renderers)?;
+            Ok(if rendiff::doctor::run(renderers.as_deref()) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(2)
+            })
         }
         Command::PeakRss { report, command } => {
             let code = rendiff::check::process::peak_rss_main(&report, &command)?;
@@ -646,17 +741,25 @@ fn run(cli: Cli) -> Result<ExitCode> {
             expectations,
             no_calibration,
             reduce_budget,
+            from,
+            known,
             quiet,
         } => {
             // Checked here rather than by clap, whose refusal spans several
             // lines: the one-line error every bad input gets.
             let amount = match (count, minutes) {
+                _ if !from.is_empty() && (count.is_some() || minutes.is_some()) => {
+                    anyhow::bail!("fuzz: --from makes its own scenes; give no --count or --minutes")
+                }
+                _ if !from.is_empty() => rendiff::fuzz::Amount::Variants(from),
                 (Some(n), None) => rendiff::fuzz::Amount::Count(n),
                 (None, Some(m)) => rendiff::fuzz::Amount::Minutes(m),
                 (Some(_), Some(_)) => {
                     anyhow::bail!("fuzz: give --count N or --minutes M, not both")
                 }
-                (None, None) => anyhow::bail!("fuzz: give --count N or --minutes M"),
+                (None, None) => {
+                    anyhow::bail!("fuzz: give --count N or --minutes M (or --from SCENE...)")
+                }
             };
             let mut check = check_template(only, renderers, jobs, timeout, expectations)?;
             check.quiet = quiet;
@@ -671,6 +774,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 check,
                 reduce_budget: (reduce_budget > 0)
                     .then(|| std::time::Duration::from_secs(reduce_budget)),
+                known,
             };
             let outcome = rendiff::fuzz::run(&opts)?;
             let l = &outcome.ledger;
@@ -778,6 +882,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             timeout,
             expectations,
             quiet,
+            verbose,
             references,
             seed,
             spp,
@@ -863,7 +968,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Some(record) => rendiff::check::run_shard(&opts, record)?,
                 None => rendiff::check::run(&opts)?,
             };
-            Ok(finish_run("check", &outcome, &output))
+            Ok(finish_run("check", &outcome, &output, verbose))
         }
     }
 }
@@ -958,13 +1063,18 @@ fn own_file(root: &Path, given: Option<PathBuf>, rel: &str) -> Result<PathBuf> {
 
 /// The end of `check` and `merge`: the verdict table, the tally, the report;
 /// exit 1 when any verdict fails.
-fn finish_run(what: &str, outcome: &rendiff::check::CheckOutcome, output: &Path) -> ExitCode {
+fn finish_run(
+    what: &str,
+    outcome: &rendiff::check::CheckOutcome,
+    output: &Path,
+    verbose: bool,
+) -> ExitCode {
     let tally = rendiff::check::tally(&outcome.results);
+    let verdicts = &outcome.results.results;
+    let failing = verdicts.iter().filter(|e| e.is_failure()).count();
+    let table = rendiff::check::table::shown(&outcome.table, verdicts.len(), failing, verbose);
     // The table quotes scene names: control characters escaped.
-    rendiff::out!(
-        "{}",
-        rendiff::check::process::printable_lines(&outcome.table)
-    );
+    rendiff::out!("{}", rendiff::check::process::printable_lines(&table));
     rendiff::outln!(
         "{what}: {} ok, {} failing, {} skipped -> {}",
         tally.ok,
@@ -990,7 +1100,11 @@ fn write_report(run: &Path) {
 
 fn load_scene(path: &Path) -> Result<ResolvedScene> {
     let scene = Scene::load(path)?;
-    Ok(ResolvedScene::resolve(&scene)?)
+    let resolved = ResolvedScene::resolve(&scene)?;
+    for w in &resolved.warnings {
+        rendiff::errln!("warning: {w}");
+    }
+    Ok(resolved)
 }
 
 /// `rendiff diff`: one line per buffer present in either file (src/diff.rs);

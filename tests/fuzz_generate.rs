@@ -93,6 +93,25 @@ fn bad_fuzz_and_reduce_input_is_one_clear_line() {
     }
     let (code, err) = run(&["fuzz", "--minutes", "0"]);
     assert_eq!(code, Some(2), "{err}");
+    // --from makes its own scenes; a missing source is named.
+    let (code, err) = run(&["fuzz", "--from", "a.toml", "--count", "3", "-o", "f1"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--from makes its own scenes"), "{err}");
+    let (code, err) = run(&["fuzz", "--from", "absent.toml", "-o", "f2"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("absent.toml"), "{err}");
+    // A bad known-finding declaration is refused before anything renders.
+    std::fs::create_dir(dir.join("known")).unwrap();
+    std::fs::write(dir.join("known/k.toml"), "classification = \"bug\"\n").unwrap();
+    let (code, err) = run(&["fuzz", "--count", "1", "--known", "known", "-o", "f3"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("k.toml") && err.contains("not a known-finding declaration"),
+        "{err}"
+    );
+    assert!(!dir.join("f3").exists());
     let (code, err) = run(&["reduce", "nope", "s1_00000", "--backend", "trace"]);
     assert_eq!(code, Some(2), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -186,4 +205,68 @@ fn minutes_generates_whole_batches_of_the_seeds_first_scenes() {
         .join("fuzz")
         .join(rendiff::fuzz::batch_run(scenes / batch))
         .exists());
+}
+
+/// `--from`: a scene's base and its six variants go through one check (the
+/// core's trace here); none changes the verdict class, so no finding, and
+/// the ledger and the page say what was fuzzed.
+#[test]
+fn from_checks_a_scene_and_its_variants() {
+    need_venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/three_triangles.toml");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rendiff"))
+        .current_dir(tmp.path())
+        .env("RENDIFF_HOME", env!("CARGO_MANIFEST_DIR"))
+        .args(["fuzz", "--from"])
+        .arg(&scene)
+        .args([
+            "--only",
+            "trace",
+            "--no-calibration",
+            "--jobs",
+            "2",
+            "--quiet",
+            "-o",
+            "f",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let ledger: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("f/findings.json")).unwrap())
+            .unwrap();
+    assert_eq!(ledger["scenes"], 6, "{ledger}");
+    assert_eq!(ledger["from"][0], scene.display().to_string());
+    assert_eq!(ledger["findings"].as_array().unwrap().len(), 0, "{ledger}");
+    let names: Vec<String> = files(&tmp.path().join("f/scenes"))
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+    assert_eq!(names.len(), 7, "{names:?}");
+    for rel in [
+        "translate",
+        "rotate",
+        "mirror",
+        "permute",
+        "flip_winding",
+        "duplicate",
+    ] {
+        assert!(
+            names.contains(&format!("m0_three_triangles__{rel}.toml")),
+            "{rel}: {names:?}"
+        );
+    }
+    // Every variant was compared (a trace verdict for each, base included).
+    let results = std::fs::read_to_string(tmp.path().join("f/run/results.json")).unwrap();
+    for n in &names {
+        let stem = n.trim_end_matches(".toml");
+        assert!(
+            results.contains(&format!("\"scene\": \"{stem}\"")),
+            "{stem}"
+        );
+    }
+    let page = std::fs::read_to_string(tmp.path().join("f/findings.html")).unwrap();
+    assert!(page.contains("6 variants of"), "{page}");
 }

@@ -127,6 +127,27 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
         .as_str()
         .unwrap()
         .contains("--only coplanar_bias"));
+    // Its situation is the reduced pair's. The smallest scene that hit it
+    // (seed 1's s1_00007) is a `near_plane` scene: two triangles crossing
+    // each other and the near plane, dropped where their depths are within
+    // the bias of each other, near their intersection line (so not
+    // `coplanar`). No declaration names a planted renderer, so it is
+    // unclassified, on the ledger and on the page.
+    let tags: Vec<&str> = f["situation"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_str().unwrap())
+        .collect();
+    assert_eq!(r["from"], "s1_00007", "{f}");
+    assert!(tags.contains(&"near_plane"), "{f}");
+    assert_eq!(f["classification"]["kind"], "unclassified", "{f}");
+    let page = std::fs::read_to_string(dir.join("fuzz/findings.html")).unwrap();
+    assert!(page.contains("coplanar_bias fails id (interior)") && page.contains("unclassified"));
+    assert!(
+        page.contains("<img src=\"findings/"),
+        "the page shows the scene's pictures"
+    );
     let reduced = std::fs::read(dir.join("fuzz").join(r["scene"].as_str().unwrap())).unwrap();
 
     // The largest scene that hit it, reduced by hand from the fuzz's run.

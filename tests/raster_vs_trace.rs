@@ -220,3 +220,49 @@ fn triangles_sharing_a_box_by_the_thousand_render_identically() {
         );
     }
 }
+
+/// `render --renderer core` and `check`'s reference render through the loop
+/// the cost model (`rendiff::loop_cost`) picks: whichever it is, the buffers
+/// are both loops' own, so the choice never changes a verdict. Every starter
+/// scene through the pick for one frame, and through the pick when the BVH is
+/// shared by many frames (which is the tracer on the dense grid below), so
+/// both picks are exercised.
+#[test]
+fn the_loop_the_cost_model_picks_renders_both_loops_buffers() {
+    use rendiff::loop_cost::{self, Loop, Workload};
+    use rendiff::render::{self, Backend, RenderOptions};
+    let mut scenes: Vec<(String, ResolvedScene)> = scene_files()
+        .into_iter()
+        .map(|p| (p.display().to_string(), load(&p)))
+        .collect();
+    // 8 triangles per pixel, screen-filling: the passes favour the tracer.
+    let dense = rendiff::scene::generators::crossover_grid(128, 64, false).unwrap();
+    scenes.push(("dense grid".into(), dense));
+    let mut picked = std::collections::BTreeSet::new();
+    for (name, scene) in &scenes {
+        let (r, t) = both(scene, false);
+        assert_identical(name, &r, &t);
+        let shared = Workload {
+            frames: 1000,
+            ..loop_cost::workload(scene, 2)
+        };
+        let picks = [
+            render::core_loop(scene, 2).0,
+            match loop_cost::choose(&shared).pick {
+                Loop::Raster => Backend::Raster,
+                Loop::Trace => Backend::Trace,
+            },
+        ];
+        for backend in picks {
+            picked.insert(backend.name());
+            let got = render::render(scene, backend, RenderOptions::default(), &|_| {})
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_identical(&format!("{name} ({})", backend.name()), &r, &got.frame);
+        }
+    }
+    assert_eq!(
+        picked.into_iter().collect::<Vec<_>>(),
+        ["raster", "trace"],
+        "both loops picked somewhere"
+    );
+}

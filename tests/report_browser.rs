@@ -125,3 +125,141 @@ fn the_report_renders_in_a_headless_browser() {
     );
     eprintln!("screenshot: {}", shot.display());
 }
+
+/// A number the report's script wrote on `<body>` (`data-NAME="N"`).
+fn body_number(dom: &str, name: &str) -> i64 {
+    let key = format!("data-{name}=\"");
+    let at = dom
+        .find(&key)
+        .unwrap_or_else(|| panic!("the script recorded no {name}"));
+    let rest = &dom[at + key.len()..];
+    rest[..rest.find('"').unwrap()].parse().unwrap()
+}
+
+/// The report of a run with a failed camera calibration, in Chromium: the
+/// causes come first, one row each, calibration before all else; every
+/// evidence link points at a page and an anchor that exist; the matrix stays
+/// inside the page at 1400 px and scrolls inside its own box on a narrow
+/// window. Screenshots stay in target/report-browser/ (a CI artifact).
+#[test]
+fn causes_links_and_the_matrix_in_a_headless_browser() {
+    if !Path::new(CHROMIUM).exists() {
+        if std::env::var("RENDIFF_ALLOW_NO_BROWSER").as_deref() == Ok("1") {
+            eprintln!("SKIPPED: {CHROMIUM} not found and RENDIFF_ALLOW_NO_BROWSER=1");
+            return;
+        }
+        panic!("{CHROMIUM} not found: run scripts/setup.sh (it installs chromium), or set RENDIFF_ALLOW_NO_BROWSER=1 to skip");
+    }
+    common_cli::need_venv();
+    let root = common_cli::root();
+    let keep = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/report-browser");
+    let run = keep.join("causes-run");
+    let _ = std::fs::remove_dir_all(&run);
+    std::fs::create_dir_all(&keep).unwrap();
+    let path = format!(
+        "{}:{}",
+        root.join(".venv/bin").display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    // A renderer sampling pixel corners fails its calibration and spoils its
+    // verdicts; the core's tracer and Embree pass beside it.
+    let out = common_cli::rendiff()
+        .env("PATH", path)
+        .args([
+            "check",
+            "scenes/three_triangles.toml",
+            "scenes/pixel_grid.toml",
+            "--renderers",
+            "tests/fuzz_renderers/cameras.toml",
+            "--only",
+            "corner_sample,trace,embree",
+            "--jobs",
+            "2",
+            "--quiet",
+            "-o",
+        ])
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = run.join("report");
+    let profile = tempfile::tempdir().unwrap();
+    let dom = loaded_dom(profile.path(), &report.join("index.html"));
+
+    // Grouping: one cause, the calibration, before anything else.
+    let attention = &dom[dom.find("id=\"attention\"").unwrap()..];
+    let attention = &attention[..attention.find("<h2").unwrap()];
+    let causes: Vec<&str> = attention
+        .split("<tr class=\"cause\"")
+        .skip(1)
+        .map(|r| &r[..r.find("</tr>").unwrap()])
+        .collect();
+    assert_eq!(causes.len(), 1, "{attention}");
+    assert!(
+        causes[0].contains("data-kind=\"calibration\"") && causes[0].contains("corner_sample"),
+        "{}",
+        causes[0]
+    );
+
+    // Links: every link in the causes reaches a page, and its anchor is on it.
+    let mut links = 0;
+    for href in attention.split("href=\"").skip(1) {
+        let href = &href[..href.find('"').unwrap()];
+        let (file, anchor) = href.split_once('#').unwrap_or((href, ""));
+        let target = report.join(file);
+        let page = std::fs::read_to_string(&target)
+            .unwrap_or_else(|e| panic!("link {href}: {}: {e}", target.display()));
+        if !anchor.is_empty() {
+            assert!(
+                page.contains(&format!("id=\"{anchor}\"")),
+                "link {href}: no anchor {anchor} on {}",
+                target.display()
+            );
+        }
+        links += 1;
+    }
+    assert!(links >= 2, "the causes link to no evidence: {attention}");
+
+    // The matrix: inside the page at 1400 px, and at 600 px it scrolls in its box.
+    for (width, must_scroll) in [(1400, false), (600, true)] {
+        let dom = chromium(
+            profile.path(),
+            &[
+                format!("--window-size={width},900"),
+                "--virtual-time-budget=3000".into(),
+                "--dump-dom".into(),
+                url(&report.join("index.html")),
+            ],
+        );
+        let right = body_number(&dom, "matrix-right");
+        let viewport = body_number(&dom, "viewport-width");
+        assert!(
+            right <= viewport,
+            "at {width} px the matrix box ends at {right} px, past the page's {viewport} px"
+        );
+        if must_scroll {
+            assert_eq!(
+                body_number(&dom, "matrix-scrolls"),
+                1,
+                "at {width} px the matrix should scroll inside its box"
+            );
+        }
+        let shot = keep.join(format!("overview-{width}.png"));
+        chromium(
+            profile.path(),
+            &[
+                format!("--screenshot={}", shot.display()),
+                format!("--window-size={width},900"),
+                url(&report.join("index.html")),
+            ],
+        );
+        let png = std::fs::read(&shot).expect("no screenshot written");
+        assert!(png.starts_with(b"\x89PNG"), "screenshot is not a PNG");
+        eprintln!("screenshot: {}", shot.display());
+    }
+}

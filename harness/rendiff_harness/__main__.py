@@ -1,4 +1,5 @@
-"""Command line: `python -m rendiff_harness {info,render,serve,compare,reference,metamorphic,expectations} ...`.
+"""Command line: `python -m rendiff_harness COMMAND ...` (info, where, render, serve, compare, reference,
+metamorphic, expectations, import).
 
 The Rust core drives this as a subprocess, so the contract is machine-readable:
 one JSON line on stdout for results, messages on stderr, and exit codes
@@ -210,6 +211,44 @@ def cmd_expectations(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def where() -> dict[str, str]:
+    """Where this harness lives: what `rendiff doctor` prints and where `rendiff check` finds
+    rendiff's own data (calibration probes, expectations, references) when the harness is an
+    installed package rather than a checkout (`data/` mirrors the checkout's layout)."""
+    from importlib import metadata
+
+    package = Path(__file__).resolve().parent
+    try:
+        version = metadata.version("rendiff-harness")
+    except metadata.PackageNotFoundError:
+        version = "not installed (run from a checkout)"
+    return {
+        "package": str(package),
+        "version": version,
+        "data": str(package / "data"),
+        "python": sys.executable,
+        "python_version": sys.version.split()[0],
+    }
+
+
+def cmd_where(args: argparse.Namespace) -> int:
+    """Print where this harness, its data and its Python are (one JSON line with --json)."""
+    found = where()
+    if args.json:
+        print(json.dumps(found))
+    else:
+        for key, value in found.items():
+            print(f"{key}: {printable(value)}")
+    return EXIT_OK
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """Delegates to judge/importcheck (a resolved scene against independent decodes of its mesh files)."""
+    from .judge.importcheck import main as import_main
+
+    return import_main([args.resolved])
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     """Answer `render` requests on stdin until it closes (worker.py: one process, many scenes)."""
     from .renderers.worker import serve
@@ -225,6 +264,8 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "metamorphic": cmd_metamorphic,
     "serve": cmd_serve,
     "expectations": cmd_expectations,
+    "where": cmd_where,
+    "import": cmd_import,
 }
 
 
@@ -337,6 +378,10 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="Mitsuba variant (default scalar_rgb; llvm_ad_rgb needs libLLVM 19: DRJIT_LIBLLVM_PATH or Debian's)",
     )
+    p_where = sub.add_parser(
+        "where", help="where this harness, its data (probes, expectations, references) and its Python are"
+    )
+    p_where.add_argument("--json", action="store_true", help="one JSON object on stdout")
     sub.add_parser(
         "serve",
         help="answer render requests, one JSON line each on stdin, until stdin closes (worker.py; "
@@ -348,6 +393,12 @@ def build_parser() -> argparse.ArgumentParser:
         "it is valid, else one line naming the file and the problem, exit 2",
     )
     p_exp.add_argument("file", help="expectations TOML (e.g. tests/expectations.toml)")
+    p_imp = sub.add_parser(
+        "import",
+        help="check a resolved scene's triangles against independent decodes of its mesh files (the `import` "
+        "verdict, judge/importcheck): one line per decoder, exit 1 when one departs, 2 when DIR is unreadable",
+    )
+    p_imp.add_argument("resolved", help="resolved scene folder (`rendiff export SCENE -o DIR`)")
     p_compare = sub.add_parser(
         "compare", help="compare a check run's buffers, write RUN/results.json (see compare.py)", add_help=False
     )

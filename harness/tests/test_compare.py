@@ -578,7 +578,9 @@ def _normals_of(scene: resolved.ResolvedScene, prim: np.ndarray) -> np.ndarray:
     return out
 
 
-def _normals_run(tmp_path: Path, flip_reference: bool, tilt_test: float) -> dict[tuple[str, str, str], Any]:
+def _normals_run(
+    tmp_path: Path, flip_reference: bool, tilt_test: float, zero_test: bool = False
+) -> dict[tuple[str, str, str], Any]:
     run = tmp_path / "run"
     sdir = write_scene(run / "scenes/quads/resolved", TRIS, OIDS, vfov_deg=90.0, width=32, height=32, name="quads")
     scene, ref = _ref(sdir)
@@ -589,6 +591,8 @@ def _normals_run(tmp_path: Path, flip_reference: bool, tilt_test: float) -> dict
     x, y = PLAIN_PX
     n_test[y, x] = (n_test[y, x] + np.array([tilt_test, 0, 0], dtype=np.float32)).astype(np.float32)
     n_test[y, x] /= np.linalg.norm(n_test[y, x])
+    if zero_test:
+        n_test[ref["prim"] != BG] = 0.0
     s = run / "scenes/quads"
     exrbuf.write_buffers(s / "raster.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_ref)
     exrbuf.write_buffers(s / "mitsuba.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_test)
@@ -626,6 +630,18 @@ def test_normals_are_judged_against_the_winding_for_every_backend_and_the_refere
     res = _normals_run(tmp_path / "c", flip_reference=False, tilt_test=1e-4)
     e = res[("quads", "mitsuba", "N")]
     assert e["status"] == "fail" and e["interior_mismatches"] == 1
+
+
+def test_a_zero_normal_fails_and_is_not_called_reversed(tmp_path: Path) -> None:
+    # Mitsuba's normal of a huge triangle is the zero vector (scenes/found/mitsuba_zero_normal.toml):
+    # every pixel fails, none reads as facing the other way, and the reason says zero.
+    res = _normals_run(tmp_path, flip_reference=False, tilt_test=0.0, zero_test=True)
+    e = res[("quads", "mitsuba", "N")]
+    assert e["status"] == "fail" and e["interior_mismatches"] == 400
+    assert "0 of them facing the other way, 400 zero or not finite" in e["reason"], e["reason"]
+    assert "zero vector" in e["explanations"][0]["why"]
+    ref = res[("quads", "raster", "N")]
+    assert ref["status"] == "pass" and "zero" not in ref["reason"]
 
 
 def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:

@@ -45,6 +45,10 @@ pub struct Manifest {
     /// run with different ones.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub options: Option<RunOptions>,
+    /// Where check ran and the files it was given that a reproduction needs
+    /// again (absent in runs of older rendiffs): the report's commands carry them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rerun: Option<Rerun>,
     /// The split this run is a shard of (`check --shard K/N`); absent in a
     /// run of all scenes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -69,6 +73,26 @@ pub struct RunOptions {
     pub spp: Option<u32>,
     /// The injected shading error, if any (`--inject-bias`).
     pub bias: Option<String>,
+}
+
+/// What a printed reproduction command needs besides [`RunOptions`]
+/// (report/rerun.rs): the folder check ran in (scene paths are relative to
+/// it), the renderers file (a declared renderer's name means nothing
+/// without it) and a probe folder other than rendiff's own.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Rerun {
+    /// The working folder of the check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cwd: Option<String>,
+    /// `--renderers`, absolute.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub renderers_file: Option<String>,
+    /// `--calibration`, when not rendiff's scenes/calibration.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_dir: Option<String>,
+    /// `--expectations`, when not rendiff's tests/expectations.toml.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expectations_file: Option<String>,
 }
 
 /// A shard's place in its split: its index and the whole deal, so that
@@ -143,7 +167,8 @@ pub struct RenderRecord {
     /// Backend version string.
     #[serde(default)]
     pub version: String,
-    /// Command that reproduces this render.
+    /// Command that reproduces this render, its buffer written beside the
+    /// run (`RUN.repro/render/...`), never over the run's own.
     #[serde(default)]
     pub command: String,
     /// Buffers it produced.

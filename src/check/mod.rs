@@ -11,6 +11,7 @@
 //! calibration probes (`CheckOptions::calibration`) run first, as scenes with
 //! `role: "calibration"`.
 
+pub mod home;
 pub mod inputs;
 pub mod isolated;
 use crate::vocab::Feature;
@@ -19,6 +20,7 @@ pub mod pool;
 pub mod process;
 pub mod run_folder;
 pub mod shard;
+pub mod table;
 pub mod worker;
 
 use crate::backends::embree::{self, EmbreeMode};
@@ -145,51 +147,7 @@ pub struct CheckOutcome {
     pub table: String,
 }
 
-/// Where rendiff's own files live (the Python harness and its venv, the
-/// calibration probes, expectations and references), so that `rendiff check`
-/// works from any folder: `RENDIFF_HOME` if set; else the current folder if it
-/// is a rendiff checkout; else the checkout this binary was built from (what
-/// `cargo install --path .` leaves). The error names the variable to set.
-pub fn find_root() -> Result<PathBuf> {
-    let is_root = |p: &Path| p.join("harness/rendiff_harness").is_dir();
-    if let Some(home) = std::env::var_os("RENDIFF_HOME") {
-        let home = PathBuf::from(home);
-        if !is_root(&home) {
-            bail!(
-                "RENDIFF_HOME={}: not a rendiff checkout (no harness/rendiff_harness)",
-                home.display()
-            );
-        }
-        return Ok(std::path::absolute(&home)?);
-    }
-    let cwd = std::env::current_dir().context("cannot read the current folder")?;
-    if is_root(&cwd) {
-        return Ok(cwd);
-    }
-    let built = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    if is_root(&built) {
-        return Ok(built);
-    }
-    bail!(
-        "cannot find rendiff's harness (harness/rendiff_harness): run from the rendiff checkout or set RENDIFF_HOME to it"
-    )
-}
-
-/// `rel` (one of rendiff's own files) inside `root`: relative as given when
-/// the root is the current folder (tidy paths in records), absolute otherwise.
-pub fn in_root(root: &Path, rel: &str) -> PathBuf {
-    match std::env::current_dir() {
-        Ok(cwd) if cwd == root => PathBuf::from(rel),
-        _ => root.join(rel),
-    }
-}
-
-/// The Python interpreter of the project's venv (override with `RENDIFF_PYTHON`).
-pub fn python(root: &Path) -> PathBuf {
-    std::env::var_os("RENDIFF_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join(".venv/bin/python"))
-}
+pub use home::{find_root, in_root, python};
 
 /// The environment variable that names the user's renderers file for the
 /// harness (harness `command_renderers.py`, docs/your-renderer.md).
@@ -213,9 +171,8 @@ const MAX_RENDERERS_BYTES: u64 = 1 << 20;
 fn harness_command(opts: &CheckOptions) -> Command {
     let root = &opts.root;
     let mut cmd = Command::new(python(root));
-    cmd.current_dir(root)
-        .env("PYTHONPATH", root.join("harness"))
-        .args(["-m", "rendiff_harness"]);
+    cmd.current_dir(root).args(["-m", "rendiff_harness"]);
+    home::harness_path(&mut cmd, root);
     match &opts.renderers {
         Some(file) => cmd.env(RENDERERS_ENV, file),
         None => cmd.env_remove(RENDERERS_ENV),
@@ -480,6 +437,27 @@ fn harness_names(opts: &CheckOptions) -> Result<Vec<String>, String> {
         .map(|b| b.into_iter().map(|b| b.name).collect())
 }
 
+/// The loop that renders the reference: the raster when the tracer renders
+/// too (so the run compares the two loops), else whichever the cost model
+/// expects to finish sooner (bit-identical buffers, so no verdict changes).
+fn reference_loop(
+    opts: &CheckOptions,
+    scene: &ResolvedScene,
+) -> (Backend, Option<rendiff_core::loop_cost::Choice>) {
+    if wanted(opts, "trace") {
+        return (Backend::Raster, None);
+    }
+    let (b, c) = crate::render::core_loop(scene, rayon::current_num_threads());
+    (b, Some(c))
+}
+
+/// Records in the reference's `info` which loop rendered it and why.
+fn note_loop_choice(rec: &mut RenderRecord, choice: Option<rendiff_core::loop_cost::Choice>) {
+    if let (Some(c), Some(info)) = (choice, rec.info.as_object_mut()) {
+        info.insert("loop_choice".into(), serde_json::json!(c));
+    }
+}
+
 fn wanted(opts: &CheckOptions, name: &str) -> bool {
     name == REFERENCE
         || opts
@@ -690,6 +668,37 @@ fn run_options(opts: &CheckOptions) -> Result<manifest::RunOptions> {
     })
 }
 
+/// Where a recorded render command writes its buffer: `RUN.repro/render/<rel>`,
+/// beside the run, so that running it never overwrites the run it came
+/// from (report/rerun.rs writes check reruns to `RUN.repro/` too). Given the
+/// staging folder, it names the run's once the command is unstaged.
+fn repro_out(run_dir: &Path, rel_exr: &str) -> PathBuf {
+    let mut dir = run_dir.as_os_str().to_owned();
+    dir.push(".repro");
+    PathBuf::from(dir).join("render").join(rel_exr)
+}
+
+/// What the report's reproduction commands need besides the run's options.
+fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
+    // rendiff's own files are check's defaults: a command without them finds them again.
+    let own = |rel: &str| std::path::absolute(in_root(&opts.root, rel)).ok();
+    let given = |file: &Path, rel: &str| {
+        let abs = std::path::absolute(file).ok();
+        (abs != own(rel)).then(|| file.display().to_string())
+    };
+    manifest::Rerun {
+        cwd: std::env::current_dir()
+            .ok()
+            .map(|d| d.display().to_string()),
+        renderers_file: opts.renderers.as_ref().map(|f| f.display().to_string()),
+        calibration_dir: opts
+            .calibration
+            .as_ref()
+            .and_then(|c| given(c, "scenes/calibration")),
+        expectations_file: given(&opts.expectations, "tests/expectations.toml"),
+    }
+}
+
 /// The run itself, written to `opts.run_dir` (the staging folder); commands in
 /// the manifest name `shown_dir`, where the run will be once published.
 fn render_and_compare(
@@ -767,6 +776,11 @@ fn render_and_compare(
                 continue;
             }
         };
+        // What the import left out (a glTF POINTS or LINES primitive) is
+        // said even with --quiet: the scene is not all of the user's file.
+        for w in &scene.warnings {
+            crate::errln!("  warning: {w}");
+        }
         runs.requires = scene.requires.iter().cloned().collect();
         runs.resolved_sha256 = seal.digest.clone();
         let core_missing = missing(&runs.requires, &core_features());
@@ -784,7 +798,7 @@ fn render_and_compare(
                 "--renderer",
                 name,
                 "-o",
-                &exr.display().to_string(),
+                &repro_out(run_dir, &rel_exr).display().to_string(),
             ]);
             let rec = if !core_missing.is_empty() {
                 skipped_for_features(name, &core_missing)
@@ -799,10 +813,10 @@ fn render_and_compare(
                 };
                 isolated::render(opts, &job, version.clone())
             } else {
-                let backend = if name == "raster" {
-                    Backend::Raster
+                let (backend, choice) = if name != REFERENCE {
+                    (Backend::Trace, None)
                 } else {
-                    Backend::Trace
+                    reference_loop(opts, &scene)
                 };
                 let render_opts = RenderOptions {
                     spp: opts.core.spp,
@@ -810,7 +824,7 @@ fn render_and_compare(
                     bias: opts.core.bias,
                     ..RenderOptions::default()
                 };
-                in_process(
+                let mut rec = in_process(
                     backend,
                     &scene,
                     &exr,
@@ -819,7 +833,9 @@ fn render_and_compare(
                     version.clone(),
                     render_opts,
                     opts.timeout,
-                )
+                );
+                note_loop_choice(&mut rec, choice);
+                rec
             };
             let mut rec = rec;
             unstaged(&mut rec);
@@ -974,6 +990,7 @@ fn render_and_compare(
         rendiff_version: env!("CARGO_PKG_VERSION").into(),
         scenes,
         options: Some(run_options(opts)?),
+        rerun: Some(rerun_inputs(opts)),
         shard,
     };
     crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {
@@ -1068,6 +1085,20 @@ fn external(
         "rendiff_harness".into(),
     ];
     words.extend(args.iter().cloned());
+    // The recorded command reproduces the buffer beside the run, not over it
+    // (the harness writes only into a folder that exists).
+    let repro = repro_out(&opts.run_dir, &rel_exr);
+    if let Some(i) = words.iter().position(|w| w == "--out") {
+        if let Some(out) = words.get_mut(i + 1) {
+            *out = repro.display().to_string();
+        }
+    }
+    let mkdir = repro.parent().map_or(String::new(), |d| {
+        format!(
+            "{} && ",
+            shell_line(["mkdir", "-p", &d.display().to_string()])
+        )
+    });
     let declared = opts.renderers.as_ref().map_or(String::new(), |f| {
         format!(
             "{RENDERERS_ENV}={} ",
@@ -1075,8 +1106,8 @@ fn external(
         )
     });
     rec.command = format!(
-        "{declared}PYTHONPATH={} {}",
-        process::shell_quote(&opts.root.join("harness").display().to_string()),
+        "{mkdir}{declared}{}{}",
+        home::harness_path_words(&opts.root),
         shell_line(&words)
     );
     // The render reads a copy of its own (inputs.rs); the record names the

@@ -304,6 +304,7 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         rendiff_version: first.rendiff_version.clone(),
         scenes,
         options: first.options.clone(),
+        rerun: first.rerun.clone(),
         shard: None,
     };
     crate::exr_io::write_atomically(&staging.dir.join("manifest.json"), |tmp| {

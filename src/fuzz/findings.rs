@@ -6,8 +6,10 @@
 //! counted ([`failure_class`]). Two failures with the same signature
 //! (backend, buffer, class) are presumed one cause: the finding keeps every
 //! scene that hit it, counts them by grammar family, and the smallest is
-//! reduced. (The fuller signature, with the reduced geometry's
-//! situation, is not computed yet: docs/fuzzing.md.)
+//! reduced. The reduced geometry's situation (`situation.rs`) is recorded
+//! with each finding after its reduction and completes the signature that a
+//! known-finding declaration matches (`known.rs`); grouping itself stays by
+//! (backend, buffer, class), since the situation is known only once reduced.
 
 use crate::gate::{Status, Verdict};
 use serde::Serialize;
@@ -126,6 +128,12 @@ pub struct Finding {
     /// The reduction of the first scene, when one ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reduced: Option<ReducedRecord>,
+    /// The geometric situation (`situation.rs`) of its reduced scene, else of
+    /// its smallest scene: part of the signature a declaration matches.
+    pub situation: Vec<String>,
+    /// What it is (`known.rs`): set once its situation is known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub classification: Option<super::known::Classification>,
 }
 
 /// FOLDER/findings.json.
@@ -140,6 +148,13 @@ pub struct Ledger {
     /// The check run, relative to FOLDER: `run`, or under `--minutes` the
     /// folder `runs` holding batch k's run in `runs/b<k>` (`mod::batch_run`).
     pub run: String,
+    /// `--from`'s scene files (empty for generated scenes).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub from: Vec<String>,
+    /// `--from`: the base scenes' own failing verdicts (the variants are held
+    /// to them: a variant failing the same way is no finding).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub base_failures: Vec<Failure>,
     /// Every failing verdict on a generated scene.
     pub failures: Vec<Failure>,
     /// Calibration (camera) failures: not per scene, so not reduced.
@@ -200,6 +215,8 @@ pub fn group(
                 families,
                 reason: crate::scene::printable(&vs[0].0.reason, 300),
                 reduced: None,
+                situation: Vec::new(),
+                classification: None,
             }
         })
         .collect();

@@ -8,7 +8,11 @@
 //!   both the generator and the reducer write;
 //! * [`reduce`]: ddmin over objects and triangles, then coordinate snapping,
 //!   with `check` as the interestingness test;
-//! * [`findings`]: failure classes, signatures, findings.json.
+//! * [`findings`]: failure classes, signatures, findings.json;
+//! * [`situation`]: the geometric situation of a finding's scene;
+//! * [`known`]: declared findings that classify a run's findings;
+//! * [`page`]: the findings page beside the ledger;
+//! * [`variants`]: `--from`'s metamorphic variants of real scenes.
 //!
 //! All generated scenes go through one `check` run (one pool, one set of
 //! workers, calibration once), and every reduction batches its candidates
@@ -17,9 +21,13 @@
 
 pub mod findings;
 pub mod grammar;
+pub mod known;
 pub mod literal;
+pub mod page;
 pub mod reduce;
 pub mod rng;
+pub mod situation;
+pub mod variants;
 
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
@@ -48,13 +56,16 @@ pub const BATCH: u64 = 50;
 
 /// How many scenes a fuzz run generates: a fixed count, or batches until
 /// a time is up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Amount {
     /// `--count N`: scenes 0 to N-1, one check run.
     Count(u64),
     /// `--minutes M`: batches of [`BATCH`] scenes, a new one started while
     /// less than M minutes have passed since the run began.
     Minutes(u64),
+    /// `--from SCENE...`: no generated scenes; the variants of these scene
+    /// files (`variants.rs`), one check run.
+    Variants(Vec<PathBuf>),
 }
 
 /// What `rendiff fuzz` was asked.
@@ -70,7 +81,13 @@ pub struct FuzzOptions {
     pub check: CheckOptions,
     /// Time for each finding's reduction; None reduces nothing.
     pub reduce_budget: Option<Duration>,
+    /// `--known`: the folder of known-finding declarations; None is
+    /// rendiff's own, `scenes/found/known/` under the check's root.
+    pub known: Option<PathBuf>,
 }
+
+/// rendiff's own known findings, relative to its root.
+pub const KNOWN_DIR: &str = "scenes/found/known";
 
 /// What a fuzz run found.
 #[derive(Debug, Clone)]
@@ -126,7 +143,17 @@ fn write_range(
 /// folders (hidden, beside `run`). A folder holding anything else is not one.
 fn fuzz_entry(name: &std::ffi::OsStr) -> bool {
     let name = name.to_string_lossy();
-    ["scenes", "run", "runs", "reduced", MARKER].contains(&name.as_ref()) || name.starts_with('.')
+    [
+        "scenes",
+        "run",
+        "runs",
+        "reduced",
+        MARKER,
+        page::PAGE,
+        page::IMAGES,
+    ]
+    .contains(&name.as_ref())
+        || name.starts_with('.')
 }
 
 /// Makes `folder` ready for a fuzz run: created when absent; a folder that
@@ -146,7 +173,7 @@ fn prepare(folder: &Path) -> Result<()> {
                 crate::scene::printable(&other.to_string_lossy(), 100)
             );
         }
-        for sub in ["scenes", "runs", "reduced"] {
+        for sub in ["scenes", "runs", "reduced", page::IMAGES] {
             let p = folder.join(sub);
             if p.exists() {
                 std::fs::remove_dir_all(&p)
@@ -175,6 +202,12 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
         }
         _ => {}
     }
+    let known_dir = opts
+        .known
+        .clone()
+        .unwrap_or_else(|| opts.check.root.join(KNOWN_DIR));
+    // Before any rendering: a bad declaration is bad input, refused at once.
+    let known = known::load(&known_dir)?;
     let folder = &opts.folder;
     prepare(folder)?;
     let scenes_dir = folder.join("scenes");
@@ -183,13 +216,30 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
     let mut verdicts = Vec::new();
     let mut tables = Vec::new();
     let (mut count, mut k) = (0, 0);
+    let mut from: Option<variants::Written> = None;
     let run_name = loop {
-        let (indices, run_name) = match opts.amount {
-            Amount::Count(n) => (0..n, "run".to_string()),
-            Amount::Minutes(_) => (k * BATCH..(k + 1) * BATCH, batch_run(k)),
+        let (files, fams, run_name) = match &opts.amount {
+            Amount::Count(n) => {
+                let (f, fam) = write_range(opts.seed, 0..*n, &scenes_dir)?;
+                (f, fam, "run".to_string())
+            }
+            Amount::Minutes(_) => {
+                let (f, fam) = write_range(opts.seed, k * BATCH..(k + 1) * BATCH, &scenes_dir)?;
+                (f, fam, batch_run(k))
+            }
+            Amount::Variants(sources) => {
+                let w = variants::write(sources, &scenes_dir)?;
+                for why in &w.skipped {
+                    crate::errln!("fuzz --from: variant not written: {why}");
+                }
+                let (f, fam) = (w.files.clone(), w.relation.clone());
+                from = Some(w);
+                (f, fam, "run".to_string())
+            }
         };
-        let (files, fams) = write_range(opts.seed, indices, &scenes_dir)?;
-        count += files.len() as u64;
+        // Bases are checked too (their verdicts are what the variants are held to).
+        let generated = files.len() - from.as_ref().map_or(0, |w| w.files.len() - w.base.len());
+        count += generated as u64;
         families.extend(fams);
         let check = CheckOptions {
             scenes: files,
@@ -210,28 +260,123 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
             Amount::Minutes(m)
                 if started.elapsed() < Duration::from_secs(m * 60) && count < MAX_COUNT => {}
             Amount::Minutes(_) => break "runs".to_string(),
-            Amount::Count(_) => break run_name,
+            Amount::Count(_) | Amount::Variants(_) => break run_name,
         }
     };
     let table = tables.join("\n");
+    let mut base_failures = Vec::new();
+    if let Some(w) = &from {
+        let (held, of_bases) = hold_to_bases(verdicts, w);
+        verdicts = held;
+        base_failures = of_bases;
+    }
     let (failures, camera_failures, mut found) = findings::group(&verdicts, &families);
     if let Some(budget) = opts.reduce_budget {
         for f in &mut found {
             f.reduced = Some(reduce_finding(opts, f, budget));
         }
     }
+    for f in &mut found {
+        f.situation = finding_situation(folder, f);
+        let s = &f.signature;
+        f.classification = Some(known::classify(
+            &known,
+            &s.backend,
+            &s.buffer,
+            &s.class,
+            &f.situation,
+        ));
+    }
     let ledger = Ledger {
         format: FINDINGS_FORMAT.into(),
         seed: opts.seed,
         scenes: count,
         run: run_name,
+        from: match &opts.amount {
+            Amount::Variants(sources) => sources.iter().map(|p| p.display().to_string()).collect(),
+            _ => Vec::new(),
+        },
+        base_failures,
         failures,
         camera_failures,
         findings: found,
     };
     let json = serde_json::to_string_pretty(&ledger)? + "\n";
     crate::exr_io::write_atomically(&folder.join(MARKER), |tmp| Ok(std::fs::write(tmp, &json)?))?;
+    page::write(folder, &ledger)?;
     Ok(FuzzOutcome { ledger, table })
+}
+
+/// `--from`: the variants' verdicts whose class differs from their base's on
+/// the same backend and buffer (the reason then names the base's class), and
+/// the bases' own failing verdicts (reported, not reduced: the variants are
+/// the fuzz's scenes). Calibration probes pass through.
+fn hold_to_bases(
+    verdicts: Vec<crate::gate::Verdict>,
+    w: &variants::Written,
+) -> (Vec<crate::gate::Verdict>, Vec<findings::Failure>) {
+    let bases: std::collections::BTreeSet<&String> = w.base.values().collect();
+    let base_class: BTreeMap<(String, String, String), Option<String>> = verdicts
+        .iter()
+        .filter(|v| bases.contains(&v.scene))
+        .map(|v| {
+            (
+                (v.scene.clone(), v.backend.clone(), v.buffer.clone()),
+                findings::failure_class(v),
+            )
+        })
+        .collect();
+    let mut of_bases = Vec::new();
+    let mut held = Vec::new();
+    for mut v in verdicts {
+        if bases.contains(&v.scene) {
+            if let Some(class) = findings::failure_class(&v) {
+                of_bases.push(findings::Failure {
+                    scene: v.scene.clone(),
+                    backend: v.backend.clone(),
+                    buffer: v.buffer.clone(),
+                    class,
+                    reason: crate::scene::printable(&v.reason, 300),
+                });
+            }
+            continue;
+        }
+        let Some(base) = w.base.get(&v.scene) else {
+            held.push(v); // a calibration probe
+            continue;
+        };
+        let Some(class) = findings::failure_class(&v) else {
+            continue;
+        };
+        let was = base_class
+            .get(&(base.clone(), v.backend.clone(), v.buffer.clone()))
+            .cloned()
+            .flatten();
+        if was.as_deref() == Some(class.as_str()) {
+            continue;
+        }
+        v.reason = format!(
+            "base {base}: {}; this variant: {}",
+            was.as_deref().unwrap_or("pass"),
+            v.reason
+        );
+        held.push(v);
+    }
+    (held, of_bases)
+}
+
+/// The situation of a finding's reduced scene, else of its smallest scene
+/// (the one reduction started from); empty when neither resolves.
+fn finding_situation(folder: &Path, f: &Finding) -> Vec<String> {
+    let file = match &f.reduced {
+        Some(r) if r.error.is_empty() => folder.join(&r.scene),
+        Some(r) => folder.join("scenes").join(format!("{}.toml", r.from)),
+        None => folder.join("scenes").join(format!("{}.toml", f.scenes[0])),
+    };
+    Scene::load(&file)
+        .ok()
+        .and_then(|s| ResolvedScene::resolve(&s).ok())
+        .map_or_else(Vec::new, |r| situation::situations(&r))
 }
 
 /// Reduces a finding's smallest scene (fewest bytes, then first: the
@@ -391,4 +536,61 @@ pub fn target_in_run(
         },
         PathBuf::from(&entry.scene_file),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gate::{Status, Verdict};
+
+    fn v(scene: &str, backend: &str, status: Status, interior: u64) -> Verdict {
+        Verdict {
+            scene: scene.into(),
+            backend: backend.into(),
+            buffer: "id".into(),
+            status,
+            reason: "why".into(),
+            counts: [("interior_mismatches".to_string(), interior)].into(),
+            errors: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn variants_are_held_to_their_base_verdict_class() {
+        let mut w = variants::Written::default();
+        for rel in ["translate", "mirror"] {
+            let name = variants::variant_name("m0_a", rel);
+            w.base.insert(name.clone(), "m0_a".into());
+            w.relation.insert(name, rel.into());
+        }
+        let verdicts = vec![
+            // The base passes on povray and fails (interior) on mitsuba.
+            v("m0_a", "povray", Status::Pass, 0),
+            v("m0_a", "mitsuba", Status::Fail, 3),
+            // translate: povray now fails (a finding); mitsuba fails as its base does (none).
+            v("m0_a__translate", "povray", Status::Fail, 5),
+            v("m0_a__translate", "mitsuba", Status::Fail, 7),
+            // mirror: both as the base (none), and a calibration probe passes through.
+            v("m0_a__mirror", "povray", Status::Pass, 0),
+            v("m0_a__mirror", "mitsuba", Status::Fail, 1),
+            v("camera_far", "povray", Status::Fail, 0),
+        ];
+        let (held, bases) = hold_to_bases(verdicts, &w);
+        let keys: Vec<(&str, &str)> = held
+            .iter()
+            .map(|v| (v.scene.as_str(), v.backend.as_str()))
+            .collect();
+        assert_eq!(
+            keys,
+            vec![("m0_a__translate", "povray"), ("camera_far", "povray")]
+        );
+        assert!(held[0]
+            .reason
+            .starts_with("base m0_a: pass; this variant: "));
+        assert_eq!(bases.len(), 1);
+        assert_eq!(
+            (bases[0].backend.as_str(), bases[0].class.as_str()),
+            ("mitsuba", "interior")
+        );
+    }
 }

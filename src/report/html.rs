@@ -98,7 +98,9 @@ td.num{text-align:right;font-variant-numeric:tabular-nums}
 .s-error{background:#f3c3f3;color:#701a75}.s-skipped{background:#e6e6e6;color:#404040}
 .s-xfail{background:#fde9b8;color:#713f12}.s-xpass{background:#c8dcf8;color:#1e3a8a}
 .s-other{background:#eee;color:#000}
-.matrix td{text-align:center;white-space:nowrap}.matrix td.scene{text-align:left}
+.scroll{max-width:100%;overflow-x:auto}
+.matrix td{text-align:center;white-space:nowrap}
+tr.cause td{font-weight:600}tr.cause td.reason{font-weight:400}tr.members>td{border-top:none;padding-left:24px}.matrix td.scene{text-align:left}
 .reason{font-size:12px;color:#444;max-width:60em;word-break:break-word}
 pre.cmd{background:#f2f2f2;border:1px solid #ddd;padding:4px 6px;margin:2px 0;white-space:pre-wrap;word-break:break-all;font-size:12px}
 .grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(170px,1fr));gap:10px}
@@ -119,8 +121,9 @@ details{margin:4px 0}
 svg{background:#fff;border:1px solid #ddd}
 "#;
 
-/// The only script: marks every image as loaded or failed (so a headless
-/// browser test can read the result from the DOM) and drives the flip viewers.
+/// The only script: marks every image as loaded or failed and records where
+/// the matrix's box ends against the page's width (so a headless browser
+/// test can read both from the DOM), and drives the flip viewers.
 /// It reads everything from the DOM; nothing is interpolated into it.
 const JS: &str = r#"
 (function(){
@@ -141,6 +144,13 @@ const JS: &str = r#"
     mark(i);
   });
   tally();
+  function measure(){
+    var m=document.getElementById('matrix-box');if(!m)return;
+    var r=m.getBoundingClientRect(),d=document.body.dataset;
+    d.matrixRight=Math.ceil(r.right);d.viewportWidth=document.documentElement.clientWidth;
+    d.matrixScrolls=(m.scrollWidth>m.clientWidth)?'1':'0';
+  }
+  measure();window.addEventListener('load',measure);window.addEventListener('resize',measure);
   document.querySelectorAll('.flip').forEach(function(f){
     var view=f.querySelector('.flip-view'),a=f.querySelector('.flip-a'),b=f.querySelector('.flip-b');
     var label=f.querySelector('.flip-label'),pos=f.querySelector('.flip-pos'),hover=f.querySelector('.flip-hover');

@@ -359,8 +359,14 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
             );
         }
         if let (Some(rz), Some(tz)) = (&r.z, &b.z) {
-            out.histograms
-                .push((l.backend.clone(), Histogram::of_depth(rz, tz)));
+            let prims = match (&r.prim, &b.prim) {
+                (Some(rp), Some(tp)) => Some((rp.as_slice(), tp.as_slice())),
+                _ => None,
+            };
+            out.histograms.push((
+                l.backend.clone(),
+                Histogram::of_depth_same_prims(rz, tz, prims),
+            ));
         }
         if let (Some(rp), Some(tp)) = (&r.prim, &b.prim) {
             let objects = scene.resolved.as_ref().map_or(0, |s| s.objects.len());

@@ -9,10 +9,12 @@
 //! computes histograms, [`svg`] plots, [`html`] escapes and wraps pages,
 //! [`overview`] and [`scene_page`] compose them.
 
+pub mod causes;
 pub mod data;
 pub mod html;
 pub mod images;
 pub mod overview;
+pub mod rerun;
 pub mod scene_page;
 pub mod stats;
 pub mod svg;

@@ -2,13 +2,12 @@
 //! buffer matrix, render times, depth-error distributions and versions, each
 //! linking to the scene pages that explain it.
 
-use super::data::{is_scene_error, num, status_rank, RunData, SceneData, CLASSES};
+use super::data::{num, status_rank, RunData, SceneData, CLASSES};
 use super::html::{badge, command_block, escape, page, url};
 use super::images::{Kind, SceneImages};
 use super::stats::Histogram;
 use super::svg;
 use crate::check::manifest::{RenderRecord, ResultEntry};
-use crate::check::process::shell_line;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -139,7 +138,7 @@ pub fn camera_cells(get: impl Fn(&str) -> Option<Value>) -> String {
 fn calibration_section(data: &RunData) -> String {
     let mut b = String::from(
         "<h2 id=\"calibration\">Camera calibration</h2><p class=\"muted\">Each backend's camera measured on the probe scenes against the reference conventions \
-         (pixel-center offset, scale, rotation; the RMS residual of the fit and the bound it is held to). An offset beyond its bound is a convention error in the exporter.</p>",
+         (pixel-center offset, scale, rotation; the RMS residual of the fit and the bound it is held to). An offset beyond its bound is a convention error in the renderer (for a built-in backend, in rendiff's exporter for it).</p>",
     );
     match &data.calibration {
         None => b.push_str("<p class=\"muted\">Not recorded: this run's results.json has no <code>calibration</code> (an older comparison, or none ran).</p>"),
@@ -184,23 +183,6 @@ fn calibration_section(data: &RunData) -> String {
     b
 }
 
-/// The command that reruns a whole run (from the repository root).
-pub fn run_command(data: &RunData) -> String {
-    let mut words: Vec<String> = vec!["rendiff".into(), "check".into()];
-    for s in &data.scenes {
-        if let Some(r) = &s.runs {
-            words.push(r.scene_file.clone());
-        }
-    }
-    words.push("-o".into());
-    words.push(data.dir.display().to_string());
-    if let Some(e) = expectations_arg(data) {
-        words.push("--expectations".into());
-        words.push(e);
-    }
-    shell_line(words)
-}
-
 /// The expectations file the comparison used, when it is not check's default.
 pub fn expectations_arg(data: &RunData) -> Option<String> {
     data.expectations
@@ -226,6 +208,94 @@ fn scene_link(s: &SceneData, anchor: &str) -> String {
     )
 }
 
+/// The first line of a reason (the line that names the fault).
+fn first_line(text: &str) -> &str {
+    text.lines().next().unwrap_or("")
+}
+
+/// "Needs attention": one row per root cause (causes.rs) with its count, the
+/// reason that names it and a link to the evidence; under each, the verdicts
+/// it explains (without class counts under a failed calibration: they were
+/// measured with the wrong camera).
+fn attention_section(data: &RunData) -> String {
+    let mut b = String::from("<h2 id=\"attention\">Needs attention</h2>");
+    let causes = super::causes::group(data);
+    if causes.is_empty() {
+        b.push_str(if data.results.is_some() {
+            "<p>Nothing failed: no fail, error or unexpected_pass.</p>"
+        } else {
+            "<p class=\"muted\">No verdicts and no failed render.</p>"
+        });
+        return b;
+    }
+    let total: usize = causes.iter().map(|c| c.members.len()).sum();
+    let _ = write!(
+        b,
+        "<p class=\"muted\">{total} failing verdicts and failed renders from {} {}, one row each: failed camera calibrations first \
+         (fix those before reading anything else: the verdicts they spoil hang under them), then scenes that could not be loaded, \
+         renderer errors, and each class of mismatch per renderer and buffer across scenes. Classes: {}.</p>\
+         <table class=\"causes\"><tr><th>cause</th><th>renderer</th><th>count</th><th>evidence</th><th>why</th></tr>",
+        causes.len(),
+        if causes.len() == 1 { "cause" } else { "causes" },
+        CLASS_WORDS
+    );
+    for (i, c) in causes.iter().enumerate() {
+        let evidence = match &c.evidence {
+            Some((s, anchor)) => scene_link(s, anchor),
+            None => "<a href=\"#calibration\">calibration</a>".into(),
+        };
+        let _ = write!(
+            b,
+            "<tr class=\"cause\" id=\"cause-{i}\" data-kind=\"{}\"><td>{}</td><td>{}</td><td class=\"num\">{}</td><td>{evidence}</td><td class=\"reason\">{}</td></tr>",
+            match c.kind {
+                super::causes::Kind::Calibration => "calibration",
+                super::causes::Kind::Scene => "scene",
+                super::causes::Kind::RendererError => "error",
+                super::causes::Kind::Mismatch => "mismatch",
+            },
+            escape(&c.title),
+            escape(&c.backend),
+            c.members.len(),
+            escape(first_line(&c.why))
+        );
+        let what = if c.counts_valid {
+            "verdicts"
+        } else if c.kind == super::causes::Kind::Calibration {
+            "verdicts on the probes, and verdicts not judged because of it (their counts were measured with the wrong camera and are not shown)"
+        } else {
+            "verdicts"
+        };
+        let _ = write!(
+            b,
+            "<tr class=\"members\"><td colspan=\"5\"><details><summary>{} {what}</summary><table><tr><th>status</th><th>scene</th><th>buffer</th>{}<th>why</th></tr>",
+            c.members.len(),
+            if c.counts_valid {
+                "<th>edge</th><th>tie</th><th>crack</th><th>interior</th>"
+            } else {
+                ""
+            }
+        );
+        for m in &c.members {
+            let counts = match (c.counts_valid, m.entry) {
+                (true, Some(e)) => class_cells(e),
+                (true, None) => "<td class=\"num\">-</td>".repeat(CLASSES.len()),
+                (false, _) => String::new(),
+            };
+            let _ = write!(
+                b,
+                "<tr class=\"member\"><td>{}</td><td>{}</td><td>{}</td>{counts}<td class=\"reason\">{}</td></tr>",
+                badge(&m.status, &m.reason),
+                scene_link(m.scene, &format!("#b-{}", super::data::page_stem(&c.backend))),
+                escape(&m.buffer),
+                escape(first_line(&m.reason))
+            );
+        }
+        b.push_str("</table></details></td></tr>");
+    }
+    b.push_str("</table>");
+    b
+}
+
 /// Renders index.html. `images` holds each scene's pictures (same order as `data.scenes`).
 pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     let mut b = String::new();
@@ -249,76 +319,8 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     }
     b.push_str("</p>");
 
-    // ---- failures and errors first, scenes that could not be loaded before all else
-    let mut attention: Vec<(&SceneData, &ResultEntry)> = data
-        .scenes
-        .iter()
-        .flat_map(|s| s.results.iter().map(move |e| (s, e)))
-        .filter(|(_, e)| status_rank(&e.status) == 0)
-        .collect();
-    attention.sort_by_key(|(s, e)| {
-        (
-            !is_scene_error(e),
-            s.name.clone(),
-            e.backend.clone(),
-            e.buffer.clone(),
-        )
-    });
-    // Renders that failed or were skipped with no verdict saying so (results.json missing).
-    let unjudged = |status: &str| -> Vec<(&SceneData, &RenderRecord)> {
-        data.scenes
-            .iter()
-            .flat_map(|s| {
-                s.runs
-                    .iter()
-                    .flat_map(|r| r.renders.iter())
-                    .filter(move |r| {
-                        r.status == status && !s.results.iter().any(|e| e.backend == r.backend)
-                    })
-                    .map(move |r| (s, r))
-            })
-            .collect()
-    };
-    let render_errors = unjudged("error");
-    b.push_str("<h2 id=\"attention\">Needs attention</h2>");
-    if attention.is_empty() && render_errors.is_empty() {
-        b.push_str(if data.results.is_some() {
-            "<p>Nothing failed: no fail, error or unexpected_pass.</p>"
-        } else {
-            "<p class=\"muted\">No verdicts and no failed render.</p>"
-        });
-    } else {
-        let _ = write!(
-            b,
-            "<p class=\"muted\">Failures, errors and unexpected passes only; scenes that could not be loaded first. Classes: {}.</p>\
-             <table><tr><th>status</th><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>why</th></tr>",
-            CLASS_WORDS
-        );
-        for (s, e) in attention {
-            let _ = write!(
-                b,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{}<td class=\"reason\">{}</td></tr>",
-                badge(&e.status, &e.reason),
-                scene_link(s, &format!("#b-{}", super::data::page_stem(&e.backend))),
-                escape(&e.backend),
-                escape(&e.buffer),
-                class_cells(e),
-                escape(&e.reason)
-            );
-        }
-        for (s, r) in render_errors {
-            let _ = write!(
-                b,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>render</td>{}<td class=\"reason\">{}</td></tr>",
-                badge(&r.status, &r.message),
-                scene_link(s, &format!("#b-{}", super::data::page_stem(&r.backend))),
-                escape(&r.backend),
-                "<td class=\"num\">-</td>".repeat(CLASSES.len()),
-                escape(&r.message)
-            );
-        }
-        b.push_str("</table>");
-    }
+    // ---- failures grouped by cause, failed calibrations first (causes.rs)
+    b.push_str(&attention_section(data));
 
     // ---- known failures, then skips, each with its reason
     let listed = |status: &str| -> Vec<(&SceneData, &ResultEntry)> {
@@ -348,7 +350,20 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         b.push_str("</table>");
     }
     let skipped = listed("skipped");
-    let render_skips = unjudged("skipped");
+    // Renders skipped with no verdict saying so (results.json missing).
+    let render_skips: Vec<(&SceneData, &RenderRecord)> = data
+        .scenes
+        .iter()
+        .flat_map(|s| {
+            s.runs
+                .iter()
+                .flat_map(|r| r.renders.iter())
+                .filter(move |r| {
+                    r.status == "skipped" && !s.results.iter().any(|e| e.backend == r.backend)
+                })
+                .map(move |r| (s, r))
+        })
+        .collect();
     b.push_str("<h2 id=\"skipped\">Skipped</h2>");
     if skipped.is_empty() && render_skips.is_empty() {
         b.push_str("<p class=\"muted\">Nothing was skipped.</p>");
@@ -387,7 +402,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     let _ = write!(
         b,
         "<h2 id=\"matrix\">Scene × backend × buffer</h2><p class=\"muted\">Scenes with failures first. Hover a badge for its reason; the reference column shows its render. Buffers: {}. \
-         Numbers after a verdict are its mismatch counts per class, <span class=\"counts\">edge/tie/crack/interior</span> (- where not compared); camera entries show their RMS residual.</p><table class=\"matrix\"><tr><th>scene</th>",
+         Numbers after a verdict are its mismatch counts per class, <span class=\"counts\">edge/tie/crack/interior</span> (- where not compared); camera entries show their RMS residual. The table scrolls sideways inside its box when it is wider than the page.</p><div class=\"scroll\" id=\"matrix-box\"><table class=\"matrix\"><tr><th>scene</th>",
         escape(&buffers.join(", "))
     );
     for be in &backends {
@@ -428,7 +443,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         }
         b.push_str("</tr>");
     }
-    b.push_str("</table>");
+    b.push_str("</table></div>");
 
     // ---- scenes with thumbnails
     b.push_str("<h2 id=\"scenes\">Scenes</h2><div class=\"grid\">");
@@ -541,8 +556,8 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
     b.push_str("</table>");
     let _ = write!(
         b,
-        "<h2 id=\"rerun\">Rerun</h2><p>From the repository root (after <code>scripts/setup.sh</code>); each scene page has the command for one scene and one backend.</p>{}",
-        command_block(&run_command(data))
+        "<h2 id=\"rerun\">Rerun</h2><p>The same scenes and options, into a new folder beside this run (this one is left as it is); each scene page has the command for one scene and one backend.</p>{}",
+        command_block(&super::rerun::run_command(data))
     );
     page("rendiff report", &b)
 }

@@ -8,12 +8,9 @@ use super::data::{
 };
 use super::html::{badge, command_block, escape, page, url};
 use super::images::{Kind, SceneImages};
-use super::overview::{
-    camera_cells, camera_header, class_cells, count, expectations_arg, CLASS_WORDS,
-};
+use super::overview::{camera_cells, camera_header, class_cells, count, CLASS_WORDS};
 use super::svg;
 use crate::check::manifest::ResultEntry;
-use crate::check::process::shell_line;
 use std::fmt::Write;
 
 fn err(e: &ResultEntry, key: &str) -> String {
@@ -147,23 +144,34 @@ fn camera_section(rows: &[&ResultEntry]) -> String {
     b
 }
 
-/// The command that reruns one backend on one scene and compares it again.
-pub fn verdict_command(data: &RunData, scene: &SceneData, backend: &str) -> Option<String> {
-    let file = &scene.runs.as_ref()?.scene_file;
-    let mut words = vec![
-        "rendiff".to_string(),
-        "check".into(),
-        file.clone(),
-        "--only".into(),
-        backend.to_string(),
-        "-o".into(),
-        data.dir.display().to_string(),
-    ];
-    if let Some(e) = expectations_arg(data) {
-        words.push("--expectations".into());
-        words.push(e);
+/// What a Z verdict judged beyond the pixels where both saw the same triangle
+/// (judge/depth.py): the test's depths against its own triangle's plane where
+/// it saw another, and the pixels that could be judged neither way, with why.
+/// Without it a Z pass with "max |ΔZ| 0" stood beside a histogram of large
+/// errors, which came from pixels of different triangles.
+fn own_plane_note(e: &ResultEntry) -> String {
+    let mut out = String::new();
+    if let Some(n) = num(e, "own_plane_pixels").filter(|n| *n > 0.0) {
+        let _ = write!(
+            out,
+            "<br><span class=\"muted\">{n} px where it saw another triangle than the reference: its depth judged against that triangle's own plane at the pixel center (max |ΔZ| {}).</span>",
+            err(e, "own_plane_max_abs_error")
+        );
     }
-    Some(shell_line(words))
+    if let Some(m) = e
+        .details
+        .get("not_comparable")
+        .and_then(serde_json::Value::as_object)
+        .filter(|m| !m.is_empty())
+    {
+        let parts: Vec<String> = m.iter().map(|(why, n)| format!("{n} px: {why}")).collect();
+        let _ = write!(
+            out,
+            "<br><span class=\"muted\">Not comparable (both hit, judged neither way): {}.</span>",
+            escape(&parts.join("; "))
+        );
+    }
+    out
 }
 
 fn bound_text(e: &ResultEntry) -> String {
@@ -211,6 +219,9 @@ fn extra_fields(e: &ResultEntry) -> String {
         "version",
         "command",
         "images",
+        "own_plane_pixels",
+        "own_plane_max_abs_error",
+        "not_comparable",
     ];
     let rows: Vec<String> = e
         .details
@@ -282,13 +293,13 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     // ---- verdicts
     let mut rows: Vec<&ResultEntry> = scene.results.iter().collect();
     rows.sort_by_key(|e| (status_rank(&e.status), e.backend.clone(), e.buffer.clone()));
-    let _ = write!(b, "<h2 id=\"verdicts\">Verdicts</h2><p class=\"muted\">Failures first. Mismatch classes: {}. Mask: hit on one side only. Errors are |Z_test − Z_ref| where both hit the same triangle; max angle: the largest angle between the normals (N) where both hit the same triangle. - : not compared.</p>", escape(CLASS_WORDS));
+    let _ = write!(b, "<h2 id=\"verdicts\">Verdicts</h2><p class=\"muted\">Failures first. Mismatch classes: {}. Mask: hit on one side only. Errors are |Z_test − Z_ref| where both hit the same triangle (where they hit different ones, the test's depth is judged against its own triangle's plane, said under the verdict); max angle: the largest angle between the normals (N) where both hit the same triangle. - : not compared.</p>", escape(CLASS_WORDS));
     b.push_str("<table><tr><th>backend</th><th>buffer</th><th>status</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>mask</th><th>compared px</th><th>max |ΔZ|</th><th>mean |ΔZ|</th><th>max rel</th><th>max angle</th><th>bound</th><th>why</th></tr>");
     for e in &rows {
         let tol = text(e, "tolerance");
         let _ = write!(
             b,
-            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td>{}<td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}</td></tr>",
+            "<tr><td><a href=\"#b-{}\">{}</a></td><td>{}</td><td>{}</td>{}<td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"reason\">{}{}{}{}</td></tr>",
             url(&page_stem(&e.backend)),
             escape(&e.backend),
             escape(&e.buffer),
@@ -302,6 +313,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             escape(&angle(e)),
             escape(&bound_text(e)),
             escape(&e.reason),
+            own_plane_note(e),
             if tol.is_empty() { String::new() } else { format!("<details><summary>tolerance</summary>{}</details>", escape(tol)) },
             extra_fields(e),
         );
@@ -453,7 +465,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
     );
 
     // ---- per backend: versions, times, commands
-    b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">Commands run from the repository root. The render command reproduces the buffer; the check command reproduces the verdict (the reference always renders too).</p>");
+    b.push_str("<h2 id=\"backends\">Backends: versions, times, commands</h2><p class=\"muted\">The render command reproduces the buffer; the check command reproduces the verdict with the options of this run (the reference always renders too), into a new folder beside this run.</p>");
     for be in &backends {
         let _ = write!(
             b,
@@ -506,7 +518,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
             }
         }
         if be != reference {
-            if let Some(cmd) = verdict_command(data, scene, be) {
+            if let Some(cmd) = super::rerun::verdict_command(data, scene, be) {
                 let _ = write!(b, "verdict: {}", command_block(&cmd));
             }
         }

@@ -27,6 +27,10 @@ pub struct Histogram {
     pub over: u64,
     /// Pixels one side hits and the other does not (not an error value, but counted).
     pub mask_mismatches: u64,
+    /// Pixels both hit on different triangles: their |Z_test − Z_ref| compares two
+    /// surfaces, not a depth error, so it is not binned (the verdict judges
+    /// them against the test's own triangle's plane).
+    pub other_prim: u64,
 }
 
 impl Default for Histogram {
@@ -37,11 +41,37 @@ impl Default for Histogram {
             bins: [0; BINS],
             over: 0,
             mask_mismatches: 0,
+            other_prim: 0,
         }
     }
 }
 
 impl Histogram {
+    /// Histogram of |test − reference| over common hits on the same triangle
+    /// (`prims`: the reference's and the test's id.prim, when both wrote one;
+    /// hits on different triangles are counted in `other_prim`).
+    pub fn of_depth_same_prims(
+        reference: &[f32],
+        test: &[f32],
+        prims: Option<(&[u32], &[u32])>,
+    ) -> Histogram {
+        let Some((rp, tp)) =
+            prims.filter(|(a, b)| a.len() == reference.len() && b.len() == test.len())
+        else {
+            return Histogram::of_depth(reference, test);
+        };
+        let mut h = Histogram::default();
+        for (((&r, &t), &a), &b) in reference.iter().zip(test).zip(rp).zip(tp) {
+            match (r.is_finite(), t.is_finite()) {
+                (true, true) if a != b => h.other_prim += 1,
+                (true, true) => h.add((f64::from(t) - f64::from(r)).abs()),
+                (false, false) => {}
+                _ => h.mask_mismatches += 1,
+            }
+        }
+        h
+    }
+
     /// Histogram of |test − reference| over common hits.
     pub fn of_depth(reference: &[f32], test: &[f32]) -> Histogram {
         let mut h = Histogram::default();
@@ -77,6 +107,7 @@ impl Histogram {
         self.under += other.under;
         self.over += other.over;
         self.mask_mismatches += other.mask_mismatches;
+        self.other_prim += other.other_prim;
         for (a, b) in self.bins.iter_mut().zip(other.bins.iter()) {
             *a += b;
         }
@@ -160,6 +191,26 @@ mod tests {
         let mut m = h.clone();
         m.merge(&h);
         assert_eq!(m.total(), 6);
+    }
+
+    #[test]
+    fn hits_on_different_triangles_are_counted_apart_not_binned() {
+        let inf = f32::INFINITY;
+        let (z_ref, z_test) = ([1.0, 1.0, 2.0, inf], [1.0, 1.1, 2.5, 3.0]);
+        // Pixel 1 sees triangle 7 in the test, 4 in the reference: its 0.1 is two surfaces.
+        let h =
+            Histogram::of_depth_same_prims(&z_ref, &z_test, Some((&[4, 4, 5, 0], &[4, 7, 5, 9])));
+        assert_eq!(
+            (h.zero, h.other_prim, h.mask_mismatches, h.total()),
+            (1, 1, 1, 2)
+        );
+        let (a, b) = h.used_bins().unwrap();
+        assert!(a == b && Histogram::bin_lo(a) <= 0.5 && 0.5 < Histogram::bin_lo(a + 1));
+        // Without prims every common hit is binned, as before.
+        assert_eq!(
+            Histogram::of_depth_same_prims(&z_ref, &z_test, None).total(),
+            3
+        );
     }
 
     #[test]

@@ -148,8 +148,8 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         None => (0, 0),
     };
     let nb = if used.is_some() { last - first + 1 } else { 0 };
-    // Columns: "= 0", "< 1e-12", the used bins, ">= 1e4", "hit/miss".
-    let cols = nb + 4;
+    // Columns: "= 0", "< 1e-12", the used bins, ">= 1e4", "hit/miss", "other triangle".
+    let cols = nb + 5;
     let (label_w, col_w, row_h) = (150.0, 24.0, 46.0);
     let width = label_w + cols as f64 * col_w + 20.0;
     let height = 20.0 + series.len() as f64 * row_h + 20.0;
@@ -157,7 +157,7 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         .iter()
         .flat_map(|s| {
             let h = &s.2;
-            [h.zero, h.under, h.over, h.mask_mismatches]
+            [h.zero, h.under, h.over, h.mask_mismatches, h.other_prim]
                 .into_iter()
                 .chain(h.bins.iter().copied())
         })
@@ -196,6 +196,11 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
         }
         cells.push((h.over, format!("|ΔZ| ≥ 1e{HI_EXP}"), color.as_str()));
         cells.push((h.mask_mismatches, "hit/miss mismatch".into(), "#00b5b5"));
+        cells.push((
+            h.other_prim,
+            "on different triangles (judged against the test's own plane, not binned)".into(),
+            "#b58900",
+        ));
         for (k, (count, what, fill)) in cells.iter().enumerate() {
             let bh = scale(*count);
             let _ = write!(
@@ -238,9 +243,10 @@ pub fn histograms(series: &[(String, String, Histogram)]) -> String {
     }
     label(&mut s, nb + 2, ">");
     label(&mut s, nb + 3, "h/m");
+    label(&mut s, nb + 4, "≠tri");
     let _ = write!(
         s,
-        "</svg><p class=\"muted\">|Z_test − Z_ref| over pixels both hit, log bins ({PER_DECADE} per decade, labels at their lower edges); gray: exactly 0; bar height ∝ log(1 + pixels), hover a bar for its count; “<”, “>”: below 1e{LO_EXP} and above 1e{HI_EXP}; h/m: hit on one side only.</p>"
+        "</svg><p class=\"muted\">|Z_test − Z_ref| over pixels both hit on the same triangle, log bins ({PER_DECADE} per decade, labels at their lower edges); gray: exactly 0; bar height ∝ log(1 + pixels), hover a bar for its count; “<”, “>”: below 1e{LO_EXP} and above 1e{HI_EXP}; h/m: hit on one side only; ≠tri: both hit, on different triangles (two surfaces, not a depth error: the verdict judges the test's depth there against its own triangle's plane).</p>"
     );
     s
 }

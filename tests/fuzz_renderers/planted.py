@@ -14,7 +14,15 @@ t rounded to float32 once) with one deliberate fault, chosen by BUG:
   1 px^2) has its first vertex moved 1e-3 px to the right (along the camera's right axis, at
   the vertex's depth), as a snapping step applied to small triangles only would.
 
-All three are declared with the tiny renderer's honest precision (renderers.toml), so the fault
+Two more are camera-convention faults, for the report's and the calibration's tests
+(tests/report_causes.rs, harness/tests/test_calibration_hypotheses.py):
+
+* `corner_sample`: samples each pixel at its top-left corner, `x` instead of `x + 0.5`, as a
+  renderer that forgot the pixel-center offset would (a half-pixel shift).
+* `radial_depth`: writes the distance from the eye, `t |d|`, in Z instead of the planar depth
+  `t` (docs/DESIGN.md "Buffers").
+
+All five are declared with the tiny renderer's honest precision (renderers.toml), so the fault
 is all the verifier sees: its pixels are interior (or crack) mismatches.
 """
 
@@ -33,7 +41,7 @@ from rendiff_harness.contract import exrbuf  # noqa: E402
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
 SHIFT_PX = 1e-3
-BUGS = ("coplanar_bias", "subpixel_shift", "far_depth")
+BUGS = ("coplanar_bias", "subpixel_shift", "far_depth", "corner_sample", "radial_depth")
 
 
 def projected_area_px(
@@ -67,8 +75,9 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
     tris = np.fromfile(scene_dir / files["triangles"], dtype="<f4").reshape(-1, 3, 3).astype(np.float64)
     objects = np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
 
-    sx = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * tan_half * w / h
-    sy = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * tan_half
+    center = 0.0 if bug == "corner_sample" else 0.5  # the corner_sample bug: no half-pixel offset
+    sx = (2.0 * (np.arange(w) + center) / w - 1.0) * tan_half * w / h
+    sy = (1.0 - 2.0 * (np.arange(h) + center) / h) * tan_half
     d = fwd + sx[None, :, None] * right + sy[:, None, None] * up
 
     z = np.full((h, w), np.inf)
@@ -100,6 +109,9 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
         with np.errstate(invalid="ignore"):
             hit_point = (eye + z[..., None] * d).astype(np.float32).astype(np.float64)
             z = np.where(seen, (hit_point - eye) @ fwd, z)
+    if bug == "radial_depth":
+        # The radial_depth bug: distance from the eye instead of planar depth.
+        z = np.where(seen, z * np.linalg.norm(d, axis=2), z)
     obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
     obj[seen] = objects[prim[seen]]
     exrbuf.write_buffers(

@@ -465,6 +465,14 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
                     vec![1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048],
                 ),
                 threads: threads.unwrap_or_else(super::cpus),
+                corpus: if quick {
+                    vec![home.file("scenes/three_triangles.toml")?]
+                } else {
+                    super::which_loop::corpus_files(&[
+                        home.file("scenes")?,
+                        home.file("scenes/corpus")?,
+                    ])?
+                },
             })
         }
         BenchCommand::Scale {

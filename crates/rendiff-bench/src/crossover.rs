@@ -39,6 +39,8 @@ pub struct CrossoverOptions {
     pub nx: Vec<u32>,
     /// Worker threads.
     pub threads: usize,
+    /// Scenes the loop-choice model is also checked on ([`super::which_loop`]).
+    pub corpus: Vec<std::path::PathBuf>,
 }
 
 /// The sweep's scene ([`rendiff::scene::generators::crossover_grid`]).
@@ -89,6 +91,7 @@ pub fn paired_rounds(runs: usize, round_s: f64, quick: bool) -> usize {
 /// on one machine state, [`measure::raster_vs_trace`]), and records their
 /// operation counts.
 fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize, quick: bool) -> Value {
+    let threads = rayon::current_num_threads();
     // Each loop's phases back to back (its frames, then its pass alone), so
     // that one loop's allocations (an 8M-triangle BVH) do not sit in the
     // middle of the other's measurements.
@@ -101,7 +104,16 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize, quick: bool) -> V
     let paired = measure::raster_vs_trace(scene, &t.build.last, rounds);
     let tris = scene.triangles.len() as f64;
     let px = f64::from(size) * f64::from(size);
+    let which_loop = super::which_loop::verdicts(
+        &rendiff::loop_cost::workload(scene, threads),
+        rk.median_s,
+        paired["raster_speedup_over_trace"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+        t.build.median_s,
+    );
     json!({
+        "which_loop": which_loop,
         "nx": nx,
         "triangles": tris,
         "pixels_per_triangle": px / tris,
@@ -152,6 +164,15 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
     };
     let rows = sweep(false)?;
     let aligned_rows = sweep(true)?;
+    let corpus = Value::Array(
+        pool.install(|| super::which_loop::corpus_rows(&opts.corpus, opts.threads, runs)),
+    );
+    let judged: Vec<&Value> = rows
+        .iter()
+        .map(|r| &r["which_loop"])
+        .chain(corpus.as_array().into_iter().flatten())
+        .collect();
+    let which_summary = super::which_loop::summary(&judged);
     let col = |k: &str| -> Vec<f64> {
         rows.iter()
             .map(|r| r[k].as_f64().unwrap_or(f64::NAN))
@@ -187,6 +208,12 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             "whole_frames_with_build": frames_with_build,
             "whole_frames_without_build": frames_trace_only,
             "compared": "visibility passes (keys); whole_frames_*: frames including the shared assembly",
+        },
+        "which_loop": {
+            "model": "rendiff::loop_cost (docs/benchmarks.md, \"Which loop\")",
+            "grid": "rows[].which_loop",
+            "corpus": corpus,
+            "summary": which_summary,
         },
         "raster_equals_trace_everywhere": rows.iter().chain(&aligned_rows).all(|r| r["raster_equals_trace"] == json!(true)),
     });
@@ -311,6 +338,11 @@ fn page(record: &Value, svgs: &[(String, String)]) -> String {
     p.heading("pixel-aligned grid (ties everywhere)");
     p.para(&super::page::compact(&record["aligned"]));
     table(&mut p, &record["aligned_rows"]);
+    super::which_loop::page_section(
+        &mut p,
+        &record["which_loop"]["corpus"],
+        &record["which_loop"]["summary"],
+    );
     p.environment(&record["environment"]);
     p.finish()
 }
@@ -345,6 +377,8 @@ fn table(p: &mut Page, rows: &Value) {
                     c("trace_counters", "exact_fallbacks")
                 ),
                 super::page::compact(&r["raster_equals_trace"]),
+                super::which_loop::cell(&r["which_loop"]["one_frame"]),
+                super::which_loop::cell(&r["which_loop"]["bvh_shared"]),
             ]
         })
         .collect();
@@ -367,6 +401,8 @@ fn table(p: &mut Page, rows: &Value) {
             "BVH nodes visited",
             "exact fallbacks raster / trace",
             "raster == trace",
+            "one frame: model picked / faster / ratio",
+            "BVH shared: model picked / faster / ratio",
         ],
         &rows,
     );

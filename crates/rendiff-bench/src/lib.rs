@@ -38,6 +38,7 @@ pub mod spp;
 pub mod stability;
 pub mod variance;
 pub mod variance_stats;
+pub mod which_loop;
 
 pub use core_loops::{run, BenchOptions};
 

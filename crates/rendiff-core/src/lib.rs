@@ -17,6 +17,7 @@ pub mod deadline;
 pub mod exr_io;
 pub mod frame;
 mod huge_pages;
+pub mod loop_cost;
 pub mod names;
 pub mod pending;
 pub mod predicate;

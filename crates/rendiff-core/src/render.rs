@@ -6,6 +6,7 @@
 
 use crate::backends::embree::{self, EmbreeError, EmbreeMode};
 use crate::frame::Frame;
+use crate::loop_cost::{self, Choice, Loop};
 use crate::raster::{self, RasterOptions};
 use crate::scene::resolve::ResolvedScene;
 use crate::shade::{self, Bias, Radiance, ShadeOptions};
@@ -53,6 +54,18 @@ impl Backend {
             Backend::Embree(_) => 0,
         }
     }
+}
+
+/// The core loop [`loop_cost`] expects to render `scene` once sooner on
+/// `threads` threads (`render --renderer core`, `check`'s reference), with
+/// the estimates behind the pick. Both loops give the same buffers.
+pub fn core_loop(scene: &ResolvedScene, threads: usize) -> (Backend, Choice) {
+    let choice = loop_cost::choose(&loop_cost::workload(scene, threads));
+    let backend = match choice.pick {
+        Loop::Raster => Backend::Raster,
+        Loop::Trace => Backend::Trace,
+    };
+    (backend, choice)
 }
 
 /// How to render: the tracer's knobs, shading's samples and seed, a time limit.
@@ -153,15 +166,23 @@ pub fn render(
             });
         }
     };
-    let radiance = shade::needs_shading(scene).then(|| {
-        let bvh = traced_bvh.unwrap_or_else(|| trace::TraceBvh::build(scene, opts.bvh));
-        let shading = ShadeOptions {
-            spp: opts.spp.unwrap_or(scene.integrator.spp),
-            seed: opts.seed,
-            bias: opts.bias,
-            deadline: opts.deadline,
+    // Past the deadline nothing more is done (the caller discards the frame).
+    let radiance = if shade::needs_shading(scene) && !crate::deadline::past(opts.deadline) {
+        let bvh = match traced_bvh {
+            Some(b) => Some(b),
+            None => trace::TraceBvh::build_until(scene, opts.bvh, opts.deadline),
         };
-        shade::shade(scene, &frame, &bvh, shading)
-    });
+        bvh.map(|bvh| {
+            let shading = ShadeOptions {
+                spp: opts.spp.unwrap_or(scene.integrator.spp),
+                seed: opts.seed,
+                bias: opts.bias,
+                deadline: opts.deadline,
+            };
+            shade::shade(scene, &frame, &bvh, shading)
+        })
+    } else {
+        None
+    };
     Ok(Rendered { frame, radiance })
 }

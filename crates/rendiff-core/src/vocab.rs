@@ -154,6 +154,9 @@ words! {
         Camera = "camera",
         /// The scene itself could not be loaded or resolved.
         Scene = "scene",
+        /// rendiff's resolved triangles against an independent decode of the
+        /// scene's mesh files (backend: the decoder's name).
+        Import = "import",
     }
 }
 

@@ -19,6 +19,10 @@ CACHED_REFERENCE_BACKEND = "mitsuba_ref"
 """The backend name results.json gives a comparison with a cached Mitsuba reference (references.py):
 no renderer may take it."""
 
+IMPORT_DECODERS = ("gltf_spec", "trimesh")
+"""The backend names results.json gives the `import` verdict's decoders (judge/importcheck): no
+renderer may take them."""
+
 
 class Feature(StrEnum):
     """What a scene requires of a renderer (``requires = [...]``)."""
@@ -82,6 +86,7 @@ class Buffer(StrEnum):
     RGB = "RGB"
     CAMERA = "camera"
     SCENE = "scene"
+    IMPORT = "import"
 
 
 class MismatchClass(StrEnum):

@@ -88,6 +88,7 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
             r.attrs,
             ids.edge_mask if ids is not None else None,
             ids.classes if ids is not None else None,
+            own_plane=True,
         )
     except tolerance.ToleranceError as exc:
         e.reason = str(exc)
@@ -102,6 +103,10 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
     e.mean_abs_error = finite(res.mean_abs)
     e.max_rel_error = finite(res.max_rel)
     e.tolerance = res.tolerance
+    # Where both hit other prims: judged against the test's own plane (judge/depth.py), or not comparable.
+    e.extra["own_plane_pixels"] = res.own_plane
+    e.extra["own_plane_max_abs_error"] = finite(res.own_plane_max_abs)
+    e.extra["not_comparable"] = dict(res.not_comparable)
     ref_z, test_z = r.ref.buffers["Z"], r.test["Z"]
 
     def heat_map(path: Path) -> None:

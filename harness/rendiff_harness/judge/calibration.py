@@ -61,7 +61,9 @@ Verdict: pass when max_shift_px <= bound_px and rms_px <= rms_bound_px; otherwis
 with a reason naming the exporter's convention error, e.g. "convention error in the
 mitsuba exporter: camera turned by (0.0004597, -0.0001798) rad off its view direction,
 pixel centers offset by (0.03555, 0.01388) px (bound 0.001428 px)", "... y flipped (scale_y -1)",
-"... vertical FOV scale 1.01x".
+"... vertical FOV scale 1.01x"; a failure's reason is led by the hypothesis it follows
+(judge/hypotheses.py: planar, radial, window, NDC or reversed-Z depth; pixel-center offset,
+field of view, aspect, handedness, y flip), every hypothesis's residual after it.
 """
 
 from __future__ import annotations
@@ -82,13 +84,16 @@ from ..contract.manifest import EntryError, render_reason, run_path
 from ..contract.results import Entry
 from ..contract.vocab import BACKGROUND_ID, Buffer, Status
 from ..renderers.spec import SpecLookup
-from . import precision
+from . import hypotheses, precision
 from .camera_budget import CalibrationError, ProbePixels
 
 ROLE = "calibration"
 """`role` of a probe scene in manifest.json (docs/run-format.md)."""
 BUFFER = "camera"
 """The results.json `buffer` of a calibration entry."""
+NOT_JUDGED_FIELD = "not_judged"
+"""The results.json field of an entry left unjudged because its backend's camera failed
+calibration (value "calibration"): the report groups such entries under that one cause."""
 MIN_PIXELS = 64
 """Fewer usable pixels than this cannot identify the nine entries of G with any precision."""
 MAX_CONDITION = 1e8
@@ -150,6 +155,7 @@ class Calibration:
     height: int = 0
     pixel: float = 0.0  # one pixel on the image plane at distance 1
     owner: str = ""  # whose convention a failure blames (judge.precision.camera_owner)
+    hypotheses: Mapping[str, Any] | None = None  # a failure's diagnosis (judge/hypotheses.py)
     render: Mapping[str, Any] = field(default_factory=dict, repr=False)
 
     def fields(self) -> dict[str, Any]:
@@ -313,10 +319,6 @@ def measure(
     delta = pinv @ rhs
     gm = (g0 + delta).reshape(3, 3)
     residual = rhs - design @ delta
-    if not gm[0, 0] > 0:
-        raise CalibrationError(
-            f"depth scale came out {1.0 / gm[0, 0]:.3g}: the Z buffer is not a planar depth of these planes"
-        )
 
     # The backend's error bounds, per pixel, in px.
     d = cam.forward[None, :] + sx[:, None] * cam.right[None, :] + sy[:, None] * cam.up_ortho[None, :]
@@ -354,6 +356,29 @@ def measure(
     model, known = precision.camera_model(spec)
     budget = model(ctx)
     pixel_bound = np.abs(budget.pixel) / g
+    if not gm[0, 0] > 0:
+        # No planar depth of these planes: which depth is it? (the per-pixel bound only: the
+        # per-vertex terms need the fitted camera)
+        diag = hypotheses.diagnose(
+            design, h[p] / g, zk, d_norm, cam.near, cam.far, float(np.sqrt(np.mean(pixel_bound**2))), False
+        )
+        planar = f"depth scale came out {1.0 / gm[0, 0]:.3g}: the Z buffer is not a planar depth of these planes"
+        if diag.depth == hypotheses.PLANAR:
+            raise CalibrationError(f"{planar}; {diag.summary()}")
+        owner = precision.camera_owner(spec, backend)
+        return Calibration(
+            scene=scene.name,
+            backend=backend,
+            status="fail",
+            reason=f"convention error in {owner}: {diag.lead()}; {planar}; {diag.summary()}",
+            pixels=k_px,
+            width=cam.width,
+            height=cam.height,
+            pixel=pixel,
+            owner=owner,
+            hypotheses=diag.as_json(),
+            render=render or {},
+        )
     text = (
         budget.text
         if known
@@ -416,7 +441,22 @@ def measure(
         ),
         render=render or {},
     )
-    return judge(cal)
+    cal = judge(cal)
+    if cal.status != "fail":
+        return cal
+    diag = hypotheses.diagnose(design, h[p] / g, zk, d_norm, cam.near, cam.far, rms_bound, False)
+    return _replace(cal, reason=diagnosed(cal, diag), hypotheses=diag.as_json())
+
+
+def diagnosed(cal: Calibration, diag: hypotheses.Diagnosis) -> str:
+    """A failing calibration's reason led by the best hypothesis (judge/hypotheses.py), every
+    hypothesis's residual after it. Under a depth other than planar the fitted camera numbers
+    (fitted to the wrong depth) are left out of the words; results.json keeps them."""
+    prefix = f"convention error in {cal.owner}: "
+    if diag.depth != hypotheses.PLANAR:
+        return f"{prefix}{diag.lead()}; {diag.summary()}"
+    rest = cal.reason.removeprefix(prefix)
+    return f"{prefix}{diag.lead()}: {rest}; {diag.summary()}"
 
 
 def _num(x: float) -> str:
@@ -600,6 +640,8 @@ def entry(cal: Calibration) -> dict[str, Any]:
     e.compared_pixels = cal.pixels
     e.tolerance = cal.bound_text
     e.extra = cal.fields()
+    if cal.hypotheses is not None:
+        e.extra["hypotheses"] = dict(cal.hypotheses)
     return e.blank_if_not_compared().to_json()
 
 
@@ -634,6 +676,8 @@ def summarize(measurements: Sequence[Calibration]) -> dict[str, dict[str, Any]]:
             probes=[m.scene for m in ms],
             tolerance=worst.bound_text,
         )
+        if worst.hypotheses is not None:
+            item["hypotheses"] = dict(worst.hypotheses)
         out[backend] = item
     return out
 
@@ -667,7 +711,8 @@ def calibrate_and_blame(
     """Camera calibration from the run's probe scenes (`calibrate_run`): returns the summary
     for results.json's `calibration` and the `camera` entries that follow `results`.
 
-    A backend whose camera fails calibration has a convention error in its exporter, not a
+    A backend whose camera fails calibration has a convention error (in its exporter, or in the
+    renderer declared by command), not a
     renderer bug in every scene: its failing verdicts elsewhere become `error` entries that
     say so, by name, instead of fails blamed on the renderer.
     """
@@ -691,4 +736,6 @@ def calibrate_and_blame(
             continue
         e.status = Status.ERROR
         e.reason = f"not judged: {e.backend}'s camera failed calibration ({cal.get('reason', '')}); was: {e.reason}"
+        # What made it unjudged, by name: the report hangs it under that cause (docs/run-format.md).
+        e.extra[NOT_JUDGED_FIELD] = ROLE
     return rep.summary, rep.entries

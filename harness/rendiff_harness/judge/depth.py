@@ -1,10 +1,18 @@
 """The `Z` buffer: hit/miss masks exactly, depth where both sides see the same prim within the
-backend's tolerance model (tolerance.py), the rest interior mismatches."""
+backend's tolerance model (tolerance.py), the rest interior mismatches.
+
+Where both hit but see different prims (an allowed edge or tie pixel, or an ID mismatch the `id`
+entry fails), there is no reference depth to compare with, yet the test renderer's depth is
+still judged: it must lie on the plane of the triangle its own `id.prim` names, at the pixel
+center, within the same model (`own_plane`). A renderer whose depths were wrong only where IDs
+differed used to pass Z with "max |dZ| 0" beside a histogram of 0.1 errors. Pixels that cannot
+be judged either way are counted by reason (`not_comparable`): the test names no valid prim, or
+wrote no id.prim, or the ray runs along its triangle's plane."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,6 +38,86 @@ class DepthResult:
     details: list[str]
     tie: int = 0
     crack: int = 0
+    own_plane: int = 0  # pixels of different prims judged against the test's own triangle's plane
+    own_plane_beyond: int = 0  # of those, depths beyond the model (counted as interior)
+    own_plane_max_abs: float = 0.0
+    not_comparable: dict[str, int] = field(default_factory=dict)  # both hit, judged neither way: reason -> pixels
+
+
+@dataclass
+class OwnPlane:
+    """The test renderer's depths where it sees another prim than the reference, against its own
+    triangle's plane at the pixel center (module docstring)."""
+
+    idx: np.ndarray  # flat pixel indices judged
+    beyond: np.ndarray  # flat pixel indices beyond the model
+    max_abs: float
+    not_comparable: dict[str, int]
+    details: list[str]
+    tolerance: str
+
+
+def own_plane_depths(
+    ref: Reference,
+    test: Mapping[str, np.ndarray],
+    both: np.ndarray,
+    same: np.ndarray,
+    model: tolerance.Model,
+    render: Mapping[str, Any],
+    attrs: Mapping[str, Any],
+) -> OwnPlane:
+    """Judge the test's depth at pixels where both hit and `same` is False against the plane of
+    the triangle its id.prim names there: t = n.(a - eye) / n.d, d the contract's pixel-center ray
+    (planar depth, as d's forward component is 1), held to the test's own depth model."""
+    h, w = both.shape
+    other = both & ~same
+    skipped: dict[str, int] = {}
+    if "id.prim" not in test:
+        n_other = int(other.sum())
+        if n_other:
+            skipped["the test wrote no id.prim: its triangle there is unknown"] = n_other
+        return OwnPlane(np.zeros(0, np.int64), np.zeros(0, np.int64), 0.0, skipped, [], "")
+    tp = test["id.prim"]
+    valid = (tp != BACKGROUND_ID) & (tp.astype(np.uint64) < np.uint64(ref.scene.triangle_count))
+    bad_prim = int((other & ~valid).sum())
+    if bad_prim:
+        skipped["the test's id.prim names no triangle of the scene"] = bad_prim
+    idx = np.flatnonzero(other & valid)
+    rows, cols = idx // w, idx % w
+    prims = tp.ravel()[idx].astype(np.int64)
+    tri = ref.scene.triangles[prims].astype(np.float64)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    d = ref.scene.camera.center_directions(rows, cols)
+    eye = np.asarray(ref.scene.camera.eye, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        z_plane = np.einsum("ij,ij->i", n, tri[:, 0] - eye[None, :]) / np.einsum("ij,ij->i", n, d)
+        # Rounded once to f32, as the contract's depth is stored: the depth models bound a renderer's
+        # distance from that stored value (an exact model: bit-identical to it).
+        z_plane = z_plane.astype(np.float32).astype(np.float64)
+    ok = np.isfinite(z_plane) & (z_plane > 0)
+    if (~ok).any():
+        skipped["the pixel ray runs along (or away from) the test's triangle's plane"] = int((~ok).sum())
+    idx, rows, cols, prims, z_plane = idx[ok], rows[ok], cols[ok], prims[ok], z_plane[ok]
+    z_test = test["Z"].astype(np.float64).ravel()[idx]
+    ctx = depth_context(ref, rows, cols, z_plane, prims, render, attrs)
+    tol, tol_text = model.depth(ctx)
+    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), z_plane.shape)
+    err = np.abs(z_test - z_plane)
+    beyond = ~(err <= tol)
+    details: list[str] = []
+    bi = np.nonzero(beyond)[0]
+    if bi.size:
+        worst = bi[np.argsort(-(err[bi] / np.maximum(tol[bi], 1e-300)))[:EXAMPLES]]
+        ex = ", ".join(
+            f"({cols[k]},{rows[k]}) prim {prims[k]} plane {z_plane[k]:.9g} test {z_test[k]:.9g} "
+            f"|d| {err[k]:.3g} > tol {tol[k]:.3g}"
+            for k in worst
+        )
+        details.append(
+            f"{bi.size} depths off their own triangle's plane (where the test sees another prim than the "
+            f"reference), worst {ex}"
+        )
+    return OwnPlane(idx, idx[beyond], float(err.max()) if idx.size else 0.0, skipped, details, tol_text)
 
 
 def depth_context(
@@ -91,6 +179,32 @@ def depth_tolerance_fn(
     return tol
 
 
+def radial_hint(
+    ref: Reference,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    z_ref: np.ndarray,
+    z_test: np.ndarray,
+    tol: np.ndarray,
+    beyond: np.ndarray,
+) -> str:
+    """Names the commonest depth-convention bug when it explains the failing depths: a renderer
+    that writes the distance from the eye, Z |d| (d the contract's pixel ray, forward component 1),
+    instead of planar depth. Said only when most pixels beyond tolerance are within it of Z |d|
+    (the calibration tests this and the other depth conventions properly: judge/hypotheses.py)."""
+    if not beyond.any():
+        return ""
+    k = np.flatnonzero(beyond)
+    d_norm = np.linalg.norm(ref.scene.camera.center_directions(rows[k], cols[k]), axis=1)
+    radial = np.abs(z_test[k] - z_ref[k] * d_norm) <= tol[k] * d_norm
+    if radial.mean() < 0.9:
+        return ""
+    return (
+        f"{int(radial.sum())} of the {k.size} depths beyond tolerance equal the radial distance from the eye "
+        "(Z |d|), not the planar depth the contract asks for (docs/DESIGN.md, Buffers)"
+    )
+
+
 def compare_depth(
     ref: Reference,
     test: Mapping[str, np.ndarray],
@@ -99,12 +213,17 @@ def compare_depth(
     attrs: Mapping[str, Any],
     id_edge_mask: np.ndarray | None,
     id_classes: np.ndarray | None = None,
+    own_plane: bool = False,
 ) -> DepthResult:
     """Hit/miss masks exact except at allowed ID classes; depth within the backend's model.
 
     With `id_classes` (the verifier's classes of the ID mismatches), a mask mismatch at an
     edge or tie pixel is allowed, at a crack pixel it is a crack, elsewhere interior.
     Without it, `id_edge_mask` marks the allowed pixels (the metamorphic comparison).
+    With `own_plane` (the verifier's comparison with the reference), pixels where both hit other
+    prims are judged against the test's own triangle's plane (`own_plane_depths`); the
+    metamorphic comparison, whose variant buffers are mapped back onto the base scene and whose
+    core models are exact, does not ask for it.
     """
     zr = ref.buffers["Z"].astype(np.float64)
     zt = test["Z"].astype(np.float64)
@@ -150,12 +269,18 @@ def compare_depth(
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(z_ref != 0.0, err / np.abs(z_ref), np.where(err == 0.0, 0.0, np.inf))
     interior_mask.ravel()[idx[beyond]] = True
+    # Not asked for: every common hit counts as judged above, so none is left for the own-plane test.
+    own = own_plane_depths(ref, test, hr & ht, same if own_plane else np.ones_like(same), model, render, attrs)
+    interior_mask.ravel()[own.beyond] = True
 
     if mask_mm.any():
         mi = np.flatnonzero(interior_mask & mask_mm)[:EXAMPLES]
         if mi.size:
             ex = ", ".join(f"({k % w},{k // w}) ref {zr.ravel()[k]:.7g} test {zt.ravel()[k]:.7g}" for k in mi)
             details.append(f"hit/miss mask mismatches e.g. {ex}")
+    hint = radial_hint(ref, rows, cols, z_ref, z_test, tol, beyond)
+    if hint:
+        details.append(hint)
     bi = np.nonzero(beyond)[0]
     if bi.size:
         worst = bi[np.argsort(-(err[bi] / np.maximum(tol[bi], 1e-300)))[:EXAMPLES]]
@@ -164,10 +289,19 @@ def compare_depth(
             for k in worst
         )
         details.append(f"{bi.size} depths beyond tolerance, worst {ex}")
-    text = (
-        f"{tol_text}; compared {scope}; hit/miss masks exact except where the ID mismatch is an allowed class "
-        "(edge, tie; crack only where declared)"
+    details += own.details
+    own_text = (
+        f"; where both hit other prims, the test's depth against its own triangle's plane at the pixel center "
+        f"({own.idx.size} pixels)"
+        if own_plane
+        else ""
     )
+    text = (
+        f"{tol_text}; compared {scope}{own_text}; hit/miss masks exact except where the ID mismatch is an "
+        "allowed class (edge, tie; crack only where declared)"
+    )
+    if own.not_comparable:
+        notes.append("not comparable: " + ", ".join(f"{k} ({v} px)" for k, v in sorted(own.not_comparable.items())))
     if notes:
         text += "; " + "; ".join(notes)
     return DepthResult(
@@ -182,4 +316,8 @@ def compare_depth(
         details=details,
         tie=int(tie_mask.sum()),
         crack=int(crack_mask.sum()),
+        own_plane=int(own.idx.size),
+        own_plane_beyond=int(own.beyond.size),
+        own_plane_max_abs=own.max_abs,
+        not_comparable=own.not_comparable,
     )

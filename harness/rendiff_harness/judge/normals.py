@@ -87,7 +87,14 @@ def judge_normals(
             for j in k
         )
         flipped = int(np.count_nonzero(bad & (cosang < 0)))
-        details.append(f"{int(bad.sum())} normals off, {flipped} of them facing the other way; e.g. {ex}")
+        # A zero (or non-finite) N has no direction: its angle is recorded as pi, which
+        # must not read as "reversed" (a Mitsuba finding was first described that way).
+        no_dir = ~(got_len > 0) | ~np.isfinite(got_len)
+        zero = int(np.count_nonzero(bad & no_dir))
+        details.append(
+            f"{int(bad.sum())} normals off, {flipped} of them facing the other way, "
+            f"{zero} zero or not finite (angle shown as pi); e.g. {ex}"
+        )
         first = valid[k[0]]
         e.explanations = [
             {
@@ -96,8 +103,12 @@ def judge_normals(
                 "test_prim": int(prims[first]),
                 "pixels": int(bad.sum()),
                 "example": [int(first % w), int(first // w)],
-                "why": f"N is {angle[k[0]]:.3g} rad from normalize((b-a) x (c-a)) of the prim it names"
-                + (" (flipped)" if cosang[k[0]] < 0 else ""),
+                "why": (
+                    f"N is the zero vector or not finite (|N| = {got_len[k[0]]:.3g}), not normalize((b-a) x (c-a))"
+                    if no_dir[k[0]]
+                    else f"N is {angle[k[0]]:.3g} rad from normalize((b-a) x (c-a)) of the prim it names"
+                    + (" (flipped)" if cosang[k[0]] < 0 else "")
+                ),
             }
         ]
     return Judged(details)

@@ -40,7 +40,10 @@ def camera_model(spec: BackendSpec | None) -> tuple[CameraModel, bool]:
 
 
 def camera_owner(spec: BackendSpec | None, backend: str) -> str:
-    """Whose convention a calibration failure blames: the core's camera, or the backend's exporter."""
+    """Whose convention a calibration failure blames: the core's camera, a renderer declared by
+    command (it reads the resolved scene itself), or the built-in backend's exporter."""
     if spec is not None and spec.core_loop:
         return f"the rendiff core's camera ({backend})"
+    if spec is not None and spec.declared:
+        return f"the {backend} renderer"
     return f"the {backend} exporter"

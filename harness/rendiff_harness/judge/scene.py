@@ -22,7 +22,7 @@ from ..contract.manifest import (
 from ..contract.results import Entry
 from ..contract.vocab import Buffer, Status
 from ..renderers.spec import BackendSpec, SpecLookup
-from . import expectations, precision, radiance, tolerance
+from . import expectations, importcheck, precision, radiance, tolerance
 from .buffers import (
     BUFFER_FIELDS,
     BUFFER_TABLE,
@@ -144,6 +144,7 @@ def compare_scene(
             )
     if references_dir is not None and vocab.Feature.GLOBAL_ILLUMINATION in ref.scene.requires:
         results.append(compare_cached_reference(run, name, ref, references_dir, exps, images, specs))
+    results += importcheck.import_entries(ref.scene, name)  # the resolved triangles against a second decoder
     return [e.blank_if_not_compared() for e in results]
 
 

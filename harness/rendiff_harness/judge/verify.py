@@ -225,14 +225,17 @@ def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int, slac
     neigh = topo.neighbors(tri, local)
     if not neigh:
         return True, "a mesh boundary edge"
-    t = scene.triangles.astype(np.float64)
+    # Only the corners it reads go to f64 (exact, so the same values as a copy of the whole
+    # scene, which this made per visited edge: 128 ms and 94 MB at 1.31M triangles).
+    t = scene.triangles
     eye = scene.camera.eye
-    a, b, c = t[tri, local], t[tri, (local + 1) % 3], t[tri, (local + 2) % 3]
+    own_tri = np.asarray(t[tri], dtype=np.float64)
+    a, b, c = own_tri[local], own_tri[(local + 1) % 3], own_tri[(local + 2) % 3]
     own = _side(eye, a, b, c, slack)
     if own == 0:
         return True, "an edge of a triangle this renderer may see edge-on"
     for n_tri, n_local in neigh:
-        other = _side(eye, a, b, t[n_tri, (n_local + 2) % 3], slack)
+        other = _side(eye, a, b, np.asarray(t[n_tri, (n_local + 2) % 3], dtype=np.float64), slack)
         if own * other < 0:
             return False, str(n_tri)
     return True, "a silhouette edge (its neighbors fold behind it, or may for this renderer)"

@@ -128,4 +128,5 @@ def spec(r: Renderer) -> BackendSpec:
         render=backend.render,
         version=backend.version,
         unavailable_reason=backend.unavailable_reason,
+        declared=True,
     )

@@ -40,8 +40,11 @@ BUILT_IN = (
 )
 """The built-in external backends, in the order `info` lists them: renderers/<name>/backend.py's `SPEC`."""
 
-RESERVED_NAMES = frozenset({s.name for s in core.SPECS} | set(BUILT_IN) | {vocab.CACHED_REFERENCE_BACKEND})
-"""Names a declared renderer cannot take: every backend above, and the comparison's cached references."""
+RESERVED_NAMES = frozenset(
+    {s.name for s in core.SPECS} | set(BUILT_IN) | {vocab.CACHED_REFERENCE_BACKEND} | set(vocab.IMPORT_DECODERS)
+)
+"""Names a declared renderer cannot take: every backend above, the comparison's cached references
+and the import verdict's decoders."""
 KNOWN_BUFFERS = frozenset({vocab.Buffer.Z, vocab.Buffer.ID, vocab.Buffer.N, vocab.Buffer.RGB})
 VISIBILITY_FEATURES = frozenset(f.value for f in vocab.VISIBILITY_FEATURES)
 """The features the visibility buffers (Z, id, N) need; every other feature is a shading one

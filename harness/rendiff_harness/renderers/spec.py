@@ -78,6 +78,9 @@ class BackendSpec:
     """True for the rendiff core's own loops (raster, trace): one camera, coverage predicate and depth
     function, so calibration blames the core's camera, and metamorphic relations hold them to the
     core's own bounds (judge/metamorphic.py)."""
+    declared: bool = False
+    """True for a renderer declared by command (renderers/declared.py): rendiff exports nothing for it
+    (it reads the resolved scene itself), so a convention error is the renderer's, not an exporter's."""
 
 
 SpecLookup = Callable[[str], "BackendSpec | None"]

@@ -10,15 +10,17 @@
 //! header), buffers are read here (relative file names inside the scene's
 //! folder, or base64 `data:` URIs; never images), and accessors are read here
 //! with every byte range checked. Only geometry is
-//! read: positions, indices, primitive modes, the node hierarchy and, when the
-//! scene asks for it, one perspective camera. Materials, textures, normals,
-//! animations and extensions that do not change geometry are ignored; skins
-//! and non-zero morph weights are refused (the geometry would not be the one a
-//! glTF viewer shows). The rules and the naming are documented in
-//! docs/resolved-scene.md.
+//! read: positions (float, or quantized as `KHR_mesh_quantization` allows),
+//! indices, primitive modes (points and lines skipped with a warning), the
+//! node hierarchy with `EXT_mesh_gpu_instancing` instances, the scene the
+//! user chose and, when the scene asks for it, one perspective camera.
+//! Materials, textures, normals, animations and extensions that do not change
+//! geometry are ignored; skins and non-zero morph weights are refused (the
+//! geometry would not be the one a glTF viewer shows). The rules and the
+//! naming are documented in docs/resolved-scene.md.
 
 use super::generators::Tri64;
-use super::{read_regular_file, SceneError, MAX_MESH_FILE_BYTES, MAX_SCENE_TRIANGLES};
+use super::{read_regular_file, GltfRef, SceneError, MAX_MESH_FILE_BYTES, MAX_SCENE_TRIANGLES};
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use gltf::json;
 use gltf::json::accessor::{ComponentType, Type as AccType};
@@ -79,6 +81,19 @@ pub enum CameraRequest<'a> {
     First,
     /// The camera node whose node name or camera name is this.
     Named(&'a str),
+    /// The node placing the file's camera of this index (`cameras[i]`).
+    Index(usize),
+}
+
+impl<'a> CameraRequest<'a> {
+    /// The request a scene file's `camera.gltf.camera` makes (none: the first).
+    pub fn of(choice: Option<&'a GltfRef>) -> CameraRequest<'a> {
+        match choice {
+            None => CameraRequest::First,
+            Some(GltfRef::Name(n)) => CameraRequest::Named(n),
+            Some(GltfRef::Index(i)) => CameraRequest::Index(*i as usize),
+        }
+    }
 }
 
 /// What a glTF file contributes to a scene.
@@ -88,7 +103,22 @@ pub struct GltfFile {
     pub nodes: Vec<GltfMeshNode>,
     /// The requested camera ([`CameraRequest::None`] gives `None`).
     pub camera: Option<GltfCamera>,
+    /// What was left out and why (a POINTS or LINES primitive), one line each,
+    /// without the file name (the caller adds it, as for errors).
+    pub warnings: Vec<String>,
 }
+
+/// The glTF extensions rendiff reads itself, so a file may require them:
+/// the `gltf` crate refuses every required extension it does not know, and
+/// it knows neither of these.
+pub const READ_EXTENSIONS: [&str; 2] = ["KHR_mesh_quantization", "EXT_mesh_gpu_instancing"];
+
+/// Most `EXT_mesh_gpu_instancing` instances a glTF file may place, all nodes
+/// together: 2^20 = 1,048,576. Each instance is a rendiff object (a name and
+/// its record, about 100 B with the export's JSON), so this keeps a hostile
+/// file's objects near 100 MB; a forest of 100,000 instanced trees loads.
+/// Instances also count their triangles against the scene's triangle budget.
+pub const MAX_INSTANCES: u64 = 1 << 20;
 
 /// Splits a GLB container into its JSON chunk and optional BIN chunk, or says
 /// what is wrong with it. Chunks after the first two are ignored, as the
@@ -465,31 +495,105 @@ fn accessor_count(root: &json::Root, ai: usize) -> Result<u64, String> {
         .ok_or_else(|| format!("accessor {ai} does not exist"))
 }
 
-/// Reads a POSITION accessor (float VEC3) as f64 points, refusing NaN and Inf.
-fn read_positions(root: &json::Root, buffers: &[Vec<u8>], ai: usize) -> Result<Vec<DVec3>, String> {
-    let acc = &root.accessors[ai];
-    let ok = matches!(
-        acc.component_type,
-        Checked::Valid(json::accessor::GenericComponentType(ComponentType::F32))
-    ) && matches!(acc.type_, Checked::Valid(AccType::Vec3));
-    if !ok {
-        return Err(format!(
-            "accessor {ai} (POSITION) must be float VEC3 (quantized positions are not supported)"
-        ));
+/// One component of a float or quantized accessor, dequantized as the glTF
+/// 2.0 specification defines normalized integers (`KHR_mesh_quantization`
+/// refers to its table), in f64:
+/// a normalized signed byte `c` is `max(c / 127, -1)`, an unsigned one
+/// `c / 255`, a signed short `max(c / 32767, -1)`, an unsigned one
+/// `c / 65535`; an unnormalized integer is its value; a float is itself.
+fn dequantize(c: ComponentType, normalized: bool, b: &[u8]) -> f64 {
+    let v = match c {
+        ComponentType::F32 => return f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        ComponentType::I8 => f64::from(b[0] as i8),
+        ComponentType::U8 => f64::from(b[0]),
+        ComponentType::I16 => f64::from(i16::from_le_bytes([b[0], b[1]])),
+        ComponentType::U16 => f64::from(u16::from_le_bytes([b[0], b[1]])),
+        ComponentType::U32 => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+    };
+    if !normalized {
+        return v;
     }
-    let bytes = accessor_bytes(root, buffers, ai, 12)?;
-    let mut out = Vec::with_capacity(bytes.len() / 12);
-    for (k, e) in bytes.chunks_exact(12).enumerate() {
-        let f = |o: usize| f32::from_le_bytes([e[o], e[o + 1], e[o + 2], e[o + 3]]);
-        let v = [f(0), f(4), f(8)];
-        if v.iter().any(|x| !x.is_finite()) {
+    match c {
+        ComponentType::I8 => (v / 127.0).max(-1.0),
+        ComponentType::U8 => v / 255.0,
+        ComponentType::I16 => (v / 32767.0).max(-1.0),
+        ComponentType::U16 => v / 65535.0,
+        _ => v / f64::from(u32::MAX),
+    }
+}
+
+/// Reads a float or quantized accessor of `n` components per element
+/// (`what` names it in messages) as f64 values, element after element,
+/// refusing NaN and Inf. `signed_normalized_only` restricts integers to
+/// normalized signed bytes and shorts (an instance ROTATION); otherwise any
+/// byte or short, normalized or not, is read (`KHR_mesh_quantization`).
+fn read_floats(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    ai: usize,
+    what: &str,
+    n: usize,
+    signed_normalized_only: bool,
+) -> Result<Vec<f64>, String> {
+    let acc = root
+        .accessors
+        .get(ai)
+        .ok_or_else(|| format!("accessor {ai} ({what}) does not exist"))?;
+    let ty = match n {
+        3 => AccType::Vec3,
+        _ => AccType::Vec4,
+    };
+    let comp = match acc.component_type {
+        Checked::Valid(json::accessor::GenericComponentType(c)) => Some(c),
+        _ => None,
+    };
+    let ok = match comp {
+        Some(ComponentType::F32) => true,
+        Some(ComponentType::I8 | ComponentType::I16) if signed_normalized_only => acc.normalized,
+        Some(ComponentType::I8 | ComponentType::I16 | ComponentType::U8 | ComponentType::U16) => {
+            !signed_normalized_only
+        }
+        _ => false,
+    };
+    let (Some(comp), true, true) = (comp, ok, acc.type_ == Checked::Valid(ty)) else {
+        let types = if signed_normalized_only {
+            "float, or normalized signed byte or short"
+        } else {
+            "float, or (KHR_mesh_quantization) byte or short, signed or unsigned, normalized or not"
+        };
+        return Err(format!(
+            "accessor {ai} ({what}) must be {} of {types}",
+            if n == 3 { "VEC3" } else { "VEC4" }
+        ));
+    };
+    let size = component_size(comp);
+    let elem = n * size;
+    let bytes = accessor_bytes(root, buffers, ai, elem)?;
+    let mut out = Vec::with_capacity(bytes.len() / size);
+    for (k, e) in bytes.chunks_exact(elem).enumerate() {
+        let start = out.len();
+        out.extend(
+            e.chunks_exact(size)
+                .map(|b| dequantize(comp, acc.normalized, b)),
+        );
+        if out[start..].iter().any(|x| !x.is_finite()) {
             return Err(format!(
-                "accessor {ai} (POSITION) element {k} is not finite (NaN or Inf): {v:?}"
+                "accessor {ai} ({what}) element {k} is not finite (NaN or Inf): {:?}",
+                &out[start..]
             ));
         }
-        out.push(DVec3::new(v[0].into(), v[1].into(), v[2].into()));
     }
     Ok(out)
+}
+
+/// Reads a POSITION accessor (VEC3: float, or quantized as
+/// `KHR_mesh_quantization` allows, dequantized by [`dequantize`]) as f64
+/// points, refusing NaN and Inf.
+fn read_positions(root: &json::Root, buffers: &[Vec<u8>], ai: usize) -> Result<Vec<DVec3>, String> {
+    let v = read_floats(root, buffers, ai, "POSITION", 3, false)?;
+    Ok(v.chunks_exact(3)
+        .map(|p| DVec3::new(p[0], p[1], p[2]))
+        .collect())
 }
 
 /// Reads an index accessor (unsigned SCALAR) and checks every index against
@@ -536,25 +640,26 @@ fn read_indices(
     Ok(out)
 }
 
-/// Triangles a primitive makes from `n` vertex references, or the reason it
-/// makes none (a mode that is not a surface).
+/// The name of a primitive mode that is not a surface (points and lines),
+/// or None for the three triangle modes.
+fn non_surface(mode: Mode) -> Option<&'static str> {
+    match mode {
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan => None,
+        Mode::Points => Some("POINTS"),
+        Mode::Lines => Some("LINES"),
+        Mode::LineLoop => Some("LINE_LOOP"),
+        Mode::LineStrip => Some("LINE_STRIP"),
+    }
+}
+
+/// Triangles a primitive of a surface mode makes from `n` vertex references.
 fn triangle_count(mode: Mode, n: u64, where_: &str) -> Result<u64, String> {
     match mode {
         Mode::Triangles if n.is_multiple_of(3) => Ok(n / 3),
         Mode::Triangles => Err(format!(
             "{where_} has {n} vertex references, not a multiple of 3 (mode TRIANGLES)"
         )),
-        Mode::TriangleStrip | Mode::TriangleFan => Ok(n.saturating_sub(2)),
-        other => Err(format!(
-            "{where_} has mode {}; rendiff renders triangles only (TRIANGLES, \
-             TRIANGLE_STRIP, TRIANGLE_FAN)",
-            match other {
-                Mode::Points => "POINTS",
-                Mode::Lines => "LINES",
-                Mode::LineLoop => "LINE_LOOP",
-                _ => "LINE_STRIP",
-            }
-        )),
+        _ => Ok(n.saturating_sub(2)),
     }
 }
 
@@ -673,18 +778,46 @@ fn validation_problem(e: gltf::Error) -> String {
     }
 }
 
-/// The scene's mesh nodes and camera nodes, depth first, pre-order, with
-/// their world matrices; the hierarchy must be a tree and mesh nodes unskinned.
-fn scene_nodes(root: &json::Root) -> Result<(usize, Vec<NodeAt>, Vec<NodeAt>), String> {
-    let scene = root
-        .scene
-        .map(|s| s.value())
-        .or(if root.scenes.is_empty() {
-            None
-        } else {
-            Some(0)
-        })
-        .ok_or("the glTF file has no scene")?;
+/// The scene to show: the one the scene file chose (by index or by name,
+/// which must name exactly one), else the file's `scene`, else its first.
+fn pick_scene(root: &json::Root, choice: Option<&GltfRef>) -> Result<usize, String> {
+    let n = root.scenes.len();
+    match choice {
+        Some(GltfRef::Index(i)) if (*i as usize) < n => Ok(*i as usize),
+        Some(GltfRef::Index(i)) => Err(format!(
+            "gltf_scene {i} does not exist (the file has {n} scene{})",
+            if n == 1 { "" } else { "s" }
+        )),
+        Some(GltfRef::Name(name)) => {
+            let hits: Vec<usize> = (0..n)
+                .filter(|&i| root.scenes[i].name.as_deref() == Some(name.as_str()))
+                .collect();
+            let shown = super::printable(name, 80);
+            match hits.as_slice() {
+                [one] => Ok(*one),
+                [] => Err(format!("gltf_scene: no glTF scene is named {shown:?}")),
+                _ => Err(format!(
+                    "gltf_scene: {} glTF scenes are named {shown:?} (scenes {hits:?}); choose one by index",
+                    hits.len()
+                )),
+            }
+        }
+        None => root
+            .scene
+            .map(|s| s.value())
+            .or(if n == 0 { None } else { Some(0) })
+            .ok_or_else(|| "the glTF file has no scene".into()),
+    }
+}
+
+/// The chosen scene's mesh nodes and camera nodes, depth first, pre-order,
+/// with their world matrices; the hierarchy must be a tree and mesh nodes
+/// unskinned.
+fn scene_nodes(
+    root: &json::Root,
+    choice: Option<&GltfRef>,
+) -> Result<(usize, Vec<NodeAt>, Vec<NodeAt>), String> {
+    let scene = pick_scene(root, choice)?;
     let roots = &root
         .scenes
         .get(scene)
@@ -732,6 +865,8 @@ fn scene_nodes(root: &json::Root) -> Result<(usize, Vec<NodeAt>, Vec<NodeAt>), S
 struct MeshCount {
     triangles: u64,
     refs: u64,
+    /// POINTS and LINES primitives left out.
+    skipped: u64,
 }
 
 /// The index of a primitive's POSITION accessor (present: checked while counting).
@@ -741,9 +876,24 @@ fn position_accessor(p: &json::mesh::Primitive) -> Option<usize> {
         .map(|a| a.value())
 }
 
+/// The POSITION accessor of a primitive that makes triangles (None for a
+/// POINTS or LINES primitive, which is never read).
+fn surface_positions(p: &json::mesh::Primitive) -> Option<usize> {
+    match p.mode {
+        Checked::Valid(mode) if non_surface(mode).is_none() => position_accessor(p),
+        _ => None,
+    }
+}
+
 /// Counts mesh `mi` (first used by node `ni`) from its accessors' counts,
-/// before any geometry is read, or says why it cannot be read.
-fn count_mesh(root: &json::Root, mi: usize, ni: usize) -> Result<MeshCount, String> {
+/// before any geometry is read, or says why it cannot be read. A POINTS or
+/// LINES primitive is left out, with a line in `warnings` naming it.
+fn count_mesh(
+    root: &json::Root,
+    mi: usize,
+    ni: usize,
+    warnings: &mut Vec<String>,
+) -> Result<MeshCount, String> {
     let mesh = root
         .meshes
         .get(mi)
@@ -759,6 +909,18 @@ fn count_mesh(root: &json::Root, mi: usize, ni: usize) -> Result<MeshCount, Stri
         let Checked::Valid(mode) = p.mode else {
             return Err(format!("{where_} has an invalid mode"));
         };
+        if let Some(name) = non_surface(mode) {
+            let mesh_name = match mesh.name.as_deref() {
+                Some(n) if !n.is_empty() => format!(" ({:?})", super::printable(n, 80)),
+                _ => String::new(),
+            };
+            warnings.push(format!(
+                "mesh {mi}{mesh_name} primitive {pi} has mode {name}: skipped (rendiff renders \
+                 triangles only)"
+            ));
+            count.skipped += 1;
+            continue;
+        }
         let pos =
             position_accessor(p).ok_or_else(|| format!("{where_} has no POSITION attribute"))?;
         let refs = accessor_count(root, p.indices.map_or(pos, |i| i.value()))?;
@@ -774,12 +936,13 @@ fn count_mesh(root: &json::Root, mi: usize, ni: usize) -> Result<MeshCount, Stri
 fn count_meshes(
     root: &json::Root,
     mesh_nodes: &[NodeAt],
+    warnings: &mut Vec<String>,
 ) -> Result<(Vec<usize>, HashMap<usize, MeshCount>), String> {
     let mut order = Vec::new();
     let mut counts = HashMap::new();
     for &(ni, _, mi) in mesh_nodes {
         if let Entry::Vacant(slot) = counts.entry(mi) {
-            slot.insert(count_mesh(root, mi, ni)?);
+            slot.insert(count_mesh(root, mi, ni, warnings)?);
             order.push(mi);
         }
     }
@@ -796,7 +959,7 @@ fn check_vertex_bound(root: &json::Root, meshes: &[usize], refs: u64) -> Result<
         for ai in root.meshes[mi]
             .primitives
             .iter()
-            .filter_map(position_accessor)
+            .filter_map(surface_positions)
         {
             if !seen.insert(ai) {
                 continue;
@@ -844,7 +1007,7 @@ fn triangles_of(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
             })
             .collect(),
         Mode::TriangleFan => (0..n).map(|i| [idx[i + 1], idx[i + 2], idx[0]]).collect(),
-        _ => unreachable!("refused while counting"),
+        _ => unreachable!("left out while counting"),
     }
 }
 
@@ -859,8 +1022,12 @@ fn read_mesh(
 ) -> Result<Vec<Part>, String> {
     let mut parts = Vec::new();
     for p in &root.meshes[mi].primitives {
-        let (Checked::Valid(mode), Some(pa)) = (p.mode, position_accessor(p)) else {
+        let Checked::Valid(mode) = p.mode else {
             unreachable!("checked while counting")
+        };
+        // POINTS and LINES were left out (with a warning) while counting.
+        let Some(pa) = surface_positions(p) else {
+            continue;
         };
         let positions = match cache.entry(pa) {
             Entry::Occupied(e) => Rc::clone(e.get()),
@@ -922,6 +1089,115 @@ fn node_labels(root: &json::Root, mesh_nodes: &[NodeAt]) -> Vec<String> {
         .collect()
 }
 
+/// A node's `EXT_mesh_gpu_instancing` attributes: the accessors of its
+/// instances' TRANSLATION, ROTATION and SCALE (each optional) and their
+/// common count.
+struct Instancing {
+    translation: Option<usize>,
+    rotation: Option<usize>,
+    scale: Option<usize>,
+    count: u64,
+}
+
+/// Reads node `ni`'s `EXT_mesh_gpu_instancing` object (None: the node has
+/// none), checking its accessors exist and agree on their count, before any
+/// is read. Attributes other than the three (an application's own, such as
+/// `_ID`) are ignored.
+fn instancing(root: &json::Root, ni: usize) -> Result<Option<Instancing>, String> {
+    let Some(ext) = root.nodes[ni]
+        .extensions
+        .as_ref()
+        .and_then(|e| e.others.get("EXT_mesh_gpu_instancing"))
+    else {
+        return Ok(None);
+    };
+    let bad = |p: String| format!("node {ni}: EXT_mesh_gpu_instancing {p}");
+    let attrs = ext
+        .get("attributes")
+        .and_then(|a| a.as_object())
+        .ok_or_else(|| bad("has no \"attributes\" object".into()))?;
+    let n = root.accessors.len();
+    let mut found = [None; 3];
+    for (slot, name) in found.iter_mut().zip(["TRANSLATION", "ROTATION", "SCALE"]) {
+        if let Some(v) = attrs.get(name) {
+            let ai = v.as_u64().filter(|a| *a < n as u64).ok_or_else(|| {
+                bad(format!(
+                    "attribute {name} is not an accessor index (the file has {n} accessors)"
+                ))
+            })?;
+            *slot = Some(ai as usize);
+        }
+    }
+    let present: Vec<usize> = found.iter().flatten().copied().collect();
+    let Some(&first) = present.first() else {
+        return Err(bad("has none of TRANSLATION, ROTATION and SCALE".into()));
+    };
+    let count = root.accessors[first].count.0;
+    if let Some(&other) = present
+        .iter()
+        .find(|&&a| root.accessors[a].count.0 != count)
+    {
+        return Err(bad(format!(
+            "attributes have different counts (accessor {first}: {count}, accessor {other}: {})",
+            root.accessors[other].count.0
+        )));
+    }
+    let [translation, rotation, scale] = found;
+    Ok(Some(Instancing {
+        translation,
+        rotation,
+        scale,
+        count,
+    }))
+}
+
+/// The instances' matrices, `T * R * S` each (absent attributes: identity),
+/// the rotation quaternion normalized in f64 like a node's; the node's world
+/// matrix is applied after them (the extension's rule).
+fn instance_matrices(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    ni: usize,
+    inst: &Instancing,
+) -> Result<Vec<DMat4>, String> {
+    let n = inst.count as usize;
+    let read = |ai: Option<usize>, what: &str, k: usize, signed: bool, default: &[f64]| match ai {
+        Some(ai) => read_floats(root, buffers, ai, what, k, signed),
+        None => Ok(default.repeat(n)),
+    };
+    let t = read(
+        inst.translation,
+        "instance TRANSLATION",
+        3,
+        false,
+        &[0.0; 3],
+    )?;
+    let r = read(
+        inst.rotation,
+        "instance ROTATION",
+        4,
+        true,
+        &[0.0, 0.0, 0.0, 1.0],
+    )?;
+    let s = read(inst.scale, "instance SCALE", 3, false, &[1.0; 3])?;
+    (0..n)
+        .map(|k| {
+            let q = DQuat::from_xyzw(r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]);
+            let len = q.length();
+            if len.is_nan() || len <= 0.0 {
+                return Err(format!(
+                    "node {ni}: EXT_mesh_gpu_instancing instance {k}'s rotation quaternion is zero"
+                ));
+            }
+            Ok(DMat4::from_scale_rotation_translation(
+                DVec3::new(s[3 * k], s[3 * k + 1], s[3 * k + 2]),
+                q / len,
+                DVec3::new(t[3 * k], t[3 * k + 1], t[3 * k + 2]),
+            ))
+        })
+        .collect()
+}
+
 /// The UTF-8 byte order mark. glTF forbids writers to add one before the
 /// JSON but lets loaders ignore it (glTF 2.0, 3.2 "JSON encoding"), and
 /// editors on Windows add it: ignored, rather than refused as malformed JSON.
@@ -951,6 +1227,29 @@ pub fn load_gltf(
     budget: u64,
     camera: CameraRequest<'_>,
 ) -> Result<GltfFile, SceneError> {
+    load_gltf_scene(file, scene_dir, field, budget, None, camera)
+}
+
+/// [`load_gltf`] showing the glTF scene the scene file chose (`gltf_scene`:
+/// an index into the file's `scenes`, or a name that must match exactly one;
+/// None: the file's `scene`, else its first).
+///
+/// A node with `EXT_mesh_gpu_instancing` is drawn once per instance (and not
+/// by itself, as the extension says), each instance one [`GltfMeshNode`]
+/// labelled `<node label>/<k>` in instance order, its world matrix the
+/// node's times the instance's `T * R * S`; instances are held to
+/// [`MAX_INSTANCES`] and their triangles to `budget` before anything is
+/// read. POINTS and LINES primitives are left out, each with a line in
+/// [`GltfFile::warnings`]; a node whose mesh has nothing else is no object,
+/// and a file with no triangle left is refused.
+pub fn load_gltf_scene(
+    file: &Path,
+    scene_dir: &Path,
+    field: &str,
+    budget: u64,
+    scene_choice: Option<&GltfRef>,
+    camera: CameraRequest<'_>,
+) -> Result<GltfFile, SceneError> {
     let err = |p: String| SceneError::new(file, field, p);
     let bytes =
         read_regular_file(file, MAX_MESH_FILE_BYTES).map_err(|p| err(format!("mesh file {p}")))?;
@@ -963,9 +1262,13 @@ pub fn load_gltf(
         (&bytes[..], None)
     };
     let json_bytes = json_bytes.strip_prefix(&UTF8_BOM[..]).unwrap_or(json_bytes);
-    let root =
+    let mut root =
         json::Root::from_slice(json_bytes).map_err(|e| err(format!("malformed glTF JSON: {e}")))?;
     check_primitive_accessors(&root).map_err(err)?;
+    // Read here, so a file may require them; the crate refuses every required
+    // extension it does not know, these two included.
+    root.extensions_required
+        .retain(|e| !READ_EXTENSIONS.contains(&e.as_str()));
     let doc = gltf::Document::from_json(root).map_err(|e| err(validation_problem(e)))?;
     let root = doc.as_json();
     // Buffers, all of them, each exactly its byteLength.
@@ -977,12 +1280,27 @@ pub fn load_gltf(
         buffers.push(data);
     }
     drop(bytes);
-    let (scene, mesh_nodes, camera_nodes) = scene_nodes(root).map_err(err)?;
+    let (scene, mesh_nodes, camera_nodes) = scene_nodes(root, scene_choice).map_err(err)?;
     // Count first, against the budget, before any geometry is read.
-    let (order, counts) = count_meshes(root, &mesh_nodes).map_err(err)?;
-    let count = mesh_nodes
-        .iter()
-        .fold(0u64, |n, (_, _, mi)| n.saturating_add(counts[mi].triangles));
+    let mut warnings = Vec::new();
+    let (order, counts) = count_meshes(root, &mesh_nodes, &mut warnings).map_err(err)?;
+    let mut instanced = Vec::with_capacity(mesh_nodes.len());
+    let (mut count, mut instances) = (0u64, 0u64);
+    for &(ni, _, mi) in &mesh_nodes {
+        let inst = instancing(root, ni).map_err(err)?;
+        let copies = inst.as_ref().map_or(1, |i| i.count);
+        if inst.is_some() {
+            instances = instances.saturating_add(copies);
+            if instances > MAX_INSTANCES {
+                return Err(err(format!(
+                    "node {ni}: EXT_mesh_gpu_instancing brings the file's instances to {instances}, \
+                     more than the limit of {MAX_INSTANCES} (each instance is an object)"
+                )));
+            }
+        }
+        count = count.saturating_add(counts[&mi].triangles.saturating_mul(copies));
+        instanced.push(inst);
+    }
     if count > budget {
         return Err(err(format!(
             "glTF file has {count} triangles; with the scene's other objects ({} triangles) \
@@ -994,7 +1312,16 @@ pub fn load_gltf(
         return Err(err(format!("glTF scene {scene} has no node with a mesh")));
     }
     if count == 0 {
-        return Err(err(super::NO_FACES.into()));
+        let skipped: u64 = counts.values().map(|c| c.skipped).sum();
+        return Err(err(if skipped == 0 {
+            super::NO_FACES.into()
+        } else {
+            format!(
+                "{}: its {skipped} POINTS/LINES primitive(s) are skipped, and rendiff renders \
+                 triangles only",
+                super::NO_FACES
+            )
+        }));
     }
     let refs = counts.values().fold(0u64, |n, c| n.saturating_add(c.refs));
     check_vertex_bound(root, &order, refs).map_err(err)?;
@@ -1003,19 +1330,45 @@ pub fn load_gltf(
     for &mi in &order {
         meshes.insert(mi, read_mesh(root, &buffers, mi, &mut cache).map_err(err)?);
     }
-    let nodes = mesh_nodes
+    let mut nodes = Vec::with_capacity(mesh_nodes.len());
+    for ((&(ni, world, mi), label), inst) in mesh_nodes
         .iter()
         .zip(node_labels(root, &mesh_nodes))
-        .map(|(&(_, world, mi), label)| GltfMeshNode {
-            label,
-            triangles: place(&meshes[&mi], world),
-        })
-        .collect();
+        .zip(&instanced)
+    {
+        // A mesh of points and lines only is no object (nothing of it is drawn).
+        let c = counts[&mi];
+        if c.skipped > 0 && c.skipped as usize == root.meshes[mi].primitives.len() {
+            continue;
+        }
+        match inst {
+            None => nodes.push(GltfMeshNode {
+                label,
+                triangles: place(&meshes[&mi], world),
+            }),
+            Some(inst) => {
+                for (k, m) in instance_matrices(root, &buffers, ni, inst)
+                    .map_err(err)?
+                    .into_iter()
+                    .enumerate()
+                {
+                    nodes.push(GltfMeshNode {
+                        label: format!("{label}/{k}"),
+                        triangles: place(&meshes[&mi], world * m),
+                    });
+                }
+            }
+        }
+    }
     let camera = match camera {
         CameraRequest::None => None,
         request => Some(pick_camera(root, &camera_nodes, request).map_err(err)?),
     };
-    Ok(GltfFile { nodes, camera })
+    Ok(GltfFile {
+        nodes,
+        camera,
+        warnings,
+    })
 }
 
 /// The requested camera among the scene's camera nodes (traversal order).
@@ -1046,6 +1399,32 @@ fn pick_camera(
                         "{} camera nodes match the name {:?}; name the node instead",
                         hits.len(),
                         super::printable(name, 80)
+                    ))
+                }
+            }
+        }
+        CameraRequest::Index(want) => {
+            let hits: Vec<_> = camera_nodes
+                .iter()
+                .filter(|(_, _, ci)| *ci == want)
+                .collect();
+            match hits.as_slice() {
+                [one] => **one,
+                [] if want >= root.cameras.len() => {
+                    return Err(format!(
+                        "camera {want} does not exist (the file has {} cameras)",
+                        root.cameras.len()
+                    ))
+                }
+                [] => {
+                    return Err(format!(
+                        "camera {want} is placed by no node of the chosen glTF scene"
+                    ))
+                }
+                _ => {
+                    return Err(format!(
+                        "camera {want} is placed by {} nodes; choose one by its node's name",
+                        hits.len()
                     ))
                 }
             }
@@ -1548,7 +1927,14 @@ mod tests {
 
         let mut d = Doc::tri();
         d.mode = 1;
-        assert!(load_err(&d.write(path), path).contains("mesh 0 primitive 0 has mode LINES"));
+        let e = load_err(&d.write(path), path);
+        assert!(
+            e.ends_with(&format!(
+                "{}: its 1 POINTS/LINES primitive(s) are skipped, and rendiff renders triangles only",
+                super::super::NO_FACES
+            )),
+            "{e}"
+        );
 
         let p = path.join("broken.gltf");
         std::fs::write(&p, "{\"asset\": {\"version\": \"2.0\"},\n\"nodes\": [}").unwrap();
@@ -1811,5 +2197,412 @@ mod tests {
         d.indices = Some(vec![0, 1]);
         d.mode = 5;
         assert!(load_err(&d.write(path), path).ends_with(&want));
+    }
+
+    /// `json` with a second buffer (a `data:` URI of `bin`) as bufferView 2,
+    /// and `accessors` (JSON objects reading bufferView 2) appended after the
+    /// document's own accessors (0: indices, 1: positions).
+    fn with_accessors(json: &str, bin: &[u8], accessors: &str) -> String {
+        let json = json.replacen(
+            r#""buffers": [{"#,
+            &format!(
+                r#""buffers": [{{"byteLength": {}, "uri": "data:application/octet-stream;base64,{}"}}, {{"#,
+                bin.len(),
+                base64(bin)
+            ),
+            1,
+        );
+        // The data: buffer went first: the document's own is now buffer 1.
+        let json = json.replace(r#""buffer": 0"#, r#""buffer": 1"#);
+        let json = json.replacen(
+            r#""bufferViews": ["#,
+            &format!(
+                r#""bufferViews": [{{"buffer": 0, "byteLength": {}}}, "#,
+                bin.len()
+            ),
+            1,
+        );
+        // Views shift by one: 0 -> 1 (indices), 1 -> 2 (positions).
+        let json = json
+            .replace(r#""bufferView": 1"#, r#""bufferView": 2"#)
+            .replace(r#""bufferView": 0"#, r#""bufferView": 1"#);
+        let accessors = accessors.replace("\"bufferView\": 9", "\"bufferView\": 0");
+        let at = json.rfind(']').expect("accessors close the document");
+        format!("{}, {accessors}{}", &json[..at], &json[at..])
+    }
+
+    fn f32_bytes(v: &[f32]) -> Vec<u8> {
+        v.iter().flat_map(|x| x.to_le_bytes()).collect()
+    }
+
+    fn write_json(dir: &Path, name: &str, json: &str) -> PathBuf {
+        std::fs::write(dir.join("m.bin"), Doc::tri().bin()).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, json).unwrap();
+        p
+    }
+
+    #[test]
+    fn points_and_lines_are_skipped_with_a_warning_naming_mesh_and_primitive() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = Doc::tri();
+        let plain = load(&d.write(dir.path()), dir.path()).unwrap();
+        assert!(plain.warnings.is_empty());
+        let line = |mode: u32| format!(r#"{{"attributes": {{"POSITION": 1}}, "mode": {mode}}}"#);
+        let json = d
+            .json()
+            .replacen(
+                r#""mode": 4}]}]"#,
+                &format!(
+                    r#""mode": 4}}, {}, {}], "name": "wire"}}, {{"primitives": [{}, {}]}}]"#,
+                    line(1),
+                    line(0),
+                    line(2),
+                    line(3)
+                ),
+                1,
+            )
+            .replacen(
+                r#"[{"mesh": 0, "name": "tri"}]"#,
+                r#"[{"mesh": 0, "name": "tri"}, {"mesh": 1, "name": "lines"}]"#,
+                1,
+            );
+        let d2 = Doc {
+            roots: "[0, 1]".into(),
+            ..Doc::tri()
+        };
+        let json = json.replacen(r#""nodes": [0]"#, &format!(r#""nodes": {}"#, d2.roots), 1);
+        let p = write_json(dir.path(), "lines.gltf", &json);
+        let f = load(&p, dir.path()).unwrap();
+        // The triangle is read as before; the node of lines only is no object.
+        assert_eq!(f.nodes.len(), 1);
+        assert_eq!(f.nodes[0].triangles, plain.nodes[0].triangles);
+        assert_eq!(
+            f.warnings,
+            [
+                r#"mesh 0 ("wire") primitive 1 has mode LINES: skipped (rendiff renders triangles only)"#,
+                r#"mesh 0 ("wire") primitive 2 has mode POINTS: skipped (rendiff renders triangles only)"#,
+                "mesh 1 primitive 0 has mode LINE_LOOP: skipped (rendiff renders triangles only)",
+                "mesh 1 primitive 1 has mode LINE_STRIP: skipped (rendiff renders triangles only)",
+            ]
+        );
+        // Nothing but points and lines: refused, saying why nothing is left.
+        for mode in 0..4 {
+            let mut d = Doc::tri();
+            d.mode = mode;
+            let e = load_err(&d.write(dir.path()), dir.path());
+            assert!(e.contains("POINTS/LINES primitive(s) are skipped"), "{e}");
+        }
+    }
+
+    #[test]
+    fn quantized_positions_are_dequantized_as_the_specification_says() {
+        // (componentType, normalized, stored components, expected values).
+        let cases: [(u32, bool, [i64; 6], [f64; 6]); 6] = [
+            (
+                5120,
+                true,
+                [127, -128, 0, -127, 64, 1],
+                [1.0, -1.0, 0.0, -1.0, 64.0 / 127.0, 1.0 / 127.0],
+            ),
+            (
+                5121,
+                true,
+                [255, 0, 51, 1, 2, 3],
+                [1.0, 0.0, 0.2, 1.0 / 255.0, 2.0 / 255.0, 3.0 / 255.0],
+            ),
+            (
+                5122,
+                true,
+                [32767, -32768, 0, -16384, 3, 0],
+                [1.0, -1.0, 0.0, -16384.0 / 32767.0, 3.0 / 32767.0, 0.0],
+            ),
+            (
+                5123,
+                true,
+                [65535, 0, 1, 2, 3, 4],
+                [
+                    1.0,
+                    0.0,
+                    1.0 / 65535.0,
+                    2.0 / 65535.0,
+                    3.0 / 65535.0,
+                    4.0 / 65535.0,
+                ],
+            ),
+            (
+                5122,
+                false,
+                [-300, 7, 0, 1, -1, 2],
+                [-300.0, 7.0, 0.0, 1.0, -1.0, 2.0],
+            ),
+            (
+                5121,
+                false,
+                [200, 7, 0, 1, 0, 2],
+                [200.0, 7.0, 0.0, 1.0, 0.0, 2.0],
+            ),
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        for (ct, normalized, stored, want) in cases {
+            let size = if ct < 5122 { 1 } else { 2 };
+            // Three vertices, the third (0, 0, 0); elements aligned to 4 bytes
+            // (byteStride), as glTF requires of vertex attributes.
+            let stride = (3 * size as usize).div_ceil(4) * 4;
+            let mut bin = vec![0u8; 3 * stride];
+            for (k, v) in stored.iter().enumerate() {
+                let at = (k / 3) * stride + (k % 3) * size as usize;
+                let b = (*v as i16).to_le_bytes();
+                bin[at..at + size as usize].copy_from_slice(&b[..size as usize]);
+            }
+            let (lo, hi) = (stored.iter().min().unwrap(), stored.iter().max().unwrap());
+            let json = format!(
+                r#"{{"asset": {{"version": "2.0"}}, "extensionsUsed": ["KHR_mesh_quantization"],
+                   "extensionsRequired": ["KHR_mesh_quantization"],
+                   "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+                   "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+                   "buffers": [{{"byteLength": {len}, "uri": "data:application/octet-stream;base64,{b64}"}}],
+                   "bufferViews": [{{"buffer": 0, "byteLength": {len}, "byteStride": {stride}}}],
+                   "accessors": [{{"bufferView": 0, "componentType": {ct}, "normalized": {normalized},
+                                   "count": 3, "type": "VEC3", "min": [{lo}, {lo}, {lo}], "max": [{hi}, {hi}, {hi}]}}]}}"#,
+                len = bin.len(),
+                b64 = base64(&bin),
+            );
+            let p = dir.path().join("q.gltf");
+            std::fs::write(&p, json).unwrap();
+            let f = load(&p, dir.path()).unwrap_or_else(|e| panic!("{ct} {normalized}: {e}"));
+            let t = f.nodes[0].triangles[0];
+            let got = [t[0].x, t[0].y, t[0].z, t[1].x, t[1].y, t[1].z];
+            assert_eq!(got, want, "componentType {ct}, normalized {normalized}");
+            assert_eq!(t[2], DVec3::ZERO);
+        }
+    }
+
+    #[test]
+    fn gpu_instances_are_objects_placed_by_node_times_instance() {
+        let dir = tempfile::tempdir().unwrap();
+        // Two instances: (T, R, S) = ((10,0,0), identity, 1) and ((0,5,0),
+        // 90 degrees about z as normalized shorts, (-2,2,2): a mirror).
+        let h = 23170i16; // 0.7071 in normalized shorts
+        let mut bin = f32_bytes(&[10.0, 0.0, 0.0, 0.0, 5.0, 0.0]);
+        for v in [0i16, 0, 0, 32767, 0, 0, h, h] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+        bin.extend(f32_bytes(&[1.0, 1.0, 1.0, -2.0, 2.0, 2.0]));
+        let acc = |off: usize, ct: u32, norm: bool, ty: &str| {
+            format!(
+                r#"{{"bufferView": 9, "byteOffset": {off}, "componentType": {ct}, "normalized": {norm}, "count": 2, "type": "{ty}"}}"#
+            )
+        };
+        let accessors = [
+            acc(0, 5126, false, "VEC3"),
+            acc(24, 5122, true, "VEC4"),
+            acc(40, 5126, false, "VEC3"),
+        ]
+        .join(", ");
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"mesh": 0, "name": "tri", "translation": [0, 0, 1],
+            "extensions": {"EXT_mesh_gpu_instancing": {"attributes":
+                {"TRANSLATION": 2, "ROTATION": 3, "SCALE": 4, "_ID": 1}}}}]"#
+            .into();
+        let json = with_accessors(&d.json(), &bin, &accessors).replacen(
+            r#""scene": 0,"#,
+            r#""scene": 0, "extensionsUsed": ["EXT_mesh_gpu_instancing"],
+               "extensionsRequired": ["EXT_mesh_gpu_instancing"],"#,
+            1,
+        );
+        let p = write_json(dir.path(), "inst.gltf", &json);
+        let f = load(&p, dir.path()).unwrap();
+        let labels: Vec<&str> = f.nodes.iter().map(|n| n.label.as_str()).collect();
+        assert_eq!(labels, ["tri/0", "tri/1"]);
+        assert_eq!(
+            f.nodes[0].triangles,
+            vec![[
+                DVec3::new(10.0, 0.0, 1.0),
+                DVec3::new(11.0, 0.0, 1.0),
+                DVec3::new(10.0, 1.0, 1.0)
+            ]]
+        );
+        // Mirrored: the winding is reversed (a, c, b).
+        let t = f.nodes[1].triangles[0];
+        assert!(close(t[0], [0.0, 5.0, 1.0]), "{t:?}");
+        assert!(close(t[1], [-2.0, 5.0, 1.0]), "{t:?}");
+        assert!(close(t[2], [0.0, 3.0, 1.0]), "{t:?}");
+
+        // Instances multiply the triangles counted against the budget.
+        let e = load_gltf(&p, dir.path(), "objects[0].mesh", 1, CameraRequest::None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("glTF file has 2 triangles"), "{e}");
+
+        // Each broken form is one line naming the node and the problem.
+        let cases = [
+            (
+                r#""ROTATION": 3"#,
+                r#""ROTATION": 2"#,
+                "accessor 2 (instance ROTATION) must be VEC4",
+            ),
+            (
+                r#""SCALE": 4"#,
+                r#""SCALE": 3"#,
+                "accessor 3 (instance SCALE) must be VEC3",
+            ),
+            (
+                r#""SCALE": 4"#,
+                r#""SCALE": 40"#,
+                "attribute SCALE is not an accessor index",
+            ),
+            (
+                r#""TRANSLATION": 2, "ROTATION": 3, "SCALE": 4"#,
+                r#""_ID": 2"#,
+                "has none of TRANSLATION",
+            ),
+            (
+                r#""TRANSLATION": 2"#,
+                r#""TRANSLATION": 1"#,
+                "attributes have different counts (accessor 1: 3, accessor 3: 2)",
+            ),
+            (
+                r#""normalized": true"#,
+                r#""normalized": false"#,
+                "normalized signed byte or short",
+            ),
+        ];
+        for (from, to, want) in cases {
+            let bad = json.replacen(from, to, 1);
+            assert_ne!(bad, json);
+            let p = write_json(dir.path(), "bad.gltf", &bad);
+            let e = load_err(&p, dir.path());
+            assert!(e.contains(want), "{e}");
+        }
+        // A zero rotation is refused, not turned into a collapse.
+        let zero = with_accessors(
+            &d.json(),
+            &bin.iter().map(|_| 0).collect::<Vec<u8>>(),
+            &accessors,
+        );
+        let p = write_json(dir.path(), "zero.gltf", &zero);
+        assert!(load_err(&p, dir.path()).contains("instance 0's rotation quaternion is zero"));
+    }
+
+    #[test]
+    fn instances_beyond_the_limit_are_refused_before_they_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"mesh": 0, "extensions": {"EXT_mesh_gpu_instancing":
+            {"attributes": {"TRANSLATION": 2}}}}]"#
+            .into();
+        for (count, ok) in [(MAX_INSTANCES, true), (MAX_INSTANCES + 1, false)] {
+            // Zeros made from nothing (no bufferView, one sparse value):
+            // cheap to state, costly to read.
+            let acc = format!(
+                r#"{{"componentType": 5126, "count": {count}, "type": "VEC3",
+                    "sparse": {{"count": 1, "indices": {{"bufferView": 9, "componentType": 5125}},
+                                "values": {{"bufferView": 9}}}}}}"#
+            );
+            let json = with_accessors(&d.json(), &[0; 12], &acc);
+            let p = write_json(dir.path(), "many.gltf", &json);
+            if ok {
+                assert_eq!(load(&p, dir.path()).unwrap().nodes.len() as u64, count);
+            } else {
+                let e = load_err(&p, dir.path());
+                assert!(e.contains("more than the limit of 1048576"), "{e}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_required_extension_rendiff_does_not_read_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let json = Doc::tri().json().replacen(
+            r#""scene": 0,"#,
+            r#""scene": 0, "extensionsUsed": ["KHR_draco_mesh_compression"],
+               "extensionsRequired": ["KHR_draco_mesh_compression"],"#,
+            1,
+        );
+        let p = write_json(dir.path(), "draco.gltf", &json);
+        let e = load_err(&p, dir.path());
+        assert!(e.contains("KHR_draco_mesh_compression"), "{e}");
+        assert!(
+            e.contains("requires an extension rendiff's glTF reader does not support"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn scenes_and_cameras_are_chosen_by_index_or_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut d = Doc::tri();
+        d.nodes = r#"[{"mesh": 0, "name": "a"}, {"mesh": 0, "name": "b", "translation": [0, 0, 2]},
+                      {"camera": 0, "name": "cam0"}, {"camera": 1, "name": "cam1"}]"#
+            .into();
+        d.cameras = r#"[{"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.1}},
+                        {"type": "perspective", "name": "wide", "perspective": {"yfov": 1.0, "znear": 0.1}},
+                        {"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.1}}]"#
+            .into();
+        let json = d.json().replacen(
+            r#""scenes": [{"nodes": [0]}]"#,
+            r#""scenes": [{"nodes": [0, 2], "name": "A"}, {"nodes": [1, 3], "name": "B"},
+                          {"nodes": [], "name": "twin"}, {"nodes": [], "name": "twin"}]"#,
+            1,
+        );
+        let p = write_json(dir.path(), "scenes.gltf", &json);
+        let get = |scene: Option<GltfRef>, cam: CameraRequest<'_>| {
+            load_gltf_scene(
+                &p,
+                dir.path(),
+                "objects[0].mesh",
+                MAX_SCENE_TRIANGLES,
+                scene.as_ref(),
+                cam,
+            )
+        };
+        let labels = |f: &GltfFile| f.nodes.iter().map(|n| n.label.clone()).collect::<Vec<_>>();
+        // Default: the file's `scene` (0).
+        assert_eq!(labels(&get(None, CameraRequest::None).unwrap()), ["a"]);
+        assert_eq!(
+            labels(&get(Some(GltfRef::Index(1)), CameraRequest::None).unwrap()),
+            ["b"]
+        );
+        let b = get(Some(GltfRef::Name("B".into())), CameraRequest::Index(1)).unwrap();
+        assert_eq!(labels(&b), ["b"]);
+        assert_eq!(b.camera.unwrap().node, 3);
+        let c = get(Some(GltfRef::Index(0)), CameraRequest::Index(0))
+            .unwrap()
+            .camera
+            .unwrap();
+        assert_eq!((c.node, c.camera), (2, 0));
+        let c = get(Some(GltfRef::Index(1)), CameraRequest::Named("wide"))
+            .unwrap()
+            .camera
+            .unwrap();
+        assert_eq!((c.node, c.camera), (3, 1));
+        let err = |scene: Option<GltfRef>, cam: CameraRequest<'_>| {
+            let e = get(scene, cam).unwrap_err().to_string();
+            assert_eq!(e.lines().count(), 1, "{e}");
+            e
+        };
+        let e = err(Some(GltfRef::Index(4)), CameraRequest::None);
+        assert!(
+            e.contains("gltf_scene 4 does not exist (the file has 4 scenes)"),
+            "{e}"
+        );
+        let e = err(Some(GltfRef::Name("C".into())), CameraRequest::None);
+        assert!(e.contains("no glTF scene is named \"C\""), "{e}");
+        let e = err(Some(GltfRef::Name("twin".into())), CameraRequest::None);
+        assert!(
+            e.contains("2 glTF scenes are named \"twin\" (scenes [2, 3])"),
+            "{e}"
+        );
+        let e = err(None, CameraRequest::Index(1));
+        assert!(
+            e.contains("camera 1 is placed by no node of the chosen glTF scene"),
+            "{e}"
+        );
+        let e = err(None, CameraRequest::Index(3));
+        assert!(
+            e.contains("camera 3 does not exist (the file has 3 cameras)"),
+            "{e}"
+        );
     }
 }

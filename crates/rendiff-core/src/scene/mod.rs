@@ -7,6 +7,7 @@
 pub mod export;
 pub mod generators;
 pub mod gltf;
+pub mod model;
 pub mod obj;
 pub mod resolve;
 
@@ -179,8 +180,47 @@ impl CameraSpec {
 pub struct GltfCameraSpec {
     /// Name of the scene object whose `mesh` is the `.gltf`/`.glb` file.
     pub object: String,
-    /// Node name or camera name; the first camera node (traversal order) when absent.
-    pub camera: Option<String>,
+    /// Node name or camera name, or an index into the file's `cameras`; the
+    /// first camera node (traversal order) when absent.
+    pub camera: Option<GltfRef>,
+}
+
+/// A glTF scene or camera chosen in the scene file, as glTF viewers let
+/// users choose them: by its index in the file's own array, or by its name.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GltfRef {
+    /// Index into the file's `scenes` (or `cameras`), as the file numbers them.
+    Index(u32),
+    /// The `name` the file gives it (a camera may also be chosen by its node's name).
+    Name(String),
+}
+
+impl<'de> Deserialize<'de> for GltfRef {
+    /// An integer from 0 or a string; anything else is refused in words a
+    /// user can act on (serde's untagged enums only say "did not match").
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = GltfRef;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("an index into the glTF file's array (0, 1, ...) or a name (a string)")
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<GltfRef, E> {
+                u32::try_from(v)
+                    .map(GltfRef::Index)
+                    .map_err(|_| E::invalid_value(serde::de::Unexpected::Signed(v), &self))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<GltfRef, E> {
+                u32::try_from(v)
+                    .map(GltfRef::Index)
+                    .map_err(|_| E::invalid_value(serde::de::Unexpected::Unsigned(v), &self))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<GltfRef, E> {
+                Ok(GltfRef::Name(v.to_string()))
+            }
+        }
+        d.deserialize_any(V)
+    }
 }
 
 /// A diffuse material: albedo and emitted radiance.
@@ -208,6 +248,9 @@ pub struct ObjectSpec {
     pub mesh: Option<String>,
     /// A built-in generator; exactly one of `mesh` and `shape` is given.
     pub shape: Option<generators::Shape>,
+    /// For a glTF `mesh`: which of the file's scenes to show (index or name);
+    /// the file's `scene`, else its first, when absent.
+    pub gltf_scene: Option<GltfRef>,
     /// Material name; the first material (or a default grey) when absent.
     pub material: Option<String>,
     /// Scale, then rotate (XYZ Euler, degrees), then translate.
@@ -219,7 +262,9 @@ pub struct ObjectSpec {
 }
 
 /// Affine transform applied as scale, then rotation (X, then Y, then Z), then translation.
-#[derive(Debug, Clone, Deserialize)]
+/// Serialized as written into the resolved scene's mesh provenance, so the harness's
+/// independent decoders place a mesh file's triangles as resolution did.
+#[derive(Debug, Clone, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Transform {
     #[serde(default = "one3")]
@@ -278,8 +323,12 @@ pub struct Scene {
 impl Scene {
     /// Reads, parses and validates a scene file. The file must be a regular
     /// file (never a FIFO or device: those are refused before they are opened)
-    /// of at most [`MAX_SCENE_FILE_BYTES`], in UTF-8.
+    /// of at most [`MAX_SCENE_FILE_BYTES`], in UTF-8. A model file (`.obj`,
+    /// `.gltf`, `.glb`) is taken as the scene [`model`] makes of it.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        if model::is_model_path(path) {
+            return Scene::from_model(path);
+        }
         let bytes = read_regular_file(path, MAX_SCENE_FILE_BYTES)
             .map_err(|p| SceneError::new(path, "", format!("cannot read scene file: {p}")))?;
         let text = utf8_text(bytes)
@@ -902,6 +951,13 @@ fn validate(path: &Path, s: &SceneFile) -> Result<BTreeSet<String>, SceneError> 
             }
             _ => {}
         }
+        if o.gltf_scene.is_some() && !o.mesh.as_deref().is_some_and(gltf::is_gltf_path) {
+            return Err(SceneError::new(
+                path,
+                format!("{field}.gltf_scene"),
+                "chooses a glTF scene, but the object's mesh is not a glTF file (.gltf or .glb)",
+            ));
+        }
         if let Some(m) = &o.material {
             if !names.contains(m.as_str()) {
                 return Err(SceneError::new(
@@ -997,6 +1053,34 @@ mod message_tests {
         assert!(!s.chars().any(char::is_control), "{s:?}");
         assert!(s.starts_with("a\\u{1b}b.toml: f\\n: p\\0"), "{s}");
         assert!(s.len() < 1000, "{}", s.len());
+    }
+
+    #[test]
+    fn a_gltf_scene_or_camera_is_an_index_or_a_name_and_nothing_else() {
+        let text = |v: &str| {
+            format!(
+                "requires = [\"depth\"]\n[camera]\nwidth = 8\nheight = 8\n\
+                 gltf = {{ object = \"m\", camera = {v} }}\n\
+                 [[objects]]\nname = \"m\"\nmesh = \"m.glb\"\ngltf_scene = {v}\n"
+            )
+        };
+        let parse = |v: &str| Scene::parse(Path::new("s.toml"), &text(v));
+        let s = parse("3").unwrap();
+        assert_eq!(s.file.objects[0].gltf_scene, Some(GltfRef::Index(3)));
+        let c = s.file.camera.gltf.unwrap().camera;
+        assert_eq!(c, Some(GltfRef::Index(3)));
+        let s = parse("\"Main\"").unwrap();
+        assert_eq!(
+            s.file.objects[0].gltf_scene,
+            Some(GltfRef::Name("Main".into()))
+        );
+        for bad in ["-1", "1.5", "4294967296", "true", "[0]"] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("expected an index into the glTF file's array (0, 1, ...) or a name"),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! `object_id` and vertex values mean the same thing everywhere.
 
 use super::generators::Tri64;
-use super::gltf::{camera_spec, is_gltf_path, load_gltf, CameraRequest};
+use super::gltf::{camera_spec, is_gltf_path, load_gltf_scene, CameraRequest};
 use super::obj::{confined_path, load_obj};
 use super::{LightSpec, Scene, SceneError};
 use crate::camera::Camera;
@@ -28,6 +28,26 @@ pub struct ObjectInfo {
     pub first_prim: u32,
     /// Number of triangles.
     pub prim_count: u32,
+    /// For a part of a mesh file: which file and part, and the scene object's
+    /// transform, so that an independent decoder can read the same file and
+    /// check these triangles (the harness's `import` verdict); absent for shapes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<MeshSource>,
+}
+
+/// Where a mesh-file object's triangles came from (docs/resolved-scene.md,
+/// `objects[].mesh`): the import is checked against a second decoder, not trusted.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeshSource {
+    /// The mesh file as resolution opened it (confined to the scene's folder).
+    pub file: PathBuf,
+    /// `"gltf"` or `"obj"`: the loader that read it.
+    pub format: &'static str,
+    /// This object's index among the file's parts: glTF mesh nodes in
+    /// traversal order, OBJ groups in file order (0 for a one-group OBJ).
+    pub part: u32,
+    /// The scene object's transform as written, applied after the file's own.
+    pub transform: super::Transform,
 }
 
 /// A resolved material (see docs/DESIGN.md: albedo and emission).
@@ -66,6 +86,10 @@ pub struct ResolvedScene {
     pub lights: Vec<LightSpec>,
     /// Monte Carlo settings.
     pub integrator: super::IntegratorSpec,
+    /// What resolution left out of a mesh file and why (a glTF POINTS or
+    /// LINES primitive), one line each naming the file, field and part:
+    /// the tool prints them, the core never does.
+    pub warnings: Vec<String>,
 }
 
 /// Exact test for a zero-area triangle: all three coordinate-plane projections
@@ -142,19 +166,29 @@ impl ResolvedScene {
             super::MAX_SCENE_TRIANGLES.saturating_sub(super::shape_triangles(&scene.file));
         let mut meshes = Vec::with_capacity(scene.file.objects.len());
         let mut gltf_camera = None;
+        let mut warnings = Vec::new();
         for (si, o) in scene.file.objects.iter().enumerate() {
             meshes.push(match &o.mesh {
                 Some(rel) if is_gltf_path(rel) => {
                     let mesh_field = format!("objects[{si}].mesh");
                     let full = confined_path(path, &scene.dir, rel, &mesh_field)?;
                     let request = match &scene.file.camera.gltf {
-                        Some(g) if g.object == o.name => match &g.camera {
-                            Some(name) => CameraRequest::Named(name),
-                            None => CameraRequest::First,
-                        },
+                        Some(g) if g.object == o.name => CameraRequest::of(g.camera.as_ref()),
                         _ => CameraRequest::None,
                     };
-                    let file = load_gltf(&full, &scene.dir, &mesh_field, budget, request)?;
+                    let file = load_gltf_scene(
+                        &full,
+                        &scene.dir,
+                        &mesh_field,
+                        budget,
+                        o.gltf_scene.as_ref(),
+                        request,
+                    )?;
+                    warnings.extend(
+                        file.warnings
+                            .iter()
+                            .map(|w| SceneError::new(&full, &mesh_field, w.as_str()).to_string()),
+                    );
                     let n: usize = file.nodes.iter().map(|g| g.triangles.len()).sum();
                     budget = budget.saturating_sub(n as u64);
                     if let Some(c) = file.camera {
@@ -204,6 +238,7 @@ impl ResolvedScene {
             let field = format!("objects[{si}]");
             // A mesh file's parts (OBJ groups, glTF mesh nodes) were named when
             // it was read; a generator is one object under the scene's name.
+            let from_file = mesh.is_some();
             let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (mesh, &o.shape) {
                 (Some((parts, full)), _) => (parts, full),
                 (None, Some(shape)) => (vec![(o.name.clone(), shape.triangles())], path.clone()),
@@ -216,7 +251,7 @@ impl ResolvedScene {
             let (m, tr) = transform_matrix(&o.transform);
             // Triangle index within the scene object (file order across groups), for messages.
             let mut ti = 0usize;
-            for (name, tris64) in parts {
+            for (part, (name, tris64)) in parts.into_iter().enumerate() {
                 let oi = objects.len();
                 if oi >= u32::MAX as usize {
                     return Err(SceneError::new(path, "objects", "more than 2^32-1 objects"));
@@ -259,6 +294,16 @@ impl ResolvedScene {
                     material,
                     first_prim: first as u32,
                     prim_count: (triangles.len() - first) as u32,
+                    mesh: from_file.then(|| MeshSource {
+                        file: origin.clone(),
+                        format: if o.mesh.as_deref().is_some_and(is_gltf_path) {
+                            "gltf"
+                        } else {
+                            "obj"
+                        },
+                        part: part as u32,
+                        transform: o.transform.clone(),
+                    }),
                 });
             }
         }
@@ -297,6 +342,7 @@ impl ResolvedScene {
             materials,
             lights: scene.file.lights.clone(),
             integrator: scene.file.integrator,
+            warnings,
         })
     }
 
@@ -317,6 +363,7 @@ impl ResolvedScene {
                 material: 0,
                 first_prim: 0,
                 prim_count: n as u32,
+                mesh: None,
             }],
             materials: vec![Material {
                 name: "default".into(),
@@ -325,6 +372,7 @@ impl ResolvedScene {
             }],
             lights: vec![],
             integrator: super::IntegratorSpec::default(),
+            warnings: vec![],
         }
     }
 }
@@ -612,6 +660,72 @@ height = 6
         .to_string();
         assert!(
             e.contains("camera.gltf.object: no object named \"x\""),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_toml_chooses_the_gltf_scene_and_camera_and_warnings_name_the_file() {
+        let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let (json, bin) = gltf_of(&[tri], None);
+        // Scene 0 (the default) holds the mesh node and camera 0; scene 1
+        // ("far") the camera node of camera 1 and the mesh node again, whose
+        // mesh also has a LINES primitive.
+        let json = json
+            .replacen(
+                r#""nodes": [{"#,
+                r#""cameras": [{"type": "perspective", "perspective": {"yfov": 0.7, "znear": 0.01}},
+                               {"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.01}}],
+                   "nodes": [{"camera": 0, "translation": [0, 0, 3]},
+                             {"camera": 1, "translation": [0, 0, 9]}, {"#,
+                1,
+            )
+            .replace(
+                r#""scenes": [{"nodes": [0]}]"#,
+                r#""scenes": [{"nodes": [0, 2]}, {"nodes": [1, 2], "name": "far"}]"#,
+            )
+            .replacen(
+                r#""attributes": {"POSITION": 0}"#,
+                r#""attributes": {"POSITION": 0}}, {"attributes": {"POSITION": 0}, "mode": 1"#,
+                1,
+            );
+        let files: [(&str, &[u8]); 2] = [("m.gltf", json.as_bytes()), ("m.bin", &bin)];
+        let text = |scene: &str, camera: &str| {
+            format!(
+                "requires = [\"depth\", \"ids\"]\n[camera]\nwidth = 8\nheight = 8\n\
+                 gltf = {{ object = \"model\"{camera} }}\n\
+                 [[objects]]\nname = \"model\"\nmesh = \"m.gltf\"\n{scene}"
+            )
+        };
+        let r = resolve_files(&files, &text("", "")).unwrap();
+        assert_eq!(r.camera.eye, DVec3::new(0.0, 0.0, 3.0));
+        assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
+        let w = &r.warnings[0];
+        assert!(
+            w.contains("m.gltf: objects[0].mesh: mesh 0 primitive 1 has mode LINES: skipped"),
+            "{w}"
+        );
+        for scene in ["gltf_scene = 1\n", "gltf_scene = \"far\"\n"] {
+            for camera in [", camera = 1", ""] {
+                let r = resolve_files(&files, &text(scene, camera)).unwrap();
+                assert_eq!(r.camera.eye, DVec3::new(0.0, 0.0, 9.0), "{scene} {camera}");
+            }
+            let e = resolve_files(&files, &text(scene, ", camera = 0")).unwrap_err();
+            assert!(
+                e.to_string().contains("camera 0 is placed by no node"),
+                "{e}"
+            );
+        }
+        let obj: [(&str, &[u8]); 1] = [("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")];
+        let e = resolve_files(
+            &obj,
+            "requires = [\"depth\"]\n[camera]\neye = [0, 0, 3]\nlook_at = [0, 0, 0]\nvfov = 40\n\
+             width = 8\nheight = 8\n[[objects]]\nname = \"o\"\nmesh = \"m.obj\"\ngltf_scene = 0\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("objects[0].gltf_scene: chooses a glTF scene"),
             "{e}"
         );
     }

@@ -6,6 +6,7 @@
 //! triangles and grown by [`grow_box`], so pruning is conservative: a box is
 //! skipped only when its nearest possible key is worse than the best hit.
 
+mod build;
 mod frustum;
 mod nodes;
 /// A cache hint the raster's tile loop shares (for the triangles its bins name next).
@@ -27,10 +28,10 @@ use crate::visibility::{
 };
 use glam::Vec3;
 use nodes::Nodes32;
-use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
+use obvhs::{triangle::Triangle, BvhBuildParams};
 use primary::{LeafTri, Node32, Ray32};
 use rayon::prelude::*;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// BVH build quality: obvhs presets (without spatial splits, which would
 /// give a triangle several partial boxes and break conservative pruning).
@@ -101,23 +102,39 @@ pub struct TraceBvh {
 }
 
 impl TraceBvh {
+    /// A tree over no triangles: every ray misses.
+    fn empty() -> TraceBvh {
+        TraceBvh {
+            nodes: Vec::new(),
+            prims: Vec::new(),
+            nodes32: Nodes32::empty(),
+            leaves: Vec::new(),
+            rects: Vec::new(),
+            planes: frustum::PacketPlanes::empty(),
+            build_seconds: 0.0,
+        }
+    }
+
     /// Builds the BVH for this scene and camera (boxes are grown relative to the eye).
     pub fn build(scene: &ResolvedScene, quality: BvhQuality) -> TraceBvh {
+        Self::build_until(scene, quality, None).expect("a build without a deadline finishes")
+    }
+
+    /// [`Self::build`], or None once `deadline` has passed: it is checked
+    /// between the build's phases ([`build`]), so `--timeout` stops a slow
+    /// build too.
+    pub fn build_until(
+        scene: &ResolvedScene,
+        quality: BvhQuality,
+        deadline: Option<Instant>,
+    ) -> Option<TraceBvh> {
         let start = Instant::now();
         let cam = &scene.camera;
         let ids: Vec<u32> = (0..scene.triangles.len() as u32)
             .filter(|&i| !scene.degenerate[i as usize])
             .collect();
         if ids.is_empty() {
-            return TraceBvh {
-                nodes: Vec::new(),
-                prims: Vec::new(),
-                nodes32: Nodes32::empty(),
-                leaves: Vec::new(),
-                rects: Vec::new(),
-                planes: frustum::PacketPlanes::empty(),
-                build_seconds: 0.0,
-            };
+            return Some(TraceBvh::empty());
         }
         let tris: Vec<Triangle> = ids
             .iter()
@@ -134,7 +151,10 @@ impl TraceBvh {
         // (`same_box`: its merging is quadratic in them otherwise).
         let groups = same_box::SameBoxGroups::find(&tris);
         let build_input = groups.as_ref().map_or(&tris[..], |g| &g.reps[..]);
-        let mut bvh = build_bvh2_from_tris(build_input, quality.params(), &mut Duration::default());
+        if crate::deadline::past(deadline) {
+            return None;
+        }
+        let mut bvh = build::build_bvh2(build_input, quality.params(), deadline)?;
         if let Some(g) = &groups {
             let mut first_count: Vec<(u32, u32)> = bvh
                 .nodes
@@ -196,6 +216,9 @@ impl TraceBvh {
             .map(|n| Node32::new(cam.eye, &n.bounds, n.first, n.count))
             .collect();
         let nodes32 = Nodes32::new(&nodes32);
+        if crate::deadline::past(deadline) {
+            return None;
+        }
         let slack = rect::RectSlack::new(cam);
         // Leaves and rectangles on huge pages where the OS has them, as
         // the tree's nodes (`crate::huge_pages`).
@@ -211,7 +234,7 @@ impl TraceBvh {
                 )
             })
             .unzip_into_vecs(&mut leaves, &mut rects);
-        TraceBvh {
+        Some(TraceBvh {
             nodes,
             prims,
             nodes32,
@@ -219,7 +242,7 @@ impl TraceBvh {
             rects,
             planes: frustum::PacketPlanes::new(cam),
             build_seconds: start.elapsed().as_secs_f64(),
-        }
+        })
     }
 
     /// Nearest hit key for one pixel ray (and optionally every covering triangle's
@@ -378,7 +401,9 @@ pub fn render_keeping_bvh(
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Frame, TraceBvh) {
     let start = Instant::now();
-    let bvh = TraceBvh::build(scene, opts.bvh);
+    // Past the deadline the build stops; the empty tree then traces no
+    // triangle and the caller discards the frame ([`crate::deadline::past`]).
+    let bvh = TraceBvh::build_until(scene, opts.bvh, opts.deadline).unwrap_or_else(TraceBvh::empty);
     let mut frame = render_with_bvh(scene, &bvh, opts, progress);
     frame.seconds = start.elapsed().as_secs_f64();
     (frame, bvh)

@@ -1,0 +1,256 @@
+//! Where the cost model of `rendiff::loop_cost` is right and where it is
+//! wrong: on each `bench crossover` grid and each scene of the corpus, the
+//! loop the model picks, the loop that was faster, and what the pick cost
+//! (its time over the faster one's), for two budgets:
+//!
+//! - *one frame*: what `render --renderer core` and `check`'s reference pay:
+//!   the raster's pass against the tracer's pass plus its BVH build (unless
+//!   the scene is shaded, when the BVH is built either way and the passes
+//!   decide);
+//! - *BVH shared*: the build already paid (many frames, or shading): the
+//!   two passes alone.
+//!
+//! "Faster" comes from the paired rounds (each round one pass of each loop,
+//! the median of the per-round ratios) plus the build's median where it
+//! counts.
+
+use super::measure;
+use super::page::{num, Page};
+use anyhow::Result;
+use rendiff::loop_cost::{self, Loop, Workload};
+use rendiff::scene::resolve::ResolvedScene;
+use rendiff::trace::{BvhQuality, TraceBvh};
+use serde_json::{json, Value};
+use std::path::PathBuf;
+
+/// The model's pick against the measurement, for one budget.
+pub fn verdict(w: &Workload, raster_s: f64, trace_s: f64) -> Value {
+    let model = loop_cost::choose(w).pick;
+    let faster = if trace_s < raster_s {
+        Loop::Trace
+    } else {
+        Loop::Raster
+    };
+    let picked_s = match model {
+        Loop::Raster => raster_s,
+        Loop::Trace => trace_s,
+    };
+    json!({
+        "model": model.name(),
+        "faster": faster.name(),
+        "right": model == faster,
+        "ratio": picked_s / raster_s.min(trace_s),
+        "raster_s": raster_s,
+        "trace_s": trace_s,
+        "estimate": loop_cost::choose(w),
+    })
+}
+
+/// Both budgets' verdicts from measured passes (`paired`: the median of the
+/// rounds' trace / raster ratios) and the build.
+pub fn verdicts(w: &Workload, raster_pass_s: f64, trace_over_raster: f64, build_s: f64) -> Value {
+    let trace_pass_s = raster_pass_s * trace_over_raster;
+    let one = if w.bvh_needed_anyway {
+        trace_pass_s
+    } else {
+        trace_pass_s + build_s
+    };
+    let shared = Workload {
+        bvh_needed_anyway: true,
+        ..*w
+    };
+    json!({
+        "workload": w,
+        "one_frame": verdict(w, raster_pass_s, one),
+        "bvh_shared": verdict(&shared, raster_pass_s, trace_pass_s),
+    })
+}
+
+/// Every scene file in `dirs` (sorted), the corpus the model is checked on.
+pub fn corpus_files(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for d in dirs {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(d)
+            .map_err(|e| anyhow::anyhow!("{}: cannot list scenes: {e}", d.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        v.sort();
+        out.extend(v);
+    }
+    Ok(out)
+}
+
+/// One scene's row: its workload, both passes in paired rounds, the build,
+/// and the verdicts.
+pub fn scene_row(name: &str, scene: &ResolvedScene, threads: usize, runs: usize) -> Value {
+    let build = super::timed(runs, || TraceBvh::build(scene, BvhQuality::Medium));
+    let paired = measure::raster_vs_trace(scene, &build.last, runs.max(5));
+    let raster_pass_s = super::median(
+        &paired["raster_keys_s"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(Value::as_f64)
+            .collect::<Vec<_>>(),
+    );
+    let ratio = paired["raster_speedup_over_trace"]
+        .as_f64()
+        .unwrap_or(f64::NAN);
+    let w = loop_cost::workload(scene, threads);
+    let mut row = verdicts(&w, raster_pass_s, ratio, build.median_s);
+    row["scene"] = json!(name);
+    row["bvh_build_s"] = json!(build.median_s);
+    row["paired"] = paired;
+    row
+}
+
+/// The corpus rows, each scene loaded, timed and dropped in turn.
+pub fn corpus_rows(files: &[PathBuf], threads: usize, runs: usize) -> Vec<Value> {
+    files
+        .iter()
+        .map(|p| {
+            let name = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            rendiff::errln!("crossover: model check on {}", p.display());
+            match super::load_scene(p) {
+                Ok(s) => scene_row(&name, &s, threads, runs),
+                Err(e) => json!({"scene": name, "error": format!("{e:#}")}),
+            }
+        })
+        .collect()
+}
+
+/// Right picks per budget over `rows` (grid rows and corpus rows alike).
+pub fn summary(rows: &[&Value]) -> Value {
+    let count = |budget: &str| {
+        let judged: Vec<&Value> = rows
+            .iter()
+            .map(|r| &r[budget])
+            .filter(|v| v["right"].is_boolean())
+            .collect();
+        let right = judged.iter().filter(|v| v["right"] == json!(true)).count();
+        let worst = judged
+            .iter()
+            .filter_map(|v| v["ratio"].as_f64())
+            .fold(1.0f64, f64::max);
+        json!({"right": right, "of": judged.len(), "worst_ratio": worst})
+    };
+    json!({"one_frame": count("one_frame"), "bvh_shared": count("bvh_shared")})
+}
+
+/// "picked / faster / ratio" for one budget of a row.
+pub fn cell(v: &Value) -> String {
+    match (v["model"].as_str(), v["faster"].as_str()) {
+        (Some(m), Some(f)) => {
+            let mark = if v["right"] == json!(true) {
+                ""
+            } else {
+                " WRONG"
+            };
+            format!("{m} / {f} / {}{mark}", num(v["ratio"].as_f64(), 3))
+        }
+        _ => "-".into(),
+    }
+}
+
+/// The corpus table and the summary on the crossover page.
+pub fn page_section(p: &mut Page, corpus: &Value, summary: &Value) {
+    p.heading("which loop: the cost model against the measurement");
+    let s = |b: &str| {
+        format!(
+            "{} of {} right, worst pick {}x the faster",
+            summary[b]["right"],
+            summary[b]["of"],
+            num(summary[b]["worst_ratio"].as_f64(), 3)
+        )
+    };
+    p.para(&format!(
+        "Model: rendiff::loop_cost (docs/benchmarks.md, \"Which loop\"), fitted to the crossover record of Nov 27. Columns read model picked / faster / the pick's time over the faster's. One frame (the BVH build counted unless the scene is shaded): {}. BVH shared (passes only): {}. Grid rows above, the corpus below; raster and trace are bit-identical, so a wrong pick costs time only.",
+        s("one_frame"),
+        s("bvh_shared")
+    ));
+    let rows: Vec<Vec<String>> = corpus
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|r| {
+            let w = &r["workload"];
+            vec![
+                super::page::compact(&r["scene"]),
+                super::page::compact(&w["triangles"]),
+                num(
+                    match (w["covered"].as_f64(), w["pixels"].as_f64()) {
+                        (Some(c), Some(p)) if p > 0.0 => Some(c / p),
+                        _ => None,
+                    },
+                    3,
+                ),
+                super::page::compact(&w["bvh_needed_anyway"]),
+                num(r["one_frame"]["raster_s"].as_f64(), 4),
+                num(r["bvh_shared"]["trace_s"].as_f64(), 4),
+                num(r["bvh_build_s"].as_f64(), 4),
+                cell(&r["one_frame"]),
+                cell(&r["bvh_shared"]),
+                r["error"].as_str().unwrap_or("").to_string(),
+            ]
+        })
+        .collect();
+    p.table(
+        &[
+            "scene",
+            "triangles",
+            "covered / image (estimate)",
+            "shaded (BVH built anyway)",
+            "raster pass s",
+            "trace pass s",
+            "BVH build s",
+            "one frame: model picked / faster / ratio",
+            "BVH shared: model picked / faster / ratio",
+            "error",
+        ],
+        &rows,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn w(bvh: bool) -> Workload {
+        Workload {
+            triangles: 2,
+            pixels: 262144,
+            covered: 262144,
+            threads: 2,
+            frames: 1,
+            bvh_needed_anyway: bvh,
+        }
+    }
+
+    /// A right pick has ratio 1; a wrong one its time over the faster's, and
+    /// the summary counts it.
+    #[test]
+    fn verdicts_mark_wrong_picks_and_their_cost() {
+        // Two triangles: the model picks the raster in both budgets.
+        let right = verdicts(&w(false), 1e-3, 10.0, 1e-4);
+        assert_eq!(right["one_frame"]["right"], json!(true));
+        assert_eq!(right["one_frame"]["ratio"], json!(1.0));
+        // A (made-up) measurement where the tracer was twice as fast.
+        let wrong = verdicts(&w(false), 1e-3, 0.4, 1e-4);
+        assert_eq!(wrong["one_frame"]["faster"], json!("trace"));
+        assert_eq!(wrong["one_frame"]["right"], json!(false));
+        let r = wrong["one_frame"]["ratio"].as_f64().unwrap();
+        assert!((r - 1e-3 / 0.5e-3).abs() < 1e-9, "{r}");
+        assert!(cell(&wrong["one_frame"]).ends_with("WRONG"));
+        let s = summary(&[&right, &wrong]);
+        assert_eq!(s["one_frame"]["right"], json!(1));
+        assert_eq!(s["one_frame"]["of"], json!(2));
+        assert!((s["one_frame"]["worst_ratio"].as_f64().unwrap() - r).abs() < 1e-12);
+        // Shaded: the build is not the tracer's alone.
+        let shaded = verdicts(&w(true), 1e-3, 0.9, 5.0);
+        assert_eq!(shaded["one_frame"]["faster"], json!("trace"));
+    }
+}

@@ -1,0 +1,386 @@
+"""A glTF 2.0 decoder written from the specification (Khronos glTF 2.0, sections 3.5 "Scenes",
+3.6 "Binary data storage", 3.7 "Geometry", 4 "GLB"), in numpy, independent of the `gltf` crate
+rendiff loads with: the second reading of every glTF file a scene shows (`import` verdict).
+
+What it reads: the GLB container (header, JSON chunk, BIN chunk) or JSON with a BOM tolerated;
+buffers from base64 `data:` URIs, relative files beside the glTF (percent-decoded, never leaving
+the folder) or the GLB's BIN chunk; accessors with byteOffset, byteStride, every component type,
+`normalized` integers (converted as the specification's table says, in float32), sparse
+substitution (indices, values; an accessor without a bufferView is zeros first); primitive modes
+TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN numbered as the Meshes section's topology table defines (POINTS and LINE*
+make no triangle and are left out); the file's `scene` (else scene 0) depth first, pre-order;
+node `matrix` (column-major) or T * R * S, the quaternion normalized; world = parent x local; a
+node whose world matrix mirrors (negative determinant) has its triangles' winding reversed (the
+specification: "the determinant of the node's global transform defines the winding order").
+
+One choice follows rendiff's contract rather than the specification, which leaves it open: node
+numbers (matrix, translation, rotation, scale) are JSON numbers, read as float32 as rendiff reads
+them (docs/resolved-scene.md), then used in float64.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import struct
+import urllib.parse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...contract.userfile import UserFileError, read_regular
+from .parts import DecodeError, Part, empty_part, extend
+
+MAX_BYTES = 1 << 30
+"""Largest file read (the glTF and each buffer), rendiff's own limit for mesh files."""
+
+COMPONENTS: dict[int, str] = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+"""componentType -> numpy dtype (3.6.2.2)."""
+
+WIDTH: dict[str, int] = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+"""Accessor type -> components (matrices are never geometry here)."""
+
+NORMALIZE: dict[int, tuple[float, float]] = {
+    5120: (127.0, -1.0),
+    5121: (255.0, 0.0),
+    5122: (32767.0, -1.0),
+    5123: (65535.0, 0.0),
+}
+"""Normalized integer -> float: max(c / divisor, floor) (3.11, "Animations" table, and 3.6.2.3)."""
+
+MODE_NAMES = {
+    0: "POINTS",
+    1: "LINES",
+    2: "LINE_LOOP",
+    3: "LINE_STRIP",
+    4: "TRIANGLES",
+    5: "TRIANGLE_STRIP",
+    6: "TRIANGLE_FAN",
+}
+
+OPS_PER_LEVEL = 20
+"""Roundings one node level can add to a coordinate: quaternion normalization (a 4-term sum of
+squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
+(1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
+
+OPS_POINT = 4
+"""The point itself: a 3-term product plus the translation."""
+
+
+def _fail(path: Path, problem: str) -> DecodeError:
+    return DecodeError(f"{path}: {problem}")
+
+
+def _index(doc: dict[str, Any], key: str, i: Any, path: Path) -> dict[str, Any]:
+    items = doc.get(key)
+    if isinstance(i, bool) or not isinstance(i, int) or not isinstance(items, list) or not 0 <= i < len(items):
+        raise _fail(path, f"{key}[{i!r}] does not exist")
+    item = items[i]
+    if not isinstance(item, dict):
+        raise _fail(path, f"{key}[{i}] is not an object")
+    return item
+
+
+def _read(path: Path) -> bytes:
+    try:
+        return read_regular(path, MAX_BYTES)
+    except FileNotFoundError:
+        raise _fail(path, "missing") from None
+    except (UserFileError, OSError) as exc:
+        raise _fail(path, f"unreadable: {exc}") from None
+
+
+def container(path: Path) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON document and, for a GLB, its BIN chunk (section 4)."""
+    raw = _read(path)
+    bin_chunk = None
+    if raw[:4] == b"glTF":
+        if len(raw) < 20:
+            raise _fail(path, "GLB shorter than its header")
+        _, version, length = struct.unpack_from("<III", raw, 0)
+        if version != 2 or length > len(raw):
+            raise _fail(path, f"GLB version {version}, length {length} of {len(raw)} bytes")
+        at, chunks = 12, []
+        while at + 8 <= length:
+            size, kind = struct.unpack_from("<II", raw, at)
+            chunks.append((kind, raw[at + 8 : at + 8 + size]))
+            at += 8 + size
+        if not chunks or chunks[0][0] != 0x4E4F534A:
+            raise _fail(path, "GLB without a JSON chunk first")
+        text = chunks[0][1]
+        bin_chunk = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == 0x004E4942 else None
+    else:
+        text = raw
+    try:
+        doc = json.loads(text.decode("utf-8").removeprefix("\ufeff"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise _fail(path, f"not glTF JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise _fail(path, "the JSON is not an object")
+    return doc, bin_chunk
+
+
+def _buffer(doc: dict[str, Any], i: int, path: Path, bin_chunk: bytes | None) -> bytes:
+    b = _index(doc, "buffers", i, path)
+    length = b.get("byteLength")
+    if isinstance(length, bool) or not isinstance(length, int) or length < 0:
+        raise _fail(path, f"buffers[{i}].byteLength is not a count")
+    uri = b.get("uri")
+    if uri is None:
+        if i != 0 or bin_chunk is None:
+            raise _fail(path, f"buffers[{i}] has no uri and there is no GLB BIN chunk")
+        data = bin_chunk
+    elif not isinstance(uri, str):
+        raise _fail(path, f"buffers[{i}].uri is not a string")
+    elif uri.startswith("data:"):
+        head, _, payload = uri.partition(",")
+        if not head.endswith(";base64"):
+            raise _fail(path, f"buffers[{i}]: a data: URI that is not base64")
+        try:
+            data = base64.b64decode(payload, validate=True)
+        except (binascii.Error, ValueError):
+            raise _fail(path, f"buffers[{i}]: bad base64") from None
+    else:
+        rel = urllib.parse.unquote(uri)
+        parts = Path(rel).parts
+        if ":" in uri.split("/")[0] or Path(rel).is_absolute() or ".." in parts or not parts:
+            raise _fail(path, f"buffers[{i}].uri {uri!r} leaves the glTF's folder")
+        data = _read(path.parent / rel)
+    if len(data) < length:
+        raise _fail(path, f"buffers[{i}] holds {len(data)} bytes, fewer than its byteLength {length}")
+    return data[:length]
+
+
+def _view(
+    doc: dict[str, Any], bv_index: Any, path: Path, buffers: dict[int, bytes], bin_chunk: bytes | None
+) -> tuple[bytes, dict[str, Any]]:
+    """A bufferView's bytes (its range checked against its buffer) and its JSON."""
+    bv = _index(doc, "bufferViews", bv_index, path)
+    bi = bv.get("buffer")
+    if isinstance(bi, bool) or not isinstance(bi, int):
+        raise _fail(path, f"bufferViews[{bv_index}].buffer is not an index")
+    if bi not in buffers:
+        buffers[bi] = _buffer(doc, bi, path, bin_chunk)
+    data = buffers[bi]
+    off, length = bv.get("byteOffset", 0), bv.get("byteLength")
+    if not isinstance(off, int) or not isinstance(length, int) or off < 0 or length < 0 or off + length > len(data):
+        raise _fail(path, f"bufferViews[{bv_index}] lies outside its buffer")
+    return data[off : off + length], bv
+
+
+def _elements(
+    view: bytes, offset: int, stride: int, count: int, dtype: np.dtype[Any], width: int, where: str, path: Path
+) -> np.ndarray:
+    """`count` elements of `width` components of `dtype`, the first at `offset`, `stride` apart."""
+    elem = dtype.itemsize * width
+    if count == 0:
+        return np.zeros((0, width), dtype=dtype)
+    end = offset + stride * (count - 1) + elem
+    if offset < 0 or end > len(view):
+        raise _fail(path, f"{where} reads bytes {offset}..{end} of a {len(view)}-byte bufferView")
+    raw = np.frombuffer(view, dtype=np.uint8, count=end - offset, offset=offset)
+    rows = np.lib.stride_tricks.as_strided(raw, shape=(count, elem), strides=(stride, 1), writeable=False)
+    out: np.ndarray = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+    return out
+
+
+def accessor(
+    doc: dict[str, Any], ai: Any, path: Path, buffers: dict[int, bytes], bin_chunk: bytes | None
+) -> np.ndarray:
+    """Accessor `ai` as (count, width): float64 for floats and normalized integers (converted in
+    float32 first, as the specification's float), int64 for other integers; sparse values applied."""
+    acc = _index(doc, "accessors", ai, path)
+    ct, kind, count = acc.get("componentType"), acc.get("type"), acc.get("count")
+    if ct not in COMPONENTS or kind not in WIDTH or isinstance(count, bool) or not isinstance(count, int) or count < 0:
+        raise _fail(path, f"accessors[{ai}]: componentType {ct!r}, type {kind!r}, count {count!r} not readable")
+    dtype, width = np.dtype(COMPONENTS[ct]), WIDTH[kind]
+    if "bufferView" in acc:
+        view, bv = _view(doc, acc["bufferView"], path, buffers, bin_chunk)
+        stride = bv.get("byteStride") or dtype.itemsize * width
+        values = _elements(view, acc.get("byteOffset", 0), stride, count, dtype, width, f"accessors[{ai}]", path)
+    else:
+        values = np.zeros((count, width), dtype=dtype)
+    sparse = acc.get("sparse")
+    if isinstance(sparse, dict):
+        n, si, sv = sparse.get("count"), sparse.get("indices", {}), sparse.get("values", {})
+        if (
+            not isinstance(n, int)
+            or not isinstance(si, dict)
+            or not isinstance(sv, dict)
+            or si.get("componentType") not in (5121, 5123, 5125)
+        ):
+            raise _fail(path, f"accessors[{ai}].sparse is malformed")
+        iview, _ = _view(doc, si.get("bufferView"), path, buffers, bin_chunk)
+        idt = np.dtype(COMPONENTS[si["componentType"]])
+        idx = _elements(
+            iview, si.get("byteOffset", 0), idt.itemsize, n, idt, 1, f"accessors[{ai}].sparse.indices", path
+        )
+        idx = idx[:, 0].astype(np.int64)
+        vview, _ = _view(doc, sv.get("bufferView"), path, buffers, bin_chunk)
+        vals = _elements(
+            vview,
+            sv.get("byteOffset", 0),
+            dtype.itemsize * width,
+            n,
+            dtype,
+            width,
+            f"accessors[{ai}].sparse.values",
+            path,
+        )
+        if n and (idx.min() < 0 or idx.max() >= count):
+            raise _fail(path, f"accessors[{ai}].sparse.indices reach {int(idx.max())} of {count} elements")
+        values = apply_sparse(values, idx, vals)
+    if ct == 5126:
+        return values.astype(np.float64)
+    if acc.get("normalized") is True and ct in NORMALIZE:
+        div, floor = NORMALIZE[ct]
+        as32: np.ndarray = np.maximum(values.astype(np.float32) / np.float32(div), np.float32(floor))
+        return as32.astype(np.float64)
+    return values.astype(np.int64)
+
+
+def apply_sparse(values: np.ndarray, indices: np.ndarray, replacements: np.ndarray) -> np.ndarray:
+    """The accessor's elements with element `indices[k]` replaced by `replacements[k]` (3.6.2.3)."""
+    out = values.copy()
+    out[indices] = replacements
+    return out
+
+
+def mirrors(world: np.ndarray) -> bool:
+    """True when a node's world matrix mirrors (negative determinant of its 3x3 part): its
+    triangles' winding is then reversed (the node's global transform's determinant defines it)."""
+    return bool(np.linalg.det(world[:3, :3]) < 0)
+
+
+def triangles_of(mode: int, idx: np.ndarray) -> np.ndarray:
+    """(n, 3) vertex indices of a primitive's triangles, numbered as glTF 2.0's topology table does."""
+    n = max(len(idx) - 2, 0)
+    i = np.arange(n)
+    if mode == 4:
+        m = len(idx) // 3 * 3
+        return idx[:m].reshape(-1, 3)
+    if mode == 5:  # p_i = {v_i, v_(i + (1 + i%2)), v_(i + (2 - i%2))}
+        return np.stack([idx[i], idx[i + 1 + i % 2], idx[i + 2 - i % 2]], axis=1)
+    if mode == 6:  # p_i = {v_(i+1), v_(i+2), v_0}
+        return np.stack([idx[i + 1], idx[i + 2], np.full(n, idx[0]) if n else idx[:0]], axis=1)
+    return np.zeros((0, 3), dtype=np.int64)
+
+
+def _f32(values: Any, count: int, default: list[float], what: str, path: Path) -> np.ndarray:
+    v = default if values is None else values
+    if (
+        not isinstance(v, list)
+        or len(v) != count
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    ):
+        raise _fail(path, f"{what} must be {count} numbers")
+    return np.asarray(v, dtype=np.float32).astype(np.float64)
+
+
+def local_matrix(node: dict[str, Any], ni: int, path: Path) -> np.ndarray:
+    """A node's local 4x4 matrix (float64 from float32 numbers): `matrix` column-major, else T R S."""
+    if "matrix" in node:
+        return _f32(node["matrix"], 16, [], f"nodes[{ni}].matrix", path).reshape(4, 4).T.copy()
+    t = _f32(node.get("translation"), 3, [0.0, 0.0, 0.0], f"nodes[{ni}].translation", path)
+    x, y, z, w = _f32(node.get("rotation"), 4, [0.0, 0.0, 0.0, 1.0], f"nodes[{ni}].rotation", path)
+    s = _f32(node.get("scale"), 3, [1.0, 1.0, 1.0], f"nodes[{ni}].scale", path)
+    n = float(np.sqrt(x * x + y * y + z * z + w * w))
+    if not n > 0.0:
+        raise _fail(path, f"nodes[{ni}].rotation is a zero quaternion")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    m = np.eye(4)
+    m[:3, :3] = r * s[None, :]
+    m[:3, 3] = t
+    return m
+
+
+def mesh_nodes(doc: dict[str, Any], path: Path) -> list[tuple[int, np.ndarray, np.ndarray, int]]:
+    """(node index, world matrix, |world| as the product of absolute local matrices, depth) of
+    every node with a mesh in the shown scene, depth first, pre-order, in the file's order."""
+    scenes = doc.get("scenes") or []
+    si = doc.get("scene", 0)
+    scene = _index(doc, "scenes", si, path) if scenes else {"nodes": []}
+    out: list[tuple[int, np.ndarray, np.ndarray, int]] = []
+    seen: set[int] = set()
+    stack: list[tuple[int, np.ndarray, np.ndarray, int]] = [
+        (r, np.eye(4), np.eye(4), 1) for r in reversed(scene.get("nodes", []))
+    ]
+    while stack:
+        ni, parent, parent_abs, depth = stack.pop()
+        if ni in seen:
+            raise _fail(path, f"node {ni} is reached twice: the node graph is not a tree")
+        seen.add(ni)
+        node = _index(doc, "nodes", ni, path)
+        local = local_matrix(node, ni, path)
+        world, world_abs = parent @ local, parent_abs @ np.abs(local)
+        if "mesh" in node:
+            out.append((ni, world, world_abs, depth))
+        for c in reversed(node.get("children", [])):
+            stack.append((c, world, world_abs, depth + 1))
+    return out
+
+
+def labels(doc: dict[str, Any], nodes: list[int]) -> list[str]:
+    """Each mesh node's label (docs/resolved-scene.md): its name, its index when unnamed, and
+    `<name>#<index>` when mesh nodes share the name."""
+    names = [doc["nodes"][ni].get("name") or None for ni in nodes]
+    uses: dict[str, int] = {}
+    for n in names:
+        if isinstance(n, str):
+            uses[n] = uses.get(n, 0) + 1
+    return [
+        (f"{n}#{ni}" if uses[n] > 1 else n) if isinstance(n, str) else str(ni)
+        for n, ni in zip(names, nodes, strict=True)
+    ]
+
+
+def decode(path: Path) -> list[Part]:
+    """Every mesh node of the file's shown scene as a Part (the order rendiff's objects follow)."""
+    doc, bin_chunk = container(path)
+    buffers: dict[int, bytes] = {}
+    nodes = mesh_nodes(doc, path)
+    out = []
+    for (ni, world, world_abs, depth), label in zip(nodes, labels(doc, [n[0] for n in nodes]), strict=True):
+        mi = doc["nodes"][ni]["mesh"]
+        mesh = _index(doc, "meshes", mi, path)
+        flip = mirrors(world)
+        part = empty_part(
+            label,
+            f"node {ni}, mesh {mi}" + (" (mirrored: winding reversed)" if flip else ""),
+            OPS_PER_LEVEL * depth + OPS_POINT,
+        )
+        for pi, prim in enumerate(mesh.get("primitives", [])):
+            mode = prim.get("mode", 4)
+            pos_ai = prim.get("attributes", {}).get("POSITION")
+            if mode not in (4, 5, 6) or pos_ai is None:
+                continue
+            pos = accessor(doc, pos_ai, path, buffers, bin_chunk)
+            if pos.shape[1] != 3:
+                raise _fail(path, f"accessors[{pos_ai}] (POSITION) is not VEC3")
+            pos = pos.astype(np.float64)
+            if "indices" in prim:
+                idx = accessor(doc, prim["indices"], path, buffers, bin_chunk)[:, 0].astype(np.int64)
+            else:
+                idx = np.arange(pos.shape[0])
+            if idx.size and (idx.min() < 0 or idx.max() >= pos.shape[0]):
+                raise _fail(path, f"meshes[{mi}].primitives[{pi}]: an index beyond the {pos.shape[0]} vertices")
+            faces = triangles_of(mode, idx)
+            if flip:
+                faces = faces[:, [0, 2, 1]]
+            hom = np.concatenate([pos, np.ones((pos.shape[0], 1))], axis=1)
+            placed = (hom @ world.T)[:, :3]
+            mag = (np.abs(hom) @ world_abs.T)[:, :3]
+            sparse = " sparse POSITION" if "sparse" in doc["accessors"][pos_ai] else ""
+            name = f"mesh {mi} primitive {pi} ({MODE_NAMES[mode]}{sparse})"
+            extend(part, name, placed[faces], mag[faces])
+        out.append(part)
+    return out

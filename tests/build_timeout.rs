@@ -1,0 +1,138 @@
+//! `--timeout` bounds the tracer's BVH build too. The scene: 60,000
+//! near-duplicate triangles (one triangle shifted by i * 1e-6, so no two share
+//! an f32 box and `same_box` leaves them to obvhs's PLOC build, which is
+//! quadratic in them: 20,000 took 5 s and 40,000 21 s in a release build on
+//! the 2-CPU VM, so 60,000 take about 45 s, far past the 1 s limit).
+//!
+//! The bound on the wall time is derived, not tuned: the same command with
+//! the raster, which needs no BVH, measures what the run costs besides the
+//! build (process start, scene load, EXR writing: the raster writes one, the
+//! timed-out trace none); the limit is added, and 10 s of slack for a loaded
+//! machine. The build alone would take several times that.
+
+mod common_cli;
+
+use common_cli::*;
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+const NEAR_DUPLICATES: usize = 60_000;
+
+fn near_duplicate_scene(dir: &Path) -> std::path::PathBuf {
+    let mut obj = String::with_capacity(NEAR_DUPLICATES * 100);
+    for i in 0..NEAR_DUPLICATES {
+        let d = i as f64 * 1e-6;
+        obj.push_str(&format!(
+            "v {:.9} -1 0\nv {:.9} -1 0\nv {:.9} 1 0\n",
+            -1.0 + d,
+            1.0 + d,
+            d
+        ));
+    }
+    for i in 0..NEAR_DUPLICATES {
+        obj.push_str(&format!("f {} {} {}\n", 3 * i + 1, 3 * i + 2, 3 * i + 3));
+    }
+    std::fs::write(dir.join("near.obj"), obj).unwrap();
+    let scene = dir.join("near.toml");
+    std::fs::write(
+        &scene,
+        r#"description = "near-duplicate triangles: a slow BVH build"
+requires = ["depth", "ids"]
+
+[camera]
+eye = [0.3, 0.2, 4.0]
+look_at = [0.0, 0.0, 0.0]
+vfov = 40.0
+width = 64
+height = 48
+
+[[objects]]
+name = "near"
+mesh = "near.obj"
+"#,
+    )
+    .unwrap();
+    scene
+}
+
+fn render(scene: &Path, renderer: &str, out: &Path) -> (std::process::Output, Duration) {
+    let start = Instant::now();
+    let mut cmd = rendiff();
+    cmd.arg("render")
+        .arg(scene)
+        .args([
+            "--renderer",
+            renderer,
+            "--timeout",
+            "1",
+            "--quiet",
+            "--no-preview",
+            "-o",
+        ])
+        .arg(out);
+    // A hang guard only: the assertion below is the bound.
+    let o = output_within(&mut cmd, 600);
+    (o, start.elapsed())
+}
+
+#[test]
+fn render_timeout_stops_a_slow_bvh_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = near_duplicate_scene(dir.path());
+    let (raster, besides) = render(&scene, "raster", &dir.path().join("r.exr"));
+    assert!(raster.status.success(), "{raster:?}");
+    let out = dir.path().join("t.exr");
+    let (trace, took) = render(&scene, "trace", &out);
+    let stderr = String::from_utf8_lossy(&trace.stderr);
+    assert_eq!(trace.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("timed out"), "{stderr}");
+    assert!(!out.exists(), "a timed-out render wrote its EXR");
+    let bound = besides + Duration::from_secs(1) + Duration::from_secs(10);
+    assert!(
+        took < bound,
+        "took {took:?}, bound {bound:?} (raster run {besides:?})"
+    );
+}
+
+/// `check --timeout` records the tracer's render as timed out, its buffers
+/// discarded, while the reference (the raster) renders.
+#[test]
+fn check_timeout_stops_a_slow_bvh_build() {
+    need_venv();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = near_duplicate_scene(dir.path());
+    let run = dir.path().join("run");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rendiff"));
+    cmd.current_dir(root())
+        .arg("check")
+        .arg(&scene)
+        .args([
+            "--no-calibration",
+            "--only",
+            "trace",
+            "--timeout",
+            "1",
+            "--quiet",
+            "-o",
+        ])
+        .arg(&run);
+    let out = output_within(&mut cmd, 600);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("manifest.json")).unwrap()).unwrap();
+    let renders = manifest["scenes"][0]["renders"].as_array().unwrap();
+    let trace = renders.iter().find(|r| r["backend"] == "trace").unwrap();
+    assert_eq!(trace["status"], "error");
+    let msg = trace["message"].as_str().unwrap();
+    assert!(msg.contains("timed out"), "{msg}");
+    // It stopped at the limit: its own time is the limit plus what the
+    // scheduler adds on a loaded machine (the same 10 s of slack as above),
+    // against the build's 45 s.
+    let t = trace["time_s"].as_f64().unwrap();
+    assert!((1.0..11.0).contains(&t), "trace took {t} s of a 1 s limit");
+    let raster = renders.iter().find(|r| r["backend"] == "raster").unwrap();
+    assert_eq!(raster["status"], "ok", "{raster}");
+    assert!(!run.join("scenes/near/trace.exr").exists());
+}
