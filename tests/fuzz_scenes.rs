@@ -1,4 +1,5 @@
-//! Fuzzer: hostile scenes and meshes through the real binary.
+//! Fuzzer: hostile scenes, meshes, glTF files, renderer declarations and
+//! tampered run folders through the real binary, one test per surface.
 //!
 //! proptest generates scene folders (TOML with wrong types, huge, NaN and
 //! infinite numbers, degenerate cameras, budgets exceeded; OBJ text with bad
@@ -8,13 +9,48 @@
 //! --renderer raster` and `rendiff export`. No run may panic (exit 101 or a
 //! signal), hang past [`TIMEOUT`], exit with anything but 0 or 2, print more
 //! or less than one line (or a raw control character) on stderr when it
-//! fails, or leave a file in the output folder when it fails.
+//! fails, or leave a file in the output folder when it fails ([`judge`]).
+//! The other surfaces, each with its own oracle for a wrong verdict:
+//! fuzz_scenes/gltf.rs (glTF and GLB files), fuzz_scenes/renderers.rs
+//! (`check --renderers`), fuzz_scenes/runs.rs (gate, bless, report and
+//! merge on tampered runs).
 //!
-//! The table of counts is printed at the end (`cargo test --test fuzz_scenes
-//! -- --nocapture`). `RENDIFF_FUZZ_CASES` (default 2000) and `RENDIFF_FUZZ_SEED`
-//! change the number of scene folders and the seed, `RENDIFF_FUZZ_BIN` the
-//! binary; a failure prints the
-//! folder's files so it can be reproduced by hand.
+//! Each surface prints its table of counts by outcome (`cargo test --test
+//! fuzz_scenes -- --nocapture`). The number of cases: `RENDIFF_FUZZ_CASES`
+//! (scenes, default 2000), `RENDIFF_FUZZ_GLTF_CASES` (600),
+//! `RENDIFF_FUZZ_RENDERERS_CASES` (24: each accepted file is a whole check,
+//! about 3 s), `RENDIFF_FUZZ_RUNS_CASES` (120); the defaults keep the test
+//! near a minute on two cores. `RENDIFF_FUZZ_SEED` changes the seed,
+//! `RENDIFF_FUZZ_BIN` the binary, `RENDIFF_FUZZ_SHOW` prints every clean
+//! error; a failure prints what reproduces it by hand.
+//!
+//! Larger runs (seed 12, on a 2-core machine shared with other builds):
+//!
+//! | surface | inputs | runs | clean errors | successes | failing verdicts | panics | hangs | leftovers | bad messages | other exits | wrong verdicts |
+//! |---|---|---|---|---|---|---|---|---|---|---|---|
+//! | scenes (default) | 2000 | 4000 | 3722 | 278 | - | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | glTF files | 2000 | 4000 | 2442 | 1558 | 0 | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | renderer declarations (300 cases: each a check) | 300 | 300 | 224 | 55 | 21 | 0 | 0 | 0 | 0 | 0 | 0 |
+//! | tampered runs | 2000 | 4802 | 2766 | 1591 | 445 | 0 | 0 | 0 | 0 | 0 | 0 |
+//!
+//! (glTF: 639 cases of the valid file's meaning, each exported the same
+//! triangles; 422 invalid by the specification, each refused. Tampered
+//! runs, before the fixes that came with them: gate passed runs whose
+//! manifest.json was damaged, merge passed shards whose resolved scene or
+//! its recorded hash had been changed. One earlier 2000-case run of the
+//! tampered runs also had 5 merges of a shard with a damaged EXR end in
+//! "the comparison failed" on several lines, its marker left in the
+//! unpublished output; not seen in the rerun above or in 30 tries by hand
+//! (the Python comparison died, the machine shared: cause not found). The
+//! message is one line now; why the comparison died is open.)
+
+mod common_cli;
+#[path = "fuzz_scenes/gltf.rs"]
+mod gltf;
+#[path = "fuzz_scenes/renderers.rs"]
+mod renderers;
+#[path = "fuzz_scenes/runs.rs"]
+mod runs;
 
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
@@ -388,8 +424,17 @@ struct Tally {
     leftovers: AtomicUsize,
     bad_messages: AtomicUsize,
     other_exits: AtomicUsize,
+    /// Runs that ended without a panic but with the wrong answer: a success
+    /// where a refusal is the only right end, a result that differs from
+    /// the one the input must give, a PASS on tampered data.
+    wrong_verdicts: AtomicUsize,
+    /// Runs that ended with exit 1 where that is a verdict (check, gate).
+    failed_runs: AtomicUsize,
     /// Clean errors by the part after the file name (field, or problem start).
     kinds: Mutex<std::collections::BTreeMap<String, usize>>,
+    /// How many `": "`-separated parts of a clean error's line to skip for
+    /// its kind (0: the default, 2: the program and the file).
+    kind_skip: usize,
 }
 
 fn mkfifo(p: &Path) {
@@ -427,27 +472,43 @@ enum Outcome {
 }
 
 fn run_limited(cmd: &mut Command) -> Outcome {
+    run_within(cmd, TIMEOUT).0
+}
+
+/// Runs `cmd` in a process group of its own within `limit` (the group
+/// killed after it: a hang), its stdin empty; returns how it ended (with
+/// its stderr) and its stdout.
+fn run_within(cmd: &mut Command, limit: Duration) -> (Outcome, String) {
+    use std::os::unix::process::CommandExt;
     let mut child = cmd
-        .stdout(Stdio::null())
+        .process_group(0)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn rendiff");
-    let mut se = child.stderr.take().unwrap();
-    let reader = std::thread::spawn(move || {
-        let mut v = Vec::new();
-        se.read_to_end(&mut v).ok();
-        v
-    });
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut v = Vec::new();
+            r.read_to_end(&mut v).ok();
+            String::from_utf8_lossy(&v).into_owned()
+        })
+    };
+    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let out = drain(Box::new(child.stdout.take().unwrap()));
     let start = Instant::now();
     loop {
         if let Some(st) = child.try_wait().unwrap() {
-            let err = reader.join().unwrap();
-            return Outcome::Exited(st.code(), String::from_utf8_lossy(&err).into_owned());
+            let (err, out) = (err.join().unwrap(), out.join().unwrap());
+            return (Outcome::Exited(st.code(), err), out);
         }
-        if start.elapsed() > TIMEOUT {
-            child.kill().ok();
+        if start.elapsed() > limit {
+            let group = -(child.id() as i32);
+            // SAFETY: kill() takes no pointers; the group is the child's own
+            // (process_group(0) above), not yet reaped, so its id is not reused.
+            unsafe { libc::kill(group, libc::SIGKILL) };
             child.wait().ok();
-            return Outcome::Hang;
+            return (Outcome::Hang, String::new());
         }
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -468,103 +529,253 @@ fn files_under(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
+/// How one run ended, as the fuzzer judges it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// Exit 0.
+    Success,
+    /// Exit 2 with one clean line on stderr.
+    Refused,
+    /// Exit 1 (a finished check or gate with failing verdicts).
+    Failed,
+    /// Anything else (a panic, a hang, a bad message, another exit): a
+    /// problem already recorded.
+    Broken,
+}
+
+/// Judges one run of the binary against the failure contract: exit 0, or
+/// exit 2 with one line on stderr that carries no control character and no
+/// panic, and (on exit 2) nothing left in `folder` (None: the command's
+/// output is not a folder of its own); exit 1 only when `exit_1_ok` (check
+/// and gate end so with failing verdicts). Counts it in `t`, records
+/// problems, and returns how it ended with its stderr.
+fn judge(
+    what: &str,
+    outcome: Outcome,
+    folder: Option<&Path>,
+    exit_1_ok: bool,
+    t: &Tally,
+    problems: &mut Vec<String>,
+) -> (End, String) {
+    t.runs.fetch_add(1, Ordering::Relaxed);
+    match outcome {
+        Outcome::Hang => {
+            t.hangs.fetch_add(1, Ordering::Relaxed);
+            problems.push(format!("{what}: still running past its time limit"));
+            (End::Broken, String::new())
+        }
+        Outcome::Exited(Some(0), err) => {
+            t.successes.fetch_add(1, Ordering::Relaxed);
+            let stray: Vec<_> = folder
+                .map(files_under)
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|p| p.to_string_lossy().contains(".tmp-"))
+                .collect();
+            if !stray.is_empty() {
+                t.leftovers.fetch_add(1, Ordering::Relaxed);
+                problems.push(format!("{what}: temporary files left: {stray:?}"));
+            }
+            (End::Success, err)
+        }
+        Outcome::Exited(Some(1), err) if exit_1_ok => {
+            t.failed_runs.fetch_add(1, Ordering::Relaxed);
+            (End::Failed, err)
+        }
+        Outcome::Exited(Some(2), err) => {
+            let body = err.strip_suffix('\n').unwrap_or(&err);
+            let one_line = !body.is_empty() && !body.contains('\n');
+            let clean_chars = !body.chars().any(char::is_control);
+            let end = if one_line && clean_chars && body.len() < 2000 && !body.contains("panicked")
+            {
+                t.clean_errors.fetch_add(1, Ordering::Relaxed);
+                let skip = if t.kind_skip == 0 { 2 } else { t.kind_skip };
+                let key: String = body
+                    .splitn(skip + 1, ": ")
+                    .nth(skip)
+                    .unwrap_or(body)
+                    .chars()
+                    .take(36)
+                    .collect();
+                *t.kinds.lock().unwrap().entry(key).or_default() += 1;
+                if std::env::var_os("RENDIFF_FUZZ_SHOW").is_some() {
+                    eprintln!("{what}: {body}");
+                }
+                End::Refused
+            } else {
+                t.bad_messages.fetch_add(1, Ordering::Relaxed);
+                problems.push(format!(
+                    "{what}: exit 2 but stderr is not one clean line: {err:?}"
+                ));
+                End::Broken
+            };
+            let left = folder.map(files_under).unwrap_or_default();
+            if !left.is_empty() {
+                t.leftovers.fetch_add(1, Ordering::Relaxed);
+                problems.push(format!("{what}: failed but left {left:?}"));
+            }
+            (end, err)
+        }
+        Outcome::Exited(code, err) => {
+            if code == Some(101) || code.is_none() {
+                t.panics.fetch_add(1, Ordering::Relaxed);
+            } else {
+                t.other_exits.fetch_add(1, Ordering::Relaxed);
+            }
+            let tail: String = err.chars().take(600).collect();
+            problems.push(format!("{what}: exit {code:?}: {tail}"));
+            (End::Broken, err)
+        }
+    }
+}
+
+/// Records a wrong verdict: the run ended cleanly, with the wrong answer.
+fn wrong(t: &Tally, problems: &mut Vec<String>, why: String) {
+    t.wrong_verdicts.fetch_add(1, Ordering::Relaxed);
+    problems.push(why);
+}
+
+/// `rendiff render --renderer raster` of `scene` into `out/render/r.exr`.
+fn render_cmd(scene: &Path, out: &Path) -> Command {
+    let mut cmd = Command::new(binary());
+    cmd.args([
+        "render",
+        "--renderer",
+        "raster",
+        "--quiet",
+        "--threads",
+        "1",
+    ])
+    .arg(scene)
+    .arg("-o")
+    .arg(out.join("render").join("r.exr"));
+    cmd
+}
+
+/// `rendiff export` of `scene` into `out/export`.
+fn export_cmd(scene: &Path, out: &Path) -> Command {
+    let mut cmd = Command::new(binary());
+    cmd.arg("export")
+        .arg(scene)
+        .arg("-o")
+        .arg(out.join("export"));
+    cmd
+}
+
 /// Runs one case through render and export; returns the problems found.
 fn run_case(c: &Case, t: &Tally) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     let scene = write_case(dir.path(), c);
     let out = dir.path().join("out");
     let mut problems = Vec::new();
-    let render_out = out.join("render").join("r.exr");
-    let export_out = out.join("export");
-    let commands: [(&str, Command, PathBuf); 2] = [
-        (
-            "render",
-            {
-                let mut cmd = Command::new(binary());
-                cmd.args([
-                    "render",
-                    "--renderer",
-                    "raster",
-                    "--quiet",
-                    "--threads",
-                    "1",
-                ])
-                .arg(&scene)
-                .arg("-o")
-                .arg(&render_out);
-                cmd
-            },
-            out.join("render"),
-        ),
-        (
-            "export",
-            {
-                let mut cmd = Command::new(binary());
-                cmd.arg("export").arg(&scene).arg("-o").arg(&export_out);
-                cmd
-            },
-            export_out.clone(),
-        ),
-    ];
-    for (what, mut cmd, folder) in commands {
-        t.runs.fetch_add(1, Ordering::Relaxed);
-        match run_limited(&mut cmd) {
-            Outcome::Hang => {
-                t.hangs.fetch_add(1, Ordering::Relaxed);
-                problems.push(format!("{what}: still running after {TIMEOUT:?}"));
-            }
-            Outcome::Exited(Some(0), _) => {
-                t.successes.fetch_add(1, Ordering::Relaxed);
-                let stray: Vec<_> = files_under(&folder)
-                    .into_iter()
-                    .filter(|p| p.to_string_lossy().contains(".tmp-"))
-                    .collect();
-                if !stray.is_empty() {
-                    t.leftovers.fetch_add(1, Ordering::Relaxed);
-                    problems.push(format!("{what}: temporary files left: {stray:?}"));
-                }
-            }
-            Outcome::Exited(Some(2), err) => {
-                let body = err.strip_suffix('\n').unwrap_or(&err);
-                let one_line = !body.is_empty() && !body.contains('\n');
-                let clean_chars = !body.chars().any(char::is_control);
-                if one_line && clean_chars && body.len() < 2000 && !body.contains("panicked") {
-                    t.clean_errors.fetch_add(1, Ordering::Relaxed);
-                    let key: String = body
-                        .split(": ")
-                        .nth(2)
-                        .unwrap_or(body)
-                        .chars()
-                        .take(36)
-                        .collect();
-                    *t.kinds.lock().unwrap().entry(key).or_default() += 1;
-                    if std::env::var_os("RENDIFF_FUZZ_SHOW").is_some() {
-                        eprintln!("{what}: {body}");
-                    }
-                } else {
-                    t.bad_messages.fetch_add(1, Ordering::Relaxed);
-                    problems.push(format!(
-                        "{what}: exit 2 but stderr is not one clean line: {err:?}"
-                    ));
-                }
-                let left = files_under(&folder);
-                if !left.is_empty() {
-                    t.leftovers.fetch_add(1, Ordering::Relaxed);
-                    problems.push(format!("{what}: failed but left {left:?}"));
-                }
-            }
-            Outcome::Exited(code, err) => {
-                if code == Some(101) || code.is_none() {
-                    t.panics.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    t.other_exits.fetch_add(1, Ordering::Relaxed);
-                }
-                let tail: String = err.chars().take(600).collect();
-                problems.push(format!("{what}: exit {code:?}: {tail}"));
-            }
-        }
-    }
+    let outcome = run_limited(&mut render_cmd(&scene, &out));
+    judge(
+        "render",
+        outcome,
+        Some(&out.join("render")),
+        false,
+        t,
+        &mut problems,
+    );
+    let outcome = run_limited(&mut export_cmd(&scene, &out));
+    judge(
+        "export",
+        outcome,
+        Some(&out.join("export")),
+        false,
+        t,
+        &mut problems,
+    );
     problems
+}
+
+/// A number from the environment variable `var`, else `default`.
+fn env_number<T: std::str::FromStr>(var: &str, default: T) -> T {
+    std::env::var(var)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// A deterministic runner for `seed`.
+fn seeded_runner(seed: u64) -> TestRunner {
+    let mut seed_bytes = [0u8; 32];
+    seed_bytes[..8].copy_from_slice(&seed.to_le_bytes());
+    TestRunner::new_with_rng(
+        Config {
+            failure_persistence: None,
+            ..Config::default()
+        },
+        TestRng::from_seed(RngAlgorithm::ChaCha, &seed_bytes),
+    )
+}
+
+/// `n` values of `strategy`, generated up front (deterministic for a seed).
+fn generate<S: Strategy>(strategy: S, n: usize, seed: u64) -> Vec<S::Value> {
+    let mut runner = seeded_runner(seed);
+    (0..n)
+        .map(|_| strategy.new_tree(&mut runner).unwrap().current())
+        .collect()
+}
+
+/// Runs `each` on every case on `workers` threads; returns each failing
+/// case's index and problems, in order.
+fn run_all<C: Sync>(
+    all: &[C],
+    workers: usize,
+    tally: &Tally,
+    each: impl Fn(&C, &Tally) -> Vec<String> + Sync,
+) -> Vec<(usize, Vec<String>)> {
+    let next = AtomicUsize::new(0);
+    let failures: Mutex<Vec<(usize, Vec<String>)>> = Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(c) = all.get(i) else { break };
+                tally.inputs.fetch_add(1, Ordering::Relaxed);
+                let problems = each(c, tally);
+                if !problems.is_empty() {
+                    failures.lock().unwrap().push((i, problems));
+                }
+            });
+        }
+    });
+    let mut failures = failures.into_inner().unwrap();
+    failures.sort_by_key(|f| f.0);
+    failures
+}
+
+/// Prints a surface's table of counts by outcome and its clean errors by
+/// kind (the part after the file name and field).
+fn print_table(surface: &str, seed: u64, elapsed: Duration, t: &Tally) {
+    let g = |a: &AtomicUsize| a.load(Ordering::Relaxed);
+    eprintln!(
+        "\n{surface} (seed {seed}, {:.1} s):\n\
+         | inputs | runs | clean errors (exit 2, one line) | successes | failing verdicts (exit 1) | panics | hangs | leftovers | bad messages | other exits | wrong verdicts |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n\
+         | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        elapsed.as_secs_f64(),
+        g(&t.inputs),
+        g(&t.runs),
+        g(&t.clean_errors),
+        g(&t.successes),
+        g(&t.failed_runs),
+        g(&t.panics),
+        g(&t.hangs),
+        g(&t.leftovers),
+        g(&t.bad_messages),
+        g(&t.other_exits),
+        g(&t.wrong_verdicts),
+    );
+    let mut kinds: Vec<_> = t.kinds.lock().unwrap().clone().into_iter().collect();
+    kinds.sort_by_key(|k| std::cmp::Reverse(k.1));
+    let kinds: Vec<String> = kinds
+        .iter()
+        .take(30)
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    eprintln!("clean errors by kind (top 30): {}", kinds.join("; "));
 }
 
 #[test]
@@ -579,73 +790,13 @@ fn hostile_scenes_fail_cleanly() {
 }
 
 fn fuzz() {
-    let cases: usize = std::env::var("RENDIFF_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2000);
-    let seed: u64 = std::env::var("RENDIFF_FUZZ_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(12);
-    let mut seed_bytes = [0u8; 32];
-    seed_bytes[..8].copy_from_slice(&seed.to_le_bytes());
-    let mut runner = TestRunner::new_with_rng(
-        Config {
-            failure_persistence: None,
-            ..Config::default()
-        },
-        TestRng::from_seed(RngAlgorithm::ChaCha, &seed_bytes),
-    );
-    // Generated up front (deterministic for a seed), run on two workers.
-    let strategy = case();
-    let all: Vec<Case> = (0..cases)
-        .map(|_| strategy.new_tree(&mut runner).unwrap().current())
-        .collect();
-    drop(strategy);
+    let cases: usize = env_number("RENDIFF_FUZZ_CASES", 2000);
+    let seed: u64 = env_number("RENDIFF_FUZZ_SEED", 12);
+    let all: Vec<Case> = generate(case(), cases, seed);
     let tally = Tally::default();
-    let next = AtomicUsize::new(0);
-    let failures: Mutex<Vec<(usize, Vec<String>)>> = Mutex::new(Vec::new());
     let started = Instant::now();
-    std::thread::scope(|s| {
-        for _ in 0..2 {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(c) = all.get(i) else { break };
-                tally.inputs.fetch_add(1, Ordering::Relaxed);
-                let problems = run_case(c, &tally);
-                if !problems.is_empty() {
-                    failures.lock().unwrap().push((i, problems));
-                }
-            });
-        }
-    });
-    let g = |a: &AtomicUsize| a.load(Ordering::Relaxed);
-    eprintln!(
-        "\nfuzz_scenes (seed {seed}, {:.1} s):\n\
-         | inputs | runs | clean errors (exit 2, one line) | successes | panics | hangs | leftovers | bad messages | other exits |\n\
-         |---|---|---|---|---|---|---|---|---|\n\
-         | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-        started.elapsed().as_secs_f64(),
-        g(&tally.inputs),
-        g(&tally.runs),
-        g(&tally.clean_errors),
-        g(&tally.successes),
-        g(&tally.panics),
-        g(&tally.hangs),
-        g(&tally.leftovers),
-        g(&tally.bad_messages),
-        g(&tally.other_exits),
-    );
-    let mut kinds: Vec<_> = tally.kinds.lock().unwrap().clone().into_iter().collect();
-    kinds.sort_by_key(|k| std::cmp::Reverse(k.1));
-    let kinds: Vec<String> = kinds
-        .iter()
-        .take(30)
-        .map(|(k, n)| format!("{n} {k}"))
-        .collect();
-    eprintln!("clean errors by field (top 30): {}", kinds.join("; "));
-    let mut failures = failures.into_inner().unwrap();
-    failures.sort_by_key(|f| f.0);
+    let failures = run_all(&all, 2, &tally, run_case);
+    print_table("fuzz_scenes", seed, started.elapsed(), &tally);
     for (i, problems) in failures.iter().take(10) {
         let c = &all[*i];
         eprintln!(

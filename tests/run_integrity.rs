@@ -483,3 +483,84 @@ fn messages_name_the_run_folder_and_carry_no_raw_escapes() {
         assert!(!t.contains('\u{1b}'), "{what} carries a raw escape: {t:?}");
     }
 }
+
+/// Found by the fuzzer (tests/fuzz_scenes/runs.rs): gate ignored a
+/// manifest.json it could not read and printed PASS on the damaged run.
+#[test]
+fn gate_refuses_a_damaged_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    json_run(&run, &["alpha"], &["trace"]);
+    let baseline = dir.path().join("baseline.json");
+    let o = bless(&run, &baseline, &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+    let gate = || {
+        common_cli::rendiff()
+            .arg("gate")
+            .arg(&run)
+            .arg("--baseline")
+            .arg(&baseline)
+            .output()
+            .unwrap()
+    };
+    assert_eq!(gate().status.code(), Some(0));
+    let manifest = run.join("manifest.json");
+    let good = std::fs::read(&manifest).unwrap();
+    for bad in [&good[..good.len() / 2], b"null", b"\xff{}"] {
+        std::fs::write(&manifest, bad).unwrap();
+        let o = gate();
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains("manifest.json"), "{err}");
+        assert!(!text(&o.stdout).contains("PASS"));
+    }
+}
+
+/// Found by the fuzzer: merge judged a shard's renders again against a
+/// resolved scene changed after its check (or with its recorded hash
+/// changed), and passed.
+#[test]
+fn merge_refuses_a_shard_whose_resolved_scene_changed() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scenes: Vec<PathBuf> = ["three_triangles", "pixel_grid"]
+        .iter()
+        .map(|s| root().join(format!("scenes/{s}.toml")))
+        .collect();
+    let trace = ["--only", "trace"];
+    let one = shard_check(d, &scenes, "1/2", &trace, "one");
+    let two = shard_check(d, &scenes, "2/2", &trace, "two");
+    let m = read_json(&one.join("manifest.json"));
+    let name = m["scenes"][0]["scene"].as_str().unwrap().to_string();
+    let refused = |says: &str| {
+        let o = merge(d, &[&one, &two]);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains("one/manifest.json") && err.contains(says),
+            "{err}"
+        );
+        assert!(!d.join("merged").exists());
+    };
+    // A triangle changed after the check.
+    let tri = one.join(format!("scenes/{name}/resolved/triangles.f32"));
+    let good = std::fs::read(&tri).unwrap();
+    let mut bad = good.clone();
+    bad[0] ^= 0x40;
+    std::fs::set_permissions(&tri, std::fs::Permissions::from_mode(0o644)).unwrap();
+    std::fs::write(&tri, &bad).unwrap();
+    refused("is not the one the shard rendered");
+    std::fs::write(&tri, &good).unwrap();
+    // The recorded hash changed, or removed.
+    let path = one.join("manifest.json");
+    for h in [json!("sha256:00"), json!("")] {
+        let mut edited = m.clone();
+        edited["scenes"][0]["resolved_sha256"] = h;
+        std::fs::write(&path, edited.to_string()).unwrap();
+        refused("resolved");
+    }
+    std::fs::write(&path, m.to_string()).unwrap();
+    let o = merge(d, &[&one, &two]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
+}

@@ -1251,9 +1251,9 @@ fn compare(opts: &CheckOptions, scratch: &Path, shown: &Path) -> Result<(Results
             bail!("the comparison refused the run: {refusal}");
         }
         bail!(
-            "the comparison failed ({}): {}\nrun scripts/setup.sh if the Python harness is missing",
+            "the comparison failed ({}): {} (run scripts/setup.sh if the Python harness is missing)",
             o.how(),
-            o.stderr_tail(12)
+            o.stderr_line(12)
         );
     }
     let text = std::fs::read_to_string(&results_path)

@@ -42,6 +42,18 @@ impl Outcome {
         let lines: Vec<&str> = self.stderr.lines().collect();
         lines[lines.len().saturating_sub(n)..].join("\n")
     }
+    /// The last `n` non-empty lines of stderr as one line (`|` between
+    /// them, control characters escaped): for an error that ends rendiff,
+    /// which is one line (a dying harness's traceback made it many).
+    pub fn stderr_line(&self, n: usize) -> String {
+        let lines: Vec<&str> = self
+            .stderr
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .collect();
+        let tail = lines[lines.len().saturating_sub(n)..].join(" | ");
+        crate::scene::printable(&tail, 2000)
+    }
 }
 
 /// Runs `cmd` with stdin closed and output captured to files in `scratch`
@@ -251,6 +263,22 @@ pub const PRINTABLE_LINE_CHARS: usize = 4000;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_traceback_becomes_one_escaped_line() {
+        let o = Outcome {
+            code: Some(1),
+            signal: None,
+            timed_out: false,
+            stdout: String::new(),
+            stderr: "Traceback (most recent call last):\n  File \"x\"\n\nBrokenProcessPool: \u{1b}[31mdied\n".into(),
+            seconds: 0.0,
+            max_rss_bytes: None,
+        };
+        let line = o.stderr_line(2);
+        assert_eq!(line, "  File \"x\" | BrokenProcessPool: \\u{1b}[31mdied");
+        assert!(!line.contains('\n') && !line.contains('\u{1b}'));
+    }
 
     #[test]
     fn quoting_neutralizes_shell_syntax() {

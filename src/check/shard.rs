@@ -228,6 +228,7 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         }
     }
     check_shard_set(&manifests)?;
+    check_resolved_seals(&manifests)?;
     // The merge judges with the renderers file it is given: the shards' own.
     let recorded = first
         .options
@@ -328,6 +329,47 @@ pub fn merge(shards: &[PathBuf], opts: &CheckOptions) -> Result<CheckOutcome> {
         results,
         table,
     })
+}
+
+/// Refuses a shard whose resolved scene is not the one it was rendered
+/// from: merge judges each shard's renders again against
+/// `scenes/<name>/resolved/`, so a changed triangle there (or a changed
+/// hash in manifest.json) would re-judge correct renders against other
+/// geometry, or hide the change. Each scene's folder is hashed as the check
+/// did ([`super::inputs::Seal`]) and held to its `resolved_sha256`. A
+/// shard run records one for every scene that loaded (the shard record and
+/// the hash came in together), so a scene with a render but no hash is
+/// refused too; one that did not load has neither.
+fn check_resolved_seals(manifests: &[(PathBuf, Manifest)]) -> Result<()> {
+    for (run, m) in manifests {
+        let file = run.join("manifest.json");
+        for s in &m.scenes {
+            let name = crate::scene::printable(&s.scene, 100);
+            let rendered = s.renders.iter().any(|r| r.status == "ok");
+            if s.resolved_sha256.is_empty() && !rendered {
+                continue;
+            }
+            if s.resolved_sha256.is_empty() {
+                bail!(
+                    "{}: scene {name:?} records no resolved_sha256, so its resolved scene cannot be checked: run the shard again",
+                    file.display()
+                );
+            }
+            let dir = run.join("scenes").join(&s.scene).join("resolved");
+            let now = super::inputs::Seal::of(&dir)
+                .map_err(|e| anyhow::anyhow!("{}: scene {name:?}: {e:#}", file.display()))?;
+            if now.digest != s.resolved_sha256 {
+                bail!(
+                    "{}: scene {name:?}: its resolved scene ({}) is not the one the shard rendered (resolved_sha256 {}, now {}): the run was changed after its check; run the shard again",
+                    file.display(),
+                    dir.display(),
+                    crate::scene::printable(&s.resolved_sha256, 80),
+                    now.digest
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Refuses a set of shard runs that is not one whole split run one way:

@@ -392,7 +392,14 @@ pub fn gate(baseline_path: &Path, run: &Path) -> Result<(String, bool)> {
     crate::check::run_folder::ensure_complete(run)?;
     let baseline = load_baseline(baseline_path)?;
     let results = load_verdicts(&run.join("results.json"))?;
-    let manifest: Option<Manifest> = read_json(&run.join("manifest.json"), "manifest").ok();
+    // A run without one (written by hand, or by an older rendiff) is gated
+    // on its verdicts; one that is there must be a manifest: a garbled one
+    // was ignored, and the gate passed a run whose records had been damaged.
+    let mpath = run.join("manifest.json");
+    let manifest: Option<Manifest> = match std::fs::symlink_metadata(&mpath) {
+        Ok(_) => Some(read_json(&mpath, "rendiff manifest")?),
+        Err(_) => None,
+    };
     let outcome = compare(&baseline, &results);
     let text = markdown(
         &outcome,
