@@ -431,6 +431,12 @@ def instance_matrices(
     return [trs(t[k], q[k], s[k], f"nodes[{ni}] instance {k}'s rotation", path) for k in range(n)]
 
 
+def instance_world(node_world: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """An instance's world matrix: the node's world matrix times the instance's T * R * S (the
+    extension applies the instance's transform first, then the node's)."""
+    return node_world @ instance
+
+
 def slots(
     doc: dict[str, Any], path: Path, chosen: int | None, buffers: dict[int, bytes], bin_chunk: bytes | None
 ) -> list[Slot]:
@@ -449,7 +455,9 @@ def slots(
             continue
         mats = instance_matrices(doc, ni, ext, path, buffers, bin_chunk)
         for k, m in enumerate(mats):
-            out.append(Slot(ni, mi, f"{label}/{k}", world @ m, world_abs @ np.abs(m), depth + 1, k, len(mats)))
+            out.append(
+                Slot(ni, mi, f"{label}/{k}", instance_world(world, m), world_abs @ np.abs(m), depth + 1, k, len(mats))
+            )
     return out
 
 
