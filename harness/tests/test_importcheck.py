@@ -26,6 +26,7 @@ import pytest
 
 from fixtures import REPO, rendiff_binary
 from rendiff_harness.contract import resolved
+from rendiff_harness.contract.results import Entry
 from rendiff_harness.judge import importcheck
 from rendiff_harness.judge.importcheck import gltf_spec, gltf_trimesh, match
 
@@ -52,7 +53,7 @@ def _export(tmp: Path, mesh_name: str, mesh: bytes | Path, transform: str = "") 
     return out
 
 
-def _verdict(directory: Path, decoder: str = "gltf_spec") -> importcheck.Entry:
+def _verdict(directory: Path, decoder: str = "gltf_spec") -> Entry:
     """The scene's import entry of `decoder`."""
     entries = {e.backend: e for e in importcheck.import_entries(resolved.load(directory))}
     return entries[decoder]
@@ -82,9 +83,7 @@ def _buggy_gltf(directory: Path, patch: Callable[[pytest.MonkeyPatch], None]) ->
     return [match.place(p, scene.objects[i]["mesh"]["transform"]).tris for i, p in enumerate(parts)]
 
 
-def _plant_and_judge(
-    tmp_path: Path, out: Path, buggy: list[np.ndarray], decoder: str = "gltf_spec"
-) -> importcheck.Entry:
+def _plant_and_judge(tmp_path: Path, out: Path, buggy: list[np.ndarray], decoder: str = "gltf_spec") -> Entry:
     ok = _verdict(out, decoder)
     assert ok.status == "pass", ok.reason
     _rewrite(out, buggy)
@@ -452,7 +451,8 @@ def test_a_float32_dequantization_would_lie_outside_the_bound(tmp_path: Path) ->
 
     def in_float32(values: np.ndarray, ct: int, normalized: bool) -> np.ndarray:
         div, floor = gltf_spec.NORMALIZE[ct]
-        return np.maximum(values.astype(np.float32) / np.float32(div), np.float32(floor)).astype(np.float64)
+        as32: np.ndarray = np.maximum(values.astype(np.float32) / np.float32(div), np.float32(floor))
+        return as32.astype(np.float64)
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(gltf_spec, "dequantize", in_float32)

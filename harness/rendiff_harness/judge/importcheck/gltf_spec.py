@@ -434,7 +434,8 @@ def instance_matrices(
 def instance_world(node_world: np.ndarray, instance: np.ndarray) -> np.ndarray:
     """An instance's world matrix: the node's world matrix times the instance's T * R * S (the
     extension applies the instance's transform first, then the node's)."""
-    return node_world @ instance
+    world: np.ndarray = node_world @ instance
+    return world
 
 
 def slots(
