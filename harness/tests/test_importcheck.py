@@ -437,7 +437,7 @@ def test_quantized_positions_not_normalized_fail_naming_the_primitive(tmp_path: 
 def test_a_float32_dequantization_would_lie_outside_the_bound(tmp_path: Path) -> None:
     # Why gltf_spec divides in float64 (docs/verifier.md): 12345/65535 in float32 is up to half a float32
     # unit of 0.19 away from rendiff's float64 value; a node translation that cancels it leaves a world
-    # coordinate near 1e-5, whose own half unit (~5e-13) cannot absorb that difference (~7e-9).
+    # coordinate near 1e-5, whose own half unit (4.5e-13) cannot absorb that difference (here 1.6e-9).
     g = _Gltf()
     pos = g.acc([[12345, 0, 0], [65535, 0, 0], [12345, 65535, 0]], "VEC3", 5123, "<u2", True, 8)
     q = np.float32(12345 / 65535)
