@@ -3,7 +3,9 @@
 Each planted import bug is planted honestly: rendiff exports the real resolved scene of a small
 file, then the test rewrites that scene's triangles as a buggy importer would have written them
 (the same decoder with one step broken: sparse values one element off, a strip read as a list, a
-mirrored node's winding kept, an OBJ negative index one off), and the unbroken verdict must fail,
+mirrored node's winding kept, an OBJ negative index one off, instances in the wrong order or
+placed after the node's transform instead of before, quantized positions not normalized, the
+file's default glTF scene read instead of the chosen one), and the unbroken verdict must fail,
 naming the object and the primitive. The unmodified export must pass (so each test can fail both
 ways), and a one-unit shift of one vertex must fail (the bound is not loose).
 """
@@ -17,12 +19,14 @@ import struct
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from fixtures import REPO, rendiff_binary
 from rendiff_harness.contract import resolved
+from rendiff_harness.contract.results import Entry
 from rendiff_harness.judge import importcheck
 from rendiff_harness.judge.importcheck import gltf_spec, gltf_trimesh, match
 
@@ -49,7 +53,7 @@ def _export(tmp: Path, mesh_name: str, mesh: bytes | Path, transform: str = "") 
     return out
 
 
-def _verdict(directory: Path, decoder: str = "gltf_spec") -> importcheck.Entry:
+def _verdict(directory: Path, decoder: str = "gltf_spec") -> Entry:
     """The scene's import entry of `decoder`."""
     entries = {e.backend: e for e in importcheck.import_entries(resolved.load(directory))}
     return entries[decoder]
@@ -74,13 +78,12 @@ def _buggy_gltf(directory: Path, patch: Callable[[pytest.MonkeyPatch], None]) ->
     scene = resolved.load(directory)
     with pytest.MonkeyPatch.context() as mp:
         patch(mp)
-        parts = gltf_spec.decode(Path(scene.objects[0]["mesh"]["file"]))
+        mesh = scene.objects[0]["mesh"]
+        parts = gltf_spec.decode(Path(mesh["file"]), mesh.get("gltf_scene"))
     return [match.place(p, scene.objects[i]["mesh"]["transform"]).tris for i, p in enumerate(parts)]
 
 
-def _plant_and_judge(
-    tmp_path: Path, out: Path, buggy: list[np.ndarray], decoder: str = "gltf_spec"
-) -> importcheck.Entry:
+def _plant_and_judge(tmp_path: Path, out: Path, buggy: list[np.ndarray], decoder: str = "gltf_spec") -> Entry:
     ok = _verdict(out, decoder)
     assert ok.status == "pass", ok.reason
     _rewrite(out, buggy)
@@ -278,3 +281,243 @@ def test_a_glb_with_interleaved_attributes_byte_indices_two_primitives_and_a_hie
     assert [o["name"] for o in resolved.load(out).objects] == ["m/twin#1", "m/twin#2"]
     tm = _verdict(out, "trimesh")
     assert tm.status == "skipped" and "drops TRIANGLE_FAN" in tm.reason
+
+
+class _Gltf:
+    """A small glTF under construction: each array becomes an accessor of one base64 `data:` buffer."""
+
+    def __init__(self) -> None:
+        self.data = b""
+        self.doc: dict[str, Any] = {"asset": {"version": "2.0"}, "bufferViews": [], "accessors": []}
+
+    def acc(self, values: Any, kind: str, ct: int, dtype: str, normalized: bool = False, stride: int = 0) -> int:
+        """Appends `values` (rows of `kind`) as an accessor of componentType `ct`; its index."""
+        arr = np.ascontiguousarray(np.asarray(values, dtype=dtype).reshape(len(values), -1))
+        self.data += b"\0" * (-len(self.data) % 4)
+        raw = arr.tobytes()
+        if stride:  # vertex attributes padded to a 4-byte stride, as KHR_mesh_quantization requires
+            raw = b"".join(row.tobytes() + b"\0" * (stride - arr.itemsize * arr.shape[1]) for row in arr)
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.data), "byteLength": len(raw)}
+        if stride:
+            view["byteStride"] = stride
+        self.doc["bufferViews"].append(view)
+        self.data += raw
+        acc: dict[str, Any] = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": ct}
+        acc |= {"count": len(arr), "type": kind, "normalized": normalized}
+        if kind == "VEC3":
+            acc |= {"min": arr.min(axis=0).tolist(), "max": arr.max(axis=0).tolist()}
+        self.doc["accessors"].append(acc)
+        return len(self.doc["accessors"]) - 1
+
+    def bytes(self, **top: Any) -> bytes:
+        uri = "data:application/octet-stream;base64," + base64.b64encode(self.data).decode()
+        return json.dumps(self.doc | top | {"buffers": [{"uri": uri, "byteLength": len(self.data)}]}).encode()
+
+
+QUAD = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.25]]
+"""Four vertices of two triangles (0 1 2, 1 3 2), not in a plane."""
+
+
+def _quad(g: _Gltf) -> dict[str, Any]:
+    """A TRIANGLES primitive of QUAD (float positions, u16 indices)."""
+    pos = g.acc(QUAD, "VEC3", 5126, "<f4")
+    return {"attributes": {"POSITION": pos}, "indices": g.acc([0, 1, 2, 1, 3, 2], "SCALAR", 5123, "<u2")}
+
+
+def _instanced_gltf() -> bytes:
+    """Under a rotated, translated parent: node "trees" with three EXT_mesh_gpu_instancing instances
+    (float translations, a normalized signed-short rotation, a scale mirroring the last), and a
+    plain node "ground" after it."""
+    g = _Gltf()
+    prim = _quad(g)
+    t = g.acc([[0, 0, 0], [2, 0.5, -1], [-1.5, 1, 0.25]], "VEC3", 5126, "<f4")
+    c, s = round(32767 * np.cos(0.3)), round(32767 * np.sin(0.3))
+    r = g.acc([[0, 0, 0, 32767], [0, s, 0, c], [s, 0, s, c]], "VEC4", 5122, "<i2", normalized=True)
+    sc = g.acc([[1, 1, 1], [0.5, 2, 1], [-1, 1, 1.5]], "VEC3", 5126, "<f4")
+    inst = {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": t, "ROTATION": r, "SCALE": sc}}}
+    g.doc |= {
+        "meshes": [{"primitives": [prim]}],
+        "nodes": [
+            {"children": [1, 2], "rotation": [0.2, 0.1, 0.0, 0.97], "translation": [0.5, -0.25, 0.1]},
+            {"name": "trees", "mesh": 0, "scale": [1.0, 1.5, 1.0], "extensions": inst},
+            {"name": "ground", "mesh": 0, "translation": [0, -2, 0]},
+        ],
+        "scenes": [{"nodes": [0]}],
+    }
+    return g.bytes(scene=0, extensionsUsed=["EXT_mesh_gpu_instancing"], extensionsRequired=["EXT_mesh_gpu_instancing"])
+
+
+TURNED = "transform = { rotate = [10.0, 25.0, -40.0], scale = [1.5, 1.5, 0.5], translate = [0.25, -1.0, 2.0] }\n"
+
+
+def test_instances_are_objects_in_instance_order_and_pass(tmp_path: Path) -> None:
+    out = _export(tmp_path, "i.gltf", _instanced_gltf(), TURNED)
+    assert [o["name"] for o in resolved.load(out).objects] == ["m/trees/0", "m/trees/1", "m/trees/2", "m/ground"]
+    spec = _verdict(out)
+    assert spec.status == "pass", spec.reason
+    assert spec.extra == {"triangles": 8, "objects": 4}
+    parts = gltf_spec.decode(Path(resolved.load(out).objects[0]["mesh"]["file"]))
+    assert "instance 2 of 3 (mirrored: winding reversed)" in parts[2].where
+    tm = _verdict(out, "trimesh")  # the plain node compared, the instances declared
+    assert tm.status == "pass" and tm.extra == {"triangles": 2, "objects": 1}, tm.reason
+    assert "does not apply EXT_mesh_gpu_instancing" in tm.reason
+
+
+def test_instances_in_the_wrong_order_fail_naming_the_instance(tmp_path: Path) -> None:
+    out = _export(tmp_path, "i.gltf", _instanced_gltf(), TURNED)
+    real = gltf_spec.instance_matrices
+
+    def reversed_order(*args: Any) -> list[np.ndarray]:
+        return real(*args)[::-1]
+
+    bad = _plant_and_judge(
+        tmp_path, out, _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "instance_matrices", reversed_order))
+    )
+    assert bad.status == "fail", bad.reason
+    assert "object 'm/trees/0' (node 1, mesh 0, instance 0 of 3)" in bad.reason
+    assert "mesh 0 primitive 0 (TRIANGLES) triangle 0" in bad.reason
+    assert "m/ground" not in bad.reason
+
+
+def test_an_instance_placed_after_the_node_instead_of_before_fails_naming_it(tmp_path: Path) -> None:
+    out = _export(tmp_path, "i.gltf", _instanced_gltf(), TURNED)
+    bad = _plant_and_judge(
+        tmp_path,
+        out,
+        _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "instance_world", lambda world, inst: inst @ world)),
+    )
+    assert bad.status == "fail", bad.reason
+    assert "object 'm/trees/1' (node 1, mesh 0, instance 1 of 3)" in bad.reason
+    assert "m/trees/0" not in bad.reason and "m/ground" not in bad.reason  # the identity instance commutes
+
+
+def _quantized_gltf() -> bytes:
+    """KHR_mesh_quantization positions under dequantizing node transforms: unsigned shorts and signed
+    bytes normalized, unsigned shorts unnormalized, each padded to a 4-byte stride."""
+    g = _Gltf()
+    idx = g.acc([0, 1, 2, 1, 3, 2], "SCALAR", 5123, "<u2")
+    u16 = g.acc([[0, 0, 0], [65535, 1234, 0], [17, 65535, 300], [40000, 50000, 65535]], "VEC3", 5123, "<u2", True, 8)
+    i8 = g.acc([[-128, 0, 5], [127, -3, 0], [0, 127, -127], [100, 90, 64]], "VEC3", 5120, "<i1", True, 4)
+    raw = g.acc([[0, 0, 0], [3, 0, 1], [0, 3, 0], [3, 3, 2]], "VEC3", 5123, "<u2", False, 8)
+    g.doc |= {
+        "meshes": [{"primitives": [{"attributes": {"POSITION": a}, "indices": idx}]} for a in (u16, i8, raw)],
+        "nodes": [
+            {"name": "u16", "mesh": 0, "scale": [2.5, 1.75, 0.5], "translation": [-1.25, -0.875, 0.1]},
+            {"name": "i8", "mesh": 1, "scale": [0.75, 0.75, 0.75], "translation": [1.0, 0.0, 0.0]},
+            {"name": "raw", "mesh": 2, "scale": [0.125, 0.125, 0.125], "translation": [0.0, 1.0, 0.0]},
+        ],
+        "scenes": [{"nodes": [0, 1, 2]}],
+    }
+    return g.bytes(scene=0, extensionsUsed=["KHR_mesh_quantization"], extensionsRequired=["KHR_mesh_quantization"])
+
+
+def test_quantized_positions_pass_and_trimesh_compares_only_the_unnormalized(tmp_path: Path) -> None:
+    out = _export(tmp_path, "q.gltf", _quantized_gltf(), TURNED)
+    spec = _verdict(out)
+    assert spec.status == "pass" and spec.extra == {"triangles": 6, "objects": 3}, spec.reason
+    tm = _verdict(out, "trimesh")
+    assert tm.status == "pass" and tm.extra == {"triangles": 2, "objects": 1}, tm.reason
+    assert "ignores `accessor.normalized`" in tm.reason
+
+
+def test_quantized_positions_not_normalized_fail_naming_the_primitive(tmp_path: Path) -> None:
+    out = _export(tmp_path, "q.gltf", _quantized_gltf(), TURNED)
+    real = gltf_spec.dequantize
+    bad = _plant_and_judge(
+        tmp_path,
+        out,
+        _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "dequantize", lambda v, ct, norm: real(v, ct, False))),
+    )
+    assert bad.status == "fail", bad.reason
+    assert "object 'm/u16' (node 0, mesh 0)" in bad.reason
+    assert "mesh 0 primitive 0 (TRIANGLES quantized POSITION) triangle 0" in bad.reason
+    assert "m/raw" not in bad.reason  # the unnormalized positions stay right
+
+
+def test_a_float32_dequantization_would_lie_outside_the_bound(tmp_path: Path) -> None:
+    # Why gltf_spec divides in float64 (docs/verifier.md): 12345/65535 in float32 is up to half a float32
+    # unit of 0.19 away from rendiff's float64 value; a node translation that cancels it leaves a world
+    # coordinate near 1e-5, whose own half unit (4.5e-13) cannot absorb that difference (here 1.6e-9).
+    g = _Gltf()
+    pos = g.acc([[12345, 0, 0], [65535, 0, 0], [12345, 65535, 0]], "VEC3", 5123, "<u2", True, 8)
+    q = np.float32(12345 / 65535)
+    g.doc |= {
+        "meshes": [{"primitives": [{"attributes": {"POSITION": pos}}]}],
+        "nodes": [{"mesh": 0, "translation": [float(-q) + 1e-5, 0, 0]}],
+        "scenes": [{"nodes": [0]}],
+    }
+    out = _export(tmp_path, "c.gltf", g.bytes(scene=0))
+    assert _verdict(out).status == "pass"
+
+    def in_float32(values: np.ndarray, ct: int, normalized: bool) -> np.ndarray:
+        div, floor = gltf_spec.NORMALIZE[ct]
+        as32: np.ndarray = np.maximum(values.astype(np.float32) / np.float32(div), np.float32(floor))
+        return as32.astype(np.float64)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(gltf_spec, "dequantize", in_float32)
+        assert _verdict(out).status == "fail"
+
+
+def _two_scenes_gltf() -> bytes:
+    """Scene 0 (the default, "first") shows node 0, scene 1 ("second") node 1: both named "part",
+    so only the geometry tells them apart."""
+    g = _Gltf()
+    a = g.acc([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "VEC3", 5126, "<f4")
+    b = g.acc([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]], "VEC3", 5126, "<f4")
+    g.doc |= {
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": a}}]},
+            {"primitives": [{"attributes": {"POSITION": b}}]},
+        ],
+        "nodes": [{"name": "part", "mesh": 0}, {"name": "part", "mesh": 1}],
+        "scenes": [{"name": "first", "nodes": [0]}, {"name": "second", "nodes": [1]}],
+    }
+    return g.bytes(scene=0)
+
+
+def test_the_chosen_gltf_scene_is_recorded_and_read(tmp_path: Path) -> None:
+    for i, (choice, want) in enumerate([("", 0), ('gltf_scene = "second"\n', 1), ("gltf_scene = 0\n", 0)]):
+        (tmp_path / str(i)).mkdir()
+        out = _export(tmp_path / str(i), "s.gltf", _two_scenes_gltf(), choice)
+        assert resolved.load(out).objects[0]["mesh"]["gltf_scene"] == want
+        assert _verdict(out).status == "pass"
+        tm = _verdict(out, "trimesh")
+        assert tm.status == ("skipped" if want else "pass"), tm.reason
+        assert ("loads only the file's default glTF scene" in tm.reason) == bool(want)
+
+
+def test_the_default_scene_read_instead_of_the_chosen_one_fails_naming_the_primitive(tmp_path: Path) -> None:
+    out = _export(tmp_path, "s.gltf", _two_scenes_gltf(), "gltf_scene = 1\n")
+    bad = _plant_and_judge(
+        tmp_path,
+        out,
+        _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "scene_index", lambda doc, chosen: doc.get("scene", 0))),
+    )
+    assert bad.status == "fail", bad.reason
+    assert (
+        "object 'm/part' (node 1, mesh 1)" in bad.reason and "mesh 1 primitive 0 (TRIANGLES) triangle 0" in bad.reason
+    )
+
+
+def test_points_and_lines_are_skipped_and_a_node_of_nothing_else_is_no_object(tmp_path: Path) -> None:
+    g = _Gltf()
+    prim = _quad(g)
+    line = {"attributes": {"POSITION": prim["attributes"]["POSITION"]}, "mode": 1}
+    g.doc |= {
+        "meshes": [
+            {"primitives": [line, prim, dict(line, mode=0), {"attributes": prim["attributes"], "mode": 5}]},
+            {"primitives": [dict(line, mode=3), dict(line, mode=0)]},
+        ],
+        "nodes": [{"name": "a", "mesh": 0}, {"name": "b", "mesh": 1}, {"name": "c", "mesh": 0, "scale": [1, -1, 1]}],
+        "scenes": [{"nodes": [0, 1, 2]}],
+    }
+    out = _export(tmp_path, "l.gltf", g.bytes(scene=0), TURNED)
+    assert [o["name"] for o in resolved.load(out).objects] == ["m/a", "m/c"]
+    for decoder in ("gltf_spec", "trimesh"):  # trimesh: a mesh of several primitives, lines among them
+        entry = _verdict(out, decoder)
+        assert entry.status == "pass" and entry.extra == {"triangles": 8, "objects": 2}, entry.reason
+    with pytest.MonkeyPatch.context() as mp:  # a decoder that made an object of node b would disagree
+        mp.setattr(gltf_spec, "draws_nothing", lambda mesh: False)
+        wrong = _verdict(out)
+    assert wrong.status == "fail" and "the decoder found 3 mesh nodes and instances" in wrong.reason

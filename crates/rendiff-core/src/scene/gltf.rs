@@ -99,6 +99,9 @@ impl<'a> CameraRequest<'a> {
 /// What a glTF file contributes to a scene.
 #[derive(Debug, Clone)]
 pub struct GltfFile {
+    /// The index of the glTF scene shown (the one chosen, else the file's
+    /// default): recorded with each object so the import check reads the same.
+    pub scene: usize,
     /// Mesh nodes in traversal order (see [`load_gltf`]).
     pub nodes: Vec<GltfMeshNode>,
     /// The requested camera ([`CameraRequest::None`] gives `None`).
@@ -1365,6 +1368,7 @@ pub fn load_gltf_scene(
         request => Some(pick_camera(root, &camera_nodes, request).map_err(err)?),
     };
     Ok(GltfFile {
+        scene,
         nodes,
         camera,
         warnings,

@@ -46,6 +46,10 @@ pub struct MeshSource {
     /// This object's index among the file's parts: glTF mesh nodes in
     /// traversal order, OBJ groups in file order (0 for a one-group OBJ).
     pub part: u32,
+    /// For a glTF file, the index of the glTF scene shown (`gltf_scene`, else
+    /// the file's default): the decoder must read the same scene.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gltf_scene: Option<u32>,
     /// The scene object's transform as written, applied after the file's own.
     pub transform: super::Transform,
 }
@@ -201,7 +205,7 @@ impl ResolvedScene {
                         .into_iter()
                         .map(|n| (format!("{}/{}", o.name, n.label), n.triangles))
                         .collect();
-                    Some((parts, full))
+                    Some((parts, full, Some(file.scene as u32)))
                 }
                 Some(rel) => {
                     let mesh_field = format!("objects[{si}].mesh");
@@ -220,7 +224,7 @@ impl ResolvedScene {
                             .map(|g| (format!("{}/{}", o.name, g.name), g.triangles))
                             .collect()
                     };
-                    Some((parts, full))
+                    Some((parts, full, None))
                 }
                 None => None,
             });
@@ -239,11 +243,16 @@ impl ResolvedScene {
             // A mesh file's parts (OBJ groups, glTF mesh nodes) were named when
             // it was read; a generator is one object under the scene's name.
             let from_file = mesh.is_some();
-            let (parts, origin): (Vec<(String, Vec<Tri64>)>, PathBuf) = match (mesh, &o.shape) {
-                (Some((parts, full)), _) => (parts, full),
-                (None, Some(shape)) => (vec![(o.name.clone(), shape.triangles())], path.clone()),
-                (None, None) => unreachable!("validated: mesh or shape"),
-            };
+            let (parts, origin, gltf_scene): (Vec<(String, Vec<Tri64>)>, PathBuf, _) =
+                match (mesh, &o.shape) {
+                    (Some((parts, full, gltf_scene)), _) => (parts, full, gltf_scene),
+                    (None, Some(shape)) => (
+                        vec![(o.name.clone(), shape.triangles())],
+                        path.clone(),
+                        None,
+                    ),
+                    (None, None) => unreachable!("validated: mesh or shape"),
+                };
             let material = match &o.material {
                 Some(m) => material_index.get(m.as_str()).copied().unwrap_or(0),
                 None => 0,
@@ -302,6 +311,7 @@ impl ResolvedScene {
                             "obj"
                         },
                         part: part as u32,
+                        gltf_scene,
                         transform: o.transform.clone(),
                     }),
                 });

@@ -36,16 +36,20 @@ Decoded = tuple[list[Part | None], list[str]]
 """A file's parts as one decoder reads them (None: not comparable, a declared decoder bug) and notes."""
 
 
-def _spec(path: Path) -> Decoded:
-    return list(gltf_spec.decode(path)), []
+Decoder = Callable[[Path, int | None], Decoded]
+"""Reads a mesh file (and, for glTF, the glTF scene rendiff showed: `objects[].mesh.gltf_scene`)."""
 
 
-def _obj(path: Path) -> Decoded:
+def _spec(path: Path, chosen: int | None) -> Decoded:
+    return list(gltf_spec.decode(path, chosen)), []
+
+
+def _obj(path: Path, chosen: int | None) -> Decoded:
     return list(obj_trimesh.decode(path)), []
 
 
 SPEC, TRIMESH = IMPORT_DECODERS
-DECODERS: dict[str, dict[str, Callable[[Path], Decoded]]] = {
+DECODERS: dict[str, dict[str, Decoder]] = {
     SPEC: {"gltf": _spec},
     TRIMESH: {"obj": _obj, "gltf": gltf_trimesh.decode},
 }
@@ -103,19 +107,26 @@ def _pairs(
             )
         return pairs, problems
     if len(parts) != len(group):
-        problems.append(f"rendiff made {len(group)} objects of the file, the decoder found {len(parts)} mesh nodes")
+        problems.append(
+            f"rendiff made {len(group)} objects of the file, the decoder found {len(parts)} mesh nodes and instances"
+        )
     for i, name, part in zip(group, names, parts, strict=False):
         if part is not None and not name.endswith("/" + part.label):
             problems.append(
-                f"object {name!r} is the decoder's mesh node {part.label!r} ({part.where}): wrong assignment"
+                f"object {name!r} is the decoder's mesh node or instance {part.label!r} ({part.where}): "
+                "wrong assignment"
             )
         pairs.append((i, part))
     return pairs, problems
 
 
-def _judge(
-    scene: ResolvedScene, name: str, decoder: str, formats: dict[str, Callable[[Path], Decoded]]
-) -> Entry | None:
+def _chosen(mesh: dict[str, object]) -> int | None:
+    """The glTF scene the object shows (None: an export that did not record it, the file's default)."""
+    chosen = mesh.get("gltf_scene")
+    return chosen if isinstance(chosen, int) and not isinstance(chosen, bool) else None
+
+
+def _judge(scene: ResolvedScene, name: str, decoder: str, formats: dict[str, Decoder]) -> Entry | None:
     """The entry of one decoder over the scene's objects of the formats it reads; None when there are none."""
     groups = [g for g in _groups(scene) if scene.objects[g[0]]["mesh"].get("format") in formats]
     if not groups:
@@ -125,15 +136,15 @@ def _judge(
     problems: list[str] = []
     notes: list[str] = []
     outcomes: list[Outcome] = []
-    cache: dict[tuple[str, str], Decoded] = {}
+    cache: dict[tuple[str, str, int | None], Decoded] = {}
     try:
         for group in groups:
             mesh = scene.objects[group[0]]["mesh"]
-            file, fmt = str(mesh.get("file", "")), str(mesh.get("format"))
-            if (file, fmt) not in cache:
-                cache[file, fmt] = formats[fmt](Path(file))
-                notes += cache[file, fmt][1]
-            pairs, assignment = _pairs(scene, group, cache[file, fmt][0], fmt)
+            file, fmt, chosen = str(mesh.get("file", "")), str(mesh.get("format")), _chosen(mesh)
+            if (file, fmt, chosen) not in cache:
+                cache[file, fmt, chosen] = formats[fmt](Path(file), chosen)
+                notes += cache[file, fmt, chosen][1]
+            pairs, assignment = _pairs(scene, group, cache[file, fmt, chosen][0], fmt)
             problems += assignment
             for i, part in pairs:
                 if part is None:
@@ -186,8 +197,9 @@ def _who(scene: ResolvedScene, i: int, decoder: str, fmt: str, file: str) -> str
     """Which side departs from the format's rules, where that can be decided."""
     if (decoder, fmt) in VERDICT:
         return VERDICT[decoder, fmt]
-    part = scene.objects[i]["mesh"].get("part")
-    spec = gltf_spec.decode(Path(file))
+    mesh = scene.objects[i]["mesh"]
+    part = mesh.get("part")
+    spec = gltf_spec.decode(Path(file), _chosen(mesh))
     if not isinstance(part, int) or not 0 <= part < len(spec):
         return "gltf_spec has no such mesh node either"
     if _object(scene, i, spec[part], "gltf_spec").ok:

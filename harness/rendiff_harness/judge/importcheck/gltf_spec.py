@@ -5,13 +5,17 @@ rendiff loads with: the second reading of every glTF file a scene shows (`import
 What it reads: the GLB container (header, JSON chunk, BIN chunk) or JSON with a BOM tolerated;
 buffers from base64 `data:` URIs, relative files beside the glTF (percent-decoded, never leaving
 the folder) or the GLB's BIN chunk; accessors with byteOffset, byteStride, every component type,
-`normalized` integers (converted as the specification's table says, in float32), sparse
-substitution (indices, values; an accessor without a bufferView is zeros first); primitive modes
-TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN numbered as the Meshes section's topology table defines (POINTS and LINE*
-make no triangle and are left out); the file's `scene` (else scene 0) depth first, pre-order;
-node `matrix` (column-major) or T * R * S, the quaternion normalized; world = parent x local; a
-node whose world matrix mirrors (negative determinant) has its triangles' winding reversed (the
-specification: "the determinant of the node's global transform defines the winding order").
+`normalized` integers (`KHR_mesh_quantization` positions, instance rotations: the specification's
+formulas, evaluated in float64 as rendiff does, docs/verifier.md), sparse substitution (indices,
+values; an accessor without a bufferView is zeros first); primitive modes TRIANGLES,
+TRIANGLE_STRIP, TRIANGLE_FAN numbered as the Meshes section's topology table defines (POINTS and
+LINE* make no triangle and are left out; a node whose mesh has nothing else is no part); the glTF
+scene the resolved scene recorded (`objects[].mesh.gltf_scene`, else the file's `scene`, else scene
+0) depth first, pre-order; node `matrix` (column-major) or T * R * S, the quaternion normalized;
+world = parent x local; `EXT_mesh_gpu_instancing`: one part per instance, in instance order, its
+world matrix the node's times the instance's T * R * S (the extension's rule), the node itself not
+drawn; a part whose world matrix mirrors (negative determinant) has its triangles' winding reversed
+(the specification: "the determinant of the node's global transform defines the winding order").
 
 One choice follows rendiff's contract rather than the specification, which leaves it open: node
 numbers (matrix, translation, rotation, scale) are JSON numbers, read as float32 as rendiff reads
@@ -25,6 +29,7 @@ import binascii
 import json
 import struct
 import urllib.parse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +53,13 @@ NORMALIZE: dict[int, tuple[float, float]] = {
     5122: (32767.0, -1.0),
     5123: (65535.0, 0.0),
 }
-"""Normalized integer -> float: max(c / divisor, floor) (3.11, "Animations" table, and 3.6.2.3)."""
+"""Normalized integer -> float: max(c / divisor, floor) (3.11, "Animations" table, and 3.6.2.3;
+`KHR_mesh_quantization` refers to the same table)."""
+
+SURFACE_MODES = (4, 5, 6)
+"""TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN: the modes that make triangles."""
+
+INSTANCING = "EXT_mesh_gpu_instancing"
 
 MODE_NAMES = {
     0: "POINTS",
@@ -65,8 +76,9 @@ OPS_PER_LEVEL = 20
 squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
 (1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
 
-OPS_POINT = 4
-"""The point itself: a 3-term product plus the translation."""
+OPS_POINT = 5
+"""The point itself: a 3-term product plus the translation (4), and a normalized (quantized)
+coordinate's dequantizing division (1), correctly rounded in float64 on both sides."""
 
 
 def _fail(path: Path, problem: str) -> DecodeError:
@@ -234,10 +246,18 @@ def accessor(
         values = apply_sparse(values, idx, vals)
     if ct == 5126:
         return values.astype(np.float64)
-    if acc.get("normalized") is True and ct in NORMALIZE:
+    return dequantize(values, ct, acc.get("normalized") is True)
+
+
+def dequantize(values: np.ndarray, ct: int, normalized: bool) -> np.ndarray:
+    """Integer components as the specification reads them: a normalized one `max(c / divisor, floor)`
+    (its table), divided in float64 (one correctly rounded division, as rendiff: evaluating it in
+    float32 would start up to half a float32 unit away, which the bound does not allow,
+    docs/verifier.md); an unnormalized one its value (float64 for positions, exact)."""
+    if normalized and ct in NORMALIZE:
         div, floor = NORMALIZE[ct]
-        as32: np.ndarray = np.maximum(values.astype(np.float32) / np.float32(div), np.float32(floor))
-        return as32.astype(np.float64)
+        out: np.ndarray = np.maximum(values.astype(np.float64) / div, floor)
+        return out
     return values.astype(np.int64)
 
 
@@ -284,11 +304,17 @@ def local_matrix(node: dict[str, Any], ni: int, path: Path) -> np.ndarray:
     if "matrix" in node:
         return _f32(node["matrix"], 16, [], f"nodes[{ni}].matrix", path).reshape(4, 4).T.copy()
     t = _f32(node.get("translation"), 3, [0.0, 0.0, 0.0], f"nodes[{ni}].translation", path)
-    x, y, z, w = _f32(node.get("rotation"), 4, [0.0, 0.0, 0.0, 1.0], f"nodes[{ni}].rotation", path)
+    q = _f32(node.get("rotation"), 4, [0.0, 0.0, 0.0, 1.0], f"nodes[{ni}].rotation", path)
     s = _f32(node.get("scale"), 3, [1.0, 1.0, 1.0], f"nodes[{ni}].scale", path)
+    return trs(t, q, s, f"nodes[{ni}].rotation", path)
+
+
+def trs(t: np.ndarray, q: np.ndarray, s: np.ndarray, what: str, path: Path) -> np.ndarray:
+    """T * R * S as a 4x4 float64 matrix, the quaternion (x, y, z, w) normalized first."""
+    x, y, z, w = (float(c) for c in q)
     n = float(np.sqrt(x * x + y * y + z * z + w * w))
     if not n > 0.0:
-        raise _fail(path, f"nodes[{ni}].rotation is a zero quaternion")
+        raise _fail(path, f"{what} is a zero quaternion")
     x, y, z, w = x / n, y / n, z / n, w / n
     r = np.array(
         [
@@ -303,12 +329,21 @@ def local_matrix(node: dict[str, Any], ni: int, path: Path) -> np.ndarray:
     return m
 
 
-def mesh_nodes(doc: dict[str, Any], path: Path) -> list[tuple[int, np.ndarray, np.ndarray, int]]:
+def scene_index(doc: dict[str, Any], chosen: int | None) -> Any:
+    """The glTF scene shown: the one the resolved scene recorded (rendiff's `gltf_scene` choice,
+    already resolved to an index), else the file's `scene`, else the first."""
+    return doc.get("scene", 0) if chosen is None else chosen
+
+
+def mesh_nodes(
+    doc: dict[str, Any], path: Path, chosen: int | None = None
+) -> list[tuple[int, np.ndarray, np.ndarray, int]]:
     """(node index, world matrix, |world| as the product of absolute local matrices, depth) of
-    every node with a mesh in the shown scene, depth first, pre-order, in the file's order."""
+    every node with a mesh in the shown scene (`scene_index`), depth first, pre-order, in the
+    file's order."""
     scenes = doc.get("scenes") or []
-    si = doc.get("scene", 0)
-    scene = _index(doc, "scenes", si, path) if scenes else {"nodes": []}
+    si = scene_index(doc, chosen)
+    scene = _index(doc, "scenes", si, path) if scenes or chosen is not None else {"nodes": []}
     out: list[tuple[int, np.ndarray, np.ndarray, int]] = []
     seen: set[int] = set()
     stack: list[tuple[int, np.ndarray, np.ndarray, int]] = [
@@ -343,25 +378,108 @@ def labels(doc: dict[str, Any], nodes: list[int]) -> list[str]:
     ]
 
 
-def decode(path: Path) -> list[Part]:
-    """Every mesh node of the file's shown scene as a Part (the order rendiff's objects follow)."""
-    doc, bin_chunk = container(path)
-    buffers: dict[int, bytes] = {}
-    nodes = mesh_nodes(doc, path)
-    out = []
+@dataclass
+class Slot:
+    """One part of the shown scene before its geometry is read: a mesh node, or one instance of an
+    instanced mesh node (rendiff's object order and labels, docs/resolved-scene.md)."""
+
+    node: int
+    mesh: int
+    label: str
+    world: np.ndarray
+    world_abs: np.ndarray
+    depth: int
+    instance: int | None = None
+    instances: int = 0
+
+    @property
+    def where(self) -> str:
+        """The node and mesh (and instance) in messages."""
+        inst = "" if self.instance is None else f", instance {self.instance} of {self.instances}"
+        return f"node {self.node}, mesh {self.mesh}{inst}"
+
+
+def draws_nothing(mesh: dict[str, Any]) -> bool:
+    """True for a mesh whose primitives are all POINTS or LINE*: rendiff skips each with a warning and
+    makes no object of a node showing it (a mesh without primitives is not such a mesh)."""
+    prims = mesh.get("primitives", [])
+    return bool(prims) and all(p.get("mode", 4) not in SURFACE_MODES for p in prims)
+
+
+def instance_matrices(
+    doc: dict[str, Any], ni: int, ext: Any, path: Path, buffers: dict[int, bytes], bin_chunk: bytes | None
+) -> list[np.ndarray]:
+    """An `EXT_mesh_gpu_instancing` node's instances, in order: T * R * S each (absent attributes:
+    identity; the quaternion normalized as a node's)."""
+    attrs = ext.get("attributes") if isinstance(ext, dict) else None
+    if not isinstance(attrs, dict):
+        raise _fail(path, f"nodes[{ni}].extensions.{INSTANCING} has no attributes")
+    read: dict[str, np.ndarray] = {}
+    for name, width in (("TRANSLATION", 3), ("ROTATION", 4), ("SCALE", 3)):
+        if name in attrs:
+            values = accessor(doc, attrs[name], path, buffers, bin_chunk).astype(np.float64)
+            if values.shape[1] != width:
+                raise _fail(path, f"nodes[{ni}] instance {name} is not VEC{width}")
+            read[name] = values
+    counts = {len(v) for v in read.values()}
+    if len(counts) != 1:
+        raise _fail(path, f"nodes[{ni}]: instance attributes missing or of different counts {sorted(counts)}")
+    n = counts.pop()
+    t = read.get("TRANSLATION", np.zeros((n, 3)))
+    q = read.get("ROTATION", np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+    s = read.get("SCALE", np.ones((n, 3)))
+    return [trs(t[k], q[k], s[k], f"nodes[{ni}] instance {k}'s rotation", path) for k in range(n)]
+
+
+def instance_world(node_world: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """An instance's world matrix: the node's world matrix times the instance's T * R * S (the
+    extension applies the instance's transform first, then the node's)."""
+    world: np.ndarray = node_world @ instance
+    return world
+
+
+def slots(
+    doc: dict[str, Any], path: Path, chosen: int | None, buffers: dict[int, bytes], bin_chunk: bytes | None
+) -> list[Slot]:
+    """The shown scene's parts in rendiff's object order: each mesh node (labelled among all the
+    scene's mesh nodes), one per instance of an instanced node (`<label>/<k>`, one level deeper:
+    the instance's T * R * S), none for a node whose mesh draws nothing."""
+    nodes = mesh_nodes(doc, path, chosen)
+    out: list[Slot] = []
     for (ni, world, world_abs, depth), label in zip(nodes, labels(doc, [n[0] for n in nodes]), strict=True):
         mi = doc["nodes"][ni]["mesh"]
+        if draws_nothing(_index(doc, "meshes", mi, path)):
+            continue
+        ext = (doc["nodes"][ni].get("extensions") or {}).get(INSTANCING)
+        if ext is None:
+            out.append(Slot(ni, mi, label, world, world_abs, depth))
+            continue
+        mats = instance_matrices(doc, ni, ext, path, buffers, bin_chunk)
+        for k, m in enumerate(mats):
+            out.append(
+                Slot(ni, mi, f"{label}/{k}", instance_world(world, m), world_abs @ np.abs(m), depth + 1, k, len(mats))
+            )
+    return out
+
+
+def decode(path: Path, chosen: int | None = None) -> list[Part]:
+    """Every part of the shown scene (`slots`: rendiff's object order) with its triangles."""
+    doc, bin_chunk = container(path)
+    buffers: dict[int, bytes] = {}
+    out = []
+    for slot in slots(doc, path, chosen, buffers, bin_chunk):
+        mi, world, world_abs = slot.mesh, slot.world, slot.world_abs
         mesh = _index(doc, "meshes", mi, path)
         flip = mirrors(world)
         part = empty_part(
-            label,
-            f"node {ni}, mesh {mi}" + (" (mirrored: winding reversed)" if flip else ""),
-            OPS_PER_LEVEL * depth + OPS_POINT,
+            slot.label,
+            slot.where + (" (mirrored: winding reversed)" if flip else ""),
+            OPS_PER_LEVEL * slot.depth + OPS_POINT,
         )
         for pi, prim in enumerate(mesh.get("primitives", [])):
             mode = prim.get("mode", 4)
             pos_ai = prim.get("attributes", {}).get("POSITION")
-            if mode not in (4, 5, 6) or pos_ai is None:
+            if mode not in SURFACE_MODES or pos_ai is None:
                 continue
             pos = accessor(doc, pos_ai, path, buffers, bin_chunk)
             if pos.shape[1] != 3:
@@ -379,8 +497,11 @@ def decode(path: Path) -> list[Part]:
             hom = np.concatenate([pos, np.ones((pos.shape[0], 1))], axis=1)
             placed = (hom @ world.T)[:, :3]
             mag = (np.abs(hom) @ world_abs.T)[:, :3]
-            sparse = " sparse POSITION" if "sparse" in doc["accessors"][pos_ai] else ""
-            name = f"mesh {mi} primitive {pi} ({MODE_NAMES[mode]}{sparse})"
+            pos_acc = doc["accessors"][pos_ai]
+            feats = (" sparse POSITION" if "sparse" in pos_acc else "") + (
+                " quantized POSITION" if pos_acc.get("componentType") != 5126 else ""
+            )
+            name = f"mesh {mi} primitive {pi} ({MODE_NAMES[mode]}{feats})"
             extend(part, name, placed[faces], mag[faces])
         out.append(part)
     return out
