@@ -39,8 +39,10 @@ pub struct CrossoverOptions {
     pub nx: Vec<u32>,
     /// Worker threads.
     pub threads: usize,
-    /// Scenes the loop-choice model is also checked on ([`super::which_loop`]).
-    pub corpus: Vec<std::path::PathBuf>,
+    /// Scene files or folders the loop-choice model is also checked on
+    /// ([`super::which_loop`]); the error says why there are none (no rendiff
+    /// checkout to take the default corpus from), and the record says so too.
+    pub corpus: std::result::Result<Vec<std::path::PathBuf>, String>,
 }
 
 /// The sweep's scene ([`rendiff::scene::generators::crossover_grid`]).
@@ -164,9 +166,17 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
     };
     let rows = sweep(false)?;
     let aligned_rows = sweep(true)?;
-    let corpus = Value::Array(
-        pool.install(|| super::which_loop::corpus_rows(&opts.corpus, opts.threads, runs)),
-    );
+    let (corpus, corpus_not_run) = match &opts.corpus {
+        Ok(paths) => {
+            let files = super::which_loop::corpus_files(paths)?;
+            let rows = pool.install(|| super::which_loop::corpus_rows(&files, opts.threads, runs));
+            (Value::Array(rows), Value::Null)
+        }
+        Err(why) => {
+            eprintln!("crossover: the loop-choice table over the corpus is not run: {why}");
+            (Value::Array(Vec::new()), Value::String(why.clone()))
+        }
+    };
     let judged: Vec<&Value> = rows
         .iter()
         .map(|r| &r["which_loop"])
@@ -213,6 +223,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
             "model": "rendiff::loop_cost (docs/benchmarks.md, \"Which loop\")",
             "grid": "rows[].which_loop",
             "corpus": corpus,
+            "corpus_not_run": corpus_not_run,
             "summary": which_summary,
         },
         "raster_equals_trace_everywhere": rows.iter().chain(&aligned_rows).all(|r| r["raster_equals_trace"] == json!(true)),
@@ -338,6 +349,9 @@ fn page(record: &Value, svgs: &[(String, String)]) -> String {
     p.heading("pixel-aligned grid (ties everywhere)");
     p.para(&super::page::compact(&record["aligned"]));
     table(&mut p, &record["aligned_rows"]);
+    if let Some(why) = record["which_loop"]["corpus_not_run"].as_str() {
+        p.para(&format!("The corpus table was not run: {why}"));
+    }
     super::which_loop::page_section(
         &mut p,
         &record["which_loop"]["corpus"],

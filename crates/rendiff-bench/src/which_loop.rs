@@ -66,10 +66,15 @@ pub fn verdicts(w: &Workload, raster_pass_s: f64, trace_over_raster: f64, build_
     })
 }
 
-/// Every scene file in `dirs` (sorted), the corpus the model is checked on.
-pub fn corpus_files(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+/// Every scene file in `paths` (a scene file as given, a folder's `*.toml`
+/// sorted), the corpus the model is checked on.
+pub fn corpus_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
-    for d in dirs {
+    for d in paths {
+        if d.is_file() {
+            out.push(d.clone());
+            continue;
+        }
         let mut v: Vec<PathBuf> = std::fs::read_dir(d)
             .map_err(|e| anyhow::anyhow!("{}: cannot list scenes: {e}", d.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
