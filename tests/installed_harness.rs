@@ -144,3 +144,31 @@ fn a_python_without_the_harness_is_one_line_naming_every_step_and_the_fix() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("RENDIFF_PYTHON=/usr/bin/python3"), "{err}");
 }
+
+/// A checkout that was never set up (no venv): one line saying what is
+/// missing, how rendiff's files were found, and both fixes; not "cannot
+/// start .../.venv/bin/python".
+#[test]
+fn a_checkout_without_its_venv_says_how_it_was_found_and_how_to_fix_it() {
+    let t = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(t.path().join("harness/rendiff_harness")).unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rendiff"));
+    cmd.current_dir(t.path())
+        .env("RENDIFF_HOME", t.path())
+        .env_remove("RENDIFF_PYTHON")
+        .args(["check", "--no-calibration", "-o", "out"])
+        .arg(root().join("scenes/three_triangles.toml"));
+    let o = output_within(&mut cmd, 120);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    for said in [
+        "Python harness not installed",
+        ".venv/bin/python is missing",
+        "found through RENDIFF_HOME",
+        "scripts/setup.sh",
+        "RENDIFF_PYTHON=",
+    ] {
+        assert!(err.contains(said), "{said:?} not said: {err}");
+    }
+}

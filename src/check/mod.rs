@@ -227,16 +227,30 @@ fn harness_refusal(stderr: &str) -> Option<String> {
         .map(|m| crate::scene::printable(m, 2000))
 }
 
+/// When the harness's Python for `root` does not exist: what is missing, how
+/// rendiff's files were found, and the commands that fix it (one line).
+fn missing_python(root: &Path) -> Option<String> {
+    let py = python(root);
+    if py.exists() {
+        return None;
+    }
+    let how = home::search().map_or_else(
+        |e| format!("{e:#}"),
+        |f| format!("rendiff's files were found through {}", f.how),
+    );
+    Some(format!(
+        "Python harness not installed ({} is missing; {how}): run scripts/setup.sh in {}, or install the harness with pip and set {}=VENV/bin/python",
+        py.display(),
+        root.display(),
+        home::PYTHON_ENV
+    ))
+}
+
 /// Asks the Python harness which backends it has. An error here means the harness
 /// itself is not installed; the message says how to fix it.
 fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
-    let root = &opts.root;
-    let py = python(root);
-    if !py.exists() {
-        return Err(format!(
-            "Python harness not installed ({} is missing): run scripts/setup.sh",
-            py.display()
-        ));
+    if let Some(missing) = missing_python(&opts.root) {
+        return Err(missing);
     }
     let mut cmd = harness_command(opts);
     cmd.args(["info", "--json"]);
@@ -400,6 +414,9 @@ pub fn check_only_option(opts: &CheckOptions) -> Result<()> {
 /// runs: a bad bound or a typo in a key was found only after every render,
 /// leaving the run incomplete.
 fn check_expectations(opts: &CheckOptions) -> Result<()> {
+    if let Some(missing) = missing_python(&opts.root) {
+        bail!("{missing}");
+    }
     let mut cmd = harness_command(opts);
     cmd.arg("expectations").arg("--").arg(&opts.expectations);
     let o = in_probe_folder("expectations", |probe| {
