@@ -226,6 +226,25 @@ pub fn python(root: &Path) -> PathBuf {
     }
 }
 
+/// When the harness's Python for `root` does not exist: what is missing, how
+/// rendiff's files were found, and the commands that fix it (one line).
+pub fn missing_python(root: &Path) -> Option<String> {
+    let py = python(root);
+    if py.exists() {
+        return None;
+    }
+    let how = search().map_or_else(
+        |e| format!("{e:#}"),
+        |f| format!("rendiff's files were found through {}", f.how),
+    );
+    Some(format!(
+        "Python harness not installed ({} is missing; {how}): run scripts/setup.sh in {}, or install the harness with pip and set {}=VENV/bin/python",
+        py.display(),
+        root.display(),
+        PYTHON_ENV
+    ))
+}
+
 /// Puts a checkout's harness first on the command's `PYTHONPATH`; an
 /// installed harness is found by its Python alone.
 pub fn harness_path(cmd: &mut Command, root: &Path) {

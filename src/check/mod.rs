@@ -76,7 +76,8 @@ pub struct CheckOptions {
     pub scenes: Vec<PathBuf>,
     /// Output folder (manifest, buffers, results).
     pub run_dir: PathBuf,
-    /// Repository root: where `harness/` and `.venv/` live.
+    /// Where rendiff's own files are: a checkout, or an installed harness's
+    /// data folder ([`home`]).
     pub root: PathBuf,
     /// Only these backends (the reference always runs).
     pub only: Option<Vec<String>>,
@@ -227,29 +228,10 @@ fn harness_refusal(stderr: &str) -> Option<String> {
         .map(|m| crate::scene::printable(m, 2000))
 }
 
-/// When the harness's Python for `root` does not exist: what is missing, how
-/// rendiff's files were found, and the commands that fix it (one line).
-fn missing_python(root: &Path) -> Option<String> {
-    let py = python(root);
-    if py.exists() {
-        return None;
-    }
-    let how = home::search().map_or_else(
-        |e| format!("{e:#}"),
-        |f| format!("rendiff's files were found through {}", f.how),
-    );
-    Some(format!(
-        "Python harness not installed ({} is missing; {how}): run scripts/setup.sh in {}, or install the harness with pip and set {}=VENV/bin/python",
-        py.display(),
-        root.display(),
-        home::PYTHON_ENV
-    ))
-}
-
 /// Asks the Python harness which backends it has. An error here means the harness
 /// itself is not installed; the message says how to fix it.
 fn harness_backends(opts: &CheckOptions, scratch: &Path) -> Result<Vec<HarnessBackend>, String> {
-    if let Some(missing) = missing_python(&opts.root) {
+    if let Some(missing) = home::missing_python(&opts.root) {
         return Err(missing);
     }
     let mut cmd = harness_command(opts);
@@ -414,7 +396,7 @@ pub fn check_only_option(opts: &CheckOptions) -> Result<()> {
 /// runs: a bad bound or a typo in a key was found only after every render,
 /// leaving the run incomplete.
 fn check_expectations(opts: &CheckOptions) -> Result<()> {
-    if let Some(missing) = missing_python(&opts.root) {
+    if let Some(missing) = home::missing_python(&opts.root) {
         bail!("{missing}");
     }
     let mut cmd = harness_command(opts);

@@ -38,12 +38,8 @@ pub struct Harness {
 impl Harness {
     /// The harness if its Python exists, else why not (recorded as the skip reason).
     pub fn find(root: &Path, timeout: Duration, scratch: &Path) -> Result<Harness, String> {
-        let py = rendiff::check::python(root);
-        if !py.exists() {
-            return Err(format!(
-                "Python harness not installed ({} is missing): run scripts/setup.sh",
-                py.display()
-            ));
+        if let Some(missing) = rendiff::check::home::missing_python(root) {
+            return Err(missing);
         }
         Ok(Harness {
             root: root.to_path_buf(),
@@ -85,8 +81,8 @@ impl Harness {
         settings: &[String],
     ) -> Result<HarnessRun, String> {
         let mut cmd = Command::new(rendiff::check::python(&self.root));
+        rendiff::check::home::harness_path(&mut cmd, &self.root);
         cmd.current_dir(&self.root)
-            .env("PYTHONPATH", self.root.join("harness"))
             .args(["-m", "rendiff_harness", "render", "--backend", backend])
             .arg("--scene")
             .arg(resolved)
