@@ -60,6 +60,46 @@ def point_norm(ref: Reference, rows: np.ndarray, cols: np.ndarray, z: np.ndarray
     return norms
 
 
+def involved_triangles(
+    ref: Reference, rows: np.ndarray, cols: np.ndarray, prims: tuple[np.ndarray, ...]
+) -> dict[str, np.ndarray]:
+    """What the edge models need of the triangles at each mismatched pixel (tolerance.EdgeContext):
+    the pixel center's off-axis factor sqrt(1 + |q|^2), and over the prims named (background and
+    IDs naming no triangle skipped) the largest |v - eye|, longest edge, largest height, and the
+    nearest planar depth at which a prim's plane crosses the pixel ray (inf: none)."""
+    cam = ref.scene.camera
+    eye = np.asarray(cam.eye, dtype=np.float64)
+    sx, sy = cam.screen_at(*cam.pixel_centers(cols, rows))
+    d = cam.direction(sx, sy)  # planar component 1: t along d is planar depth
+    out = {
+        "off_axis": np.sqrt(1.0 + sx * sx + sy * sy),
+        "vertex_distance": np.zeros(rows.size),
+        "extent": np.zeros(rows.size),
+        "height": np.zeros(rows.size),
+        "plane_depth": np.full(rows.size, np.inf),
+    }
+    n = ref.scene.triangle_count
+    for ids in prims:
+        ok = ids.astype(np.uint64) < np.uint64(n)
+        if not ok.any():
+            continue
+        tri = ref.scene.triangles[ids[ok].astype(np.int64)].astype(np.float64)  # (k, 3, 3)
+        edges = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # (k, 3)
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        twice_area = np.linalg.norm(normal, axis=1)
+        with np.errstate(all="ignore"):
+            height = np.where(edges.min(axis=1) > 0, twice_area / edges.min(axis=1), 0.0)
+            t = np.einsum("ij,ij->i", normal, tri[:, 0] - eye) / np.einsum("ij,ij->i", normal, d[ok])
+        for key, value in (
+            ("vertex_distance", np.linalg.norm(tri - eye, axis=2).max(axis=1)),
+            ("extent", edges.max(axis=1)),
+            ("height", height),
+        ):
+            out[key][ok] = np.maximum(out[key][ok], value)
+        out["plane_depth"][ok] = np.minimum(out["plane_depth"][ok], np.where(np.isfinite(t) & (t > 0), t, np.inf))
+    return out
+
+
 def compare_ids(
     ref: Reference,
     test: Mapping[str, np.ndarray],
@@ -108,12 +148,21 @@ def compare_ids(
         if zt is not None:
             zt_here = zt.ravel()[idx].astype(np.float64)
             z_here = np.where(np.isfinite(z_here), z_here, zt_here)
+        tris = involved_triangles(ref, rows, cols, (r_ids, t_ids))
+        # The edge that moved is on one of the two triangles, and a point moved by d shifts by d / z
+        # on the image: the nearer one's depth at the pixel bounds both (its plane, from the scene).
+        z_edge = np.minimum(np.where(np.isfinite(z_here), z_here, np.inf), tris["plane_depth"])
+        z_edge = np.where(np.isfinite(z_edge), z_edge, z_here)
         ectx = tolerance.EdgeContext(
-            z=z_here,
+            z=z_edge,
             point_norm=point_norm(ref, rows, cols, z_here),
             pixel_size=pixel_size(ref),
             origin_offset=origin_offset(ref),
             eye_norm=eye_norm(ref),
+            off_axis=tris["off_axis"],
+            vertex_distance=tris["vertex_distance"],
+            extent=tris["extent"],
+            height=tris["height"],
         )
         eps, tol_text = model.edge_eps(ectx)
 

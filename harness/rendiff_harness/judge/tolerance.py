@@ -68,6 +68,15 @@ class EdgeContext:
     pixel_size: float  # one pixel on the image plane at distance 1
     origin_offset: float  # |f32(eye) - eye|
     eye_norm: float = 0.0  # |eye|
+    # (K,) sqrt(1 + sx^2 + sy^2) of the pixel center (sx, sy on the image plane at distance 1): how
+    # much more than |moved| / z a moved point's image may move off the optical axis (`shift_edge`)
+    off_axis: np.ndarray | None = None
+    # (K,) the triangles involved (the reference's and the test's prim at the pixel, either may be
+    # background): their largest |v - eye| over the vertices, longest edge and largest height
+    # (twice the area over the shortest edge); the Embree models round coordinates of that size
+    vertex_distance: np.ndarray | None = None
+    extent: np.ndarray | None = None
+    height: np.ndarray | None = None
 
 
 DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
@@ -110,7 +119,8 @@ class Model:
         if self.edge_extra is None:
             return base, self.edge_text()
         extra, text = self.edge_extra(ctx)
-        extra = np.where(np.isfinite(extra), extra, 0.0)
+        # NaN: no term at that pixel; +inf (rounding may carry the point past the eye) stays
+        extra = np.where(np.isnan(extra), 0.0, extra)
         return base + extra, f"{self.edge_text()} + {text}"
 
 
@@ -164,11 +174,29 @@ def shift_depth(ctx: DepthContext, moved: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(d), d, 0.0)
 
 
+def off_axis(ctx: EdgeContext) -> np.ndarray:
+    """`ctx.off_axis`, which every image-plane shift needs; a caller that leaves it out is refused."""
+    if ctx.off_axis is None:
+        raise ToleranceError("an edge model needs each pixel center's off-axis factor (EdgeContext.off_axis)")
+    return ctx.off_axis
+
+
 def shift_edge(moved: np.ndarray, ctx: EdgeContext) -> np.ndarray:
-    """A point moved by `moved` at depth z moves by moved / (z pixel) px on the image."""
+    """How far (px) the image of a point at planar depth z moves when the point moves by `moved`.
+
+    In camera coordinates a point (x, y, z) is seen at q = (x, y) / z. Moved by d it is seen at
+    (x + dx, y + dy) / (z + dz), so q moves by exactly ((dx, dy) - q dz) / (z + dz). The 2x3 map
+    d -> (dx, dy) - q dz has norm sqrt(1 + |q|^2) (its Gram matrix has eigenvalues 1 and
+    1 + |q|^2), and |dz| <= |d|: the shift is at most sqrt(1 + |q|^2) |d| / (z - |d|) on the image
+    plane at distance 1, over `pixel_size` in px. Off the axis (|q| is tan of the angle off
+    the axis) that is up to 1.4 times moved / z at a 45-degree corner. Where the point could reach
+    the eye (z <= |d|) the shift is unbounded (inf); where z is unknown (inf) there is no term (0).
+    """
+    z = np.abs(ctx.z)
     with np.errstate(all="ignore"):
-        px = moved / (np.abs(ctx.z) * ctx.pixel_size)
-    return np.where(np.isfinite(px), px, 0.0)
+        px = off_axis(ctx) * moved / ((z - moved) * ctx.pixel_size)
+    px = np.where(z - moved > 0, px, np.inf)
+    return np.where(np.isfinite(z), np.where(np.isnan(px), 0.0, px), 0.0)
 
 
 def position_edge(position: PositionError, text: str) -> EdgeModel:
@@ -176,7 +204,7 @@ def position_edge(position: PositionError, text: str) -> EdgeModel:
 
     def edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
         moved = position(ctx.origin_offset, ctx.eye_norm, ctx.point_norm)
-        return shift_edge(moved, ctx), f"{text} / (z * pixel)"
+        return shift_edge(moved, ctx), f"{text} * sqrt(1 + |q|^2) / ((z - moved) * pixel)"
 
     return edge
 
@@ -209,6 +237,80 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
         f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
         f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye)"
     )
+
+
+EMBREE_ROBUST_EPS = 2.0**-23
+"""Embree's ROBUST triangle test accepts a ray up to this fraction of U + V + W outside each edge:
+`eps = float(ulp) * abs(UVW)` with `ulp` = FLT_EPSILON (kernels/geometry/triangle_intersector_pluecker.h,
+common/math/constants.h, Embree 3.13.5)."""
+
+EMBREE_EDGE_PX = 1e-4
+"""The Embree edge terms not derived yet: the rounding of the edge functions' own cross and dot products
+(docs/verifier.md, "Embree's arithmetic"), measured within 1e-4 px of shared edges."""
+
+
+def embree_moved(ctx: EdgeContext, robust: bool) -> np.ndarray:
+    """How far Embree's f32 arithmetic may move an edge relative to the ray origin, world units (K,).
+
+    Embree 3.13.5's triangle tests (docs/verifier.md, "Embree's arithmetic", derives each term):
+
+    * both: rays start at f32(eye): every point moves by `origin_offset` relative to the ray.
+    * default (`Triangle4`, Moeller-Trumbore): the build stores v0, e1 = fl(v0 - v1),
+      e2 = fl(v2 - v0); the test takes C = fl(v0 - org). So the triangle tested is
+      (C, C - e1, C + e2) relative to org: rounding C moves it rigidly by <= u |v0 - org|, the
+      edges move v1 and v2 by <= u |e| more: u (max |v - eye| + longest edge) with u = 2^-24.
+    * ROBUST (`Triangle4v`, Pluecker): each vertex is moved to the origin, v' = fl(v - org)
+      (<= u |v - org|), then each edge function is D . (e x s) with e = fl(vj' - vi') and
+      s = fl(vj' + vi'). (x - y) x (x + y) = 2 x x y for any x, y, so the computed e and s are
+      exactly the edge of the endpoints x = (e + s) / 2, y = (s - e) / 2, each within
+      u max(|vi'_c|, |vj'_c|) per coordinate of vj', vi': <= sqrt(2) u (1 + u) max |v - org|.
+      And the test accepts U >= -eps with eps = 2^-23 |U + V + W|, i.e. barycentric >= -2^-23:
+      each edge moved out, in the triangle's plane, by 2^-23 times the height over it (at most the
+      triangle's largest height).
+
+    An edge point is a convex combination of its endpoints, so it moves no more than they do.
+    """
+    for name in ("vertex_distance", "extent", "height"):
+        if getattr(ctx, name) is None:
+            raise ToleranceError(f"the Embree edge model needs the triangles involved (EdgeContext.{name})")
+    far = np.asarray(ctx.vertex_distance, dtype=np.float64) + ctx.origin_offset  # |v - org| <= |v - eye| + offset
+    if robust:
+        return (
+            ctx.origin_offset
+            + F32_U * far
+            + math.sqrt(2.0) * F32_U * (1.0 + F32_U) * far
+            + EMBREE_ROBUST_EPS * np.asarray(ctx.height, dtype=np.float64)
+        )
+    return ctx.origin_offset + F32_U * (far + np.asarray(ctx.extent, dtype=np.float64))
+
+
+def embree_direction_px(ctx: EdgeContext) -> np.ndarray:
+    """The f32 ray direction (px): D32 = fl(D) moves D by <= u |D|, and D = (q, 1) in camera axes,
+    so the ray crosses the image plane at distance 1 moved by <= sqrt(1 + |q|^2) u |D| / (1 - u)
+    = u (1 + |q|^2) / (1 - u) (the map of `shift_edge`)."""
+    q2 = off_axis(ctx) ** 2
+    px: np.ndarray = F32_U * q2 / ((1.0 - F32_U) * ctx.pixel_size)
+    return px
+
+
+def embree_edge(robust: bool) -> EdgeModel:
+    """Embree's edge rounding distance beyond `EMBREE_EDGE_PX`: `embree_moved` seen from the pixel
+    (`shift_edge`), plus the f32 direction (`embree_direction_px`)."""
+
+    def edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
+        px = shift_edge(embree_moved(ctx, robust), ctx) + embree_direction_px(ctx)
+        moved = (
+            "|f32(eye) - eye| + 2^-24 (1 + sqrt(2)) |v - org| + 2^-23 h (vertices moved to the f32 ray origin, "
+            "edge and sum vectors rounded, the ROBUST test's 2^-23 (U + V + W) margin over the largest height h)"
+            if robust
+            else "|f32(eye) - eye| + 2^-24 (|v - org| + longest edge) (v0 moved to the f32 ray origin, "
+            "edges stored in f32)"
+        )
+        return px, (
+            f"({moved}) * sqrt(1 + |q|^2) / ((z - moved) * pixel) + 2^-24 (1 + |q|^2) / pixel (f32 ray direction)"
+        )
+
+    return edge
 
 
 def strict_model(backend: str) -> Model:

@@ -7,7 +7,16 @@ from __future__ import annotations
 
 from ..contract.vocab import VISIBILITY_FEATURES, Buffer, Feature
 from ..judge.camera_budget import core_camera, embree_camera
-from ..judge.tolerance import Model, core_normals, embree_depth, exact_depth, exact_rgb, f32_origin, position_edge
+from ..judge.tolerance import (
+    EMBREE_EDGE_PX,
+    Model,
+    core_normals,
+    embree_depth,
+    embree_edge,
+    exact_depth,
+    exact_rgb,
+    f32_origin,
+)
 from .spec import BackendSpec
 
 _ALL_BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N, Buffer.RGB})
@@ -28,18 +37,19 @@ def _loop(name: str, what: str, other: str) -> BackendSpec:
     )
 
 
-def _embree(name: str, what: str) -> BackendSpec:
-    """Embree (default or ROBUST): float32 ray-triangle tests on rays from the f32 eye."""
+def _embree(name: str, what: str, robust: bool) -> BackendSpec:
+    """Embree (default or ROBUST): float32 ray-triangle tests on rays from the f32 eye; the edge terms
+    of its arithmetic (tolerance.embree_edge) differ between the two tests."""
     return BackendSpec(
         name,
         frozenset(VISIBILITY_FEATURES),
         frozenset({Buffer.Z, Buffer.ID, Buffer.N}),
         Model(
             name,
-            1e-4,
-            f"{what}: measured ID differences within 1e-4 of shared edges",
+            EMBREE_EDGE_PX,
+            f"{what}: the edge functions' own f32 products, measured within {EMBREE_EDGE_PX:g} px of shared edges",
             embree_depth,
-            edge_extra=position_edge(f32_origin, "|f32(eye) - eye| (rays start at the f32 eye)"),
+            edge_extra=embree_edge(robust),
             position=f32_origin,
         ),
         calibration=embree_camera,
@@ -50,7 +60,7 @@ def _embree(name: str, what: str) -> BackendSpec:
 SPECS = (
     _loop("trace", "tracer", "raster"),
     _loop("raster", "rasterizer", "trace"),
-    _embree("embree", "float32 ray-triangle tests"),
-    _embree("embree_robust", "float32 watertight ray-triangle tests (ROBUST)"),
+    _embree("embree", "float32 ray-triangle tests (Moeller-Trumbore)", robust=False),
+    _embree("embree_robust", "float32 watertight ray-triangle tests (ROBUST, Pluecker)", robust=True),
 )
 """The core's backends, in the order the registry lists them."""

@@ -111,6 +111,7 @@ from ...judge.tolerance import (
     exposure_scale,
     param,
     shift_depth,
+    shift_edge,
 )
 from ..children import die_with_parent
 from ..errors import BackendError, BackendUnavailable
@@ -943,12 +944,13 @@ def povray_edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
 
     A hit moved by e / |cos| along the ray lands up to e / |cos| off the plane; its
     dominant-axis projection then shifts sideways by at most sqrt(3) e / |cos| x |cos|
-    = sqrt(3) e, which a point at depth z sees as sqrt(3) e / (z pixel) px.
+    = sqrt(3) e, which a point at depth z sees as at most sqrt(3) e sqrt(1 + |q|^2) / ((z - sqrt(3) e) pixel)
+    px (`shift_edge`).
     """
     e = povray_plane_error(ctx.point_norm)
-    with np.errstate(all="ignore"):
-        px = np.sqrt(3.0) * e / (np.abs(ctx.z) * ctx.pixel_size)
-    return np.where(np.isfinite(px), px, 0.0), "sqrt(3) 2^-24 3|X| / (z pixel) (f32 plane offset moves the hit)"
+    return shift_edge(np.sqrt(3.0) * e, ctx), (
+        "sqrt(3) 2^-24 3|X| * sqrt(1 + |q|^2) / ((z - moved) pixel) (f32 plane offset moves the hit)"
+    )
 
 
 PRECISION = Model(

@@ -1,0 +1,251 @@
+"""Embree's edge rounding distance (tolerance.embree_edge, docs/verifier.md "Embree's arithmetic"):
+each derived term on both sides of its boundary, so that removing or mis-scaling one fails here.
+
+The expected values are written out from the derivation, not read back from the model."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixtures import write_scene
+from rendiff_harness.contract import resolved, vocab
+from rendiff_harness.contract.manifest import Reference
+from rendiff_harness.judge import ids, tolerance, verify
+from rendiff_harness.renderers.core import SPECS
+
+U = 2.0**-24
+BG = vocab.BACKGROUND_ID
+
+
+def _model(name: str) -> tolerance.Model:
+    return next(s.precision for s in SPECS if s.name == name)
+
+
+def _ctx(**over: object) -> tolerance.EdgeContext:
+    base: dict[str, object] = {
+        "z": np.array([1000.0]),
+        "point_norm": np.array([1000.0]),
+        "pixel_size": 1e-3,
+        "origin_offset": 0.0,
+        "off_axis": np.array([1.0]),
+        "vertex_distance": np.array([1000.0]),
+        "extent": np.array([1.0]),
+        "height": np.array([1.0]),
+    }
+    base.update(over)
+    return tolerance.EdgeContext(**base)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- shift_edge
+
+
+def test_shift_edge_bounds_the_exact_projection_off_axis_and_is_tight() -> None:
+    """q = (x, y) / z moved by d: exactly ((dx, dy) - q dz) / (z + dz). The worst direction reaches
+    sqrt(1 + |q|^2) |d| / z: without the factor the bound is exceeded, doubled it is loose."""
+    q = np.array([0.78, -0.61])
+    z, moved, pixel = 0.14, 1.4e-5, 0.02
+    a = np.array([[1.0, 0.0, -q[0]], [0.0, 1.0, -q[1]]])
+    worst = np.linalg.svd(a)[2][0]  # right singular vector of the largest singular value
+    bound = float(
+        tolerance.shift_edge(
+            np.array([moved]), _ctx(z=np.array([z]), pixel_size=pixel, off_axis=np.array([math.hypot(1.0, *q)]))
+        )[0]
+    )
+    point = np.array([q[0] * z, q[1] * z, z])
+    for sign in (1.0, -1.0):
+        d = sign * moved * worst
+        seen = (point[:2] + d[:2]) / (point[2] + d[2])
+        shift = float(np.linalg.norm(seen - q)) / pixel
+        assert shift <= bound
+        assert shift > moved / (z * pixel) * 1.25  # the on-axis moved / (z pixel) is too small here
+        assert shift >= bound * (1.0 - 2.0 * moved / z)  # and the bound is reached
+    rng = np.random.default_rng(7)
+    for d in rng.normal(size=(200, 3)):
+        d *= moved / np.linalg.norm(d)
+        seen = (point[:2] + d[:2]) / (point[2] + d[2])
+        assert float(np.linalg.norm(seen - q)) / pixel <= bound
+
+
+def test_shift_edge_is_unbounded_when_rounding_may_reach_the_eye_and_zero_without_depth() -> None:
+    out = tolerance.shift_edge(np.array([2.0, 1.0]), _ctx(z=np.array([1.0, np.inf]), off_axis=np.ones(2)))
+    assert out[0] == np.inf and out[1] == 0.0
+    with pytest.raises(tolerance.ToleranceError, match="off_axis"):
+        tolerance.shift_edge(np.array([1.0]), _ctx(off_axis=None))
+
+
+# --------------------------------------------------------------------------- each term's coefficient
+
+
+def _extra(name: str, **over: object) -> float:
+    eps, _ = _model(name).edge_eps(_ctx(**over))
+    return float(eps[0])
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_the_ray_terms_are_the_f32_origin_and_direction(name: str) -> None:
+    """Rays start at f32(eye) (moved by |f32(eye) - eye|) in f32 directions (u (1 + |q|^2) / pixel)."""
+    z, pixel, q2 = 1000.0, 1e-3, 0.5
+    far = dict(vertex_distance=np.array([0.0]), extent=np.array([0.0]), height=np.array([0.0]))
+    base = _extra(name, off_axis=np.array([math.sqrt(1.0 + q2)]), **far)
+    assert base == pytest.approx(1e-4 + U * (1.0 + q2) / ((1.0 - U) * pixel), rel=1e-12)
+    offset = 0.25
+    with_offset = _extra(name, origin_offset=offset, off_axis=np.array([math.sqrt(1.0 + q2)]), **far)
+    # (the vertex terms round |v - org| <= |v - eye| + offset: a further 1e-7 of it)
+    assert with_offset - base == pytest.approx(math.sqrt(1.0 + q2) * offset / ((z - offset) * pixel), rel=1e-6)
+
+
+def test_default_moves_v0_to_the_origin_and_stores_edges_in_f32() -> None:
+    """Moeller: C = fl(v0 - org) (u |v - org|) and e1, e2 rounded at build time (u |e|)."""
+    z, pixel = 1000.0, 1e-3
+    zero = _extra("embree", vertex_distance=np.array([0.0]), extent=np.array([0.0]))
+    far = _extra("embree", vertex_distance=np.array([2.0e9]), extent=np.array([0.0]))
+    long = _extra("embree", vertex_distance=np.array([0.0]), extent=np.array([2.0e9]))
+    for got in (far, long):
+        moved = U * 2.0e9
+        assert got - zero == pytest.approx(moved / ((z - moved) * pixel), rel=1e-9)
+    # height is the ROBUST margin's: the default test has none
+    assert _extra("embree", height=np.array([2.0e9])) == _extra("embree", height=np.array([0.0]))
+
+
+def test_robust_moves_every_vertex_rounds_edge_and_sum_and_adds_its_margin() -> None:
+    """Pluecker: fl(v - org) (u |v - org|), fl(vj' -+ vi') (sqrt(2) u (1 + u) |v - org|), and
+    U >= -2^-23 (U + V + W): the edge moved out by 2^-23 times the height."""
+    z, pixel = 1000.0, 1e-3
+    zero = _extra("embree_robust", vertex_distance=np.array([0.0]), height=np.array([0.0]))
+    far = _extra("embree_robust", vertex_distance=np.array([1.0e9]), height=np.array([0.0]))
+    tall = _extra("embree_robust", vertex_distance=np.array([0.0]), height=np.array([1.0e9]))
+    moved = (1.0 + math.sqrt(2.0) * (1.0 + U)) * U * 1.0e9
+    assert far - zero == pytest.approx(moved / ((z - moved) * pixel), rel=1e-9)
+    margin = 2.0**-23 * 1.0e9
+    assert tall - zero == pytest.approx(margin / ((z - margin) * pixel), rel=1e-9)
+    # the longest edge is the default test's stored edges: ROBUST rounds no stored edge
+    assert _extra("embree_robust", extent=np.array([1e9])) == _extra("embree_robust", extent=np.array([0.0]))
+
+
+# --------------------------------------------------------------------------- through the verifier
+
+
+def _mismatch(
+    tmp_path: Path,
+    tris: list[list[list[float]]],
+    px: tuple[int, int],
+    ref_id: int,
+    test_id: int,
+    z: float,
+    **camera: object,
+) -> tuple[Reference, dict[str, np.ndarray]]:
+    """A reference and a test render that differ at one pixel only."""
+    scene = resolved.load(write_scene(tmp_path / "s", tris, **camera))  # type: ignore[arg-type]
+    h, w = scene.camera.height, scene.camera.width
+    rid = np.full((h, w), BG, dtype=np.uint32)
+    tid = rid.copy()
+    x, y = px
+    rid[y, x], tid[y, x] = ref_id, test_id
+    zr = np.full((h, w), np.inf, dtype=np.float32)
+    zt = zr.copy()
+    if ref_id != BG:
+        zr[y, x] = z
+    if test_id != BG:
+        zt[y, x] = z
+    ref = Reference(scene, {"id.prim": rid, "Z": zr}, (h, w))
+    return ref, {"id.prim": tid, "Z": zt}
+
+
+def _class(ref: Reference, test: dict[str, np.ndarray], name: str) -> tuple[str, str]:
+    res = ids.compare_ids(ref, test, _model(name), backend=name)
+    why = res.explanations[0]["why"] if res.explanations else ""
+    return ("interior" if res.interior else "edge" if res.edge else "none"), str(why)
+
+
+# The hand_inside_open `translate` finding (docs/fuzzing.md): prims 249 and 250 of the scene moved
+# by 256, the camera inside the hand. Embree saw 250 at pixel (40, 29), whose center is 0.00537 px
+# inside 249: the f32 eye's offset (1.36e-5) moves that edge by 0.00539 px at depth 0.141 and 38
+# degrees off the axis, over the 0.00485 px that |offset| / (z pixel) allows on the axis.
+_A = [256.0726318359375, -255.70498657226562, 256.1430969238281]
+_B = [256.06256103515625, -255.73745727539062, 256.14556884765625]
+_C = [256.113525390625, -255.7224884033203, 256.14337158203125]
+_D = [256.10784912109375, -255.7569580078125, 256.1412658691406]
+HAND = [[_A, _B, _C], [_C, _B, _D]]
+HAND_CAMERA: dict[str, object] = dict(
+    eye=(255.97, -255.58, 256.08), look_at=(255.97, -256.0, 256.02), up=(0.0, 0.0, 1.0), vfov_deg=100.0,
+    width=160, height=120, near=0.0001222422376071549,
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_the_hand_finding_is_an_edge_once_the_shift_counts_the_off_axis_factor(tmp_path: Path, name: str) -> None:
+    ref, test = _mismatch(tmp_path, HAND, (40, 29), 0, 1, 0.14133906, **HAND_CAMERA)
+    cls, why = _class(ref, test, name)
+    assert cls == "edge", why
+    # the center's distance from the edge is beyond the on-axis bound: the off-axis factor decides
+    cam = ref.scene.camera
+    offset = float(np.linalg.norm(np.asarray(cam.eye).astype(np.float32).astype(np.float64) - cam.eye))
+    on_axis = 1e-4 + offset / (0.14133906 * cam.pixel_size()) + 1e-5
+    res = verify.classify_mismatches(
+        ref.scene, np.array([0], dtype=np.uint32), np.array([1], dtype=np.uint32), np.array([29]), np.array([40]),
+        on_axis, lambda z, c: np.zeros_like(z),
+    )  # fmt: skip
+    assert verify.CLASSES[int(res.cls[0])] == "interior"
+
+
+# The reduced s2_00091 finding on ROBUST: a triangle parallel to the image plane whose vertices lie
+# 1e11 from the eye. A single fronto-parallel right triangle, legs L, at depth Z: its left edge runs
+# d px to the right of a pixel center, the reference sees background there and the test the triangle.
+L, Z = 2.0**37, 2.0**20
+PIXEL = (48, 32)  # 64 x 64, vfov 90: pixel 1/32, center at sx = 0.515625, sy = -0.015625
+FAR_CAMERA: dict[str, object] = dict(
+    eye=(0.0, 0.0, 0.0), look_at=(0.0, 0.0, -1.0), vfov_deg=90.0, width=64, height=64
+)  # fmt: skip
+
+
+def _robust_case(tmp_path: Path, d: float) -> tuple[Reference, dict[str, np.ndarray], float]:
+    sx = 2.0 * (PIXEL[0] + 0.5) / 64 - 1.0
+    xe = float(np.float32((sx + d / 32.0) * Z))
+    tri = [[xe, -L / 2, -Z], [xe, L / 2, -Z], [xe + L, -L / 2, -Z]]
+    ref, test = _mismatch(tmp_path, [tri], PIXEL, BG, 0, Z, **FAR_CAMERA)
+    actual = (xe / Z - sx) * 32.0
+    return ref, test, actual
+
+
+def _derived(robust: bool, xe_over_z: float) -> float:
+    """The derivation's distance at PIXEL for the triangle of `_robust_case` (written out here)."""
+    sx, sy = 0.515625, -0.015625
+    off2 = 1.0 + sx * sx + sy * sy
+    far = math.sqrt((xe_over_z * Z + L) ** 2 + (L / 2) ** 2 + Z**2)  # the farthest vertex from the eye
+    if robust:
+        moved = U * far + math.sqrt(2.0) * U * (1.0 + U) * far + 2.0**-23 * L  # height over the legs: L
+    else:
+        moved = U * (far + L * math.sqrt(2.0))
+    return 1e-4 + math.sqrt(off2) * moved / ((Z - moved) / 32.0) + U * off2 / ((1.0 - U) / 32.0)
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_far_vertices_move_the_edge_by_the_derived_distance_and_no_more(tmp_path: Path, name: str) -> None:
+    bound = _derived(name == "embree_robust", 0.515625)
+    assert bound > 0.5  # the new terms dominate: the old 1e-4 + offset term alone is 1e-4 here
+    for k, factor in enumerate((0.95, 1.05)):
+        ref, test, actual = _robust_case(tmp_path / str(k), factor * bound)
+        assert _derived(name == "embree_robust", ref.scene.triangles[0, 0, 0] / Z) == pytest.approx(bound, rel=1e-3)
+        cls, why = _class(ref, test, name)
+        assert cls == ("edge" if actual <= bound else "interior"), (factor, actual, bound, why)
+        assert cls == ("edge" if factor < 1.0 else "interior")
+
+
+def test_the_nearer_triangle_s_depth_scales_the_shift(tmp_path: Path) -> None:
+    """The reference sees a triangle B 4 times deeper than the triangle A that ROBUST reached past
+    its edge: A's edge moved, at A's depth (its plane at the pixel, from the scene), so the bound
+    is the same as with nothing behind A. B's own vertices are much nearer than A's, so they do
+    not change the bound; with B's depth it would be a quarter of it and the pixel interior."""
+    bound = _derived(True, 0.515625)
+    sx = 2.0 * (PIXEL[0] + 0.5) / 64 - 1.0
+    xe = float(np.float32((sx + 0.95 * bound / 32.0) * Z))
+    a = [[xe, -L / 2, -Z], [xe, L / 2, -Z], [xe + L, -L / 2, -Z]]
+    b = [[-8 * Z, -8 * Z, -4 * Z], [8 * Z, -8 * Z, -4 * Z], [0.0, 8 * Z, -4 * Z]]
+    ref, test = _mismatch(tmp_path, [a, b], PIXEL, 1, 0, 4 * Z, **FAR_CAMERA)
+    test["Z"][PIXEL[1], PIXEL[0]] = 4 * Z  # the test's own depth is not trusted for this: the scene's is
+    cls, why = _class(ref, test, "embree_robust")
+    assert cls == "edge", why
