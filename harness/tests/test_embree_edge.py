@@ -163,7 +163,7 @@ def _class(ref: Reference, test: dict[str, np.ndarray], name: str) -> tuple[str,
 
 # The hand_inside_open `translate` finding (docs/fuzzing.md): prims 249 and 250 of the scene moved
 # by 256, the camera inside the hand. Embree saw 250 at pixel (40, 29), whose center is 0.00537 px
-# inside 249: the f32 eye's offset (1.36e-5) moves that edge by 0.00539 px at depth 0.141 and 38
+# inside 249: the f32 eye's offset (1.36e-5) moves that edge by 0.00539 px at depth 0.141 and 45
 # degrees off the axis, over the 0.00485 px that |offset| / (z pixel) allows on the axis.
 _A = [256.0726318359375, -255.70498657226562, 256.1430969238281]
 _B = [256.06256103515625, -255.73745727539062, 256.14556884765625]
