@@ -249,3 +249,16 @@ def test_the_nearer_triangle_s_depth_scales_the_shift(tmp_path: Path) -> None:
     test["Z"][PIXEL[1], PIXEL[0]] = 4 * Z  # the test's own depth is not trusted for this: the scene's is
     cls, why = _class(ref, test, "embree_robust")
     assert cls == "edge", why
+
+
+def test_a_plane_seen_edge_on_does_not_bring_the_edge_near_the_eye(tmp_path: Path) -> None:
+    """The test names a triangle 1e4 away whose plane, seen edge-on, crosses the pixel ray 0.005
+    from the eye, 10 px from its image. Its edges are never nearer than its nearest vertex, so the
+    shift is taken at 1e4 (1e-5 px) and the pixel stays interior, not 25 px of room at 0.005."""
+    sx, sy = 0.015625, -0.015625  # pixel (32, 32) of 64 x 64, vfov 90
+    p0 = 0.005 * np.array([sx, sy, -1.0])
+    e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.3, -1.0])
+    g = [p0 + 1e4 * e2 - 1e3 * e1, p0 + 1e4 * e2 + 1e3 * e1, p0 + 2e4 * e2]
+    ref, test = _mismatch(tmp_path, [[list(map(float, v)) for v in g]], (32, 32), BG, 0, 1e4, **FAR_CAMERA)
+    cls, why = _class(ref, test, "embree_robust")
+    assert cls == "interior", why

@@ -66,7 +66,8 @@ def involved_triangles(
     """What the edge models need of the triangles at each mismatched pixel (tolerance.EdgeContext):
     the pixel center's off-axis factor sqrt(1 + |q|^2), and over the prims named (background and
     IDs naming no triangle skipped) the largest |v - eye|, longest edge, largest height, and the
-    nearest planar depth at which a prim's plane crosses the pixel ray (inf: none)."""
+    nearest planar depth at which a prim's plane crosses the pixel ray, but no nearer than that
+    prim's nearest vertex (inf: none)."""
     cam = ref.scene.camera
     eye = np.asarray(cam.eye, dtype=np.float64)
     sx, sy = cam.screen_at(*cam.pixel_centers(cols, rows))
@@ -96,6 +97,9 @@ def involved_triangles(
             ("height", height),
         ):
             out[key][ok] = np.maximum(out[key][ok], value)
+        # The moved edge point lies on the triangle: never nearer than its nearest vertex (a plane
+        # seen edge-on may cross the pixel ray anywhere, far from the triangle).
+        t = np.maximum(t, ((tri - eye) @ cam.forward).min(axis=1))
         out["plane_depth"][ok] = np.minimum(out["plane_depth"][ok], np.where(np.isfinite(t) & (t > 0), t, np.inf))
     return out
 
