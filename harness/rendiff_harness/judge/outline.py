@@ -49,9 +49,28 @@ SILHOUETTE = "a silhouette edge (its neighbors fold behind it, or may for this r
 
 
 class EdgeTable(Protocol):
-    """What the search reads of verify.Topology: the other triangles across an edge."""
+    """What the search reads of verify.Topology: its sorted edge table (exact f32 vertex identity)."""
 
-    def neighbors(self, tri: int, local: int) -> list[tuple[int, int]]: ...
+    corner_vid: np.ndarray  # (N, 3) vertex id of every corner
+    keys: np.ndarray  # (3N,) sorted edge keys lo * vertices + hi
+    key_tri: np.ndarray  # (3N,) triangle of each sorted key
+    key_local: np.ndarray  # (3N,) local edge index of each sorted key
+    vertices: int
+
+
+def across(topo: EdgeTable, tri: np.ndarray, loc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The other (triangle, local edge) pairs sharing each edge (tri[i], loc[i]), in the edge
+    table's order (verify.Topology.neighbors for every edge at once): (owner i, triangle, local)."""
+    a = topo.corner_vid[tri, loc]
+    b = topo.corner_vid[tri, (loc + 1) % 3]
+    key = np.minimum(a, b) * topo.vertices + np.maximum(a, b)
+    lo = np.searchsorted(topo.keys, key, side="left")
+    count = np.searchsorted(topo.keys, key, side="right") - lo
+    owner = np.repeat(np.arange(tri.size), count)
+    pos = np.arange(owner.size) - np.repeat(np.cumsum(count) - count, count) + np.repeat(lo, count)
+    n_tri, n_loc = topo.key_tri[pos], topo.key_local[pos]
+    keep = n_tri != tri[owner]
+    return owner[keep], n_tri[keep], n_loc[keep]
 
 
 def side(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float) -> int:
@@ -92,6 +111,13 @@ def silhouettes(
     than `slack` (the renderer's eye uncertainty) from both planes; the neighbor named is
     the first such in the edge table's order.
     """
+    return [(is_outline, what) for is_outline, what, _ in _edge_answers(scene, topo, edges, slack)]
+
+
+def _edge_answers(
+    scene: ResolvedScene, topo: EdgeTable, edges: Sequence[tuple[int, int]], slack: float
+) -> list[tuple[bool, str, list[int]]]:
+    """`silhouettes`, with each edge's neighbor triangles (the walk's next steps)."""
     if not edges:
         return []
     eye = scene.camera.eye
@@ -103,25 +129,30 @@ def silhouettes(
     rows = np.arange(tri.size)
     a, b, c = own[rows, loc], own[rows, (loc + 1) % 3], own[rows, (loc + 2) % 3]
     own_side = sides(eye, a, b, c, slack)
-    neigh = [topo.neighbors(int(tr), int(lo)) for tr, lo in edges]
-    which = np.array([i for i, ns in enumerate(neigh) for _ in ns], dtype=np.int64)
-    apex = np.array([t[n_tri, (n_local + 2) % 3] for ns in neigh for n_tri, n_local in ns], dtype=np.float64)
-    other = sides(eye, a[which], b[which], apex.reshape(-1, 3), slack) if which.size else np.zeros(0, np.int8)
-    out: list[tuple[bool, str]] = []
-    k = 0
-    for i, ns in enumerate(neigh):
-        answer = (True, SILHOUETTE)
+    owner, n_tri, n_loc = across(topo, tri, loc)
+    apex = np.asarray(t[n_tri, (n_loc + 2) % 3], dtype=np.float64).reshape(-1, 3)
+    other = sides(eye, a[owner], b[owner], apex, slack)
+    # The first neighbor on the other side, per edge (-1: none).
+    closed = np.nonzero(own_side[owner].astype(np.int64) * other < 0)[0]
+    first = np.full(tri.size, -1, dtype=np.int64)
+    by = owner[closed]  # sorted: owner is
+    lead = np.ones(by.size, dtype=bool)
+    lead[1:] = by[1:] != by[:-1]
+    first[by[lead]] = n_tri[closed[lead]]
+    start = np.searchsorted(owner, rows, side="left").tolist()
+    end = np.searchsorted(owner, rows, side="right").tolist()
+    names = n_tri.tolist()
+    out: list[tuple[bool, str, list[int]]] = []
+    for s, e, f, o in zip(start, end, first.tolist(), own_side.tolist(), strict=True):
+        ns = names[s:e]
         if not ns:
-            answer = (True, BOUNDARY)
-        elif own_side[i] == 0:
-            answer = (True, EDGE_ON)
+            out.append((True, BOUNDARY, ns))
+        elif o == 0:
+            out.append((True, EDGE_ON, ns))
+        elif f >= 0:
+            out.append((False, str(f), ns))
         else:
-            for j, (n_tri, _) in enumerate(ns):
-                if int(own_side[i]) * int(other[k + j]) < 0:
-                    answer = (False, str(n_tri))
-                    break
-        k += len(ns)
-        out.append(answer)
+            out.append((True, SILHOUETTE, ns))
     return out
 
 
@@ -219,8 +250,7 @@ def search(
     stack: list[list[tuple[int, list[int]]]] = [[(int(starts[p]), list(nears[p]))] for p in range(n)]
     first_closed = [""] * n
     result: list[tuple[str, str] | None] = [None] * n
-    answers: dict[tuple[int, int], tuple[bool, str]] = {}
-    across: dict[tuple[int, int], list[int]] = {}
+    answers: dict[tuple[int, int], tuple[bool, str, list[int]]] = {}
     active = list(range(n))
     while active:
         popped: list[tuple[int, int, list[int]]] = []
@@ -231,22 +261,19 @@ def search(
             else:
                 result[p] = ("", first_closed[p])
         asked = list(dict.fromkeys((tri, j) for _, tri, edges in popped for j in edges if (tri, j) not in answers))
-        answers.update(zip(asked, silhouettes(scene, topo, asked, slack), strict=True))
+        answers.update(zip(asked, _edge_answers(scene, topo, asked, slack), strict=True))
         reached_p: list[int] = []
         reached_tri: list[int] = []
         for p, tri, edges in popped:
             start = len(reached_p)
+            s = seen[p]
             for j in edges:
-                is_outline, what = answers[(tri, j)]
+                is_outline, what, others = answers[(tri, j)]
                 if is_outline:
                     result[p] = (f"{what} of prim {tri}", "")
                     del reached_p[start:], reached_tri[start:]
                     break
                 first_closed[p] = first_closed[p] or what
-                others = across.get((tri, j))
-                if others is None:
-                    others = across[(tri, j)] = [nt for nt, _ in topo.neighbors(tri, j)]
-                s = seen[p]
                 for n_tri in others:
                     if n_tri not in s:
                         s.add(n_tri)
@@ -256,7 +283,9 @@ def search(
             rp = np.array(reached_p, dtype=np.int64)
             d = edge_distances(scene, np.array(reached_tri, dtype=np.int64), rows[rp], cols[rp])
             within = d <= eps[rp][:, None]
-            for k in np.nonzero(within.any(axis=1))[0]:
-                stack[reached_p[k]].append((reached_tri[k], [j for j in range(3) if within[k, j]]))
+            rows_within = within.tolist()
+            for k in np.nonzero(within.any(axis=1))[0].tolist():
+                w = rows_within[k]
+                stack[reached_p[k]].append((reached_tri[k], [j for j in range(3) if w[j]]))
         active = [p for p in active if result[p] is None]
     return [r if r is not None else ("", "") for r in result]
