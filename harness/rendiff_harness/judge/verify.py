@@ -38,7 +38,7 @@ import numpy as np
 from ..contract.camera import Camera
 from ..contract.resolved import ResolvedScene
 from ..contract.vocab import BACKGROUND_ID
-from . import geometry
+from . import geometry, outline
 
 CLASSES = ("edge", "tie", "crack", "interior")
 EDGE, TIE, CRACK, INTERIOR = range(4)
@@ -111,11 +111,6 @@ class Side:
     cos: np.ndarray  # (K,) |cos| between the pixel ray and the triangle's normal
 
 
-def _project(cam: Camera, p: np.ndarray) -> np.ndarray:
-    """Camera-space points (..., 3) in front of the eye -> pixel coordinates (..., 2)."""
-    return cam.to_pixel(p[..., 0], p[..., 1], np.where(p[..., 2] > 0.0, p[..., 2], 1.0))
-
-
 def _near_far(cam: Camera, cam_tris: np.ndarray) -> tuple[float, float]:
     near = cam.near if cam.near > 0.0 else 1e-12 * max(1.0, float(np.abs(cam_tris).max(initial=0.0)))
     far = cam.far if np.isfinite(cam.far) and cam.far > near else np.inf
@@ -142,29 +137,11 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
     with np.errstate(all="ignore"):
         ct = cam.to_camera(tris)
         near, far = _near_far(cam, ct)
+        edge_d[idx] = outline.clipped_edge_distances(cam, ct, cx, cy, np.full(idx.size, near), np.full(idx.size, far))
         for i in range(3):
-            a, b = ct[:, i], ct[:, (i + 1) % 3]
-            za, zb = a[:, 2], b[:, 2]
-            dz = zb - za
-            # Parameter range of the segment inside near <= z <= far.
-            t0 = np.zeros(idx.size)
-            t1 = np.ones(idx.size)
-            safe = np.where(dz != 0.0, dz, 1.0)
-            tn = (near - za) / safe
-            t0 = np.where(dz > 0, np.maximum(t0, tn), t0)
-            t1 = np.where(dz < 0, np.minimum(t1, tn), t1)
-            if np.isfinite(far):
-                tf = (far - za) / safe
-                t1 = np.where(dz > 0, np.minimum(t1, tf), t1)
-                t0 = np.where(dz < 0, np.maximum(t0, tf), t0)
-            flat_out = (dz == 0) & ((za < near) | (za > far))
-            ok = (t0 <= t1) & ~flat_out
-            pa = _project(cam, a + t0[:, None] * (b - a))
-            pb = _project(cam, a + t1[:, None] * (b - a))
-            d = geometry.segment_distance(cx, cy, pa, pb)
-            edge_d[idx, i] = np.where(ok & np.isfinite(d), d, np.inf)
+            a = ct[:, i]
             vin = (a[:, 2] >= near) & (a[:, 2] <= far)
-            pv = _project(cam, a)
+            pv = outline.project(cam, a)
             vert_d[idx, i] = np.where(vin, np.hypot(pv[:, 0] - cx, pv[:, 1] - cy), np.inf)
         poly, count = geometry.clip_and_project(cam, tris)
         poly_d[idx] = geometry.polygon_distance(poly, count, cx, cy)
@@ -203,79 +180,6 @@ class Classified:
     cls: np.ndarray  # (K,) int8 in EDGE, TIE, CRACK, INTERIOR
     why: list[str]  # (K,) one sentence each
     groups: list[dict[str, object]] = field(default_factory=list)
-
-
-def _side(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float) -> int:
-    """Which side of the plane (eye, a, b) c lies on: +1, -1, or 0 when the eye is within
-    `slack` of the plane of (a, b, c), so that the renderer's view of it may be edge-on."""
-    det = float(np.linalg.det(np.stack([a - eye, b - eye, c - eye])))
-    # det = |(b-a) x (c-a)| x (signed distance of the eye from the plane of a, b, c).
-    area2 = float(np.linalg.norm(np.cross(b - a, c - a)))
-    if abs(det) <= slack * area2:
-        return 0
-    return 1 if det > 0.0 else -1
-
-
-def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int, slack: float) -> tuple[bool, str]:
-    """Is edge `local` of `tri` an outline as seen from the eye? (True, why) or (False, neighbor).
-
-    Closed means a neighbor across the edge lies on the other side, with the eye farther
-    than `slack` (the renderer's eye uncertainty) from both planes.
-    """
-    neigh = topo.neighbors(tri, local)
-    if not neigh:
-        return True, "a mesh boundary edge"
-    # Only the corners it reads go to f64 (exact, so the same values as a copy of the whole
-    # scene, which this made per visited edge: 128 ms and 94 MB at 1.31M triangles).
-    t = scene.triangles
-    eye = scene.camera.eye
-    own_tri = np.asarray(t[tri], dtype=np.float64)
-    a, b, c = own_tri[local], own_tri[(local + 1) % 3], own_tri[(local + 2) % 3]
-    own = _side(eye, a, b, c, slack)
-    if own == 0:
-        return True, "an edge of a triangle this renderer may see edge-on"
-    for n_tri, n_local in neigh:
-        other = _side(eye, a, b, np.asarray(t[n_tri, (n_local + 2) % 3], dtype=np.float64), slack)
-        if own * other < 0:
-            return False, str(n_tri)
-    return True, "a silhouette edge (its neighbors fold behind it, or may for this renderer)"
-
-
-MAX_PATCH = 64
-"""Triangles the outline search visits around one pixel before it calls the patch closed."""
-
-
-def _outline_near(
-    scene: ResolvedScene, topo: Topology, start: int, near: list[int], row: int, col: int, eps: float, slack: float
-) -> tuple[str, str]:
-    """Is there an outline of the surface within `eps` of the pixel center? (why, "") or ("", neighbor).
-
-    A renderer whose rounding moves the sample by up to `eps` may land anywhere in that
-    disc. Starting from the missed triangle's edges near the center (`near`), walk across
-    closed edges to the neighbors and look at their edges within `eps`: an outline (a mesh
-    boundary, a silhouette, or an edge this renderer may see edge-on) means the renderer
-    could have missed the surface legitimately. Only when the whole patch under the disc
-    is closed is the miss a leak.
-    """
-    seen = {start}
-    frontier = [(start, near)]
-    first_closed = ""
-    while frontier and len(seen) <= MAX_PATCH:
-        tri, edges = frontier.pop()
-        for j in edges:
-            is_outline, what = _silhouette(scene, topo, tri, j, slack)
-            if is_outline:
-                return f"{what} of prim {tri}", ""
-            first_closed = first_closed or what
-            for n_tri, _ in topo.neighbors(tri, j):
-                if n_tri in seen:
-                    continue
-                seen.add(n_tri)
-                g = side_geometry(scene, np.array([n_tri]), np.array([row]), np.array([col]))
-                n_near = [k for k in range(3) if g.edge_d[0, k] <= eps]
-                if n_near:
-                    frontier.append((n_tri, n_near))
-    return "", first_closed
 
 
 def _shared(topo: Topology, r: int, t: int) -> set[int]:
@@ -334,6 +238,7 @@ def classify_mismatches(
 
     rows_a = np.asarray(rows).ravel()
     cols_a = np.asarray(cols).ravel()
+    walk: list[tuple[int, int, list[int], float, str, str, str]] = []  # pixels whose miss needs the outline search
     for i in range(k):
         r, t = int(r_ids[i]), int(t_ids[i])
         rn = "background" if r == BACKGROUND_ID else f"prim {r}"
@@ -372,9 +277,9 @@ def classify_mismatches(
             continue
         # The side that saw the farther surface missed the nearer triangle.
         if sr.valid[i] and (not st.valid[i] or st.z[i] > sr.z[i]):
-            missed, seen, g, missed_name, seen_name, who = r, t, sr, rn, tn, backend
+            missed, g, missed_name, seen_name, who = r, sr, rn, tn, backend
         elif st.valid[i]:
-            missed, seen, g, missed_name, seen_name, who = t, r, st, tn, rn, "the reference"
+            missed, g, missed_name, seen_name, who = t, st, tn, rn, "the reference"
         else:
             why[i] = "both sides name no triangle"
             continue
@@ -391,20 +296,23 @@ def classify_mismatches(
                     f"{who} saw {seen_name}: interior"
                 )
             continue
-        tp = get_topo()
-        outline, closed_by = _outline_near(scene, tp, missed, near, int(rows_a[i]), int(cols_a[i]), e, eye_slack)
-        if outline:
-            cls[i] = EDGE
-            d = min(g.edge_d[i, j] for j in near)
-            why[i] = f"center {d:.2g} px from {outline} (reached from {missed_name}): edge"
-        else:
-            cls[i] = CRACK
-            d = min(g.edge_d[i, j] for j in near)
-            why[i] = (
-                f"center {d:.2g} px from the closed edge {missed_name} shares with prim {closed_by}, "
-                f"and no outline within {e:.2g} px, but {who} saw {seen_name} behind it: crack"
-            )
-        del seen
+        walk.append((i, missed, near, float(min(g.edge_d[i, j] for j in near)), missed_name, who, seen_name))
+    if walk:
+        # Every pixel's outline search at once (outline.py): numpy per round, not per pixel.
+        at = np.array([w[0] for w in walk], dtype=np.int64)
+        found = outline.search(
+            scene, get_topo(), [w[1] for w in walk], [w[2] for w in walk], rows_a[at], cols_a[at], eps_a[at], eye_slack
+        )
+        for (i, _, _, d, missed_name, who, seen_name), (line, closed_by) in zip(walk, found, strict=True):
+            if line:
+                cls[i] = EDGE
+                why[i] = f"center {d:.2g} px from {line} (reached from {missed_name}): edge"
+            else:
+                cls[i] = CRACK
+                why[i] = (
+                    f"center {d:.2g} px from the closed edge {missed_name} shares with prim {closed_by}, "
+                    f"and no outline within {float(eps_a[i]):.2g} px, but {who} saw {seen_name} behind it: crack"
+                )
     return Classified(cls, why, explain(cls, why, r_ids, t_ids, rows, cols))
 
 
