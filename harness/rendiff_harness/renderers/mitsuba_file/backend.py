@@ -80,7 +80,7 @@ from ..mitsuba import backend as mb
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
-FEATURES = frozenset({Feature.DEPTH, Feature.IDS, Feature.TWO_SIDED, Feature.ONE_SIDED})
+FEATURES = frozenset({Feature.DEPTH, Feature.IDS})
 BUFFERS = frozenset({Buffer.Z, Buffer.ID})
 AOVS = "z:depth,pi:prim_index,si:shape_index"
 MAX_OBJ_BYTES = 1 << 30
