@@ -31,11 +31,14 @@ REASON = mb.unavailable_reason()
 pytestmark = pytest.mark.skipif(REASON is not None, reason=f"mitsuba unavailable: {REASON}")
 
 GRID = "".join(f"v {x} {y} 0\n" for y in range(4) for x in range(4)) + "g left\n"
-"""A 3 x 3 grid of unit quads in z = 0 (vertex 1 + x + 4 y at (x, y)), as two groups, plus one pentagon."""
-GRID += "".join(f"f {1 + x + 4 * y} {2 + x + 4 * y} {6 + x + 4 * y} {5 + x + 4 * y}\n" for y in range(3) for x in range(2))
+"""A 3 x 3 grid of unit quads in z = 0 (vertex 1 + x + 4 y at (x, y)), as two groups, plus one
+convex pentagon above it (vertices 13, 14 and three more)."""
+GRID += "".join(
+    f"f {1 + x + 4 * y} {2 + x + 4 * y} {6 + x + 4 * y} {5 + x + 4 * y}\n" for y in range(3) for x in range(2)
+)
 GRID += "g right\n" + "".join(f"f {3 + 4 * y} {4 + 4 * y} {8 + 4 * y} {7 + 4 * y}\n" for y in range(3))
-GRID += "v 1.5 3.5 0\nf 13 14 15 16 17\n"
-TRANSFORM = 'transform = { rotate = [10.0, -20.0, 30.0], scale = [0.9, 1.1, 1.0], translate = [-1.2, -1.4, 0.3] }'
+GRID += "v 1.3 3.5 0\nv 0.5 3.9 0\nv -0.3 3.5 0\nf 13 14 17 18 19\n"
+TRANSFORM = "transform = { rotate = [10.0, -20.0, 30.0], scale = [0.9, 1.1, 1.0], translate = [-1.2, -1.4, 0.3] }"
 
 
 def _export(tmp: Path, obj: str | Path, transform: str = TRANSFORM, name: str = "m.obj") -> Path:
@@ -115,13 +118,14 @@ def test_mitsubas_obj_loader_keeps_face_order_ignores_groups_and_fans_ngons(tmp_
     path.write_text(GRID)
     mi = mb._import_mitsuba()
     verts, faces = mf._arrays(mi, mf._shape(mi, path, None))
-    text_verts = np.array([[float(c) for c in ln.split()[1:]] for ln in GRID.splitlines() if ln.startswith("v ")])
+    lines = GRID.splitlines()
+    text_verts = np.array([[float(c) for c in ln.split()[1:]] for ln in lines if ln.startswith("v ")])
     fans = []
-    for ln in GRID.splitlines():
+    for ln in lines:
         if ln.startswith("f "):
             idx = [int(c) - 1 for c in ln.split()[1:]]
             fans += [[idx[0], idx[i], idx[i + 1]] for i in range(1, len(idx) - 1)]
-    assert np.array_equal(verts[faces], text_verts[np.array(fans)])
+    assert np.array_equal(verts[faces], text_verts.astype(np.float32)[np.array(fans)])
 
 
 def test_the_unmodified_export_passes_and_records_its_placement(tmp_path: Path) -> None:
@@ -131,7 +135,7 @@ def test_the_unmodified_export_passes_and_records_its_placement(tmp_path: Path) 
         assert res[key]["status"] == "pass", (key, res[key]["reason"])
     assert "vertex placement" in res["mitsuba_file", "Z"]["tolerance"]
     info = registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
-    assert 0.0 < float(info["vertex_placement"]) < 1e-5 and "import_disagreement" not in info
+    assert 0.0 < float(str(info["vertex_placement"])) < 1e-5 and "import_disagreement" not in info
 
 
 def _fan_from_the_second_vertex(scene: resolved.ResolvedScene) -> np.ndarray:
