@@ -23,7 +23,7 @@ from fixtures import REPO, rendiff_binary, three_triangles
 from rendiff_harness import compare
 from rendiff_harness.contract import exrbuf, meshfile, resolved
 from rendiff_harness.renderers import registry
-from rendiff_harness.renderers.errors import BackendSkipped
+from rendiff_harness.renderers.errors import BackendError, BackendSkipped
 from rendiff_harness.renderers.mitsuba import backend as mb
 from rendiff_harness.renderers.mitsuba_file import backend as mf
 
@@ -203,3 +203,18 @@ def test_negative_indices_long_lines_gltf_and_shapes_are_skipped_with_a_reason(t
         mf.plan_uses(resolved.load(gltf))
     with pytest.raises(BackendSkipped, match="not read from a mesh file"):
         mf.plan_uses(resolved.load(three_triangles(tmp_path / "t")))
+
+
+def test_a_face_count_rendiff_disagrees_with_is_an_error_naming_the_importers(tmp_path: Path) -> None:
+    """An importer that dropped the pentagon's last triangle: no prim_id can be mapped, so the render
+    is an error that says so (never IDs shifted onto the wrong triangles)."""
+    out = _export(tmp_path, GRID)
+    meta = json.loads((out / "scene.json").read_text())
+    tris = resolved.load(out).triangles[:-1]
+    meta["triangle_count"] = int(tris.shape[0])
+    meta["objects"][-1]["prim_count"] -= 1
+    (out / "scene.json").write_text(json.dumps(meta))
+    _rewrite(out, tris)
+    np.fromfile(out / "object_ids.u32", dtype="<u4")[:-1].tofile(out / "object_ids.u32")
+    with pytest.raises(BackendError, match=r"importer disagreement: Mitsuba reads 21 triangles from m.obj, rendiff 20"):
+        registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
