@@ -78,7 +78,7 @@ def _judge(directory: Path, backends: tuple[str, ...] = ("mitsuba", "mitsuba_fil
                 "backend": name,
                 "status": "ok",
                 "exr": exr.relative_to(run).as_posix(),
-                "buffers": ["Z", "id"],
+                "buffers": ["Z", "id", "N"],
                 "info": info,
                 "time_s": 0.1,
                 "version": name,
@@ -103,7 +103,7 @@ def _judge(directory: Path, backends: tuple[str, ...] = ("mitsuba", "mitsuba_fil
     (run / "manifest.json").write_text(json.dumps(manifest))
     assert compare.main(["--run", str(run), "--no-images"]) in (0, 1)
     doc = json.loads((run / "results.json").read_text())
-    return {(r["backend"], r["buffer"]): r for r in doc["results"] if r["buffer"] in ("id", "Z")}
+    return {(r["backend"], r["buffer"]): r for r in doc["results"] if r["buffer"] in ("id", "Z", "N")}
 
 
 def _rewrite(directory: Path, tris: np.ndarray) -> None:
@@ -131,7 +131,7 @@ def test_mitsubas_obj_loader_keeps_face_order_ignores_groups_and_fans_ngons(tmp_
 def test_the_unmodified_export_passes_and_records_its_placement(tmp_path: Path) -> None:
     out = _export(tmp_path, GRID)
     res = _judge(out)
-    for key in (("mitsuba", "id"), ("mitsuba", "Z"), ("mitsuba_file", "id"), ("mitsuba_file", "Z")):
+    for key in [(b, buf) for b in ("mitsuba", "mitsuba_file") for buf in ("id", "Z", "N")]:
         assert res[key]["status"] == "pass", (key, res[key]["reason"])
     assert "vertex placement" in res["mitsuba_file", "Z"]["tolerance"]
     info = registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
@@ -176,6 +176,19 @@ def test_a_planted_import_bug_fails_mitsuba_file_while_the_resolved_export_passe
     assert bad["mitsuba_file", "id"]["interior_mismatches"] > 0
     info = registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
     assert "importer disagreement" in str(info["import_disagreement"])
+
+
+def test_a_winding_flipped_under_a_mirroring_transform_fails_mitsuba_files_normals(tmp_path: Path) -> None:
+    """An importer that reversed the winding because the object's transform mirrors (glTF's rule for
+    node matrices, which OBJ scene transforms do not have): the same triangles, so every ID agrees,
+    but Mitsuba's normals, from the file's own winding, face the other way."""
+    out = _export(tmp_path, GRID, TRANSFORM.replace("scale = [0.9,", "scale = [-0.9,"))
+    ok = _judge(out)
+    assert ok["mitsuba_file", "N"]["status"] == "pass", ok["mitsuba_file", "N"]["reason"]
+    _rewrite(out, resolved.load(out).triangles[:, [0, 2, 1]])
+    bad = _judge(out)
+    assert bad["mitsuba", "N"]["status"] == "pass" and bad["mitsuba_file", "id"]["status"] == "pass"
+    assert bad["mitsuba_file", "N"]["status"] == "fail" and "facing the other way" in bad["mitsuba_file", "N"]["reason"]
 
 
 def test_the_torus_placed_twice_maps_both_shapes(tmp_path: Path) -> None:

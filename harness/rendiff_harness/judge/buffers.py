@@ -121,7 +121,7 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
 
 
 def judge_rendered_normals(r: BackendRender, e: Entry) -> Judged | None:
-    return judge_normals(r.ref, r.backend, r.test, e, r.spec)
+    return judge_normals(r.ref, r.backend, r.test, e, r.spec, r.attrs)
 
 
 def judge_rgb(r: BackendRender, e: Entry) -> Judged | None:

@@ -1,4 +1,4 @@
-"""Mitsuba 3 rendering the user's original OBJ files itself (`mitsuba_file`): depth and triangle IDs.
+"""Mitsuba 3 rendering the user's original OBJ files itself (`mitsuba_file`): depth, IDs and normals.
 
 Every other renderer reads rendiff's resolved triangles, so a wrong OBJ import (an index, a face
 order, an n-gon's triangulation, a transform) would pass everywhere. This backend gives Mitsuba
@@ -80,9 +80,9 @@ from ..mitsuba import backend as mb
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
-FEATURES = frozenset({Feature.DEPTH, Feature.IDS})
-BUFFERS = frozenset({Buffer.Z, Buffer.ID})
-AOVS = "z:depth,pi:prim_index,si:shape_index"
+FEATURES = frozenset({Feature.DEPTH, Feature.IDS, Feature.NORMALS})
+BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N})
+AOVS = "z:depth,pi:prim_index,si:shape_index,ng:geo_normal"
 MAX_OBJ_BYTES = 1 << 30
 """rendiff's own limit on a mesh file (docs/resolved-scene.md)."""
 MITSUBA_LINE_LIMIT = 1024
@@ -224,7 +224,7 @@ def disagreement(rendiff: np.ndarray, mitsuba: np.ndarray, bound: np.ndarray, fi
 
 
 def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str, Any], float]:
-    """({'Z', 'prim', 'obj'}, info, vertex_placement) of Mitsuba rendering the scene's OBJ files."""
+    """({'Z', 'prim', 'obj', 'N'}, info, vertex_placement) of Mitsuba rendering the scene's OBJ files."""
     uses = plan_uses(scene)
     mi = mb._import_mitsuba()
     if len(uses) > 1 and mi.variant() != mb.DEFAULT_VARIANT:
@@ -297,7 +297,10 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
     }
     if problems:
         info["import_disagreement"] = "importer disagreement: " + "; ".join(problems)
-    return {"Z": mb.planar_depth(ch["z.T"], cam, near), "prim": prim, "obj": obj}, info, placement
+    normals = np.stack([ch["ng.X"], ch["ng.Y"], ch["ng.Z"]], axis=-1)
+    normals[~hit] = 0.0
+    buffers = {"Z": mb.planar_depth(ch["z.T"], cam, near), "prim": prim, "obj": obj, "N": normals}
+    return buffers, info, placement
 
 
 def global_prims(
@@ -337,7 +340,7 @@ def render(
     *,
     visibility_only: bool = False,
 ) -> dict[str, object]:
-    """Render `scene`'s OBJ files with Mitsuba into `out_exr` (Z, id.prim, id.object); never RGB
+    """Render `scene`'s OBJ files with Mitsuba into `out_exr` (Z, id.prim, id.object, N); never RGB
     (`visibility_only` is accepted, and always what is done). In-process; `workdir` is unused."""
     buffers, info, placement = render_arrays(scene)
     t0 = time.perf_counter()
@@ -346,6 +349,7 @@ def render(
         Z=buffers["Z"],
         prim=buffers["prim"],
         obj=buffers["obj"],
+        N=buffers["N"],
         attrs={
             "backend": NAME,
             "variant": str(info["variant"]),
