@@ -48,7 +48,9 @@ the same float32 v (correctly rounded decimals). The render records `vertex_plac
 largest such bound over the scene's vertices as a vector (sqrt of the sum of the squared
 coordinate bounds), and the precision model moves every point by it: edges by
 vertex_placement / (z pixel) px, depths by vertex_placement / |cos| (at most the triangle's depth
-span), on top of Mitsuba's own sensor and intersection model.
+span), on top of Mitsuba's own sensor and intersection model; normals (`geo_normal`, from the
+file's own winding, so a winding rendiff reversed fails them) by the turn such a move can give a
+triangle (judge/normals.placement_angle).
 """
 
 from __future__ import annotations
