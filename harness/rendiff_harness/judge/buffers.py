@@ -55,7 +55,12 @@ Judge = Callable[[BackendRender, Entry], Judged | None]
 
 def judge_ids(r: BackendRender, e: Entry) -> Judged:
     res = compare_ids(
-        r.ref, r.test, r.model, depth_tol=depth_tolerance_fn(r.ref, r.model, r.render, r.attrs), backend=r.backend
+        r.ref,
+        r.test,
+        r.model,
+        depth_tol=depth_tolerance_fn(r.ref, r.model, r.render, r.attrs),
+        backend=r.backend,
+        attrs=r.attrs,
     )
     r.id_result = res
     e.edge_mismatches = res.edge
@@ -116,7 +121,7 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
 
 
 def judge_rendered_normals(r: BackendRender, e: Entry) -> Judged | None:
-    return judge_normals(r.ref, r.backend, r.test, e, r.spec)
+    return judge_normals(r.ref, r.backend, r.test, e, r.spec, r.attrs)
 
 
 def judge_rgb(r: BackendRender, e: Entry) -> Judged | None:

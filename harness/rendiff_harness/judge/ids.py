@@ -111,6 +111,7 @@ def compare_ids(
     edge_distance: EdgeDistance | None = None,
     depth_tol: verify.DepthTolerance | None = None,
     backend: str = "the test renderer",
+    attrs: Mapping[str, Any] | None = None,
 ) -> IdResult:
     """Exact id.prim / id.object comparison; every mismatch gets a class (verify.py).
 
@@ -167,13 +168,14 @@ def compare_ids(
             vertex_distance=tris["vertex_distance"],
             extent=tris["extent"],
             height=tris["height"],
+            attrs=attrs or {},
         )
         eps, tol_text = model.edge_eps(ectx)
 
         def exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
             return np.zeros_like(z)
 
-        slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm)
+        slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm, ectx.attrs)
         result = verify.classify_mismatches(
             ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend, slack
         )

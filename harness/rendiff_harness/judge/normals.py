@@ -38,14 +38,34 @@ def compare_normals(
     return e
 
 
+def placement_angle(p: float, e1: np.ndarray, e2: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """How far moving every vertex by at most p (world units) can turn a triangle's normal: each edge
+    moves by <= 2p, so the cross product by <= 2p (|e1| + |e2|) + 4p^2, and a vector c turns by at
+    most asin(|dc| / |c|) (pi when |dc| >= |c|: any direction)."""
+    if p <= 0.0:
+        return np.zeros(length.shape)
+    dc = 2.0 * p * (np.linalg.norm(e1, axis=1) + np.linalg.norm(e2, axis=1)) + 4.0 * p * p
+    with np.errstate(all="ignore"):
+        ratio = dc / length
+    out: np.ndarray = np.where(ratio < 1.0, np.arcsin(np.minimum(ratio, 1.0)), np.pi)
+    return out
+
+
 def judge_normals(
-    ref: Reference, backend: str, buffers: Mapping[str, np.ndarray], e: Entry, spec: BackendSpec | None
+    ref: Reference,
+    backend: str,
+    buffers: Mapping[str, np.ndarray],
+    e: Entry,
+    spec: BackendSpec | None,
+    attrs: Mapping[str, Any] | None = None,
 ) -> Judged | None:
     """N against the documented winding convention: N = normalize((b-a) x (c-a)).
 
     Judged at every pixel where the backend's own id.prim names a triangle (its
     visibility is judged by its id entry), so the reference's normals are checked too:
-    a flipped, unnormalized or wrong-triangle normal is an interior mismatch.
+    a flipped, unnormalized or wrong-triangle normal is an interior mismatch. A backend
+    that placed the vertices itself (`Model.placement`, read from its `attrs`) gets the
+    angle its placement can turn the triangle by on top (`placement_angle`).
     """
     h, w = ref.shape
     n = buffers.get("N")
@@ -71,6 +91,12 @@ def judge_normals(
         angle = np.arctan2(np.linalg.norm(np.cross(got, expect), axis=1) / got_len, cosang)
     angle = np.where(np.isfinite(angle) & (length > 0), angle, np.pi)
     tol, text = precision.normal_tolerance(spec, np.where(np.isfinite(cond), cond, np.inf))
+    if spec is not None and spec.precision.placement is not None:
+        placed = spec.precision.placement(attrs or {})
+        tol = tol + placement_angle(placed, e1, e2, length)
+        text += (
+            f" + the turn of vertices placed {placed:.3g} apart: asin(min(1, (2p (|e1| + |e2|) + 4p^2) / |e1 x e2|))"
+        )
     unit_ok = np.abs(got_len - 1.0) <= 4.0 * tolerance.F32_U + tol
     bad = ~(angle <= tol) | ~unit_ok
     e.compared_pixels = int(valid.size)

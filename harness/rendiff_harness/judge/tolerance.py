@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -77,6 +77,7 @@ class EdgeContext:
     vertex_distance: np.ndarray | None = None
     extent: np.ndarray | None = None
     height: np.ndarray | None = None
+    attrs: Mapping[str, Any] = field(default_factory=dict)  # the test EXR's rendiff attributes
 
 
 DepthModel = Callable[[DepthContext], tuple[np.ndarray, str]]
@@ -84,6 +85,9 @@ EdgeModel = Callable[[EdgeContext], tuple[np.ndarray, str]]
 PositionError = Callable[[float, float, np.ndarray], np.ndarray]
 """(|f32(eye) - eye|, |eye|, |X| (K,)) -> how far the renderer's f32 arithmetic may move the
 point X it renders relative to its camera, world units (K,)."""
+Placement = Callable[[Mapping[str, Any]], float]
+"""A render's EXR attributes -> the world distance by which it placed every vertex away from the
+resolved scene's (`Model.placement`)."""
 
 F32_U = 2.0**-24
 """Unit roundoff of f32: rounding to nearest moves a value by at most this times its size."""
@@ -98,17 +102,25 @@ class Model:
     known: bool = True  # False: a strict fallback for a backend without a model
     edge_extra: EdgeModel | None = None  # per-pixel growth of edge_px (f32 camera origin, plane offsets)
     position: PositionError | None = None  # how far f32 arithmetic moves a point relative to the camera
+    placement: Placement | None = None
+    """How far the renderer itself placed every vertex from the resolved scene's, read from its
+    render: a renderer that loads the user's mesh file and applies the objects' transforms in its
+    own arithmetic (renderers/mitsuba_file). Edges and the eye's uncertainty add it here; its depth
+    model adds it itself (`shift_depth`)."""
 
-    def eye_uncertainty(self, origin_offset: float, eye_norm: float, point_norm: np.ndarray) -> float:
+    def eye_uncertainty(
+        self, origin_offset: float, eye_norm: float, point_norm: np.ndarray, attrs: Mapping[str, Any] | None = None
+    ) -> float:
         """World distance by which the renderer may see the eye moved relative to the geometry.
 
         The verifier calls an edge closed only if the eye is farther than this from both
         triangles' planes (verify.py): closer, either may turn edge-on and the edge become
         an outline for this renderer.
         """
+        placed = self.placement(attrs or {}) if self.placement is not None else 0.0
         if self.position is None or point_norm.size == 0:
-            return 0.0
-        return float(np.max(self.position(origin_offset, eye_norm, point_norm), initial=0.0))
+            return placed
+        return float(np.max(self.position(origin_offset, eye_norm, point_norm), initial=0.0)) + placed
 
     def edge_text(self) -> str:
         return f"edge: pixel center within {self.edge_px:.3g} px of a triangle edge ({self.edge_reason})"
@@ -116,12 +128,17 @@ class Model:
     def edge_eps(self, ctx: EdgeContext) -> tuple[np.ndarray, str]:
         """Per-pixel rounding distance (px) and the sentence that derives it."""
         base = np.full(ctx.z.shape, self.edge_px, dtype=np.float64)
-        if self.edge_extra is None:
-            return base, self.edge_text()
-        extra, text = self.edge_extra(ctx)
-        # NaN: no term at that pixel; +inf (rounding may carry the point past the eye) stays
-        extra = np.where(np.isnan(extra), 0.0, extra)
-        return base + extra, f"{self.edge_text()} + {text}"
+        text = self.edge_text()
+        if self.edge_extra is not None:
+            extra, extra_text = self.edge_extra(ctx)
+            # NaN: no term at that pixel; +inf (rounding may carry the point past the eye) stays
+            base = base + np.where(np.isnan(extra), 0.0, extra)
+            text = f"{text} + {extra_text}"
+        if self.placement is not None:
+            placed = self.placement(ctx.attrs)
+            base = base + shift_edge(np.full(ctx.z.shape, placed), ctx)
+            text = f"{text} + vertex placement {placed:.3g} * sqrt(1 + |q|^2) / ((z - placed) * pixel)"
+        return base, text
 
 
 def render_param(attrs: Mapping[str, Any], info: Mapping[str, Any], key: str) -> float | None:

@@ -37,6 +37,7 @@ BUILT_IN = (
     "povray",
     "pyrender",
     "mitsuba",
+    "mitsuba_file",
 )
 """The built-in external backends, in the order `info` lists them: renderers/<name>/backend.py's `SPEC`."""
 

@@ -25,6 +25,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
+from ...contract.meshfile import file_uses
 from ...contract.resolved import ResolvedScene
 from ...contract.results import Entry
 from ...contract.vocab import IMPORT_DECODERS, Buffer, Status
@@ -71,20 +72,6 @@ MAX_PROBLEMS = 3
 """Object problems spelled out in one entry's reason (the count says how many there were)."""
 
 
-def _groups(scene: ResolvedScene) -> list[list[int]]:
-    """Indices of the objects read from one scene object's mesh file, one list per file use
-    (a new use starts at part 0)."""
-    out: list[list[int]] = []
-    for i, obj in enumerate(scene.objects):
-        mesh = obj.get("mesh") if isinstance(obj, dict) else None
-        if not isinstance(mesh, dict):
-            continue
-        if mesh.get("part") == 0 or not out:
-            out.append([])
-        out[-1].append(i)
-    return out
-
-
 def _pairs(
     scene: ResolvedScene, group: list[int], parts: list[Part | None], fmt: str
 ) -> tuple[list[tuple[int, Part | None]], list[str]]:
@@ -128,7 +115,7 @@ def _chosen(mesh: dict[str, object]) -> int | None:
 
 def _judge(scene: ResolvedScene, name: str, decoder: str, formats: dict[str, Decoder]) -> Entry | None:
     """The entry of one decoder over the scene's objects of the formats it reads; None when there are none."""
-    groups = [g for g in _groups(scene) if scene.objects[g[0]]["mesh"].get("format") in formats]
+    groups = [g for g in file_uses(scene) if scene.objects[g[0]]["mesh"].get("format") in formats]
     if not groups:
         return None
     t0 = time.monotonic()

@@ -4,13 +4,13 @@ of triangles: counts, positions within the derived rounding bound, winding (docs
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ...contract.meshfile import object_matrix
 from .parts import Part
 
 U64 = 2.0**-53
@@ -25,20 +25,6 @@ OPS_OBJECT = 16
 def gamma(k: int) -> float:
     """Higham's gamma_k = k u / (1 - k u): the relative bound of k float64 roundings."""
     return k * U64 / (1.0 - k * U64)
-
-
-def object_matrix(transform: Any) -> tuple[np.ndarray, np.ndarray]:
-    """A scene object's transform as written (scale, rotate in degrees X then Y then Z, translate):
-    (M, t) with world = M p + t, M = Rz Ry Rx diag(scale) (docs/resolved-scene.md)."""
-    t = transform if isinstance(transform, dict) else {}
-    s = np.asarray(t.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64).reshape(3)
-    rx, ry, rz = np.radians(np.asarray(t.get("rotate", [0.0, 0.0, 0.0]), dtype=np.float64).reshape(3))
-    tr = np.asarray(t.get("translate", [0.0, 0.0, 0.0]), dtype=np.float64).reshape(3)
-    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
-    mx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    my = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    mz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return mz @ my @ mx @ np.diag(s), tr
 
 
 @dataclass
