@@ -21,7 +21,7 @@ pub fn cpu_model() -> String {
 }
 
 /// Every `*seed*` field in a backend's reported info, with its key.
-fn find_seeds(v: &Value, out: &mut Vec<(String, Value)>) {
+pub(super) fn find_seeds(v: &Value, out: &mut Vec<(String, Value)>) {
     match v {
         Value::Object(m) => {
             for (k, x) in m {
@@ -84,7 +84,7 @@ pub fn dropped_entries(before: &Baseline, now: &Baseline) -> Vec<String> {
 }
 
 /// One line naming what would be dropped (the first [`DROPPED_NAMED`], then a count).
-fn dropped_summary(dropped: &[String]) -> String {
+pub(super) fn dropped_summary(dropped: &[String]) -> String {
     let shown = dropped[..dropped.len().min(DROPPED_NAMED)].join(", ");
     let more = dropped.len().saturating_sub(DROPPED_NAMED);
     let more = if more > 0 {

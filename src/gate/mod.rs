@@ -44,6 +44,8 @@
 pub mod bless;
 pub mod markdown;
 pub mod policy;
+#[cfg(test)]
+mod tests;
 
 pub use bless::*;
 pub use markdown::*;
@@ -413,42 +415,4 @@ pub fn gate(baseline_path: &Path, run: &Path) -> Result<(String, bool)> {
         Ok(())
     })?;
     Ok((text, outcome.regressions() == 0))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn exact_backends_allow_nothing_and_external_ones_a_little() {
-        let exact = Noise::for_backend("trace", 10.0);
-        assert_eq!(exact.limit("max_abs_error", 0.0), 0.0);
-        assert_eq!(exact.limit("edge_mismatches", 3.0), 3.0);
-        let ext = Noise::for_backend("povray", 4.0);
-        assert_eq!(ext.limit("edge_mismatches", 3.0), 3.0);
-        let l = ext.limit("max_abs_error", 1e-6);
-        assert!(l > 1.5e-6 && l < 1.5e-6 + 1e-6);
-        assert!(ext.improved_below("max_abs_error", 1e-6) < 1e-6);
-    }
-
-    #[test]
-    fn markdown_cells_cannot_carry_markup() {
-        let s = md("<img src=x onerror=alert(1)>|[a](b)`");
-        assert_eq!(
-            s, "&lt;img src=x onerror=alert(1)&gt;\\|\\[a\\](b)\\`",
-            "no tag, link, cell break or code span survives"
-        );
-    }
-
-    #[test]
-    fn markdown_cells_carry_no_terminal_escapes_and_no_line_breaks() {
-        // The summary is printed on the terminal: a scene named with an
-        // escape sequence recoloured it, a bidi override reordered it.
-        let s = md("a\u{1b}[31mred\u{7}\u{202e}txt\nrow");
-        assert!(
-            !s.chars().any(|c| c.is_control() || c == '\u{202e}'),
-            "{s:?}"
-        );
-        assert!(s.contains("\\u{1b}") && s.contains("\\u{202e}"), "{s:?}");
-    }
 }

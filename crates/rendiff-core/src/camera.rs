@@ -309,4 +309,121 @@ mod tests {
         assert!(size(16_384, 16_384).unwrap_err().contains("Mpixel"));
         assert!(size(16_384, 4_096).is_ok());
     }
+
+    fn spec(near: Option<f64>, far: Option<f64>) -> CameraSpec {
+        CameraSpec {
+            eye: Some([0.0, 0.0, 5.0]),
+            look_at: Some([0.0, 0.0, 1.0]),
+            up: None,
+            vfov: Some(90.0),
+            width: 4,
+            height: 2,
+            near,
+            far,
+            gltf: None,
+        }
+    }
+
+    #[test]
+    fn a_spec_resolves_with_its_defaults_or_names_its_field() {
+        let c = Camera::from_spec(&spec(None, None), 20.0).unwrap();
+        assert_eq!((c.near, c.far), (1e-4 * 20.0, f64::INFINITY));
+        assert_eq!((c.width, c.height, c.vfov_deg), (4, 2, 90.0));
+        assert_eq!(c.up, DVec3::Y, "up defaults to +y");
+        // Without a usable scene size the near plane scales with the view distance (4).
+        for size in [0.0, -1.0, f64::INFINITY, f64::NAN] {
+            let c = Camera::from_spec(&spec(None, None), size).unwrap();
+            assert_eq!(c.near, 1e-4 * 4.0, "scene size {size}");
+        }
+        let c = Camera::from_spec(&spec(Some(0.5), Some(0.75)), 1.0).unwrap();
+        assert_eq!((c.near, c.far), (0.5, 0.75));
+        let field = |s: CameraSpec| Camera::from_spec(&s, 1.0).unwrap_err();
+        for near in [0.0, -1.0, f64::INFINITY, f64::NAN] {
+            let (f, why) = field(spec(Some(near), None));
+            assert_eq!(f, "camera.near");
+            assert!(why.starts_with("must be > 0"), "{why}");
+        }
+        for far in [0.5, 0.25, f64::NAN] {
+            let (f, why) = field(spec(Some(0.5), Some(far)));
+            assert_eq!(f, "camera.far");
+            assert_eq!(why, format!("must be greater than near (0.5), got {far}"));
+        }
+        for (missing, name) in [(0, "eye"), (1, "look_at"), (2, "vfov")] {
+            let mut s = spec(None, None);
+            match missing {
+                0 => s.eye = None,
+                1 => s.look_at = None,
+                _ => s.vfov = None,
+            }
+            assert_eq!(
+                field(s),
+                (
+                    format!("camera.{name}"),
+                    "missing (a glTF camera must be mapped first)".to_string()
+                )
+            );
+        }
+        let mut flat = spec(None, None);
+        flat.up = Some([0.0, 0.0, 1.0]);
+        assert_eq!(field(flat).0, "camera");
+    }
+
+    #[test]
+    fn the_field_of_view_is_open_at_both_ends() {
+        let e = DVec3::new(0.0, 0.0, 5.0);
+        let at = |vfov| Camera::new(e, DVec3::ZERO, DVec3::Y, vfov, 4, 4, 1e-3, 1.0);
+        for bad in [0.0, -10.0, 180.0, 200.0, f64::NAN] {
+            assert!(
+                at(bad).unwrap_err().starts_with("vfov must be in (0, 180)"),
+                "{bad}"
+            );
+        }
+        for good in [1e-9, 90.0, 179.9] {
+            assert!(at(good).is_ok(), "{good}");
+        }
+    }
+
+    /// The DESIGN.md formulas, evaluated by hand on a 4x2 image at 90
+    /// degrees (tan = 1, aspect 2), eye off the origin so that no term vanishes.
+    #[test]
+    fn screen_coordinates_rays_and_projection_follow_the_formulas() {
+        let eye = DVec3::new(1.0, 2.0, 3.0);
+        let c = Camera::new(eye, eye - DVec3::Z, DVec3::Y, 90.0, 4, 2, 1e-3, 9.0).unwrap();
+        assert_eq!(c.tan_half_vfov, 1.0);
+        assert_eq!((c.tie_right, c.tie_up), (eye + DVec3::X, eye + DVec3::Y));
+        // sx = (2 (x + 0.5) / W - 1) * tan * W/H; sy = (1 - 2 (y + 0.5) / H) * tan.
+        assert_eq!(c.screen(0, 0), (-1.5, 0.5));
+        assert_eq!(c.screen(3, 1), (1.5, -0.5));
+        assert_eq!(c.screen_x(1), -0.5);
+        assert_eq!(c.screen_y(1), -0.5);
+        assert_eq!(c.direction(0, 0), DVec3::new(-1.5, 0.5, -1.0));
+        assert_eq!(c.direction_at(0.5, 0.5), c.direction(0, 0));
+        assert_eq!(c.direction_at(4.0, 0.0), DVec3::new(2.0, 1.0, -1.0));
+        assert_eq!(
+            c.screen_direction(0.25, -0.75),
+            DVec3::new(0.25, -0.75, -1.0)
+        );
+        let r = c.pixel_ray(3, 1);
+        assert_eq!(r.dir, DVec3::new(1.5, -0.5, -1.0));
+        assert_eq!(r.p, eye + r.dir);
+        assert_eq!(r.inv_dir, DVec3::new(1.0 / 1.5, -2.0, -1.0));
+        assert_eq!(r.planar, 1.0);
+        assert_eq!(c.screen_ray(1.5, -0.5), r);
+        let q = eye + DVec3::new(3.0, -1.0, -2.0);
+        assert_eq!(c.to_camera(q), DVec3::new(3.0, -1.0, 2.0));
+        // x: (1.5 / 2 + 1) * 0.5 * 4 = 3.5; y: (1 - (-0.5)) * 0.5 * 2 = 1.5.
+        assert_eq!(c.camera_to_pixel(DVec3::new(3.0, -1.0, 2.0)), (3.5, 1.5));
+        assert_eq!(c.pixel_count(), 8);
+    }
+
+    /// Pixel centers through the continuous form, at 60 degrees (tan is not
+    /// 1, so a factor of it cannot hide) on a 64x48 image.
+    #[test]
+    fn continuous_image_points_at_pixel_centers_are_the_pixel_rays() {
+        let c = cam();
+        for (x, y) in [(0, 0), (63, 47), (10, 30)] {
+            let (fx, fy) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+            assert_eq!(c.direction_at(fx, fy), c.direction(x, y), "({x}, {y})");
+        }
+    }
 }

@@ -156,4 +156,114 @@ pub(crate) mod tests {
         assert_eq!(EdgePlane::new(eye, a, b).sign(eye, q, q - eye, &mut fb), 0);
         assert_eq!(fb, 1);
     }
+
+    /// Queries exactly on the plane through the eye and the edge whose f64
+    /// determinant is not zero (the cross product rounds): only the error
+    /// bound sends them to the exact path, which says 0. A smaller bound
+    /// (a permanent term dropped, a sign flipped) lets the rounded value
+    /// through as a wrong +1 or -1.
+    #[test]
+    fn the_error_bound_catches_rounded_determinants_of_exactly_coplanar_points() {
+        let mut s = 11u64;
+        let mut rounded = 0;
+        for _ in 0..2000 {
+            let a = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s) + 3.0);
+            let b = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s) + 3.0);
+            let e = EdgePlane::new(DVec3::ZERO, a, b);
+            // 2a, -a/2 and 4b are exact scalings: on the plane through 0, a and b.
+            for q in [a * 2.0, a * -0.5, b * 4.0] {
+                let (det, bound) = e.filter(q.x, q.y, q.z);
+                assert!(det.abs() <= bound, "{det} beyond {bound}");
+                rounded += usize::from(det != 0.0);
+                let mut fb = 0;
+                assert_eq!(e.sign(DVec3::ZERO, q, q, &mut fb), 0);
+                assert_eq!(fb, 1, "one exact fallback per undecided sign");
+                let mut fb = 0;
+                let float = e.sign_with(DVec3::ZERO, q, q, Precision::FloatOnly, &mut fb);
+                assert_eq!(float, (det > 0.0) as i8 - (det < 0.0) as i8);
+                assert_eq!(fb, 0, "FloatOnly never falls back");
+            }
+        }
+        assert!(rounded > 100, "only {rounded} rounded determinants");
+    }
+
+    /// Points well off the plane are decided by the filter alone, with the
+    /// exact sign: a larger bound (or one that grows with the wrong terms)
+    /// sends them to the exact path, which the counter shows.
+    #[test]
+    fn clear_cases_are_decided_without_exact_arithmetic() {
+        let mut s = 3u64;
+        for _ in 0..2000 {
+            let eye = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s) + 5.0);
+            let a = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s));
+            let b = DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s));
+            let e = EdgePlane::new(eye, a, b);
+            let n = (a - eye).cross(b - eye).normalize();
+            // A point a unit off the plane through eye, a and b, on each side.
+            for side in [1.0, -1.0] {
+                let q = (a + b) * 0.5 + n * side;
+                let mut fb = 0;
+                let want = exact_sign(a, b, q, eye);
+                assert_eq!(want, side as i8, "the exact sign of a point on side {side}");
+                assert_eq!(e.sign(eye, q, q - eye, &mut fb), want);
+                assert_eq!(
+                    e.sign_with(eye, q, q - eye, Precision::FloatOnly, &mut fb),
+                    want
+                );
+                assert_eq!(fb, 0, "decided by the filter");
+            }
+        }
+    }
+
+    #[test]
+    fn the_plane_and_its_permanents_are_the_cross_product_terms() {
+        let eye = DVec3::new(1.0, 2.0, 3.0);
+        let (a, b) = (DVec3::new(3.0, 5.0, 7.0), DVec3::new(-1.0, 4.0, 11.0));
+        let e = EdgePlane::new(eye, a, b);
+        // ad = (2, 3, 4), bd = (-2, 2, 8).
+        assert_eq!(
+            e.n,
+            DVec3::new(
+                3.0 * 8.0 - 4.0 * 2.0,
+                4.0 * -2.0 - 2.0 * 8.0,
+                2.0 * 2.0 - 3.0 * -2.0
+            )
+        );
+        assert_eq!(e.perm, DVec3::new(24.0 + 8.0, 8.0 + 16.0, 4.0 + 6.0));
+        assert_eq!((e.a, e.b), (a, b));
+        let (det, bound) = e.filter(1.0, -2.0, 0.5);
+        assert_eq!(det, 16.0 + 48.0 + 5.0);
+        assert_eq!(bound, O3D_ERRBOUND_A * (32.0 + 48.0 + 5.0));
+        assert_eq!(
+            O3D_ERRBOUND_A,
+            (7.0 + 56.0 * 2f64.powi(-53)) * 2f64.powi(-53)
+        );
+    }
+
+    #[test]
+    fn exact_signs_of_both_sides_and_the_plane() {
+        let (a, b, d) = (DVec3::X, DVec3::Y, DVec3::ZERO);
+        assert_eq!(exact_sign(a, b, DVec3::Z, d), 1);
+        assert_eq!(exact_sign(a, b, -DVec3::Z, d), -1);
+        assert_eq!(exact_sign(a, b, DVec3::new(3.0, -1.0, 0.0), d), 0);
+    }
+
+    /// At the eye itself the determinant and its bound are both exactly 0:
+    /// the filter must not decide (strictly greater, not greater or equal),
+    /// and the float-only sign of a zero is 0.
+    #[test]
+    fn a_zero_determinant_with_a_zero_bound_is_undecided() {
+        let eye = DVec3::new(0.25, -0.5, 2.0);
+        let e = EdgePlane::new(eye, DVec3::X, DVec3::Y);
+        assert_eq!(e.filter(0.0, 0.0, 0.0), (0.0, 0.0));
+        let mut fb = 0;
+        assert_eq!(e.sign(eye, eye, DVec3::ZERO, &mut fb), 0);
+        assert_eq!(fb, 1);
+        let mut fb = 0;
+        assert_eq!(
+            e.sign_with(eye, eye, DVec3::ZERO, Precision::FloatOnly, &mut fb),
+            0
+        );
+        assert_eq!(fb, 0);
+    }
 }

@@ -387,4 +387,277 @@ mod tests {
         assert!(hit_key(1.0, 3) < hit_key(1.0, 4));
         assert!(hit_key(f32::MAX, u32::MAX - 1) < NO_HIT);
     }
+
+    #[test]
+    fn counters_add_field_by_field() {
+        let mut a = Counters {
+            coverage_tests: 1,
+            covered: 2,
+            exact_fallbacks: 3,
+            ties: 4,
+            triangle_setups: 5,
+            bvh_nodes_visited: 6,
+            fast_decided: 7,
+            hidden_skipped: 8,
+        };
+        a += Counters {
+            coverage_tests: 10,
+            covered: 20,
+            exact_fallbacks: 30,
+            ties: 40,
+            triangle_setups: 50,
+            bvh_nodes_visited: 60,
+            fast_decided: 70,
+            hidden_skipped: 80,
+        };
+        assert_eq!(
+            a,
+            Counters {
+                coverage_tests: 11,
+                covered: 22,
+                exact_fallbacks: 33,
+                ties: 44,
+                triangle_setups: 55,
+                bvh_nodes_visited: 66,
+                fast_decided: 77,
+                hidden_skipped: 88,
+            }
+        );
+    }
+
+    /// The tie rule's two steps: a vertical edge through the pixel center is
+    /// decided by the move right (the triangle on the right covers it); a
+    /// horizontal one lies along that move and is decided by the move down
+    /// (the triangle below covers it), whatever the winding.
+    #[test]
+    fn ties_go_right_then_down() {
+        let c = cam(8, 8, 90.0);
+        let v = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+        let flip = |t: [Vec3; 3]| [t[0], t[2], t[1]];
+        let covered = |t: [Vec3; 3], x: u32, y: u32| {
+            let mut k = Counters::default();
+            let s = TriEdges::new(&c, &t).covers(&c, &c.pixel_ray(x, y), &mut k);
+            (s != 0, k)
+        };
+        // x = 0.125 is column 4's centers; y = 0.125 is row 3's.
+        let left = [v(-0.9, -0.9), v(0.125, -0.9), v(0.125, 0.9)];
+        let right = [v(0.125, -0.9), v(0.9, -0.9), v(0.125, 0.9)];
+        let below = [v(-0.9, -0.9), v(0.9, 0.125), v(-0.9, 0.125)];
+        let above = [v(-0.9, 0.125), v(0.9, 0.125), v(0.0, 0.9)];
+        for y in 2..6 {
+            for (t, want) in [(left, false), (right, true)] {
+                for t in [t, flip(t)] {
+                    let (got, k) = covered(t, 4, y);
+                    assert_eq!(got, want, "pixel (4, {y}) of {t:?}");
+                    assert!(k.ties >= 1, "an edge through the center is a tie");
+                }
+            }
+        }
+        for x in 2..6 {
+            for (t, want) in [(below, true), (above, false)] {
+                for t in [t, flip(t)] {
+                    let (got, k) = covered(t, x, 3);
+                    assert_eq!(got, want, "pixel ({x}, 3) of {t:?}");
+                    assert!(k.ties >= 1);
+                }
+            }
+        }
+        // Off the edges: no tie, and the pixel clearly inside one triangle.
+        let (got, k) = covered(right, 5, 4);
+        assert!(got && k.ties == 0 && k.coverage_tests == 1 && k.covered == 1);
+    }
+
+    #[test]
+    fn coverage_needs_three_equal_nonzero_signs_and_stops_at_the_first_difference() {
+        let run = |signs: [i8; 3]| {
+            let mut k = Counters::default();
+            let mut asked = Vec::new();
+            let s = covers_by(&mut k, |i, _| {
+                asked.push(i);
+                signs[i]
+            });
+            (s, asked, k.coverage_tests, k.covered)
+        };
+        assert_eq!(run([1, 1, 1]), (1, vec![0, 1, 2], 1, 1));
+        assert_eq!(run([-1, -1, -1]), (-1, vec![0, 1, 2], 1, 1));
+        assert_eq!(run([0, 0, 0]), (0, vec![0], 1, 0));
+        assert_eq!(run([1, -1, 1]), (0, vec![0, 1], 1, 0));
+        assert_eq!(run([-1, -1, 1]), (0, vec![0, 1, 2], 1, 0));
+        assert_eq!(run([1, 1, 0]), (0, vec![0, 1, 2], 1, 0));
+    }
+
+    #[test]
+    fn boxes_grow_by_the_margin_times_their_distance_from_the_eye() {
+        assert_eq!(BOX_MARGIN, 2f64.powi(-48));
+        let m = BOX_MARGIN;
+        let eye = DVec3::new(1.0, 1.0, 1.0);
+        // lo - eye = (0, -3, 3), hi - eye = (2, 0, 7): the larger distances are (2, 3, 7).
+        let b = grow_box(eye, Vec3::new(1.0, -2.0, 4.0), Vec3::new(3.0, 1.0, 8.0));
+        assert_eq!(
+            b.lo,
+            DVec3::new(1.0 - 2.0 * m, -2.0 - 3.0 * m, 4.0 - 7.0 * m)
+        );
+        assert_eq!(
+            b.hi,
+            DVec3::new(3.0 + 2.0 * m, 1.0 + 3.0 * m, 8.0 + 7.0 * m)
+        );
+    }
+
+    #[test]
+    fn slabs_give_the_parameter_interval_inside_a_box() {
+        let b = RayBox {
+            lo: DVec3::new(1.0, 1.0, -1.0),
+            hi: DVec3::new(3.0, 8.0, 1.0),
+        };
+        let inv = |d: DVec3| DVec3::ONE / d;
+        let d = DVec3::new(1.0, 2.0, 0.0);
+        assert_eq!(slab_od(DVec3::ZERO, d, inv(d), &b), (1.0, 3.0));
+        // Going the other way from the far side: the same box, entered at x = 3.
+        let d = DVec3::new(-1.0, -0.5, 0.0);
+        assert_eq!(
+            slab_od(DVec3::new(5.0, 6.0, 0.0), d, inv(d), &b),
+            (2.0, 4.0)
+        );
+        // A zero direction component: inside the slab (its faces included) or a miss.
+        let d = DVec3::new(1.0, 0.0, 0.0);
+        for y in [1.0, 8.0, 4.0] {
+            assert_eq!(
+                slab_od(DVec3::new(0.0, y, 1.0), d, inv(d), &b),
+                (1.0, 3.0),
+                "y {y}"
+            );
+        }
+        for (y, z) in [(0.5, 0.0), (8.5, 0.0), (4.0, -1.5), (4.0, 1.5)] {
+            assert_eq!(
+                slab_od(DVec3::new(0.0, y, z), d, inv(d), &b),
+                (f64::INFINITY, f64::NEG_INFINITY),
+                "({y}, {z})"
+            );
+        }
+        let eye = DVec3::new(0.0, 4.0, 0.0);
+        let ray = PixelRay {
+            p: eye + d,
+            dir: d,
+            inv_dir: inv(d),
+            planar: 1.0,
+        };
+        assert_eq!(slab(eye, &ray, &b), (1.0, 3.0));
+    }
+
+    #[test]
+    fn an_interval_misses_only_beyond_its_rounding() {
+        assert!(!slab_misses(1.0, 3.0));
+        assert!(!slab_misses(0.0, 0.0));
+        assert!(!slab_misses(1.0, 1.0));
+        // Within (|tmin| + |tmax|) 4e-16 of touching: kept.
+        assert!(!slab_misses(1.0 + f64::EPSILON, 1.0));
+        assert!(slab_misses(1.0 + 2f64.powi(-48), 1.0));
+        assert!(slab_misses(3.0, 1.0));
+        // Behind the eye beyond rounding: a miss; just behind it: kept.
+        assert!(!slab_misses(-1.0, -1e-17));
+        assert!(slab_misses(-1.0, -1e-15));
+        assert!(slab_misses(-3.0, -2.0));
+        assert!(!slab_misses(f64::NEG_INFINITY, 2.0));
+    }
+
+    #[test]
+    fn depth_is_the_planar_distance_of_the_plane_hit() {
+        let c = cam(8, 8, 90.0);
+        // The plane z = -2 - x/2 seen from (0, 0, 1) along (1/8, -1/8, -1):
+        // 1 - t = -2 - t/16, so t = 3 / (1 - 1/16) = 3.2, planar depth too.
+        let t = [
+            Vec3::new(-8.0, -8.0, 2.0),
+            Vec3::new(8.0, -8.0, -6.0),
+            Vec3::new(0.0, 8.0, -2.0),
+        ];
+        let d = TriDepth::new(&c, &t);
+        assert_eq!(
+            d.normal,
+            DVec3::new(16.0, 0.0, -8.0).cross(DVec3::new(8.0, 16.0, -4.0))
+        );
+        assert_eq!(d.num, d.normal.dot(DVec3::new(-8.0, -8.0, 1.0)));
+        let ray = c.pixel_ray(4, 4);
+        assert_eq!(ray.dir, DVec3::new(0.125, -0.125, -1.0));
+        assert_eq!(d.depth(&c, &ray), Some(3.2));
+    }
+
+    #[test]
+    fn depth_is_clamped_into_the_triangles_box() {
+        // The plane z = -2 (depth 3) is hit at x = 0.375, outside the
+        // triangle's box x in [1, 2]; the depth is clamped to where the ray
+        // enters the box's slab in x: t = 1 / 0.125 = 8.
+        let c = cam(8, 8, 90.0);
+        let t = [
+            Vec3::new(1.0, -1.0, -2.0),
+            Vec3::new(2.0, -1.0, -2.0),
+            Vec3::new(1.5, 1.0, -2.0),
+        ];
+        let ray = c.pixel_ray(4, 4);
+        assert_eq!(ray.dir, DVec3::new(0.125, -0.125, -1.0));
+        assert_eq!(TriDepth::new(&c, &t).depth(&c, &ray), Some(8.0));
+    }
+
+    #[test]
+    fn depth_is_kept_from_near_to_far_inclusive() {
+        let t = [
+            Vec3::new(-9.0, -9.0, -2.0),
+            Vec3::new(9.0, -9.0, -2.0),
+            Vec3::new(0.0, 9.0, -2.0),
+        ];
+        let with = |near: f64, far: f64| {
+            let c = Camera::new(DVec3::Z, DVec3::ZERO, DVec3::Y, 90.0, 8, 8, near, far).unwrap();
+            TriDepth::new(&c, &t).depth(&c, &c.pixel_ray(3, 3))
+        };
+        assert_eq!(with(3.0, 3.5), Some(3.0), "at near");
+        assert_eq!(with(2.5, 3.0), Some(3.0), "at far");
+        assert_eq!(with(3.0f64.next_up(), 4.0), None, "nearer than near");
+        assert_eq!(with(1.0, 3.0f64.next_down()), None, "farther than far");
+    }
+
+    #[test]
+    fn a_plane_along_the_ray_has_no_depth() {
+        // 1x1 at the origin's axis: the ray is (0, 0, -1), in the plane x = 0.
+        let c = cam(1, 1, 90.0);
+        let t = [
+            Vec3::new(0.0, -1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+        ];
+        assert_eq!(TriDepth::new(&c, &t).depth(&c, &c.pixel_ray(0, 0)), None);
+        // A vertex at infinity: the normal is not finite, and there is no depth either.
+        let far = [
+            Vec3::new(0.0, -1.0, -1.0),
+            Vec3::new(1.0, -1.0, -1.0),
+            Vec3::new(0.0, f32::INFINITY, -1.0),
+        ];
+        let d = TriDepth::new(&c, &far);
+        assert!(!d.normal.dot(c.pixel_ray(0, 0).dir).is_finite());
+        assert_eq!(d.depth(&c, &c.pixel_ray(0, 0)), None);
+    }
+
+    #[test]
+    fn keys_carry_depth_and_prim_and_the_empty_key_reads_as_background() {
+        let k = hit_key(2.5, 7);
+        assert_eq!(k, (u64::from(2.5f32.to_bits()) << 32) + 7);
+        assert_eq!((key_depth(k), key_prim(k)), (2.5, 7));
+        assert_eq!(
+            (key_depth(NO_HIT), key_prim(NO_HIT)),
+            (f32::INFINITY, u32::MAX)
+        );
+        assert_eq!(NO_HIT, u64::MAX);
+        let mut band = vec![std::mem::MaybeUninit::new(5u64); 3];
+        assert_eq!(fill_no_hit(&mut band), &[NO_HIT; 3]);
+    }
+
+    #[test]
+    fn geometric_normals_follow_the_winding() {
+        let t = [
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(3.0, 1.0, 1.0),
+            Vec3::new(1.0, 4.0, 1.0),
+        ];
+        assert_eq!(geometric_normal(&t), [0.0, 0.0, 1.0]);
+        assert_eq!(geometric_normal(&[t[0], t[2], t[1]]), [0.0, 0.0, -1.0]);
+        assert_eq!(geometric_normal(&[t[0], t[1], t[0]]), [0.0; 3]);
+    }
 }
