@@ -1,0 +1,370 @@
+"""Every class boundary of the verifier (judge/verify.py), tried from both sides on synthetic scenes.
+
+Issue 37 item 6: faults planted in the verifier passed every test because no scene sat on the
+boundary they moved (a tie that no longer asked both triangles to cover the center turned 9,962
+interior pixels of `million` into ties). Each test here puts a pixel center at a distance the
+scene fixes exactly and asks for the class on either side of it; docs/mutation.md lists the
+mutants these tests kill.
+
+Camera: eye (0, 0, 4) looking down -z, vfov 90, 16 x 16 pixels. On the plane z = 0 (depth 4)
+a world point (x, y) projects to px = 2x + 8, py = 8 - 2y, exactly (powers of two), so the
+pixel (c, r), center (c + 0.5, r + 0.5), sits at x = (c - 7.5) / 2, y = (7.5 - r) / 2 and a
+world distance w on that plane is 2w pixels.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixtures import write_scene
+from rendiff_harness.contract import resolved, vocab
+from rendiff_harness.judge import verify
+
+BG = vocab.BACKGROUND_ID
+PX = (4, 4)  # center (4.5, 4.5): world (-1.75, 1.75) on z = 0
+BIG = [[-20, -20, 0], [20, -20, 0], [0, 20, 0]]  # covers PX, its edges more than 10 px away
+# Coplanar with BIG, to the right of the vertical line x = -1.5 (px = 5): 0.5 px from PX's center.
+RIGHT_OF_PX = [[-1.5, -3, 0], [3, -3, 0], [-1.5, 3, 0]]
+
+
+def _scene(tmp_path: Path, tris: list[list[list[float]]], near: float = 1e-3) -> resolved.ResolvedScene:
+    d = write_scene(tmp_path, tris, eye=(0.0, 0.0, 4.0), vfov_deg=90.0, width=16, height=16, near=near)
+    return resolved.load(d)
+
+
+def _exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    return np.zeros_like(z)
+
+
+def _one(
+    scene: resolved.ResolvedScene,
+    ref: int,
+    test: int,
+    px: tuple[int, int] = PX,
+    eps: float = 1e-3,
+    depth_tol: verify.DepthTolerance = _exact,
+    eye_slack: float = 0.0,
+) -> tuple[str, str]:
+    x, y = px
+    res = verify.classify_mismatches(
+        scene,
+        np.array([ref], dtype=np.uint32),
+        np.array([test], dtype=np.uint32),
+        np.array([y]),
+        np.array([x]),
+        eps,
+        depth_tol,
+        eye_slack=eye_slack,
+    )
+    return verify.CLASSES[int(res.cls[0])], res.why[0]
+
+
+def _distance(scene: resolved.ResolvedScene, prim: int, px: tuple[int, int] = PX) -> float:
+    """The verifier's own distance from the center to the prim's visible boundary."""
+    g = verify.side_geometry(scene, np.array([prim]), np.array([px[1]]), np.array([px[0]]))
+    return float(g.poly_d[0])
+
+
+# --------------------------------------------------------------------------- tie: both must cover
+
+
+def test_tie_needs_the_test_triangle_to_cover_the_center(tmp_path: Path) -> None:
+    """Planted fault (a): coplanar surfaces tie only where BOTH triangles cover the center.
+
+    The test renderer drew RIGHT_OF_PX (coplanar with BIG, same depth) at a center 0.5 px
+    outside it: within a rounding distance of 0.5 px it may have, beyond it it may not.
+    """
+    s = _scene(tmp_path, [BIG, RIGHT_OF_PX])
+    d = _distance(s, 1)
+    assert d == 0.5  # the scene fixes it: x = -1.5 against the center's -1.75, two px per unit
+    cls, why = _one(s, 0, 1, eps=d)
+    assert cls == "tie" and "prims 0 and 1 are coplanar here" in why
+    cls, why = _one(s, 0, 1, eps=float(np.nextafter(d, 0.0)))
+    assert cls == "interior", why
+    assert "center 0.5 px outside the boundary of prim 1" in why and "the reference saw prim 0: interior" in why
+
+
+def test_tie_needs_the_reference_triangle_to_cover_the_center(tmp_path: Path) -> None:
+    """The same boundary with the sides swapped: the reference's triangle must cover too."""
+    s = _scene(tmp_path, [BIG, RIGHT_OF_PX])
+    d = _distance(s, 1)
+    assert _one(s, 1, 0, eps=d)[0] == "tie"
+    cls, why = _one(s, 1, 0, eps=float(np.nextafter(d, 0.0)))
+    assert cls == "interior" and "the reference saw prim 1: interior" in why
+
+
+def test_tie_needs_both_depths_on_their_planes(tmp_path: Path) -> None:
+    """Both covering is not enough: a triangle with no depth along the ray (behind the eye) never ties."""
+    behind = [[-20, -20, 8], [20, -20, 8], [0, 20, 8]]  # the plane z = 8, behind the eye at z = 4
+    s = _scene(tmp_path, [BIG, behind])
+    assert not np.isfinite(verify.side_geometry(s, np.array([1]), np.array([4]), np.array([4])).z[0])
+    assert _one(s, 0, 1, eps=100.0)[0] != "tie"
+
+
+# --------------------------------------------------------------------------- tie: depth agreement
+
+
+def test_tie_allows_two_f32_roundings_of_depth_and_no_more(tmp_path: Path) -> None:
+    """An exact renderer's tie: |dz| <= 0 + 2 * 2^-23 * z. At z = 4 that is 9.54e-7."""
+    allowed = 2.0 * verify.F32_ULP * 4.0
+    for lift, expect in ((0.75 * allowed, "tie"), (1.25 * allowed, "interior")):
+        up = float(np.float32(lift))  # world z of the second copy: its depth is 4 - lift
+        lifted = [[v[0], v[1], up] for v in BIG]
+        s = _scene(tmp_path / expect, [BIG, lifted])
+        cls, why = _one(s, 0, 1)
+        assert cls == expect, (lift, why)
+
+
+def test_tie_adds_the_renderers_depth_tolerance(tmp_path: Path) -> None:
+    """The renderer's own depth tolerance widens the tie by exactly its value at (z, cos)."""
+    lift = 1e-3
+    lifted = [[v[0], v[1], lift] for v in BIG]
+    s = _scene(tmp_path, [BIG, lifted])
+    dz = 4.0 - (4.0 - float(np.float32(lift)))
+    seen: list[tuple[float, float]] = []
+
+    def tol(factor: float) -> verify.DepthTolerance:
+        def f(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+            seen.append((float(z[0]), float(cos[0])))
+            return np.full_like(z, factor * dz)
+
+        return f
+
+    assert _one(s, 0, 1, depth_tol=tol(1.0))[0] == "tie"
+    assert _one(s, 0, 1, depth_tol=tol(0.99))[0] == "interior"
+    # Asked at the reference triangle's planar depth and |cos| there (PX's ray is oblique).
+    g = verify.side_geometry(s, np.array([0]), np.array([PX[1]]), np.array([PX[0]]))
+    assert seen[0] == (float(g.z[0]), float(g.cos[0]))
+
+
+# --------------------------------------------------------------------------- shared edge and vertex
+
+
+def test_an_edge_counts_as_shared_only_when_both_its_vertices_are(tmp_path: Path) -> None:
+    """Planted fault (b): R and T share the vertex V only. The center is 0.25 px from R's edge
+    V-W (W not in T) and 8.5 px from V; T, nearer, covers it deeply. Not an edge R and T share:
+    the reference missed T far inside T, an interior mismatch."""
+    v = [-6.0, 1.875, 0.0]
+    r = [v, [6.0, 1.875, 0.0], [0.0, -6.0, 0.0]]  # edge V-W at py = 4.25
+    t = [v, [6.0, 8.0, 2.0], [6.0, -6.0, 2.0]]  # in front of R at PX
+    s = _scene(tmp_path, [r, t])
+    g = verify.side_geometry(s, np.array([0, 1]), np.array([4, 4]), np.array([4, 4]))
+    assert g.edge_d[0, 0] == 0.25 and g.vert_d[0, 0] > 8.0 and g.poly_d[1] > 4.0
+    cls, why = _one(s, 0, 1, eps=1.0)
+    assert cls == "interior", why
+    assert "inside the boundary of prim 1" in why and "the reference saw prim 0" in why
+    # Both vertices shared (T hinged on the whole edge V-W): the same center is an edge.
+    t2 = [v, [0.0, 8.0, 2.0], [6.0, 1.875, 0.0]]
+    s = _scene(tmp_path / "hinge", [r, t2])
+    cls, why = _one(s, 0, 1, eps=1.0)
+    assert cls == "edge" and why == "center 0.25 px from the edge prims 0 and 1 share: edge"
+    # ... only within the rounding distance of that edge.
+    assert _one(s, 0, 1, eps=0.2)[0] != "edge"
+
+
+def test_a_shared_edge_band_is_closed_at_eps(tmp_path: Path) -> None:
+    """The band of a shared edge: distance <= eps is an edge, anything above it is not."""
+    left = [[-1.5, -3, 0], [-1.5, 3, 0], [-6, 0, 0]]  # shares x = -1.5 with RIGHT_OF_PX
+    s = _scene(tmp_path, [left, RIGHT_OF_PX])
+    # RIGHT_OF_PX's edge x = -1.5 is local edge 2 (corner 2 -> corner 0); the center is 0.5 px away.
+    assert _one(s, 0, 1, eps=0.5) == ("edge", "center 0.5 px from the edge prims 0 and 1 share: edge")
+    # Just inside the band no more: the two are coplanar, so the test's prim, 0.5 px away, no longer
+    # covers the center and its edge (a closed one) is out of reach: interior.
+    assert _one(s, 0, 1, eps=float(np.nextafter(0.5, 0.0)))[0] == "interior"
+
+
+def test_a_shared_vertex_band_is_closed_at_eps(tmp_path: Path) -> None:
+    """Near only a shared vertex (not an edge through it): edge at distance <= eps."""
+    v = [-1.5, 1.5, 0.0]  # px (5, 5): the center (4.5, 4.5) is sqrt(0.5) px from it
+    r = [v, [-8.0, 1.5, 0.0], [-1.5, 8.0, 0.0]]  # up-left of V: covers PX
+    t = [v, [6.0, -1.5, 1.0], [1.5, -6.0, 1.0]]  # down-right of V, nearer
+    s = _scene(tmp_path, [r, t])
+    d = float(np.hypot(0.5, 0.5))
+    g = verify.side_geometry(s, np.array([0]), np.array([4]), np.array([4]))
+    assert g.vert_d[0, 0] == d
+    cls, why = _one(s, 0, 1, eps=d)
+    assert cls == "edge" and why.startswith("center 0.71 px from the vertex prims 0 and 1 share")
+    # Below it the vertex no longer explains the pixel; R's own boundary edges, 0.5 px away, still do.
+    cls, why = _one(s, 0, 1, eps=float(np.nextafter(d, 0.0)))
+    assert cls == "edge" and why.startswith("center 0.5 px from a mesh boundary edge of prim 0")
+
+
+# --------------------------------------------------------------------------- invalid ids
+
+
+@pytest.mark.parametrize("side", ["test", "ref"])
+def test_an_id_one_past_the_last_triangle_names_none(tmp_path: Path, side: str) -> None:
+    s = _scene(tmp_path, [BIG, RIGHT_OF_PX])
+    n = s.triangle_count
+    ref, test = (0, n) if side == "test" else (n, 0)
+    cls, why = _one(s, ref, test, eps=100.0)
+    assert (cls, why) == ("interior", f"id {n} names no triangle (the scene has {n})")
+    # The last triangle is a triangle: the pair is judged by geometry (a tie here).
+    ref, test = (0, n - 1) if side == "test" else (n - 1, 0)
+    assert _one(s, ref, test, eps=100.0)[0] == "tie"
+
+
+# --------------------------------------------------------------------------- which side missed
+
+
+# Covers PX; its left edge x = -1.875 (px 4.25) is a mesh boundary 0.25 px from PX's center.
+EDGE_NEAR_PX = [[-1.875, -3, 0], [3, -3, 0], [-1.875, 3, 0]]
+FAR_AWAY = [[2, 2, 0], [3, 2, 0], [2, 3, 0]]  # coplanar with EDGE_NEAR_PX, far from PX
+
+
+def test_a_coplanar_triangle_drawn_away_from_its_area_is_interior_even_at_the_others_edge(tmp_path: Path) -> None:
+    """Equal depths: the side whose triangle does not reach the center is the one that must explain
+    it. The test drew FAR_AWAY at PX; that the reference's own edge is 0.25 px away does not help."""
+    s = _scene(tmp_path, [EDGE_NEAR_PX, FAR_AWAY])
+    cls, why = _one(s, 0, 1, eps=0.5)
+    assert cls == "interior" and "outside the boundary of prim 1" in why, why
+
+
+def test_the_missed_triangles_edge_band_is_closed_at_eps(tmp_path: Path) -> None:
+    """The test saw the background where the reference saw a triangle 0.25 px inside its boundary."""
+    s = _scene(tmp_path, [EDGE_NEAR_PX])
+    d = _distance(s, 0)
+    assert d == 0.25
+    assert _one(s, 0, BG, eps=d) == (
+        "edge",
+        "center 0.25 px from a mesh boundary edge of prim 0 (reached from prim 0): edge",
+    )
+    below = float(np.nextafter(d, 0.0))
+    assert _one(s, 0, BG, eps=below) == (
+        "interior",
+        f"center 0.25 px inside the boundary of prim 0 (allowed {below:.2g} px); the test renderer saw background: "
+        "interior",
+    )
+    # The other way round: the reference saw the background, the test drew the triangle there.
+    assert _one(s, BG, 0, eps=d)[0] == "edge"
+    cls, why = _one(s, BG, 0, eps=below)
+    assert cls == "interior" and why.endswith("the reference saw background: interior")
+
+
+def test_the_far_clip_is_an_outline_within_eps(tmp_path: Path) -> None:
+    """A plane z = y cut by the far plane (depth 8, py = 12): row 11's centers are 0.5 px from the
+    clip line and several px from the triangle's edges. The clip bounds what a renderer shows."""
+    tilted = [[-30, -10, -10], [30, -10, -10], [0, 3, 3]]
+    d = write_scene(tmp_path, [tilted], eye=(0.0, 0.0, 4.0), vfov_deg=90.0, width=16, height=16, far=8.0)
+    s = resolved.load(d)
+    px = (8, 11)
+    g = verify.side_geometry(s, np.array([0]), np.array([px[1]]), np.array([px[0]]))
+    clip = float(g.poly_d[0])
+    assert clip == pytest.approx(0.5, abs=1e-12) and g.inside[0] and float(g.edge_d[0].min()) > 2.0
+    cls, why = _one(s, 0, BG, px=px, eps=clip)
+    assert (cls, why) == ("edge", "center 0.5 px from the near/far clip of prim 0: edge")
+    cls, why = _one(s, 0, BG, px=px, eps=float(np.nextafter(clip, 0.0)))
+    assert cls == "interior" and "0.5 px inside the boundary of prim 0" in why
+    # Beyond the far plane nothing is visible: a center there is outside the polygon.
+    g = verify.side_geometry(s, np.array([0]), np.array([13]), np.array([8]))
+    assert not g.inside[0] and g.poly_d[0] == pytest.approx(1.5, abs=1e-12)
+
+
+# --------------------------------------------------------------------------- crack
+
+
+FOLD_A = [[-3, 0, 0], [3, 0, 0], [0, 3, 0]]  # edge y = 0 at py = 8
+FLAT_B = [[3, 0, 0], [-3, 0, 0], [0, -3, 0]]  # continues FOLD_A below the edge, same plane
+
+
+def test_a_closed_edge_is_a_crack_until_the_eye_is_within_the_renderers_slack_of_the_plane(tmp_path: Path) -> None:
+    """Both planes are z = 0, 4 units from the eye: within a slack of 4 the renderer may see them
+    edge-on (an outline), beyond it the edge is closed and a miss there leaks."""
+    s = _scene(tmp_path, [FOLD_A, FLAT_B])
+    px = (8, 7)  # center (8.5, 7.5): 0.5 px above the shared edge, inside FOLD_A
+    cls, why = _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 - 1e-12))
+    assert cls == "crack"
+    assert why == (
+        "center 0.5 px from the closed edge prim 0 shares with prim 1, and no outline within 0.5 px, "
+        "but the test renderer saw background behind it: crack"
+    )
+    cls, why = _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 + 1e-12))
+    assert cls == "edge" and "an edge of a triangle this renderer may see edge-on of prim 0" in why
+    # The closed edge is out of reach below 0.5 px: the center is plainly inside prim 0.
+    assert _one(s, 0, BG, px=px, eps=0.49)[0] == "interior"
+
+
+def test_a_neighbor_on_the_same_side_is_a_silhouette(tmp_path: Path) -> None:
+    """FOLD_A's edge y = 0 with a neighbor folding back up (behind it as seen from the eye): an outline."""
+    fold = [[3, 0, 0], [-3, 0, 0], [0, 3, -3]]
+    s = _scene(tmp_path, [FOLD_A, fold])
+    cls, why = _one(s, 0, BG, px=(8, 7), eps=0.5)
+    assert cls == "edge"
+    assert why == (
+        "center 0.5 px from a silhouette edge (its neighbors fold behind it, or may for this renderer) "
+        "of prim 0 (reached from prim 0): edge"
+    )
+
+
+def test_side_is_zero_exactly_at_the_slack(tmp_path: Path) -> None:
+    """_side: |det| <= slack * |(b - a) x (c - a)| is edge-on; the eye's distance decides."""
+    eye = np.array([0.0, 0.0, 4.0])
+    a, b, c = (np.array(p, dtype=np.float64) for p in FOLD_A)
+    assert verify._side(eye, a, b, c, 4.0) == 0
+    assert verify._side(eye, a, b, c, float(np.nextafter(4.0, 0.0))) != 0
+    assert verify._side(eye, a, b, c, 0.0) == -verify._side(eye, b, a, c, 0.0)
+    assert {verify._side(eye, a, b, c, 0.0), verify._side(eye, b, a, c, 0.0)} == {1, -1}
+
+
+def test_the_outline_search_walks_across_closed_edges(tmp_path: Path) -> None:
+    """A strip of three coplanar triangles: the middle one's closed edges lead to the outer ones,
+    whose mesh boundary within eps makes the miss an edge; out of reach, a crack."""
+    a = [[-3, 0, 0], [3, 0, 0], [0, 3, 0]]
+    b = [[3, 0, 0], [-3, 0, 0], [0, -0.125, 0]]  # a sliver closing a's edge y = 0, 0.25 px deep
+    s = _scene(tmp_path, [a, b])
+    px = (8, 7)  # 0.5 px above y = 0; b's lower edges are 0.5 + ~0.25 px away
+    cls, why = _one(s, 0, BG, px=px, eps=0.5)
+    assert cls == "crack" and "shares with prim 1" in why
+    cls, why = _one(s, 0, BG, px=px, eps=0.8)
+    assert cls == "edge" and "a mesh boundary edge of prim 1 (reached from prim 0)" in why
+
+
+# --------------------------------------------------------------------------- explanations and counts
+
+
+def test_explanations_rank_failures_first_then_size_and_cap_at_twenty() -> None:
+    # 2 interior (0 vs 1 at PX), 3 edge (0 vs bg at PX, eps 0.5), and 25 one-pixel groups.
+    ref = [0, 0] + [0, 0, 0] + [0] * 25
+    test = [1, 1] + [BG, BG, BG] + [1] * 25
+    rows = [4, 4] + [4, 4, 4] + [4] * 25
+    cols = [4, 4] + [4, 4, 4] + [4] * 25
+    cls = np.array([verify.INTERIOR] * 2 + [verify.EDGE] * 3 + [verify.TIE] * 25, dtype=np.int8)
+    why = [f"w{i}" for i in range(30)]
+    r_ids = np.array(ref, dtype=np.uint64)
+    t_ids = np.array(test, dtype=np.uint64)
+    t_ids[5:] = np.arange(100, 125)  # 25 distinct test prims: 25 tie groups of one pixel
+    groups = verify.explain(cls, why, r_ids, t_ids, np.array(rows), np.array(cols))
+    assert len(groups) == verify.MAX_EXPLANATIONS == 20
+    assert groups[0] == {
+        "class": "interior",
+        "ref_prim": 0,
+        "test_prim": 1,
+        "pixels": 2,
+        "example": [4, 4],
+        "why": "w0",
+    }
+    assert groups[1] == {"class": "tie", "ref_prim": 0, "test_prim": 100, "pixels": 1, "example": [4, 4], "why": "w5"}
+    # Edges rank last: the cap drops them before any tie.
+    assert all(g["class"] == "tie" for g in groups[1:])
+    groups = verify.explain(cls[:5], why[:5], r_ids[:5], t_ids[:5], np.array(rows[:5]), np.array(cols[:5]))
+    assert groups[1] == {"class": "edge", "ref_prim": 0, "test_prim": None, "pixels": 3, "example": [4, 4], "why": "w2"}
+    assert verify.counts(cls) == {"edge": 3, "tie": 25, "crack": 0, "interior": 2}
+
+
+def test_explanations_order_crack_before_tie_and_larger_groups_first() -> None:
+    cls = np.array([verify.EDGE, verify.TIE, verify.CRACK, verify.TIE, verify.EDGE, verify.EDGE], dtype=np.int8)
+    r = np.array([1, 2, 3, 2, 5, 5], dtype=np.uint64)
+    t = np.array([BG, 9, BG, 9, 6, 6], dtype=np.uint64)
+    rows, cols = np.arange(6), np.arange(6) + 10
+    groups = verify.explain(cls, [str(i) for i in range(6)], r, t, rows, cols)
+    assert [(g["class"], g["pixels"], g["example"]) for g in groups] == [
+        ("crack", 1, [12, 2]),
+        ("tie", 2, [11, 1]),
+        ("edge", 2, [14, 4]),
+        ("edge", 1, [10, 0]),
+    ]
+    assert groups[3]["ref_prim"] == 1 and groups[3]["test_prim"] is None
+    assert verify.explain(cls, ["x"] * 6, np.full(6, BG, dtype=np.uint64), t, rows, cols)[0]["ref_prim"] is None
