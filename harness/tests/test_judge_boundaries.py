@@ -14,6 +14,7 @@ world distance w on that plane is 2w pixels.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -309,6 +310,19 @@ def test_side_is_zero_exactly_at_the_slack(tmp_path: Path) -> None:
     assert {verify._side(eye, a, b, c, 0.0), verify._side(eye, b, a, c, 0.0)} == {1, -1}
 
 
+def test_side_is_the_sign_of_orient3d_beyond_the_slack() -> None:
+    """In general position: det(a - eye, b - eye, c - eye) = -37 and |(b - a) x (c - a)| = sqrt(74)
+    (integer arithmetic), so the eye is 37 / sqrt(74) from the plane; at a tenth of the scale the
+    determinant is -0.037, and its sign, not its size, decides."""
+    eye, a, b, c = (np.array(p, dtype=np.float64) for p in ([1, 2, 5], [1, 1, 0], [4, 0, 0], [0, 4, 1]))
+    dist = 37.0 / math.sqrt(74.0)
+    assert verify._side(eye, a, b, c, 0.0) == -1 and verify._side(eye, b, a, c, 0.0) == 1
+    assert verify._side(eye, a, b, c, dist * (1 - 1e-9)) == -1
+    assert verify._side(eye, a, b, c, dist * (1 + 1e-9)) == 0
+    assert verify._side(eye / 10, b / 10, a / 10, c / 10, 0.0) == 1
+    assert verify._side(eye / 10, a / 10, b / 10, c / 10, dist / 10 * (1 + 1e-9)) == 0
+
+
 def test_the_outline_search_walks_across_closed_edges(tmp_path: Path) -> None:
     """A strip of three coplanar triangles: the middle one's closed edges lead to the outer ones,
     whose mesh boundary within eps makes the miss an edge; out of reach, a crack."""
@@ -320,6 +334,12 @@ def test_the_outline_search_walks_across_closed_edges(tmp_path: Path) -> None:
     assert cls == "crack" and "shares with prim 1" in why
     cls, why = _one(s, 0, BG, px=px, eps=0.8)
     assert cls == "edge" and "a mesh boundary edge of prim 1 (reached from prim 0)" in why
+    # The neighbor's own edges count from the distance eps on, inclusive (the verifier's distance).
+    g = verify.side_geometry(s, np.array([1]), np.array([px[1]]), np.array([px[0]]))
+    lower = float(g.edge_d[0, 1:].min())
+    assert g.edge_d[0, 0] == 0.5 and 0.5 < lower < 0.8
+    assert _one(s, 0, BG, px=px, eps=lower)[0] == "edge"
+    assert _one(s, 0, BG, px=px, eps=float(np.nextafter(lower, 0.0)))[0] == "crack"
 
 
 # --------------------------------------------------------------------------- explanations and counts
