@@ -388,3 +388,24 @@ def test_explanations_order_crack_before_tie_and_larger_groups_first() -> None:
     ]
     assert groups[3]["ref_prim"] == 1 and groups[3]["test_prim"] is None
     assert verify.explain(cls, ["x"] * 6, np.full(6, BG, dtype=np.uint64), t, rows, cols)[0]["ref_prim"] is None
+
+
+def _fan(wedges: int) -> list[list[list[float]]]:
+    """`wedges` coplanar triangles around the apex V at PX's center, spanning 300 degrees: every
+    edge through V is closed except the first and the last (mesh boundaries)."""
+    v = [-1.75, 1.75, 0.0]
+    rim = [[v[0] + 2 * math.cos(a), v[1] + 2 * math.sin(a), 0.0] for a in np.radians(np.linspace(0, 300, wedges + 1))]
+    return [[v, rim[i], rim[i + 1]] for i in range(wedges)]
+
+
+def test_the_outline_search_stops_after_max_patch_triangles(tmp_path: Path) -> None:
+    """The walk from wedge 1 (its edges through V both closed) goes first towards the last wedge,
+    whose edge is an outline. Wedge k is reached with 2 + (k - 1) triangles seen (wedges 0 and
+    1..k), and looked at while no more than MAX_PATCH are: a last wedge MAX_PATCH - 1 is
+    reached, one more and the patch counts as closed."""
+    n = verify.MAX_PATCH
+    s = _scene(tmp_path / "in", _fan(n))
+    cls, why = _one(s, 1, BG, eps=0.5)
+    assert cls == "edge" and f"a mesh boundary edge of prim {n - 1}" in why, why
+    s = _scene(tmp_path / "out", _fan(n + 1))
+    assert _one(s, 1, BG, eps=0.5)[0] == "crack"
