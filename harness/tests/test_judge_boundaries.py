@@ -409,3 +409,21 @@ def test_the_outline_search_stops_after_max_patch_triangles(tmp_path: Path) -> N
     assert cls == "edge" and f"a mesh boundary edge of prim {n - 1}" in why, why
     s = _scene(tmp_path / "out", _fan(n + 1))
     assert _one(s, 1, BG, eps=0.5)[0] == "crack"
+
+
+def test_the_outline_search_follows_every_neighbor_across_a_shared_edge(tmp_path: Path) -> None:
+    """A non-manifold edge: S, X and P fan around V (PX's center), and D lies over X on the edge
+    V-C that X and P share; D's other edge through V is a mesh boundary. The walk reaches X and
+    P first, and from each of them sees across V-C one neighbor already queued (P or X) before
+    D: D must still be visited, and its outline makes the miss an edge."""
+    v = [-1.75, 1.75, 0.0]
+    a, b, c, d = ([v[0] + 3 * math.cos(t), v[1] + 3 * math.sin(t), 0.0] for t in np.radians([0, 120, 240, 300]))
+    s_, x_, p_, d_ = [v, a, b], [v, c, a], [v, b, c], [v, c, d]
+    s = _scene(tmp_path, [s_, x_, p_, d_])
+    topo = verify.topology(s.triangles)
+    assert [t for t, _ in topo.neighbors(2, 2)] == [1, 3]  # P across V-C: X, then D
+    cls, why = _one(s, 0, BG, eps=0.5)
+    assert cls == "edge" and "a mesh boundary edge of prim 3 (reached from prim 0)" in why, why
+    # Without D the fan is closed all round: a crack.
+    s = _scene(tmp_path / "closed", [s_, x_, p_])
+    assert _one(s, 0, BG, eps=0.5)[0] == "crack"
