@@ -65,11 +65,17 @@ def test_the_metamorphic_edge_band_is_closed_at_edge_px(tmp_path: Path) -> None:
 
     res = ids.compare_ids(ref, {"id.prim": test}, _model(edge_px=0.5), edge_distance=edge_distance)
     assert calls == [3]
+    assert res.explanations == []  # the metamorphic comparison explains nothing
     assert (res.edge, res.interior, res.tie, res.crack) == (1, 2, 0, 0)
-    assert res.classes is not None and res.classes.tolist() == [
-        [-1, verify.EDGE, verify.INTERIOR, -1],
-        [-1, -1, -1, verify.INTERIOR],
-    ]
+    assert (
+        res.classes is not None
+        and res.classes.dtype == np.int8
+        and res.classes.tolist()
+        == [
+            [-1, verify.EDGE, verify.INTERIOR, -1],
+            [-1, -1, -1, verify.INTERIOR],
+        ]
+    )
     assert res.edge_mask.tolist() == [[False, True, False, False], [False] * 4]
     assert res.details == [
         "1 pixels carry IDs naming no triangle (scene has 1)",
@@ -102,6 +108,7 @@ def test_the_verifier_gets_the_renderers_eps_slack_and_depth_tolerance(
     test_prim[4, 4] = 1
     test_prim[4, 6] = 0  # ... the test saw prim 0 at depth 3 (not on its plane: Z judges that)
     test_z[4, 6] = 3.0
+    test_z[4, 4] = 4.5  # where both saw something, the reference's depth is the one used
     seen: dict[str, Any] = {}
 
     def extra(ctx: tolerance.EdgeContext) -> tuple[np.ndarray, str]:
@@ -133,7 +140,11 @@ def test_the_verifier_gets_the_renderers_eps_slack_and_depth_tolerance(
     assert args[7] is ref.topology_cache and args[8] == "the test renderer"
     assert args[9] == max(expect_norm.tolist()) * 0.5  # the eye uncertainty: the largest position error
     assert seen["position"] == (0.0, 4.0, expect_norm.tolist())
-    assert res.tolerance.startswith("edge: pixel center within 0.25 px of a triangle edge (E) + X; tie: both")
+    assert res.tolerance == (
+        "edge: pixel center within 0.25 px of a triangle edge (E) + X; tie: both triangles cover the center and "
+        "their depths agree within the depth tolerance; crack: a leak through a closed edge (allowed only where the "
+        "backend declares it); id.object not compared (missing on one side)"
+    )
 
 
 def test_origin_offset_eye_norm_and_point_norm(tmp_path: Path) -> None:
@@ -162,13 +173,18 @@ def test_classes_counts_and_masks_of_the_verifier_path(tmp_path: Path) -> None:
     test[7, 8] = 1  # across the shared edge: edge
     test[5, 8] = 2  # the duplicate: tie
     test[6, 8] = 0  # the reference saw background 1.5 px inside a, 1.5 px from its edge y = 0: interior
+    test[4, 8] = 0  # ... and 1.41 px from a's slanted edge: interior too
     res = ids.compare_ids(ref, {"id.prim": test}, _model(0.5))
-    assert (res.edge, res.tie, res.crack, res.interior) == (1, 1, 0, 1)
+    assert (res.edge, res.tie, res.crack, res.interior) == (1, 1, 0, 2)
     allowed = np.zeros((16, 16), dtype=bool)
     allowed[7, 8] = allowed[5, 8] = True
     assert np.array_equal(res.edge_mask, allowed)
-    assert res.interior_mask.sum() == 1 and res.interior_mask[6, 8]
-    assert res.details[0].startswith("interior e.g. (8,6) ref bg test 0: center 1.5 px inside the boundary of prim 0")
+    assert res.interior_mask.sum() == 2 and res.interior_mask[6, 8] and res.interior_mask[4, 8]
+    assert res.details == [
+        "interior e.g. (8,4) ref bg test 0: center 1.41 px inside the boundary of prim 0 (allowed 0.5 px); the "
+        "reference saw background: interior; (8,6) ref bg test 0: center 1.5 px inside the boundary of prim 0 "
+        "(allowed 0.5 px); the reference saw background: interior"
+    ]
     # A crack: the test saw the background through the closed edge, 0.5 px from it.
     test2 = prim.copy()
     test2[7, 8] = BG
@@ -202,11 +218,26 @@ def test_object_ids_must_follow_prim_ids(tmp_path: Path) -> None:
         }
     ]
     assert res.tolerance.endswith("; id.object must match wherever id.prim does")
-    # Where the prims differ, the objects may too: judged by the prim's class alone.
+    assert res.tolerance == (
+        "edge: pixel center within 0 px of a triangle edge (E); tie: both triangles cover the center and their depths "
+        "agree within the depth tolerance; crack: a leak through a closed edge (allowed only where the backend "
+        "declares it); id.object must match wherever id.prim does"
+    )
+    # Where the prims differ, the objects may too: judged by the prim's class alone; an object
+    # mismatch elsewhere adds to it, and its explanation comes first.
     t_prim = prim.copy()
     t_prim[0, 0] = BG
     res = ids.compare_ids(ref, {"id.prim": t_prim, "id.object": obj.copy()}, _model())
     assert res.interior == 1 and res.explanations[0]["class"] == "interior" and res.explanations[0]["ref_prim"] == 0
+    res = ids.compare_ids(ref, {"id.prim": t_prim, "id.object": t_obj}, _model())
+    assert res.interior == 3 and res.interior_mask.tolist() == [[True, True, False], [False, False, True]]
+    assert [g["ref_prim"] for g in res.explanations] == [None, 0]
+    # The reference without id.object: not compared, whatever the test wrote.
+    ref2 = Reference(ref.scene, {"id.prim": prim}, (2, 3))
+    res = ids.compare_ids(ref2, {"id.prim": prim.copy(), "id.object": t_obj}, _model())
+    assert res.interior == 0 and res.tolerance.endswith("; id.object not compared (missing on one side)")
+    res = ids.compare_ids(ref2, {"id.prim": prim.copy(), "id.object": t_obj}, _model(), edge_distance=lambda *a: a[0])
+    assert res.explanations == [] and res.tolerance.endswith("; id.object not compared (missing on one side)")
 
 
 # =========================================================================== depth.py
@@ -357,12 +388,15 @@ def test_own_plane_pixels_that_cannot_be_judged_are_counted_by_reason(tmp_path: 
     )
     own = depth.own_plane_depths(ref, {"Z": z}, np.ones((1, 4), bool), np.zeros((1, 4), bool), _model(), {}, {})
     assert own.not_comparable == {"the test wrote no id.prim: its triangle there is unknown": 4}
+    assert (own.idx.size, own.beyond.size, own.max_abs, own.details, own.tolerance) == (0, 0, 0.0, [], "")
     own = depth.own_plane_depths(ref, {"Z": z}, np.ones((1, 4), bool), np.ones((1, 4), bool), _model(), {}, {})
     assert own.not_comparable == {}
 
 
 def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> None:
-    ref = _ref(tmp_path, [BIG], {}, size=(4, 4))
+    d = write_scene(tmp_path / "s", [BIG], eye=(0.1, 0.0, 4.0), vfov_deg=90.0, width=4, height=4)
+    ref = Reference(resolved.load(d), {}, (4, 4))
+    eye = float(np.linalg.norm([0.1, 0.0, 4.0]))
     seen: list[tolerance.DepthContext] = []
 
     def dm(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
@@ -372,8 +406,9 @@ def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> N
     fn = depth.depth_tolerance_fn(ref, tolerance.Model("m", 0.0, "", dm), {"info": {"q": 1}}, {"a": 1})
     assert fn(np.array([-2.0, 3.0]), np.array([0.5, 0.25])).tolist() == [-1.0, 0.75]
     ctx = seen[0]
-    assert ctx.point_norm is not None and ctx.point_norm.tolist() == [6.0, 7.0]  # |z| + |eye|
-    assert (ctx.pixel_size, ctx.eye_norm, ctx.origin_offset, ctx.info, ctx.attrs) == (0.5, 4.0, 0.0, {"q": 1}, {"a": 1})
+    assert ctx.point_norm is not None and ctx.point_norm.tolist() == [2.0 + eye, 3.0 + eye]  # |z| + |eye|
+    assert (ctx.pixel_size, ctx.eye_norm, ctx.info, ctx.attrs) == (0.5, eye, {"q": 1}, {"a": 1})
+    assert ctx.origin_offset == ids.origin_offset(ref) > 0.0
 
     def broken(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
         raise tolerance.ToleranceError("no")
@@ -442,6 +477,20 @@ def test_the_normal_angle_band_and_the_models_cond(tmp_path: Path) -> None:
     assert e.interior_mismatches == 1
 
 
+def test_cond_is_the_product_of_the_edge_lengths_over_the_cross(tmp_path: Path) -> None:
+    """|e1| = 1, |e2| = 4 at a right angle: cond = 1, the f32 model allows 14u; 10u passes."""
+    tall = [[0, 0, 0], [1, 0, 0], [0, 4, 0]]
+    e, _ = _normals(tmp_path, [tall], np.array([[_rot(10 * U)]]), np.array([[0]], dtype=np.uint32), spec_name=None)
+    assert e.interior_mismatches == 0
+
+
+def test_the_angle_of_a_normal_that_is_not_unit_is_its_direction(tmp_path: Path) -> None:
+    """|N| = 0.5 fails the unit test, and the angle recorded is the direction's own (0.3 rad)."""
+    n = np.array([[[0.5 * c for c in _rot(0.3)]]])
+    e, _ = _normals(tmp_path, [XY], n, np.array([[0]], dtype=np.uint32))
+    assert e.interior_mismatches == 1 and e.max_angle_rad == pytest.approx(0.3, abs=1e-12)
+
+
 def test_a_spec_brings_its_own_normal_model(tmp_path: Path) -> None:
     """raster's N is the f64 cross product rounded once (4u): 5u fails there, passes the f32 model."""
     prim = np.array([[0]], dtype=np.uint32)
@@ -490,10 +539,11 @@ def test_normal_failures_are_counted_and_explained(tmp_path: Path) -> None:
     # The first failure a zero vector; then one merely perpendicular, and one short but not zero.
     n2 = n.copy()
     n2[0, 1] = [0, 0, 0]
+    n2[0, 2] = [0, 0, 2]  # the second failure: twice too long
     e, judged = _normals(tmp_path / "zero", [XY, SLIVER, YZ], n2, prim)
     assert e.explanations is not None
     assert e.explanations[0]["why"] == "N is the zero vector or not finite (|N| = 0), not normalize((b-a) x (c-a))"
-    assert judged.details[0].startswith("4 normals off, 0 of them facing the other way, 3 zero or not finite")
+    assert judged.details[0].startswith("4 normals off, 0 of them facing the other way, 2 zero or not finite")
     n3 = np.zeros((1, 2, 3))
     n3[0, 0] = [1, 0, 0]
     n3[0, 1] = [0, 0, 0.5]
@@ -503,10 +553,14 @@ def test_normal_failures_are_counted_and_explained(tmp_path: Path) -> None:
     assert judged.details[0].startswith("2 normals off, 0 of them facing the other way, 0 zero or not finite")
 
 
-def test_a_degenerate_triangle_has_no_normal_to_match(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("spec", "bad"), [("raster", 1), (None, 0)])
+def test_a_degenerate_triangle_has_no_normal_to_match(tmp_path: Path, spec: str | None, bad: int) -> None:
+    """|e1 x e2| = 0: no direction to match, the angle is recorded as pi. The core (f64 cross
+    product) fails it; in f32 arithmetic the rounded cross product of a degenerate triangle may
+    point anywhere, and the f32 model's room, 8u cond with cond infinite, says so."""
     line = [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
-    e, _ = _normals(tmp_path, [line], np.array([[[0.0, 0.0, 1.0]]]), np.array([[0]], dtype=np.uint32))
-    assert (e.interior_mismatches, e.max_angle_rad) == (1, math.pi)
+    e, _ = _normals(tmp_path, [line], np.array([[[0.0, 0.0, 1.0]]]), np.array([[0]], dtype=np.uint32), spec)
+    assert (e.interior_mismatches, e.max_angle_rad) == (bad, math.pi)
 
 
 def test_normals_skip_without_buffers_and_count_only_named_triangles(tmp_path: Path) -> None:
@@ -543,3 +597,14 @@ def test_compare_normals_gives_a_verdict(tmp_path: Path) -> None:
     assert "2.4e-07" in e.reason  # raster's model (4u), not the f32 one
     e = normals.compare_normals("s", "raster", {}, ref, {"id.prim": prim}, exps, spec)
     assert e.status == vocab.Status.SKIPPED and e.reason == "raster writes no N"
+
+
+def test_a_float32_normal_is_judged_in_float64(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """N = (a, b, 0) stored in f32 with |N| = 1 + 4u + 6e-8 in f64: beyond the unit band, though its
+    length taken in f32 rounds to 1 + 4u and would pass. Its triangle's normal is exactly along N."""
+    monkeypatch.setattr(normals.precision, "normal_tolerance", lambda spec, cond: (np.full(cond.shape, 1e-12), "t"))
+    a, b = 0.8426332473754883, 0.5384884476661682
+    n = np.array([[[a, b, 0.0]]], dtype=np.float32)
+    assert float(np.linalg.norm(n.astype(np.float64))) > 1 + 4 * U + 1e-12 >= float(np.linalg.norm(n[0, 0]))
+    e, _ = _normals(tmp_path, [[[0, 0, 0], [-b, a, 0], [0, 0, 1]]], n, np.array([[0]], dtype=np.uint32))
+    assert e.interior_mismatches == 1 and e.max_angle_rad is not None and e.max_angle_rad < 1e-12

@@ -58,6 +58,8 @@ def test_shift_depth_without_a_span_caps_at_max_rel_of_depth() -> None:
     assert got.tolist() == [5.0 * tl.MAX_REL, 2e-6, 5.0 * tl.MAX_REL]
     # a move larger than the cap is the floor of the cap
     assert tl.shift_depth(_ctx([5.0], [0.0]), np.array([1.0])).tolist() == [1.0]
+    # a move so large that dividing by the floor of |cos| overflows: capped, quietly
+    assert tl.shift_depth(_ctx([5.0], [0.0]), np.array([1e10])).tolist() == [1e10]
     # non-finite results (an infinite depth) count as nothing rather than poisoning the tolerance
     assert tl.shift_depth(_ctx([math.inf], [0.5]), np.array([math.inf])).tolist() == [0.0]
 
@@ -119,9 +121,17 @@ def test_eye_uncertainty_is_the_largest_position_error() -> None:
     m = _model(position=pos)
     assert m.eye_uncertainty(0.5, 2.0, np.array([1.0, 3.0, 2.0])) == 6.5
     assert m.eye_uncertainty(0.5, 2.0, np.zeros(0)) == 0.0
+    assert m.eye_uncertainty(0.5, 2.0, np.array([1.0])) == 2.5
     assert _model().eye_uncertainty(0.5, 2.0, np.array([1.0])) == 0.0
     neg = _model(position=lambda o, e, p: -np.ones_like(p))
     assert neg.eye_uncertainty(0.0, 0.0, np.array([1.0])) == 0.0  # max(..., initial=0)
+
+
+def test_embree_adds_room_for_its_f32_ray_origin() -> None:
+    """Its intersection's relative term, plus the shift of rays starting at the f32-rounded eye."""
+    base = tl.embree_depth(_ctx([5.0], [1.0]))[0]
+    moved = tl.embree_depth(_ctx([5.0], [1.0], origin_offset=1e-3, depth_span=np.array([1.0])))[0]
+    assert base[0] > 0.0 and moved[0] > base[0]
 
 
 def test_exact_and_strict_models() -> None:
@@ -147,6 +157,7 @@ def test_render_param_prefers_attributes_and_accepts_only_finite_numbers() -> No
     assert tl.render_param({"k": "nan"}, {"k": "2"}, "k") == 2.0
     assert tl.render_param({"k": math.inf}, {"k": "x"}, "k") is None
     assert tl.render_param({"k": "abc"}, {"k": [1]}, "k") is None
+    assert tl.render_param({"k": "abc"}, {"k": 3}, "k") == 3.0
     assert tl.render_param({}, {}, "k") is None
     assert tl.param(_ctx([1.0], [1.0], attrs={"a": "7"}, info={"a": 8}), "a") == 7.0
     assert tl.param(_ctx([1.0], [1.0], info={"a": 8}), "a") == 8.0
@@ -168,7 +179,10 @@ def test_normal_models() -> None:
     assert tol.tolist() == [4 * U, 4 * U] and text.startswith("angle <= 4 * 2^-24")
     tol, text = tl.f32_normals(cond)
     assert tol.tolist() == [8 * U + 6 * U, 8 * U * 16.0 + 6 * U]
-    assert text.startswith("angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24")
+    assert text == (
+        "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "
+        "slivers amplify the cross product's rounding)"
+    )
 
 
 def test_rgb_models() -> None:
@@ -179,6 +193,8 @@ def test_rgb_models() -> None:
     t = tl.rgb_fallback("nova", {"rgb_encoding": "float32"})
     assert (t.abs_tol, t.rel) == (0.0, 4 * U)
     assert t.text == "float32: |dL| <= 2.38e-07*|L| (4 ulps) (no RGB model for 'nova'; its EXR says float32)"
+    t = tl.rgb_fallback("nova", ["rgb_encoding"])  # type: ignore[arg-type]  # attributes unreadable
+    assert (t.abs_tol, t.rel) == (0.0, 0.0)
     t = tl.rgb_fallback("nova", {"rgb_encoding": "half"})
     assert (t.abs_tol, t.rel) == (0.0, 0.0)
     assert t.text == "exact: no RGB precision model for backend 'nova' in the registry (renderers/registry.py)"
