@@ -365,9 +365,87 @@ def test_pixels_of_another_prim_are_judged_on_the_tests_own_plane_inclusive(tmp_
         "(1,0) prim 1 plane 4 test 4.5 |d| 0.5 > tol 0.5, (2,0) prim 1 plane 4 test 4.5 |d| 0.5 > tol 0.5"
     ]
     assert "(3 pixels)" in res.tolerance
-    # Not asked (the metamorphic comparison): nothing judged on its own plane.
+    # Not asked (the metamorphic comparison, and the default): nothing judged on its own plane.
     res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(), own_plane=False)
-    assert (res.own_plane, res.interior, res.not_comparable) == (0, 0, {})
+    assert (res.own_plane, res.interior, res.not_comparable, res.own_plane_max_abs) == (0, 0, {}, 0.0)
+    res = depth.compare_depth(ref, {"Z": tz, "id.prim": tp}, _model(), {"info": {}}, {}, None)
+    assert res.own_plane == 0
+    # The worst first: by |d| over the tolerance, which grows with |cos| here (largest at column 1,
+    # the one whose ray is nearest the plane's normal).
+    tz[0, 1] = 4.5
+    tz[0, 2] = 4.5
+
+    def by_cos(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
+        return 0.1 * ctx.cos, "D"
+
+    own = depth.own_plane_depths(
+        ref,
+        {"Z": tz, "id.prim": tp},
+        np.ones((1, 3), bool),
+        np.zeros((1, 3), bool),
+        tolerance.Model("m", 0, "", by_cos),
+        {},
+        {},
+    )
+    assert own.details[0].split("worst ")[1].startswith("(2,0) prim 1 plane 4 test 4.5 |d| 0.5 > tol 0.0")
+    assert ", (1,0) prim 1 plane 4 test 4.5 |d| 0.5 > tol 0.1" in own.details[0]
+    assert own.tolerance == "D" and own.max_abs == 0.5 and own.beyond.tolist() == [1, 2]
+
+
+def test_own_plane_depth_is_the_planes_depth_rounded_to_f32(tmp_path: Path) -> None:
+    """A tilted triangle, the test's depth solved here as a ray-triangle system (not the judge's
+    formula) and stored in f32: exact models pass it; 1e-3 more fails; its depth 0.5 (< 1) is judged;
+    a plane through the eye (depth 0) and one along the ray are not comparable."""
+    tilted = [[-8.0, -8.0, -1.0], [8.0, -8.0, 0.3], [0.0, 8.0, 1.7]]
+    near = [[-20, -20, 3.5], [20, -20, 3.5], [0, 20, 3.5]]  # depth 0.5
+    through = [[-20, 0, -20], [20, 0, -20], [0, 0, 20]]  # the plane y = 0 holds the eye
+    ref = _ref(tmp_path, [BIG, tilted, near, through], {}, size=(2, 2))
+    cam = ref.scene.camera
+    rows, cols = np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1])
+    d = cam.center_directions(rows, cols)
+    t = ref.scene.triangles[1].astype(np.float64)
+    depths = []
+    for k in range(2):  # eye + z d = a + u (b - a) + v (c - a)
+        m = np.stack([d[k], t[0] - t[1], t[0] - t[2]], axis=1)
+        depths.append(np.linalg.solve(m, t[0] - cam.eye)[0])
+    z = np.full((2, 2), 4.0, dtype=np.float32)
+    prim = np.zeros((2, 2), dtype=np.uint32)
+    tz = np.array([[depths[0], depths[1]], [0.5, 4.0]], dtype=np.float32)
+    tp = np.array([[1, 1], [2, 3]], dtype=np.uint32)
+    ref = Reference(ref.scene, {"Z": z, "id.prim": prim}, (2, 2))
+    res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(), own_plane=True)
+    assert (res.own_plane, res.own_plane_beyond, res.interior) == (3, 0, 0)
+    assert res.not_comparable == {"the pixel ray runs along (or away from) the test's triangle's plane": 1}
+    tz[0, 1] += np.float32(1e-3)
+    res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(), own_plane=True)
+    assert (res.own_plane_beyond, res.interior) == (1, 1)
+
+
+def test_a_ray_along_the_tests_plane_is_not_comparable_and_quiet(tmp_path: Path) -> None:
+    """One pixel, its ray (0, 0, -1) along the plane x = 1: n . d = 0, no depth, no warning."""
+    wall = [[1, -5, -5], [1, 5, -5], [1, 0, 5]]
+    z = np.full((1, 1), 4.0, dtype=np.float32)
+    ref = _ref(tmp_path, [BIG, wall], {"Z": z, "id.prim": np.zeros((1, 1), np.uint32)}, size=(1, 1))
+    res = _depth(ref, {"Z": z.copy(), "id.prim": np.ones((1, 1), np.uint32)}, _model(), own_plane=True)
+    assert res.not_comparable == {"the pixel ray runs along (or away from) the test's triangle's plane": 1}
+
+
+def test_same_prim_pixels_need_a_valid_reference_prim(tmp_path: Path) -> None:
+    """Depth is compared where both hit the same valid prim; without the test's ids, where both hit
+    and the reference names a valid prim; a reference without ids compares every common hit."""
+    z = np.full((1, 4), 4.0, dtype=np.float32)
+    rp = np.array([[0, BG, 1, 0]], dtype=np.uint32)  # 1: one past the last triangle
+    ref = _ref(tmp_path, [BIG], {"Z": z, "id.prim": rp}, size=(1, 4))
+    tz = z.copy()
+    tz[0, 3] = np.inf  # the test missed there
+    res = _depth(ref, {"Z": tz, "id.prim": rp.copy()}, _model())
+    assert (res.compared, res.mask, res.interior) == (1, 1, 1)
+    res = _depth(ref, {"Z": tz}, _model())
+    assert (res.compared, res.mask, res.interior) == (1, 1, 1)
+    assert "compared where both hit (no id.prim on the test side: prims not checked)" in res.tolerance
+    ref2 = Reference(ref.scene, {"Z": z}, (1, 4))
+    res = _depth(ref2, {"Z": tz, "id.prim": rp.copy()}, _model())
+    assert (res.compared, res.mask) == (3, 1)
 
 
 def test_own_plane_pixels_that_cannot_be_judged_are_counted_by_reason(tmp_path: Path) -> None:
@@ -375,7 +453,7 @@ def test_own_plane_pixels_that_cannot_be_judged_are_counted_by_reason(tmp_path: 
     z = np.full((1, 4), 4.0, dtype=np.float32)
     prim = np.zeros((1, 4), dtype=np.uint32)
     ref = _ref(tmp_path, [BIG, behind], {"Z": z, "id.prim": prim}, size=(1, 4))
-    tp = np.array([[5, 1, 1, 0]], dtype=np.uint32)
+    tp = np.array([[2, 1, 1, 0]], dtype=np.uint32)  # 2: one past the last triangle
     res = _depth(ref, {"Z": z.copy(), "id.prim": tp}, _model(), own_plane=True)
     assert res.not_comparable == {
         "the pixel ray runs along (or away from) the test's triangle's plane": 2,
@@ -407,6 +485,8 @@ def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> N
     assert fn(np.array([-2.0, 3.0]), np.array([0.5, 0.25])).tolist() == [-1.0, 0.75]
     ctx = seen[0]
     assert ctx.point_norm is not None and ctx.point_norm.tolist() == [2.0 + eye, 3.0 + eye]  # |z| + |eye|
+    ctx2 = depth.depth_context(ref, np.array([0]), np.array([0]), np.array([4.0]), np.array([0]), {}, {})
+    assert ctx2.origin_offset == ids.origin_offset(ref) > 0.0
     assert (ctx.pixel_size, ctx.eye_norm, ctx.info, ctx.attrs) == (0.5, eye, {"q": 1}, {"a": 1})
     assert ctx.origin_offset == ids.origin_offset(ref) > 0.0
 
