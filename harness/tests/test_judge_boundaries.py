@@ -427,3 +427,15 @@ def test_the_outline_search_follows_every_neighbor_across_a_shared_edge(tmp_path
     # Without D the fan is closed all round: a crack.
     s = _scene(tmp_path / "closed", [s_, x_, p_])
     assert _one(s, 0, BG, eps=0.5)[0] == "crack"
+
+
+def test_the_slack_boundary_is_taken_in_f64_from_the_f32_vertices(tmp_path: Path) -> None:
+    """Corners whose f32 differences round (3.3 - -3.1 needs more bits than f32 has): the plane
+    z = 0 is 4 from the eye, and the edge-on test |det| <= slack |(b - a) x (c - a)| must hold
+    at 4 (1 + 1e-9) and fail at 4 (1 - 1e-9), as computed in f64, where f32 would err ~1e-7."""
+    a = [[-3.1, 0.1, 0], [3.3, 0.1, 0], [0.2, 3.7, 0]]
+    b = [[3.3, 0.1, 0], [-3.1, 0.1, 0], [0.3, -2.9, 0]]
+    s = _scene(tmp_path, [a, b])
+    px = (8, 7)  # center (8.5, 7.5): 0.3 px above the shared edge y = 0.1 (py 7.8)
+    assert _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 - 1e-9))[0] == "crack"
+    assert _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 + 1e-9))[0] == "edge"
