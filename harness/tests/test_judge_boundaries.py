@@ -439,3 +439,15 @@ def test_the_slack_boundary_is_taken_in_f64_from_the_f32_vertices(tmp_path: Path
     px = (8, 7)  # center (8.5, 7.5): 0.3 px above the shared edge y = 0.1 (py 7.8)
     assert _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 - 1e-9))[0] == "crack"
     assert _one(s, 0, BG, px=px, eps=0.5, eye_slack=4.0 * (1 + 1e-9))[0] == "edge"
+
+
+def test_a_neighbor_seen_edge_on_does_not_close_the_edge(tmp_path: Path) -> None:
+    """FOLD_A's edge y = 0 with a neighbor hanging straight down in the plane y = 0, which holds
+    the eye: the renderer sees it edge-on, on neither side, so the edge is an outline."""
+    hanging = [[3, 0, 0], [-3, 0, 0], [0, 0, -3]]
+    s = _scene(tmp_path, [FOLD_A, hanging])
+    eye = np.array([0.0, 0.0, 4.0])
+    a, b = np.array(FOLD_A[0], dtype=np.float64), np.array(FOLD_A[1], dtype=np.float64)
+    assert verify._side(eye, a, b, np.array([0.0, 0.0, -3.0]), 0.0) == 0
+    cls, why = _one(s, 0, BG, px=(8, 7), eps=0.5)
+    assert cls == "edge" and "a silhouette edge" in why, why
