@@ -22,7 +22,8 @@ import pytest
 
 from fixtures import write_scene
 from rendiff_harness.contract import resolved, vocab
-from rendiff_harness.judge import verify
+from rendiff_harness.contract.camera import Camera
+from rendiff_harness.judge import geometry, verify
 
 BG = vocab.BACKGROUND_ID
 PX = (4, 4)  # center (4.5, 4.5): world (-1.75, 1.75) on z = 0
@@ -451,3 +452,68 @@ def test_a_neighbor_seen_edge_on_does_not_close_the_edge(tmp_path: Path) -> None
     assert verify._side(eye, a, b, np.array([0.0, 0.0, -3.0]), 0.0) == 0
     cls, why = _one(s, 0, BG, px=(8, 7), eps=0.5)
     assert cls == "edge" and "a silhouette edge" in why, why
+
+
+# --------------------------------------------------------------------------- clipping at near and far
+
+
+def _visible_distances(
+    cam: Camera, tri: np.ndarray, near: float, far: float, cx: np.ndarray, cy: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The spec of side_geometry's edge and vertex distances, written apart: each edge's part with
+    near <= depth <= far, projected, its distance from each center (inf: none visible); each vertex
+    within [near, far], its distance (inf otherwise)."""
+    ct = cam.to_camera(tri)
+    edge = np.full((cx.size, 3), np.inf)
+    vert = np.full((cx.size, 3), np.inf)
+    for i in range(3):
+        a, b = ct[i], ct[(i + 1) % 3]
+        dz = b[2] - a[2]
+        if dz == 0:
+            lo, hi = (0.0, 1.0) if near <= a[2] <= far else (1.0, 0.0)
+        else:
+            tn, tf = (near - a[2]) / dz, (far - a[2]) / dz if math.isfinite(far) else math.copysign(math.inf, dz)
+            lo, hi = (max(0.0, tn), min(1.0, tf)) if dz > 0 else (max(0.0, tf), min(1.0, tn))
+        if lo <= hi:
+            p, q = (cam.to_pixel(*(a + t * (b - a))) for t in (lo, hi))
+            edge[:, i] = geometry.segment_distance(cx, cy, np.tile(p, (cx.size, 1)), np.tile(q, (cx.size, 1)))
+        if near <= a[2] <= far:
+            pv = cam.to_pixel(*a)
+            vert[:, i] = np.hypot(pv[0] - cx, pv[1] - cy)
+    return edge, vert
+
+
+CLIP_CASES = {
+    # name: (near, far, triangles); eye (0, 0, 4) looking down -z: depth = 4 - z
+    "crossing near and far": (1.0, 6.0, [[[0, -1, 2], [2, -1, 4], [0, 1, 2]], [[0, 0, -4], [1, 1, 0], [-1, 1, -4]]]),
+    "flat edges on near and far": (
+        1.0,
+        6.0,
+        [[[-1, -1, 3], [1, -1, 3], [0, 1, 0]], [[-1, -1, -2], [1, -1, -2], [0, 1, 0]]],
+    ),
+    "flat edges beyond near and far": (
+        1.0,
+        6.0,
+        [[[-1, -1, 3.5], [1, -1, 3.5], [0, 1, 0]], [[-1, -1, -3], [1, -1, -3], [0, 1, 0]]],
+    ),
+    "near at 0.5": (0.5, None, [[[0, -1, 2], [2, -1, 3.75], [0, 1, 3.25]]]),
+    "far equal to near": (2.0, 2.0, [[[0, -1, -1], [2, -1, 3], [0, 1, 1]]]),
+    # one vertex exactly on the plane, the others beyond: each edge through it is visible as a point
+    "touching near and far": (1.0, 6.0, [[[0, 0, -2], [1, 0, -4], [0, 1, -4]], [[0, 0, 3], [1, 0, 3.5], [0, 1, 3.5]]]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CLIP_CASES))
+def test_edge_and_vertex_distances_see_only_what_lies_between_near_and_far(tmp_path: Path, case: str) -> None:
+    near, far, tris = CLIP_CASES[case]
+    d = write_scene(tmp_path, tris, eye=(0.0, 0.0, 4.0), vfov_deg=90.0, width=16, height=16, near=near, far=far)
+    s = resolved.load(d)
+    cols, rows = (g.ravel() for g in np.meshgrid(np.arange(-8, 25, 4), np.arange(-8, 25, 4)))
+    cx, cy = s.camera.pixel_centers(cols, rows)
+    eff_far = far if far is not None and far > near else math.inf
+    for prim in range(len(tris)):
+        g = verify.side_geometry(s, np.full(cols.size, prim), rows, cols)
+        edge, vert = _visible_distances(s.camera, s.triangles[prim].astype(np.float64), near, eff_far, cx, cy)
+        assert np.allclose(g.edge_d, edge, rtol=1e-9, atol=1e-9), (prim, g.edge_d, edge)
+        assert np.array_equal(np.isinf(g.vert_d), np.isinf(vert)) and np.allclose(g.vert_d, vert, rtol=1e-12), prim
+        assert np.isfinite(g.edge_d).any(), prim  # something of every triangle is visible
