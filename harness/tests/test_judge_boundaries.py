@@ -517,3 +517,43 @@ def test_edge_and_vertex_distances_see_only_what_lies_between_near_and_far(tmp_p
         assert np.allclose(g.edge_d, edge, rtol=1e-9, atol=1e-9), (prim, g.edge_d, edge)
         assert np.array_equal(np.isinf(g.vert_d), np.isinf(vert)) and np.allclose(g.vert_d, vert, rtol=1e-12), prim
         assert np.isfinite(g.edge_d).any(), prim  # something of every triangle is visible
+
+
+def test_without_a_near_plane_the_eye_plane_is_pushed_to_1e_12_of_the_scene(tmp_path: Path) -> None:
+    """near 0: a vertex counts as in front of the eye from 1e-12 x max(1, largest camera coordinate)
+    on. A unit triangle's corner at depth 1.5e-12 is in front; a size-10 one's at 5e-12 is not."""
+    unit = [[0.5, 0.5, -1.5e-12], [1, 0, -1], [0, 1, -1]]
+    big = [[0.5, 0.5, -5e-12], [10, 0, -10], [0, 10, -10]]
+    d = write_scene(tmp_path, [unit, big], eye=(0.0, 0.0, 0.0), look_at=(0.0, 0.0, -1.0), near=0.0, width=4, height=4)
+    s = resolved.load(d)
+    g0, g1 = (verify.side_geometry(s, np.array([p]), np.array([1]), np.array([1])) for p in (0, 1))
+    assert np.isfinite(g0.vert_d[0, 0]) and np.isinf(g1.vert_d[0, 0])
+    assert np.isfinite(g0.vert_d[0, 1:]).all() and np.isfinite(g1.vert_d[0, 1:]).all()
+
+
+def test_a_side_without_a_triangle_has_no_geometry(tmp_path: Path) -> None:
+    """The background or an unknown id: every distance infinite, outside, no depth, cos 0; a ray
+    along the triangle's plane has no depth either, quietly."""
+    # The plane 16 x - 7 z = -16 holds the direction (-7/16, sy, -1) of every ray of column 4.
+    wall = [[-1, -5, 0], [-1, 5, 0], [-0.125, 0, 2]]
+    d = write_scene(tmp_path, [BIG, wall], eye=(0.0, 0.0, 4.0), vfov_deg=90.0, width=16, height=16)
+    s = resolved.load(d)
+    for prims in ([BG, 5], [BG]):
+        k = len(prims)
+        g = verify.side_geometry(s, np.array(prims, dtype=np.uint32), np.zeros(k, np.int64), np.zeros(k, np.int64))
+        assert g.edge_d.shape == g.vert_d.shape == (k, 3)
+        assert np.isinf(g.edge_d).all() and np.isinf(g.vert_d).all() and np.isinf(g.poly_d).all()
+        assert not g.inside.any() and not g.valid.any() and np.isinf(g.z).all() and (g.cos == 0).all()
+    g = verify.side_geometry(s, np.array([1]), np.array([4]), np.array([4]))  # px 4.5: sx = -7/16
+    assert np.isinf(g.z[0]) and g.cos[0] == 0.0
+
+
+def test_topology_identity_is_exact_f32() -> None:
+    """Two vertices are one when their f32 coordinates are equal, whatever f64 values they came from."""
+    a = [0.1, 0.0, 0.0]
+    a2 = [0.1 + 1e-12, 0.0, 0.0]  # the same f32
+    b = [1e-8, 0.0, 1.0]  # not (0, 0, 1)
+    topo = verify.topology([[a, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], [a2, [0.0, 1.0, 0.0], b]])
+    assert topo.neighbors(0, 0) == [(1, 0)] and topo.neighbors(0, 2) == [] and topo.vertices == 4
+    empty = verify.topology(np.zeros((0, 3, 3), dtype=np.float32))
+    assert empty.vertices == 0 and empty.keys.size == 0
