@@ -557,3 +557,72 @@ def test_topology_identity_is_exact_f32() -> None:
     assert topo.neighbors(0, 0) == [(1, 0)] and topo.neighbors(0, 2) == [] and topo.vertices == 4
     empty = verify.topology(np.zeros((0, 3, 3), dtype=np.float32))
     assert empty.vertices == 0 and empty.keys.size == 0
+
+
+# --------------------------------------------------------------------------- classify_mismatches' plumbing
+
+
+def test_the_tie_band_is_inclusive(tmp_path: Path) -> None:
+    """Depths 4 and 4 - 2^-10, exact; a renderer tolerance of 2^-10 - 2^-20 plus the two f32
+    roundings 2 * 2^-23 * 4 = 2^-20 is exactly 2^-10: a tie; any less is not."""
+    lifted = [[v[0], v[1], 2.0**-10] for v in BIG]
+    s = _scene(tmp_path, [BIG, lifted])
+
+    def tol(value: float) -> verify.DepthTolerance:
+        return lambda z, cos: np.full_like(z, value)
+
+    assert _one(s, 0, 1, depth_tol=tol(2.0**-10 - 2.0**-20))[0] == "tie"
+    assert _one(s, 0, 1, depth_tol=tol(float(np.nextafter(2.0**-10 - 2.0**-20, 0.0))))[0] == "interior"
+
+
+def test_the_eye_slack_defaults_to_none(tmp_path: Path) -> None:
+    """Without an eye slack a closed edge 0.5 from the eye is closed (a crack), not edge-on."""
+    d = write_scene(tmp_path, [FOLD_A, FLAT_B], eye=(0.0, 0.0, 0.5), vfov_deg=90.0, width=16, height=16)
+    s = resolved.load(d)
+    args = (np.array([0], np.uint32), np.array([BG], np.uint32), np.array([7]), np.array([8]), 0.5, _exact)
+    assert verify.CLASSES[int(verify.classify_mismatches(s, *args).cls[0])] == "crack"
+
+
+def test_every_pixel_is_classified_whatever_comes_before_it(tmp_path: Path) -> None:
+    """An id naming no triangle, then background on both sides (no triangle either way), then a shared
+    edge: each gets its own class and sentence; classes are int8."""
+    s = _scene(tmp_path, [FOLD_A, FLAT_B])
+    n = s.triangle_count
+    res = verify.classify_mismatches(
+        s,
+        np.array([n, BG, BG, 0], np.uint32),
+        np.array([0, BG, n, 1], np.uint32),
+        np.array([7, 7, 7, 7]),
+        np.array([8, 8, 8, 8]),
+        0.5,
+        _exact,
+    )
+    assert res.cls.dtype == np.int8
+    assert [verify.CLASSES[c] for c in res.cls] == ["interior", "interior", "interior", "edge"]
+    assert res.why[:3] == [f"id {n} names no triangle (the scene has {n})", "both sides name no triangle"] + [
+        f"id {n} names no triangle (the scene has {n})"
+    ]
+    empty = verify.classify_mismatches(s, *(np.zeros(0, np.uint32),) * 2, *(np.zeros(0, np.int64),) * 2, 0.5, _exact)
+    assert empty.cls.dtype == np.int8 and empty.why == [] and empty.groups == []
+
+
+def test_the_topology_is_cached_under_topo_and_read_back(tmp_path: Path) -> None:
+    """The edge table is built once per scene: stored in the cache, and a cached one is used."""
+    s = _scene(tmp_path, [FOLD_A, FLAT_B])
+    args = (np.array([0], np.uint32), np.array([1], np.uint32), np.array([7]), np.array([8]), 0.5, _exact)
+    cache: dict[str, verify.Topology] = {}
+    assert verify.CLASSES[int(verify.classify_mismatches(s, *args, cache).cls[0])] == "edge"
+    assert set(cache) == {"topo"} and cache["topo"].vertices == 4
+    # A cached table in which the two triangles share nothing: no shared edge, the pixel is judged
+    # as the test's triangle drawn 0.5 px outside itself.
+    apart = {"topo": verify.topology(np.array([FOLD_A, [[3, 0, 1], [-3, 0, 1], [0, -3, 1]]], np.float32))}
+    res = verify.classify_mismatches(s, *args, apart)
+    assert "share" not in res.why[0], res.why[0]
+
+
+def test_explanations_put_interior_before_a_larger_crack_group() -> None:
+    cls = np.array([verify.CRACK, verify.CRACK, verify.INTERIOR], dtype=np.int8)
+    r = np.array([1, 1, 2], dtype=np.uint64)
+    t = np.array([BG, BG, 3], dtype=np.uint64)
+    groups = verify.explain(cls, ["a", "b", "c"], r, t, np.arange(3), np.arange(3))
+    assert [(g["class"], g["pixels"]) for g in groups] == [("interior", 1), ("crack", 2)]
