@@ -23,6 +23,7 @@ import pytest
 from fixtures import write_scene
 from rendiff_harness.contract import resolved, vocab
 from rendiff_harness.contract.camera import Camera
+from rendiff_harness.contract.manifest import Reference
 from rendiff_harness.judge import geometry, verify
 
 BG = vocab.BACKGROUND_ID
@@ -626,3 +627,45 @@ def test_explanations_put_interior_before_a_larger_crack_group() -> None:
     t = np.array([BG, BG, 3], dtype=np.uint64)
     groups = verify.explain(cls, ["a", "b", "c"], r, t, np.arange(3), np.arange(3))
     assert [(g["class"], g["pixels"]) for g in groups] == [("interior", 1), ("crack", 2)]
+
+
+def test_planar_depth_and_cos_agree_with_separate_computations(tmp_path: Path) -> None:
+    """side_geometry's z against a ray-triangle solve and its |cos| against Reference.ray_cos, on a
+    tilted triangle, a small one (|n| |d| < 1), one whose n . d is exactly 1, a degenerate one, one
+    whose plane holds the eye and one at depth 0.5: z is inf where there is no depth in front."""
+    tris = [
+        [[-8.0, -8.0, -1.0], [8.0, -8.0, 0.3], [0.0, 8.0, 1.7]],
+        [[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0]],
+        [[0, 0, 0], [0, 1, 0], [1, 0, 0]],
+        [[0, 0, 0], [1, 1, 0], [2, 2, 0]],
+        [[-20, 0, -20], [20, 0, -20], [0, 0, 20]],
+        [[-20, -20, 3.5], [20, -20, 3.5], [0, 20, 3.5]],
+    ]
+    s = _scene(tmp_path, tris)
+    ref = Reference(s, {}, (16, 16))
+    cols, rows = (g.ravel() for g in np.meshgrid(np.arange(0, 16, 3), np.arange(0, 16, 3)))
+    for prim in range(len(tris)):
+        prims = np.full(cols.size, prim)
+        g = verify.side_geometry(s, prims, rows, cols)
+        assert np.allclose(g.cos, ref.ray_cos(rows, cols, prims), rtol=1e-12, atol=1e-15), prim
+        t = s.triangles[prim].astype(np.float64)
+        d = s.camera.center_directions(rows, cols)
+        for k in range(cols.size):
+            m = np.stack([d[k], t[0] - t[1], t[0] - t[2]], axis=1)
+            if abs(np.linalg.det(m)) < 1e-12:
+                want = math.inf  # degenerate, or the ray along the plane
+            else:
+                z = float(np.linalg.solve(m, t[0] - s.camera.eye)[0])
+                want = z if z > 1e-9 else math.inf  # the plane through the eye: 0 up to the solve's rounding
+            assert g.z[k] == pytest.approx(want, rel=1e-12), (prim, k)
+    assert verify.side_geometry(s, np.array([2]), np.array([4]), np.array([4])).z[0] == 4.0  # n . d = 1
+
+
+def test_a_center_on_an_edge_is_inside(tmp_path: Path) -> None:
+    """The visible polygon's inside test includes its boundary: PX's center (x = -1.75) lies on the
+    edge x = -1.75 of one triangle, 0.25 px inside another, 0.25 px outside a third."""
+    on = [[-1.75, -3, 0], [3, -3, 0], [-1.75, 3, 0]]
+    s = _scene(tmp_path, [on, EDGE_NEAR_PX, RIGHT_OF_PX, [[-1.75, 3, 0], [3, -3, 0], [-1.75, -3, 0]]])
+    g = verify.side_geometry(s, np.array([0, 1, 2, 3]), np.full(4, PX[1]), np.full(4, PX[0]))
+    assert g.inside.tolist() == [True, True, False, True]  # either winding
+    assert g.poly_d.tolist() == [0.0, 0.25, 0.5, 0.0]

@@ -262,8 +262,9 @@ def test_a_hit_miss_mismatch_takes_the_class_of_its_id_mismatch(tmp_path: Path) 
     tz[0, :] = np.inf  # every pixel missed by the test
     tp = np.full((1, 5), BG, dtype=np.uint32)
     classes = np.array([[verify.EDGE, verify.TIE, verify.CRACK, verify.INTERIOR, -1]], dtype=np.int8)
-    res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(), classes)
+    res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(), classes, own_plane=True)
     assert (res.mask, res.edge, res.tie, res.crack, res.interior, res.compared) == (5, 1, 1, 1, 2, 0)
+    assert res.own_plane == 0  # a hit/miss mismatch has no depth of the test's to judge
     assert res.details == ["hit/miss mask mismatches e.g. (3,0) ref 4 test inf, (4,0) ref 4 test inf"]
     # Without the verifier's classes: the allowed mask alone (the metamorphic comparison) ...
     allowed = np.array([[True, False, False, False, True]])
@@ -298,6 +299,22 @@ def test_same_prim_depth_is_within_the_model_inclusive(tmp_path: Path) -> None:
         "D; compared where both hit the same prim; hit/miss masks exact except where the ID mismatch is an allowed "
         "class (edge, tie; crack only where declared)"
     )
+
+
+def test_same_prim_failures_are_listed_worst_first(tmp_path: Path) -> None:
+    """By |dZ| over the tolerance, which grows with |cos| here: column 2 (oblique) before column 1."""
+    z = np.full((1, 3), 4.0, dtype=np.float32)
+    prim = np.zeros((1, 3), dtype=np.uint32)
+    ref = _ref(tmp_path, [BIG], {"Z": z, "id.prim": prim}, size=(1, 3))
+    tz = z.copy()
+    tz[0, 1:] = 4.5
+
+    def by_cos(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
+        return 0.1 * ctx.cos, "D"
+
+    res = _depth(ref, {"Z": tz, "id.prim": prim.copy()}, tolerance.Model("m", 0, "", by_cos))
+    worst = res.details[-1].split("worst ")[1]
+    assert worst.startswith("(2,0) ref 4 test 4.5 |d| 0.5 > tol 0.0") and ", (1,0) ref 4 test 4.5" in worst
 
 
 def test_a_zero_reference_depth_has_a_relative_error_only_when_they_differ(tmp_path: Path) -> None:
@@ -357,7 +374,7 @@ def test_pixels_of_another_prim_are_judged_on_the_tests_own_plane_inclusive(tmp_
     tz[0, 2] = 4.5
     res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(depth_tol=0.5), own_plane=True)
     assert (res.own_plane, res.own_plane_beyond, res.own_plane_max_abs, res.interior) == (3, 0, 0.5, 0)
-    assert res.compared == 0
+    assert (res.compared, res.max_abs, res.mean_abs, res.max_rel) == (0, 0.0, 0.0, 0.0)
     res = _depth(ref, {"Z": tz, "id.prim": tp}, _model(depth_tol=float(np.nextafter(0.5, 0))), own_plane=True)
     assert (res.own_plane, res.own_plane_beyond, res.interior) == (3, 2, 2)
     assert res.details == [
@@ -517,6 +534,10 @@ def test_the_radial_hint_needs_nine_in_ten(tmp_path: Path) -> None:
         "the contract asks for (docs/DESIGN.md, Buffers)"
     )
     assert depth.radial_hint(ref, rows, cols, z_ref, z_test, tol, np.zeros(10, dtype=bool)) == ""
+    # Radial within the tolerance scaled along the ray, tol |d|: 0.9 of it still counts.
+    near_radial = np.where(np.arange(10) < 9, radial + 0.9 * tol * dn, z_ref + 1.0)
+    assert depth.radial_hint(ref, rows, cols, z_ref, near_radial, tol, beyond).startswith("9 of the 10")
+    assert (dn[:9] > 1.06).sum() >= 2  # where tol / |d| would be too narrow
     # Only the pixels beyond tolerance count: 9 radial of 9 beyond.
     only = np.arange(10) < 9
     assert depth.radial_hint(ref, rows, cols, z_ref, z_test, tol, only).startswith("9 of the 9 depths")
