@@ -186,15 +186,18 @@ def test_classes_counts_and_masks_of_the_verifier_path(tmp_path: Path) -> None:
         "(allowed 0.5 px); the reference saw background: interior"
     ]
     # A crack: the test saw the background through the closed edge, 0.5 px from it.
+    prim[7, 9] = 0  # center (9.5, 7.5): 0.5 px above the shared edge too
+    ref = _ref(tmp_path / "two", [a, b, dup], {"id.prim": prim})
     test2 = prim.copy()
-    test2[7, 8] = BG
+    test2[7, 8] = test2[7, 9] = BG
     res = ids.compare_ids(ref, {"id.prim": test2}, _model(0.5))
-    assert (res.edge, res.tie, res.crack, res.interior) == (0, 0, 1, 0)
+    assert (res.edge, res.tie, res.crack, res.interior) == (0, 0, 2, 0)
     assert res.edge_mask[7, 8] and not res.interior_mask.any()
-    assert res.details == [
-        "crack e.g. (8,7) ref 0 test bg: center 0.5 px from the closed edge prim 0 shares with prim 1, and no "
-        "outline within 0.5 px, but the test renderer saw background behind it: crack"
-    ]
+    why = (
+        "center 0.5 px from the closed edge prim 0 shares with prim 1, and no outline within 0.5 px, but the test "
+        "renderer saw background behind it: crack"
+    )
+    assert res.details == [f"crack e.g. (8,7) ref 0 test bg: {why}; (9,7) ref 0 test bg: {why}"]
 
 
 def test_object_ids_must_follow_prim_ids(tmp_path: Path) -> None:
