@@ -18,7 +18,7 @@ import pytest
 HARNESS = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent  # not resolved: the venv's bin/, where pip put the tools
 REQUIREMENTS = HARNESS / "requirements.txt"
-TOOLS = ("ruff", "mypy")
+TOOLS = ("ruff", "mypy", "mutmut")
 
 GATES = {
     "ruff check": ("ruff", "check", "."),
@@ -64,7 +64,9 @@ def test_installed_tools_are_the_pinned_ones(tool: str) -> None:
     out = subprocess.run(
         [str(_tool(tool)), "--version"], capture_output=True, text=True, timeout=120, check=True
     ).stdout
-    assert re.match(rf"{tool} {re.escape(want)}\b", out), f"{tool}: installed {out.strip()!r}, pinned {want}"
+    assert re.match(rf"{tool},? (version )?{re.escape(want)}\b", out), (
+        f"{tool}: installed {out.strip()!r}, pinned {want}"
+    )
 
 
 def test_pyproject_pins_are_the_requirements() -> None:
