@@ -104,7 +104,7 @@ fn rendiff(args: &[String], root: &Path, logs: &Path) -> Result<Timing> {
     Ok(Timing {
         seconds: o.seconds,
         code: o.code,
-        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stdout: o.stdout,
     })
 }
 
