@@ -238,6 +238,10 @@ pub fn group(
 /// after these are split by their own situation, unreduced.
 pub const MAX_REDUCTIONS_PER_GROUP: usize = 3;
 
+/// A reduction as [`split`] gets it: the record, and the situation of the
+/// reduced scene (of the scene itself when the reduction failed).
+pub type Reduced = (ReducedRecord, Vec<String>);
+
 /// One part of a (backend, buffer, class) group after [`split`].
 #[derive(Debug, Clone)]
 pub struct Part {
@@ -261,7 +265,7 @@ pub fn split(
     scenes: &[String],
     own: &dyn Fn(&str) -> Vec<String>,
     size: &dyn Fn(&str) -> u64,
-    reduce: &mut dyn FnMut(&str) -> Option<(ReducedRecord, Vec<String>)>,
+    reduce: &mut dyn FnMut(&str) -> Option<Reduced>,
 ) -> Vec<Part> {
     let mut pending: Vec<&String> = scenes.iter().collect();
     let mut parts: Vec<Part> = Vec::new();
