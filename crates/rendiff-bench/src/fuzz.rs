@@ -221,6 +221,7 @@ width = 16
 height = 16
 
 [[objects]]
+name = "probe"
 shape = { kind = "triangles", vertices = [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]] }
 "#;
 
@@ -718,20 +719,20 @@ mod tests {
             {"renders": [{"backend": "raster", "status": "ok", "time_s": 0.01},
                          {"backend": "povray", "status": "ok", "time_s": 1.0}]},
             {"renders": [{"backend": "raster", "status": "ok", "time_s": 0.03},
-                         {"backend": "povray", "status": "ok", "time_s": 0.8},
+                         {"backend": "povray", "status": "ok", "time_s": 0.5},
                          {"backend": "mitsuba", "status": "error", "time_s": 600.0}]},
         ]});
         let t = render_times(&m);
         assert_eq!(t.len(), 2, "errors are not render times: {t:?}");
         assert_eq!(t["povray"]["renders"], 2);
-        assert_eq!(t["povray"]["mean_s"], json!(0.9));
+        assert_eq!(t["povray"]["mean_s"], json!(0.75));
         assert_eq!(t["raster"]["max_s"], json!(0.03));
         assert_eq!(backends_of(&m), vec!["povray", "mitsuba"]);
-        let probe: BTreeMap<String, Value> = [("povray".to_string(), json!({"median_s": 0.72}))]
+        let probe: BTreeMap<String, Value> = [("povray".to_string(), json!({"median_s": 0.375}))]
             .into_iter()
             .collect();
         let s = startup_shares(&probe, &t);
-        assert_eq!(s["povray"]["startup_share"], json!(0.8));
+        assert_eq!(s["povray"]["startup_share"], json!(0.5));
     }
 
     #[test]
