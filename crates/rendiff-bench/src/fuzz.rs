@@ -13,9 +13,9 @@
 //!   over the runs ([`crate::measure::bootstrap_median_interval`]).
 //!   Calibration is left out: a fuzz run calibrates once, not per scene
 //!   (docs/fuzzing.md), a fixed cost the record times apart.
-//! * **Start-up share**: one check of a one-triangle 16x16 probe scene per
-//!   run; its render time per backend is what a render costs with nothing to
-//!   draw, and its ratio to the backend's mean render time on the generated
+//! * **Start-up share**: one check of [`PROBES`] copies of a one-triangle
+//!   16x16 probe scene per run; the median render time per backend is what
+//!   a render costs with nothing to draw, and its ratio to the backend's mean render time on the generated
 //!   scenes is the share start-up takes (POV-Ray's front end is most of it).
 //! * **Reduction time per finding**: a fuzz run through a planted command
 //!   renderer (`tests/fuzz_renderers/renderers.toml`, the renderers
@@ -208,6 +208,10 @@ pub fn startup_shares(
         })
         .collect()
 }
+
+/// Copies of the probe checked together: the median of their render times
+/// is a warm worker's (the first copy may pay a worker's own start).
+pub const PROBES: usize = 5;
 
 /// The probe: one 16x16 triangle, nothing else (a render of it is start-up).
 pub const PROBE_SCENE: &str = r#"description = "bench fuzz's start-up probe: one triangle, 16x16"
@@ -461,24 +465,30 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
     let all = configs[0]["scenes_per_minute"]["median"].as_f64();
     record["goal_met"] = json!(all.map(|r| r >= GOAL_SCENES_PER_MINUTE));
 
-    // Start-up: the probe scene, `runs` times; the median render time each.
-    let probe_file = dir.join("probe.toml");
-    std::fs::write(&probe_file, PROBE_SCENE)
-        .with_context(|| format!("{}: cannot write", probe_file.display()))?;
+    // Start-up: PROBES copies of the probe scene in one check, `runs` times;
+    // the median render time of each backend (its workers warm after the
+    // first copy, as in a fuzz run).
+    let mut probe_files = Vec::new();
+    for k in 0..PROBES {
+        let f = dir.join(format!("probe{k}.toml"));
+        std::fs::write(&f, PROBE_SCENE)
+            .with_context(|| format!("{}: cannot write", f.display()))?;
+        probe_files.push(f.display().to_string());
+    }
     let mut probe_times: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let mut probe_wall = Vec::new();
     for k in 0..opts.common.runs.max(1) {
         let out = dir.join(format!("probe-{k}"));
-        let mut args = vec![
-            "check".to_string(),
-            probe_file.display().to_string(),
-            "--no-calibration".into(),
+        let mut args = vec!["check".to_string()];
+        args.extend(probe_files.iter().cloned());
+        args.extend([
+            "--no-calibration".to_string(),
             "--quiet".into(),
             "--jobs".into(),
             opts.jobs.to_string(),
             "--timeout".into(),
             opts.common.timeout_s.to_string(),
-        ];
+        ]);
         if let Some(only) = &opts.only {
             args.extend(["--only".into(), only.join(",")]);
         }
@@ -486,7 +496,7 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
         rendiff::errln!("fuzz: start-up probe");
         probe_wall.push(rendiff(&args, &opts.common.root, &logs)?.seconds);
         for (b, v) in render_times(&read_json(&out.join("manifest.json"))?) {
-            if let Some(t) = v["mean_s"].as_f64() {
+            if let Some(t) = v["median_s"].as_f64() {
                 probe_times.entry(b).or_default().push(t);
             }
         }
@@ -498,7 +508,7 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
     let scene_times: BTreeMap<String, Value> =
         serde_json::from_value(configs[0]["render_s"].clone()).unwrap_or_default();
     record["startup"] = json!({
-        "check_of_one_scene_s": {"median_s": median(&probe_wall), "runs_s": probe_wall},
+        "check_of_the_probes_s": {"median_s": median(&probe_wall), "runs_s": probe_wall},
         "per_backend": startup_shares(&probe, &scene_times),
     });
     record["configurations"] = json!(configs);
