@@ -238,6 +238,15 @@ def test_depth_tolerance_and_mask_mismatches(compared: Any) -> None:
     assert z["max_rel_error"] == pytest.approx(1e-4, rel=0.05)
     assert 1e-6 < z["mean_abs_error"] < z["max_abs_error"]
     assert "beyond tolerance" in z["reason"] and "mask" in z["reason"]
+    # Where: the interior pixels grouped by (ref prim, test prim) like the id buffer's, each
+    # with an example; both are in the left quad (prims 0, 1), with their own prims on both sides.
+    groups = z["explanations"]
+    assert sum(g["pixels"] for g in groups) == 2 and all(g["class"] == "interior" for g in groups), groups
+    x, y = PLAIN_PX
+    assert {tuple(g["example"]) for g in groups} <= {(x, y), (x, y + 1)}
+    assert all(g["ref_prim"] == g["test_prim"] and g["ref_prim"] in (0, 1) for g in groups), groups
+    # A Z verdict with no interior pixel has none.
+    assert "explanations" not in res[("quads", "trace", "Z")]
 
 
 def test_nan_or_negative_infinite_depth_is_never_background(compared: Any) -> None:

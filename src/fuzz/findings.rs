@@ -3,13 +3,15 @@
 //!
 //! A failure is one failing verdict of results.json (fail, error or
 //! unexpected pass) on a generated scene; its class is what the verifier
-//! counted ([`failure_class`]). Two failures with the same signature
-//! (backend, buffer, class) are presumed one cause: the finding keeps every
-//! scene that hit it, counts them by grammar family, and the smallest is
-//! reduced. The reduced geometry's situation (`situation.rs`) is recorded
-//! with each finding after its reduction and completes the signature that a
-//! known-finding declaration matches (`known.rs`); grouping itself stays by
-//! (backend, buffer, class), since the situation is known only once reduced.
+//! counted ([`failure_class`]). Failures are grouped in two steps: by
+//! (backend, buffer, class) ([`group`]), then each group by the geometric
+//! situation (`situation.rs`) of its reduced scene ([`split`]): the smallest
+//! scene is reduced, the scenes whose own geometry has every tag of the
+//! reduced scene's situation join it, and the rest are split the same way.
+//! Two failures with the same signature (backend, buffer, class, situation)
+//! are presumed one cause: the finding keeps every scene that hit it and
+//! counts them by grammar family. The signature is what a known-finding
+//! declaration matches (`known.rs`).
 
 use crate::gate::{Status, Verdict};
 use serde::Serialize;
@@ -76,6 +78,10 @@ pub struct Signature {
     pub buffer: String,
     /// [`failure_class`].
     pub class: String,
+    /// The situation tags (`situation.rs`, sorted) of the finding's reduced
+    /// scene, else of its smallest scene (not reduced, or the reduction
+    /// failed); empty after [`group`], set by [`split`].
+    pub situation: Vec<String>,
 }
 
 /// A reduced repro, as findings.json records it.
@@ -105,6 +111,12 @@ pub struct ReducedRecord {
     pub candidates: usize,
     /// False when the budget ran out before a fixed point.
     pub complete: bool,
+    /// The triangles (indices in the scene it was reduced from) the
+    /// failure's pixels were on, which every step stayed near (`near.rs`);
+    /// absent when the verifier names none (no explanations: a side
+    /// without `id.prim`, an error) and the step was held to the class alone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure_triangles: Option<Vec<usize>>,
     /// Why there is no reduced scene, when reduction failed.
     #[serde(skip_serializing_if = "String::is_empty")]
     pub error: String,
@@ -125,12 +137,9 @@ pub struct Finding {
     pub families: BTreeMap<String, usize>,
     /// The example's reason.
     pub reason: String,
-    /// The reduction of the first scene, when one ran.
+    /// The reduction of its smallest scene, when one ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reduced: Option<ReducedRecord>,
-    /// The geometric situation (`situation.rs`) of its reduced scene, else of
-    /// its smallest scene: part of the signature a declaration matches.
-    pub situation: Vec<String>,
     /// What it is (`known.rs`): set once its situation is known.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub classification: Option<super::known::Classification>,
@@ -190,6 +199,7 @@ pub fn group(
                         backend: v.backend.clone(),
                         buffer: v.buffer.clone(),
                         class,
+                        situation: Vec::new(),
                     })
                     .or_default()
                     .push((v, family));
@@ -215,12 +225,86 @@ pub fn group(
                 families,
                 reason: crate::scene::printable(&vs[0].0.reason, 300),
                 reduced: None,
-                situation: Vec::new(),
                 classification: None,
             }
         })
         .collect();
     (failures, camera, findings)
+}
+
+/// Most reductions per (backend, buffer, class) group in [`split`]: each
+/// is up to `--reduce-budget`, and a group of many situations is more
+/// likely one cause seen in many scenes than many causes; its scenes left
+/// after these are split by their own situation, unreduced.
+pub const MAX_REDUCTIONS_PER_GROUP: usize = 3;
+
+/// A reduction as [`split`] gets it: the record, and the situation of the
+/// reduced scene (of the scene itself when the reduction failed).
+pub type Reduced = (ReducedRecord, Vec<String>);
+
+/// One part of a (backend, buffer, class) group after [`split`].
+#[derive(Debug, Clone)]
+pub struct Part {
+    /// Its situation (the signature's last part).
+    pub situation: Vec<String>,
+    /// Its scenes, in the group's order.
+    pub scenes: Vec<String>,
+    /// The reduction of its smallest scene, when one ran.
+    pub reduced: Option<ReducedRecord>,
+}
+
+/// Splits a group's `scenes` (one backend, buffer and class) by situation:
+/// while scenes are left, the smallest (`size`, then the first) is reduced
+/// (`reduce`: the record and the situation of its reduced scene, or of the
+/// scene itself when the reduction failed; None when nothing is reduced),
+/// at most [`MAX_REDUCTIONS_PER_GROUP`] times, else its own situation
+/// (`own`) is used; it and every scene left whose own situation holds all of
+/// those tags form a part. Parts of equal situation are one part (the first
+/// reduction kept).
+pub fn split(
+    scenes: &[String],
+    own: &dyn Fn(&str) -> Vec<String>,
+    size: &dyn Fn(&str) -> u64,
+    reduce: &mut dyn FnMut(&str) -> Option<Reduced>,
+) -> Vec<Part> {
+    let mut pending: Vec<&String> = scenes.iter().collect();
+    let mut parts: Vec<Part> = Vec::new();
+    let mut reductions = 0;
+    while let Some(&first) = pending.iter().min_by_key(|s| size(s.as_str())) {
+        let (reduced, situation) = match (reductions < MAX_REDUCTIONS_PER_GROUP)
+            .then(|| reduce(first.as_str()))
+            .flatten()
+        {
+            Some((r, sit)) => {
+                reductions += 1;
+                (Some(r), sit)
+            }
+            None => (None, own(first.as_str())),
+        };
+        let (members, rest): (Vec<&String>, Vec<&String>) = pending.into_iter().partition(|s| {
+            *s == first || {
+                let tags = own(s.as_str());
+                situation.iter().all(|t| tags.contains(t))
+            }
+        });
+        pending = rest;
+        let members: Vec<String> = members.into_iter().cloned().collect();
+        match parts.iter_mut().find(|p| p.situation == situation) {
+            Some(p) => {
+                p.scenes.extend(members);
+                p.scenes.sort_by_key(|s| scenes.iter().position(|x| x == s));
+                if p.reduced.is_none() {
+                    p.reduced = reduced;
+                }
+            }
+            None => parts.push(Part {
+                situation,
+                scenes: members,
+                reduced,
+            }),
+        }
+    }
+    parts
 }
 
 #[cfg(test)]
@@ -261,6 +345,91 @@ mod tests {
         assert_eq!(
             c(verdict("s", "Z", Status::Error, &[])).as_deref(),
             Some("error")
+        );
+    }
+
+    fn record(from: &str) -> ReducedRecord {
+        ReducedRecord {
+            from: from.into(),
+            scene: String::new(),
+            command: String::new(),
+            triangles_before: 0,
+            triangles_after: 0,
+            objects_before: 0,
+            objects_after: 0,
+            bytes_before: 0,
+            bytes_after: 0,
+            check_runs: 0,
+            candidates: 0,
+            complete: true,
+            failure_triangles: None,
+            error: String::new(),
+        }
+    }
+
+    #[test]
+    fn groups_split_by_the_reduced_situation() {
+        let names: Vec<String> = ["a", "b", "c", "d", "e"].map(String::from).to_vec();
+        let own = |s: &str| -> Vec<String> {
+            match s {
+                "a" | "b" => vec!["coplanar".into(), "sliver".into()],
+                "c" => vec!["coplanar".into()],
+                "d" => vec!["far_from_origin".into(), "sliver".into()],
+                _ => vec!["distant".into()],
+            }
+        };
+        // b is the smallest, then d, then a, c, e.
+        let size = |s: &str| -> u64 {
+            match s {
+                "b" => 1,
+                "d" => 2,
+                _ => 3,
+            }
+        };
+        // b reduces to a coplanar pair (its sliver removed), d to a far
+        // sliver; e's reduction fails (its own situation then).
+        let mut reduced = Vec::new();
+        let mut reduce = |s: &str| -> Option<(ReducedRecord, Vec<String>)> {
+            reduced.push(s.to_string());
+            let sit = match s {
+                "b" => vec!["coplanar".to_string()],
+                "d" => vec!["far_from_origin".into(), "sliver".into()],
+                _ => own(s),
+            };
+            Some((record(s), sit))
+        };
+        let parts = split(&names, &own, &size, &mut reduce);
+        assert_eq!(reduced, ["b", "d", "e"]);
+        assert_eq!(parts.len(), 3);
+        assert_eq!(parts[0].situation, ["coplanar"]);
+        assert_eq!(parts[0].scenes, ["a", "b", "c"]);
+        assert_eq!(parts[0].reduced.as_ref().unwrap().from, "b");
+        assert_eq!(parts[1].scenes, ["d"]);
+        assert_eq!(
+            (parts[2].situation.clone(), parts[2].scenes.clone()),
+            (vec!["distant".to_string()], vec!["e".to_string()])
+        );
+
+        // Nothing reduced: each part is its smallest scene's own situation.
+        let parts = split(&names, &own, &size, &mut |_| None);
+        let sits: Vec<&[String]> = parts.iter().map(|p| p.situation.as_slice()).collect();
+        assert_eq!(sits.len(), 4, "{sits:?}");
+        assert_eq!(parts[0].scenes, ["a", "b"]);
+        assert!(parts.iter().all(|p| p.reduced.is_none()));
+
+        // The cap: after MAX_REDUCTIONS_PER_GROUP reductions, own situations.
+        let many: Vec<String> = (0..9).map(|i| format!("s{i}")).collect();
+        let own_i = |s: &str| vec![s.to_string()];
+        let mut n = 0;
+        let parts = split(&many, &own_i, &|_| 0, &mut |s| {
+            n += 1;
+            Some((record(s), vec![s.to_string()]))
+        });
+        assert_eq!(parts.len(), 9);
+        assert_eq!(n, MAX_REDUCTIONS_PER_GROUP);
+        assert_eq!(
+            parts.iter().filter(|p| p.reduced.is_some()).count(),
+            MAX_REDUCTIONS_PER_GROUP
         );
     }
 

@@ -8,6 +8,7 @@
 //!   both the generator and the reducer write;
 //! * [`reduce`]: ddmin over objects and triangles, then coordinate snapping,
 //!   with `check` as the interestingness test;
+//! * [`near`]: that test's "near the same triangles";
 //! * [`findings`]: failure classes, signatures, findings.json;
 //! * [`situation`]: the geometric situation of a finding's scene;
 //! * [`known`]: declared findings that classify a run's findings;
@@ -23,6 +24,7 @@ pub mod findings;
 pub mod grammar;
 pub mod known;
 pub mod literal;
+pub mod near;
 pub mod page;
 pub mod reduce;
 pub mod rng;
@@ -270,21 +272,16 @@ pub fn run(opts: &FuzzOptions) -> Result<FuzzOutcome> {
         verdicts = held;
         base_failures = of_bases;
     }
-    let (failures, camera_failures, mut found) = findings::group(&verdicts, &families);
-    if let Some(budget) = opts.reduce_budget {
-        for f in &mut found {
-            f.reduced = Some(reduce_finding(opts, f, budget));
-        }
-    }
+    let (failures, camera_failures, grouped) = findings::group(&verdicts, &families);
+    let mut found = split_findings(opts, grouped, &failures, &families)?;
     for f in &mut found {
-        f.situation = finding_situation(folder, f);
         let s = &f.signature;
         f.classification = Some(known::classify(
             &known,
             &s.backend,
             &s.buffer,
             &s.class,
-            &f.situation,
+            &s.situation,
         ));
     }
     let ledger = Ledger {
@@ -365,46 +362,125 @@ fn hold_to_bases(
     (held, of_bases)
 }
 
-/// The situation of a finding's reduced scene, else of its smallest scene
-/// (the one reduction started from); empty when neither resolves.
-fn finding_situation(folder: &Path, f: &Finding) -> Vec<String> {
-    let file = match &f.reduced {
-        Some(r) if r.error.is_empty() => folder.join(&r.scene),
-        Some(r) => folder.join("scenes").join(format!("{}.toml", r.from)),
-        None => folder.join("scenes").join(format!("{}.toml", f.scenes[0])),
-    };
-    Scene::load(&file)
+/// The situation of a scene file (`situation.rs`); empty when it does not resolve.
+fn situation_of(file: &Path) -> Vec<String> {
+    Scene::load(file)
         .ok()
         .and_then(|s| ResolvedScene::resolve(&s).ok())
         .map_or_else(Vec::new, |r| situation::situations(&r))
 }
 
-/// Reduces a finding's smallest scene (fewest bytes, then first: the
-/// quickest to reduce); a reduction that fails is recorded with its reason.
-fn reduce_finding(opts: &FuzzOptions, f: &Finding, budget: Duration) -> ReducedRecord {
-    let file = |s: &String| opts.folder.join("scenes").join(format!("{s}.toml"));
-    let size = |s: &String| std::fs::metadata(file(s)).map_or(u64::MAX, |m| m.len());
-    let smallest = f
-        .scenes
-        .iter()
-        .min_by_key(|s| size(s))
-        .unwrap_or(&f.scenes[0]);
-    let scene_file = file(smallest);
-    let out = opts.folder.join("reduced").join(format!("{}.toml", f.id));
-    let target = Target {
-        backend: f.signature.backend.clone(),
-        buffer: f.signature.buffer.clone(),
-        class: f.signature.class.clone(),
+/// Splits each (backend, buffer, class) group by the situation of its
+/// reduced scenes ([`findings::split`]), reducing within `--reduce-budget`;
+/// the findings in signature order, numbered `F1`, `F2`, ..., each reduced
+/// scene at `reduced/F<n>.toml`.
+fn split_findings(
+    opts: &FuzzOptions,
+    grouped: Vec<Finding>,
+    failures: &[findings::Failure],
+    families: &BTreeMap<String, String>,
+) -> Result<Vec<Finding>> {
+    let folder = &opts.folder;
+    let scene_file = |s: &str| folder.join("scenes").join(format!("{s}.toml"));
+    let cache = std::cell::RefCell::new(BTreeMap::<String, Vec<String>>::new());
+    let own = |s: &str| -> Vec<String> {
+        if let Some(t) = cache.borrow().get(s) {
+            return t.clone();
+        }
+        let t = situation_of(&scene_file(s));
+        cache.borrow_mut().insert(s.to_string(), t.clone());
+        t
     };
-    let work = opts.folder.join("reduced").join(format!(".{}.work", f.id));
+    let size = |s: &str| std::fs::metadata(scene_file(s)).map_or(u64::MAX, |m| m.len());
+    let mut pending = 0;
+    let mut found = Vec::new();
+    for g in grouped {
+        let sig = g.signature;
+        let mut reduce = |s: &str| -> Option<(ReducedRecord, Vec<String>)> {
+            let budget = opts.reduce_budget?;
+            pending += 1;
+            let r = reduce_scene(opts, &sig, s, &format!(".pending{pending}"), budget);
+            let situation = if r.error.is_empty() {
+                situation_of(&folder.join(&r.scene))
+            } else {
+                own(s)
+            };
+            Some((r, situation))
+        };
+        for part in findings::split(&g.scenes, &own, &size, &mut reduce) {
+            let mut fams = BTreeMap::new();
+            for s in &part.scenes {
+                if let Some(f) = families.get(s) {
+                    *fams.entry(f.clone()).or_insert(0) += 1;
+                }
+            }
+            let reason = failures
+                .iter()
+                .find(|f| {
+                    f.scene == part.scenes[0]
+                        && f.backend == sig.backend
+                        && f.buffer == sig.buffer
+                        && f.class == sig.class
+                })
+                .map_or_else(|| g.reason.clone(), |f| f.reason.clone());
+            found.push(Finding {
+                id: String::new(),
+                signature: findings::Signature {
+                    situation: part.situation,
+                    ..sig.clone()
+                },
+                hits: part.scenes.len(),
+                scenes: part.scenes,
+                families: fams,
+                reason,
+                reduced: part.reduced,
+                classification: None,
+            });
+        }
+    }
+    found.sort_by(|a, b| a.signature.cmp(&b.signature));
+    for (i, f) in found.iter_mut().enumerate() {
+        f.id = format!("F{}", i + 1);
+        if let Some(r) = f.reduced.as_mut().filter(|r| r.error.is_empty()) {
+            let to = format!("reduced/{}.toml", f.id);
+            std::fs::rename(folder.join(&r.scene), folder.join(&to))
+                .with_context(|| format!("{}: cannot rename", folder.join(&r.scene).display()))?;
+            r.command = reproduce_command(
+                &folder.join(&to),
+                &f.signature.backend,
+                opts.check.renderers.as_deref(),
+            );
+            r.scene = to;
+        }
+    }
+    Ok(found)
+}
+
+/// Reduces `scene` (a generated scene's name) for `sig` into
+/// `reduced/NAME.toml`; a reduction that fails is recorded with its reason.
+fn reduce_scene(
+    opts: &FuzzOptions,
+    sig: &findings::Signature,
+    scene: &str,
+    name: &str,
+    budget: Duration,
+) -> ReducedRecord {
+    let scene_file = opts.folder.join("scenes").join(format!("{scene}.toml"));
+    let out = opts.folder.join("reduced").join(format!("{name}.toml"));
+    let target = Target {
+        backend: sig.backend.clone(),
+        buffer: sig.buffer.clone(),
+        class: sig.class.clone(),
+    };
+    let work = opts.folder.join("reduced").join(format!("{name}.work"));
     match reduce_file(&scene_file, &target, &opts.check, &work, Some(budget), &out) {
         Ok(mut r) => {
-            r.scene = format!("reduced/{}.toml", f.id);
-            r.from = smallest.clone();
+            r.scene = format!("reduced/{name}.toml");
+            r.from = scene.to_string();
             r
         }
         Err(e) => ReducedRecord {
-            from: smallest.clone(),
+            from: scene.to_string(),
             scene: String::new(),
             command: String::new(),
             triangles_before: 0,
@@ -416,6 +492,7 @@ fn reduce_finding(opts: &FuzzOptions, f: &Finding, budget: Duration) -> ReducedR
             check_runs: 0,
             candidates: 0,
             complete: false,
+            failure_triangles: None,
             error: format!("{e:#}"),
         },
     }
@@ -466,6 +543,7 @@ pub fn reduce_file(
         check_runs: r.check_runs,
         candidates: r.candidates,
         complete: r.complete,
+        failure_triangles: r.failure_triangles,
         error: String::new(),
     })
 }

@@ -154,7 +154,7 @@ fn summary_table(ledger: &Ledger) -> String {
             html::escape(&s.backend),
             html::escape(&s.buffer),
             html::escape(&s.class),
-            html::escape(&f.situation.join(", ")),
+            html::escape(&f.signature.situation.join(", ")),
             f.hits,
             kind_badge(f),
             id = html::escape(&f.id),
@@ -214,10 +214,10 @@ fn finding_section(
         b,
         "<p>Situation: {}. Hit by {} scene(s) (by family: {}): <span class=\"counts\">{}</span></p>\n\
          <p>The verifier: <span class=\"reason\">{}</span></p>",
-        html::escape(&if f.situation.is_empty() {
+        html::escape(&if f.signature.situation.is_empty() {
             "none of the tagged ones".to_string()
         } else {
-            f.situation.join(", ")
+            f.signature.situation.join(", ")
         }),
         f.hits,
         html::escape(&families.join(", ")),
@@ -244,6 +244,16 @@ fn finding_section(
                 html::url(&r.scene),
                 html::escape(&r.scene)
             );
+            if let Some(t) = &r.failure_triangles {
+                let list: Vec<String> = t.iter().map(usize::to_string).collect();
+                let _ = writeln!(
+                    b,
+                    "<p>Every step failed near the triangles the failure was on at the start: \
+                     {} of {}.</p>",
+                    list.join(", "),
+                    html::escape(&r.from)
+                );
+            }
             b.push_str(&html::command_block(&r.command));
             match std::fs::read_to_string(folder.join(&r.scene)) {
                 Ok(text) if text.len() <= MAX_INLINE => {
@@ -345,6 +355,7 @@ mod tests {
                 backend: backend.into(),
                 buffer: "id".into(),
                 class: "interior".into(),
+                situation: vec!["shared_edge".into()],
             },
             hits: 2,
             scenes: vec!["s1_00001".into(), "s1_00007".into()],
@@ -363,9 +374,9 @@ mod tests {
                 check_runs: 4,
                 candidates: 20,
                 complete: true,
+                failure_triangles: Some(vec![0, 1]),
                 error: String::new(),
             }),
-            situation: vec!["coplanar".into()],
             classification,
         }
     }
@@ -419,6 +430,9 @@ mod tests {
         );
         assert!(page.contains("rendiff check &#39;x&lt;y&gt;.toml&#39;"));
         assert!(page.contains("1 renderer bug, 1 unclassified"));
+        // The signature's situation, and the triangles the reduction kept to.
+        assert!(page.contains("shared_edge"));
+        assert!(page.contains("the failure was on at the start: 0, 1 of s1_00001"));
         // The run is absent: a note instead of pictures, never a failed page.
         assert!(page.contains("cannot be read"));
     }

@@ -5,10 +5,13 @@
 //! repeated until a round changes nothing (docs/fuzzing.md).
 //!
 //! The interestingness test is "the same backend still fails the same
-//! buffer with the same class" ([`super::findings::failure_class`]), asked
-//! of `check` itself: candidates are written as scene files and checked
-//! together, a batch per `check` run, so the harness's workers, the pool
-//! and the comparison start once per batch, not per candidate. Candidates
+//! buffer with the same class" ([`super::findings::failure_class`]) "near
+//! the same triangles" ([`super::near`]: its failing pixels on, or within a
+//! pixel of, a triangle the first failure's pixels were on, triangles
+//! followed by their index in the starting scene), asked of `check`
+//! itself: candidates are written as scene files and checked together, a
+//! batch per `check` run, so the harness's workers, the pool and the
+//! comparison start once per batch, not per candidate. Candidates
 //! are tried in ddmin's order and the first interesting one wins, so the
 //! result is the one sequential ddmin would give. Calibration is not rerun
 //! (the run being reduced judged the camera already): a reduction asks
@@ -16,12 +19,13 @@
 
 use super::findings::failure_class;
 use super::literal::{LiteralScene, Tri};
+use super::near::{self, Group};
 use super::rng::pow2;
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
 use crate::scene::Scene;
 use anyhow::{bail, Context, Result};
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -57,7 +61,34 @@ pub struct Reduction {
     pub candidates: usize,
     /// False when the time budget ran out before a fixed point.
     pub complete: bool,
+    /// The triangles (indices in the starting scene) the first failure's
+    /// pixels were on, which every accepted candidate's failure stayed near;
+    /// None when the verifier names none (no explanations: a side without
+    /// `id.prim`, an error), and the test was the class alone.
+    pub failure_triangles: Option<Vec<usize>>,
 }
+
+/// A candidate: a scene, and for each of its triangles (in prim order) its
+/// index in the scene the reduction started from.
+#[derive(Debug, Clone)]
+struct Cand {
+    scene: LiteralScene,
+    origin: Vec<usize>,
+}
+
+impl Cand {
+    /// What the cache knows it by: its text and its triangles' origins
+    /// (the same text with other origins may be near other triangles).
+    fn key(&self) -> String {
+        let ids: Vec<String> = self.origin.iter().map(usize::to_string).collect();
+        format!("{}\n# origin {}", self.scene.to_toml(), ids.join(" "))
+    }
+}
+
+/// What a `check` run says of one candidate: None when it does not fail as
+/// the target says, else its failing pixel groups (None inside when the
+/// verifier names none).
+type Answer = Option<Option<Vec<Group>>>;
 
 /// Ran out of the time budget (the reduction keeps what it has).
 struct OutOfTime;
@@ -68,6 +99,9 @@ struct Oracle<'a> {
     work: PathBuf,
     target: Target,
     cache: HashMap<String, bool>,
+    /// The first failure's triangles ([`Reduction::failure_triangles`]);
+    /// None until it is known, or when the verifier names none.
+    footprint: Option<BTreeSet<usize>>,
     check_runs: usize,
     candidates: usize,
     deadline: Option<Instant>,
@@ -88,8 +122,8 @@ pub fn valid(scene: &LiteralScene) -> bool {
 impl Oracle<'_> {
     /// The index of the first interesting candidate, testing in batches of
     /// [`BATCH`] and stopping after the batch that holds one.
-    fn first(&mut self, cands: &[LiteralScene]) -> Result<Result<Option<usize>, OutOfTime>> {
-        let texts: Vec<String> = cands.iter().map(LiteralScene::to_toml).collect();
+    fn first(&mut self, cands: &[Cand]) -> Result<Result<Option<usize>, OutOfTime>> {
+        let texts: Vec<String> = cands.iter().map(Cand::key).collect();
         let mut i = 0;
         while i < cands.len() {
             if let Some(&known) = self.cache.get(&texts[i]) {
@@ -107,7 +141,7 @@ impl Oracle<'_> {
             let mut j = i;
             while j < cands.len() && batch.len() < BATCH {
                 if !self.cache.contains_key(&texts[j]) {
-                    if valid(&cands[j]) {
+                    if valid(&cands[j].scene) {
                         batch.push(j);
                     } else {
                         self.cache.insert(texts[j].clone(), false);
@@ -115,8 +149,9 @@ impl Oracle<'_> {
                 }
                 j += 1;
             }
-            let verdicts = self.test(&batch, &texts)?;
-            for (k, interesting) in batch.iter().zip(verdicts) {
+            let answers = self.test(&batch, cands)?;
+            for (k, groups) in batch.iter().zip(answers) {
+                let interesting = self.near(&cands[*k], groups);
                 self.cache.insert(texts[*k].clone(), interesting);
             }
             // Back to i: the cache now answers this batch in order.
@@ -130,8 +165,43 @@ impl Oracle<'_> {
         Ok(Ok(None))
     }
 
-    /// One `check` run over the candidates `which`; whether each still fails.
-    fn test(&mut self, which: &[usize], texts: &[String]) -> Result<Vec<bool>> {
+    /// Whether a candidate that failed as the target says (`groups`: None
+    /// when it did not) failed near the first failure's triangles.
+    fn near(&self, cand: &Cand, groups: Answer) -> bool {
+        let Some(groups) = groups else {
+            return false;
+        };
+        let Some(footprint) = &self.footprint else {
+            return true;
+        };
+        let Some(groups) = groups else {
+            return false;
+        };
+        let resolved = Scene::parse(Path::new("candidate.toml"), &cand.scene.to_toml())
+            .ok()
+            .and_then(|s| ResolvedScene::resolve(&s).ok());
+        resolved.is_some_and(|r| {
+            !near::near_triangles(&groups, &cand.origin, &r).is_disjoint(footprint)
+        })
+    }
+
+    /// Checks the starting scene alone: whether it fails as the target
+    /// says, and the triangles its failing pixels are on (the footprint
+    /// every later candidate is held to).
+    fn establish(&mut self, start: &Cand) -> Result<bool> {
+        let mut answers = self.test(&[0], std::slice::from_ref(start))?;
+        let Some(groups) = answers.pop().flatten() else {
+            return Ok(false);
+        };
+        self.footprint = groups.map(|g| near::on_triangles(&g, &start.origin));
+        self.cache.insert(start.key(), true);
+        Ok(true)
+    }
+
+    /// One `check` run over the candidates `which`: for each, None when it
+    /// does not fail as the target says, else its failing pixel groups
+    /// ([`near::failing_groups`]; None inside when the verifier names none).
+    fn test(&mut self, which: &[usize], cands: &[Cand]) -> Result<Vec<Answer>> {
         if which.is_empty() {
             return Ok(Vec::new());
         }
@@ -145,7 +215,7 @@ impl Oracle<'_> {
         let mut files = Vec::new();
         for (n, &k) in which.iter().enumerate() {
             let f = dir.join(format!("c{n:03}.toml"));
-            std::fs::write(&f, &texts[k])
+            std::fs::write(&f, cands[k].scene.to_toml())
                 .with_context(|| format!("{}: cannot write", f.display()))?;
             files.push(f);
         }
@@ -161,14 +231,23 @@ impl Oracle<'_> {
         let verdicts = crate::gate::verdicts(&outcome.results)?;
         self.check_runs += 1;
         self.candidates += which.len();
+        let t = &self.target;
         Ok((0..which.len())
             .map(|n| {
                 let name = format!("c{n:03}");
-                verdicts.iter().any(|v| {
+                let fails = verdicts.iter().any(|v| {
                     v.scene == name
-                        && v.backend == self.target.backend
-                        && v.buffer == self.target.buffer
-                        && failure_class(v).as_deref() == Some(self.target.class.as_str())
+                        && v.backend == t.backend
+                        && v.buffer == t.buffer
+                        && failure_class(v).as_deref() == Some(t.class.as_str())
+                });
+                fails.then(|| {
+                    outcome
+                        .results
+                        .results
+                        .iter()
+                        .find(|e| e.scene == name && e.backend == t.backend && e.buffer == t.buffer)
+                        .and_then(|e| near::failing_groups(e, &t.class))
                 })
             })
             .collect())
@@ -180,7 +259,7 @@ impl Oracle<'_> {
 /// 1-minimal subset ddmin reaches (or what it had when time ran out).
 fn ddmin(
     n_units: usize,
-    build: &dyn Fn(&[usize]) -> LiteralScene,
+    build: &dyn Fn(&[usize]) -> Cand,
     oracle: &mut Oracle,
 ) -> Result<Result<Vec<usize>, Vec<usize>>> {
     let mut units: Vec<usize> = (0..n_units).collect();
@@ -193,7 +272,7 @@ fn ddmin(
                 cands.push(units.iter().copied().filter(|u| !c.contains(u)).collect());
             }
         }
-        let scenes: Vec<LiteralScene> = cands.iter().map(|k| build(k)).collect();
+        let scenes: Vec<Cand> = cands.iter().map(|k| build(k)).collect();
         match oracle.first(&scenes)? {
             Err(OutOfTime) => return Ok(Err(units)),
             Ok(Some(i)) if i < chunks.len() => {
@@ -233,6 +312,35 @@ fn keep_objects(s: &LiteralScene, keep: &[usize]) -> LiteralScene {
     let mut out = s.clone();
     out.objects = keep.iter().map(|&i| s.objects[i].clone()).collect();
     out
+}
+
+/// [`keep_objects`] of a candidate, its kept triangles' origins with it.
+fn cand_objects(c: &Cand, keep: &[usize]) -> Cand {
+    let mut starts = Vec::with_capacity(c.scene.objects.len());
+    let mut k = 0;
+    for o in &c.scene.objects {
+        starts.push(k);
+        k += o.triangles.len();
+    }
+    let origin = keep
+        .iter()
+        .flat_map(|&i| {
+            let n = c.scene.objects[i].triangles.len();
+            c.origin[starts[i]..starts[i] + n].iter().copied()
+        })
+        .collect();
+    Cand {
+        scene: keep_objects(&c.scene, keep),
+        origin,
+    }
+}
+
+/// [`keep_triangles`] of a candidate, its kept triangles' origins with it.
+fn cand_triangles(c: &Cand, keep: &[usize]) -> Cand {
+    Cand {
+        scene: keep_triangles(&c.scene, keep),
+        origin: keep.iter().map(|&i| c.origin[i]).collect(),
+    }
 }
 
 /// The scene with only the triangles `keep` (indices over all objects in
@@ -329,6 +437,7 @@ pub fn reduce(
         work: work.to_path_buf(),
         target: target.clone(),
         cache: HashMap::new(),
+        footprint: None,
         check_runs: 0,
         candidates: 0,
         deadline: budget.map(|b| Instant::now() + b),
@@ -343,18 +452,20 @@ pub fn reduce(
         check_runs: oracle.check_runs,
         candidates: oracle.candidates,
         complete,
+        failure_triangles: oracle.footprint.map(|f| f.into_iter().collect()),
     })
 }
 
-fn reduce_with(oracle: &mut Oracle, mut cur: LiteralScene) -> Result<(LiteralScene, bool)> {
-    if !valid(&cur) {
+fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene, bool)> {
+    if !valid(&start) {
         bail!("the standalone rewrite of the scene is not a valid scene");
     }
-    // The first deadline check comes after this test: it always runs.
-    let deadline = oracle.deadline.take();
-    let first = oracle.first(std::slice::from_ref(&cur))?;
-    oracle.deadline = deadline;
-    if !matches!(first, Ok(Some(0))) {
+    let mut cur = Cand {
+        origin: (0..start.triangle_count()).collect(),
+        scene: start,
+    };
+    // Before any deadline: this test always runs.
+    if !oracle.establish(&cur)? {
         bail!(
             "the failure ({} fails {} with class {}) does not reproduce from the scene rewritten standalone \
              (literal triangles, checked with --only {} and no calibration)",
@@ -365,27 +476,35 @@ fn reduce_with(oracle: &mut Oracle, mut cur: LiteralScene) -> Result<(LiteralSce
         );
     }
     for _ in 0..MAX_ROUNDS {
-        let before = cur.to_toml();
+        let before = cur.key();
         let s = cur.clone();
-        match ddmin(s.objects.len(), &|k| keep_objects(&s, k), oracle)? {
-            Ok(k) => cur = keep_objects(&s, &k),
-            Err(k) => return Ok((keep_objects(&s, &k), false)),
+        match ddmin(s.scene.objects.len(), &|k| cand_objects(&s, k), oracle)? {
+            Ok(k) => cur = cand_objects(&s, &k),
+            Err(k) => return Ok((cand_objects(&s, &k).scene, false)),
         }
         let s = cur.clone();
-        match ddmin(s.triangle_count(), &|k| keep_triangles(&s, k), oracle)? {
-            Ok(k) => cur = keep_triangles(&s, &k),
-            Err(k) => return Ok((keep_triangles(&s, &k), false)),
+        match ddmin(s.scene.triangle_count(), &|k| cand_triangles(&s, k), oracle)? {
+            Ok(k) => cur = cand_triangles(&s, &k),
+            Err(k) => return Ok((cand_triangles(&s, &k).scene, false)),
         }
-        match oracle.first(&snap_candidates(&cur))? {
-            Ok(Some(i)) => cur = snap_candidates(&cur).swap_remove(i),
+        // Snapping moves vertices, never triangles: the origins stay.
+        let snaps: Vec<Cand> = snap_candidates(&cur.scene)
+            .into_iter()
+            .map(|scene| Cand {
+                scene,
+                origin: cur.origin.clone(),
+            })
+            .collect();
+        match oracle.first(&snaps)? {
+            Ok(Some(i)) => cur = snaps[i].clone(),
             Ok(None) => {}
-            Err(OutOfTime) => return Ok((cur, false)),
+            Err(OutOfTime) => return Ok((cur.scene, false)),
         }
-        if cur.to_toml() == before {
-            return Ok((cur, true));
+        if cur.key() == before {
+            return Ok((cur.scene, true));
         }
     }
-    Ok((cur, false))
+    Ok((cur.scene, false))
 }
 
 #[cfg(test)]

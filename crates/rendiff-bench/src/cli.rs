@@ -14,6 +14,7 @@
 //! so is the default output folder.
 
 use super::crossover::{self, CrossoverOptions};
+use super::fuzz::{self, FuzzBenchOptions};
 use super::knobs::{self, KnobsOptions, SceneSpec};
 use super::peers::{self, PeersOptions};
 use super::scale::{self, ScaleOptions};
@@ -286,6 +287,41 @@ pub enum BenchCommand {
         #[arg(long, value_parser = rendiff::args::parse_threads)]
         threads: Option<usize>,
     },
+    /// Generated scenes a minute through `rendiff fuzz`, all backends together and each
+    /// alone, each renderer's start-up share, and reduction time per finding.
+    Fuzz {
+        /// Options every subcommand takes.
+        #[command(flatten)]
+        common: CommonArgs,
+        /// The generator's seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Scenes per timed fuzz run (default: 50, one `--minutes` batch; --quick: 4).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        count: Option<u64>,
+        /// Only these backends, comma-separated (default: every one; --quick: trace).
+        #[arg(long, value_delimiter = ',')]
+        only: Option<Vec<String>>,
+        /// External renders at a time in each fuzz run (default: the cores).
+        #[arg(long, value_parser = rendiff::args::parse_threads)]
+        jobs: Option<usize>,
+        /// Planted renderers whose findings are reduced and timed, comma-separated
+        /// (default: coplanar_bias; --quick: none), declared in --planted-renderers.
+        #[arg(long, value_delimiter = ',')]
+        planted: Option<Vec<String>>,
+        /// Their declarations (default: tests/fuzz_renderers/renderers.toml).
+        #[arg(long)]
+        planted_renderers: Option<PathBuf>,
+        /// Scenes fuzzed through each planted renderer (default: 50).
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        planted_count: u64,
+        /// Findings reduced per planted renderer, at most.
+        #[arg(long, default_value_t = 3)]
+        reductions: usize,
+        /// Each reduction's time budget, seconds.
+        #[arg(long, default_value_t = 180, value_parser = rendiff::args::parse_timeout)]
+        reduce_budget: u64,
+    },
 }
 
 /// A subcommand with every option resolved: what runs.
@@ -303,6 +339,8 @@ pub enum Plan {
     Stability(StabilityOptions),
     /// `bench variance`.
     Variance(VarianceOptions),
+    /// `bench fuzz`.
+    Fuzz(Box<FuzzBenchOptions>),
 }
 
 impl Plan {
@@ -315,6 +353,7 @@ impl Plan {
             Plan::Scale(_) => "scale",
             Plan::Stability(_) => "stability",
             Plan::Variance(_) => "variance",
+            Plan::Fuzz(_) => "fuzz",
         }
     }
 
@@ -327,6 +366,7 @@ impl Plan {
             Plan::Scale(o) => &o.common,
             Plan::Stability(o) => &o.common,
             Plan::Variance(o) => &o.common,
+            Plan::Fuzz(o) => &o.common,
         }
     }
 
@@ -338,6 +378,7 @@ impl Plan {
             Plan::Scale(o) => scale::run(o),
             Plan::Stability(o) => stability::run(o),
             Plan::Variance(o) => variance::run(o),
+            Plan::Fuzz(o) => fuzz::run(o),
         }
     }
 }
@@ -533,6 +574,43 @@ pub fn plan_in(cmd: BenchCommand, home: &Home) -> Result<Plan> {
                 threads: threads.unwrap_or_else(super::cpus),
             })
         }
+        BenchCommand::Fuzz {
+            common,
+            seed,
+            count,
+            only,
+            jobs,
+            planted,
+            planted_renderers,
+            planted_count,
+            reductions,
+            reduce_budget,
+        } => {
+            let c = common.common(home)?;
+            let quick = c.quick;
+            let planted = pick(planted, quick, Vec::new(), vec!["coplanar_bias".into()]);
+            Plan::Fuzz(Box::new(FuzzBenchOptions {
+                common: c,
+                seed,
+                count: pick(count, quick, 4, rendiff::fuzz::BATCH),
+                only: match only {
+                    Some(o) => Some(o),
+                    None if quick => Some(vec!["trace".into()]),
+                    None => None,
+                },
+                jobs: jobs.unwrap_or_else(super::cpus),
+                // Found in the checkout only when a planted renderer is asked for.
+                planted_renderers: if planted.is_empty() {
+                    planted_renderers.unwrap_or_default()
+                } else {
+                    home.or_file(planted_renderers, fuzz::PLANTED_RENDERERS)?
+                },
+                planted,
+                planted_count,
+                reductions,
+                reduce_budget_s: reduce_budget,
+            }))
+        }
     })
 }
 
@@ -674,6 +752,57 @@ mod tests {
             panic!()
         };
         assert_eq!((o.shards, o.common.runs), (vec![2], 1));
+    }
+
+    /// `bench fuzz`: --quick runs a few scenes through the tracer and reduces
+    /// nothing; the normal run is one `--minutes` batch through every backend
+    /// and reduces coplanar_bias's findings, declared in the checkout;
+    /// explicit options win.
+    #[test]
+    fn fuzz_plans() {
+        let Plan::Fuzz(o) = plan_of(&["fuzz", "--quick"]) else {
+            panic!()
+        };
+        assert_eq!((o.count, o.common.runs), (4, 1));
+        assert_eq!(o.only, Some(vec!["trace".to_string()]));
+        assert!(o.planted.is_empty());
+        let Plan::Fuzz(o) = plan_of(&["fuzz"]) else {
+            panic!()
+        };
+        assert_eq!((o.count, o.common.runs, o.only), (50, 3, None));
+        assert_eq!(o.planted, ["coplanar_bias"]);
+        assert_eq!(
+            o.planted_renderers,
+            Path::new("/home/rd/tests/fuzz_renderers/renderers.toml")
+        );
+        assert_eq!(
+            (o.planted_count, o.reductions, o.reduce_budget_s),
+            (50, 3, 180)
+        );
+        let Plan::Fuzz(o) = plan_of(&[
+            "fuzz",
+            "--quick",
+            "--count",
+            "7",
+            "--only",
+            "povray,embree",
+            "--planted",
+            "far_depth",
+            "--jobs",
+            "2",
+        ]) else {
+            panic!()
+        };
+        assert_eq!((o.count, o.jobs), (7, 2));
+        assert_eq!(o.only, Some(vec!["povray".to_string(), "embree".into()]));
+        assert_eq!(o.planted, ["far_depth"]);
+        assert_eq!(plan_of(&["fuzz", "--quick"]).stem(), "fuzz");
+        // No checkout: --quick needs none (no planted renderers to find).
+        let none = Home(Err("cannot find rendiff's harness".into()));
+        let t = T::try_parse_from(["bench", "fuzz", "--quick"]).unwrap();
+        assert!(plan_in(t.cmd, &none).is_ok());
+        let t = T::try_parse_from(["bench", "fuzz"]).unwrap();
+        assert!(plan_in(t.cmd, &none).is_err());
     }
 
     /// Defaults name rendiff's own files in its checkout, wherever the

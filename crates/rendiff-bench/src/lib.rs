@@ -9,6 +9,7 @@
 //!   (Embree held to its best by the native driver in [`native_embree`]).
 //! - [`crossover`]: raster against trace as triangles shrink from a few large to millions of tiny.
 //! - [`stability`]: scene families pushed to numerical extremes through `rendiff check`.
+//! - [`fuzz`]: generated scenes a minute through `rendiff fuzz`, start-up shares, reduction time per finding.
 //! - [`variance`]: whether the path tracer's variance-of-the-mean estimate is calibrated, and its bias.
 //!
 //! Everything here is a measurement, never an assertion: tests only check that
@@ -22,6 +23,7 @@ pub mod cli;
 pub mod core_loops;
 pub mod crossover;
 pub mod direct;
+pub mod fuzz;
 pub mod harness;
 pub mod knobs;
 pub mod machine_cpu;

@@ -31,6 +31,10 @@ pub const PAGES: &[(&str, &str)] = &[
     ),
     ("core", "raster and trace on one scene per thread count"),
     (
+        "fuzz",
+        "generated scenes a minute through rendiff fuzz; start-up shares; reduction time per finding",
+    ),
+    (
         "variance",
         "is the path tracer's variance estimate calibrated; bias against the reference",
     ),

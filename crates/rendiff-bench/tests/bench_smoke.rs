@@ -439,6 +439,45 @@ fn scale_times_the_main_job_and_its_shards() {
     );
 }
 
+/// `bench fuzz --quick`: a few scenes through the tracer, once through all
+/// the backends asked for and once through each; the start-up probe; no
+/// planted renderer.
+#[test]
+fn fuzz_records_scenes_a_minute_and_startup_shares() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = bench("fuzz", dir.path());
+    assert_eq!(
+        (record["scenes"].as_u64(), record["runs"].as_u64()),
+        (Some(4), Some(1))
+    );
+    assert_eq!(record["backends"], serde_json::json!(["trace"]));
+    let configs = record["configurations"].as_array().unwrap();
+    let names: Vec<&str> = configs
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["all", "trace"]);
+    for c in configs {
+        assert_eq!(c["runs_s"].as_array().unwrap().len(), 1, "{c}");
+        assert!(
+            c["scenes_per_minute"]["median"]
+                .as_f64()
+                .is_some_and(|r| r > 0.0),
+            "{c}"
+        );
+        // Every scene rendered by the reference and the tracer.
+        assert_eq!(c["render_s"]["trace"]["renders"], 4, "{c}");
+        assert_eq!(c["render_s"]["raster"]["renders"], 4, "{c}");
+    }
+    let start = &record["startup"]["per_backend"]["trace"];
+    assert!(start["startup_share"].as_f64().is_some(), "{start}");
+    assert!(record["goal_met"].is_boolean());
+    assert!(record["reduction"]["planted"]
+        .as_array()
+        .unwrap()
+        .is_empty());
+}
+
 /// Counts and sizes a benchmark cannot honour are refused before anything
 /// runs: exit code 2, an error naming the option, and no output folder.
 /// (`--runs 0` and `--threads 0` used to be raised to 1 silently, `--size
@@ -490,6 +529,8 @@ fn impossible_options_are_refused_before_any_work() {
         (&["scale", "--shards", "0"], "--shards"),
         (&["stability", "--only", "trace,bogus"], "--only bogus"),
         (&["variance", "--threads", "100000"], "--threads"),
+        (&["fuzz", "--count", "0"], "--count"),
+        (&["fuzz", "--jobs", "0"], "--jobs"),
         (&["--runs", "0"], "--runs"),
     ];
     for (args, names) in cases {

@@ -238,6 +238,7 @@ fn explicit_options_are_used_with_quick() {
         "scale",
         "stability",
         "variance",
+        "fuzz",
     ] {
         let o = run(&[sub, "--help"]);
         let help = String::from_utf8_lossy(&o.stdout)

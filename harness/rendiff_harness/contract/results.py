@@ -2,7 +2,7 @@
 
 Every entry has the fields of `Entry` up to `images` (`COMMON_FIELDS`, docs/run-format.md),
 then the fields only its buffer has (`Entry.own_fields`, from judge/buffers.py's buffer table:
-`explanations` on id and N, `max_angle_rad` on N, the radiance fields on RGB), then any
+`explanations` on id, Z and N, `max_angle_rad` on N, the radiance fields on RGB), then any
 further fields (`Entry.extra`: calibration's measurements on `camera` entries).
 `Entry.to_json()` is the entry exactly as results.json holds it.
 
@@ -58,7 +58,8 @@ RGB_FIELDS = ("failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean
 """The RGB fields that are null on an RGB entry that was not compared."""
 
 OPTIONAL_FIELDS = frozenset({"explanations"})
-"""Buffer fields written only when set (id: when compared; N: when some normal is off)."""
+"""Buffer fields written only when set (id: when compared; Z: when some pixel is interior; N: when some normal
+is off)."""
 
 NOT_COMPARED = (Status.SKIPPED, Status.ERROR)
 
@@ -97,7 +98,7 @@ class Entry:
     # Buffer-specific fields: written after `images`, those in `own_fields` only, in that order.
     own_fields: tuple[str, ...] = field(default=(), repr=False)
     max_angle_rad: float | None = None  # N
-    explanations: list[dict[str, Any]] | None = None  # id, N (OPTIONAL_FIELDS)
+    explanations: list[dict[str, Any]] | None = None  # id, Z, N (OPTIONAL_FIELDS)
     mode: str | None = None  # RGB: "deterministic" | "statistical"
     failing_pixels: int | None = 0
     min_p: float | None = None

@@ -112,6 +112,8 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
     e.extra["own_plane_pixels"] = res.own_plane
     e.extra["own_plane_max_abs_error"] = finite(res.own_plane_max_abs)
     e.extra["not_comparable"] = dict(res.not_comparable)
+    if res.explanations:
+        e.explanations = res.explanations
     ref_z, test_z = r.ref.buffers["Z"], r.test["Z"]
 
     def heat_map(path: Path) -> None:
@@ -168,7 +170,9 @@ BUFFER_TABLE: tuple[BufferSpec, ...] = (
         judge_ids,
         fields=("explanations",),
     ),
-    BufferSpec(Buffer.Z, When.ALWAYS, "Z", "Z channel", "reference has no Z channel", judge_depth),
+    BufferSpec(
+        Buffer.Z, When.ALWAYS, "Z", "Z channel", "reference has no Z channel", judge_depth, fields=("explanations",)
+    ),
     BufferSpec(Buffer.N, When.WRITTEN, "N", "N channel", None, judge_rendered_normals, fields=N_FIELDS),
     BufferSpec(
         Buffer.RGB,

@@ -42,6 +42,9 @@ class DepthResult:
     own_plane_beyond: int = 0  # of those, depths beyond the model (counted as interior)
     own_plane_max_abs: float = 0.0
     not_comparable: dict[str, int] = field(default_factory=dict)  # both hit, judged neither way: reason -> pixels
+    # The interior pixels grouped by (ref prim, test prim), as the id buffer's (verify.explain);
+    # empty when there are none or a side has no id.prim (where they are is then not known).
+    explanations: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -304,6 +307,23 @@ def compare_depth(
         notes.append("not comparable: " + ", ".join(f"{k} ({v} px)" for k, v in sorted(own.not_comparable.items())))
     if notes:
         text += "; " + "; ".join(notes)
+    explanations: list[dict[str, Any]] = []
+    bad = np.flatnonzero(interior_mask)
+    if bad.size and have_ref_ids and "id.prim" in test:
+        whys = [
+            "a hit on one side only, where the ID mismatch is no allowed class"
+            if m
+            else "a depth beyond the backend's depth model"
+            for m in mask_mm.ravel()[bad]
+        ]
+        explanations = verify.explain(
+            np.full(bad.size, verify.INTERIOR, dtype=np.int8),
+            whys,
+            ref.buffers["id.prim"].ravel()[bad],
+            test["id.prim"].ravel()[bad],
+            bad // w,
+            bad % w,
+        )
     return DepthResult(
         edge=int(edge_mask.sum()),
         interior=int(interior_mask.sum()),
@@ -320,4 +340,5 @@ def compare_depth(
         own_plane_beyond=int(own.beyond.size),
         own_plane_max_abs=own.max_abs,
         not_comparable=own.not_comparable,
+        explanations=explanations,
     )
