@@ -14,7 +14,7 @@
 pub mod home;
 pub mod inputs;
 pub mod isolated;
-use crate::vocab::Feature;
+use crate::vocab::{Feature, RenderStatus, Status};
 pub mod manifest;
 pub mod pool;
 pub mod process;
@@ -300,7 +300,7 @@ pub fn rgb_not_rendered(missing: &[String]) -> String {
 
 /// Marks an ok record as visibility only: no RGB listed, the reason recorded.
 fn visibility_only(rec: &mut RenderRecord, missing: &[String]) {
-    if rec.status == "ok" {
+    if rec.status == RenderStatus::Ok {
         rec.buffers.retain(|b| b != "RGB");
         rec.reason = rgb_not_rendered(missing);
     }
@@ -500,7 +500,7 @@ fn in_process(
         crate::render::render(scene, backend, render_opts, &|_| {})
     }) {
         Ok(Ok(_)) if rendiff_core::deadline::past(Some(deadline)) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.time_s = start.elapsed().as_secs_f64();
             rec.message = format!(
                 "timed out: stopped after {:.0} s (--timeout {} s); its partial buffers were discarded",
@@ -516,7 +516,7 @@ fn in_process(
             }
             match write_frame_with(exr, &frame, radiance.as_ref(), &attrs) {
                 Ok(()) => {
-                    rec.status = "ok".into();
+                    rec.status = RenderStatus::Ok;
                     rec.exr = rel_exr.into();
                     rec.buffers = vec!["Z".into(), "id".into(), "N".into()];
                     if radiance.is_some() {
@@ -531,22 +531,22 @@ fn in_process(
                     });
                 }
                 Err(e) => {
-                    rec.status = "error".into();
+                    rec.status = RenderStatus::Error;
                     rec.message = format!("{e:#}");
                 }
             }
         }
         Ok(Err(NotRendered::Skipped(why))) => {
-            rec.status = "skipped".into();
+            rec.status = RenderStatus::Skipped;
             rec.reason = why;
         }
         Ok(Err(NotRendered::Failed(e))) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = e;
             rec.time_s = start.elapsed().as_secs_f64();
         }
         Err(_) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!("{name} panicked (a bug in rendiff)");
             rec.time_s = start.elapsed().as_secs_f64();
         }
@@ -568,11 +568,13 @@ fn say(opts: &CheckOptions, line: String) {
 const SAY_MAX_CHARS: usize = 4000;
 
 fn describe(rec: &RenderRecord) -> String {
-    match rec.status.as_str() {
-        "ok" if !rec.reason.is_empty() => format!("ok ({:.2} s; {})", rec.time_s, rec.reason),
-        "ok" => format!("ok ({:.2} s)", rec.time_s),
-        "skipped" => format!("skipped: {}", rec.reason),
-        _ => format!("ERROR: {}", rec.message),
+    match rec.status {
+        RenderStatus::Ok if !rec.reason.is_empty() => {
+            format!("ok ({:.2} s; {})", rec.time_s, rec.reason)
+        }
+        RenderStatus::Ok => format!("ok ({:.2} s)", rec.time_s),
+        RenderStatus::Skipped => format!("skipped: {}", rec.reason),
+        RenderStatus::Error => format!("ERROR: {}", rec.message),
     }
 }
 
@@ -763,7 +765,7 @@ fn render_and_compare(
             Err(e) => {
                 let mut rec = RenderRecord {
                     backend: REFERENCE.into(),
-                    status: "error".into(),
+                    status: RenderStatus::Error,
                     message: format!("cannot load scene: {e:#}"),
                     ..RenderRecord::default()
                 };
@@ -902,7 +904,7 @@ fn render_and_compare(
             for (runs, _) in scenes.iter_mut().zip(&pending).filter(|(_, p)| p.is_some()) {
                 runs.renders.push(RenderRecord {
                     backend: "harness".into(),
-                    status: "error".into(),
+                    status: RenderStatus::Error,
                     message: e.clone(),
                     ..RenderRecord::default()
                 });
@@ -1039,12 +1041,12 @@ fn external(
     let features: Vec<&str> = b.features.iter().map(String::as_str).collect();
     let capability = Capability::of(&runs.requires, &features);
     if let Capability::Skip(miss) = &capability {
-        rec.status = "skipped".into();
+        rec.status = RenderStatus::Skipped;
         rec.reason = format!("missing features: {}", miss.join(", "));
         return rec;
     }
     if !b.available {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.message = format!(
             "{} unavailable: {}",
             b.name,
@@ -1115,7 +1117,7 @@ fn external(
         .join("inputs")
         .join(format!("{}-{}", runs.scene, b.name));
     if let Err(e) = inputs::private_copy(&resolved, &input) {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.message = format!("cannot copy the resolved scene for the render: {e:#}");
         let _ = std::fs::remove_dir_all(&input);
         return rec;
@@ -1146,14 +1148,14 @@ fn external(
     };
     match outcome {
         Err(e) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!("{e:#}");
         }
         Ok(o) => {
             rec.time_s = o.seconds;
             rec.max_rss_bytes = o.max_rss_bytes;
             if o.timed_out {
-                rec.status = "error".into();
+                rec.status = RenderStatus::Error;
                 rec.message = format!(
                     "timed out and was killed after {:.0} s (--timeout {} s for the render, plus {:.0} s for the harness's own start-up)",
                     limit.as_secs_f64(),
@@ -1169,7 +1171,7 @@ fn external(
                 let parsed: Option<serde_json::Value> =
                     last.and_then(|l| serde_json::from_str(l).ok());
                 if exr.exists() {
-                    rec.status = "ok".into();
+                    rec.status = RenderStatus::Ok;
                     rec.exr = rel_exr;
                     if let Some(v) = parsed {
                         if let Some(ver) = v.get("version").and_then(|x| x.as_str()) {
@@ -1178,11 +1180,11 @@ fn external(
                         rec.info = v.get("info").cloned().unwrap_or_default();
                     }
                 } else {
-                    rec.status = "error".into();
+                    rec.status = RenderStatus::Error;
                     rec.message = "reported success but wrote no buffer file".into();
                 }
             } else if o.code == Some(isolated::EXIT_SKIPPED) {
-                rec.status = "skipped".into();
+                rec.status = RenderStatus::Skipped;
                 rec.reason = o.stderr_tail(3);
                 if rec.reason.is_empty() {
                     // The harness's skip line: {"status": "skipped", "reason": ...}.
@@ -1195,7 +1197,7 @@ fn external(
                         .unwrap_or_else(|| o.stdout.trim().to_string());
                 }
             } else {
-                rec.status = "error".into();
+                rec.status = RenderStatus::Error;
                 rec.message = format!("{} failed ({}): {}", b.name, o.how(), o.stderr_tail(6));
             }
         }
@@ -1207,7 +1209,7 @@ fn external(
     };
     let _ = std::fs::remove_dir_all(&input);
     if let Some(what) = tampered {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.reason.clear();
         rec.message = format!(
             "{} changed its input, the resolved scene {{scene}}, during the render ({what}); a renderer may only read it: its buffers are not judged (every render reads a copy of its own: no other verdict is affected)",
@@ -1218,7 +1220,7 @@ fn external(
         visibility_only(&mut rec, m);
     }
     // Never take a partial output for a result.
-    if rec.status != "ok" {
+    if rec.status != RenderStatus::Ok {
         let _ = std::fs::remove_file(&exr);
     }
     rec
@@ -1375,7 +1377,7 @@ pub fn tally(results: &Results) -> Tally {
     for r in &results.results {
         if r.is_failure() {
             t.failed += 1;
-        } else if r.status == "skipped" {
+        } else if r.status == Status::Skipped.as_str() {
             t.skipped += 1;
         } else {
             t.ok += 1;
@@ -1388,7 +1390,7 @@ pub fn tally(results: &Results) -> Tally {
 fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
     RenderRecord {
         backend: backend.into(),
-        status: "skipped".into(),
+        status: RenderStatus::Skipped,
         reason: format!("missing features: {}", missing.join(", ")),
         ..RenderRecord::default()
     }
@@ -1437,7 +1439,7 @@ mod tests {
     #[test]
     fn visibility_only_records_drop_rgb_and_say_why() {
         let mut rec = RenderRecord {
-            status: "ok".into(),
+            status: RenderStatus::Ok,
             buffers: req(&["Z", "id", "RGB"]),
             ..RenderRecord::default()
         };

@@ -17,6 +17,7 @@
 
 use super::data::{is_scene_error, num, status_rank, RunData, SceneData};
 use crate::check::manifest::ResultEntry;
+use crate::vocab::RenderStatus;
 use serde_json::Value;
 
 /// The results.json field naming what left an entry unjudged
@@ -200,13 +201,14 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
         .collect();
     for s in &data.scenes {
         for r in s.runs.iter().flat_map(|r| r.renders.iter()) {
-            if r.status == "error" && !s.results.iter().any(|e| e.backend == r.backend) {
+            if r.status == RenderStatus::Error && !s.results.iter().any(|e| e.backend == r.backend)
+            {
                 errors.push((
                     r.backend.clone(),
                     Member {
                         scene: s,
                         buffer: "render".into(),
-                        status: r.status.clone(),
+                        status: r.status.to_string(),
                         reason: r.message.clone(),
                         entry: None,
                     },
@@ -297,7 +299,8 @@ pub fn unexplained(data: &RunData, causes: &[Cause<'_>]) -> usize {
                 .iter()
                 .flat_map(|r| r.renders.iter())
                 .filter(move |r| {
-                    r.status == "error" && !s.results.iter().any(|e| e.backend == r.backend)
+                    r.status == RenderStatus::Error
+                        && !s.results.iter().any(|e| e.backend == r.backend)
                 })
         })
         .count();

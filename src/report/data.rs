@@ -6,6 +6,7 @@
 use crate::check::manifest::{
     Manifest, RenderRecord, ResultEntry, Results, SceneRuns, MANIFEST_FORMAT, RESULTS_FORMAT,
 };
+use crate::vocab::RenderStatus;
 use anyhow::{Context, Result};
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -125,7 +126,7 @@ impl SceneData {
     pub fn has_render_errors(&self) -> bool {
         self.runs
             .as_ref()
-            .is_some_and(|r| r.renders.iter().any(|x| x.status == "error"))
+            .is_some_and(|r| r.renders.iter().any(|x| x.status == RenderStatus::Error))
     }
 }
 
