@@ -12,7 +12,7 @@ import pytest
 
 import backend_cases as cases
 from rendiff_harness.contract import manifest, references, resolved
-from rendiff_harness.contract.userfile import JsonFileError, read_json
+from rendiff_harness.contract.userfile import JsonFileError, read_json, read_record
 from rendiff_harness.judge import metamorphic
 
 # (bytes written, the cause read_json gives, words its message holds)
@@ -54,6 +54,19 @@ def test_valid_json_at_the_limit_is_read(tmp_path: Path) -> None:
     text = json.dumps({"format": "f", "list": [1, 2.5, "é"]}).encode("utf-8")
     path.write_bytes(text)
     assert read_json(path, len(text)) == {"format": "f", "list": [1, 2.5, "é"]}
+
+
+@pytest.mark.parametrize(
+    ("doc", "says"), [([1], "must be a JSON object"), ({"format": "other/1"}, "format is 'other/1', expected 'mine/1'")]
+)
+def test_a_record_is_an_object_of_its_format(tmp_path: Path, doc: object, says: str) -> None:
+    path = tmp_path / "x.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(JsonFileError) as info:
+        read_record(path, 1000, "mine/1")
+    assert info.value.cause == "format" and str(info.value) == f"{path}: {says}"
+    path.write_text(json.dumps({"format": "mine/1", "a": 1}))
+    assert read_record(path, 1000, "mine/1") == {"format": "mine/1", "a": 1}
 
 
 def _manifest(tmp_path: Path) -> tuple[Path, Callable[[], object]]:

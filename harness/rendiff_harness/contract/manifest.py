@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import exrbuf, resolved, vocab
-from .userfile import JsonFileError, read_json
+from .userfile import JsonFileError, read_record
 
 MANIFEST_FORMAT = vocab.MANIFEST_FORMAT
 # Largest manifest.json read: Rust's limit on run records (`check::manifest::MAX_RECORD_BYTES`).
@@ -40,13 +40,9 @@ def load_manifest(run: Path) -> dict[str, Any]:
     """Read and structurally validate RUN/manifest.json; ManifestError names the file."""
     path = run / "manifest.json"
     try:
-        data = read_json(path, MAX_MANIFEST_BYTES, " (run `rendiff check` first)")
+        data = read_record(path, MAX_MANIFEST_BYTES, MANIFEST_FORMAT, " (run `rendiff check` first)")
     except JsonFileError as exc:
         raise ManifestError(str(exc)) from None
-    if not isinstance(data, dict):
-        raise ManifestError(f"{path}: must be a JSON object")
-    if data.get("format") != MANIFEST_FORMAT:
-        raise ManifestError(f"{path}: format is {data.get('format')!r}, expected {MANIFEST_FORMAT!r}")
     reference = data.get("reference", "raster")
     if not isinstance(reference, str) or not reference:
         raise ManifestError(f"{path}: 'reference' must be a backend name, got {reference!r}")

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera
-from .userfile import JsonFileError, UserFileError, open_regular, read_json
+from .userfile import JsonFileError, UserFileError, open_regular, read_record
 
 FORMAT = "rendiff-resolved/1"
 
@@ -138,13 +138,9 @@ def load(directory: str | Path) -> ResolvedScene:
     directory = Path(directory)
     meta_path = directory / "scene.json"
     try:
-        meta = read_json(meta_path, MAX_SCENE_JSON_BYTES, " (run `rendiff export` first)")
+        meta = read_record(meta_path, MAX_SCENE_JSON_BYTES, FORMAT, " (run `rendiff export` first)")
     except JsonFileError as exc:
         raise SceneError(str(exc)) from None
-    if not isinstance(meta, dict):
-        raise SceneError(f"{meta_path}: must be a JSON object")
-    if meta.get("format") != FORMAT:
-        raise SceneError(f"{meta_path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
     cam = meta["camera"]
     far = cam.get("far")
     camera = Camera(

@@ -13,7 +13,7 @@ import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 
 class UserFileError(ValueError):
@@ -66,7 +66,8 @@ class JsonFileError(ValueError):
     """A JSON file that cannot be read, in one line: `str()` is `PATH: problem`.
 
     `cause` says which check refused it (`missing`, `file`: not a regular file or too large,
-    `unreadable`: an OS error or bytes that are not UTF-8, `json`: not valid JSON) and `detail`
+    `unreadable`: an OS error or bytes that are not UTF-8, `json`: not valid JSON, `format`: not
+    the record `read_record` expects) and `detail`
     the problem without its label, so a caller that words the message itself (a cached
     reference's provenance) keeps one source of truth for the checks."""
 
@@ -110,3 +111,14 @@ def read_json(path: Path, limit: int, missing_hint: str = "") -> object:
         raise JsonFileError(path, "json", "nested too deeply") from None
     except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
         raise JsonFileError(path, "json", str(exc)) from None
+
+
+def read_record(path: Path, limit: int, fmt: str, missing_hint: str = "") -> dict[str, Any]:
+    """`read_json` of one of rendiff's records (manifest.json, a resolved scene's scene.json): a
+    JSON object whose `format` is `fmt`, else a JsonFileError saying which."""
+    data = read_json(path, limit, missing_hint)
+    if not isinstance(data, dict):
+        raise JsonFileError(path, "format", "must be a JSON object")
+    if data.get("format") != fmt:
+        raise JsonFileError(path, "format", f"format is {data.get('format')!r}, expected {fmt!r}")
+    return data
