@@ -200,20 +200,17 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
         .map(|(s, e)| (e.backend.clone(), member(s, e)))
         .collect();
     for s in &data.scenes {
-        for r in s.runs.iter().flat_map(|r| r.renders.iter()) {
-            if r.status == RenderStatus::Error && !s.results.iter().any(|e| e.backend == r.backend)
-            {
-                errors.push((
-                    r.backend.clone(),
-                    Member {
-                        scene: s,
-                        buffer: "render".into(),
-                        status: r.status.to_string(),
-                        reason: r.message.clone(),
-                        entry: None,
-                    },
-                ));
-            }
+        for r in s.unjudged_renders(RenderStatus::Error) {
+            errors.push((
+                r.backend.clone(),
+                Member {
+                    scene: s,
+                    buffer: "render".into(),
+                    status: r.status.to_string(),
+                    reason: r.message.clone(),
+                    entry: None,
+                },
+            ));
         }
     }
     for (backend, m) in errors {
@@ -294,15 +291,7 @@ pub fn unexplained(data: &RunData, causes: &[Cause<'_>]) -> usize {
     let renders = data
         .scenes
         .iter()
-        .flat_map(|s| {
-            s.runs
-                .iter()
-                .flat_map(|r| r.renders.iter())
-                .filter(move |r| {
-                    r.status == RenderStatus::Error
-                        && !s.results.iter().any(|e| e.backend == r.backend)
-                })
-        })
+        .flat_map(|s| s.unjudged_renders(RenderStatus::Error))
         .count();
     (failing + renders).saturating_sub(listed)
 }

@@ -356,13 +356,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         .scenes
         .iter()
         .flat_map(|s| {
-            s.runs
-                .iter()
-                .flat_map(|r| r.renders.iter())
-                .filter(move |r| {
-                    r.status == RenderStatus::Skipped
-                        && !s.results.iter().any(|e| e.backend == r.backend)
-                })
+            s.unjudged_renders(RenderStatus::Skipped)
                 .map(move |r| (s, r))
         })
         .collect();
