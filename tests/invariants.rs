@@ -1,11 +1,14 @@
 //! ARCHITECTURE.md's "Invariants" that a grep can check: the core crate has
-//! no command line and starts no process; only the tool does.
+//! no command line and starts no process; only the tool does. And statuses
+//! come from `vocab` only where the tool orchestrates (`check`, `gate`).
 
+use rendiff::vocab::{RenderStatus, Status};
 use std::path::Path;
 
-fn core_sources() -> Vec<(String, String)> {
+/// Every `.rs` file under `rel` (from the repository root), with its text.
+fn sources(rel: &str) -> Vec<(String, String)> {
     let mut out = Vec::new();
-    let mut stack = vec![Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/rendiff-core/src")];
+    let mut stack = vec![Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)];
     while let Some(dir) = stack.pop() {
         for e in std::fs::read_dir(&dir).unwrap() {
             let p = e.unwrap().path();
@@ -19,7 +22,7 @@ fn core_sources() -> Vec<(String, String)> {
             }
         }
     }
-    assert!(out.len() > 10, "core sources not found");
+    assert!(out.len() > 2, "{rel}: sources not found");
     out
 }
 
@@ -35,7 +38,7 @@ fn the_core_crate_has_no_command_line_and_starts_no_process() {
             "rendiff-core must not depend on {dep}"
         );
     }
-    for (file, text) in core_sources() {
+    for (file, text) in sources("crates/rendiff-core/src") {
         for forbidden in ["Command::new", "process::Command", "clap::", "run_folder"] {
             assert!(
                 !text.contains(forbidden),
@@ -43,4 +46,57 @@ fn the_core_crate_has_no_command_line_and_starts_no_process() {
             );
         }
     }
+}
+
+/// The status words `vocab` spells, render statuses and verdict statuses.
+fn status_words() -> Vec<&'static str> {
+    let mut words = RenderStatus::names();
+    words.extend(Status::names());
+    // `skipped` and `error` are both kinds of status: each word once.
+    words.sort_unstable();
+    words.dedup();
+    words
+}
+
+/// `line:literal` for each status spelling written as a string literal in
+/// `text`, comments aside (text after `//` on a line is not code).
+fn raw_statuses(text: &str) -> Vec<String> {
+    let words = status_words();
+    let mut found = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let code = line.split("//").next().unwrap_or("");
+        for w in &words {
+            if code.contains(&format!("\"{w}\"")) {
+                found.push(format!("{}:\"{w}\"", i + 1));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_scanner_finds_a_raw_status_and_ignores_comments() {
+    let text = "let a = RenderStatus::Ok;\n// answers \"ok\"\nrec.status = \"error\".into();\nif s == \"expected_fail\" {}\n";
+    assert_eq!(raw_statuses(text), ["3:\"error\"", "4:\"expected_fail\""]);
+}
+
+#[test]
+fn check_and_gate_spell_no_status_themselves() {
+    let mut bad = Vec::new();
+    let mut files = 0;
+    for dir in ["src/check", "src/gate"] {
+        for (file, text) in sources(dir) {
+            files += 1;
+            bad.extend(
+                raw_statuses(&text)
+                    .into_iter()
+                    .map(|at| format!("{file}:{at}")),
+            );
+        }
+    }
+    assert!(files > 10, "sources not found");
+    assert!(
+        bad.is_empty(),
+        "status spelled as a string literal (use vocab::RenderStatus / vocab::Status): {bad:?}"
+    );
 }

@@ -6,6 +6,7 @@ use super::manifest::RenderRecord;
 use super::process::{run_measured, shell_line};
 use super::CheckOptions;
 use crate::exr_io::read_buffers;
+use crate::vocab::RenderStatus;
 use std::path::Path;
 use std::process::Command;
 
@@ -65,11 +66,11 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
         .join(format!("{}-{}", super::stem(job.scene), job.backend));
     match run_measured(cmd, opts.timeout, &work, job.bin) {
         Err(e) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!("{e:#}");
         }
         Ok(o) if o.timed_out => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!(
                 "timed out after {:.0} s and was killed",
                 opts.timeout.as_secs_f64()
@@ -82,7 +83,7 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
             match o.code {
                 Some(0) => match read_buffers(job.exr) {
                     Ok(b) => {
-                        rec.status = "ok".into();
+                        rec.status = RenderStatus::Ok;
                         rec.exr = job.rel_exr.into();
                         rec.buffers = vec!["Z".into(), "id".into(), "N".into()];
                         let secs = b.attrs.get("seconds").and_then(|s| s.parse::<f64>().ok());
@@ -94,24 +95,24 @@ pub fn render(opts: &CheckOptions, job: &Job, version: String) -> RenderRecord {
                         });
                     }
                     Err(e) => {
-                        rec.status = "error".into();
+                        rec.status = RenderStatus::Error;
                         rec.message =
                             format!("reported success but its buffers are unreadable: {e:#}");
                     }
                 },
                 Some(EXIT_SKIPPED) => {
-                    rec.status = "skipped".into();
+                    rec.status = RenderStatus::Skipped;
                     rec.reason = o.stderr_tail(2);
                 }
                 _ => {
-                    rec.status = "error".into();
+                    rec.status = RenderStatus::Error;
                     rec.message =
                         format!("{} failed ({}): {}", job.backend, o.how(), o.stderr_tail(6));
                 }
             }
         }
     }
-    if rec.status != "ok" {
+    if rec.status != RenderStatus::Ok {
         let _ = std::fs::remove_file(job.exr);
     }
     rec

@@ -150,8 +150,9 @@ pub struct SceneRuns {
 pub struct RenderRecord {
     /// Backend name.
     pub backend: String,
-    /// ok | skipped | error.
-    pub status: String,
+    /// What happened (`ok`, `skipped`, `error`: `vocab::RenderStatus`, spelled
+    /// in the file as before).
+    pub status: crate::vocab::RenderStatus,
     /// Why it was skipped.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub reason: String,

@@ -14,23 +14,22 @@
 pub mod home;
 pub mod inputs;
 pub mod isolated;
-use crate::vocab::Feature;
+use crate::vocab::{Feature, RenderStatus, Status};
 pub mod manifest;
 pub mod pool;
 pub mod process;
+mod render_run;
 pub mod run_folder;
 pub mod shard;
 pub mod table;
 pub mod worker;
 
-use crate::backends::embree::{self, EmbreeMode};
+use crate::backends::embree::EmbreeMode;
 use crate::exr_io::{frame_attrs, write_frame_with};
 use crate::render::{Backend, NotRendered, RenderOptions, Rendered};
-use crate::scene::export::export;
 use crate::scene::resolve::ResolvedScene;
-use crate::scene::Scene;
 use anyhow::{bail, Context, Result};
-use manifest::{Manifest, RenderRecord, Results, SceneRuns, MANIFEST_FORMAT};
+use manifest::{Manifest, RenderRecord, Results, SceneRuns};
 use process::{run_with_timeout, shell_line};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -300,7 +299,7 @@ pub fn rgb_not_rendered(missing: &[String]) -> String {
 
 /// Marks an ok record as visibility only: no RGB listed, the reason recorded.
 fn visibility_only(rec: &mut RenderRecord, missing: &[String]) {
-    if rec.status == "ok" {
+    if rec.status == RenderStatus::Ok {
         rec.buffers.retain(|b| b != "RGB");
         rec.reason = rgb_not_rendered(missing);
     }
@@ -500,7 +499,7 @@ fn in_process(
         crate::render::render(scene, backend, render_opts, &|_| {})
     }) {
         Ok(Ok(_)) if rendiff_core::deadline::past(Some(deadline)) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.time_s = start.elapsed().as_secs_f64();
             rec.message = format!(
                 "timed out: stopped after {:.0} s (--timeout {} s); its partial buffers were discarded",
@@ -516,7 +515,7 @@ fn in_process(
             }
             match write_frame_with(exr, &frame, radiance.as_ref(), &attrs) {
                 Ok(()) => {
-                    rec.status = "ok".into();
+                    rec.status = RenderStatus::Ok;
                     rec.exr = rel_exr.into();
                     rec.buffers = vec!["Z".into(), "id".into(), "N".into()];
                     if radiance.is_some() {
@@ -531,22 +530,22 @@ fn in_process(
                     });
                 }
                 Err(e) => {
-                    rec.status = "error".into();
+                    rec.status = RenderStatus::Error;
                     rec.message = format!("{e:#}");
                 }
             }
         }
         Ok(Err(NotRendered::Skipped(why))) => {
-            rec.status = "skipped".into();
+            rec.status = RenderStatus::Skipped;
             rec.reason = why;
         }
         Ok(Err(NotRendered::Failed(e))) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = e;
             rec.time_s = start.elapsed().as_secs_f64();
         }
         Err(_) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!("{name} panicked (a bug in rendiff)");
             rec.time_s = start.elapsed().as_secs_f64();
         }
@@ -568,11 +567,13 @@ fn say(opts: &CheckOptions, line: String) {
 const SAY_MAX_CHARS: usize = 4000;
 
 fn describe(rec: &RenderRecord) -> String {
-    match rec.status.as_str() {
-        "ok" if !rec.reason.is_empty() => format!("ok ({:.2} s; {})", rec.time_s, rec.reason),
-        "ok" => format!("ok ({:.2} s)", rec.time_s),
-        "skipped" => format!("skipped: {}", rec.reason),
-        _ => format!("ERROR: {}", rec.message),
+    match rec.status {
+        RenderStatus::Ok if !rec.reason.is_empty() => {
+            format!("ok ({:.2} s; {})", rec.time_s, rec.reason)
+        }
+        RenderStatus::Ok => format!("ok ({:.2} s)", rec.time_s),
+        RenderStatus::Skipped => format!("skipped: {}", rec.reason),
+        RenderStatus::Error => format!("ERROR: {}", rec.message),
     }
 }
 
@@ -636,7 +637,7 @@ fn run_recorded(
         renderers_snapshot,
         ..opts.clone()
     };
-    let outcome = render_and_compare(&staged, &jobs, isolate, &opts.run_dir, shard)
+    let outcome = render_run::render_and_compare(&staged, &jobs, isolate, &opts.run_dir, shard)
         .map_err(|e| anyhow::anyhow!(unstage(&format!("{e:#}"), &staging.dir, &opts.run_dir)))?;
     staging.publish()?;
     Ok(outcome)
@@ -698,312 +699,6 @@ fn rerun_inputs(opts: &CheckOptions) -> manifest::Rerun {
     }
 }
 
-/// The run itself, written to `opts.run_dir` (the staging folder); commands in
-/// the manifest name `shown_dir`, where the run will be once published.
-fn render_and_compare(
-    opts: &CheckOptions,
-    jobs: &[(PathBuf, &'static str)],
-    isolate: Option<&Path>,
-    shown_dir: &Path,
-    shard: Option<manifest::ShardRecord>,
-) -> Result<CheckOutcome> {
-    let run_dir = &opts.run_dir;
-    let (staged_dir, shown) = (run_dir.clone(), shown_dir.to_path_buf());
-    // Messages name the published run folder, never the staging folder.
-    let unstaged = |rec: &mut RenderRecord| {
-        for text in [&mut rec.command, &mut rec.message, &mut rec.reason] {
-            *text = unstage(text, &staged_dir, &shown);
-        }
-    };
-    let scratch = run_dir.join("scratch");
-    let externals = harness_backends(opts, &scratch.join("info"));
-    if let Err(e) = &externals {
-        say(opts, format!("warning: {e}"));
-    }
-    let exe = "rendiff";
-    let version = format!("rendiff {}", env!("CARGO_PKG_VERSION"));
-    let mut scenes = Vec::new();
-    // Per scene, what its external renders need (folder, size); None when it did not load.
-    let mut pending: Vec<Option<ExternalScene>> = Vec::new();
-    for (si, (scene_path, role)) in jobs.iter().enumerate() {
-        let name = stem(scene_path);
-        let rel_dir = format!("scenes/{name}");
-        let dir = run_dir.join(&rel_dir);
-        let mut runs = SceneRuns {
-            scene: name.clone(),
-            scene_file: scene_path.display().to_string(),
-            resolved: format!("{rel_dir}/resolved"),
-            resolved_sha256: String::new(),
-            requires: Vec::new(),
-            role: role.to_string(),
-            renders: Vec::new(),
-        };
-        let what = if role.is_empty() {
-            String::new()
-        } else {
-            format!(" ({role} probe)")
-        };
-        say(
-            opts,
-            format!("[{}/{}] {}{what}", si + 1, jobs.len(), scene_path.display()),
-        );
-        // The export is sealed (inputs.rs): its hash is recorded, its files
-        // are read-only, and every external render reads a copy of it.
-        let resolved = Scene::load(scene_path)
-            .map_err(anyhow::Error::from)
-            .and_then(|s| ResolvedScene::resolve(&s).map_err(anyhow::Error::from))
-            .and_then(|r| export(&r, &dir.join("resolved")).map(|_| r))
-            .and_then(|r| {
-                let folder = dir.join("resolved");
-                inputs::make_read_only(&folder)?;
-                Ok((r, inputs::Seal::of(&folder)?))
-            });
-        let (scene, seal) = match resolved {
-            Ok(s) => s,
-            Err(e) => {
-                let mut rec = RenderRecord {
-                    backend: REFERENCE.into(),
-                    status: "error".into(),
-                    message: format!("cannot load scene: {e:#}"),
-                    ..RenderRecord::default()
-                };
-                unstaged(&mut rec);
-                say(opts, format!("  scene ERROR: {}", rec.message));
-                runs.renders.push(rec);
-                scenes.push(runs);
-                pending.push(None);
-                continue;
-            }
-        };
-        // What the import left out (a glTF POINTS or LINES primitive) is
-        // said even with --quiet: the scene is not all of the user's file.
-        for w in &scene.warnings {
-            crate::errln!("  warning: {w}");
-        }
-        runs.requires = scene.requires.iter().cloned().collect();
-        runs.resolved_sha256 = seal.digest.clone();
-        let core_missing = missing(&runs.requires, &core_features());
-        let scene_arg = scene_path.display().to_string();
-        for name in CORE_LOOPS {
-            if !wanted(opts, name) {
-                continue;
-            }
-            let rel_exr = format!("{rel_dir}/{name}.exr");
-            let exr = run_dir.join(&rel_exr);
-            let command = shell_line([
-                exe,
-                "render",
-                &scene_arg,
-                "--renderer",
-                name,
-                "-o",
-                &repro_out(run_dir, &rel_exr).display().to_string(),
-            ]);
-            let rec = if !core_missing.is_empty() {
-                skipped_for_features(name, &core_missing)
-            } else if let Some(bin) = isolate {
-                let job = isolated::Job {
-                    bin,
-                    backend: name,
-                    scene: scene_path,
-                    exr: &exr,
-                    rel_exr: &rel_exr,
-                    scratch: &scratch,
-                };
-                isolated::render(opts, &job, version.clone())
-            } else {
-                let (backend, choice) = if name != REFERENCE {
-                    (Backend::Trace, None)
-                } else {
-                    reference_loop(opts, &scene)
-                };
-                let render_opts = RenderOptions {
-                    spp: opts.core.spp,
-                    seed: opts.core.seed,
-                    bias: opts.core.bias,
-                    ..RenderOptions::default()
-                };
-                let mut rec = in_process(
-                    backend,
-                    &scene,
-                    &exr,
-                    &rel_exr,
-                    command,
-                    version.clone(),
-                    render_opts,
-                    opts.timeout,
-                );
-                note_loop_choice(&mut rec, choice);
-                rec
-            };
-            let mut rec = rec;
-            unstaged(&mut rec);
-            say(opts, format!("  {:<14} {}", name, describe(&rec)));
-            runs.renders.push(rec);
-        }
-        for mode in EMBREE_MODES {
-            let name = mode.name();
-            if !wanted(opts, name) {
-                continue;
-            }
-            let rel_exr = format!("{rel_dir}/{name}.exr");
-            let exr = run_dir.join(&rel_exr);
-            // Embree renders visibility only: on a shaded scene it still gives Z and IDs.
-            let capability = Capability::of(&runs.requires, &embree_features());
-            let mut rec = if let Capability::Skip(emissing) = &capability {
-                skipped_for_features(name, emissing)
-            } else if let Some(bin) = isolate {
-                let job = isolated::Job {
-                    bin,
-                    backend: name,
-                    scene: scene_path,
-                    exr: &exr,
-                    rel_exr: &rel_exr,
-                    scratch: &scratch,
-                };
-                isolated::render(
-                    opts,
-                    &job,
-                    embree::version().unwrap_or_else(|e| e.to_string()),
-                )
-            } else {
-                let command = shell_line([exe, "check", "--only", name, &scene_arg]);
-                let v = embree::version().unwrap_or_else(|e| e.to_string());
-                in_process(
-                    Backend::Embree(mode),
-                    &scene,
-                    &exr,
-                    &rel_exr,
-                    command,
-                    v,
-                    RenderOptions::default(),
-                    opts.timeout,
-                )
-            };
-            if let Capability::VisibilityOnly(m) = &capability {
-                visibility_only(&mut rec, m);
-            }
-            unstaged(&mut rec);
-            say(opts, format!("  {:<14} {}", name, describe(&rec)));
-            runs.renders.push(rec);
-        }
-        pending.push(Some(ExternalScene {
-            dir,
-            rel_dir,
-            triangles: scene.triangles.len() as u64,
-            seal,
-        }));
-        scenes.push(runs);
-    }
-    // Then every external render of every scene, side by side in the job pool
-    // (pool.rs); the core's renders above had the cores to themselves.
-    match &externals {
-        Err(e) => {
-            for (runs, _) in scenes.iter_mut().zip(&pending).filter(|(_, p)| p.is_some()) {
-                runs.renders.push(RenderRecord {
-                    backend: "harness".into(),
-                    status: "error".into(),
-                    message: e.clone(),
-                    ..RenderRecord::default()
-                });
-            }
-        }
-        Ok(list) => {
-            let tasks: Vec<(usize, &HarnessBackend)> = pending
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| p.is_some())
-                .flat_map(|(si, _)| {
-                    list.iter()
-                        .filter(|b| wanted(opts, &b.name))
-                        .map(move |b| (si, b))
-                })
-                .collect();
-            let size = |&(si, b): &(usize, &HarnessBackend)| {
-                let triangles = pending[si].as_ref().map_or(0, |p| p.triangles);
-                pool::render_memory(b.peak_memory, triangles)
-            };
-            // Biggest first (the estimate grows with the scene's triangles),
-            // so that a large scene does not finish alone at the end.
-            let cost = |t: &(usize, &HarnessBackend)| size(t) as f64;
-            let pool_opts = pool::PoolOptions {
-                // A measuring run (`isolate`) renders one at a time, so that
-                // each peak is the render's own.
-                jobs: if isolate.is_some() { 1 } else { opts.jobs },
-                memory_budget: opts.memory_budget,
-            };
-            let done = std::sync::atomic::AtomicUsize::new(0);
-            let total = tasks.len();
-            let recs = pool::run(
-                pool_opts,
-                &tasks,
-                cost,
-                size,
-                |i| {
-                    (opts.workers && isolate.is_none())
-                        .then(|| worker::Slot::new(scratch.join(format!("workers/slot{i}"))))
-                },
-                |slot, &(si, b)| {
-                    let p = pending[si].as_ref().expect("tasks are loaded scenes");
-                    let mut rec =
-                        external(opts, b, &scenes[si], p, &scratch, isolate, slot.as_mut());
-                    unstaged(&mut rec);
-                    let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                    say(
-                        opts,
-                        format!(
-                            "  [{k}/{total}] {} {:<10} {}",
-                            scenes[si].scene,
-                            b.name,
-                            describe(&rec)
-                        ),
-                    );
-                    rec
-                },
-            );
-            for ((si, _), rec) in tasks.iter().zip(recs) {
-                scenes[*si].renders.push(rec);
-            }
-        }
-    }
-    // The comparison reads the run's own resolved scenes: still as exported?
-    for (runs, p) in scenes.iter().zip(&pending) {
-        let Some(p) = p else { continue };
-        let folder = p.dir.join("resolved");
-        let now = inputs::Seal::of(&folder)?;
-        if let Some(what) = p.seal.changes(&now) {
-            bail!(
-                "{}: the resolved scene of {:?} changed during the run ({what}), though every render read a copy of its own: its verdicts cannot be trusted; run rendiff check again",
-                folder.display(),
-                crate::scene::printable(&runs.scene, 100)
-            );
-        }
-    }
-    let manifest = Manifest {
-        format: MANIFEST_FORMAT.into(),
-        reference: REFERENCE.into(),
-        created_unix: std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_secs())
-            .unwrap_or(0),
-        rendiff_version: env!("CARGO_PKG_VERSION").into(),
-        scenes,
-        options: Some(run_options(opts)?),
-        rerun: Some(rerun_inputs(opts)),
-        shard,
-    };
-    crate::exr_io::write_atomically(&run_dir.join("manifest.json"), |tmp| {
-        std::fs::write(tmp, serde_json::to_vec_pretty(&manifest)?)?;
-        Ok(())
-    })?;
-    let (results, table) = compare(opts, &scratch, shown_dir)?;
-    Ok(CheckOutcome {
-        manifest,
-        results,
-        table,
-    })
-}
-
 /// What a loaded scene's external renders need.
 struct ExternalScene {
     /// `RUN/scenes/<stem>`: holds `resolved/` and receives the EXRs.
@@ -1039,12 +734,12 @@ fn external(
     let features: Vec<&str> = b.features.iter().map(String::as_str).collect();
     let capability = Capability::of(&runs.requires, &features);
     if let Capability::Skip(miss) = &capability {
-        rec.status = "skipped".into();
+        rec.status = RenderStatus::Skipped;
         rec.reason = format!("missing features: {}", miss.join(", "));
         return rec;
     }
     if !b.available {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.message = format!(
             "{} unavailable: {}",
             b.name,
@@ -1115,7 +810,7 @@ fn external(
         .join("inputs")
         .join(format!("{}-{}", runs.scene, b.name));
     if let Err(e) = inputs::private_copy(&resolved, &input) {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.message = format!("cannot copy the resolved scene for the render: {e:#}");
         let _ = std::fs::remove_dir_all(&input);
         return rec;
@@ -1146,14 +841,14 @@ fn external(
     };
     match outcome {
         Err(e) => {
-            rec.status = "error".into();
+            rec.status = RenderStatus::Error;
             rec.message = format!("{e:#}");
         }
         Ok(o) => {
             rec.time_s = o.seconds;
             rec.max_rss_bytes = o.max_rss_bytes;
             if o.timed_out {
-                rec.status = "error".into();
+                rec.status = RenderStatus::Error;
                 rec.message = format!(
                     "timed out and was killed after {:.0} s (--timeout {} s for the render, plus {:.0} s for the harness's own start-up)",
                     limit.as_secs_f64(),
@@ -1169,7 +864,7 @@ fn external(
                 let parsed: Option<serde_json::Value> =
                     last.and_then(|l| serde_json::from_str(l).ok());
                 if exr.exists() {
-                    rec.status = "ok".into();
+                    rec.status = RenderStatus::Ok;
                     rec.exr = rel_exr;
                     if let Some(v) = parsed {
                         if let Some(ver) = v.get("version").and_then(|x| x.as_str()) {
@@ -1178,11 +873,11 @@ fn external(
                         rec.info = v.get("info").cloned().unwrap_or_default();
                     }
                 } else {
-                    rec.status = "error".into();
+                    rec.status = RenderStatus::Error;
                     rec.message = "reported success but wrote no buffer file".into();
                 }
             } else if o.code == Some(isolated::EXIT_SKIPPED) {
-                rec.status = "skipped".into();
+                rec.status = RenderStatus::Skipped;
                 rec.reason = o.stderr_tail(3);
                 if rec.reason.is_empty() {
                     // The harness's skip line: {"status": "skipped", "reason": ...}.
@@ -1195,7 +890,7 @@ fn external(
                         .unwrap_or_else(|| o.stdout.trim().to_string());
                 }
             } else {
-                rec.status = "error".into();
+                rec.status = RenderStatus::Error;
                 rec.message = format!("{} failed ({}): {}", b.name, o.how(), o.stderr_tail(6));
             }
         }
@@ -1207,7 +902,7 @@ fn external(
     };
     let _ = std::fs::remove_dir_all(&input);
     if let Some(what) = tampered {
-        rec.status = "error".into();
+        rec.status = RenderStatus::Error;
         rec.reason.clear();
         rec.message = format!(
             "{} changed its input, the resolved scene {{scene}}, during the render ({what}); a renderer may only read it: its buffers are not judged (every render reads a copy of its own: no other verdict is affected)",
@@ -1218,7 +913,7 @@ fn external(
         visibility_only(&mut rec, m);
     }
     // Never take a partial output for a result.
-    if rec.status != "ok" {
+    if rec.status != RenderStatus::Ok {
         let _ = std::fs::remove_file(&exr);
     }
     rec
@@ -1375,7 +1070,7 @@ pub fn tally(results: &Results) -> Tally {
     for r in &results.results {
         if r.is_failure() {
             t.failed += 1;
-        } else if r.status == "skipped" {
+        } else if r.status == Status::Skipped.as_str() {
             t.skipped += 1;
         } else {
             t.ok += 1;
@@ -1388,7 +1083,7 @@ pub fn tally(results: &Results) -> Tally {
 fn skipped_for_features(backend: &str, missing: &[String]) -> RenderRecord {
     RenderRecord {
         backend: backend.into(),
-        status: "skipped".into(),
+        status: RenderStatus::Skipped,
         reason: format!("missing features: {}", missing.join(", ")),
         ..RenderRecord::default()
     }
@@ -1437,7 +1132,7 @@ mod tests {
     #[test]
     fn visibility_only_records_drop_rgb_and_say_why() {
         let mut rec = RenderRecord {
-            status: "ok".into(),
+            status: RenderStatus::Ok,
             buffers: req(&["Z", "id", "RGB"]),
             ..RenderRecord::default()
         };

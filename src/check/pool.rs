@@ -187,50 +187,37 @@ mod tests {
         assert_eq!(*started.lock().unwrap(), vec![5.0, 4.0, 3.0, 1.0]);
     }
 
+    /// The most renders in flight at once when `items` (their sizes) run on
+    /// 4 slots under `memory_budget`, each taking `ms` milliseconds.
+    fn peak_in_flight(items: &[u64], memory_budget: u64, ms: u64) -> usize {
+        let in_flight = AtomicUsize::new(0);
+        let peak = AtomicUsize::new(0);
+        let opts = PoolOptions {
+            jobs: 4,
+            memory_budget,
+        };
+        run(
+            opts,
+            items,
+            |_| 1.0,
+            |m| *m,
+            |_| (),
+            |_, _| {
+                let now = in_flight.fetch_add(1, Ordering::SeqCst) + 1;
+                peak.fetch_max(now, Ordering::SeqCst);
+                std::thread::sleep(Duration::from_millis(ms));
+                in_flight.fetch_sub(1, Ordering::SeqCst);
+            },
+        );
+        peak.load(Ordering::SeqCst)
+    }
+
     #[test]
     fn the_memory_budget_keeps_big_renders_apart() {
         // Four renders of 6 units under a budget of 10, on 4 slots: never two at once.
-        let in_flight = AtomicUsize::new(0);
-        let peak = AtomicUsize::new(0);
-        let items = [6u64; 4];
-        let opts = PoolOptions {
-            jobs: 4,
-            memory_budget: 10,
-        };
-        run(
-            opts,
-            &items,
-            |_| 1.0,
-            |m| *m,
-            |_| (),
-            |_, _| {
-                let now = in_flight.fetch_add(1, Ordering::SeqCst) + 1;
-                peak.fetch_max(now, Ordering::SeqCst);
-                std::thread::sleep(Duration::from_millis(30));
-                in_flight.fetch_sub(1, Ordering::SeqCst);
-            },
-        );
-        assert_eq!(peak.load(Ordering::SeqCst), 1);
+        assert_eq!(peak_in_flight(&[6; 4], 10, 30), 1);
         // Under a budget that fits two, two run side by side.
-        peak.store(0, Ordering::SeqCst);
-        let opts = PoolOptions {
-            jobs: 4,
-            memory_budget: 12,
-        };
-        run(
-            opts,
-            &items,
-            |_| 1.0,
-            |m| *m,
-            |_| (),
-            |_, _| {
-                let now = in_flight.fetch_add(1, Ordering::SeqCst) + 1;
-                peak.fetch_max(now, Ordering::SeqCst);
-                std::thread::sleep(Duration::from_millis(50));
-                in_flight.fetch_sub(1, Ordering::SeqCst);
-            },
-        );
-        assert_eq!(peak.load(Ordering::SeqCst), 2);
+        assert_eq!(peak_in_flight(&[6; 4], 12, 50), 2);
     }
 
     #[test]

@@ -19,6 +19,7 @@
 use super::manifest::{DealtScene, Manifest, SceneRuns, ShardRecord, MANIFEST_FORMAT};
 use super::run_folder::{ensure_complete, Staging};
 use super::{stem, CheckOptions, CheckOutcome, CALIBRATION_ROLE};
+use crate::vocab::RenderStatus;
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -345,7 +346,7 @@ fn check_resolved_seals(manifests: &[(PathBuf, Manifest)]) -> Result<()> {
         let file = run.join("manifest.json");
         for s in &m.scenes {
             let name = crate::scene::printable(&s.scene, 100);
-            let rendered = s.renders.iter().any(|r| r.status == "ok");
+            let rendered = s.renders.iter().any(|r| r.status == RenderStatus::Ok);
             if s.resolved_sha256.is_empty() && !rendered {
                 continue;
             }
@@ -494,7 +495,7 @@ fn check_shard_set(manifests: &[(PathBuf, Manifest)]) -> Result<()> {
                     );
                 }
             }
-            for r in s.renders.iter().filter(|r| r.status == "ok") {
+            for r in s.renders.iter().filter(|r| r.status == RenderStatus::Ok) {
                 let (was, at) = *versions
                     .entry(r.backend.as_str())
                     .or_insert((r.version.as_str(), run));

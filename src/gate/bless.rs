@@ -6,6 +6,7 @@ use super::*;
 use crate::exr_io::read_buffers;
 use crate::report::data::run_relative;
 use crate::report::overview::utc;
+use crate::vocab::RenderStatus;
 
 /// The CPU model from /proc/cpuinfo ("unknown" elsewhere).
 pub fn cpu_model() -> String {
@@ -207,7 +208,7 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
         let far = s
             .renders
             .iter()
-            .find(|r| r.backend == manifest.reference && r.status == "ok")
+            .find(|r| r.backend == manifest.reference && r.status == RenderStatus::Ok)
             .and_then(|r| run_relative(run, &r.exr))
             .and_then(|p| read_buffers(&p).ok())
             .and_then(|b| b.z)
@@ -225,7 +226,7 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
         for r in &s.renders {
             let mut found = Vec::new();
             find_seeds(&r.info, &mut found);
-            if found.is_empty() && r.status == "ok" {
+            if found.is_empty() && r.status == RenderStatus::Ok {
                 let attrs = run_relative(run, &r.exr).and_then(|p| read_buffers(&p).ok());
                 if let Some(v) = attrs.and_then(|b| b.attrs.get("seed").cloned()) {
                     found.push(("seed".into(), Value::String(v)));

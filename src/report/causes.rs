@@ -17,6 +17,7 @@
 
 use super::data::{is_scene_error, num, status_rank, RunData, SceneData};
 use crate::check::manifest::ResultEntry;
+use crate::vocab::RenderStatus;
 use serde_json::Value;
 
 /// The results.json field naming what left an entry unjudged
@@ -199,19 +200,17 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
         .map(|(s, e)| (e.backend.clone(), member(s, e)))
         .collect();
     for s in &data.scenes {
-        for r in s.runs.iter().flat_map(|r| r.renders.iter()) {
-            if r.status == "error" && !s.results.iter().any(|e| e.backend == r.backend) {
-                errors.push((
-                    r.backend.clone(),
-                    Member {
-                        scene: s,
-                        buffer: "render".into(),
-                        status: r.status.clone(),
-                        reason: r.message.clone(),
-                        entry: None,
-                    },
-                ));
-            }
+        for r in s.unjudged_renders(RenderStatus::Error) {
+            errors.push((
+                r.backend.clone(),
+                Member {
+                    scene: s,
+                    buffer: "render".into(),
+                    status: r.status.to_string(),
+                    reason: r.message.clone(),
+                    entry: None,
+                },
+            ));
         }
     }
     for (backend, m) in errors {
@@ -292,14 +291,7 @@ pub fn unexplained(data: &RunData, causes: &[Cause<'_>]) -> usize {
     let renders = data
         .scenes
         .iter()
-        .flat_map(|s| {
-            s.runs
-                .iter()
-                .flat_map(|r| r.renders.iter())
-                .filter(move |r| {
-                    r.status == "error" && !s.results.iter().any(|e| e.backend == r.backend)
-                })
-        })
+        .flat_map(|s| s.unjudged_renders(RenderStatus::Error))
         .count();
     (failing + renders).saturating_sub(listed)
 }

@@ -6,6 +6,7 @@
 use crate::check::manifest::{
     Manifest, RenderRecord, ResultEntry, Results, SceneRuns, MANIFEST_FORMAT, RESULTS_FORMAT,
 };
+use crate::vocab::RenderStatus;
 use anyhow::{Context, Result};
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -121,11 +122,23 @@ impl SceneData {
             .unwrap_or(if self.has_render_errors() { 0 } else { 4 })
     }
 
+    /// Its renders with `status` that no verdict speaks for (results.json
+    /// has no entry of their backend for this scene): the report lists them
+    /// from the manifest itself.
+    pub fn unjudged_renders(&self, status: RenderStatus) -> impl Iterator<Item = &RenderRecord> {
+        self.runs
+            .iter()
+            .flat_map(|r| r.renders.iter())
+            .filter(move |r| {
+                r.status == status && !self.results.iter().any(|e| e.backend == r.backend)
+            })
+    }
+
     /// True when a render failed (shown even if results.json is missing).
     pub fn has_render_errors(&self) -> bool {
         self.runs
             .as_ref()
-            .is_some_and(|r| r.renders.iter().any(|x| x.status == "error"))
+            .is_some_and(|r| r.renders.iter().any(|x| x.status == RenderStatus::Error))
     }
 }
 

@@ -75,16 +75,36 @@ pub fn command_block(cmd: &str) -> String {
 /// A complete page: `title` is plain text (escaped here), `body` is markup built
 /// by the caller from escaped pieces.
 pub fn page(title: &str, body: &str) -> String {
+    let body = format!("{body}\n<script>{JS}</script>");
+    shell(title, &format!("<style>{CSS}</style>"), &body)
+}
+
+/// A page like [`page`] whose styles are the sheet [`STYLE_SHEET`] beside it
+/// (its caller writes [`CSS`] there), and without the report's script (it
+/// serves images and flip views, which such pages do not have): for a folder
+/// of many pages written together (the benchmarks'), one sheet instead of a
+/// copy in every page.
+pub fn page_with_sheet(title: &str, body: &str) -> String {
+    let link = format!("<link rel=\"stylesheet\" href=\"{}\">", url(STYLE_SHEET));
+    shell(title, &link, body)
+}
+
+/// The file name of the sheet [`page_with_sheet`] links to.
+pub const STYLE_SHEET: &str = "style.css";
+
+/// The document around `body`, with `style` (a `<style>` or `<link>`) in its head.
+fn shell(title: &str, style: &str, body: &str) -> String {
     format!(
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>{}</title>\n<style>{CSS}</style>\n</head>\n<body>\n{body}\n<script>{JS}</script>\n</body>\n</html>\n",
+         <title>{}</title>\n{style}\n</head>\n<body>\n{body}\n</body>\n</html>\n",
         escape(title)
     )
 }
 
-/// Styles: one small sheet inlined in every page (no external files to lose).
-const CSS: &str = r#"
+/// Styles: one small sheet, inlined in every report page (no external files
+/// to lose), or written once beside pages that link it ([`page_with_sheet`]).
+pub const CSS: &str = r#"
 body{font:14px/1.4 system-ui,-apple-system,"Segoe UI",sans-serif;margin:16px 24px;color:#1b1b1b;background:#fafafa}
 h1{font-size:22px;margin:4px 0 8px}h2{font-size:18px;margin:22px 0 8px;border-bottom:1px solid #ddd}
 h3{font-size:15px;margin:14px 0 6px}

@@ -11,6 +11,7 @@ use super::stats::{object_mismatches, Histogram, ObjectMismatches};
 use crate::exr_io::{read_buffers, Buffers};
 use crate::frame::BACKGROUND_ID;
 use crate::preview::{depth_colors, finite_range, id_color, srgb8 as srgb};
+use crate::vocab::RenderStatus;
 use anyhow::Result;
 use std::path::Path;
 
@@ -168,7 +169,7 @@ pub fn build(run: &Path, reference: &str, scene: &SceneData, report_dir: &Path) 
         let Some(rec) = scene.render(&backend) else {
             continue;
         };
-        if rec.status != "ok" || rec.exr.is_empty() {
+        if rec.status != RenderStatus::Ok || rec.exr.is_empty() {
             continue;
         }
         let Some(path) = run_relative(run, &rec.exr) else {

@@ -8,6 +8,7 @@ use super::images::{Kind, SceneImages};
 use super::stats::Histogram;
 use super::svg;
 use crate::check::manifest::{RenderRecord, ResultEntry};
+use crate::vocab::RenderStatus;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -355,12 +356,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         .scenes
         .iter()
         .flat_map(|s| {
-            s.runs
-                .iter()
-                .flat_map(|r| r.renders.iter())
-                .filter(move |r| {
-                    r.status == "skipped" && !s.results.iter().any(|e| e.backend == r.backend)
-                })
+            s.unjudged_renders(RenderStatus::Skipped)
                 .map(move |r| (s, r))
         })
         .collect();
@@ -419,12 +415,12 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
             if entries.is_empty() {
                 match s.render(be) {
                     Some(r) => {
-                        let why = if r.status == "ok" {
+                        let why = if r.status == RenderStatus::Ok {
                             format!("{:.3} s", r.time_s)
                         } else {
                             format!("{}{}", r.reason, r.message)
                         };
-                        let _ = write!(b, "{}", badge(&r.status, &why));
+                        let _ = write!(b, "{}", badge(r.status.as_str(), &why));
                     }
                     None => b.push_str("<span class=\"muted\">—</span>"),
                 }

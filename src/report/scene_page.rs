@@ -478,7 +478,7 @@ pub fn render(data: &RunData, scene: &SceneData, imgs: &SceneImages) -> String {
                 let _ = write!(
                     b,
                     "<p>{} version <b>{}</b>, {}</p>",
-                    badge(&r.status, &format!("{}{}", r.reason, r.message)),
+                    badge(r.status.as_str(), &format!("{}{}", r.reason, r.message)),
                     escape(if r.version.is_empty() {
                         "?"
                     } else {

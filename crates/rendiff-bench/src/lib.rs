@@ -338,7 +338,8 @@ pub struct Output {
 }
 
 /// Writes `STEM.json`, `STEM.html`, each `(name, svg)` as a standalone
-/// file `STEM-NAME.svg` and the folder's refreshed index page, as one set
+/// file `STEM-NAME.svg`, the folder's refreshed index page and the style
+/// sheet the pages link, as one set
 /// ([`outputs::write_set`]: all or nothing, the benchmark's plots of an
 /// earlier run that this one does not write removed); returns the paths
 /// written, index aside.
@@ -369,6 +370,10 @@ pub fn write_outputs(
     files.push((
         "index.html".into(),
         page::index_html(dir, Some(stem)).into_bytes(),
+    ));
+    files.push((
+        rendiff::report::html::STYLE_SHEET.into(),
+        rendiff::report::html::CSS.trim_start().as_bytes().to_vec(),
     ));
     let mut written = outputs::write_set(dir, stem, &files)?;
     written.truncate(n);

@@ -42,7 +42,7 @@ fn existing_plots(dir: &Path, stem: &str) -> Vec<String> {
 }
 
 /// Refuses an output folder that is not a folder, and any path of the
-/// benchmark's set in it (its JSON, HTML, `index.html` and every existing
+/// benchmark's set in it (its JSON, HTML, `index.html`, the style sheet and every existing
 /// `STEM-*.svg`) that is not a regular file: checked before the benchmark
 /// runs, so that minutes of work are not lost to an unwritable output, and
 /// again with the final names before anything is written. Creates nothing.
@@ -59,6 +59,7 @@ pub fn check_targets(dir: &Path, stem: &str) -> Result<()> {
         format!("{stem}.json"),
         format!("{stem}.html"),
         "index.html".to_string(),
+        rendiff::report::html::STYLE_SHEET.to_string(),
     ];
     names.extend(existing_plots(dir, stem));
     for n in names {

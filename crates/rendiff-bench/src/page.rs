@@ -1,11 +1,12 @@
 //! The benchmark pages: one static HTML file per benchmark (tables, inline SVG
 //! plots, the environment it ran in) and an index of the folder. Built on the
-//! check report's page shell so both look alike; every piece of text that can
+//! check report's page shell and style sheet so both look alike (the sheet
+//! is one file beside the pages, not a copy in each); every piece of text that can
 //! come from a scene, a renderer or a command line is escaped here, and only
 //! SVG made by [`super::plot`] (itself escaped) is inserted as markup.
 
 use anyhow::Result;
-use rendiff::report::html::{escape, page, url};
+use rendiff::report::html::{escape, page_with_sheet, url};
 use serde_json::Value;
 use std::fmt::Write;
 use std::path::Path;
@@ -156,9 +157,10 @@ impl Page {
         self.table(&["what", "value"], &rows)
     }
 
-    /// The finished HTML document.
+    /// The finished HTML document; its styles are the report's sheet,
+    /// written once beside the pages ([`crate::write_outputs`]).
     pub fn finish(&self) -> String {
-        page(&self.title, &self.body)
+        page_with_sheet(&self.title, &self.body)
     }
 }
 
@@ -240,6 +242,13 @@ mod tests {
             assert!(!html.contains(bad), "{bad} reached the markup");
         }
         assert!(html.contains("class=\"num\">1.5"));
+    }
+
+    #[test]
+    fn pages_link_the_one_style_sheet() {
+        let html = Page::new("t").finish();
+        assert!(html.contains("<link rel=\"stylesheet\" href=\"style.css\">"));
+        assert!(!html.contains("<style>") && !html.contains("<script>"));
     }
 
     #[test]

@@ -139,6 +139,14 @@ words! {
     }
 }
 
+/// A render record is an error until its renderer's outcome says otherwise,
+/// so a record that no branch filled in never reads as a success.
+impl Default for RenderStatus {
+    fn default() -> Self {
+        RenderStatus::Error
+    }
+}
+
 words! {
     /// What a verdict compares (`buffer` in results.json).
     Buffer {

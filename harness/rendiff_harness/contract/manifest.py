@@ -12,7 +12,6 @@ EntryError: one scene/backend cannot be compared (its entries become `error` wit
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import exrbuf, resolved, vocab
-from .userfile import UserFileError, read_regular
+from .userfile import JsonFileError, read_record
 
 MANIFEST_FORMAT = vocab.MANIFEST_FORMAT
 # Largest manifest.json read: Rust's limit on run records (`check::manifest::MAX_RECORD_BYTES`).
@@ -41,21 +40,9 @@ def load_manifest(run: Path) -> dict[str, Any]:
     """Read and structurally validate RUN/manifest.json; ManifestError names the file."""
     path = run / "manifest.json"
     try:
-        data = json.loads(read_regular(path, MAX_MANIFEST_BYTES).decode("utf-8"))
-    except FileNotFoundError:
-        raise ManifestError(f"{path}: missing (run `rendiff check` first)") from None
-    except UserFileError as exc:
-        raise ManifestError(f"{path}: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ManifestError(f"{path}: unreadable: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise ManifestError(f"{path}: not valid JSON: {exc}") from None
-    except RecursionError:
-        raise ManifestError(f"{path}: not valid JSON: nested too deeply") from None
-    if not isinstance(data, dict):
-        raise ManifestError(f"{path}: must be a JSON object")
-    if data.get("format") != MANIFEST_FORMAT:
-        raise ManifestError(f"{path}: format is {data.get('format')!r}, expected {MANIFEST_FORMAT!r}")
+        data = read_record(path, MAX_MANIFEST_BYTES, MANIFEST_FORMAT, " (run `rendiff check` first)")
+    except JsonFileError as exc:
+        raise ManifestError(str(exc)) from None
     reference = data.get("reference", "raster")
     if not isinstance(reference, str) or not reference:
         raise ManifestError(f"{path}: 'reference' must be a backend name, got {reference!r}")

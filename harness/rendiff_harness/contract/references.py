@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from . import atomic, exrbuf, resolved
-from .userfile import UserFileError, read_regular, sha256_regular
+from .userfile import JsonFileError, UserFileError, read_json, sha256_regular
 
 FORMAT = "rendiff-reference/1"
 DEFAULT_SPP = 4096
@@ -126,16 +126,6 @@ def file_sha256(path: Path, limit: int | None = None) -> str:
     return sha256_regular(path, MAX_EXR_BYTES if limit is None else limit)
 
 
-def _read_provenance(js: Path) -> Any:
-    """The parsed <scene>.json: ValueError (UserFileError, UnicodeDecodeError, JSONDecodeError, or one
-    saying it nests too deeply) for bad content, OSError (FileNotFoundError...) from opening."""
-    raw = read_regular(js, MAX_PROVENANCE_BYTES)
-    try:
-        return json.loads(raw.decode("utf-8"))
-    except RecursionError:
-        raise ValueError("nested too deeply") from None
-
-
 def provenance_path(exr: str | Path) -> Path:
     """<out>.json beside <out>.exr: the EXR's name with its suffix replaced (`check_request` requires
     the `.exr` suffix, so the two never collide)."""
@@ -194,13 +184,13 @@ def regenerate_command(scene_dir: str | Path, exr: str | Path) -> str:
     """The command for `exr` from `scene_dir`, keeping the spp/seed of the existing provenance if readable."""
     spp, seed = DEFAULT_SPP, DEFAULT_SEED
     try:
-        prov = _read_provenance(provenance_path(exr))
+        prov = read_json(provenance_path(exr), MAX_PROVENANCE_BYTES)
         if isinstance(prov, dict):
             if isinstance(prov.get("spp_requested"), int) and prov["spp_requested"] > 1:
                 spp = int(prov["spp_requested"])
             if isinstance(prov.get("seed"), int) and prov["seed"] >= 0:
                 seed = int(prov["seed"])
-    except (OSError, ValueError):
+    except JsonFileError:
         pass
     return command_line(scene_dir, exr, spp, seed)
 
@@ -224,18 +214,15 @@ def load(exr: str | Path, scene: resolved.ResolvedScene) -> CachedReference:
             f"{exr}: cached reference corrupt (EXR unreadable: {exc.strerror or exc}): regenerate with {fix}"
         ) from None
     try:
-        prov = _read_provenance(js)
-    except FileNotFoundError:
-        raise ReferenceError(f"{js}: provenance of the cached reference missing: regenerate with {fix}") from None
-    except UserFileError as exc:
-        raise ReferenceError(
-            f"{js}: cached reference corrupt (the provenance file {exc}): regenerate with {fix}"
-        ) from None
-    except (OSError, ValueError) as exc:
-        detail = (exc.strerror or str(exc)) if isinstance(exc, OSError) else str(exc)
-        raise ReferenceError(
-            f"{js}: cached reference corrupt (provenance unreadable: {detail}): regenerate with {fix}"
-        ) from None
+        prov = read_json(js, MAX_PROVENANCE_BYTES)
+    except JsonFileError as exc:
+        if exc.cause == "missing":
+            why = "provenance of the cached reference missing"
+        elif exc.cause == "file":
+            why = f"cached reference corrupt (the provenance file {exc.detail})"
+        else:
+            why = f"cached reference corrupt (provenance unreadable: {exc.detail})"
+        raise ReferenceError(f"{js}: {why}: regenerate with {fix}") from None
     if not isinstance(prov, dict) or prov.get("format") != FORMAT:
         got = prov.get("format") if isinstance(prov, dict) else prov
         # a short repr for a short value, else its type: the file's content may be large or deeply nested

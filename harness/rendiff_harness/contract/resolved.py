@@ -6,7 +6,6 @@ the same numbers in every renderer.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -16,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera
-from .userfile import UserFileError, open_regular, read_regular
+from .userfile import JsonFileError, UserFileError, open_regular, read_record
 
 FORMAT = "rendiff-resolved/1"
 
@@ -139,21 +138,9 @@ def load(directory: str | Path) -> ResolvedScene:
     directory = Path(directory)
     meta_path = directory / "scene.json"
     try:
-        meta = json.loads(read_regular(meta_path, MAX_SCENE_JSON_BYTES).decode("utf-8"))
-    except FileNotFoundError as exc:
-        raise SceneError(f"{meta_path}: missing (run `rendiff export` first)") from exc
-    except UserFileError as exc:
-        raise SceneError(f"{meta_path}: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{meta_path}: unreadable: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{meta_path}: not valid JSON: {exc}") from exc
-    except RecursionError:
-        raise SceneError(f"{meta_path}: not valid JSON: nested too deeply") from None
-    if not isinstance(meta, dict):
-        raise SceneError(f"{meta_path}: must be a JSON object")
-    if meta.get("format") != FORMAT:
-        raise SceneError(f"{meta_path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
+        meta = read_record(meta_path, MAX_SCENE_JSON_BYTES, FORMAT, " (run `rendiff export` first)")
+    except JsonFileError as exc:
+        raise SceneError(str(exc)) from None
     cam = meta["camera"]
     far = cam.get("far")
     camera = Camera(

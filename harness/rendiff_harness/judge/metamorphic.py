@@ -41,7 +41,6 @@ without blocking); unparsable, too deeply nested or out-of-range content is one 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import stat
@@ -66,7 +65,7 @@ from ..contract.manifest import (
 )
 from ..contract.results import finite, write_results
 from ..contract.text import printable
-from ..contract.userfile import open_regular, read_regular
+from ..contract.userfile import JsonFileError, open_regular, read_json
 from ..contract.vocab import BACKGROUND_ID
 from ..renderers.spec import SpecLookup
 from . import expectations, geometry, precision, tolerance
@@ -166,15 +165,11 @@ class Case:
 def load_spec(path: Path) -> list[Case]:
     """Read and validate SPEC; SpecError names the file and the case."""
     try:
-        doc = json.loads(read_regular(path, MAX_SPEC_BYTES).decode("utf-8"))
-    except FileNotFoundError:
-        raise SpecError(f"{path}: spec file not found") from None
-    except RecursionError:
-        raise SpecError(f"{path}: unreadable spec: nested too deeply") from None
-    except OSError as exc:
-        raise SpecError(f"{path}: unreadable spec: {exc.strerror or exc}") from None
-    except ValueError as exc:  # UserFileError, UnicodeDecodeError, JSONDecodeError, too many digits
-        raise SpecError(f"{path}: unreadable spec: {exc}") from None
+        doc = read_json(path, MAX_SPEC_BYTES)
+    except JsonFileError as exc:
+        if exc.cause == "missing":
+            raise SpecError(f"{path}: spec file not found") from None
+        raise SpecError(f"{path}: unreadable spec: {exc.detail}") from None
     if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
         raise SpecError(f"{path}: format must be {SPEC_FORMAT!r}")
     raw = doc.get("cases")

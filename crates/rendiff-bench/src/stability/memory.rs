@@ -8,6 +8,7 @@
 use super::families::Family;
 use anyhow::Result;
 use rendiff::check::{self, manifest::SceneRuns, CheckOptions};
+use rendiff::vocab::RenderStatus;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -115,15 +116,15 @@ fn size_rows(sr: &SceneRuns, tris: u64, last: &mut Vec<(String, f64, f64)>) -> V
         .iter()
         .map(|r| {
             let rss = r.max_rss_bytes;
-            if r.status == "ok" {
+            if r.status == RenderStatus::Ok {
                 if let Some(b) = rss {
                     last.push((r.backend.clone(), b as f64, r.time_s));
                 }
             }
-            let note = match r.status.as_str() {
-                "ok" => String::new(),
-                "skipped" => r.reason.clone(),
-                _ => r.message.lines().next().unwrap_or("").to_string(),
+            let note = match r.status {
+                RenderStatus::Ok => String::new(),
+                RenderStatus::Skipped => r.reason.clone(),
+                RenderStatus::Error => r.message.lines().next().unwrap_or("").to_string(),
             };
             json!({
                 "triangles": tris, "backend": r.backend, "status": r.status,

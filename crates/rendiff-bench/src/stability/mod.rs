@@ -22,6 +22,7 @@ use rendiff::check::{self, manifest::ResultEntry, manifest::SceneRuns, CheckOpti
 use rendiff::exr_io::read_buffers;
 use rendiff::raster::{self, RasterOptions};
 use rendiff::scene::resolve::ResolvedScene;
+use rendiff::vocab::RenderStatus;
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -105,7 +106,7 @@ impl Runs {
     fn exr(&self, scene: &str, backend: &str) -> Option<PathBuf> {
         let (dir, sr) = self.scenes.get(scene)?;
         let r = sr.renders.iter().find(|r| r.backend == backend)?;
-        (r.status == "ok" && !r.exr.is_empty()).then(|| dir.join(&r.exr))
+        (r.status == RenderStatus::Ok && !r.exr.is_empty()).then(|| dir.join(&r.exr))
     }
 
     fn info(&self, scene: &str, backend: &str) -> Value {
