@@ -44,7 +44,7 @@ use super::rows::{Avx2, Avx512};
 use super::rows::{Portable, Rows, ROW, ROW2};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
-use crate::raster_edges::{self as edges, Lanes};
+use crate::raster::edges::{self as edges, Lanes};
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{hit_key, key_depth, Counters, NO_HIT};
 use glam::DVec3;

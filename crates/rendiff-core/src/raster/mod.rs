@@ -3,34 +3,41 @@
 //!
 //! Triangles are clipped against the near plane only to find a conservative
 //! screen bounding box, with a margin derived from the rounding errors
-//! ([`crate::raster_bounds`]: a triangle smaller than a pixel usually gets
+//! ([`crate::raster::bounds`]: a triangle smaller than a pixel usually gets
 //! none), and binned into tiles in parallel, those facing the eye first
-//! ([`crate::raster_bins`]); bands of
+//! ([`crate::raster::bins`]); bands of
 //! tiles render in parallel straight into the image's key buffer. The
 //! decision per pixel is [`crate::visibility`]'s, exactly as in the tracer:
-//! the edge-function fast path ([`crate::raster_edges`]) settles only the
+//! the edge-function fast path ([`crate::raster::edges`]) settles only the
 //! signs the predicate's own filter would settle at once (8 pixels at a time,
 //! or a whole 8x8 block when its corners prove it), boxes of a few pixels ask
 //! the predicate directly, a triangle that cannot beat any key in its box is
-//! skipped ([`crate::raster_hiz`]), and [`render_exact`] keeps the pure
+//! skipped ([`crate::raster::hiz`]), and [`render_exact`] keeps the pure
 //! predicate loop to test it against (same boxes, same skipping, so the same
 //! buffers and counts).
 //!
 //! Counts: `triangle_setups` and `coverage_tests` count the work done, so a
 //! triangle with an empty box or skipped as hidden adds to neither.
 
+pub mod bins;
+pub mod bounds;
+pub mod edges;
+pub mod hiz;
+pub mod screen_depth;
+pub(crate) mod timing;
+
 use crate::camera::{Camera, PixelRay};
 use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
-use crate::raster_bins::{Binned, Bins};
-use crate::raster_bounds::BoxMargin;
+use crate::raster::bins::{Binned, Bins};
+use crate::raster::bounds::BoxMargin;
 #[cfg(target_arch = "x86_64")]
-use crate::raster_edges::Avx2;
-use crate::raster_edges::{
+use crate::raster::edges::Avx2;
+use crate::raster::edges::{
     ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileColumns, TileRays, CHUNK,
 };
-use crate::raster_hiz::TileDepthBound;
-use crate::raster_screen_depth::{BlockBound, ScreenDepth};
+use crate::raster::hiz::TileDepthBound;
+use crate::raster::screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
 use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
 use rayon::prelude::*;
@@ -55,7 +62,7 @@ pub struct PixelRect {
 
 /// Conservative pixel bounding box of the part of a triangle at planar depth
 /// at least `near` (clipped against the near plane, then projected), grown by
-/// the rounding margin [`crate::raster_bounds`] derives. `None` when no
+/// the rounding margin [`crate::raster::bounds`] derives. `None` when no
 /// pixel can be covered. (Renders set the camera's constants up once.)
 pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
     BoxMargin::new(cam).bounds(cam, t)
@@ -72,7 +79,7 @@ pub struct RasterOptions {
 
 /// Renders depth and IDs by rasterization. `progress` is called with the number
 /// of tiles finished since the last call (from worker threads). Coverage goes
-/// through the edge-function fast path ([`crate::raster_edges`]) first.
+/// through the edge-function fast path ([`crate::raster::edges`]) first.
 pub fn render(
     scene: &ResolvedScene,
     opts: RasterOptions,
@@ -117,7 +124,7 @@ struct Mode {
     fast: bool,
     /// Box margins.
     margin: Option<BoxMargin>,
-    /// Skip hidden triangles ([`crate::raster_hiz`]); never while counting coverage.
+    /// Skip hidden triangles ([`crate::raster::hiz`]); never while counting coverage.
     hiz: bool,
     /// Multiplies the depth bound (tests).
     hiz_factor: f64,
@@ -387,7 +394,7 @@ fn render_tile_avx2(
     render_tile_body(avx2, scene, bin, column, y0, mode, out, rays, setups, c)
 }
 
-/// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
+/// The tile's depth bound ([`crate::raster::hiz`]), computed the first time a
 /// triangle's box is found full of hits (most tiles of big triangles never need it).
 struct LazyBound {
     /// Skipping is on.
@@ -409,7 +416,7 @@ impl LazyBound {
         }
     }
 
-    /// True when triangle `prim`, of face `face` ([`crate::raster_hiz`]), can
+    /// True when triangle `prim`, of face `face` ([`crate::raster::hiz`]), can
     /// change no key in its box `[lx0, lx1, ly0, ly1]` of the tile: its
     /// lowest possible key is no smaller than every key there (none of which
     /// may then be background). `make` computes the tile's bound the first
@@ -635,7 +642,7 @@ fn render_tile_body<L: Lanes>(
 
 /// The fast path over one tile (whose `rays` are filled): per triangle, its edge
 /// functions decide 8 pixels of a row at a time where their bound allows
-/// ([`crate::raster_edges`]); undecided pixels go to the predicate exactly as
+/// ([`crate::raster::edges`]); undecided pixels go to the predicate exactly as
 /// [`TriEdges::covers`] would ask it; covered pixels get their depth 8 at a
 /// time from the same arithmetic as [`TriDepth::depth`]. Boxes of at most
 /// [`SMALL_BOX`] pixels take the predicate path directly.
@@ -934,7 +941,7 @@ fn covered_block<L: Lanes>(
 }
 
 /// An 8x8 block the triangle covers whole, by certain signs, whose depths
-/// come from its screen-space interpolant ([`crate::raster_screen_depth`])
+/// come from its screen-space interpolant ([`crate::raster::screen_depth`])
 /// under `bound` (the block's, or its box's): every lane the rounding
 /// certificate settles keeps the interpolant's f32, the rest of its row
 /// takes [`ChunkDepth`] (the depth function bit for bit), and the keys are
@@ -1380,7 +1387,7 @@ mod tests {
     }
 
     /// Planes filling the view, where whole blocks take their depth from
-    /// the screen-space interpolant ([`crate::raster_screen_depth`]):
+    /// the screen-space interpolant ([`crate::raster::screen_depth`]):
     /// facing the camera, world-axis walls, tilted up to grazing, a copy of
     /// one a hair behind and a coplanar duplicate (the z-test and the tie
     /// on prim), with the eye up to 1e7 from the origin and near and far
@@ -1479,7 +1486,7 @@ mod tests {
         out
     }
 
-    /// Tight boxes ([`crate::raster_bounds`]) against whole-image boxes: the
+    /// Tight boxes ([`crate::raster::bounds`]) against whole-image boxes: the
     /// same keys and coverage counts, so no box lost a pixel; and with the
     /// margin multiplied by 0 some box does lose one (the margin is needed,
     /// and this test would notice a wrong one).
@@ -1570,7 +1577,7 @@ mod tests {
         out
     }
 
-    /// Skipping hidden triangles ([`crate::raster_hiz`]) changes no buffer,
+    /// Skipping hidden triangles ([`crate::raster::hiz`]) changes no buffer,
     /// in the fast and the predicate path, and skips some; with the depth
     /// bound 1% too high some buffer changes (the bound is tight enough to
     /// matter and this test would notice a wrong one).

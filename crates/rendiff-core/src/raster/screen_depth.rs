@@ -34,7 +34,7 @@
 //!   is within `6u` of the real one.
 //! - The pixel's ray `D` lies within `ε_j` = [`TileRays::eta`] of `g` per
 //!   component: `η_j = 16u(|e_j| + H_j)` bounds `|δ_j - g_j|` for exact
-//!   screen coordinates ([`crate::raster_edges`], whole blocks), and with
+//!   screen coordinates ([`crate::raster::edges`], whole blocks), and with
 //!   the computed ones the sum `f + r sx + v sy` (`3.01u H_j`), `P = e + s`
 //!   and `D = fl(P - e)` (`u(|e_j| + 1.01 H_j)` each) come to `5.03u H_j +
 //!   1.01u|e_j| < η_j`. The eye's distance from the origin enters here.
@@ -114,7 +114,7 @@
 //! against every f64 around a rounding boundary.
 
 use crate::camera::Camera;
-use crate::raster_edges::{BlockRows, ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
+use crate::raster::edges::{BlockRows, ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
 use crate::visibility::{hit_key, NO_HIT};
 
 /// Unit roundoff of f64.
@@ -582,8 +582,8 @@ impl ScreenDepth {
 mod tests {
     use super::*;
     use crate::predicate::tests::lcg;
+    use crate::raster::edges::Portable;
     use crate::raster::TILE;
-    use crate::raster_edges::Portable;
     use crate::visibility::{slab, TriDepth};
     use glam::{DVec3, Vec3};
 
@@ -762,7 +762,7 @@ mod tests {
             assert_eq!(def.0.map(f32::to_bits), z.map(f32::to_bits));
             assert_eq!((def.1, def.2), (ok, sure));
             #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = crate::raster_edges::Avx2::detect() {
+            if let Some(avx) = crate::raster::edges::Avx2::detect() {
                 let wide = r.s.row(avx, r.rays, row, base, r.bound.eu);
                 assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
                 assert_eq!((wide.1, wide.2), (ok, sure));
@@ -928,7 +928,7 @@ mod tests {
                 }
                 assert_eq!(keys_by(Portable, r, start), (rows, want.clone()));
                 #[cfg(target_arch = "x86_64")]
-                if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                if let Some(avx) = crate::raster::edges::Avx2::detect() {
                     assert_eq!(keys_by(avx, r, start), (rows, want.clone()));
                 }
             }

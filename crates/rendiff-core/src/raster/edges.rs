@@ -83,7 +83,7 @@
 //! - the evaluation, against `n . g'` with `g' = f + r sx + v sy` at the
 //!   computed coordinates taken as exact: `6u Σ_j |n_j| H_j` (three
 //!   roundings in each coefficient, three in the evaluation: the bound
-//!   [`crate::raster_screen_depth`] derives for its `den`, with `|sx| <= A`,
+//!   [`crate::raster::screen_depth`] derives for its `den`, with `|sx| <= A`,
 //!   `|sy| <= T`);
 //! - the coordinates' own rounding, `|g' - g| <= 4u (|r_j| A + |v_j| T)` per
 //!   component: `4u Σ_j |n_j| H_j`;
@@ -106,9 +106,9 @@
 
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
-use crate::raster_screen_depth::ScreenRow;
+use crate::raster::screen_depth::ScreenRow;
 #[cfg(target_arch = "x86_64")]
-use crate::raster_screen_depth::{DROPPED_MASK, MIDPOINT};
+use crate::raster::screen_depth::{DROPPED_MASK, MIDPOINT};
 use crate::scene::resolve::Tri;
 use crate::visibility::{hit_key, TriDepth, TriEdges, NO_HIT};
 use glam::DVec3;
@@ -327,7 +327,7 @@ fn row_stats_scalar(v: &[f64]) -> RowStats {
 /// (`if x < lo { x } else { lo }` is exactly `minpd`'s rule). The tile's
 /// rays gather them as they are written, so that neither the fast path's
 /// bounds ([`RowStats`]) nor the early depth test
-/// ([`crate::raster_hiz::TileDepthBound`]) reads the tile again.
+/// ([`crate::raster::hiz::TileDepthBound`]) reads the tile again.
 #[derive(Debug, Clone, Copy)]
 pub struct Extremes {
     /// Smallest value per lane (NaN never enters).
@@ -1031,7 +1031,7 @@ impl Lanes for Avx2 {
     }
 }
 
-/// [`rounds_alone`](crate::raster_screen_depth::rounds_alone) on four
+/// [`rounds_alone`](crate::raster::screen_depth::rounds_alone) on four
 /// lanes: all ones where `|low 29 bits of w - midpoint| > eu`, the one
 /// wide form of the certificate ([`Avx2`]'s `screen_row` and `screen_keys`).
 ///
@@ -1327,7 +1327,7 @@ impl TileRays {
     /// The directions and planar factors of every pixel, written now if
     /// [`TileRays::fill`] left them for later (tiles whose corners gave the
     /// spans): a tile whose triangles all settle whole blocks by corners
-    /// and screen-space depth ([`crate::raster_screen_depth`]) never needs
+    /// and screen-space depth ([`crate::raster::screen_depth`]) never needs
     /// them.
     #[inline(always)]
     pub fn ensure_dirs<L: Lanes>(&mut self, l: L) {
@@ -1384,7 +1384,7 @@ impl TileRays {
     /// in the column and row), so its least value over the tile is a
     /// corner's. Each computed `planar` lies within `ε = 4u Σ|f_j|(H_j +
     /// η_j) + 1.01 Σ|f_j| η_j` of `g · f`: `|D_j - g_j| <= η_j`
-    /// ([`crate::raster_screen_depth`] derives it from the module's `η_j`),
+    /// ([`crate::raster::screen_depth`] derives it from the module's `η_j`),
     /// `|g_j| <= H_j = |f_j| + |r_j| a + |v_j| tan`, and the dot product
     /// rounds by at most `3.01u Σ|f_j||D_j|`. So `planar(p) >= g·f(p) - ε
     /// >= min_c g·f(c) - ε >= min_c planar(c) - 2ε`. Costs four directions
@@ -1522,14 +1522,14 @@ impl TileRays {
         }
     }
 
-    /// The tile's early depth bound ([`crate::raster_hiz`]), from its frame:
+    /// The tile's early depth bound ([`crate::raster::hiz`]), from its frame:
     /// the corners' lower bound on `planar` and the span of `D_axis` (from
     /// the corners, or gathered when the directions were written).
     #[inline(always)]
-    pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
-        let faces = crate::raster_hiz::NearFaces::new(cam);
+    pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster::hiz::TileDepthBound> {
+        let faces = crate::raster::hiz::NearFaces::new(cam);
         let dk = self.d_span[faces.axis()];
-        crate::raster_hiz::TileDepthBound::from_low(faces.negative(), self.planar_low, dk)
+        crate::raster::hiz::TileDepthBound::from_low(faces.negative(), self.planar_low, dk)
     }
 
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
@@ -2454,9 +2454,9 @@ mod tests {
                     "{} far below {least}",
                     t.planar_low
                 );
-                let faces = crate::raster_hiz::NearFaces::new(&cam);
+                let faces = crate::raster::hiz::NearFaces::new(&cam);
                 let (k, neg) = (faces.axis(), faces.negative());
-                let scanned = crate::raster_hiz::TileDepthBound::new(neg, &t.planar, &t.d[k]);
+                let scanned = crate::raster::hiz::TileDepthBound::new(neg, &t.planar, &t.d[k]);
                 let (got, scanned) = (t.depth_bound(&cam).unwrap(), scanned.unwrap());
                 assert!(got.kappa() <= scanned.kappa());
                 assert!(got.kappa() >= scanned.kappa() * (1.0 - within));

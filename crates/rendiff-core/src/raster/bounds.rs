@@ -78,8 +78,8 @@
 //! coordinates.
 
 use crate::camera::Camera;
+use crate::raster::hiz::{f32_below, Abs, NearFaces};
 use crate::raster::PixelRect;
-use crate::raster_hiz::{f32_below, Abs, NearFaces};
 use crate::scene::resolve::Tri;
 use glam::{DVec3, Vec3};
 
@@ -422,7 +422,7 @@ impl Lanes<4> for Plain4 {
 mod avx2_lanes {
     //! [`Lanes`] in AVX2 intrinsics.
     use super::{Lanes, Tri};
-    use crate::raster_edges::Avx2;
+    use crate::raster::edges::Avx2;
     use std::arch::x86_64::*;
 
     // Every `unsafe` below: an `Avx2` exists only on a CPU with AVX2
@@ -906,7 +906,7 @@ impl BoxMargin {
 /// True when triangle `t`'s vertices, seen from the eye, run clockwise:
 /// its front (the side its winding's normal points to) faces away, as the
 /// far side of a closed, outward-wound mesh does. The binning lists these
-/// triangles after the others in each tile ([`crate::raster_bins`]), so
+/// triangles after the others in each tile ([`crate::raster::bins`]), so
 /// that a closed mesh's near side fills the tile first and its far side is
 /// skipped as hidden. Only an order: no key depends on it.
 ///
@@ -966,7 +966,7 @@ pub fn bounds_into(
         return unsafe { bounds_avx512(wide, cam, tris, degenerate, margin, out) };
     }
     #[cfg(target_arch = "x86_64")]
-    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+    if let Some(avx2) = crate::raster::edges::Avx2::detect() {
         // SAFETY: the CPU has AVX2 (just detected).
         return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out) };
     }
@@ -991,7 +991,7 @@ fn bounds_avx512(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn bounds_avx2(
-    avx2: crate::raster_edges::Avx2,
+    avx2: crate::raster::edges::Avx2,
     cam: &Camera,
     tris: &[Tri],
     deg: &[bool],
@@ -1282,7 +1282,7 @@ mod tests {
                     };
                     check("portable", &|o| bounds_chunk(Plain4, cam, t, d, margin, o));
                     #[cfg(target_arch = "x86_64")]
-                    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+                    if let Some(avx2) = crate::raster::edges::Avx2::detect() {
                         // SAFETY: the CPU has AVX2 (just detected).
                         check("AVX2", &|o| unsafe {
                             bounds_avx2(avx2, cam, t, d, margin, o)
