@@ -1,5 +1,6 @@
 //! ARCHITECTURE.md's "Invariants" that a grep can check: the core crate has
-//! no command line and starts no process; only the tool does.
+//! no command line and starts no process; only the tool does; SIMD
+//! intrinsics live in the core's `simd` module only, and no closure wraps one.
 
 use std::path::Path;
 
@@ -43,4 +44,166 @@ fn the_core_crate_has_no_command_line_and_starts_no_process() {
             );
         }
     }
+}
+
+/// `path` relative to the core crate's `src/`, with `/` separators.
+fn core_relative(path: &str) -> String {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/rendiff-core/src");
+    Path::new(path)
+        .strip_prefix(&root)
+        .unwrap()
+        .to_string_lossy()
+        .replace('\\', "/")
+}
+
+#[test]
+fn simd_intrinsics_and_cpu_detection_live_in_the_simd_module_only() {
+    for (file, text) in core_sources() {
+        let rel = core_relative(&file);
+        if rel.starts_with("simd/") {
+            continue;
+        }
+        let code = strip_comments_and_strings(&text);
+        for forbidden in ["arch::", "_mm", "is_x86_feature_detected"] {
+            assert!(
+                !code.contains(forbidden),
+                "{file} uses {forbidden}: intrinsics and CPU detection live in \
+                 crates/rendiff-core/src/simd/ (ARCHITECTURE.md); kernels call its traits"
+            );
+        }
+    }
+}
+
+#[test]
+fn no_closure_or_array_map_wraps_an_intrinsic() {
+    let mut found = Vec::new();
+    for (file, text) in core_sources() {
+        let code = strip_comments_and_strings(&text);
+        let line = |at: usize| code[..at].matches('\n').count() + 1;
+        for (at, body) in closures(&code) {
+            if body.contains("_mm") {
+                found.push(format!("{file}:{}: closure around an intrinsic", line(at)));
+            }
+        }
+        let squeezed: String = code.chars().filter(|c| !c.is_whitespace()).collect();
+        for call in ["map(_mm", "from_fn(_mm"] {
+            if squeezed.contains(call) {
+                found.push(format!("{file}: {call}..): an intrinsic passed to {call}"));
+            }
+        }
+    }
+    // The checker itself: it must see this closure, and not a boolean `||`.
+    let planted = "let a = x || y; let v = |p: Vec3| _mm_setr_ps(p.x, 0.0, 0.0, 0.0);";
+    let seen: Vec<_> = closures(planted).into_iter().map(|(_, b)| b).collect();
+    assert_eq!(seen, ["|p: Vec3| _mm_setr_ps(p.x, 0.0, 0.0, 0.0)"]);
+    assert!(
+        found.is_empty(),
+        "a closure or array map wraps an intrinsic (ARCHITECTURE.md, \"Why the kernels look \
+         the way they do\": compiled out of line, each intrinsic becomes a call):\n{}",
+        found.join("\n")
+    );
+}
+
+/// `text` with its `//` comments and string literals blanked (same length,
+/// so offsets keep their lines).
+fn strip_comments_and_strings(text: &str) -> String {
+    let s = text.as_bytes();
+    let mut out = s.to_vec();
+    let mut i = 0;
+    while i < s.len() {
+        if s[i..].starts_with(b"//") {
+            while i < s.len() && s[i] != b'\n' {
+                out[i] = b' ';
+                i += 1;
+            }
+        } else if s[i..].starts_with(b"'\"'") {
+            i += 3;
+        } else if s[i] == b'"' {
+            i += 1;
+            while i < s.len() && s[i] != b'"' {
+                let step = if s[i] == b'\\' { 2 } else { 1 };
+                for o in out.iter_mut().skip(i).take(step) {
+                    if *o != b'\n' {
+                        *o = b' ';
+                    }
+                }
+                i += step;
+            }
+            i += 1;
+        } else {
+            i += 1;
+        }
+    }
+    String::from_utf8(out).unwrap()
+}
+
+/// Every closure in `code` (comments and strings blanked): its offset and
+/// its text from the parameter list to the end of its body. A `|` opens one
+/// where it follows `=`, `(`, `,`, `{`, `;`, `move` or `return` (where a
+/// binary `|` or `||` cannot stand).
+fn closures(code: &str) -> Vec<(usize, &str)> {
+    let s = code.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < s.len() {
+        if s[i] != b'|' {
+            i += 1;
+            continue;
+        }
+        let before = code[..i].trim_end();
+        let comparison = ["==", "<=", ">=", "!="]
+            .iter()
+            .any(|op| before.ends_with(op));
+        let opens = (before.ends_with(['=', '(', ',', '{', ';']) && !comparison)
+            || before.ends_with("move")
+            || before.ends_with("return");
+        if !opens {
+            i += 1;
+            continue;
+        }
+        let params_end = if s.get(i + 1) == Some(&b'|') {
+            i + 1
+        } else {
+            match code[i + 1..].find('|') {
+                Some(k) => i + 1 + k,
+                None => break,
+            }
+        };
+        let mut b = params_end + 1;
+        while b < s.len() && s[b].is_ascii_whitespace() {
+            b += 1;
+        }
+        if code[b..].starts_with("->") {
+            b += code[b..].find('{').unwrap_or(0);
+        }
+        let mut depth = 0i32;
+        let mut e = b;
+        if s.get(b) == Some(&b'{') {
+            while e < s.len() {
+                match s[e] {
+                    b'{' | b'(' | b'[' => depth += 1,
+                    b'}' | b')' | b']' => depth -= 1,
+                    _ => {}
+                }
+                e += 1;
+                if depth == 0 {
+                    break;
+                }
+            }
+        } else {
+            while e < s.len() {
+                match s[e] {
+                    b'{' | b'(' | b'[' => depth += 1,
+                    b'}' | b')' | b']' if depth == 0 => break,
+                    b'}' | b')' | b']' => depth -= 1,
+                    b',' | b';' if depth == 0 => break,
+                    _ => {}
+                }
+                e += 1;
+            }
+        }
+        out.push((i, &code[i..e]));
+        i = params_end + 1;
+    }
+    out
 }

@@ -25,6 +25,7 @@ pub mod raster;
 pub mod render;
 pub mod scene;
 pub mod shade;
+pub mod simd;
 pub mod trace;
 pub mod visibility;
 pub mod vocab;

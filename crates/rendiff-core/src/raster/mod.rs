@@ -31,14 +31,15 @@ use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::raster::bins::{Binned, Bins};
 use crate::raster::bounds::BoxMargin;
-#[cfg(target_arch = "x86_64")]
-use crate::raster::edges::Avx2;
 use crate::raster::edges::{
-    ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileColumns, TileRays, CHUNK,
+    ChunkDepth, ChunkOps, ChunkSigns, FastEdges, TileColumns, TileRays, CHUNK,
 };
 use crate::raster::hiz::TileDepthBound;
 use crate::raster::screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::Avx2;
+use crate::simd::Portable;
 use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -575,13 +576,13 @@ const PREFETCH_AHEAD: usize = 8;
 /// of about a pixel, the setup costs more than it saves.
 const SMALL_BOX: usize = 4;
 
-// One pixel of a small box per lane of `Lanes::filter4` (and per step of
-// `Lanes::small_signs`).
+// One pixel of a small box per lane of `ChunkOps::filter4` (and per step of
+// `ChunkOps::small_signs`).
 const _: () = assert!(SMALL_BOX <= 4);
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn render_tile_body<L: Lanes>(
+fn render_tile_body<L: ChunkOps>(
     l: L,
     scene: &ResolvedScene,
     (bin, front): (&[Binned], usize),
@@ -648,7 +649,7 @@ fn render_tile_body<L: Lanes>(
 /// [`SMALL_BOX`] pixels take the predicate path directly.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn fast_tile<L: Lanes>(
+fn fast_tile<L: ChunkOps>(
     l: L,
     scene: &ResolvedScene,
     (bin, front): (&[Binned], usize),
@@ -673,7 +674,7 @@ fn fast_tile<L: Lanes>(
         // entries ahead (a hint; nothing observable changes).
         if ahead {
             if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
-                crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+                crate::simd::prefetch(&scene.triangles[next.prim as usize]);
             }
         }
         // Where the triangles facing away begin, a tile left without
@@ -911,7 +912,7 @@ fn fast_tile<L: Lanes>(
 /// with nothing written, when some lane needs the slab (the caller then
 /// takes the block row by row).
 #[inline(always)]
-fn covered_block<L: Lanes>(
+fn covered_block<L: ChunkOps>(
     l: L,
     cam: &Camera,
     prim: u32,
@@ -948,7 +949,7 @@ fn covered_block<L: Lanes>(
 /// updated.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn screen_block<L: Lanes>(
+fn screen_block<L: ChunkOps>(
     l: L,
     cam: &Camera,
     prim: u32,
@@ -981,7 +982,7 @@ fn screen_block<L: Lanes>(
 /// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as
 /// [`TriEdges::covers`] asks it, with the predicate's own f64 filter
 /// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
-/// evaluated here for every pixel and edge at once ([`Lanes::small_signs`]:
+/// evaluated here for every pixel and edge at once ([`ChunkOps::small_signs`]:
 /// in AVX2 one edge plane per lane, 1-3% faster on `million` than one
 /// pixel per lane), so only the signs it cannot settle call it (which
 /// then counts its exact fallbacks and ties as always). When the filter
@@ -1029,7 +1030,7 @@ fn small_box_pixels([lx0, lx1, ly0, ly1]: [usize; 4]) -> ([(usize, usize); SMALL
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn small_box<L: Lanes>(
+fn small_box<L: ChunkOps>(
     l: L,
     cam: &Camera,
     t: &Tri,
@@ -1124,7 +1125,7 @@ fn small_box<L: Lanes>(
 /// update the keys (and coverage counts).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn chunk_hits<L: Lanes>(
+fn chunk_hits<L: ChunkOps>(
     l: L,
     cam: &Camera,
     t: &Tri,
