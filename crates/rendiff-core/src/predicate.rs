@@ -51,7 +51,7 @@ impl EdgePlane {
     /// The f64 filter's determinant for the ray direction `(x, y, z)` and the
     /// bound its magnitude must clear for its sign to be exact: the one home
     /// of the formula, which [`EdgePlane::sign_with`] and the raster's
-    /// all-pixels-at-once form (`raster_edges::Lanes::filter4`) evaluate.
+    /// all-pixels-at-once form (`raster::edges::ChunkOps::filter4`) evaluate.
     #[inline(always)]
     pub fn filter(&self, x: f64, y: f64, z: f64) -> (f64, f64) {
         let det = x * self.n.x + y * self.n.y + z * self.n.z;

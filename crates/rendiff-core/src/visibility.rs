@@ -36,7 +36,7 @@ pub struct Counters {
     pub triangle_setups: u64,
     /// Ray-box tests (trace only): nodes tested per ray; a packet counts each live lane.
     pub bvh_nodes_visited: u64,
-    /// Raster only: coverage tests its edge-function fast path (`raster_edges`)
+    /// Raster only: coverage tests its edge-function fast path (`raster::edges`)
     /// decided without calling the orientation predicate; the other
     /// `coverage_tests - fast_decided` called it (and `exact_fallbacks` counts
     /// its exact arithmetic). Absent in older records, hence the default.
@@ -44,7 +44,7 @@ pub struct Counters {
     pub fast_decided: u64,
     /// Raster only: triangle-tile pairs skipped whole because no pixel of
     /// the triangle's box in that tile could beat the keys already there
-    /// (`raster_hiz`); they add no setup and no coverage test. Absent in
+    /// (`raster::hiz`); they add no setup and no coverage test. Absent in
     /// older records, hence the default.
     #[serde(default)]
     pub hidden_skipped: u64,

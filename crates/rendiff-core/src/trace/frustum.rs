@@ -212,8 +212,8 @@ fn checked_plane(cam: &Camera, n: DVec3, sx: [f64; 2], sy: [f64; 2]) -> [f32; 3]
 
 #[cfg(test)]
 mod tests {
-    use super::super::rows::Portable;
     use super::*;
+    use crate::simd::Portable;
     use crate::visibility::RayBox;
     use glam::DVec3;
 

@@ -7,14 +7,12 @@
 //! skipped only when its nearest possible key is worse than the best hit.
 
 mod build;
-mod frustum;
+pub(crate) mod frustum;
 mod nodes;
-/// A cache hint the raster's tile loop shares (for the triangles its bins name next).
-pub(crate) use nodes::prefetch;
 mod packet;
-mod primary;
+pub(crate) mod primary;
 mod rect;
-mod rows;
+pub(crate) mod rows;
 mod same_box;
 mod timing;
 

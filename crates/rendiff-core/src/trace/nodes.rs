@@ -17,6 +17,7 @@
 //! tests and stack traffic of the merged levels (3% on the million scene).
 
 use super::primary::Node32;
+use crate::simd::prefetch;
 
 /// Largest leaf made by merging a subtree: testing a few more triangles'
 /// pixel rectangles costs less than the box tests and stack traffic of the
@@ -129,21 +130,6 @@ fn prim_spans(nodes: &[Node32]) -> Vec<Option<(u32, u32)>> {
         };
     }
     span
-}
-
-/// Asks the CPU to start loading the cache line holding `*p` (a hint: no
-/// effect on results, and a no-op off x86-64).
-#[inline(always)]
-pub(crate) fn prefetch<T>(p: &T) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        // SAFETY: SSE is part of the x86-64 baseline, and a prefetch of a
-        // valid reference's address reads nothing the program can observe.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((p as *const T).cast::<i8>()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
 }
 
 #[cfg(test)]

@@ -36,16 +36,17 @@
 //! single-ray kernel's (which tests every candidate the tree hands it).
 
 use super::frustum::Frustum;
-use super::nodes::{prefetch, Nodes32};
+use super::nodes::Nodes32;
 use super::primary::{dir_norm_bound, LeafTri, Node32};
 use super::rect::PixelRect;
-#[cfg(target_arch = "x86_64")]
-use super::rows::{Avx2, Avx512};
-use super::rows::{Portable, Rows, ROW, ROW2};
+use super::rows::{Rows, ROW, ROW2};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
-use crate::raster_edges::{self as edges, Lanes};
+use crate::raster::edges::ChunkOps;
 use crate::scene::resolve::ResolvedScene;
+use crate::simd::{prefetch, Portable};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{Avx2, Avx512};
 use crate::visibility::{hit_key, key_depth, Counters, NO_HIT};
 use glam::DVec3;
 
@@ -338,7 +339,7 @@ impl Packet {
     /// lanes with an unsure sign take the per-lane path. The caller has already
     /// removed the lanes outside the triangle's pixel rectangle from `m`.
     #[inline(always)]
-    fn leaf<S: Rows, L: Lanes>(
+    fn leaf<S: Rows, L: ChunkOps>(
         &mut self,
         (s, l): (S, L),
         cam: &Camera,
@@ -447,30 +448,30 @@ impl TraceBvh {
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
         #[cfg(target_arch = "x86_64")]
-        if let (Some(avx512), Some(wide)) = (Avx512::detect(), edges::Avx2::detect()) {
-            // SAFETY: the tokens prove the CPU supports AVX-512F and AVX2.
-            return unsafe { self.trace_packet_avx512((avx512, wide), scene, x0, y0, c, stack) };
+        if let Some(avx512) = Avx512::detect() {
+            // SAFETY: the token proves the CPU supports AVX-512F, AVX2 and POPCNT.
+            return unsafe { self.trace_packet_avx512(avx512, scene, x0, y0, c, stack) };
         }
         #[cfg(target_arch = "x86_64")]
-        if let (Some(avx2), Some(wide)) = (Avx2::detect(), edges::Avx2::detect()) {
-            // SAFETY: the tokens prove the CPU supports AVX2.
-            return unsafe { self.trace_packet_avx2((avx2, wide), scene, x0, y0, c, stack) };
+        if let Some(avx2) = Avx2::detect() {
+            // SAFETY: the token proves the CPU supports AVX2 and POPCNT.
+            return unsafe { self.trace_packet_avx2(avx2, scene, x0, y0, c, stack) };
         }
-        self.trace_packet_body((Portable, edges::Portable), scene, x0, y0, c, stack)
+        self.trace_packet_body((Portable, Portable), scene, x0, y0, c, stack)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt")]
     fn trace_packet_avx2(
         &self,
-        avx2: (Avx2, edges::Avx2),
+        avx2: Avx2,
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
-        self.trace_packet_body(avx2, scene, x0, y0, c, stack)
+        self.trace_packet_body((avx2, avx2), scene, x0, y0, c, stack)
     }
 
     /// [`TraceBvh::trace_packet_avx2`] with pairs of rows in 512-bit vectors.
@@ -478,14 +479,15 @@ impl TraceBvh {
     #[target_feature(enable = "avx2,avx512f,popcnt")]
     fn trace_packet_avx512(
         &self,
-        avx512: (Avx512, edges::Avx2),
+        avx512: Avx512,
         scene: &ResolvedScene,
         x0: usize,
         y0: usize,
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
-        self.trace_packet_body(avx512, scene, x0, y0, c, stack)
+        // Pairs of rows in AVX-512; the depths' f64 chunks stay AVX2's.
+        self.trace_packet_body((avx512, avx512.avx2()), scene, x0, y0, c, stack)
     }
 
     /// Prefetches what popping `n` will read next: its children, or its
@@ -510,7 +512,7 @@ impl TraceBvh {
     }
 
     #[inline(always)]
-    fn trace_packet_body<S: Rows, L: Lanes>(
+    fn trace_packet_body<S: Rows, L: ChunkOps>(
         &self,
         (s, l): (S, L),
         scene: &ResolvedScene,
@@ -648,7 +650,7 @@ mod tests {
                 for x0 in (0..size.0 as usize).step_by(PW) {
                     let mut c = Counters::default();
                     let portable = bvh.trace_packet_body(
-                        (Portable, edges::Portable),
+                        (Portable, Portable),
                         &scene,
                         x0,
                         y0,
@@ -659,17 +661,17 @@ mod tests {
                     #[cfg(target_arch = "x86_64")]
                     {
                         let mut wide = Vec::new();
-                        if let Some(avx2) = Avx2::detect().zip(edges::Avx2::detect()) {
+                        if let Some(avx2) = Avx2::detect() {
                             let mut c2 = Counters::default();
-                            // SAFETY: the tokens prove the CPU supports AVX2.
+                            // SAFETY: the token proves the CPU supports AVX2 and POPCNT.
                             let k = unsafe {
                                 bvh.trace_packet_avx2(avx2, &scene, x0, y0, &mut c2, &mut stack)
                             };
                             wide.push(("avx2", k, c2));
                         }
-                        if let Some(avx512) = Avx512::detect().zip(edges::Avx2::detect()) {
+                        if let Some(avx512) = Avx512::detect() {
                             let mut c2 = Counters::default();
-                            // SAFETY: the tokens prove the CPU supports AVX-512F and AVX2.
+                            // SAFETY: the token proves the CPU supports AVX-512F, AVX2 and POPCNT.
                             let k = unsafe {
                                 bvh.trace_packet_avx512(avx512, &scene, x0, y0, &mut c2, &mut stack)
                             };

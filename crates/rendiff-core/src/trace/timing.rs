@@ -4,13 +4,13 @@
 //! -p rendiff-core trace::timing -- --ignored --nocapture` (`TRACE_BVH=slow`
 //! for obvhs' slow build, as `bench peers` also measures; `TRACE_BUILD=once`
 //! builds it once, untimed, for profiling the kernel; `TRACE_SCENE=grid:N`
-//! for `bench crossover`'s grid, as in `raster_timing`); it prints the BVH
+//! for `bench crossover`'s grid, as in `raster::timing`); it prints the BVH
 //! build time, the keys-only Mrays/s per thread count, and a hash of the keys
 //! (so two builds of the kernel can be compared bit for bit).
 
 #[cfg(test)]
 mod tests {
-    use crate::raster_timing::tests::{key_hash, TimingLoop};
+    use crate::raster::timing::tests::{key_hash, TimingLoop};
     use crate::trace::{trace_keys, BvhQuality, TraceBvh, TraceOptions};
 
     /// Prints build time, Mrays/s and a key hash for one scene.

@@ -78,9 +78,12 @@
 //! coordinates.
 
 use crate::camera::Camera;
+use crate::raster::hiz::{f32_below, Abs, NearFaces};
 use crate::raster::PixelRect;
-use crate::raster_hiz::{f32_below, Abs, NearFaces};
 use crate::scene::resolve::Tri;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{Avx2, Avx512};
+use crate::simd::{Lanes, Portable};
 use glam::{DVec3, Vec3};
 
 /// Unit roundoff of f64.
@@ -283,373 +286,6 @@ impl BoxMargin {
         })
     }
 }
-
-/// `N`-lane f64 arithmetic for [`BoxMargin::bounds_wide`]: each operation is
-/// the scalar IEEE one lane by lane (no fused operations), in plain Rust
-/// ([`Plain4`]), AVX2 (`Avx2`, four lanes) or AVX-512 intrinsics (`Avx512`,
-/// eight); a test checks each against [`BoxMargin::bounds`]. Lane `j`
-/// belongs to triangle `j` of the batch.
-trait Lanes<const N: usize>: Copy {
-    /// `N` f64.
-    type V: Copy;
-    /// `v` in every lane.
-    fn splat(self, v: f64) -> Self::V;
-    /// Component `c` of vertex `i` of each triangle, widened to f64.
-    fn load(self, t: &[Tri; N], i: usize, c: usize) -> Self::V;
-    /// `a + b`.
-    fn add(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `a - b`.
-    fn sub(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `a * b`.
-    fn mul(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `a / b`.
-    fn div(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `f64::max(a, b)` where neither is NaN (any rule for NaN: lanes that
-    /// can meet one are not kept, module documentation).
-    fn max(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `f64::min(a, b)` where neither is NaN (as `max`).
-    fn min(self, a: Self::V, b: Self::V) -> Self::V;
-    /// `f64::abs`.
-    fn abs(self, a: Self::V) -> Self::V;
-    /// `f64::ceil`.
-    fn ceil(self, a: Self::V) -> Self::V;
-    /// `f64::floor`.
-    fn floor(self, a: Self::V) -> Self::V;
-    /// Bit `j` set where `a >= b` (false for NaN).
-    fn ge(self, a: Self::V, b: Self::V) -> u32;
-    /// Bit `j` set where `a < b` (false for NaN).
-    fn lt(self, a: Self::V, b: Self::V) -> u32;
-    /// Bit `j` set where `a > b` (false for NaN).
-    fn gt(self, a: Self::V, b: Self::V) -> u32;
-    /// The lanes.
-    fn array(self, a: Self::V) -> [f64; N];
-    /// `a as u32` for the lanes that hold whole numbers in `[0, 2^31)`; any
-    /// value in the others. (A box's ends are such numbers wherever they are
-    /// read: clamped to the image, whose side is below 2^31, and a box
-    /// whose ends are not, is empty, and its ends are not read. Per lane,
-    /// Rust's saturating cast cost three scalar instructions and a spill.)
-    fn pixels(self, a: Self::V) -> [u32; N];
-}
-
-/// [`Lanes`] in plain Rust, for any CPU.
-#[derive(Debug, Clone, Copy)]
-struct Plain4;
-
-/// Bits of a four-lane test.
-#[inline(always)]
-fn bits4(a: [f64; 4], b: [f64; 4], f: impl Fn(f64, f64) -> bool) -> u32 {
-    u32::from(f(a[0], b[0]))
-        | u32::from(f(a[1], b[1])) << 1
-        | u32::from(f(a[2], b[2])) << 2
-        | u32::from(f(a[3], b[3])) << 3
-}
-
-/// A four-lane operation.
-#[inline(always)]
-fn zip4(a: [f64; 4], b: [f64; 4], f: impl Fn(f64, f64) -> f64) -> [f64; 4] {
-    [f(a[0], b[0]), f(a[1], b[1]), f(a[2], b[2]), f(a[3], b[3])]
-}
-
-impl Lanes<4> for Plain4 {
-    type V = [f64; 4];
-    #[inline(always)]
-    fn splat(self, v: f64) -> [f64; 4] {
-        [v; 4]
-    }
-    #[inline(always)]
-    fn load(self, t: &[Tri; 4], i: usize, c: usize) -> [f64; 4] {
-        [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]].map(f64::from)
-    }
-    #[inline(always)]
-    fn add(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, |a, b| a + b)
-    }
-    #[inline(always)]
-    fn sub(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, |a, b| a - b)
-    }
-    #[inline(always)]
-    fn mul(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, |a, b| a * b)
-    }
-    #[inline(always)]
-    fn div(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, |a, b| a / b)
-    }
-    #[inline(always)]
-    fn max(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, f64::max)
-    }
-    #[inline(always)]
-    fn min(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-        zip4(a, b, f64::min)
-    }
-    #[inline(always)]
-    fn abs(self, a: [f64; 4]) -> [f64; 4] {
-        zip4(a, a, |a, _| a.abs())
-    }
-    #[inline(always)]
-    fn ceil(self, a: [f64; 4]) -> [f64; 4] {
-        zip4(a, a, |a, _| a.ceil())
-    }
-    #[inline(always)]
-    fn floor(self, a: [f64; 4]) -> [f64; 4] {
-        zip4(a, a, |a, _| a.floor())
-    }
-    #[inline(always)]
-    fn ge(self, a: [f64; 4], b: [f64; 4]) -> u32 {
-        bits4(a, b, |a, b| a >= b)
-    }
-    #[inline(always)]
-    fn lt(self, a: [f64; 4], b: [f64; 4]) -> u32 {
-        bits4(a, b, |a, b| a < b)
-    }
-    #[inline(always)]
-    fn gt(self, a: [f64; 4], b: [f64; 4]) -> u32 {
-        bits4(a, b, |a, b| a > b)
-    }
-    #[inline(always)]
-    fn array(self, a: [f64; 4]) -> [f64; 4] {
-        a
-    }
-    #[inline(always)]
-    fn pixels(self, a: [f64; 4]) -> [u32; 4] {
-        a.map(|v| v as u32)
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-mod avx2_lanes {
-    //! [`Lanes`] in AVX2 intrinsics.
-    use super::{Lanes, Tri};
-    use crate::raster_edges::Avx2;
-    use std::arch::x86_64::*;
-
-    // Every `unsafe` below: an `Avx2` exists only on a CPU with AVX2
-    // (`Avx2::detect`), and the only memory accesses are stores into arrays
-    // borrowed here (each block's SAFETY line says which).
-    impl Lanes<4> for Avx2 {
-        type V = __m256d;
-        #[inline(always)]
-        fn splat(self, v: f64) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_set1_pd(v) }
-        }
-        #[inline(always)]
-        fn load(self, t: &[Tri; 4], i: usize, c: usize) -> __m256d {
-            // Widening f32 to f64 is exact, as `f64::from`.
-            let v = [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]];
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_cvtps_pd(_mm_set_ps(v[3], v[2], v[1], v[0])) }
-        }
-        #[inline(always)]
-        fn add(self, a: __m256d, b: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_add_pd(a, b) }
-        }
-        #[inline(always)]
-        fn sub(self, a: __m256d, b: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_sub_pd(a, b) }
-        }
-        #[inline(always)]
-        fn mul(self, a: __m256d, b: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_mul_pd(a, b) }
-        }
-        #[inline(always)]
-        fn div(self, a: __m256d, b: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_div_pd(a, b) }
-        }
-        #[inline(always)]
-        fn max(self, a: __m256d, b: __m256d) -> __m256d {
-            // `maxpd(b, a)` is `b > a ? b : a`: `f64::max` of numbers.
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_max_pd(b, a) }
-        }
-        #[inline(always)]
-        fn min(self, a: __m256d, b: __m256d) -> __m256d {
-            // `minpd(b, a)` is `b < a ? b : a`: `f64::min` of numbers.
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_min_pd(b, a) }
-        }
-        #[inline(always)]
-        fn abs(self, a: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_and_pd(a, _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX))) }
-        }
-        #[inline(always)]
-        fn ceil(self, a: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
-        }
-        #[inline(always)]
-        fn floor(self, a: __m256d) -> __m256d {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
-        }
-        #[inline(always)]
-        fn ge(self, a: __m256d, b: __m256d) -> u32 {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(a, b)) as u32 }
-        }
-        #[inline(always)]
-        fn lt(self, a: __m256d, b: __m256d) -> u32 {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(a, b)) as u32 }
-        }
-        #[inline(always)]
-        fn gt(self, a: __m256d, b: __m256d) -> u32 {
-            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
-            unsafe { _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(a, b)) as u32 }
-        }
-        #[inline(always)]
-        fn array(self, a: __m256d) -> [f64; 4] {
-            let mut out = [0.0; 4];
-            // SAFETY: `self` proves AVX2;
-            // the store writes 32 bytes into `out`, a `[f64; 4]` borrowed here.
-            unsafe { _mm256_storeu_pd(out.as_mut_ptr(), a) };
-            out
-        }
-        #[inline(always)]
-        fn pixels(self, a: __m256d) -> [u32; 4] {
-            // `vcvttpd2dq` truncates as `as` does, on the lanes whose
-            // values the trait asks for.
-            let mut out = [0u32; 4];
-            // SAFETY: `self` proves AVX2;
-            // the store writes 16 bytes into `out`, a `[u32; 4]` borrowed here (unaligned store).
-            unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), _mm256_cvttpd_epi32(a)) };
-            out
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-mod avx512_lanes {
-    //! [`Lanes`] over eight lanes in AVX-512 intrinsics: twice the
-    //! triangles per instruction of AVX2 in the binning's boxes.
-    use super::{Lanes, Tri};
-    use std::arch::x86_64::*;
-
-    /// Proof that the running CPU has AVX-512F: only [`Avx512::detect`]
-    /// makes one.
-    #[derive(Debug, Clone, Copy)]
-    pub(super) struct Avx512(());
-
-    impl Avx512 {
-        /// The token, when the CPU has AVX-512F.
-        #[inline]
-        pub(super) fn detect() -> Option<Avx512> {
-            std::is_x86_feature_detected!("avx512f").then_some(Avx512(()))
-        }
-    }
-
-    // Every `unsafe` below: an `Avx512` exists only on a CPU with AVX-512F
-    // (`Avx512::detect`), and the only memory accesses are the load of an
-    // array and stores into arrays, all borrowed here (each block's SAFETY
-    // line says which).
-    impl Lanes<8> for Avx512 {
-        type V = __m512d;
-        #[inline(always)]
-        fn splat(self, v: f64) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_set1_pd(v) }
-        }
-        #[inline(always)]
-        fn load(self, t: &[Tri; 8], i: usize, c: usize) -> __m512d {
-            // Widening f32 to f64 is exact, as `f64::from`.
-            // (An explicit array: `from_fn` is not trusted on a hot path.)
-            let v = [
-                t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c], t[4][i][c], t[5][i][c], t[6][i][c],
-                t[7][i][c],
-            ];
-            // SAFETY: `self` proves AVX-512F;
-            // the load reads 32 bytes from `v`, a `[f32; 8]` borrowed here.
-            unsafe { _mm512_cvtps_pd(_mm256_loadu_ps(v.as_ptr())) }
-        }
-        #[inline(always)]
-        fn add(self, a: __m512d, b: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_add_pd(a, b) }
-        }
-        #[inline(always)]
-        fn sub(self, a: __m512d, b: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_sub_pd(a, b) }
-        }
-        #[inline(always)]
-        fn mul(self, a: __m512d, b: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_mul_pd(a, b) }
-        }
-        #[inline(always)]
-        fn div(self, a: __m512d, b: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_div_pd(a, b) }
-        }
-        #[inline(always)]
-        fn max(self, a: __m512d, b: __m512d) -> __m512d {
-            // As AVX2's: `b > a ? b : a`, `f64::max` of numbers.
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_max_pd(b, a) }
-        }
-        #[inline(always)]
-        fn min(self, a: __m512d, b: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_min_pd(b, a) }
-        }
-        #[inline(always)]
-        fn abs(self, a: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_abs_pd(a) }
-        }
-        #[inline(always)]
-        fn ceil(self, a: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_roundscale_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
-        }
-        #[inline(always)]
-        fn floor(self, a: __m512d) -> __m512d {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { _mm512_roundscale_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
-        }
-        #[inline(always)]
-        fn ge(self, a: __m512d, b: __m512d) -> u32 {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_GE_OQ>(a, b)) }
-        }
-        #[inline(always)]
-        fn lt(self, a: __m512d, b: __m512d) -> u32 {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_LT_OQ>(a, b)) }
-        }
-        #[inline(always)]
-        fn gt(self, a: __m512d, b: __m512d) -> u32 {
-            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
-            unsafe { u32::from(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(a, b)) }
-        }
-        #[inline(always)]
-        fn array(self, a: __m512d) -> [f64; 8] {
-            let mut out = [0.0; 8];
-            // SAFETY: `self` proves AVX-512F;
-            // the store writes 64 bytes into `out`, a `[f64; 8]` borrowed here.
-            unsafe { _mm512_storeu_pd(out.as_mut_ptr(), a) };
-            out
-        }
-        #[inline(always)]
-        fn pixels(self, a: __m512d) -> [u32; 8] {
-            // As AVX2's `pixels`.
-            let mut out = [0u32; 8];
-            // SAFETY: `self` proves AVX-512F;
-            // the store writes 32 bytes into `out`, a `[u32; 8]` borrowed here (unaligned store).
-            unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), _mm512_cvttpd_epi32(a)) };
-            out
-        }
-    }
-}
-#[cfg(target_arch = "x86_64")]
-use avx512_lanes::Avx512;
 
 /// The `N` lanes of [`Lanes`] `L`, with the arithmetic operators (a scalar
 /// operand stands for itself in every lane), so that [`BoxMargin::bounds_wide`]
@@ -906,7 +542,7 @@ impl BoxMargin {
 /// True when triangle `t`'s vertices, seen from the eye, run clockwise:
 /// its front (the side its winding's normal points to) faces away, as the
 /// far side of a closed, outward-wound mesh does. The binning lists these
-/// triangles after the others in each tile ([`crate::raster_bins`]), so
+/// triangles after the others in each tile ([`crate::raster::bins`]), so
 /// that a closed mesh's near side fills the tile first and its far side is
 /// skipped as hidden. Only an order: no key depends on it.
 ///
@@ -966,11 +602,11 @@ pub fn bounds_into(
         return unsafe { bounds_avx512(wide, cam, tris, degenerate, margin, out) };
     }
     #[cfg(target_arch = "x86_64")]
-    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+    if let Some(avx2) = Avx2::detect() {
         // SAFETY: the CPU has AVX2 (just detected).
         return unsafe { bounds_avx2(avx2, cam, tris, degenerate, margin, out) };
     }
-    bounds_chunk(Plain4, cam, tris, degenerate, margin, out)
+    bounds_chunk(Portable, cam, tris, degenerate, margin, out)
 }
 
 /// [`bounds_chunk`] compiled for AVX-512F, eight triangles at a time.
@@ -991,7 +627,7 @@ fn bounds_avx512(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn bounds_avx2(
-    avx2: crate::raster_edges::Avx2,
+    avx2: Avx2,
     cam: &Camera,
     tris: &[Tri],
     deg: &[bool],
@@ -1280,9 +916,11 @@ mod tests {
                         assert_eq!(bits(&faces), want_faces[..len], "{what}, camera {ci}");
                         assert_eq!(away, want_away[..len], "{what}, camera {ci}");
                     };
-                    check("portable", &|o| bounds_chunk(Plain4, cam, t, d, margin, o));
+                    check("portable", &|o| {
+                        bounds_chunk(Portable, cam, t, d, margin, o)
+                    });
                     #[cfg(target_arch = "x86_64")]
-                    if let Some(avx2) = crate::raster_edges::Avx2::detect() {
+                    if let Some(avx2) = Avx2::detect() {
                         // SAFETY: the CPU has AVX2 (just detected).
                         check("AVX2", &|o| unsafe {
                             bounds_avx2(avx2, cam, t, d, margin, o)
@@ -1304,7 +942,7 @@ mod tests {
                 let (mut o, mut f) = ([None; 4], [0.0; 4]);
                 let nf = NearFaces::new(cam);
                 batched += 4 - base
-                    .bounds_wide(Plain4, cam, t.try_into().unwrap(), &mut o, (&nf, &mut f))
+                    .bounds_wide(Portable, cam, t.try_into().unwrap(), &mut o, (&nf, &mut f))
                     .0
                     .count_ones();
             }
@@ -1366,7 +1004,7 @@ mod tests {
             }
             let (mut got, mut faces, mut away) = (vec![None; n], vec![f32::NAN; n], vec![true; n]);
             bounds_chunk(
-                Plain4,
+                Portable,
                 cam,
                 &tris,
                 &deg,

@@ -1,7 +1,7 @@
 //! A manual timing loop for the rasterizer's visibility pass (`#[ignore]`d:
 //! no timed assertions), the raster's twin of `trace::timing`. Run with
 //! `RASTER_SCENE=scenes/million.toml RASTER_SIZE=1920x1080 cargo test
-//! --release -p rendiff-core raster_timing -- --ignored --nocapture`
+//! --release -p rendiff-core raster::timing -- --ignored --nocapture`
 //! (`RASTER_SCENE=grid:1` is `bench crossover`'s two-triangle grid, `grid:N`
 //! its `2 N²`-triangle one); it prints the pass's median time per thread
 //! count, its counts, and a hash of the keys (so two builds of the raster can

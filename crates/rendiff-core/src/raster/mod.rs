@@ -3,35 +3,43 @@
 //!
 //! Triangles are clipped against the near plane only to find a conservative
 //! screen bounding box, with a margin derived from the rounding errors
-//! ([`crate::raster_bounds`]: a triangle smaller than a pixel usually gets
+//! ([`crate::raster::bounds`]: a triangle smaller than a pixel usually gets
 //! none), and binned into tiles in parallel, those facing the eye first
-//! ([`crate::raster_bins`]); bands of
+//! ([`crate::raster::bins`]); bands of
 //! tiles render in parallel straight into the image's key buffer. The
 //! decision per pixel is [`crate::visibility`]'s, exactly as in the tracer:
-//! the edge-function fast path ([`crate::raster_edges`]) settles only the
+//! the edge-function fast path ([`crate::raster::edges`]) settles only the
 //! signs the predicate's own filter would settle at once (8 pixels at a time,
 //! or a whole 8x8 block when its corners prove it), boxes of a few pixels ask
 //! the predicate directly, a triangle that cannot beat any key in its box is
-//! skipped ([`crate::raster_hiz`]), and [`render_exact`] keeps the pure
+//! skipped ([`crate::raster::hiz`]), and [`render_exact`] keeps the pure
 //! predicate loop to test it against (same boxes, same skipping, so the same
 //! buffers and counts).
 //!
 //! Counts: `triangle_setups` and `coverage_tests` count the work done, so a
 //! triangle with an empty box or skipped as hidden adds to neither.
 
+pub mod bins;
+pub mod bounds;
+pub mod edges;
+pub mod hiz;
+pub mod screen_depth;
+pub(crate) mod timing;
+
 use crate::camera::{Camera, PixelRay};
 use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
-use crate::raster_bins::{Binned, Bins};
-use crate::raster_bounds::BoxMargin;
-#[cfg(target_arch = "x86_64")]
-use crate::raster_edges::Avx2;
-use crate::raster_edges::{
-    ChunkDepth, ChunkSigns, FastEdges, Lanes, Portable, TileColumns, TileRays, CHUNK,
+use crate::raster::bins::{Binned, Bins};
+use crate::raster::bounds::BoxMargin;
+use crate::raster::edges::{
+    ChunkDepth, ChunkOps, ChunkSigns, FastEdges, TileColumns, TileRays, CHUNK,
 };
-use crate::raster_hiz::TileDepthBound;
-use crate::raster_screen_depth::{BlockBound, ScreenDepth};
+use crate::raster::hiz::TileDepthBound;
+use crate::raster::screen_depth::{BlockBound, ScreenDepth};
 use crate::scene::resolve::{ResolvedScene, Tri};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::Avx2;
+use crate::simd::Portable;
 use crate::visibility::{covers_by, edge_sign, hit_key, Counters, TriDepth, TriEdges, NO_HIT};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -55,7 +63,7 @@ pub struct PixelRect {
 
 /// Conservative pixel bounding box of the part of a triangle at planar depth
 /// at least `near` (clipped against the near plane, then projected), grown by
-/// the rounding margin [`crate::raster_bounds`] derives. `None` when no
+/// the rounding margin [`crate::raster::bounds`] derives. `None` when no
 /// pixel can be covered. (Renders set the camera's constants up once.)
 pub fn screen_bounds(cam: &Camera, t: &Tri) -> Option<PixelRect> {
     BoxMargin::new(cam).bounds(cam, t)
@@ -72,7 +80,7 @@ pub struct RasterOptions {
 
 /// Renders depth and IDs by rasterization. `progress` is called with the number
 /// of tiles finished since the last call (from worker threads). Coverage goes
-/// through the edge-function fast path ([`crate::raster_edges`]) first.
+/// through the edge-function fast path ([`crate::raster::edges`]) first.
 pub fn render(
     scene: &ResolvedScene,
     opts: RasterOptions,
@@ -117,7 +125,7 @@ struct Mode {
     fast: bool,
     /// Box margins.
     margin: Option<BoxMargin>,
-    /// Skip hidden triangles ([`crate::raster_hiz`]); never while counting coverage.
+    /// Skip hidden triangles ([`crate::raster::hiz`]); never while counting coverage.
     hiz: bool,
     /// Multiplies the depth bound (tests).
     hiz_factor: f64,
@@ -387,7 +395,7 @@ fn render_tile_avx2(
     render_tile_body(avx2, scene, bin, column, y0, mode, out, rays, setups, c)
 }
 
-/// The tile's depth bound ([`crate::raster_hiz`]), computed the first time a
+/// The tile's depth bound ([`crate::raster::hiz`]), computed the first time a
 /// triangle's box is found full of hits (most tiles of big triangles never need it).
 struct LazyBound {
     /// Skipping is on.
@@ -409,7 +417,7 @@ impl LazyBound {
         }
     }
 
-    /// True when triangle `prim`, of face `face` ([`crate::raster_hiz`]), can
+    /// True when triangle `prim`, of face `face` ([`crate::raster::hiz`]), can
     /// change no key in its box `[lx0, lx1, ly0, ly1]` of the tile: its
     /// lowest possible key is no smaller than every key there (none of which
     /// may then be background). `make` computes the tile's bound the first
@@ -568,13 +576,13 @@ const PREFETCH_AHEAD: usize = 8;
 /// of about a pixel, the setup costs more than it saves.
 const SMALL_BOX: usize = 4;
 
-// One pixel of a small box per lane of `Lanes::filter4` (and per step of
-// `Lanes::small_signs`).
+// One pixel of a small box per lane of `ChunkOps::filter4` (and per step of
+// `ChunkOps::small_signs`).
 const _: () = assert!(SMALL_BOX <= 4);
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn render_tile_body<L: Lanes>(
+fn render_tile_body<L: ChunkOps>(
     l: L,
     scene: &ResolvedScene,
     (bin, front): (&[Binned], usize),
@@ -635,13 +643,13 @@ fn render_tile_body<L: Lanes>(
 
 /// The fast path over one tile (whose `rays` are filled): per triangle, its edge
 /// functions decide 8 pixels of a row at a time where their bound allows
-/// ([`crate::raster_edges`]); undecided pixels go to the predicate exactly as
+/// ([`crate::raster::edges`]); undecided pixels go to the predicate exactly as
 /// [`TriEdges::covers`] would ask it; covered pixels get their depth 8 at a
 /// time from the same arithmetic as [`TriDepth::depth`]. Boxes of at most
 /// [`SMALL_BOX`] pixels take the predicate path directly.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn fast_tile<L: Lanes>(
+fn fast_tile<L: ChunkOps>(
     l: L,
     scene: &ResolvedScene,
     (bin, front): (&[Binned], usize),
@@ -666,7 +674,7 @@ fn fast_tile<L: Lanes>(
         // entries ahead (a hint; nothing observable changes).
         if ahead {
             if let Some(next) = bin.get(i + PREFETCH_AHEAD) {
-                crate::trace::prefetch(&scene.triangles[next.prim as usize]);
+                crate::simd::prefetch(&scene.triangles[next.prim as usize]);
             }
         }
         // Where the triangles facing away begin, a tile left without
@@ -904,7 +912,7 @@ fn fast_tile<L: Lanes>(
 /// with nothing written, when some lane needs the slab (the caller then
 /// takes the block row by row).
 #[inline(always)]
-fn covered_block<L: Lanes>(
+fn covered_block<L: ChunkOps>(
     l: L,
     cam: &Camera,
     prim: u32,
@@ -934,14 +942,14 @@ fn covered_block<L: Lanes>(
 }
 
 /// An 8x8 block the triangle covers whole, by certain signs, whose depths
-/// come from its screen-space interpolant ([`crate::raster_screen_depth`])
+/// come from its screen-space interpolant ([`crate::raster::screen_depth`])
 /// under `bound` (the block's, or its box's): every lane the rounding
 /// certificate settles keeps the interpolant's f32, the rest of its row
 /// takes [`ChunkDepth`] (the depth function bit for bit), and the keys are
 /// updated.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn screen_block<L: Lanes>(
+fn screen_block<L: ChunkOps>(
     l: L,
     cam: &Camera,
     prim: u32,
@@ -974,7 +982,7 @@ fn screen_block<L: Lanes>(
 /// A box of at most [`SMALL_BOX`] pixels: the predicate per pixel, as
 /// [`TriEdges::covers`] asks it, with the predicate's own f64 filter
 /// ([`crate::predicate::EdgePlane::sign_with`]: same operands, same order)
-/// evaluated here for every pixel and edge at once ([`Lanes::small_signs`]:
+/// evaluated here for every pixel and edge at once ([`ChunkOps::small_signs`]:
 /// in AVX2 one edge plane per lane, 1-3% faster on `million` than one
 /// pixel per lane), so only the signs it cannot settle call it (which
 /// then counts its exact fallbacks and ties as always). When the filter
@@ -1022,7 +1030,7 @@ fn small_box_pixels([lx0, lx1, ly0, ly1]: [usize; 4]) -> ([(usize, usize); SMALL
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn small_box<L: Lanes>(
+fn small_box<L: ChunkOps>(
     l: L,
     cam: &Camera,
     t: &Tri,
@@ -1117,7 +1125,7 @@ fn small_box<L: Lanes>(
 /// update the keys (and coverage counts).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn chunk_hits<L: Lanes>(
+fn chunk_hits<L: ChunkOps>(
     l: L,
     cam: &Camera,
     t: &Tri,
@@ -1380,7 +1388,7 @@ mod tests {
     }
 
     /// Planes filling the view, where whole blocks take their depth from
-    /// the screen-space interpolant ([`crate::raster_screen_depth`]):
+    /// the screen-space interpolant ([`crate::raster::screen_depth`]):
     /// facing the camera, world-axis walls, tilted up to grazing, a copy of
     /// one a hair behind and a coplanar duplicate (the z-test and the tie
     /// on prim), with the eye up to 1e7 from the origin and near and far
@@ -1479,7 +1487,7 @@ mod tests {
         out
     }
 
-    /// Tight boxes ([`crate::raster_bounds`]) against whole-image boxes: the
+    /// Tight boxes ([`crate::raster::bounds`]) against whole-image boxes: the
     /// same keys and coverage counts, so no box lost a pixel; and with the
     /// margin multiplied by 0 some box does lose one (the margin is needed,
     /// and this test would notice a wrong one).
@@ -1570,7 +1578,7 @@ mod tests {
         out
     }
 
-    /// Skipping hidden triangles ([`crate::raster_hiz`]) changes no buffer,
+    /// Skipping hidden triangles ([`crate::raster::hiz`]) changes no buffer,
     /// in the fast and the predicate path, and skips some; with the depth
     /// bound 1% too high some buffer changes (the bound is tight enough to
     /// matter and this test would notice a wrong one).

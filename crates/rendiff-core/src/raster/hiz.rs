@@ -21,7 +21,7 @@
 //! 2^-40) fl(P / max |D_k|)` bounds `planar / |D_k|` from below: every
 //! pixel's quotient is at least the exact `P / max |D_k|`, which one
 //! rounding and the slack keep above `κ`. `P` is the tile's lower bound on
-//! `planar` from its four corners ([`TileRays`](crate::raster_edges::TileRays),
+//! `planar` from its four corners ([`TileRays`](crate::raster::edges::TileRays),
 //! `planar_low`: within about `1e-15` of the least `planar`, and it needs no
 //! ray but the corners', so a tile whose pixels never need their rays does
 //! not compute them for this bound). (The extremes need no division per
@@ -62,7 +62,7 @@
 //! and without skipping are identical, and that a bound 1% too high breaks them.
 
 use crate::camera::Camera;
-use crate::raster_edges::Span;
+use crate::raster::edges::Span;
 use crate::scene::resolve::Tri;
 use crate::visibility::hit_key;
 
@@ -111,7 +111,7 @@ impl NearFaces {
 
     /// Triangle `t`'s factor `w` (module documentation), rounded down to an
     /// f32 (0, no bound, where `w` is not positive). The binning's batched
-    /// form (`raster_bounds`) performs the same operations lane by lane.
+    /// form (`raster::bounds`) performs the same operations lane by lane.
     #[inline(always)]
     pub fn face(&self, t: &Tri) -> f32 {
         let (k, e) = (self.axis, self.eye);

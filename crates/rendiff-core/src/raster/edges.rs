@@ -83,7 +83,7 @@
 //! - the evaluation, against `n . g'` with `g' = f + r sx + v sy` at the
 //!   computed coordinates taken as exact: `6u Σ_j |n_j| H_j` (three
 //!   roundings in each coefficient, three in the evaluation: the bound
-//!   [`crate::raster_screen_depth`] derives for its `den`, with `|sx| <= A`,
+//!   [`crate::raster::screen_depth`] derives for its `den`, with `|sx| <= A`,
 //!   `|sy| <= T`);
 //! - the coordinates' own rounding, `|g' - g| <= 4u (|r_j| A + |v_j| T)` per
 //!   component: `4u Σ_j |n_j| H_j`;
@@ -106,10 +106,11 @@
 
 use crate::camera::{Camera, PixelRay};
 use crate::predicate::EdgePlane;
-use crate::raster_screen_depth::ScreenRow;
-#[cfg(target_arch = "x86_64")]
-use crate::raster_screen_depth::{DROPPED_MASK, MIDPOINT};
+use crate::raster::screen_depth::ScreenRow;
 use crate::scene::resolve::Tri;
+#[cfg(doc)]
+use crate::simd::Avx2;
+use crate::simd::Portable;
 use crate::visibility::{hit_key, TriDepth, TriEdges, NO_HIT};
 use glam::DVec3;
 
@@ -131,10 +132,12 @@ pub const CHUNK: usize = 8;
 /// The 8 rows of 8 keys of one block of a tile, to write.
 pub type BlockRows<'a> = [&'a mut [u64; CHUNK]; CHUNK];
 
-/// How a chunk of 8 comparisons becomes 8 mask bits: plain Rust everywhere
-/// ([`Portable`]), one `vcmppd` + `vmovmskpd` per half where the CPU has AVX2
-/// ([`Avx2`]). Both give the same bits (a test checks it).
-pub trait Lanes: Copy {
+/// The raster's operations on a chunk of 8 pixels (and the tracer's depths):
+/// plain Rust everywhere ([`Portable`]: the default methods, which are the
+/// definitions), AVX2 intrinsics where the CPU has it ([`Avx2`], in
+/// [`crate::simd`]); e.g. 8 comparisons become 8 mask bits by one `vcmppd` +
+/// `vmovmskpd` per half. Both give the same bits (tests check it).
+pub trait ChunkOps: Copy {
     /// Bit `j` set where `a[j] > b` (false for NaN).
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32;
 
@@ -158,7 +161,7 @@ pub trait Lanes: Copy {
         (pos, neg)
     }
 
-    /// [`Lanes::filter4`] for the edge planes of triangle `t` seen from
+    /// [`ChunkOps::filter4`] for the edge planes of triangle `t` seen from
     /// `eye` ([`EdgePlane::new`]'s operations, edge by edge) at the first
     /// `n` rays of `d`, folded into what a small box needs, bit `j` for ray
     /// `j`: the rays whose three signs it settles as positive (`front`), as
@@ -239,7 +242,7 @@ pub trait Lanes: Copy {
         p.lanes(sx)
     }
 
-    /// [`Lanes::screen_row`] and [`Lanes::min_keys`] in one pass over the 8
+    /// [`ChunkOps::screen_row`] and [`ChunkOps::min_keys`] in one pass over the 8
     /// rows of a block whose lanes all hit: row `i` has `R = r[i]` (the
     /// rest of `p` is the block's) and its keys `rows[i]`.
     /// A row whose every lane is certified has its keys lowered, and its
@@ -327,15 +330,15 @@ fn row_stats_scalar(v: &[f64]) -> RowStats {
 /// (`if x < lo { x } else { lo }` is exactly `minpd`'s rule). The tile's
 /// rays gather them as they are written, so that neither the fast path's
 /// bounds ([`RowStats`]) nor the early depth test
-/// ([`crate::raster_hiz::TileDepthBound`]) reads the tile again.
+/// ([`crate::raster::hiz::TileDepthBound`]) reads the tile again.
 #[derive(Debug, Clone, Copy)]
 pub struct Extremes {
     /// Smallest value per lane (NaN never enters).
-    lo: [f64; 4],
+    pub(crate) lo: [f64; 4],
     /// Largest value per lane.
-    hi: [f64; 4],
+    pub(crate) hi: [f64; 4],
     /// `Σ 0 x` per lane: 0 while every value is finite.
-    bad: [f64; 4],
+    pub(crate) bad: [f64; 4],
 }
 
 impl Default for Extremes {
@@ -461,642 +464,12 @@ impl Span {
     }
 }
 
-/// [`Lanes`] in plain Rust, for any CPU.
-#[derive(Debug, Clone, Copy)]
-pub struct Portable;
-
-impl Lanes for Portable {
+/// Plain Rust, for any CPU: the trait's default methods are the definitions.
+impl ChunkOps for Portable {
     #[inline(always)]
     fn gt(self, a: &[f64; CHUNK], b: f64) -> u32 {
         (0..CHUNK).fold(0, |m, j| m | (u32::from(a[j] > b) << j))
     }
-}
-
-/// [`Extremes`] in AVX2 registers while a row is written ([`Avx2`]'s
-/// `dir_row` and `planar_row`).
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-struct WideExtremes {
-    /// Running minimum per lane.
-    lo: std::arch::x86_64::__m256d,
-    /// Running maximum per lane.
-    hi: std::arch::x86_64::__m256d,
-    /// `Σ 0 v` per lane.
-    bad: std::arch::x86_64::__m256d,
-}
-
-#[cfg(target_arch = "x86_64")]
-impl WideExtremes {
-    /// `ext`'s four lanes.
-    ///
-    /// # Safety
-    /// The CPU has AVX2 (callers hold an [`Avx2`]).
-    #[inline(always)]
-    unsafe fn load(ext: &Extremes) -> Self {
-        use std::arch::x86_64::_mm256_loadu_pd;
-        // SAFETY: the caller holds an `Avx2` (this fn's contract);
-        // the loads read four f64 from each of `ext`'s arrays, borrowed here.
-        unsafe {
-            WideExtremes {
-                lo: _mm256_loadu_pd(ext.lo.as_ptr()),
-                hi: _mm256_loadu_pd(ext.hi.as_ptr()),
-                bad: _mm256_loadu_pd(ext.bad.as_ptr()),
-            }
-        }
-    }
-
-    /// Takes in four values, lane by lane as [`Extremes::add`] does
-    /// (`minpd(v, lo)` is `if v < lo { v } else { lo }`).
-    ///
-    /// # Safety
-    /// As [`WideExtremes::load`].
-    #[inline(always)]
-    unsafe fn add(&mut self, v: std::arch::x86_64::__m256d) {
-        use std::arch::x86_64::*;
-        // SAFETY: the caller holds an `Avx2` (this fn's contract); no memory access.
-        unsafe {
-            self.lo = _mm256_min_pd(v, self.lo);
-            self.hi = _mm256_max_pd(v, self.hi);
-            self.bad = _mm256_add_pd(self.bad, _mm256_mul_pd(v, _mm256_setzero_pd()));
-        }
-    }
-
-    /// Back into `ext`.
-    ///
-    /// # Safety
-    /// As [`WideExtremes::load`].
-    #[inline(always)]
-    unsafe fn store(self, ext: &mut Extremes) {
-        use std::arch::x86_64::_mm256_storeu_pd;
-        // SAFETY: the caller holds an `Avx2` (this fn's contract);
-        // the stores write four f64 into each of `ext`'s arrays, borrowed mutably here.
-        unsafe {
-            _mm256_storeu_pd(ext.lo.as_mut_ptr(), self.lo);
-            _mm256_storeu_pd(ext.hi.as_mut_ptr(), self.hi);
-            _mm256_storeu_pd(ext.bad.as_mut_ptr(), self.bad);
-        }
-    }
-}
-
-/// Proof that the running CPU has AVX2 and POPCNT: only [`Avx2::detect`] makes one.
-#[cfg(target_arch = "x86_64")]
-#[derive(Debug, Clone, Copy)]
-pub struct Avx2(());
-
-#[cfg(target_arch = "x86_64")]
-impl Avx2 {
-    /// The token, when the CPU has AVX2 and POPCNT.
-    #[inline]
-    pub fn detect() -> Option<Avx2> {
-        (std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("popcnt"))
-            .then_some(Avx2(()))
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-impl Lanes for Avx2 {
-    #[inline(always)]
-    fn chunk_depth(self, cam: &Camera, t: &Tri) -> ChunkDepth {
-        use std::arch::x86_64::*;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`);
-        // the stores write 4 f64 into the 4-element arrays here. Lanes are
-        // the axes x, y, z (lane 3 carries zeros and is dropped), and each
-        // lane is the scalar definition's arithmetic, operation for operation:
-        // * `glam`'s `Vec3::min` / `max` are `a < b ? a : b` / `a > b ? a : b`,
-        //   which is what `vminps a, b` / `vmaxps a, b` compute, ties and all;
-        //   f32 to f64 is exact either way;
-        // * `DVec3::cross` is `a.y b.z - b.y a.z` and so on: products of
-        //   the rotated lanes, then one subtraction;
-        // * `DVec3::dot` is `(x + y) + z` over the products, summed in that order;
-        // * `grow_box`'s `DVec3::max` is `vmaxpd` by the same rule; `f64::max`
-        //   of two magnitudes in `ChunkDepth` differs from `vmaxpd` only where
-        //   an operand is NaN, and none is: each is the magnitude of a
-        //   difference of two finite values (the vertices are finite f32,
-        //   `resolve` rejects others; the eye is finite, or `Camera::new`'s
-        //   basis would be zero; a grown bound is a vertex moved by a finite
-        //   margin), which may overflow to infinity but is never NaN;
-        // * `abs` clears the sign bit, as `f64::abs` does.
-        unsafe {
-            let v = |p: glam::Vec3| _mm256_cvtps_pd(_mm_setr_ps(p.x, p.y, p.z, 0.0));
-            let e = _mm256_setr_pd(cam.eye.x, cam.eye.y, cam.eye.z, 0.0);
-            let (a, b, c) = (v(t[0]), v(t[1]), v(t[2]));
-            let (e1, e2) = (_mm256_sub_pd(b, a), _mm256_sub_pd(c, a));
-            // Lanes (y, z, x, w) and (z, x, y, w).
-            const YZX: i32 = 0b11_00_10_01;
-            const ZXY: i32 = 0b11_01_00_10;
-            let normal = _mm256_sub_pd(
-                _mm256_mul_pd(
-                    _mm256_permute4x64_pd::<YZX>(e1),
-                    _mm256_permute4x64_pd::<ZXY>(e2),
-                ),
-                _mm256_mul_pd(
-                    _mm256_permute4x64_pd::<YZX>(e2),
-                    _mm256_permute4x64_pd::<ZXY>(e1),
-                ),
-            );
-            let p = _mm256_mul_pd(normal, _mm256_sub_pd(a, e));
-            let (pxy, pz) = (_mm256_castpd256_pd128(p), _mm256_extractf128_pd::<1>(p));
-            let num = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(pxy, _mm_unpackhi_pd(pxy, pxy)), pz));
-            let q = |p: glam::Vec3| _mm_setr_ps(p.x, p.y, p.z, 0.0);
-            let (qa, qb, qc) = (q(t[0]), q(t[1]), q(t[2]));
-            let lo = _mm256_cvtps_pd(_mm_min_ps(_mm_min_ps(qa, qb), qc));
-            let hi = _mm256_cvtps_pd(_mm_max_ps(_mm_max_ps(qa, qb), qc));
-            let sign = _mm256_set1_pd(-0.0);
-            let m = _mm256_mul_pd(
-                _mm256_max_pd(
-                    _mm256_andnot_pd(sign, _mm256_sub_pd(lo, e)),
-                    _mm256_andnot_pd(sign, _mm256_sub_pd(hi, e)),
-                ),
-                _mm256_set1_pd(crate::visibility::BOX_MARGIN),
-            );
-            let (blo, bhi) = (_mm256_sub_pd(lo, m), _mm256_add_pd(hi, m));
-            let (slo, shi) = (_mm256_sub_pd(blo, e), _mm256_sub_pd(bhi, e));
-            let mm = _mm256_mul_pd(
-                _mm256_set1_pd(CLAMP_FREE_MARGIN),
-                _mm256_max_pd(_mm256_andnot_pd(sign, slo), _mm256_andnot_pd(sign, shi)),
-            );
-            let misses = _mm256_or_pd(
-                _mm256_cmp_pd::<_CMP_LT_OQ>(e, blo),
-                _mm256_cmp_pd::<_CMP_GT_OQ>(e, bhi),
-            );
-            let settles = _mm256_cmp_pd::<_CMP_GE_OQ>(
-                _mm256_andnot_pd(sign, mm),
-                _mm256_set1_pd(CLAMP_FREE_MIN_MARGIN),
-            );
-            let free_lo = _mm256_blendv_pd(
-                _mm256_set1_pd(f64::INFINITY),
-                _mm256_add_pd(slo, mm),
-                settles,
-            );
-            let free_hi = _mm256_blendv_pd(
-                _mm256_set1_pd(f64::NEG_INFINITY),
-                _mm256_sub_pd(shi, mm),
-                settles,
-            );
-            let mut out = [[0f64; 4]; 5];
-            for (o, x) in out.iter_mut().zip([normal, slo, shi, free_lo, free_hi]) {
-                _mm256_storeu_pd(o.as_mut_ptr(), x);
-            }
-            let three = |o: [f64; 4]| [o[0], o[1], o[2]];
-            let bits = _mm256_movemask_pd(misses);
-            ChunkDepth {
-                normal: three(out[0]),
-                num,
-                lo: three(out[1]),
-                hi: three(out[2]),
-                zero_misses: [bits & 1 != 0, bits & 2 != 0, bits & 4 != 0],
-                clamp_free_lo: three(out[3]),
-                clamp_free_hi: three(out[4]),
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn gt(self, a: &[f64; CHUNK], b: f64) -> u32 {
-        use std::arch::x86_64::{
-            _mm256_cmp_pd, _mm256_loadu_pd, _mm256_movemask_pd, _mm256_set1_pd, _CMP_GT_OQ,
-        };
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2 (see `detect`), and
-        // the loads read the 8 f64 of the array borrowed here, 4 at a time.
-        unsafe {
-            let b = _mm256_set1_pd(b);
-            let lo = _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(a.as_ptr()), b);
-            let hi = _mm256_cmp_pd::<_CMP_GT_OQ>(_mm256_loadu_pd(a.as_ptr().add(4)), b);
-            (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32
-        }
-    }
-
-    #[inline(always)]
-    fn clamp_free_depths(
-        self,
-        cd: &ChunkDepth,
-        cam: &Camera,
-        d: [&[f64; CHUNK]; 3],
-        planar: &[f64; CHUNK],
-        want: u32,
-    ) -> Option<([f32; CHUNK], u32, u32)> {
-        use std::arch::x86_64::*;
-        let mut z = [0f32; CHUNK];
-        let (mut ok, mut free) = (0u32, 0u32);
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the loads read
-        // 4 f64 of the borrowed 8-lane arrays, the stores write 4 f32 of `z`.
-        // Each lane is `ChunkDepth::lanes`' arithmetic, operation for
-        // operation (mul, add, div, compares; `cvtpd2ps` rounds to nearest
-        // like `as f32`, `cvtps2pd` is exact).
-        unsafe {
-            let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
-            // No array `map` or closure around intrinsics (see `filter4`).
-            let (cn, cl, ch) = (cd.normal, cd.clamp_free_lo, cd.clamp_free_hi);
-            let n = [
-                _mm256_set1_pd(cn[0]),
-                _mm256_set1_pd(cn[1]),
-                _mm256_set1_pd(cn[2]),
-            ];
-            let num = _mm256_set1_pd(cd.num);
-            let lo = [
-                _mm256_set1_pd(cl[0]),
-                _mm256_set1_pd(cl[1]),
-                _mm256_set1_pd(cl[2]),
-            ];
-            let hi = [
-                _mm256_set1_pd(ch[0]),
-                _mm256_set1_pd(ch[1]),
-                _mm256_set1_pd(ch[2]),
-            ];
-            let max_t = _mm256_set1_pd(CLAMP_FREE_MAX_T);
-            let (zero, inf) = (_mm256_setzero_pd(), _mm256_set1_pd(f64::INFINITY));
-            let (near, far) = (_mm256_set1_pd(cam.near), _mm256_set1_pd(cam.far));
-            for h in 0..2 {
-                if (want >> (4 * h)) & 0xf == 0 {
-                    continue;
-                }
-                let dk = [
-                    _mm256_loadu_pd(d[0].as_ptr().add(4 * h)),
-                    _mm256_loadu_pd(d[1].as_ptr().add(4 * h)),
-                    _mm256_loadu_pd(d[2].as_ptr().add(4 * h)),
-                ];
-                // DVec3::dot: x*x' + y*y' + z*z', left to right.
-                let denom = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(n[0], dk[0]), _mm256_mul_pd(n[1], dk[1])),
-                    _mm256_mul_pd(n[2], dk[2]),
-                );
-                let t = _mm256_div_pd(num, denom);
-                let mut f = _mm256_cmp_pd::<_CMP_LE_OQ>(_mm256_and_pd(t, abs_mask), max_t);
-                for k in 0..3 {
-                    let q = _mm256_mul_pd(t, dk[k]);
-                    f = _mm256_and_pd(f, _mm256_cmp_pd::<_CMP_GE_OQ>(q, lo[k]));
-                    f = _mm256_and_pd(f, _mm256_cmp_pd::<_CMP_LE_OQ>(q, hi[k]));
-                }
-                let valid = _mm256_and_pd(
-                    _mm256_cmp_pd::<_CMP_NEQ_OQ>(denom, zero),
-                    _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_and_pd(denom, abs_mask), inf),
-                );
-                let zs = _mm256_cvtpd_ps(_mm256_mul_pd(
-                    t,
-                    _mm256_loadu_pd(planar.as_ptr().add(4 * h)),
-                ));
-                _mm_storeu_ps(z.as_mut_ptr().add(4 * h), zs);
-                let zf = _mm256_cvtps_pd(zs);
-                let in_range = _mm256_and_pd(
-                    _mm256_cmp_pd::<_CMP_GE_OQ>(zf, near),
-                    _mm256_cmp_pd::<_CMP_LE_OQ>(zf, far),
-                );
-                ok |= (_mm256_movemask_pd(_mm256_and_pd(valid, in_range)) as u32) << (4 * h);
-                free |= (_mm256_movemask_pd(f) as u32) << (4 * h);
-            }
-        }
-        Some((z, ok, free))
-    }
-
-    #[inline(always)]
-    fn small_signs(self, eye: DVec3, t: &Tri, d: &[[f64; 4]; 3], n: usize) -> (u32, u32, u32) {
-        use std::arch::x86_64::*;
-        let (mut front, mut back, mut open) = (0u32, 0u32, 0u32);
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; no memory is
-        // touched but the borrowed arrays, read by index. Lane `k` is edge
-        // `k` (lane 3 repeats edge 0): `EdgePlane::new`'s operations on its
-        // endpoints, then `EdgePlane::filter`'s per ray, in their orders
-        // (`abs` and negation by sign bit, exact).
-        unsafe {
-            let sign = _mm256_set1_pd(-0.0);
-            // Per component, `v - eye` for the vertices a, b, c, a (each
-            // widened exactly), and the edges' second endpoints b, c, a, b.
-            // (No closures around intrinsics: see `filter4`.)
-            let (v0, v1, v2) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
-            let ax = _mm256_sub_pd(_mm256_set_pd(v0.x, v2.x, v1.x, v0.x), _mm256_set1_pd(eye.x));
-            let ay = _mm256_sub_pd(_mm256_set_pd(v0.y, v2.y, v1.y, v0.y), _mm256_set1_pd(eye.y));
-            let az = _mm256_sub_pd(_mm256_set_pd(v0.z, v2.z, v1.z, v0.z), _mm256_set1_pd(eye.z));
-            const NEXT: i32 = 0b01_00_10_01;
-            let bx = _mm256_permute4x64_pd::<NEXT>(ax);
-            let by = _mm256_permute4x64_pd::<NEXT>(ay);
-            let bz = _mm256_permute4x64_pd::<NEXT>(az);
-            let (yz, zy) = (_mm256_mul_pd(ay, bz), _mm256_mul_pd(az, by));
-            let (zx, xz) = (_mm256_mul_pd(az, bx), _mm256_mul_pd(ax, bz));
-            let (xy, yx) = (_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
-            let nx = _mm256_sub_pd(yz, zy);
-            let ny = _mm256_sub_pd(zx, xz);
-            let nz = _mm256_sub_pd(xy, yx);
-            let px = _mm256_add_pd(_mm256_andnot_pd(sign, yz), _mm256_andnot_pd(sign, zy));
-            let py = _mm256_add_pd(_mm256_andnot_pd(sign, zx), _mm256_andnot_pd(sign, xz));
-            let pz = _mm256_add_pd(_mm256_andnot_pd(sign, xy), _mm256_andnot_pd(sign, yx));
-            let bound_a = _mm256_set1_pd(crate::predicate::O3D_ERRBOUND_A);
-            let [dx, dy, dz] = d;
-            for (j, ((&x, &y), &z)) in dx.iter().zip(dy).zip(dz).take(n).enumerate() {
-                let (vx, vy, vz) = (_mm256_set1_pd(x), _mm256_set1_pd(y), _mm256_set1_pd(z));
-                let det = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(vx, nx), _mm256_mul_pd(vy, ny)),
-                    _mm256_mul_pd(vz, nz),
-                );
-                let (ux, uy, uz) = (
-                    _mm256_andnot_pd(sign, vx),
-                    _mm256_andnot_pd(sign, vy),
-                    _mm256_andnot_pd(sign, vz),
-                );
-                let sum = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(ux, px), _mm256_mul_pd(uy, py)),
-                    _mm256_mul_pd(uz, pz),
-                );
-                let bound = _mm256_mul_pd(bound_a, sum);
-                let minus = _mm256_xor_pd(det, sign);
-                let pos = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(det, bound)) as u32 & 7;
-                let neg = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(minus, bound)) as u32 & 7;
-                front |= u32::from(pos == 7) << j;
-                back |= u32::from(neg == 7) << j;
-                open |= u32::from((pos | neg) != 7) << j;
-            }
-        }
-        (front, back, open)
-    }
-
-    #[inline(always)]
-    fn filter4(self, e: &[EdgePlane; 3], d: &[[f64; 4]; 3]) -> ([u32; 3], [u32; 3]) {
-        use std::arch::x86_64::*;
-        let (mut pos, mut neg) = ([0u32; 3], [0u32; 3]);
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; the loads read
-        // the four f64 of each borrowed array. Per lane: `EdgePlane::filter`'s
-        // operations in its order (`abs` and negation by sign bit, exact).
-        unsafe {
-            let sign = _mm256_set1_pd(-0.0);
-            let a = _mm256_set1_pd(crate::predicate::O3D_ERRBOUND_A);
-            // No array `map` around intrinsics: its closures can be
-            // compiled out of line, without this function's target features
-            // (each intrinsic then a call).
-            let x = _mm256_loadu_pd(d[0].as_ptr());
-            let y = _mm256_loadu_pd(d[1].as_ptr());
-            let z = _mm256_loadu_pd(d[2].as_ptr());
-            let (ax, ay, az) = (
-                _mm256_andnot_pd(sign, x),
-                _mm256_andnot_pd(sign, y),
-                _mm256_andnot_pd(sign, z),
-            );
-            for (k, e) in e.iter().enumerate() {
-                let n = [
-                    _mm256_set1_pd(e.n.x),
-                    _mm256_set1_pd(e.n.y),
-                    _mm256_set1_pd(e.n.z),
-                ];
-                let p = [
-                    _mm256_set1_pd(e.perm.x),
-                    _mm256_set1_pd(e.perm.y),
-                    _mm256_set1_pd(e.perm.z),
-                ];
-                let det = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(x, n[0]), _mm256_mul_pd(y, n[1])),
-                    _mm256_mul_pd(z, n[2]),
-                );
-                let sum = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(ax, p[0]), _mm256_mul_pd(ay, p[1])),
-                    _mm256_mul_pd(az, p[2]),
-                );
-                let bound = _mm256_mul_pd(a, sum);
-                let minus = _mm256_xor_pd(det, sign);
-                pos[k] = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(det, bound)) as u32;
-                neg[k] = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(minus, bound)) as u32;
-            }
-        }
-        (pos, neg)
-    }
-
-    #[inline(always)]
-    fn dir_row(self, e: f64, up: f64, across: &[f64], d: &mut [f64], ext: Option<&mut Extremes>) {
-        use std::arch::x86_64::*;
-        let n = d.len().min(across.len());
-        let whole = n / 4 * 4;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and
-        // stores touch 4 f64 at `i + 4 <= n`, within both slices, and the
-        // four lanes of `ext`'s arrays. Per lane: `dir_lane`'s operations in
-        // its order, and `Extremes::add`'s (`minpd(v, lo)` is `if v < lo {
-        // v } else { lo }`).
-        unsafe {
-            let (ev, uv) = (_mm256_set1_pd(e), _mm256_set1_pd(up));
-            let mut lane = |i: usize| {
-                let a = _mm256_loadu_pd(across.as_ptr().add(i));
-                let v = _mm256_sub_pd(_mm256_add_pd(ev, _mm256_add_pd(a, uv)), ev);
-                _mm256_storeu_pd(d.as_mut_ptr().add(i), v);
-                v
-            };
-            match ext {
-                Some(ext) => {
-                    let mut wide = WideExtremes::load(ext);
-                    for i in (0..whole).step_by(4) {
-                        wide.add(lane(i));
-                    }
-                    wide.store(ext);
-                    Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], Some(ext));
-                }
-                None => {
-                    for i in (0..whole).step_by(4) {
-                        lane(i);
-                    }
-                    Portable.dir_row(e, up, &across[whole..n], &mut d[whole..n], None);
-                }
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn planar_row(self, f: [f64; 3], [x, y, z]: [&[f64]; 3], p: &mut [f64]) {
-        use std::arch::x86_64::*;
-        let n = p.len().min(x.len()).min(y.len()).min(z.len());
-        let whole = n / 4 * 4;
-        // SAFETY: as in `dir_row`: 4 f64 at `i + 4 <= n` of each slice.
-        // Per lane `(x f0 + y f1) + z f2`.
-        unsafe {
-            let (f0, f1, f2) = (
-                _mm256_set1_pd(f[0]),
-                _mm256_set1_pd(f[1]),
-                _mm256_set1_pd(f[2]),
-            );
-            for i in (0..whole).step_by(4) {
-                let xv = _mm256_mul_pd(_mm256_loadu_pd(x.as_ptr().add(i)), f0);
-                let yv = _mm256_mul_pd(_mm256_loadu_pd(y.as_ptr().add(i)), f1);
-                let zv = _mm256_mul_pd(_mm256_loadu_pd(z.as_ptr().add(i)), f2);
-                let v = _mm256_add_pd(_mm256_add_pd(xv, yv), zv);
-                _mm256_storeu_pd(p.as_mut_ptr().add(i), v);
-            }
-        }
-        let rest = [&x[whole..n], &y[whole..n], &z[whole..n]];
-        Portable.planar_row(f, rest, &mut p[whole..n]);
-    }
-
-    #[inline(always)]
-    fn screen_row(self, p: &ScreenRow, sx: &[f64; CHUNK]) -> ([f32; CHUNK], u32, u32) {
-        use std::arch::x86_64::*;
-        let mut z = [0f32; CHUNK];
-        let (mut ok, mut sure) = (0u32, 0u32);
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
-        // stay within the borrowed arrays (4 f64 or 4 f32 at a time).
-        unsafe {
-            let (num, a, r) = (
-                _mm256_set1_pd(p.num),
-                _mm256_set1_pd(p.a),
-                _mm256_set1_pd(p.r),
-            );
-            let (near, far) = (_mm256_set1_pd(p.near), _mm256_set1_pd(p.far));
-            let eu = _mm256_set1_epi64x(p.eu);
-            for h in 0..2 {
-                // Each lane is `ScreenRow::lanes`' arithmetic, operation for operation.
-                let x = _mm256_loadu_pd(sx.as_ptr().add(4 * h));
-                let w = _mm256_div_pd(num, _mm256_add_pd(_mm256_mul_pd(a, x), r));
-                let zh = _mm256_cvtpd_ps(w);
-                _mm_storeu_ps(z.as_mut_ptr().add(4 * h), zh);
-                let zf = _mm256_cvtps_pd(zh);
-                let hit = _mm256_and_pd(
-                    _mm256_cmp_pd::<_CMP_GE_OQ>(zf, near),
-                    _mm256_cmp_pd::<_CMP_LE_OQ>(zf, far),
-                );
-                ok |= (_mm256_movemask_pd(hit) as u32) << (4 * h);
-                let alone = _mm256_castsi256_pd(rounds_alone4(w, eu));
-                sure |= (_mm256_movemask_pd(alone) as u32) << (4 * h);
-            }
-        }
-        (z, ok, sure)
-    }
-
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn screen_keys(
-        self,
-        p: &ScreenRow,
-        r: &[f64; CHUNK],
-        sx: &[f64; CHUNK],
-        rows: &mut BlockRows,
-        prim: u32,
-    ) -> u32 {
-        use std::arch::x86_64::*;
-        let mut done = 0;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads read the
-        // borrowed arrays, and each key row is 8 keys.
-        unsafe {
-            let num = _mm256_set1_pd(p.num);
-            let a = _mm256_set1_pd(p.a);
-            // `fl(a sx)` is the same in every row.
-            let ax0 = _mm256_mul_pd(a, _mm256_loadu_pd(sx.as_ptr()));
-            let ax1 = _mm256_mul_pd(a, _mm256_loadu_pd(sx.as_ptr().add(4)));
-            let eu = _mm256_set1_epi64x(p.eu);
-            let low = _mm256_set1_epi64x(i64::from(prim));
-            for (i, &r) in r.iter().enumerate() {
-                let rv = _mm256_set1_pd(r);
-                let w0 = _mm256_div_pd(num, _mm256_add_pd(ax0, rv));
-                let w1 = _mm256_div_pd(num, _mm256_add_pd(ax1, rv));
-                // (Helpers, not closures: a closure here was compiled out
-                // of line, without AVX2, its intrinsics then calls.)
-                let sure = _mm256_and_si256(rounds_alone4(w0, eu), rounds_alone4(w1, eu));
-                if _mm256_movemask_pd(_mm256_castsi256_pd(sure)) != 0xf {
-                    continue;
-                }
-                // `min_keys` with every lane a hit.
-                let row = rows[i].as_mut_ptr();
-                let bits0 = _mm_castps_si128(_mm256_cvtpd_ps(w0));
-                let bits1 = _mm_castps_si128(_mm256_cvtpd_ps(w1));
-                min_keys4(row, hit_keys4(bits0, low));
-                min_keys4(row.add(4), hit_keys4(bits1, low));
-                done |= 1 << i;
-            }
-        }
-        done
-    }
-
-    #[inline(always)]
-    fn min_key_rows(self, rows: &mut BlockRows, key: &[u64; CHUNK]) {
-        use std::arch::x86_64::_mm256_set1_epi64x;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; each row is 8 keys.
-        unsafe {
-            for (row, &k) in rows.iter_mut().zip(key) {
-                let row = row.as_mut_ptr();
-                let new = _mm256_set1_epi64x(k as i64);
-                min_keys4(row, new);
-                min_keys4(row.add(4), new);
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn min_keys(self, keys: &mut [u64; CHUNK], z: &[f32; CHUNK], hits: u32, prim: u32) {
-        use std::arch::x86_64::*;
-        // SAFETY: an `Avx2` exists only on a CPU with AVX2; loads and stores
-        // stay within the borrowed arrays (4 u64 or 4 f32 at a time).
-        unsafe {
-            let low = _mm256_set1_epi64x(i64::from(prim));
-            let no_hit = _mm256_set1_epi64x(-1);
-            let lane_bit = _mm256_setr_epi64x(1, 2, 4, 8);
-            for h in 0..2 {
-                let bits = _mm_loadu_si128(z.as_ptr().add(4 * h).cast());
-                let sel = _mm256_set1_epi64x(i64::from((hits >> (4 * h)) & 0xf));
-                let hit = _mm256_cmpeq_epi64(_mm256_and_si256(sel, lane_bit), lane_bit);
-                let new = _mm256_blendv_epi8(no_hit, hit_keys4(bits, low), hit);
-                min_keys4(keys.as_mut_ptr().add(4 * h), new);
-            }
-        }
-    }
-}
-
-/// [`rounds_alone`](crate::raster_screen_depth::rounds_alone) on four
-/// lanes: all ones where `|low 29 bits of w - midpoint| > eu`, the one
-/// wide form of the certificate ([`Avx2`]'s `screen_row` and `screen_keys`).
-///
-/// # Safety
-/// The CPU has AVX2 (callers hold an [`Avx2`]).
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn rounds_alone4(
-    w: std::arch::x86_64::__m256d,
-    eu: std::arch::x86_64::__m256i,
-) -> std::arch::x86_64::__m256i {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller holds an `Avx2` (this fn's contract); no memory access.
-    unsafe {
-        let mask = _mm256_set1_epi64x(DROPPED_MASK as i64);
-        let d = _mm256_sub_epi64(
-            _mm256_and_si256(_mm256_castpd_si256(w), mask),
-            _mm256_set1_epi64x(MIDPOINT),
-        );
-        let neg = _mm256_sub_epi64(_mm256_setzero_si256(), d);
-        // |d|: the negation where d's sign bit is set.
-        let abs = _mm256_blendv_pd(
-            _mm256_castsi256_pd(d),
-            _mm256_castsi256_pd(neg),
-            _mm256_castsi256_pd(d),
-        );
-        _mm256_cmpgt_epi64(_mm256_castpd_si256(abs), eu)
-    }
-}
-
-/// The z-test on four keys at `ptr`: each lowered to `new` where that is
-/// smaller as an unsigned key ([`Avx2`]'s `min_keys` and `screen_keys`).
-///
-/// # Safety
-/// The CPU has AVX2, and `ptr` points to four keys the caller may write.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn min_keys4(ptr: *mut u64, new: std::arch::x86_64::__m256i) {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller guarantees AVX2 and that `ptr` points to four keys it may write (this fn's contract).
-    unsafe {
-        let sign = _mm256_set1_epi64x(i64::MIN);
-        let p = ptr.cast::<__m256i>();
-        let old = _mm256_loadu_si256(p);
-        // Unsigned comparison as signed, with the top bits flipped.
-        let old_bigger =
-            _mm256_cmpgt_epi64(_mm256_xor_si256(old, sign), _mm256_xor_si256(new, sign));
-        _mm256_storeu_si256(p, _mm256_blendv_epi8(old, new, old_bigger));
-    }
-}
-
-/// `hit_key` on four lanes: the f32 bits (`bits`) above, `low` (the prim,
-/// broadcast) below.
-///
-/// # Safety
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn hit_keys4(
-    bits: std::arch::x86_64::__m128i,
-    low: std::arch::x86_64::__m256i,
-) -> std::arch::x86_64::__m256i {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller guarantees AVX2 (this fn's contract); no memory access.
-    unsafe { _mm256_or_si256(_mm256_slli_epi64::<32>(_mm256_cvtepu32_epi64(bits)), low) }
 }
 
 /// One direction component of a pixel ray, `(e + (across + up)) - e`:
@@ -1264,7 +637,7 @@ impl TileRays {
     /// `y0 .. y0 + th` (a band of tiles reuses the buffers: no allocation or
     /// zeroing per tile; start from `default()`, and keep to one camera).
     #[inline(always)]
-    pub fn fill<L: Lanes>(&mut self, l: L, cam: &Camera, col: &TileColumn, y0: u32, th: u32) {
+    pub fn fill<L: ChunkOps>(&mut self, l: L, cam: &Camera, col: &TileColumn, y0: u32, th: u32) {
         let t = self;
         t.width = col.width;
         t.stride = col.stride;
@@ -1327,10 +700,10 @@ impl TileRays {
     /// The directions and planar factors of every pixel, written now if
     /// [`TileRays::fill`] left them for later (tiles whose corners gave the
     /// spans): a tile whose triangles all settle whole blocks by corners
-    /// and screen-space depth ([`crate::raster_screen_depth`]) never needs
+    /// and screen-space depth ([`crate::raster::screen_depth`]) never needs
     /// them.
     #[inline(always)]
-    pub fn ensure_dirs<L: Lanes>(&mut self, l: L) {
+    pub fn ensure_dirs<L: ChunkOps>(&mut self, l: L) {
         if !self.dirs_filled {
             self.fill_dirs(l);
         }
@@ -1339,7 +712,7 @@ impl TileRays {
     /// Writes the directions and planar factors (and the spans the corners
     /// did not give).
     #[inline(always)]
-    fn fill_dirs<L: Lanes>(&mut self, l: L) {
+    fn fill_dirs<L: ChunkOps>(&mut self, l: L) {
         let t = self;
         let (stride, rows) = (t.stride, t.sy.len());
         let n = stride * rows;
@@ -1384,7 +757,7 @@ impl TileRays {
     /// in the column and row), so its least value over the tile is a
     /// corner's. Each computed `planar` lies within `ε = 4u Σ|f_j|(H_j +
     /// η_j) + 1.01 Σ|f_j| η_j` of `g · f`: `|D_j - g_j| <= η_j`
-    /// ([`crate::raster_screen_depth`] derives it from the module's `η_j`),
+    /// ([`crate::raster::screen_depth`] derives it from the module's `η_j`),
     /// `|g_j| <= H_j = |f_j| + |r_j| a + |v_j| tan`, and the dot product
     /// rounds by at most `3.01u Σ|f_j||D_j|`. So `planar(p) >= g·f(p) - ε
     /// >= min_c g·f(c) - ε >= min_c planar(c) - 2ε`. Costs four directions
@@ -1522,14 +895,14 @@ impl TileRays {
         }
     }
 
-    /// The tile's early depth bound ([`crate::raster_hiz`]), from its frame:
+    /// The tile's early depth bound ([`crate::raster::hiz`]), from its frame:
     /// the corners' lower bound on `planar` and the span of `D_axis` (from
     /// the corners, or gathered when the directions were written).
     #[inline(always)]
-    pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster_hiz::TileDepthBound> {
-        let faces = crate::raster_hiz::NearFaces::new(cam);
+    pub fn depth_bound(&self, cam: &Camera) -> Option<crate::raster::hiz::TileDepthBound> {
+        let faces = crate::raster::hiz::NearFaces::new(cam);
         let dk = self.d_span[faces.axis()];
-        crate::raster_hiz::TileDepthBound::from_low(faces.negative(), self.planar_low, dk)
+        crate::raster::hiz::TileDepthBound::from_low(faces.negative(), self.planar_low, dk)
     }
 
     /// The direction `D` of pixel `(lx, ly)`, as [`Camera::pixel_ray`] gives it.
@@ -1626,26 +999,26 @@ impl TileRays {
 #[derive(Debug, Clone, Copy)]
 pub struct ChunkDepth {
     /// The plane normal.
-    normal: [f64; 3],
+    pub(crate) normal: [f64; 3],
     /// `normal . (a - eye)`.
-    num: f64,
+    pub(crate) num: f64,
     /// `bounds.lo - eye`, per axis (the slab test's `b.lo[k] - origin[k]`).
-    lo: [f64; 3],
+    pub(crate) lo: [f64; 3],
     /// `bounds.hi - eye`, per axis.
-    hi: [f64; 3],
+    pub(crate) hi: [f64; 3],
     /// Per axis: a ray with `D_k = 0` misses the box (the eye is outside its slab).
-    zero_misses: [bool; 3],
+    pub(crate) zero_misses: [bool; 3],
     /// Per axis, `fl(L_k + 8u M_k)`: `t D_k` above it cannot be clamped from below.
-    clamp_free_lo: [f64; 3],
+    pub(crate) clamp_free_lo: [f64; 3],
     /// Per axis, `fl(H_k - 8u M_k)`: `t D_k` below it cannot be clamped from above.
-    clamp_free_hi: [f64; 3],
+    pub(crate) clamp_free_hi: [f64; 3],
 }
 
 /// The margin of [`ChunkDepth`]'s clamp-free test, in units of `M_k`.
-const CLAMP_FREE_MARGIN: f64 = 8.0 * U;
+pub(crate) const CLAMP_FREE_MARGIN: f64 = 8.0 * U;
 
 /// Largest `|t|` the clamp-free test accepts: far from overflow in `L_k / D_k`.
-const CLAMP_FREE_MAX_T: f64 = 1e300;
+pub(crate) const CLAMP_FREE_MAX_T: f64 = 1e300;
 
 /// Smallest margin `8u M_k` the clamp-free test uses: far above the
 /// subnormal range, so the roundings it absorbs are relative ones.
@@ -1714,7 +1087,7 @@ impl ChunkDepth {
     /// mask of lanes where [`TriDepth::depth`] is `Some`; exact for the
     /// lanes in `need` (the others may take the shortcut unproven).
     #[inline(always)]
-    pub fn depths<L: Lanes>(
+    pub fn depths<L: ChunkOps>(
         &self,
         l: L,
         cam: &Camera,
@@ -1732,7 +1105,7 @@ impl ChunkDepth {
     /// `need`; `subnormal`: some direction component among the rays is
     /// subnormal (no shortcut).
     #[inline(always)]
-    pub fn chunk<L: Lanes>(
+    pub fn chunk<L: ChunkOps>(
         &self,
         l: L,
         cam: &Camera,
@@ -1751,11 +1124,11 @@ impl ChunkDepth {
         self.lanes(cam, d.map(|v| *v), *planar, need, subnormal)
     }
 
-    /// The wide shortcut alone ([`Lanes::clamp_free_depths`]) over the 8
+    /// The wide shortcut alone ([`ChunkOps::clamp_free_depths`]) over the 8
     /// lanes from column `col` of tile row `row`: depths, lanes with a
     /// depth, lanes it settles; `None` where it cannot run.
     #[inline(always)]
-    pub fn clamp_free<L: Lanes>(
+    pub fn clamp_free<L: ChunkOps>(
         &self,
         l: L,
         cam: &Camera,
@@ -1998,7 +1371,7 @@ impl FastEdges {
     /// every sign given is one [`FastEdges::chunk`] gives too (lanes past
     /// the tile's width are padding, to be masked off).
     #[inline(always)]
-    pub fn screen_chunk<L: Lanes>(
+    pub fn screen_chunk<L: ChunkOps>(
         &self,
         l: L,
         rays: &TileRays,
@@ -2027,7 +1400,7 @@ impl FastEdges {
     /// tile row `row` (lane `j` is the pixel at column `col + j`; lanes past
     /// the tile's width are padding, to be masked off).
     #[inline(always)]
-    pub fn chunk<L: Lanes>(&self, l: L, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
+    pub fn chunk<L: ChunkOps>(&self, l: L, dirs: &TileRays, row: usize, col: usize) -> ChunkSigns {
         let at = row * dirs.stride + col;
         debug_assert!(dirs.dirs_filled, "tile directions read before ensure_dirs");
         let dx: &[f64; CHUNK] = dirs.d[0][at..at + CHUNK].try_into().unwrap();
@@ -2051,6 +1424,8 @@ mod tests {
     use super::*;
     use crate::predicate::exact_sign;
     use crate::predicate::tests::lcg;
+    #[cfg(target_arch = "x86_64")]
+    use crate::simd::Avx2;
     use glam::DVec3;
 
     /// An exact 90° 32x32 camera looking down -z from `o + z`, and a tilted
@@ -2071,7 +1446,7 @@ mod tests {
         ]
     }
 
-    /// Both [`Lanes`] give the same bits, for equal values, infinities, NaN and signed zeros.
+    /// Both [`ChunkOps`] give the same bits, for equal values, infinities, NaN and signed zeros.
     #[test]
     fn lane_masks_agree() {
         let vals = [
@@ -2147,7 +1522,7 @@ mod tests {
         v
     }
 
-    /// [`Lanes::chunk_depth`] in AVX2 is its definition bit for bit: on
+    /// [`ChunkOps::chunk_depth`] in AVX2 is its definition bit for bit: on
     /// vertices with signed-zero and equal coordinates (the min/max ties),
     /// f32's extremes, tiny ones, and eyes from the origin out to 1e308
     /// (bounds minus the eye overflowing to infinity, the clamp-free
@@ -2203,8 +1578,8 @@ mod tests {
         assert!(misses > 1000 && nan > 10, "{misses} {nan}");
     }
 
-    /// [`Lanes::small_signs`] in AVX2 (one plane per lane) gives the bits
-    /// of its definition (one ray per lane, from [`Lanes::filter4`]) for
+    /// [`ChunkOps::small_signs`] in AVX2 (one plane per lane) gives the bits
+    /// of its definition (one ray per lane, from [`ChunkOps::filter4`]) for
     /// every ray count of a small box: rays through the edges, anywhere,
     /// with zero and NaN components; all three outcomes occur.
     #[test]
@@ -2232,7 +1607,7 @@ mod tests {
         assert!(seen.iter().all(|&k| k > 500), "{seen:?}");
     }
 
-    /// [`Lanes::filter4`] settles exactly the signs the predicate's filter
+    /// [`ChunkOps::filter4`] settles exactly the signs the predicate's filter
     /// settles ([`EdgePlane::sign`] without an exact fallback), with its
     /// sign, on both lane kinds: rays on, near and off the edge planes,
     /// zero and NaN components.
@@ -2454,9 +1829,9 @@ mod tests {
                     "{} far below {least}",
                     t.planar_low
                 );
-                let faces = crate::raster_hiz::NearFaces::new(&cam);
+                let faces = crate::raster::hiz::NearFaces::new(&cam);
                 let (k, neg) = (faces.axis(), faces.negative());
-                let scanned = crate::raster_hiz::TileDepthBound::new(neg, &t.planar, &t.d[k]);
+                let scanned = crate::raster::hiz::TileDepthBound::new(neg, &t.planar, &t.d[k]);
                 let (got, scanned) = (t.depth_bound(&cam).unwrap(), scanned.unwrap());
                 assert!(got.kappa() <= scanned.kappa());
                 assert!(got.kappa() >= scanned.kappa() * (1.0 - within));

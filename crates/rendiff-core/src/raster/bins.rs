@@ -1,21 +1,21 @@
 //! The rasterizer's binning: every triangle's conservative box
-//! ([`crate::raster_bounds`]), then the triangles each tile must consider,
+//! ([`crate::raster::bounds`]), then the triangles each tile must consider,
 //! in parallel and in a fixed order: the triangles facing the eye first,
-//! then those facing away ([`crate::raster_bounds::faces_away`]), each in
+//! then those facing away ([`crate::raster::bounds::faces_away`]), each in
 //! triangle order. The keys are the same in any order; the operation counts
 //! of early depth rejection are not, so the order is deterministic, and it
 //! is chosen for them: a closed mesh's near side fills a tile before its far
 //! side arrives, which is then skipped as hidden (on `million`, set-ups fell
 //! from 647k to 446k and skipped triangles rose from 573k to 775k).
 
+use crate::raster::bounds::BoxMargin;
 use crate::raster::{PixelRect, TILE};
-use crate::raster_bounds::BoxMargin;
 use crate::scene::resolve::ResolvedScene;
 use rayon::prelude::*;
 
 /// A triangle in a tile's bin, with the part of its box in the tile (tile
 /// coordinates, `[lx0, lx1, ly0, ly1]` inclusive; [`TILE`] fits a byte) and
-/// its face for early depth rejection ([`crate::raster_hiz::NearFaces::face`]), so that the tile
+/// its face for early depth rejection ([`crate::raster::hiz::NearFaces::face`]), so that the tile
 /// loop reads only the triangle itself, and not even that for a triangle it
 /// skips as hidden.
 #[derive(Debug, Clone, Copy)]
@@ -24,7 +24,7 @@ pub struct Binned {
     pub prim: u32,
     /// Its box within the tile.
     pub rect: [u8; 4],
-    /// Its face ([`crate::raster_hiz`]).
+    /// Its face ([`crate::raster::hiz`]).
     pub face: f32,
 }
 
@@ -60,7 +60,7 @@ impl Bins {
     /// Triangles per chunk.
     const GRAIN: usize = 4096;
 
-    /// Bounds ([`crate::raster_bounds`]) and bins of every triangle.
+    /// Bounds ([`crate::raster::bounds`]) and bins of every triangle.
     pub fn new(
         scene: &ResolvedScene,
         margin: Option<BoxMargin>,
@@ -169,12 +169,12 @@ fn bin_chunk(
         .zip(tile.chunks_mut(BOXES).zip(local.chunks_mut(BOXES)))
     {
         let rects = &mut rects[..tris.len()];
-        let out = crate::raster_bounds::BoundsOut {
+        let out = crate::raster::bounds::BoundsOut {
             boxes: rects,
             faces: face,
             away: &mut *away,
         };
-        crate::raster_bounds::bounds_into(cam, tris, deg, margin, out);
+        crate::raster::bounds::bounds_into(cam, tris, deg, margin, out);
         for (((r, &side), t), l) in rects.iter().zip(&*away).zip(tile).zip(local) {
             let Some(r) = r else { continue };
             let [tx0, tx1, ty0, ty1] = span(r);
@@ -273,8 +273,8 @@ pub fn clip_to_tile(r: PixelRect, x0: u32, y0: u32, tw: u32, th: u32) -> [usize;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raster::bounds::faces_away;
     use crate::raster::screen_bounds;
-    use crate::raster_bounds::faces_away;
     use crate::scene::generators::crossover_grid;
 
     /// Every tile's bin is what two serial passes over the triangles give:
@@ -296,7 +296,7 @@ mod tests {
             let margin = Some(BoxMargin::new(cam));
             let (tiles_x, tiles_y) = (cam.width.div_ceil(TILE), cam.height.div_ceil(TILE));
             let bins = Bins::new(&scene, margin, tiles_x, tiles_y);
-            let faces = crate::raster_hiz::NearFaces::new(cam);
+            let faces = crate::raster::hiz::NearFaces::new(cam);
             let mut bin = Vec::new();
             let (mut entries, mut turned) = (0, 0);
             for ty in 0..tiles_y {

@@ -34,7 +34,7 @@
 //!   is within `6u` of the real one.
 //! - The pixel's ray `D` lies within `ε_j` = [`TileRays::eta`] of `g` per
 //!   component: `η_j = 16u(|e_j| + H_j)` bounds `|δ_j - g_j|` for exact
-//!   screen coordinates ([`crate::raster_edges`], whole blocks), and with
+//!   screen coordinates ([`crate::raster::edges`], whole blocks), and with
 //!   the computed ones the sum `f + r sx + v sy` (`3.01u H_j`), `P = e + s`
 //!   and `D = fl(P - e)` (`u(|e_j| + 1.01 H_j)` each) come to `5.03u H_j +
 //!   1.01u|e_j| < η_j`. The eye's distance from the origin enters here.
@@ -114,7 +114,9 @@
 //! against every f64 around a rounding boundary.
 
 use crate::camera::Camera;
-use crate::raster_edges::{BlockRows, ChunkDepth, Lanes, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN};
+use crate::raster::edges::{
+    BlockRows, ChunkDepth, ChunkOps, TileRays, CHUNK, CLAMP_FREE_MIN_MARGIN,
+};
 use crate::visibility::{hit_key, NO_HIT};
 
 /// Unit roundoff of f64.
@@ -147,7 +149,7 @@ pub fn rounds_alone(w: f64, eu: i64) -> bool {
 /// The most rows [`ScreenDepth::box_keys`] takes (a tile's).
 pub const MAX_BOX_ROWS: usize = crate::raster::TILE as usize;
 
-/// One row of a block, as [`Lanes::screen_row`] evaluates it.
+/// One row of a block, as [`ChunkOps::screen_row`] evaluates it.
 #[derive(Debug, Clone, Copy)]
 pub struct ScreenRow {
     /// The plane's `num`.
@@ -421,7 +423,7 @@ impl ScreenDepth {
     /// lanes with a hit (`near <= z <= far`), and the lanes [`rounds_alone`]
     /// certifies (only those are the depth function's).
     #[inline(always)]
-    pub fn row<L: Lanes>(
+    pub fn row<L: ChunkOps>(
         &self,
         l: L,
         rays: &TileRays,
@@ -452,7 +454,7 @@ impl ScreenDepth {
     /// and the z-test in one pass.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub fn block_keys<L: Lanes>(
+    pub fn block_keys<L: ChunkOps>(
         &self,
         l: L,
         rays: &TileRays,
@@ -486,7 +488,7 @@ impl ScreenDepth {
     /// or not finite are left to the caller.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn row_constant_keys<L: Lanes>(
+    fn row_constant_keys<L: ChunkOps>(
         &self,
         l: L,
         rays: &TileRays,
@@ -583,7 +585,7 @@ mod tests {
     use super::*;
     use crate::predicate::tests::lcg;
     use crate::raster::TILE;
-    use crate::raster_edges::Portable;
+    use crate::simd::Portable;
     use crate::visibility::{slab, TriDepth};
     use glam::{DVec3, Vec3};
 
@@ -746,7 +748,7 @@ mod tests {
     }
 
     /// Every certified lane of every row [`each_row`] visits (both
-    /// [`Lanes`] giving the same row): `check(row, pixel, tile column, z,
+    /// [`ChunkOps`] giving the same row): `check(row, pixel, tile column, z,
     /// hit)`. Returns (certified lanes, lanes of passed blocks).
     fn each_certified_lane(
         mut check: impl FnMut(&Row, (u32, u32), usize, f32, bool),
@@ -762,7 +764,7 @@ mod tests {
             assert_eq!(def.0.map(f32::to_bits), z.map(f32::to_bits));
             assert_eq!((def.1, def.2), (ok, sure));
             #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = crate::raster_edges::Avx2::detect() {
+            if let Some(avx) = crate::simd::Avx2::detect() {
                 let wide = r.s.row(avx, r.rays, row, base, r.bound.eu);
                 assert_eq!(wide.0.map(f32::to_bits), z.map(f32::to_bits));
                 assert_eq!((wide.1, wide.2), (ok, sure));
@@ -843,7 +845,7 @@ mod tests {
     }
 
     /// [`ScreenDepth::block_keys`] is [`ScreenDepth::row`] followed by the
-    /// z-test, row by row, for both [`Lanes`], over keys below, above and
+    /// z-test, row by row, for both [`ChunkOps`], over keys below, above and
     /// equal to the block's: it writes exactly the rows whose lanes are all
     /// certified.
     #[test]
@@ -920,7 +922,7 @@ mod tests {
                     boxed_blocks += 1;
                 }
                 // `block_keys` on a copy of `start`, with lanes `l`.
-                fn keys_by<L: Lanes>(l: L, r: &Row, start: &[u64]) -> (u32, Vec<u64>) {
+                fn keys_by<L: ChunkOps>(l: L, r: &Row, start: &[u64]) -> (u32, Vec<u64>) {
                     let (mut got, (row, base)) = (start.to_vec(), r.at);
                     let rows = &mut rows_of(&mut got, start.len() / CHUNK);
                     let done = r.s.block_keys(l, r.rays, (row, base), r.bound.eu, rows, 5);
@@ -928,7 +930,7 @@ mod tests {
                 }
                 assert_eq!(keys_by(Portable, r, start), (rows, want.clone()));
                 #[cfg(target_arch = "x86_64")]
-                if let Some(avx) = crate::raster_edges::Avx2::detect() {
+                if let Some(avx) = crate::simd::Avx2::detect() {
                     assert_eq!(keys_by(avx, r, start), (rows, want.clone()));
                 }
             }
