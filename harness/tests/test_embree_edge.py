@@ -5,6 +5,7 @@ The expected values are written out from the derivation, not read back from the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -21,8 +22,31 @@ U = 2.0**-24
 BG = vocab.BACKGROUND_ID
 
 
-def _model(name: str) -> tolerance.Model:
+def _registered(name: str) -> tolerance.Model:
     return next(s.precision for s in SPECS if s.name == name)
+
+
+def _model(name: str) -> tolerance.Model:
+    """The registered model with its Embree edge term built again here, from the code under test: the
+    registry builds it once at import, so a fault planted in `embree_edge` after the import (as a
+    mutation run does) would otherwise never reach these tests. The next test holds the two equal."""
+    return dataclasses.replace(_registered(name), edge_extra=tolerance.embree_edge(name == "embree_robust"))
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_the_registered_edge_term_is_the_one_built_here(name: str) -> None:
+    ctx = _ctx(
+        z=np.array([0.5, 1000.0, 3e4]),
+        point_norm=np.array([0.6, 1000.0, 3e4]),
+        off_axis=np.array([1.0, 1.3, 2.0]),
+        vertex_distance=np.array([0.7, 1000.0, 3e4]),
+        extent=np.array([0.1, 1.0, 40.0]),
+        height=np.array([0.05, 1.0, 9.0]),
+        origin_offset=1e-7,
+    )
+    got, got_text = _registered(name).edge_eps(ctx)
+    want, want_text = _model(name).edge_eps(ctx)
+    assert np.array_equal(got, want) and got_text == want_text
 
 
 def _ctx(**over: object) -> tolerance.EdgeContext:
