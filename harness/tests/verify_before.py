@@ -2,8 +2,9 @@
 
 judge/outline.py replaced the walk below, one pixel at a time with numpy calls per edge and
 per neighbor, by one walk per pixel advanced for all pixels together. This is the old code,
-verbatim but for its imports (verify's Side, Topology, explain and constants are unchanged),
-so tests/test_outline_batched.py can require the same classes and sentences from both.
+verbatim but for its imports (verify's Side and Topology are unchanged), so
+tests/test_outline_batched.py can require the old walk's answer for every pixel the batched
+search answers. Only the rewritten code is kept: the classing around it is verify.py's alone.
 """
 
 from __future__ import annotations
@@ -12,20 +13,10 @@ import numpy as np
 
 from rendiff_harness.contract.camera import Camera
 from rendiff_harness.contract.resolved import ResolvedScene
-from rendiff_harness.contract.vocab import BACKGROUND_ID
 from rendiff_harness.judge import geometry
 from rendiff_harness.judge.verify import (
-    CRACK,
-    EDGE,
-    F32_ULP,
-    INTERIOR,
-    TIE,
-    Classified,
-    DepthTolerance,
     Side,
     Topology,
-    explain,
-    topology,
 )
 
 
@@ -182,133 +173,3 @@ def _outline_near(
                 if n_near:
                     frontier.append((n_tri, n_near))
     return "", first_closed
-
-
-def _shared(topo: Topology, r: int, t: int) -> set[int]:
-    return set(int(v) for v in topo.corner_vid[r]) & set(int(v) for v in topo.corner_vid[t])
-
-
-def classify_mismatches(
-    scene: ResolvedScene,
-    ref_ids: np.ndarray,
-    test_ids: np.ndarray,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    eps: np.ndarray | float,
-    depth_tol: DepthTolerance,
-    topo_cache: dict[str, Topology] | None = None,
-    backend: str = "the test renderer",
-    eye_slack: float = 0.0,
-) -> Classified:
-    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px),
-    `eye_slack` how far (world units) its arithmetic may move the eye relative to the geometry."""
-    k = int(np.asarray(ref_ids).size)
-    cls = np.full(k, INTERIOR, dtype=np.int8)
-    why = [""] * k
-    if k == 0:
-        return Classified(cls, why)
-    r_ids = np.asarray(ref_ids).ravel().astype(np.uint64)
-    t_ids = np.asarray(test_ids).ravel().astype(np.uint64)
-    eps_a = np.broadcast_to(np.asarray(eps, dtype=np.float64), (k,))
-    sr = side_geometry(scene, r_ids, rows, cols)
-    st = side_geometry(scene, t_ids, rows, cols)
-    n = scene.triangle_count
-    bg = np.uint64(BACKGROUND_ID)
-    invalid_t = (t_ids != bg) & ~st.valid
-    invalid_r = (r_ids != bg) & ~sr.valid
-    covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a))
-    covers_t = st.valid & (st.inside | (st.poly_d <= eps_a))
-    both = covers_r & covers_t & np.isfinite(sr.z) & np.isfinite(st.z)
-    tol = np.zeros(k)
-    if both.any():
-        zi = np.nonzero(both)[0]
-        tol[zi] = np.asarray(depth_tol(sr.z[zi], sr.cos[zi]), dtype=np.float64) + 2.0 * F32_ULP * np.abs(sr.z[zi])
-    with np.errstate(invalid="ignore"):
-        tie = both & (np.abs(sr.z - st.z) <= tol)
-    topo: Topology | None = None
-
-    def get_topo() -> Topology:
-        nonlocal topo
-        if topo is None:
-            if topo_cache is not None and "topo" in topo_cache:
-                topo = topo_cache["topo"]
-            else:
-                topo = topology(scene.triangles)
-                if topo_cache is not None:
-                    topo_cache["topo"] = topo
-        return topo
-
-    rows_a = np.asarray(rows).ravel()
-    cols_a = np.asarray(cols).ravel()
-    for i in range(k):
-        r, t = int(r_ids[i]), int(t_ids[i])
-        rn = "background" if r == BACKGROUND_ID else f"prim {r}"
-        tn = "background" if t == BACKGROUND_ID else f"prim {t}"
-        e = float(eps_a[i])
-        if invalid_t[i] or invalid_r[i]:
-            bad = t if invalid_t[i] else r
-            why[i] = f"id {bad} names no triangle (the scene has {n})"
-            continue
-        if sr.valid[i] and st.valid[i]:
-            tp = get_topo()
-            shared = _shared(tp, r, t)
-            if shared:
-                near_v = [j for j in range(3) if sr.vert_d[i, j] <= e and int(tp.corner_vid[r, j]) in shared]
-                near_e = [
-                    j
-                    for j in range(3)
-                    if sr.edge_d[i, j] <= e
-                    and int(tp.corner_vid[r, j]) in shared
-                    and int(tp.corner_vid[r, (j + 1) % 3]) in shared
-                ]
-                if near_e or near_v:
-                    cls[i] = EDGE
-                    d = min([sr.edge_d[i, j] for j in near_e] + [sr.vert_d[i, j] for j in near_v])
-                    feature = "edge" if near_e else "vertex"
-                    why[i] = f"center {d:.2g} px from the {feature} prims {r} and {t} share: edge"
-                    continue
-        if tie[i]:
-            cls[i] = TIE
-            tp = get_topo()
-            same = sorted(int(v) for v in tp.corner_vid[r]) == sorted(int(v) for v in tp.corner_vid[t])
-            what = "identical triangles" if same else "coplanar here"
-            why[i] = (
-                f"prims {r} and {t} are {what} (depths {sr.z[i]:.9g} and {st.z[i]:.9g} agree within {tol[i]:.3g}): tie"
-            )
-            continue
-        # The side that saw the farther surface missed the nearer triangle.
-        if sr.valid[i] and (not st.valid[i] or st.z[i] > sr.z[i]):
-            missed, seen, g, missed_name, seen_name, who = r, t, sr, rn, tn, backend
-        elif st.valid[i]:
-            missed, seen, g, missed_name, seen_name, who = t, r, st, tn, rn, "the reference"
-        else:
-            why[i] = "both sides name no triangle"
-            continue
-        near = [j for j in range(3) if g.edge_d[i, j] <= e]
-        if not near:
-            if g.poly_d[i] <= e:
-                cls[i] = EDGE
-                why[i] = f"center {g.poly_d[i]:.2g} px from the near/far clip of {missed_name}: edge"
-            else:
-                dist = g.poly_d[i]
-                where = "inside" if g.inside[i] else "outside"
-                why[i] = (
-                    f"center {dist:.3g} px {where} the boundary of {missed_name} (allowed {e:.2g} px); "
-                    f"{who} saw {seen_name}: interior"
-                )
-            continue
-        tp = get_topo()
-        outline, closed_by = _outline_near(scene, tp, missed, near, int(rows_a[i]), int(cols_a[i]), e, eye_slack)
-        if outline:
-            cls[i] = EDGE
-            d = min(g.edge_d[i, j] for j in near)
-            why[i] = f"center {d:.2g} px from {outline} (reached from {missed_name}): edge"
-        else:
-            cls[i] = CRACK
-            d = min(g.edge_d[i, j] for j in near)
-            why[i] = (
-                f"center {d:.2g} px from the closed edge {missed_name} shares with prim {closed_by}, "
-                f"and no outline within {e:.2g} px, but {who} saw {seen_name} behind it: crack"
-            )
-        del seen
-    return Classified(cls, why, explain(cls, why, r_ids, t_ids, rows, cols))
