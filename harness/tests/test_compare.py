@@ -396,6 +396,31 @@ reason = "not watertight"
     assert doc["unused_expectations"] == [{"entry": 5, "scene": "gone", "backend": "povray", "buffer": "id"}]
 
 
+def test_unused_expectations_noted_only_for_the_runs_scenes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A stale entry of a scene in the run is shown; one of a scene the run never had is only in results.json."""
+    toml = """
+[[expect]]
+scene = "quads"
+backend = "povray "
+buffer = "id"
+status = "expected_fail"
+reason = "a typo in the backend"
+
+[[expect]]
+scene = "elsewhere"
+backend = "povray"
+buffer = "id"
+status = "expected_fail"
+reason = "a scene of another run"
+"""
+    _run_with(tmp_path, toml)
+    err = capsys.readouterr().err
+    note = [line for line in err.splitlines() if line.startswith("note: expectations matched by no compared result")]
+    assert len(note) == 1 and "quads/povray /id" in note[0] and "elsewhere" not in note[0], err
+    doc = _strict_json(tmp_path / "run" / "results.json")
+    assert [u["scene"] for u in doc["unused_expectations"]] == ["quads", "elsewhere"]
+
+
 def test_malformed_expectations_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run, _ = build_run(tmp_path)
     exp = tmp_path / "bad.toml"
