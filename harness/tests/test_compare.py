@@ -558,7 +558,9 @@ def test_relative_models_scale_with_grazing_angle_and_cap() -> None:
     assert facing[0] == pytest.approx(1e-4)
     assert grazing[0] == pytest.approx(1e-3)
     assert edge_on[0] == pytest.approx(10.0 * tolerance.MAX_REL)
-    assert precision.depth_model(registry.spec("embree"), "embree").depth(_ctx(10.0, 0.5))[0][0] == pytest.approx(2e-4)
+    embree = precision.depth_model(registry.spec("embree"), "embree")
+    ctx = tolerance.DepthContext(np.array([10.0]), np.array([0.5]), {}, {}, ray_norm=np.array([1.5]))
+    assert embree.depth(ctx)[0][0] == pytest.approx(2e-4 + 2.0**-24 * 1.5 * 10.0 / 0.5, rel=1e-12)
 
 
 def test_povray_depth_step_sources() -> None:

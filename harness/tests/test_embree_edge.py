@@ -211,7 +211,7 @@ def test_the_hand_finding_is_an_edge_once_the_shift_counts_the_off_axis_factor(t
     on_axis = 1e-4 + offset / (0.14133906 * cam.pixel_size()) + 1e-5
     res = verify.classify_mismatches(
         ref.scene, np.array([0], dtype=np.uint32), np.array([1], dtype=np.uint32), np.array([29]), np.array([40]),
-        on_axis, lambda z, c: np.zeros_like(z),
+        on_axis, lambda z, c, p: np.zeros_like(z),
     )  # fmt: skip
     assert verify.CLASSES[int(res.cls[0])] == "interior"
 

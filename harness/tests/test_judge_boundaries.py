@@ -38,7 +38,7 @@ def _scene(tmp_path: Path, tris: list[list[list[float]]], near: float = 1e-3) ->
     return resolved.load(d)
 
 
-def _exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+def _exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
     return np.zeros_like(z)
 
 
@@ -130,8 +130,8 @@ def test_tie_adds_the_renderers_depth_tolerance(tmp_path: Path) -> None:
     seen: list[tuple[float, float]] = []
 
     def tol(factor: float) -> verify.DepthTolerance:
-        def f(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
-            seen.append((float(z[0]), float(cos[0])))
+        def f(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
+            seen.append((float(z[0]), float(cos[0]), float(prims[0])))
             return np.full_like(z, factor * dz)
 
         return f
@@ -140,7 +140,7 @@ def test_tie_adds_the_renderers_depth_tolerance(tmp_path: Path) -> None:
     assert _one(s, 0, 1, depth_tol=tol(0.99))[0] == "interior"
     # Asked at the reference triangle's planar depth and |cos| there (PX's ray is oblique).
     g = verify.side_geometry(s, np.array([0]), np.array([PX[1]]), np.array([PX[0]]))
-    assert seen[0] == (float(g.z[0]), float(g.cos[0]))
+    assert seen[0] == (float(g.z[0]), float(g.cos[0]), 0.0)  # on the reference's triangle
 
 
 # --------------------------------------------------------------------------- shared edge and vertex
@@ -570,7 +570,7 @@ def test_the_tie_band_is_inclusive(tmp_path: Path) -> None:
     s = _scene(tmp_path, [BIG, lifted])
 
     def tol(value: float) -> verify.DepthTolerance:
-        return lambda z, cos: np.full_like(z, value)
+        return lambda z, cos, prims: np.full_like(z, value)
 
     assert _one(s, 0, 1, depth_tol=tol(2.0**-10 - 2.0**-20))[0] == "tie"
     assert _one(s, 0, 1, depth_tol=tol(float(np.nextafter(2.0**-10 - 2.0**-20, 0.0))))[0] == "interior"

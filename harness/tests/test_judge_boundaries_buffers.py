@@ -136,7 +136,7 @@ def test_the_verifier_gets_the_renderers_eps_slack_and_depth_tolerance(
     assert ctx.pixel_size == 2.0 / 16 and ctx.origin_offset == 0.0 and ctx.eye_norm == 4.0
     args = seen["args"]
     assert args[5].tolist() == [0.375, 0.375]  # eps = edge_px + extra
-    assert args[6](np.array([4.0]), np.array([1.0])).tolist() == [0.0]  # exact by default
+    assert args[6](np.array([4.0]), np.array([1.0]), np.array([0])).tolist() == [0.0]  # exact by default
     assert args[7] is ref.topology_cache and args[8] == "the test renderer"
     assert args[9] == max(expect_norm.tolist()) * 0.5  # the eye uncertainty: the largest position error
     assert seen["position"] == (0.0, 4.0, expect_norm.tolist())
@@ -502,8 +502,13 @@ def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> N
         return ctx.z_ref * ctx.cos, "D"
 
     fn = depth.depth_tolerance_fn(ref, tolerance.Model("m", 0.0, "", dm), {"info": {"q": 1}}, {"a": 1})
-    assert fn(np.array([-2.0, 3.0]), np.array([0.5, 0.25])).tolist() == [-1.0, 0.75]
+    assert fn(np.array([-2.0, 3.0]), np.array([0.5, 0.25]), np.array([0, 0])).tolist() == [-1.0, 0.75]
     ctx = seen[0]
+    # The triangle's own extent and depth span, as the depth verdict's context has them: an
+    # edge-on triangle's bound is min(e/|cos|, span), not the fixed cap (docs/verifier.md).
+    extent, span = depth.triangle_extent_span(ref, np.array([0, 0]))
+    assert ctx.extent is not None and ctx.extent.tolist() == extent.tolist()
+    assert ctx.depth_span is not None and ctx.depth_span.tolist() == span.tolist()
     assert ctx.point_norm is not None and ctx.point_norm.tolist() == [2.0 + eye, 3.0 + eye]  # |z| + |eye|
     ctx2 = depth.depth_context(ref, np.array([0]), np.array([0]), np.array([4.0]), np.array([0]), {}, {})
     assert ctx2.origin_offset == ids.origin_offset(ref) > 0.0
@@ -514,9 +519,9 @@ def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> N
         raise tolerance.ToleranceError("no")
 
     fn = depth.depth_tolerance_fn(ref, tolerance.Model("m", 0.0, "", broken), {}, {})
-    assert fn(np.array([2.0, 3.0]), np.array([1.0, 1.0])).tolist() == [0.0, 0.0]
+    assert fn(np.array([2.0, 3.0]), np.array([1.0, 1.0]), np.array([0, 0])).tolist() == [0.0, 0.0]
     const = depth.depth_tolerance_fn(ref, _model(depth_tol=0.25), {}, {})
-    assert const(np.array([2.0, 3.0]), np.array([1.0, 1.0])).tolist() == [0.25, 0.25]
+    assert const(np.array([2.0, 3.0]), np.array([1.0, 1.0]), np.array([0, 0])).tolist() == [0.25, 0.25]
 
 
 def test_the_radial_hint_needs_nine_in_ten(tmp_path: Path) -> None:

@@ -157,9 +157,30 @@ def test_eye_uncertainty_is_the_largest_position_error() -> None:
 
 def test_embree_adds_room_for_its_f32_ray_origin() -> None:
     """Its intersection's relative term, plus the shift of rays starting at the f32-rounded eye."""
-    base = tl.embree_depth(_ctx([5.0], [1.0]))[0]
-    moved = tl.embree_depth(_ctx([5.0], [1.0], origin_offset=1e-3, depth_span=np.array([1.0])))[0]
+    base = tl.embree_depth(_ctx([5.0], [1.0], ray_norm=1.0))[0]
+    moved = tl.embree_depth(_ctx([5.0], [1.0], origin_offset=1e-3, depth_span=np.array([1.0]), ray_norm=1.0))[0]
     assert base[0] > 0.0 and moved[0] > base[0]
+
+
+def test_embree_adds_its_f32_ray_direction_as_a_moved_point() -> None:
+    """The f32 direction moves the point at depth Z by u |d| Z: over |cos|, capped by the span.
+    Found by the fuzzer (seed 7, s7_01212): an eye 6.2e-5 from a triangle's plane, |cos| 1.18e-5,
+    Embree's Z 5.123518 against 5.118345; rounding the direction alone moves the hit by 0.00224."""
+    z, cos, d = 5.118345, 1.18e-5, 1.0000137
+    rel = tl.relative_grazing(_ctx([z], [cos]), tl.EMBREE_REL)[0]
+    big = np.array([10.0])
+    tol = tl.embree_depth(_ctx([z], [cos], depth_span=big, ray_norm=np.array([d])))[0][0]
+    assert tol - rel == pytest.approx(U * d * z / cos, rel=1e-12)
+    assert tol > abs(5.123518 - z)  # the finding is inside it
+    assert rel < abs(5.123518 - z)  # and was outside it without this term
+    # Capped by the triangle's depth span (a hit stays on its triangle), not by 1/|cos|.
+    small = tl.embree_depth(_ctx([z], [cos], depth_span=np.array([1e-3]), ray_norm=np.array([d])))[0][0]
+    assert small - rel == pytest.approx(1e-3, rel=1e-12)
+    # The longer the pixel ray, the larger the move.
+    wide = tl.embree_depth(_ctx([z], [cos], depth_span=big, ray_norm=np.array([1.5])))[0][0]
+    assert wide - rel == pytest.approx(U * 1.5 * z / cos, rel=1e-12)
+    with pytest.raises(tl.ToleranceError, match="ray_norm"):
+        tl.embree_depth(_ctx([z], [cos], depth_span=big))
 
 
 def test_exact_and_strict_models() -> None:

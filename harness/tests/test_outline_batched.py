@@ -30,7 +30,7 @@ BG = vocab.BACKGROUND_ID
 RENDIFF = fixtures.rendiff_binary()
 
 
-def _exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+def _exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
     return np.zeros_like(z)
 
 

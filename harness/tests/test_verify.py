@@ -31,7 +31,7 @@ def _scene(tmp_path: Path, tris: list[list[list[float]]]) -> resolved.ResolvedSc
     return resolved.load(d)
 
 
-def _exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+def _exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
     return np.zeros_like(z)
 
 
@@ -112,7 +112,7 @@ def test_tie_needs_depths_within_the_tolerance(tmp_path: Path) -> None:
     s = _scene(tmp_path, [T0, T1, lifted])
     assert _one(s, 2, 0, (12, 4))[0] == "interior"
 
-    def loose(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    def loose(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
         return np.full_like(z, 2e-4)
 
     assert _one(s, 2, 0, (12, 4), depth_tol=loose)[0] == "tie"

@@ -172,7 +172,7 @@ def compare_ids(
         )
         eps, tol_text = model.edge_eps(ectx)
 
-        def exact(z: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        def exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
             return np.zeros_like(z)
 
         slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm, ectx.attrs)

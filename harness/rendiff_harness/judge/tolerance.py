@@ -57,6 +57,9 @@ class DepthContext:
     origin_offset: float = 0.0  # |f32(eye) - eye|: how far an f32 camera origin moves the rays
     eye_norm: float = 0.0  # |eye|: distance of the eye from the world origin
     depth_span: np.ndarray | None = None  # (K,) max - min planar depth of the triangle's vertices
+    # (K,) or a bound for all: |d| of the pixel ray d = (q, 1) in camera axes, sqrt(1 + |q|^2); how far
+    # a rounded ray direction moves the point at depth Z is proportional to it (`embree_depth`)
+    ray_norm: np.ndarray | float | None = None
 
 
 @dataclass(frozen=True)
@@ -243,16 +246,32 @@ def exact_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
 EMBREE_REL = 1e-5
 
 
+def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
+    """|dZ| from Embree's f32 ray direction (docs/verifier.md, "Embree's arithmetic"): fl(D) is
+    within u |D| of D (u = 2^-24 per coordinate), so the point at planar depth Z along the rounded
+    ray is within u |D| Z of the exact ray's point, and reaches the plane `shift_depth` of that away
+    (1/|cos|, at most the triangle's depth span). A caller without each pixel's |D| is refused."""
+    if ctx.ray_norm is None:
+        raise ToleranceError("the Embree depth model needs each pixel ray's length (DepthContext.ray_norm)")
+    return shift_depth(ctx, F32_U * np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref))
+
+
 def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """Embree 3: float32 watertight/Moeller intersection.
 
     Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
-    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3.
+    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3; plus the two moves of
+    the ray it is given, derived: its f32 origin and its f32 direction.
     """
-    tol = relative_grazing(ctx, EMBREE_REL) + shift_depth(ctx, position_error(ctx, f32_origin))
+    tol = (
+        relative_grazing(ctx, EMBREE_REL)
+        + shift_depth(ctx, position_error(ctx, f32_origin))
+        + embree_direction_depth(ctx)
+    )
     return tol, (
         f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
-        f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye)"
+        f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye) "
+        "+ min(2^-24 |d| Z / |cos|, depth span) (f32 ray direction)"
     )
 
 

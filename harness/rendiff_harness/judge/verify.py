@@ -45,8 +45,9 @@ EDGE, TIE, CRACK, INTERIOR = range(4)
 F32_ULP = 2.0**-23
 MAX_EXPLANATIONS = 20
 
-DepthTolerance = Callable[[np.ndarray, np.ndarray], np.ndarray]
-"""(planar depth z (K,), |cos| (K,)) -> allowed |dZ| (K,) of the test renderer."""
+DepthTolerance = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(planar depth z (K,), |cos| (K,), the triangle seen there (K,)) -> allowed |dZ| (K,) of the
+test renderer on that triangle (its depth model needs the triangle's own depth span and size)."""
 
 
 # --------------------------------------------------------------------------- topology
@@ -220,7 +221,9 @@ def classify_mismatches(
     tol = np.zeros(k)
     if both.any():
         zi = np.nonzero(both)[0]
-        tol[zi] = np.asarray(depth_tol(sr.z[zi], sr.cos[zi]), dtype=np.float64) + 2.0 * F32_ULP * np.abs(sr.z[zi])
+        tol[zi] = np.asarray(depth_tol(sr.z[zi], sr.cos[zi], r_ids[zi]), dtype=np.float64) + 2.0 * F32_ULP * np.abs(
+            sr.z[zi]
+        )
     with np.errstate(invalid="ignore"):
         tie = both & (np.abs(sr.z - st.z) <= tol)
     topo: Topology | None = None
