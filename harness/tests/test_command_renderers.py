@@ -23,7 +23,9 @@ import pytest
 
 import backend_cases as cases
 import fixtures
-from fixtures import cli, write_scene
+from fixtures import QUADS_OIDS as OIDS
+from fixtures import QUADS_TRIS as TRIS
+from fixtures import cli, process_gone, write_scene
 from rendiff_harness.contract import exrbuf, resolved, vocab
 from rendiff_harness.judge import calibration, camera_budget, precision, tolerance
 from rendiff_harness.renderers import command as command_renderers
@@ -37,17 +39,8 @@ NOT_BUILT = "rendiff binary not built (cargo build --release -p rendiff; scripts
 PY = json.dumps(sys.executable)
 BG = vocab.BACKGROUND_ID
 
-# The quads of test_compare.py: two quads share the edge x = 5/32, whose projection is
-# exactly the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).
-X = 0.15625
-TRIS = [
-    [[-3, -3, 0], [X, -3, 0], [X, 3, 0]],
-    [[-3, -3, 0], [X, 3, 0], [-3, 3, 0]],
-    [[X, -3, 0], [3, -3, 0], [3, 3, 0]],
-    [[X, -3, 0], [3, 3, 0], [X, 3, 0]],
-    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
-]
-OIDS = [0, 0, 1, 1, 2]
+# The quads of fixtures.py: two quads share the edge x = 5/32, whose projection is exactly
+# the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).
 EDGE_PX = (16, 8)  # on the shared edge: reference prim 0, prim 3 across it
 W = H = 32
 
@@ -405,19 +398,6 @@ def test_scene_path_with_spaces_and_shell_characters_arrives_as_one_argument(
     assert not list(tmp_path.rglob("pwned")) and not list(work.iterdir())  # no shell; scratch removed
 
 
-def _gone(pid: int, limit_s: float) -> bool:
-    end = time.monotonic() + limit_s
-    while time.monotonic() < end:
-        try:
-            stat = Path(f"/proc/{pid}/stat").read_text()
-        except FileNotFoundError:
-            return True
-        if stat.rsplit(")", 1)[1].split()[0] == "Z":
-            return True
-        time.sleep(0.05)
-    return False
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_a_hanging_renderer_is_killed_with_its_whole_group(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
@@ -442,7 +422,8 @@ def test_a_hanging_renderer_is_killed_with_its_whole_group(
     assert rc == 2 and "mine: timed out after 1.5 s; its process group was killed; stderr: working" in err
     leader, child, group = (int(v) for v in pids.read_text().split())
     assert group not in (os.getpgid(0), leader)  # a group of its own, led by the supervisor
-    assert _gone(leader, 5.0) and _gone(child, 5.0), "a process of the renderer's group outlived the timeout"
+    gone = process_gone(leader, 5.0) and process_gone(child, 5.0)
+    assert gone, "a process of the renderer's group outlived the timeout"
     assert not out.exists()
 
 
@@ -473,7 +454,7 @@ def test_a_renderer_and_its_children_die_when_the_harness_is_killed(
         harness.kill()  # SIGKILL: no handler of the harness runs
         harness.communicate()
     renderer, child = (int(v) for v in pids.read_text().split())
-    assert _gone(renderer, 5.0) and _gone(child, 5.0), "the renderer's group outlived the harness"
+    assert process_gone(renderer, 5.0) and process_gone(child, 5.0), "the renderer's group outlived the harness"
 
 
 def test_a_crash_is_an_error_with_its_status_and_stderr(
@@ -705,7 +686,7 @@ def test_the_group_kill_leaves_nothing_after_a_normal_exit(
     assert rc == 0, err
     child = int(pids.read_text())
     try:
-        assert _gone(child, 5.0), "a process the renderer left behind survived it"
+        assert process_gone(child, 5.0), "a process the renderer left behind survived it"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(child, signal.SIGKILL)

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
+from fixtures import QUADS_OIDS as OIDS
+from fixtures import QUADS_TRIS as TRIS
 from fixtures import write_scene
 from rendiff_harness import compare
 from rendiff_harness.__main__ import main as harness_main
@@ -20,19 +22,8 @@ from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID
 
-# Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
-# px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
-# which projects to px = 16.5: every center of column 16 lies exactly on it.
-# prims 0, 1: left quad (object 0); 2, 3: right quad (object 1); 4: a triangle in front (z = 1).
-X = 0.15625
-TRIS = [
-    [[-3, -3, 0], [X, -3, 0], [X, 3, 0]],
-    [[-3, -3, 0], [X, 3, 0], [-3, 3, 0]],
-    [[X, -3, 0], [3, -3, 0], [3, 3, 0]],
-    [[X, -3, 0], [3, 3, 0], [X, 3, 0]],
-    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
-]
-OIDS = [0, 0, 1, 1, 2]
+# Scene "quads" (fixtures.py): two quads share the vertical edge x = 5/32, which projects
+# to px = 16.5: every center of column 16 lies exactly on it.
 EDGE_PX = (16, 8)  # (x, y): on the shared edge, ref prim 0
 INTERIOR_PX = (15, 17)  # inside prim 4, 2.15 px from its edges, 1 px from prim 2
 PLAIN_PX = (10, 20)  # inside prim 0 or 1, away from column 16
