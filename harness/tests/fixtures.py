@@ -147,6 +147,32 @@ def process_gone(pid: int, limit_s: float) -> bool:
     return False
 
 
+def manifest_scene(
+    name: str, renders: list[dict[str, Any]], requires: Sequence[str] = ("depth", "ids")
+) -> dict[str, Any]:
+    """One scene's entry of manifest.json: its resolved scene under `scenes/NAME/resolved`."""
+    return {
+        "scene": name,
+        "scene_file": f"scenes/{name}.toml",
+        "resolved": f"scenes/{name}/resolved",
+        "requires": list(requires),
+        "renders": renders,
+    }
+
+
+def write_manifest(run: Path, scenes: list[dict[str, Any]]) -> dict[str, Any]:
+    """Writes RUN/manifest.json (reference: the raster) listing `scenes`; returns it."""
+    manifest = {
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "created": "2026-11-25T16:00:00Z",
+        "rendiff_version": "0.1.0",
+        "scenes": scenes,
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    return manifest
+
+
 def cli(*argv: str) -> tuple[int, str, str]:
     """`python -m rendiff_harness ARGV...` in process: its exit code, stdout and stderr."""
     from rendiff_harness.__main__ import main as harness_main

@@ -25,7 +25,7 @@ import backend_cases as cases
 import fixtures
 from fixtures import QUADS_OIDS as OIDS
 from fixtures import QUADS_TRIS as TRIS
-from fixtures import cli, process_gone, write_scene
+from fixtures import cli, manifest_scene, process_gone, write_manifest, write_scene
 from rendiff_harness.contract import exrbuf, resolved, vocab
 from rendiff_harness.judge import calibration, camera_budget, precision, tolerance
 from rendiff_harness.renderers import command as command_renderers
@@ -317,22 +317,7 @@ def test_a_correct_renderer_renders_and_passes_the_comparison(
     attrs = exrbuf.read_attrs(run_scene / "mine.exr")
     assert attrs["backend"] == "mine" and attrs["declared_in"] == str(path) and attrs["spp"] == 1
 
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": "quads",
-                "scene_file": "scenes/quads.toml",
-                "resolved": "scenes/quads/resolved",
-                "requires": ["depth", "ids"],
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene("quads", renders)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     results = {(r["backend"], r["buffer"]): r for r in json.loads((run / "results.json").read_text())["results"]}
@@ -643,22 +628,7 @@ def test_the_cores_own_answer_through_a_command_passes_every_buffer(
         {"backend": "raster", "status": "ok", "exr": "scenes/icosphere/raster.exr", "buffers": ["Z", "id", "N"]},
         {**line, "exr": "scenes/icosphere/copycat.exr", "command": "copycat", "time_s": 0.1},
     ]
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": "icosphere",
-                "scene_file": "scenes/icosphere.toml",
-                "resolved": "scenes/icosphere/resolved",
-                "requires": requires,
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene("icosphere", renders, requires)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     results = [r for r in json.loads((run / "results.json").read_text())["results"] if r["backend"] == "copycat"]
@@ -698,22 +668,7 @@ EXAMPLES = HARNESS / "examples"
 
 
 def _compare(run: Path, scene: str, requires: list[str], renders: list[dict[str, Any]]) -> dict[tuple[str, str], Any]:
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": scene,
-                "scene_file": f"scenes/{scene}.toml",
-                "resolved": f"scenes/{scene}/resolved",
-                "requires": requires,
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene(scene, renders, requires)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     return {(r["backend"], r["buffer"]): r for r in json.loads((run / "results.json").read_text())["results"]}
