@@ -5,11 +5,11 @@
 //! buffer present in one file only is a difference that names it; two files
 //! that share no buffer at all cannot be compared (an error, not "differ").
 //!
-//! The channels are read with the same `exr` read chain as
-//! [`crate::exr_io::read_buffers`], which reads only the visibility buffers;
-//! the same rule holds here: IDs must be stored as uint.
+//! The channels are read by [`crate::exr_io::read_layer`], the read chain of
+//! [`crate::exr_io::read_buffers`] too, and the same rule holds here
+//! ([`crate::exr_io::require_uint_ids`]): IDs must be stored as uint.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use exr::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -29,9 +29,6 @@ pub const KNOWN_BUFFERS: &[&str] = &[
     "var.G",
     "var.B",
 ];
-
-/// Channels that hold IDs (compared as u32; must be stored as uint).
-pub const ID_BUFFERS: &[&str] = &["id.prim", "id.object"];
 
 /// One channel's samples, exactly as stored (half floats widened to f32, which is exact).
 #[derive(Debug, Clone, PartialEq)]
@@ -71,15 +68,8 @@ pub struct Channels {
 
 /// Reads every channel of an EXR; ID channels must be stored as uint.
 pub fn read_channels(path: &Path) -> Result<Channels> {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(crate::exr_io::open_exr(path)?)
-        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let layer = &image.layer_data;
+    let layer = &crate::exr_io::read_layer(path)?;
+    crate::exr_io::require_uint_ids(path, layer)?;
     let mut out = Channels {
         width: layer.size.width(),
         height: layer.size.height(),
@@ -92,12 +82,6 @@ pub fn read_channels(path: &Path) -> Result<Channels> {
             FlatSamples::F32(v) => Samples::F32(v.clone()),
             FlatSamples::F16(v) => Samples::F32(v.iter().map(|x| x.to_f32()).collect()),
         };
-        if ID_BUFFERS.contains(&name.as_str()) && !matches!(samples, Samples::U32(_)) {
-            bail!(
-                "{}: channel {name} must be stored as uint to be compared exactly",
-                path.display()
-            );
-        }
         out.channels.insert(name, samples);
     }
     Ok(out)
