@@ -40,13 +40,6 @@ pub enum Samples {
 }
 
 impl Samples {
-    fn len(&self) -> usize {
-        match self {
-            Samples::U32(v) => v.len(),
-            Samples::F32(v) => v.len(),
-        }
-    }
-
     fn kind(&self) -> &'static str {
         match self {
             Samples::U32(_) => "uint",
@@ -224,35 +217,44 @@ fn first_difference<T: Copy>(
     (count, first)
 }
 
+/// The verdict on two sample lists of one buffer (`width` pixels a row)
+/// whose samples are equal where `same` says, the first difference shown
+/// by `show`; and how many pixels differ.
+fn verdict_of<T: Copy>(
+    p: &[T],
+    q: &[T],
+    same: impl Fn(T, T) -> bool,
+    show: impl Fn(T, T) -> (String, String),
+    width: usize,
+) -> (Verdict, usize) {
+    let pixels = p.len();
+    let (count, first) = first_difference(p, q, same);
+    let verdict = match first {
+        None => Verdict::Identical { pixels },
+        Some((i, a, b)) => Verdict::Differs {
+            count,
+            pixels,
+            first: (i % width.max(1), i / width.max(1)),
+            values: show(a, b),
+        },
+    };
+    (verdict, count)
+}
+
 /// Compares one buffer present in both files (same size).
 fn compare_buffer(name: &str, x: &Samples, y: &Samples, width: usize) -> BufferDiff {
-    let pixels = x.len();
-    let at = |i: usize| (i % width.max(1), i / width.max(1));
     let (verdict, note) = match (x, y) {
         (Samples::U32(p), Samples::U32(q)) => {
-            let (count, first) = first_difference(p, q, |a, b| a == b);
-            let verdict = match first {
-                None => Verdict::Identical { pixels },
-                Some((i, a, b)) => Verdict::Differs {
-                    count,
-                    pixels,
-                    first: at(i),
-                    values: (a.to_string(), b.to_string()),
-                },
-            };
-            (verdict, String::new())
+            let show = |a: u32, b: u32| (a.to_string(), b.to_string());
+            (
+                verdict_of(p, q, |a, b| a == b, show, width).0,
+                String::new(),
+            )
         }
         (Samples::F32(p), Samples::F32(q)) => {
-            let (count, first) = first_difference(p, q, |a, b| a.to_bits() == b.to_bits());
-            let verdict = match first {
-                None => Verdict::Identical { pixels },
-                Some((i, a, b)) => Verdict::Differs {
-                    count,
-                    pixels,
-                    first: at(i),
-                    values: (show_f32(a, b), show_f32(b, a)),
-                },
-            };
+            let show = |a: f32, b: f32| (show_f32(a, b), show_f32(b, a));
+            let same = |a: f32, b: f32| a.to_bits() == b.to_bits();
+            let (verdict, count) = verdict_of(p, q, same, show, width);
             let note = if name == "Z" && count > 0 {
                 let s = crate::compare_depth(p, q);
                 format!(

@@ -35,19 +35,16 @@ fn entry(
     }
 }
 
+/// The kinds of the changes whose description contains `what`.
 fn kinds(o: &gate::Outcome, what: &str) -> Vec<ChangeKind> {
-    o.changes
-        .iter()
-        .filter(|c| c.what.contains(what))
-        .map(|c| c.kind)
-        .collect()
+    kinds_of(o, None, what)
 }
 
-/// [`kinds`] of `backend`'s changes only.
-fn kinds_of(o: &gate::Outcome, backend: &str, what: &str) -> Vec<ChangeKind> {
+/// [`kinds`] of `backend`'s changes only, where a backend is given.
+fn kinds_of(o: &gate::Outcome, backend: Option<&str>, what: &str) -> Vec<ChangeKind> {
     o.changes
         .iter()
-        .filter(|c| c.backend == backend && c.what.contains(what))
+        .filter(|c| backend.is_none_or(|b| c.backend == b) && c.what.contains(what))
         .map(|c| c.kind)
         .collect()
 }
@@ -120,7 +117,7 @@ fn counts_may_not_grow_and_errors_only_within_their_noise() {
         entry("a", "embree", "Z", "pass", 0, 1e-9),
     ];
     let o = gate::compare(&baseline_of(&base), &results(now));
-    let by = |backend: &str, what: &str| kinds_of(&o, backend, what);
+    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "edge_mismatches worse"),
         vec![ChangeKind::Regression],
@@ -398,7 +395,7 @@ fn tie_and_crack_counts_are_held_like_edge_counts() {
         classed("trace", Some(1), Some(1)),
     ];
     let o = gate::compare(&baseline_of(&base), &results(now));
-    let by = |backend: &str, what: &str| kinds_of(&o, backend, what);
+    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "tie_mismatches worse"),
         vec![ChangeKind::Regression],
