@@ -5,11 +5,11 @@
 //! buffer present in one file only is a difference that names it; two files
 //! that share no buffer at all cannot be compared (an error, not "differ").
 //!
-//! The channels are read with the same `exr` read chain as
-//! [`crate::exr_io::read_buffers`], which reads only the visibility buffers;
-//! the same rule holds here: IDs must be stored as uint.
+//! The channels are read by [`crate::exr_io::read_layer`], the read chain of
+//! [`crate::exr_io::read_buffers`] too, and the same rule holds here
+//! ([`crate::exr_io::require_uint_ids`]): IDs must be stored as uint.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use exr::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -30,9 +30,6 @@ pub const KNOWN_BUFFERS: &[&str] = &[
     "var.B",
 ];
 
-/// Channels that hold IDs (compared as u32; must be stored as uint).
-pub const ID_BUFFERS: &[&str] = &["id.prim", "id.object"];
-
 /// One channel's samples, exactly as stored (half floats widened to f32, which is exact).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Samples {
@@ -43,13 +40,6 @@ pub enum Samples {
 }
 
 impl Samples {
-    fn len(&self) -> usize {
-        match self {
-            Samples::U32(v) => v.len(),
-            Samples::F32(v) => v.len(),
-        }
-    }
-
     fn kind(&self) -> &'static str {
         match self {
             Samples::U32(_) => "uint",
@@ -71,15 +61,8 @@ pub struct Channels {
 
 /// Reads every channel of an EXR; ID channels must be stored as uint.
 pub fn read_channels(path: &Path) -> Result<Channels> {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(crate::exr_io::open_exr(path)?)
-        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let layer = &image.layer_data;
+    let layer = &crate::exr_io::read_layer(path)?;
+    crate::exr_io::require_uint_ids(path, layer)?;
     let mut out = Channels {
         width: layer.size.width(),
         height: layer.size.height(),
@@ -92,12 +75,6 @@ pub fn read_channels(path: &Path) -> Result<Channels> {
             FlatSamples::F32(v) => Samples::F32(v.clone()),
             FlatSamples::F16(v) => Samples::F32(v.iter().map(|x| x.to_f32()).collect()),
         };
-        if ID_BUFFERS.contains(&name.as_str()) && !matches!(samples, Samples::U32(_)) {
-            bail!(
-                "{}: channel {name} must be stored as uint to be compared exactly",
-                path.display()
-            );
-        }
         out.channels.insert(name, samples);
     }
     Ok(out)
@@ -240,35 +217,44 @@ fn first_difference<T: Copy>(
     (count, first)
 }
 
+/// The verdict on two sample lists of one buffer (`width` pixels a row)
+/// whose samples are equal where `same` says, the first difference shown
+/// by `show`; and how many pixels differ.
+fn verdict_of<T: Copy>(
+    p: &[T],
+    q: &[T],
+    same: impl Fn(T, T) -> bool,
+    show: impl Fn(T, T) -> (String, String),
+    width: usize,
+) -> (Verdict, usize) {
+    let pixels = p.len();
+    let (count, first) = first_difference(p, q, same);
+    let verdict = match first {
+        None => Verdict::Identical { pixels },
+        Some((i, a, b)) => Verdict::Differs {
+            count,
+            pixels,
+            first: (i % width.max(1), i / width.max(1)),
+            values: show(a, b),
+        },
+    };
+    (verdict, count)
+}
+
 /// Compares one buffer present in both files (same size).
 fn compare_buffer(name: &str, x: &Samples, y: &Samples, width: usize) -> BufferDiff {
-    let pixels = x.len();
-    let at = |i: usize| (i % width.max(1), i / width.max(1));
     let (verdict, note) = match (x, y) {
         (Samples::U32(p), Samples::U32(q)) => {
-            let (count, first) = first_difference(p, q, |a, b| a == b);
-            let verdict = match first {
-                None => Verdict::Identical { pixels },
-                Some((i, a, b)) => Verdict::Differs {
-                    count,
-                    pixels,
-                    first: at(i),
-                    values: (a.to_string(), b.to_string()),
-                },
-            };
-            (verdict, String::new())
+            let show = |a: u32, b: u32| (a.to_string(), b.to_string());
+            (
+                verdict_of(p, q, |a, b| a == b, show, width).0,
+                String::new(),
+            )
         }
         (Samples::F32(p), Samples::F32(q)) => {
-            let (count, first) = first_difference(p, q, |a, b| a.to_bits() == b.to_bits());
-            let verdict = match first {
-                None => Verdict::Identical { pixels },
-                Some((i, a, b)) => Verdict::Differs {
-                    count,
-                    pixels,
-                    first: at(i),
-                    values: (show_f32(a, b), show_f32(b, a)),
-                },
-            };
+            let show = |a: f32, b: f32| (show_f32(a, b), show_f32(b, a));
+            let same = |a: f32, b: f32| a.to_bits() == b.to_bits();
+            let (verdict, count) = verdict_of(p, q, same, show, width);
             let note = if name == "Z" && count > 0 {
                 let s = crate::compare_depth(p, q);
                 format!(

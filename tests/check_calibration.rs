@@ -8,7 +8,7 @@
 
 mod common_cli;
 
-use common_cli::{need_venv, rendiff};
+use common_cli::{need_venv, rendiff, succeeds};
 use serde_json::Value;
 
 /// The repository's near probe (the far one is the same view 2.5e4 away).
@@ -26,22 +26,15 @@ fn probes_run_first_and_are_marked_in_the_manifest() {
     let none = dir.path().join("expectations.toml");
     std::fs::write(&none, "# none\n").unwrap();
     let run = dir.path().join("run");
-    let out = rendiff()
-        .args(["check", "scenes/three_triangles.toml", "--only", "trace"])
-        .arg("--calibration")
-        .arg(&probes)
-        .arg("--expectations")
-        .arg(&none)
-        .args(["--quiet", "-o"])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "--only", "trace"])
+            .arg("--calibration")
+            .arg(&probes)
+            .arg("--expectations")
+            .arg(&none)
+            .args(["--quiet", "-o"])
+            .arg(&run),
     );
     let text = std::fs::read_to_string(run.join("manifest.json")).unwrap();
     let manifest: Value = serde_json::from_str(&text).unwrap();

@@ -7,6 +7,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+mod common_cli;
+
 const FAKE_PYTHON: &str = r#"#!/bin/bash
 # Stands in for the venv's python: fakes three broken backends, delegates the rest.
 if [ "$3" = "info" ]; then
@@ -52,13 +54,9 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
 }
 
 fn broken_renderers(mode: &[&str]) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = common_cli::root();
+    common_cli::need_venv();
     let real = root.join(".venv/bin/python");
-    assert!(
-        real.exists(),
-        "{} is missing: run scripts/setup.sh (the comparison needs the Python harness)",
-        real.display()
-    );
     let dir = tempfile::tempdir().unwrap();
     let fake = dir.path().join("python");
     std::fs::write(&fake, FAKE_PYTHON).unwrap();
@@ -172,13 +170,9 @@ fn gone_within(pid: i32, limit: Duration) -> bool {
 }
 
 fn fake_python(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = common_cli::root();
+    common_cli::need_venv();
     let real = root.join(".venv/bin/python");
-    assert!(
-        real.exists(),
-        "{} is missing: run scripts/setup.sh (the comparison needs the Python harness)",
-        real.display()
-    );
     let fake = dir.join("python");
     std::fs::write(&fake, FAKE_PYTHON).unwrap();
     Command::new("chmod").arg("+x").arg(&fake).status().unwrap();

@@ -4,7 +4,9 @@
 use std::path::{Path, PathBuf};
 
 mod common_cli;
-use common_cli::{check_failure, output_within, render_lesson, rendiff};
+use common_cli::{
+    check_failure, export_refused, output_within, raster_within, render_lesson, render_ok, rendiff,
+};
 
 const CAMERA: &str = r#"
 [camera]
@@ -84,21 +86,7 @@ fn expect_failure_with(toml: &str, setup: impl FnOnce(&Path), must_mention: &[&s
         !out.parent().unwrap().exists()
             || std::fs::read_dir(out.parent().unwrap()).unwrap().count() == 0
     );
-    let export_dir = dir.path().join("export");
-    let res = output_within(
-        rendiff()
-            .arg("export")
-            .arg(&scene)
-            .arg("-o")
-            .arg(&export_dir),
-        60,
-    );
-    check_failure(&res, must_mention);
-    assert!(
-        !export_dir.exists(),
-        "export wrote {}",
-        export_dir.display()
-    );
+    export_refused(&scene, dir.path(), 60, must_mention);
     stderr
 }
 
@@ -135,9 +123,7 @@ fn unknown_field_is_named() {
 
 #[test]
 fn missing_mesh_file() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"nope.obj\"\n"
-    );
+    let s = mesh_scene("nope.obj");
     expect_failure(
         &s,
         &[],
@@ -159,8 +145,7 @@ fn gltf_with_buffer(uri: &str) -> String {
 
 #[test]
 fn gltf_buffers_missing_or_outside_the_scene_folder() {
-    let s =
-        format!("requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"m.gltf\"\n");
+    let s = mesh_scene("m.gltf");
     let gltf = gltf_with_buffer("m.bin");
     expect_failure(
         &s,
@@ -181,28 +166,23 @@ fn gltf_buffers_missing_or_outside_the_scene_folder() {
 
 #[test]
 fn mesh_outside_scene_folder() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"../secret.obj\"\n"
-    );
+    let s = mesh_scene("../secret.obj");
     expect_failure(
         &s,
-        &[("secret.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")],
+        &[("secret.obj", TRIANGLE_OBJ)],
         &["objects[0].mesh", "outside the scene's folder"],
     );
 }
 
 #[test]
 fn absolute_mesh_path() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"/etc/passwd\"\n"
-    );
+    let s = mesh_scene("/etc/passwd");
     expect_failure(&s, &[], &["must be relative"]);
 }
 
 #[test]
 fn nan_vertex_in_obj() {
-    let s =
-        format!("requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = \"m.obj\"\n");
+    let s = mesh_scene("m.obj");
     expect_failure(
         &s,
         &[("scenes/m.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")],
@@ -309,24 +289,7 @@ fn missing_scene_file() {
 #[test]
 fn diff_exits_one_on_difference_and_zero_on_equal() {
     let dir = tempfile::tempdir().unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let render = |scene: &str, renderer: &str, out: &PathBuf| {
-        let st = rendiff()
-            .current_dir(root)
-            .args([
-                "render",
-                scene,
-                "--renderer",
-                renderer,
-                "--quiet",
-                "--no-preview",
-                "-o",
-            ])
-            .arg(out)
-            .status()
-            .unwrap();
-        assert!(st.success());
-    };
+    let render = |scene: &str, renderer: &str, out: &PathBuf| render_ok(scene, renderer, &[], out);
     let a = dir.path().join("a.exr");
     let b = dir.path().join("b.exr");
     let c = dir.path().join("c.exr");
@@ -393,14 +356,7 @@ fn mtllib_is_never_opened() {
     let scene = dir.path().join("s.toml");
     std::fs::write(&scene, mesh_scene("m.obj")).unwrap();
     let out = dir.path().join("s.exr");
-    let res = output_within(
-        rendiff()
-            .args(["render", "--renderer", "raster", "--quiet", "--no-preview"])
-            .arg(&scene)
-            .arg("-o")
-            .arg(&out),
-        60,
-    );
+    let res = raster_within(&scene, &out, 60);
     assert!(
         res.status.success(),
         "{:?}: {}",

@@ -130,3 +130,84 @@ pub fn render_lesson(renderer: &str, out: &Path) -> Command {
     .arg(out);
     c
 }
+
+/// Runs `cmd` and fails with its stdout and stderr unless it exits 0.
+pub fn succeeds(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{cmd:?}\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// `rendiff render SCENE --renderer RENDERER --quiet --no-preview EXTRA -o
+/// OUT`, failing with its output unless it exits 0.
+pub fn render_ok(scene: &str, renderer: &str, extra: &[&str], out: &Path) {
+    succeeds(
+        rendiff()
+            .args([
+                "render",
+                scene,
+                "--renderer",
+                renderer,
+                "--quiet",
+                "--no-preview",
+            ])
+            .args(extra)
+            .arg("-o")
+            .arg(out),
+    );
+}
+
+/// `rendiff bless RUN --baseline BASELINE`, to add flags to and run.
+pub fn bless_command(run: &Path, baseline: &Path) -> Command {
+    let mut c = rendiff();
+    c.arg("bless").arg(run).arg("--baseline").arg(baseline);
+    c
+}
+
+/// `rendiff export SCENE -o DIR/export` within `secs`: refused by the
+/// failure contract ([`check_failure`], naming each of `must_mention`),
+/// and nothing written. Returns its stderr.
+pub fn export_refused(scene: &Path, dir: &Path, secs: u64, must_mention: &[&str]) -> String {
+    let export_dir = dir.join("export");
+    let res = output_within(
+        rendiff()
+            .arg("export")
+            .arg(scene)
+            .arg("-o")
+            .arg(&export_dir),
+        secs,
+    );
+    let stderr = check_failure(&res, must_mention);
+    assert!(
+        !export_dir.exists(),
+        "export wrote {}",
+        export_dir.display()
+    );
+    stderr
+}
+
+/// `rendiff render --renderer raster --quiet --no-preview SCENE -o OUT`
+/// within `secs`.
+pub fn raster_within(scene: &Path, out: &Path, secs: u64) -> std::process::Output {
+    output_within(
+        rendiff()
+            .args(["render", "--renderer", "raster", "--quiet", "--no-preview"])
+            .arg(scene)
+            .arg("-o")
+            .arg(out),
+        secs,
+    )
+}
+
+/// `rendiff gate --baseline BASELINE RUN`, to add flags to and run.
+pub fn gate_command(run: &Path, baseline: &Path) -> Command {
+    let mut c = rendiff();
+    c.arg("gate").arg("--baseline").arg(baseline).arg(run);
+    c
+}

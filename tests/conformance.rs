@@ -9,10 +9,11 @@
 //! Known divergences live in tests/expectations.toml with a reason and a
 //! two-sided bound; doing better than a bound fails as an unexpected pass.
 
+mod common_trials;
+use common_trials::verdict_trial;
 use libtest_mimic::{Arguments, Failed, Trial};
 use rendiff::check::{self, CheckOptions};
 use std::path::PathBuf;
-use std::time::Duration;
 
 fn main() {
     let args = Arguments::from_args();
@@ -44,24 +45,18 @@ fn main() {
         // Before any thread starts: nothing reads the environment concurrently.
         std::env::set_var("PATH", path);
         let opts = CheckOptions {
-            scenes: check::collect_scenes(&folders).expect("scene folders are readable"),
-            run_dir: run_dir.clone(),
-            root: root.clone(),
-            only: None,
-            timeout: Duration::from_secs(600),
-            expectations: root.join("tests/expectations.toml"),
             quiet: false,
             references: Some(root.join("tests/references")),
-            core: check::CoreShading::default(),
             // The probes, as in every `rendiff check`: conformance is where each
             // backend's camera is measured against docs/DESIGN.md, and the run it
             // leaves is what `rendiff gate` holds against the baseline.
             calibration: Some(root.join("scenes/calibration")),
-            jobs: check::default_jobs(),
-            workers: true,
             renderers: Some(root.join("renderers/wgpu.toml")),
-            renderers_snapshot: None,
-            memory_budget: check::pool::default_memory_budget(),
+            ..CheckOptions::new(
+                check::collect_scenes(&folders).expect("scene folders are readable"),
+                run_dir.clone(),
+                root.clone(),
+            )
         };
         match check::run(&opts) {
             Err(e) => {
@@ -77,27 +72,7 @@ fn main() {
                     .results
                     .results
                     .into_iter()
-                    .map(|r| {
-                        let skipped = r.status == "skipped";
-                        let name = if skipped {
-                            format!("{} (skipped: {})", r.key(), r.reason)
-                        } else {
-                            r.key()
-                        };
-                        Trial::test(name, move || {
-                            if r.is_failure() {
-                                Err(Failed::from(format!(
-                                    "{}: {}\n{}",
-                                    r.status,
-                                    r.reason,
-                                    serde_json::to_string_pretty(&r.details).unwrap_or_default()
-                                )))
-                            } else {
-                                Ok(())
-                            }
-                        })
-                        .with_ignored_flag(skipped)
-                    })
+                    .map(verdict_trial)
                     .collect()
             }
         }

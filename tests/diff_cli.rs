@@ -6,35 +6,13 @@
 
 use exr::prelude::*;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn rendiff() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
+mod common_cli;
+use common_cli::{render_ok, rendiff};
 
 fn render(scene: &str, renderer: &str, out: &Path) {
-    let res = rendiff()
-        .args([
-            "render",
-            scene,
-            "--renderer",
-            renderer,
-            "--quiet",
-            "--no-preview",
-            "--spp",
-            "2",
-            "-o",
-        ])
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
+    render_ok(scene, renderer, &["--spp", "2"], out);
 }
 
 fn diff(a: &Path, b: &Path) -> (Option<i32>, String, String) {
@@ -49,15 +27,7 @@ fn diff(a: &Path, b: &Path) -> (Option<i32>, String, String) {
 /// Copies `src` to `dst`, passing every channel (name, samples) through `f`;
 /// `f` returns false to drop a channel.
 fn rewrite(src: &Path, dst: &Path, f: impl Fn(&str, &mut FlatSamples) -> bool) {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(src)
-        .unwrap();
-    let layer = image.layer_data;
+    let layer = rendiff::exr_io::read_layer(src).unwrap();
     let mut list = Vec::new();
     for ch in layer.channel_data.list {
         let name = ch.name.to_string();

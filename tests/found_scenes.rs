@@ -12,6 +12,8 @@
 //! (The other backends were checked on these scenes by hand and pass; conformance
 //! does not read scenes/found, so the regression baseline is unchanged.)
 
+mod common_trials;
+use common_trials::verdict_trial;
 use libtest_mimic::{Arguments, Failed, Trial};
 use rendiff::check::manifest::ResultEntry;
 use rendiff::check::{self, CheckOptions};
@@ -39,21 +41,9 @@ fn trials(root: &Path) -> Vec<Trial> {
     let scenes =
         check::collect_scenes(&[root.join("scenes/found")]).expect("scenes/found is readable");
     let opts = CheckOptions {
-        scenes: scenes.clone(),
-        run_dir,
-        root: root.to_path_buf(),
         only: Some(AT_FAULT.iter().map(|s| s.to_string()).collect()),
         timeout: Duration::from_secs(300),
-        expectations: root.join("tests/expectations.toml"),
-        quiet: true,
-        references: None,
-        core: check::CoreShading::default(),
-        calibration: None,
-        jobs: check::default_jobs(),
-        workers: true,
-        renderers: None,
-        renderers_snapshot: None,
-        memory_budget: check::pool::default_memory_budget(),
+        ..CheckOptions::new(scenes.clone(), run_dir, root.to_path_buf())
     };
     let results = match check::run(&opts) {
         Ok(outcome) => outcome.results.results,
@@ -70,22 +60,7 @@ fn trials(root: &Path) -> Vec<Trial> {
         .collect();
     let expects = found_expectations(&root.join("tests/expectations.toml"), &names);
     let mut out = vec![in_step(names, expects, results.clone())];
-    out.extend(results.into_iter().map(|r| {
-        let skipped = r.status == "skipped";
-        let name = if skipped {
-            format!("{} (skipped: {})", r.key(), r.reason)
-        } else {
-            r.key()
-        };
-        Trial::test(name, move || {
-            if r.is_failure() {
-                Err(Failed::from(format!("{}: {}", r.status, r.reason)))
-            } else {
-                Ok(())
-            }
-        })
-        .with_ignored_flag(skipped)
-    }));
+    out.extend(results.into_iter().map(verdict_trial));
     out
 }
 

@@ -245,14 +245,7 @@ fn from_checks_a_scene_and_its_variants() {
         .map(|(n, _)| n)
         .collect();
     assert_eq!(names.len(), 7, "{names:?}");
-    for rel in [
-        "translate",
-        "rotate",
-        "mirror",
-        "permute",
-        "flip_winding",
-        "duplicate",
-    ] {
+    for rel in rendiff::fuzz::variants::RELATIONS {
         assert!(
             names.contains(&format!("m0_three_triangles__{rel}.toml")),
             "{rel}: {names:?}"

@@ -668,25 +668,37 @@ fn run_case(c: &Case, t: &Tally) -> Vec<String> {
     let scene = write_case(dir.path(), c);
     let out = dir.path().join("out");
     let mut problems = Vec::new();
-    let outcome = run_limited(&mut render_cmd(&scene, &out));
-    judge(
+    render_and_export(&scene, &out, t, &mut problems);
+    problems
+}
+
+/// `scene` through render and export into `out`, each judged: their ends,
+/// and export's stderr.
+fn render_and_export(
+    scene: &Path,
+    out: &Path,
+    t: &Tally,
+    problems: &mut Vec<String>,
+) -> (End, End, String) {
+    let render = run_limited(&mut render_cmd(scene, out));
+    let (render, _) = judge(
         "render",
-        outcome,
+        render,
         Some(&out.join("render")),
         false,
         t,
-        &mut problems,
+        problems,
     );
-    let outcome = run_limited(&mut export_cmd(&scene, &out));
-    judge(
+    let export = run_limited(&mut export_cmd(scene, out));
+    let (export, err) = judge(
         "export",
-        outcome,
+        export,
         Some(&out.join("export")),
         false,
         t,
-        &mut problems,
+        problems,
     );
-    problems
+    (render, export, err)
 }
 
 /// A number from the environment variable `var`, else `default`.

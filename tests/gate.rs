@@ -3,12 +3,15 @@
 //! run through the command line, and the committed baseline itself.
 
 use rendiff::check::manifest::{ResultEntry, Results};
-use rendiff::gate::{self, Baseline, BaselineEntry, ChangeKind, Noise, Provenance};
+use rendiff::gate::{self, ChangeKind, Noise};
 use serde_json::{json, Value};
 use std::path::Path;
 
 mod common_cli;
-use common_cli::{rendiff, small_check};
+mod common_gate;
+mod common_runs;
+use common_cli::{bless_command, gate_command, small_check, succeeds};
+use common_gate::{baseline_of, verdicts as results};
 
 fn entry(
     scene: &str,
@@ -32,43 +35,16 @@ fn entry(
     }
 }
 
-fn baseline_of(entries: &[ResultEntry]) -> Baseline {
-    Baseline {
-        format: gate::BASELINE_FORMAT.into(),
-        provenance: Provenance::default(),
-        policy: String::new(),
-        entries: entries
-            .iter()
-            .map(|e| BaselineEntry {
-                scene: e.scene.clone(),
-                backend: e.backend.clone(),
-                buffer: e.buffer.clone(),
-                status: gate::Status::parse(&e.status).unwrap(),
-                reason: e.reason.clone(),
-                metrics: e
-                    .details
-                    .iter()
-                    .map(|(k, v)| (k.clone(), v.clone()))
-                    .collect(),
-                noise: Noise::for_backend(&e.backend, 4.0),
-            })
-            .collect(),
-    }
-}
-
-fn results(entries: Vec<ResultEntry>) -> Vec<gate::Verdict> {
-    gate::verdicts(&Results {
-        format: "rendiff-results/1".into(),
-        reference: "raster".into(),
-        results: entries,
-    })
-    .unwrap()
-}
-
+/// The kinds of the changes whose description contains `what`.
 fn kinds(o: &gate::Outcome, what: &str) -> Vec<ChangeKind> {
+    kinds_of(o, None, what)
+}
+
+/// [`kinds`] of `backend`'s changes only, where a backend is given.
+fn kinds_of(o: &gate::Outcome, backend: Option<&str>, what: &str) -> Vec<ChangeKind> {
     o.changes
         .iter()
-        .filter(|c| c.what.contains(what))
+        .filter(|c| backend.is_none_or(|b| c.backend == b) && c.what.contains(what))
         .map(|c| c.kind)
         .collect()
 }
@@ -141,13 +117,7 @@ fn counts_may_not_grow_and_errors_only_within_their_noise() {
         entry("a", "embree", "Z", "pass", 0, 1e-9),
     ];
     let o = gate::compare(&baseline_of(&base), &results(now));
-    let by = |backend: &str, what: &str| {
-        o.changes
-            .iter()
-            .filter(|c| c.backend == backend && c.what.contains(what))
-            .map(|c| c.kind)
-            .collect::<Vec<_>>()
-    };
+    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "edge_mismatches worse"),
         vec![ChangeKind::Regression],
@@ -246,19 +216,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     let run = dir.path().join("run");
     small_check(&run);
     let baseline = dir.path().join("base/baseline.json");
-    let out = rendiff()
-        .arg("bless")
-        .arg(&run)
-        .arg("--baseline")
-        .arg(&baseline)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeds(&mut bless_command(&run, &baseline));
     let b = gate::load_baseline(&baseline).unwrap();
     let r: Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("results.json")).unwrap()).unwrap();
@@ -292,20 +250,8 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
 
     // Unchanged: passes, writes RUN/gate.md, leaves the baseline alone.
     let before = std::fs::read(&baseline).unwrap();
-    let out = rendiff()
-        .arg("gate")
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg(&run)
-        .output()
-        .unwrap();
+    let out = succeeds(&mut gate_command(&run, &baseline));
     let md = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{md}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(md.starts_with("## rendiff gate: PASS"), "{md}");
     assert_eq!(std::fs::read_to_string(run.join("gate.md")).unwrap(), md);
     assert_eq!(
@@ -337,13 +283,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     extra["scene"] = "brand_new".into();
     arr.push(extra);
     std::fs::write(&path, serde_json::to_string_pretty(&r).unwrap()).unwrap();
-    let out = rendiff()
-        .arg("gate")
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg(&run)
-        .output()
-        .unwrap();
+    let out = gate_command(&run, &baseline).output().unwrap();
     let md = String::from_utf8_lossy(&out.stdout).into_owned();
     assert_eq!(out.status.code(), Some(1), "{md}");
     assert!(md.starts_with("## rendiff gate: FAIL"), "{md}");
@@ -363,13 +303,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
 
     // Bless refuses a failing run unless told to accept its failures, and a
     // run with a new scene unless told to accept scene changes.
-    let out = rendiff()
-        .arg("bless")
-        .arg(&run)
-        .arg("--baseline")
-        .arg(&baseline)
-        .output()
-        .unwrap();
+    let out = bless_command(&run, &baseline).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--allow-failures"));
     assert_eq!(
@@ -377,11 +311,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         before,
         "a refused bless changed the baseline"
     );
-    let out = rendiff()
-        .arg("bless")
-        .arg(&run)
-        .arg("--baseline")
-        .arg(&baseline)
+    let out = bless_command(&run, &baseline)
         .arg("--allow-failures")
         .output()
         .unwrap();
@@ -395,11 +325,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
     // The entry the gate found missing is not dropped silently: bless names
     // it and wants a reason (issue 40: it used to bless it away).
     let bless_all = |extra: &[&str]| {
-        rendiff()
-            .arg("bless")
-            .arg(&run)
-            .arg("--baseline")
-            .arg(&baseline)
+        bless_command(&run, &baseline)
             .arg("--allow-failures")
             .arg("--allow-scene-changes")
             .args(extra)
@@ -423,19 +349,7 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let out = rendiff()
-        .arg("gate")
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
-    );
+    succeeds(&mut gate_command(&run, &baseline));
 }
 
 // ---------------------------------------------------------------- the verifier's classes and new buffers (issue 11)
@@ -481,13 +395,7 @@ fn tie_and_crack_counts_are_held_like_edge_counts() {
         classed("trace", Some(1), Some(1)),
     ];
     let o = gate::compare(&baseline_of(&base), &results(now));
-    let by = |backend: &str, what: &str| {
-        o.changes
-            .iter()
-            .filter(|c| c.backend == backend && c.what == what)
-            .map(|c| c.kind)
-            .collect::<Vec<_>>()
-    };
+    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "tie_mismatches worse"),
         vec![ChangeKind::Regression],
@@ -608,44 +516,15 @@ fn bless_names_scene_load_errors_first_and_scene_changes_in_one_line() {
 /// A run folder without renders (bless only reads the two JSON files; the
 /// EXRs it would read for depth scales are optional).
 fn json_run(run: &Path, scenes: &[&str], extra: Vec<Value>) {
-    std::fs::create_dir_all(run).unwrap();
-    let manifest = json!({
-        "format": "rendiff-manifest/1", "reference": "raster", "created_unix": 1_795_000_000u64,
-        "rendiff_version": "0.1.0",
-        "scenes": scenes.iter().map(|s| json!({
-            "scene": s, "scene_file": format!("scenes/{s}.toml"), "resolved": format!("scenes/{s}/resolved"),
-            "requires": ["depth", "ids"],
-            "renders": [{"backend": "trace", "status": "ok", "exr": format!("scenes/{s}/trace.exr"),
-                         "version": "rendiff 0.1.0", "time_s": 0.1}]
-        })).collect::<Vec<_>>()
-    });
-    let mut entries: Vec<Value> = scenes
-        .iter()
-        .flat_map(|s| {
-            ["id", "Z", "N"].map(|buf| {
-                json!({"scene": s, "backend": "trace", "buffer": buf, "status": "pass", "reason": "",
-                       "edge_mismatches": 0, "tie_mismatches": 1, "crack_mismatches": 0, "interior_mismatches": 0,
-                       "mask_mismatches": 0, "max_abs_error": 0.0, "max_rel_error": 0.0,
-                       "explanations": [{"class": "tie", "ref_prim": 16, "test_prim": 20, "pixels": 1,
-                                         "example": [3, 4], "why": "prims 16 and 20 are identical triangles: tie"}]})
-            })
-        })
-        .collect();
-    entries.extend(extra);
-    let results = json!({"format": "rendiff-results/1", "reference": "raster", "results": entries});
-    std::fs::write(run.join("manifest.json"), manifest.to_string()).unwrap();
-    std::fs::write(run.join("results.json"), results.to_string()).unwrap();
+    let tie = json!({"tie_mismatches": 1, "explanations": [{"class": "tie", "ref_prim": 16,
+        "test_prim": 20, "pixels": 1, "example": [3, 4],
+        "why": "prims 16 and 20 are identical triangles: tie"}]});
+    common_runs::json_run(run, scenes, &["trace"], &["id", "Z", "N"], tie);
+    common_runs::edit_results(run, |r| r["results"].as_array_mut().unwrap().extend(extra));
 }
 
 fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, String) {
-    let out = rendiff()
-        .arg("bless")
-        .arg(run)
-        .arg("--baseline")
-        .arg(baseline)
-        .args(flags)
-        .output()
-        .unwrap();
+    let out = bless_command(run, baseline).args(flags).output().unwrap();
     (
         out.status.code(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
@@ -722,13 +601,7 @@ fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
 // ---------------------------------------------------------------- typed verdicts and baseline (issue 12)
 
 fn gate_cli(run: &Path, baseline: &Path) -> (Option<i32>, String, String) {
-    let out = rendiff()
-        .arg("gate")
-        .arg("--baseline")
-        .arg(baseline)
-        .arg(run)
-        .output()
-        .unwrap();
+    let out = gate_command(run, baseline).output().unwrap();
     (
         out.status.code(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

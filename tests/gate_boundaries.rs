@@ -6,13 +6,13 @@
 //! whole table of status transitions is a unit test beside the gate
 //! (src/gate/tests.rs), where mutation testing runs it.
 
-use rendiff::check::manifest::{ResultEntry, Results};
-use rendiff::gate::{self, Baseline, BaselineEntry, ChangeKind, Noise, Provenance, Status};
+use rendiff::check::manifest::ResultEntry;
+use rendiff::gate::{self, ChangeKind, Noise, Status};
 use rendiff::vocab::MismatchClass;
 use serde_json::{Map, Value};
 
-/// The farthest reference depth the baselines below are blessed with.
-const Z_FAR: f64 = 4.0;
+mod common_gate;
+use common_gate::{baseline_of, verdicts, Z_FAR};
 
 fn entry(backend: &str, buffer: &str, status: Status, metrics: &[(&str, f64)]) -> ResultEntry {
     let mut details = Map::new();
@@ -34,36 +34,10 @@ fn entry(backend: &str, buffer: &str, status: Status, metrics: &[(&str, f64)]) -
     }
 }
 
-fn baseline(e: &ResultEntry) -> Baseline {
-    Baseline {
-        format: gate::BASELINE_FORMAT.into(),
-        provenance: Provenance::default(),
-        policy: String::new(),
-        entries: vec![BaselineEntry {
-            scene: e.scene.clone(),
-            backend: e.backend.clone(),
-            buffer: e.buffer.clone(),
-            status: Status::parse(&e.status).unwrap(),
-            reason: e.reason.clone(),
-            metrics: e
-                .details
-                .iter()
-                .map(|(k, v)| (k.clone(), v.clone()))
-                .collect(),
-            noise: Noise::for_backend(&e.backend, Z_FAR),
-        }],
-    }
-}
-
 /// The gate's changes for one entry blessed as `before` and run as `now`.
 fn changes(before: &ResultEntry, now: &ResultEntry) -> Vec<(ChangeKind, String)> {
-    let run = gate::verdicts(&Results {
-        format: "rendiff-results/1".into(),
-        reference: "raster".into(),
-        results: vec![now.clone()],
-    })
-    .unwrap();
-    gate::compare(&baseline(before), &run)
+    let run = verdicts(vec![now.clone()]);
+    gate::compare(&baseline_of(std::slice::from_ref(before)), &run)
         .changes
         .into_iter()
         .map(|c| (c.kind, c.what))

@@ -7,7 +7,7 @@
 //! the file and the problem, never a panic or a hang.
 
 mod common_cli;
-use common_cli::{check_failure, output_within, rendiff};
+use common_cli::{check_failure, export_refused, output_within, raster_within, rendiff};
 
 const CAMERA: &str = r#"
 [camera]
@@ -36,31 +36,9 @@ fn refused(mesh: &str, files: &[(&str, &str)], must_mention: &[&str]) -> String 
     let text =
         format!("requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nmesh = {mesh:?}\n");
     std::fs::write(&scene, text).unwrap();
-    let export_dir = dir.path().join("export");
-    let res = output_within(
-        rendiff()
-            .arg("export")
-            .arg(&scene)
-            .arg("-o")
-            .arg(&export_dir),
-        10,
-    );
-    let stderr = check_failure(&res, must_mention);
-    assert!(
-        !export_dir.exists(),
-        "export wrote {}",
-        export_dir.display()
-    );
+    let stderr = export_refused(&scene, dir.path(), 10, must_mention);
     let out = dir.path().join("o.exr");
-    let res = output_within(
-        rendiff()
-            .args(["render", "--renderer", "raster", "--quiet", "--no-preview"])
-            .arg(&scene)
-            .arg("-o")
-            .arg(&out),
-        10,
-    );
-    check_failure(&res, must_mention);
+    check_failure(&raster_within(&scene, &out, 10), must_mention);
     assert!(!out.exists(), "render wrote {}", out.display());
     stderr
 }

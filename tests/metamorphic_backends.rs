@@ -18,6 +18,7 @@
 use glam::{DMat3, DVec3};
 use libtest_mimic::{Arguments, Failed, Trial};
 use rendiff::check::{self, process, CheckOptions};
+use rendiff::fuzz::variants::permutation;
 use rendiff::scene::generators::{cube, grid, icosphere, Tri64};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
@@ -90,19 +91,6 @@ fn map_tris(
         .iter()
         .map(|(n, t)| (*n, t.iter().map(&f).collect()))
         .collect()
-}
-
-/// A permutation of 0..n from a seed (xorshift Fisher-Yates).
-fn permutation(n: usize, seed: u64) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..n).collect();
-    let mut s = seed | 1;
-    for i in (1..n).rev() {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        order.swap(i, (s % (i as u64 + 1)) as usize);
-    }
-    order
 }
 
 fn variants() -> Vec<Variant> {
@@ -291,22 +279,10 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
     )
     .map_err(|e| e.to_string())?;
     let opts = CheckOptions {
-        scenes,
-        run_dir: run_dir.to_path_buf(),
-        root: root.to_path_buf(),
-        only: None,
         timeout: Duration::from_secs(120),
         expectations: none,
-        quiet: true,
-        references: None,
-        core: check::CoreShading::default(),
         // No calibration probes: each backend is compared with itself, so its camera offset cancels.
-        calibration: None,
-        jobs: check::default_jobs(),
-        workers: true,
-        renderers: None,
-        renderers_snapshot: None,
-        memory_budget: check::pool::default_memory_budget(),
+        ..CheckOptions::new(scenes, run_dir.to_path_buf(), root.to_path_buf())
     };
     check::run(&opts).map_err(|e| format!("rendiff check failed: {e:#}"))?;
     let out = run_dir.join("metamorphic.json");

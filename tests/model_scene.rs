@@ -77,14 +77,7 @@ fn read_json(p: &Path) -> Value {
 type Verdicts = BTreeMap<(String, String), (String, String)>;
 
 fn verdicts(results: &Value, scene: &str) -> Verdicts {
-    let counts = [
-        "pixels",
-        "edge_mismatches",
-        "tie_mismatches",
-        "crack_mismatches",
-        "interior_mismatches",
-        "mask_mismatches",
-    ];
+    let counts = std::iter::once(&"pixels").chain(rendiff::gate::COUNT_METRICS);
     results["results"]
         .as_array()
         .unwrap()
@@ -95,7 +88,7 @@ fn verdicts(results: &Value, scene: &str) -> Verdicts {
                 r["backend"].as_str().unwrap().to_string(),
                 r["buffer"].as_str().unwrap().to_string(),
             );
-            let n: Vec<String> = counts.iter().map(|c| r[c].to_string()).collect();
+            let n: Vec<String> = counts.clone().map(|c| r[c].to_string()).collect();
             (
                 key,
                 (r["status"].as_str().unwrap().to_string(), n.join(" ")),
@@ -117,27 +110,22 @@ fn check_of_a_model_from_an_empty_folder_judges_every_backend_and_scene_new_matc
 
     // The scene for editing: beside the model, its mesh path relative.
     let edit = models.join("edit.toml");
-    let out = rendiff()
-        .current_dir(&work)
-        .args(["scene", "new"])
-        .arg(&model)
-        .arg("-o")
-        .arg(&edit)
-        .output()
-        .unwrap();
+    let scene_new = || {
+        rendiff()
+            .current_dir(&work)
+            .args(["scene", "new"])
+            .arg(&model)
+            .arg("-o")
+            .arg(&edit)
+            .output()
+            .unwrap()
+    };
+    let out = scene_new();
     assert_eq!(out.status.code(), Some(0), "{out:?}");
     let text = std::fs::read_to_string(&edit).unwrap();
     assert!(text.contains("mesh = \"model.glb\""), "{text}");
     // Never overwritten.
-    let again = rendiff()
-        .current_dir(&work)
-        .args(["scene", "new"])
-        .arg(&model)
-        .arg("-o")
-        .arg(&edit)
-        .output()
-        .unwrap();
-    check_failure(&again, &["edit.toml: already exists"]);
+    check_failure(&scene_new(), &["edit.toml: already exists"]);
     assert_eq!(std::fs::read_to_string(&edit).unwrap(), text);
 
     // From an empty folder: the model itself, and the written scene, in one

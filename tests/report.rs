@@ -6,7 +6,7 @@
 
 mod common_cli;
 
-use common_cli::{need_venv, rendiff, small_check};
+use common_cli::{bless_command, gate_command, need_venv, rendiff, small_check, succeeds};
 use std::path::{Path, PathBuf};
 
 fn read(p: &Path) -> String {
@@ -210,20 +210,13 @@ shape = { kind = "three_triangles" }
     )
     .unwrap();
     let run = dir.path().join("run");
-    let out = rendiff()
-        .arg("check")
-        .arg(&scene)
-        // Escaping is the point here, not cameras: no probe pages.
-        .args(["--only", "trace", "--no-calibration", "--quiet", "-o"])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        rendiff()
+            .arg("check")
+            .arg(&scene)
+            // Escaping is the point here, not cameras: no probe pages.
+            .args(["--only", "trace", "--no-calibration", "--quiet", "-o"])
+            .arg(&run),
     );
     let report = run.join("report");
     let pages: Vec<PathBuf> = files(&report)
@@ -284,19 +277,7 @@ shape = { kind = "three_triangles" }
 
     // The gate's markdown (a PR comment renders HTML) escapes them too.
     let baseline = dir.path().join("baseline.json");
-    let out = rendiff()
-        .arg("bless")
-        .arg(&run)
-        .arg("--baseline")
-        .arg(&baseline)
-        .output()
-        .unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeds(&mut bless_command(&run, &baseline));
     let mut results: serde_json::Value =
         serde_json::from_str(&read(&run.join("results.json"))).unwrap();
     for e in results["results"].as_array_mut().unwrap() {
@@ -304,13 +285,7 @@ shape = { kind = "three_triangles" }
         e["reason"] = "<script>alert('reason')</script>".into();
     }
     std::fs::write(run.join("results.json"), results.to_string()).unwrap();
-    let out = rendiff()
-        .arg("gate")
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg(&run)
-        .output()
-        .unwrap();
+    let out = gate_command(&run, &baseline).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     let md = String::from_utf8_lossy(&out.stdout);
     assert!(md.contains("new failure"), "{md}");
@@ -573,13 +548,7 @@ fn section<'a>(html: &'a str, id: &str) -> &'a str {
 }
 
 fn report_of(run: &Path) -> PathBuf {
-    let out = rendiff().arg("report").arg(run).output().unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeds(rendiff().arg("report").arg(run));
     run.join("report")
 }
 

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common_cli;
+mod common_runs;
 use common_cli::{need_venv, root};
 
 /// The rendiff binary, run from `dir`; the example renderer runs with
@@ -144,42 +145,12 @@ fn a_renderer_that_rewrites_its_scene_is_caught_and_changes_no_other_verdict() {
 }
 
 fn json_run(run: &Path, scenes: &[&str], backends: &[&str]) {
-    std::fs::create_dir_all(run).unwrap();
-    let manifest = json!({
-        "format": "rendiff-manifest/1", "reference": "raster", "created_unix": 1_795_000_000u64,
-        "rendiff_version": "0.1.0",
-        "scenes": scenes.iter().map(|s| json!({
-            "scene": s, "scene_file": format!("scenes/{s}.toml"), "resolved": format!("scenes/{s}/resolved"),
-            "requires": ["depth", "ids"],
-            "renders": backends.iter().map(|b| json!({"backend": b, "status": "ok",
-                "exr": format!("scenes/{s}/{b}.exr"), "version": "1", "time_s": 0.1})).collect::<Vec<_>>()
-        })).collect::<Vec<_>>()
-    });
-    let entries: Vec<Value> = scenes
-        .iter()
-        .flat_map(|s| {
-            backends.iter().flat_map(move |b| {
-                ["id", "Z"].map(|buf| {
-                    json!({"scene": s, "backend": b, "buffer": buf, "status": "pass", "reason": "",
-                           "pixels": 3072, "compared_pixels": 3072,
-                           "edge_mismatches": 0, "tie_mismatches": 0, "crack_mismatches": 0,
-                           "interior_mismatches": 0, "mask_mismatches": 0,
-                           "max_abs_error": 0.0, "max_rel_error": 0.0})
-                })
-            })
-        })
-        .collect();
-    let results = json!({"format": "rendiff-results/1", "reference": "raster", "results": entries});
-    std::fs::write(run.join("manifest.json"), manifest.to_string()).unwrap();
-    std::fs::write(run.join("results.json"), results.to_string()).unwrap();
+    let pixels = json!({"pixels": 3072, "compared_pixels": 3072});
+    common_runs::json_run(run, scenes, backends, &["id", "Z"], pixels);
 }
 
 fn bless(run: &Path, baseline: &Path, flags: &[&str]) -> Output {
-    common_cli::rendiff()
-        .arg("bless")
-        .arg(run)
-        .arg("--baseline")
-        .arg(baseline)
+    common_cli::bless_command(run, baseline)
         .args(flags)
         .output()
         .unwrap()
@@ -367,6 +338,19 @@ fn shard_check(dir: &Path, scenes: &[PathBuf], k: &str, extra: &[&str], run: &st
     dir.join(run)
 }
 
+/// The two shards (`one`, `two` under `d`) of a trace-only check of two
+/// scenes, and the scene files.
+fn two_trace_shards(d: &Path) -> (Vec<PathBuf>, PathBuf, PathBuf) {
+    let scenes: Vec<PathBuf> = ["three_triangles", "pixel_grid"]
+        .iter()
+        .map(|s| root().join(format!("scenes/{s}.toml")))
+        .collect();
+    let trace = ["--only", "trace"];
+    let one = shard_check(d, &scenes, "1/2", &trace, "one");
+    let two = shard_check(d, &scenes, "2/2", &trace, "two");
+    (scenes, one, two)
+}
+
 fn merge(dir: &Path, shards: &[&Path]) -> Output {
     rendiff_in(dir)
         .arg("merge")
@@ -383,13 +367,7 @@ fn merge(dir: &Path, shards: &[&Path]) -> Output {
 fn merge_refuses_an_incomplete_or_inconsistent_shard_set() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scenes: Vec<PathBuf> = ["three_triangles", "pixel_grid"]
-        .iter()
-        .map(|s| root().join(format!("scenes/{s}.toml")))
-        .collect();
-    let trace = ["--only", "trace"];
-    let one = shard_check(d, &scenes, "1/2", &trace, "one");
-    let two = shard_check(d, &scenes, "2/2", &trace, "two");
+    let (scenes, one, two) = two_trace_shards(d);
     let m = read_json(&one.join("manifest.json"));
     assert_eq!(m["shard"]["index"], 1);
     assert_eq!(m["shard"]["deal"].as_array().unwrap().len(), 2);
@@ -414,14 +392,20 @@ fn merge_refuses_an_incomplete_or_inconsistent_shard_set() {
     // A shard of another split: more scenes.
     let mut more = scenes.clone();
     more.push(root().join("scenes/icosphere.toml"));
-    let other = shard_check(d, &more, "2/2", &trace, "other");
+    let other = shard_check(d, &more, "2/2", &["--only", "trace"], "other");
     refused(&[&one, &other], &["different splits", "icosphere"]);
     // A shard of another split whose scene has the same name, another file.
     std::fs::create_dir_all(d.join("mine")).unwrap();
     let copy = d.join("mine/three_triangles.toml");
     let original = std::fs::read_to_string(&scenes[0]).unwrap();
     std::fs::write(&copy, original.replace("width = 96", "width = 95")).unwrap();
-    let renamed = shard_check(d, &[copy, scenes[1].clone()], "2/2", &trace, "renamed");
+    let renamed = shard_check(
+        d,
+        &[copy, scenes[1].clone()],
+        "2/2",
+        &["--only", "trace"],
+        "renamed",
+    );
     refused(&[&one, &renamed], &["different splits"]);
     // A shard whose renderer is another version.
     let edited = d.join("edited");
@@ -494,15 +478,7 @@ fn gate_refuses_a_damaged_manifest() {
     let baseline = dir.path().join("baseline.json");
     let o = bless(&run, &baseline, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-    let gate = || {
-        common_cli::rendiff()
-            .arg("gate")
-            .arg(&run)
-            .arg("--baseline")
-            .arg(&baseline)
-            .output()
-            .unwrap()
-    };
+    let gate = || common_cli::gate_command(&run, &baseline).output().unwrap();
     assert_eq!(gate().status.code(), Some(0));
     let manifest = run.join("manifest.json");
     let good = std::fs::read(&manifest).unwrap();
@@ -524,13 +500,7 @@ fn merge_refuses_a_shard_whose_resolved_scene_changed() {
     use std::os::unix::fs::PermissionsExt;
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scenes: Vec<PathBuf> = ["three_triangles", "pixel_grid"]
-        .iter()
-        .map(|s| root().join(format!("scenes/{s}.toml")))
-        .collect();
-    let trace = ["--only", "trace"];
-    let one = shard_check(d, &scenes, "1/2", &trace, "one");
-    let two = shard_check(d, &scenes, "2/2", &trace, "two");
+    let (_, one, two) = two_trace_shards(d);
     let m = read_json(&one.join("manifest.json"));
     let name = m["scenes"][0]["scene"].as_str().unwrap().to_string();
     let refused = |says: &str| {

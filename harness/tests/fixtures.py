@@ -11,6 +11,7 @@ import io
 import json
 import math
 import os
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,61 @@ def three_triangles(directory: Path) -> Path:
         [[-1.0, -0.2, 1.0], [1.0, -0.2, 1.0], [0.0, 0.6, 1.0]],
     ]
     return write_scene(directory, tris, [0, 1, 2], name="three_triangles")
+
+
+# Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
+# px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
+# which projects to px = 16.5: every center of column 16 lies exactly on it.
+# prims 0, 1: left quad (object 0); 2, 3: right quad (object 1); 4: a triangle in front (z = 1).
+QUADS_X = 0.15625
+QUADS_TRIS = [
+    [[-3, -3, 0], [QUADS_X, -3, 0], [QUADS_X, 3, 0]],
+    [[-3, -3, 0], [QUADS_X, 3, 0], [-3, 3, 0]],
+    [[QUADS_X, -3, 0], [3, -3, 0], [3, 3, 0]],
+    [[QUADS_X, -3, 0], [3, 3, 0], [QUADS_X, 3, 0]],
+    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
+]
+QUADS_OIDS = [0, 0, 1, 1, 2]
+
+
+def process_gone(pid: int, limit_s: float) -> bool:
+    """True when `pid` has exited (or is a zombie) within `limit_s` (reads Linux's /proc)."""
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except FileNotFoundError:
+            return True
+        if stat.rsplit(")", 1)[1].split()[0] == "Z":
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def manifest_scene(
+    name: str, renders: list[dict[str, Any]], requires: Sequence[str] = ("depth", "ids")
+) -> dict[str, Any]:
+    """One scene's entry of manifest.json: its resolved scene under `scenes/NAME/resolved`."""
+    return {
+        "scene": name,
+        "scene_file": f"scenes/{name}.toml",
+        "resolved": f"scenes/{name}/resolved",
+        "requires": list(requires),
+        "renders": renders,
+    }
+
+
+def write_manifest(run: Path, scenes: list[dict[str, Any]]) -> dict[str, Any]:
+    """Writes RUN/manifest.json (reference: the raster) listing `scenes`; returns it."""
+    manifest = {
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "created": "2026-11-25T16:00:00Z",
+        "rendiff_version": "0.1.0",
+        "scenes": scenes,
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    return manifest
 
 
 def cli(*argv: str) -> tuple[int, str, str]:

@@ -13,25 +13,12 @@ from typing import Any, cast
 
 import pytest
 
+from fixtures import process_gone
 from rendiff_harness.contract.camera import Camera
 from rendiff_harness.renderers.children import die_with_parent, run_in_group
 from rendiff_harness.renderers.povray import backend as povray
 
 HARNESS = Path(__file__).resolve().parents[1]
-
-
-def _gone(pid: int, limit_s: float) -> bool:
-    """True when `pid` has exited (or is a zombie) within `limit_s`."""
-    end = time.monotonic() + limit_s
-    while time.monotonic() < end:
-        try:
-            stat = Path(f"/proc/{pid}/stat").read_text()
-        except FileNotFoundError:
-            return True
-        if stat.rsplit(")", 1)[1].split()[0] == "Z":
-            return True
-        time.sleep(0.05)
-    return False
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
@@ -49,7 +36,7 @@ def test_a_child_dies_when_the_harness_is_killed() -> None:
     child = int(harness.stdout.readline())
     harness.kill()  # SIGKILL: no handler runs
     harness.wait()
-    assert _gone(child, 5.0), f"process {child} outlived the harness that started it"
+    assert process_gone(child, 5.0), f"process {child} outlived the harness that started it"
 
 
 def test_povray_runs_in_the_harness_group_and_dies_with_it(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -23,7 +23,9 @@ import pytest
 
 import backend_cases as cases
 import fixtures
-from fixtures import cli, write_scene
+from fixtures import QUADS_OIDS as OIDS
+from fixtures import QUADS_TRIS as TRIS
+from fixtures import cli, manifest_scene, process_gone, write_manifest, write_scene
 from rendiff_harness.contract import exrbuf, resolved, vocab
 from rendiff_harness.judge import calibration, camera_budget, precision, tolerance
 from rendiff_harness.renderers import command as command_renderers
@@ -37,17 +39,8 @@ NOT_BUILT = "rendiff binary not built (cargo build --release -p rendiff; scripts
 PY = json.dumps(sys.executable)
 BG = vocab.BACKGROUND_ID
 
-# The quads of test_compare.py: two quads share the edge x = 5/32, whose projection is
-# exactly the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).
-X = 0.15625
-TRIS = [
-    [[-3, -3, 0], [X, -3, 0], [X, 3, 0]],
-    [[-3, -3, 0], [X, 3, 0], [-3, 3, 0]],
-    [[X, -3, 0], [3, -3, 0], [3, 3, 0]],
-    [[X, -3, 0], [3, 3, 0], [X, 3, 0]],
-    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
-]
-OIDS = [0, 0, 1, 1, 2]
+# The quads of fixtures.py: two quads share the edge x = 5/32, whose projection is exactly
+# the centers of column 16 (W = H = 32, vfov 90, eye (0, 0, 5)).
 EDGE_PX = (16, 8)  # on the shared edge: reference prim 0, prim 3 across it
 W = H = 32
 
@@ -324,22 +317,7 @@ def test_a_correct_renderer_renders_and_passes_the_comparison(
     attrs = exrbuf.read_attrs(run_scene / "mine.exr")
     assert attrs["backend"] == "mine" and attrs["declared_in"] == str(path) and attrs["spp"] == 1
 
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": "quads",
-                "scene_file": "scenes/quads.toml",
-                "resolved": "scenes/quads/resolved",
-                "requires": ["depth", "ids"],
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene("quads", renders)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     results = {(r["backend"], r["buffer"]): r for r in json.loads((run / "results.json").read_text())["results"]}
@@ -405,19 +383,6 @@ def test_scene_path_with_spaces_and_shell_characters_arrives_as_one_argument(
     assert not list(tmp_path.rglob("pwned")) and not list(work.iterdir())  # no shell; scratch removed
 
 
-def _gone(pid: int, limit_s: float) -> bool:
-    end = time.monotonic() + limit_s
-    while time.monotonic() < end:
-        try:
-            stat = Path(f"/proc/{pid}/stat").read_text()
-        except FileNotFoundError:
-            return True
-        if stat.rsplit(")", 1)[1].split()[0] == "Z":
-            return True
-        time.sleep(0.05)
-    return False
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_a_hanging_renderer_is_killed_with_its_whole_group(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
@@ -442,7 +407,8 @@ def test_a_hanging_renderer_is_killed_with_its_whole_group(
     assert rc == 2 and "mine: timed out after 1.5 s; its process group was killed; stderr: working" in err
     leader, child, group = (int(v) for v in pids.read_text().split())
     assert group not in (os.getpgid(0), leader)  # a group of its own, led by the supervisor
-    assert _gone(leader, 5.0) and _gone(child, 5.0), "a process of the renderer's group outlived the timeout"
+    gone = process_gone(leader, 5.0) and process_gone(child, 5.0)
+    assert gone, "a process of the renderer's group outlived the timeout"
     assert not out.exists()
 
 
@@ -473,7 +439,7 @@ def test_a_renderer_and_its_children_die_when_the_harness_is_killed(
         harness.kill()  # SIGKILL: no handler of the harness runs
         harness.communicate()
     renderer, child = (int(v) for v in pids.read_text().split())
-    assert _gone(renderer, 5.0) and _gone(child, 5.0), "the renderer's group outlived the harness"
+    assert process_gone(renderer, 5.0) and process_gone(child, 5.0), "the renderer's group outlived the harness"
 
 
 def test_a_crash_is_an_error_with_its_status_and_stderr(
@@ -662,22 +628,7 @@ def test_the_cores_own_answer_through_a_command_passes_every_buffer(
         {"backend": "raster", "status": "ok", "exr": "scenes/icosphere/raster.exr", "buffers": ["Z", "id", "N"]},
         {**line, "exr": "scenes/icosphere/copycat.exr", "command": "copycat", "time_s": 0.1},
     ]
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": "icosphere",
-                "scene_file": "scenes/icosphere.toml",
-                "resolved": "scenes/icosphere/resolved",
-                "requires": requires,
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene("icosphere", renders, requires)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     results = [r for r in json.loads((run / "results.json").read_text())["results"] if r["backend"] == "copycat"]
@@ -705,7 +656,7 @@ def test_the_group_kill_leaves_nothing_after_a_normal_exit(
     assert rc == 0, err
     child = int(pids.read_text())
     try:
-        assert _gone(child, 5.0), "a process the renderer left behind survived it"
+        assert process_gone(child, 5.0), "a process the renderer left behind survived it"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(child, signal.SIGKILL)
@@ -717,22 +668,7 @@ EXAMPLES = HARNESS / "examples"
 
 
 def _compare(run: Path, scene: str, requires: list[str], renders: list[dict[str, Any]]) -> dict[tuple[str, str], Any]:
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-25T16:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": scene,
-                "scene_file": f"scenes/{scene}.toml",
-                "resolved": f"scenes/{scene}/resolved",
-                "requires": requires,
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    write_manifest(run, [manifest_scene(scene, renders, requires)])
     rc, _, err = cli("compare", "--run", str(run), "--no-images")
     assert rc == 0, err
     return {(r["backend"], r["buffer"]): r for r in json.loads((run / "results.json").read_text())["results"]}

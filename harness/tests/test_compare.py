@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from fixtures import write_scene
+from fixtures import QUADS_OIDS as OIDS
+from fixtures import QUADS_TRIS as TRIS
+from fixtures import manifest_scene, write_manifest, write_scene
 from rendiff_harness import compare
 from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.contract import exrbuf, resolved, results, vocab
@@ -20,19 +22,8 @@ from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID
 
-# Scene "quads" (W = H = 32, vfov 90, eye (0, 0, 5) looking at -z): at world z = 0,
-# px = (x/5 + 1) * 16, py = (1 - y/5) * 16. Two quads share the vertical edge x = 5/32,
-# which projects to px = 16.5: every center of column 16 lies exactly on it.
-# prims 0, 1: left quad (object 0); 2, 3: right quad (object 1); 4: a triangle in front (z = 1).
-X = 0.15625
-TRIS = [
-    [[-3, -3, 0], [X, -3, 0], [X, 3, 0]],
-    [[-3, -3, 0], [X, 3, 0], [-3, 3, 0]],
-    [[X, -3, 0], [3, -3, 0], [3, 3, 0]],
-    [[X, -3, 0], [3, 3, 0], [X, 3, 0]],
-    [[-1, -1, 1], [1, -1, 1], [0, 1.2, 1]],
-]
-OIDS = [0, 0, 1, 1, 2]
+# Scene "quads" (fixtures.py): two quads share the vertical edge x = 5/32, which projects
+# to px = 16.5: every center of column 16 lies exactly on it.
 EDGE_PX = (16, 8)  # (x, y): on the shared edge, ref prim 0
 INTERIOR_PX = (15, 17)  # inside prim 4, 2.15 px from its edges, 1 px from prim 2
 PLAIN_PX = (10, 20)  # inside prim 0 or 1, away from column 16
@@ -138,29 +129,7 @@ def build_run(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
         _ok("povray", t2),
         {"backend": "pyrender", "status": "skipped", "reason": "missing features: two_sided"},
     ]
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-22T10:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": "quads",
-                "scene_file": "scenes/quads.toml",
-                "resolved": "scenes/quads/resolved",
-                "requires": ["depth", "ids"],
-                "renders": renders,
-            },
-            {
-                "scene": "noref",
-                "scene_file": "scenes/noref.toml",
-                "resolved": "scenes/noref/resolved",
-                "requires": ["depth", "ids"],
-                "renders": renders2,
-            },
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    write_manifest(run, [manifest_scene("quads", renders), manifest_scene("noref", renders2)])
     return run, ref
 
 
@@ -632,22 +601,11 @@ def _normals_run(
     s = run / "scenes/quads"
     exrbuf.write_buffers(s / "raster.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_ref)
     exrbuf.write_buffers(s / "mitsuba.exr", Z=ref["Z"], prim=ref["prim"], obj=ref["obj"], N=n_test)
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "scenes": [
-            {
-                "scene": "quads",
-                "resolved": "scenes/quads/resolved",
-                "requires": ["depth", "ids", "normals"],
-                "renders": [
-                    _ok("raster", "scenes/quads/raster.exr", buffers=["Z", "id", "N"]),
-                    _ok("mitsuba", "scenes/quads/mitsuba.exr", buffers=["Z", "id", "N"]),
-                ],
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    renders = [
+        _ok("raster", "scenes/quads/raster.exr", buffers=["Z", "id", "N"]),
+        _ok("mitsuba", "scenes/quads/mitsuba.exr", buffers=["Z", "id", "N"]),
+    ]
+    write_manifest(run, [manifest_scene("quads", renders, ["depth", "ids", "normals"])])
     assert compare.main(["--run", str(run), "--no-images"]) == 0
     return _index(_strict_json(run / "results.json"))
 
@@ -683,25 +641,8 @@ def test_a_zero_normal_fails_and_is_not_called_reversed(tmp_path: Path) -> None:
 def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:
     run = tmp_path / "run"
     run.mkdir()
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "scenes": [
-            {
-                "scene": "broken",
-                "resolved": "scenes/broken/resolved",
-                "requires": [],
-                "renders": [
-                    {
-                        "backend": "raster",
-                        "status": "error",
-                        "message": "cannot load scene: broken.toml: camera.vfov: must be in (0, 180)",
-                    }
-                ],
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
+    message = "cannot load scene: broken.toml: camera.vfov: must be in (0, 180)"
+    write_manifest(run, [manifest_scene("broken", [{"backend": "raster", "status": "error", "message": message}], [])])
     assert compare.main(["--run", str(run), "--no-images"]) == 0
     res = _index(_strict_json(run / "results.json"))
     assert list(res) == [("broken", "raster", "scene")]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from rendiff_harness.contract import resolved, vocab
 from rendiff_harness.contract.camera import Camera
 from rendiff_harness.contract.manifest import Reference
 from rendiff_harness.judge import geometry, outline, verify
+from verify_cases import classify_one, exact_depth
 
 BG = vocab.BACKGROUND_ID
 PX = (4, 4)  # center (4.5, 4.5): world (-1.75, 1.75) on z = 0
@@ -38,31 +40,9 @@ def _scene(tmp_path: Path, tris: list[list[list[float]]], near: float = 1e-3) ->
     return resolved.load(d)
 
 
-def _exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
-    return np.zeros_like(z)
-
-
-def _one(
-    scene: resolved.ResolvedScene,
-    ref: int,
-    test: int,
-    px: tuple[int, int] = PX,
-    eps: float = 1e-3,
-    depth_tol: verify.DepthTolerance = _exact,
-    eye_slack: float = 0.0,
-) -> tuple[str, str]:
-    x, y = px
-    res = verify.classify_mismatches(
-        scene,
-        np.array([ref], dtype=np.uint32),
-        np.array([test], dtype=np.uint32),
-        np.array([y]),
-        np.array([x]),
-        eps,
-        depth_tol,
-        eye_slack=eye_slack,
-    )
-    return verify.CLASSES[int(res.cls[0])], res.why[0]
+def _one(scene: resolved.ResolvedScene, ref: int, test: int, px: tuple[int, int] = PX, **kw: Any) -> tuple[str, str]:
+    """`classify_one` at PX unless told otherwise."""
+    return classify_one(scene, ref, test, px, **kw)
 
 
 def _distance(scene: resolved.ResolvedScene, prim: int, px: tuple[int, int] = PX) -> float:
@@ -302,7 +282,7 @@ def test_a_neighbor_on_the_same_side_is_a_silhouette(tmp_path: Path) -> None:
     )
 
 
-def test_side_is_zero_exactly_at_the_slack(tmp_path: Path) -> None:
+def test_side_is_zeroexact_depthly_at_the_slack(tmp_path: Path) -> None:
     """_side: |det| <= slack * |(b - a) x (c - a)| is edge-on; the eye's distance decides."""
     eye = np.array([0.0, 0.0, 4.0])
     a, b, c = (np.array(p, dtype=np.float64) for p in FOLD_A)
@@ -549,7 +529,7 @@ def test_a_side_without_a_triangle_has_no_geometry(tmp_path: Path) -> None:
     assert np.isinf(g.z[0]) and g.cos[0] == 0.0
 
 
-def test_topology_identity_is_exact_f32() -> None:
+def test_topology_identity_isexact_depth_f32() -> None:
     """Two vertices are one when their f32 coordinates are equal, whatever f64 values they came from."""
     a = [0.1, 0.0, 0.0]
     a2 = [0.1 + 1e-12, 0.0, 0.0]  # the same f32
@@ -580,7 +560,7 @@ def test_the_eye_slack_defaults_to_none(tmp_path: Path) -> None:
     """Without an eye slack a closed edge 0.5 from the eye is closed (a crack), not edge-on."""
     d = write_scene(tmp_path, [FOLD_A, FLAT_B], eye=(0.0, 0.0, 0.5), vfov_deg=90.0, width=16, height=16)
     s = resolved.load(d)
-    args = (np.array([0], np.uint32), np.array([BG], np.uint32), np.array([7]), np.array([8]), 0.5, _exact)
+    args = (np.array([0], np.uint32), np.array([BG], np.uint32), np.array([7]), np.array([8]), 0.5, exact_depth)
     assert verify.CLASSES[int(verify.classify_mismatches(s, *args).cls[0])] == "crack"
 
 
@@ -596,21 +576,23 @@ def test_every_pixel_is_classified_whatever_comes_before_it(tmp_path: Path) -> N
         np.array([7, 7, 7, 7]),
         np.array([8, 8, 8, 8]),
         0.5,
-        _exact,
+        exact_depth,
     )
     assert res.cls.dtype == np.int8
     assert [verify.CLASSES[c] for c in res.cls] == ["interior", "interior", "interior", "edge"]
     assert res.why[:3] == [f"id {n} names no triangle (the scene has {n})", "both sides name no triangle"] + [
         f"id {n} names no triangle (the scene has {n})"
     ]
-    empty = verify.classify_mismatches(s, *(np.zeros(0, np.uint32),) * 2, *(np.zeros(0, np.int64),) * 2, 0.5, _exact)
+    empty = verify.classify_mismatches(
+        s, *(np.zeros(0, np.uint32),) * 2, *(np.zeros(0, np.int64),) * 2, 0.5, exact_depth
+    )
     assert empty.cls.dtype == np.int8 and empty.why == [] and empty.groups == []
 
 
 def test_the_topology_is_cached_under_topo_and_read_back(tmp_path: Path) -> None:
     """The edge table is built once per scene: stored in the cache, and a cached one is used."""
     s = _scene(tmp_path, [FOLD_A, FLAT_B])
-    args = (np.array([0], np.uint32), np.array([1], np.uint32), np.array([7]), np.array([8]), 0.5, _exact)
+    args = (np.array([0], np.uint32), np.array([1], np.uint32), np.array([7]), np.array([8]), 0.5, exact_depth)
     cache: dict[str, verify.Topology] = {}
     assert verify.CLASSES[int(verify.classify_mismatches(s, *args, cache).cls[0])] == "edge"
     assert set(cache) == {"topo"} and cache["topo"].vertices == 4

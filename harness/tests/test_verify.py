@@ -10,6 +10,8 @@ import pytest
 from fixtures import write_scene
 from rendiff_harness.contract import resolved, vocab
 from rendiff_harness.judge import verify
+from verify_cases import classify_one as _one
+from verify_cases import exact_depth as _exact
 
 BG = vocab.BACKGROUND_ID
 
@@ -29,31 +31,6 @@ DEEP_IN_FRONT = (8, 7)
 def _scene(tmp_path: Path, tris: list[list[list[float]]]) -> resolved.ResolvedScene:
     d = write_scene(tmp_path / "s", tris, vfov_deg=90.0, width=16, height=16)
     return resolved.load(d)
-
-
-def _exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
-    return np.zeros_like(z)
-
-
-def _one(
-    scene: resolved.ResolvedScene,
-    ref: int,
-    test: int,
-    px: tuple[int, int],
-    eps: float = 1e-3,
-    depth_tol: verify.DepthTolerance = _exact,
-) -> tuple[str, str]:
-    x, y = px
-    res = verify.classify_mismatches(
-        scene,
-        np.array([ref], dtype=np.uint32),
-        np.array([test], dtype=np.uint32),
-        np.array([y]),
-        np.array([x]),
-        eps,
-        depth_tol,
-    )
-    return verify.CLASSES[int(res.cls[0])], res.why[0]
 
 
 def test_other_triangle_across_a_shared_edge_is_edge(tmp_path: Path) -> None:

@@ -110,6 +110,34 @@ pub struct CheckOptions {
     pub memory_budget: u64,
 }
 
+impl CheckOptions {
+    /// A quiet run of `scenes` into `run_dir` with the checkout or data
+    /// folder `root`: every backend, the repository's expectations
+    /// (`tests/expectations.toml`), 600 s per external render, no cached
+    /// references, no calibration probes, the default jobs, workers and
+    /// memory budget, no renderers file. Callers change what they need with
+    /// struct update syntax.
+    pub fn new(scenes: Vec<PathBuf>, run_dir: PathBuf, root: PathBuf) -> Self {
+        CheckOptions {
+            scenes,
+            run_dir,
+            expectations: root.join("tests/expectations.toml"),
+            root,
+            only: None,
+            timeout: Duration::from_secs(600),
+            quiet: true,
+            references: None,
+            core: CoreShading::default(),
+            calibration: None,
+            jobs: default_jobs(),
+            workers: true,
+            renderers: None,
+            renderers_snapshot: None,
+            memory_budget: pool::default_memory_budget(),
+        }
+    }
+}
+
 /// The default of `--jobs`: the cores this process may use.
 pub fn default_jobs() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())

@@ -200,19 +200,11 @@ pub fn reduce(a: ReduceArgs) -> Result<ExitCode> {
         &out,
     )?;
     rendiff::outln!(
-        "{} fails {} with class {}: {} -> {} triangles, {} -> {} objects, {} -> {} bytes ({} check runs, {} candidates{})",
+        "{} fails {} with class {}: {}",
         target.backend,
         target.buffer,
         target.class,
-        r.triangles_before,
-        r.triangles_after,
-        r.objects_before,
-        r.objects_after,
-        r.bytes_before,
-        r.bytes_after,
-        r.check_runs,
-        r.candidates,
-        if r.complete { "" } else { "; budget ran out" }
+        r.sizes("->")
     );
     rendiff::outln!("reduced: {}", out.display());
     rendiff::outln!("reproduce: {}", r.command);

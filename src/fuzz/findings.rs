@@ -85,7 +85,7 @@ pub struct Signature {
 }
 
 /// A reduced repro, as findings.json records it.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct ReducedRecord {
     /// The scene it was reduced from (a generated scene's name in findings.json).
     pub from: String,
@@ -120,6 +120,30 @@ pub struct ReducedRecord {
     /// Why there is no reduced scene, when reduction failed.
     #[serde(skip_serializing_if = "String::is_empty")]
     pub error: String,
+}
+
+impl ReducedRecord {
+    /// Its sizes before and after, with `arrow` between, and what the
+    /// reduction took: the one wording of the CLI's line and the page's.
+    pub fn sizes(&self, arrow: &str) -> String {
+        format!(
+            "{} {arrow} {} triangles, {} {arrow} {} objects, {} {arrow} {} bytes \
+             ({} check runs, {} candidates{})",
+            self.triangles_before,
+            self.triangles_after,
+            self.objects_before,
+            self.objects_after,
+            self.bytes_before,
+            self.bytes_after,
+            self.check_runs,
+            self.candidates,
+            if self.complete {
+                ""
+            } else {
+                "; the budget ran out"
+            }
+        )
+    }
 }
 
 /// One distinct finding.
@@ -351,19 +375,8 @@ mod tests {
     fn record(from: &str) -> ReducedRecord {
         ReducedRecord {
             from: from.into(),
-            scene: String::new(),
-            command: String::new(),
-            triangles_before: 0,
-            triangles_after: 0,
-            objects_before: 0,
-            objects_after: 0,
-            bytes_before: 0,
-            bytes_after: 0,
-            check_runs: 0,
-            candidates: 0,
             complete: true,
-            failure_triangles: None,
-            error: String::new(),
+            ..ReducedRecord::default()
         }
     }
 

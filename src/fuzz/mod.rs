@@ -481,19 +481,8 @@ fn reduce_scene(
         }
         Err(e) => ReducedRecord {
             from: scene.to_string(),
-            scene: String::new(),
-            command: String::new(),
-            triangles_before: 0,
-            triangles_after: 0,
-            objects_before: 0,
-            objects_after: 0,
-            bytes_before: 0,
-            bytes_after: 0,
-            check_runs: 0,
-            candidates: 0,
-            complete: false,
-            failure_triangles: None,
             error: format!("{e:#}"),
+            ..ReducedRecord::default()
         },
     }
 }

@@ -228,19 +228,9 @@ fn finding_section(
         Some(r) if r.error.is_empty() => {
             let _ = writeln!(
                 b,
-                "<h3>Reduced scene</h3>\n<p>From {}: {} &rarr; {} triangles, {} &rarr; {} objects, \
-                 {} &rarr; {} bytes ({} check runs, {} candidates{}). \
-                 <a href=\"{}\">{}</a></p>",
+                "<h3>Reduced scene</h3>\n<p>From {}: {}. <a href=\"{}\">{}</a></p>",
                 html::escape(&r.from),
-                r.triangles_before,
-                r.triangles_after,
-                r.objects_before,
-                r.objects_after,
-                r.bytes_before,
-                r.bytes_after,
-                r.check_runs,
-                r.candidates,
-                if r.complete { "" } else { "; the budget ran out" },
+                r.sizes("&rarr;"),
                 html::url(&r.scene),
                 html::escape(&r.scene)
             );

@@ -54,9 +54,9 @@ pub fn variant_name(base: &str, relation: &str) -> String {
     format!("{base}__{relation}")
 }
 
-/// A permutation of 0..n, fixed (xorshift Fisher-Yates, as in
-/// tests/metamorphic_backends.rs).
-fn permutation(n: usize, seed: u64) -> Vec<usize> {
+/// A permutation of 0..n, fixed by `seed` (xorshift Fisher-Yates): the
+/// `permute` relation's order here and in tests/metamorphic_backends.rs.
+pub fn permutation(n: usize, seed: u64) -> Vec<usize> {
     let mut order: Vec<usize> = (0..n).collect();
     let mut s = seed | 1;
     for i in (1..n).rev() {

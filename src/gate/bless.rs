@@ -8,6 +8,34 @@ use crate::report::data::run_relative;
 use crate::report::overview::utc;
 use crate::vocab::RenderStatus;
 
+impl BaselineEntry {
+    /// The entry `bless` writes for verdict `e` of a scene whose farthest
+    /// reference depth is `z_far`: every count and error metric (null where
+    /// the verdict recorded none), the reason shortened, the backend's noise.
+    pub fn blessed(e: &Verdict, z_far: f64) -> Self {
+        BaselineEntry {
+            scene: e.scene.clone(),
+            backend: e.backend.clone(),
+            buffer: e.buffer.clone(),
+            status: e.status,
+            reason: short(&e.reason, 200),
+            metrics: COUNT_METRICS
+                .iter()
+                .chain(ERROR_METRICS)
+                .map(|m| {
+                    let v = match (e.counts.get(*m), e.errors.get(*m)) {
+                        (Some(&c), _) => Value::from(c),
+                        (_, Some(&x)) => Value::from(x),
+                        _ => Value::Null,
+                    };
+                    (m.to_string(), v)
+                })
+                .collect(),
+            noise: Noise::for_backend(&e.backend, z_far),
+        }
+    }
+}
+
 /// The CPU model from /proc/cpuinfo ("unknown" elsewhere).
 pub fn cpu_model() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
@@ -250,26 +278,7 @@ pub fn baseline_from_run(run: &Path, opts: &BlessOptions) -> Result<Baseline> {
         .and_then(|v| v.get("expectations")?.as_str().map(String::from));
     let mut entries: Vec<BaselineEntry> = results
         .iter()
-        .map(|e| BaselineEntry {
-            scene: e.scene.clone(),
-            backend: e.backend.clone(),
-            buffer: e.buffer.clone(),
-            status: e.status,
-            reason: short(&e.reason, 200),
-            metrics: COUNT_METRICS
-                .iter()
-                .chain(ERROR_METRICS)
-                .map(|m| {
-                    let v = match (e.counts.get(*m), e.errors.get(*m)) {
-                        (Some(&c), _) => Value::from(c),
-                        (_, Some(&x)) => Value::from(x),
-                        _ => Value::Null,
-                    };
-                    (m.to_string(), v)
-                })
-                .collect(),
-            noise: Noise::for_backend(&e.backend, z_far.get(&e.scene).copied().unwrap_or(0.0)),
-        })
+        .map(|e| BaselineEntry::blessed(e, z_far.get(&e.scene).copied().unwrap_or(0.0)))
         .collect();
     entries
         .sort_by(|a, b| (&a.scene, &a.backend, &a.buffer).cmp(&(&b.scene, &b.backend, &b.buffer)));

@@ -7,6 +7,10 @@ use super::*;
 use crate::check::manifest::{Manifest, ResultEntry, Results, RESULTS_FORMAT};
 use serde_json::json;
 
+#[path = "../../tests/common_runs.rs"]
+mod common_runs;
+use common_runs::edit_results;
+
 /// Depth scale the synthetic baselines are blessed with.
 const Z_FAR: f64 = 4.0;
 
@@ -29,30 +33,15 @@ fn with_errors(mut e: Verdict, errors: &[(&str, f64)]) -> Verdict {
     e
 }
 
-/// The baseline entry bless writes for `e`.
-fn entry_of(e: &Verdict) -> BaselineEntry {
-    BaselineEntry {
-        scene: e.scene.clone(),
-        backend: e.backend.clone(),
-        buffer: e.buffer.clone(),
-        status: e.status,
-        reason: e.reason.clone(),
-        metrics: e
-            .counts
-            .iter()
-            .map(|(k, c)| (k.clone(), Value::from(*c)))
-            .chain(e.errors.iter().map(|(k, x)| (k.clone(), Value::from(*x))))
-            .collect(),
-        noise: Noise::for_backend(&e.backend, Z_FAR),
-    }
-}
-
 fn baseline_of(list: &[Verdict]) -> Baseline {
     Baseline {
         format: BASELINE_FORMAT.into(),
         provenance: Provenance::default(),
         policy: String::new(),
-        entries: list.iter().map(entry_of).collect(),
+        entries: list
+            .iter()
+            .map(|e| BaselineEntry::blessed(e, Z_FAR))
+            .collect(),
     }
 }
 
@@ -694,38 +683,13 @@ fn a_baseline_file_is_read_back_or_refused_naming_the_file() {
 /// A run folder with a manifest and results (no renders: bless reads them
 /// only for depth scales and seeds, which then default).
 fn json_run(run: &Path, scenes: &[&str]) {
-    std::fs::create_dir_all(run).unwrap();
-    let manifest = json!({
-        "format": "rendiff-manifest/1", "reference": "raster", "created_unix": 1_795_000_000u64,
-        "rendiff_version": "0.1.0",
-        "scenes": scenes.iter().map(|s| json!({
-            "scene": s, "scene_file": format!("scenes/{s}.toml"), "resolved": format!("scenes/{s}/resolved"),
-            "requires": ["depth", "ids"],
-            "renders": [{"backend": "trace", "status": "ok", "exr": format!("scenes/{s}/trace.exr"),
-                         "version": "rendiff 0.1.0", "time_s": 0.1}]
-        })).collect::<Vec<_>>()
-    });
-    let entries: Vec<Value> = scenes
-        .iter()
-        .flat_map(|s| {
-            ["id", "Z"].map(|buf| {
-                json!({"scene": s, "backend": "trace", "buffer": buf, "status": "pass", "reason": "",
-                       "edge_mismatches": 0, "tie_mismatches": 1, "crack_mismatches": 0,
-                       "interior_mismatches": 0, "mask_mismatches": 0,
-                       "max_abs_error": 0.0, "max_rel_error": 0.0})
-            })
-        })
-        .collect();
-    let results = json!({"format": RESULTS_FORMAT, "reference": "raster", "results": entries});
-    std::fs::write(run.join("manifest.json"), manifest.to_string()).unwrap();
-    std::fs::write(run.join("results.json"), results.to_string()).unwrap();
-}
-
-fn edit_results(run: &Path, f: impl FnOnce(&mut Value)) {
-    let path = run.join("results.json");
-    let mut r: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    f(&mut r);
-    std::fs::write(&path, r.to_string()).unwrap();
+    common_runs::json_run(
+        run,
+        scenes,
+        &["trace"],
+        &["id", "Z"],
+        json!({"tie_mismatches": 1}),
+    );
 }
 
 #[test]

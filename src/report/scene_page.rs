@@ -188,45 +188,38 @@ fn bound_text(e: &ResultEntry) -> String {
 /// Fields of a verdict that have no column (e.g. radiance's mode, p-value, FLIP),
 /// so nothing the comparison recorded is hidden from the reviewer.
 fn extra_fields(e: &ResultEntry) -> String {
+    use crate::gate::{COUNT_METRICS, ERROR_METRICS};
+    // Besides the gated counts and errors, what this page shows in columns
+    // (the entry's typed fields, scene to reason, are not in `details`).
     const SHOWN: &[&str] = &[
-        "scene",
-        "backend",
-        "buffer",
-        "status",
-        "reason",
-        "pixels",
-        "edge_mismatches",
-        "tie_mismatches",
-        "crack_mismatches",
-        "interior_mismatches",
+        "bound",
+        "bound_px",
+        "command",
+        "compared_pixels",
         "explanations",
+        "images",
         "max_angle_rad",
+        "mean_abs_error",
+        "not_comparable",
         "offset_x_px",
         "offset_y_px",
+        "own_plane_max_abs_error",
+        "own_plane_pixels",
+        "pixels",
+        "rms_px",
+        "rotation",
         "scale_x",
         "scale_y",
-        "rotation",
-        "rms_px",
-        "bound_px",
-        "mask_mismatches",
-        "max_abs_error",
-        "mean_abs_error",
-        "max_rel_error",
-        "compared_pixels",
-        "tolerance",
-        "bound",
         "time_s",
+        "tolerance",
         "version",
-        "command",
-        "images",
-        "own_plane_pixels",
-        "own_plane_max_abs_error",
-        "not_comparable",
     ];
+    let shown =
+        |k: &str| SHOWN.contains(&k) || COUNT_METRICS.contains(&k) || ERROR_METRICS.contains(&k);
     let rows: Vec<String> = e
         .details
         .iter()
-        .filter(|(k, v)| !SHOWN.contains(&k.as_str()) && !v.is_null() && v.as_str() != Some(""))
+        .filter(|(k, v)| !shown(k) && !v.is_null() && v.as_str() != Some(""))
         .map(|(k, v)| {
             let v = v.as_str().map_or_else(|| v.to_string(), String::from);
             format!("{}: {}", escape(k), escape(&v))

@@ -1139,24 +1139,7 @@ fn run_gltf_case(c: &GltfCase, want: &(Vec<u8>, Vec<u8>), t: &Tally) -> Vec<Stri
     let scene = write_gltf_case(dir.path(), c.container.file_name(), &bytes, &bin);
     let out = dir.path().join("out");
     let mut problems = Vec::new();
-    let outcome = run_limited(&mut render_cmd(&scene, &out));
-    let (render, _) = judge(
-        "render",
-        outcome,
-        Some(&out.join("render")),
-        false,
-        t,
-        &mut problems,
-    );
-    let outcome = run_limited(&mut export_cmd(&scene, &out));
-    let (export, err) = judge(
-        "export",
-        outcome,
-        Some(&out.join("export")),
-        false,
-        t,
-        &mut problems,
-    );
+    let (render, export, err) = render_and_export(&scene, &out, t, &mut problems);
     match class {
         Class::Same => {
             if render != End::Success || export != End::Success {

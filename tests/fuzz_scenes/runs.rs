@@ -54,6 +54,62 @@ struct Tamper {
 
 const COMMANDS: [&str; 4] = ["gate", "bless", "report", "merge"];
 
+/// One row of [`TAMPERS`].
+const fn tamper(
+    target: Target,
+    name: &'static str,
+    file: &'static str,
+    must: [Must; 4],
+    apply: fn(&Path, u64, u64),
+) -> (Target, Tamper) {
+    (
+        target,
+        Tamper {
+            name,
+            file,
+            must,
+            apply,
+        },
+    )
+}
+use Target::{Full, Shard};
+
+/// Rewrites the file at `path` with `f`'s change to its bytes.
+fn edit_bytes(path: &Path, f: impl FnOnce(&mut Vec<u8>)) {
+    let mut b = std::fs::read(path).unwrap();
+    f(&mut b);
+    std::fs::write(path, b).unwrap();
+}
+
+/// The run's `file` replaced by a link to a copy of it beside the run.
+fn link_out(run: &Path, file: &str) {
+    let p = run.join(file);
+    let out = run.parent().unwrap().join(format!("outside-{file}"));
+    std::fs::copy(&p, &out).unwrap();
+    replace_with_link(&p, &out);
+}
+
+/// The run's `file` replaced by a FIFO (`a` even) or a folder.
+fn fifo_or_dir(p: &Path, a: u64) {
+    std::fs::remove_file(p).unwrap();
+    if a.is_multiple_of(2) {
+        mkfifo(p);
+    } else {
+        std::fs::create_dir(p).unwrap();
+    }
+}
+
+/// EXR file `p` spoiled in way `k` of four: deleted, cut in half,
+/// replaced by a FIFO or by a link to `/dev/zero`.
+fn spoil_exr(p: &Path, k: u64) {
+    match k {
+        0 => std::fs::remove_file(p).unwrap(),
+        1 => edit_bytes(p, |b| b.truncate(b.len() / 2)),
+        2 => fifo_or_dir(p, 0),
+        _ => replace_with_link(p, Path::new("/dev/zero")),
+    }
+}
+
 fn edit_json(path: &Path, f: impl FnOnce(&mut Value)) {
     let mut v: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     f(&mut v);
@@ -107,548 +163,426 @@ const COUNT_FIELDS: &[&str] = &[
 /// whole run has merge Any (merge reads shards), a tamper of a shard has
 /// the others Any (they read the whole run, untouched).
 const TAMPERS: &[(Target, Tamper)] = &[
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json truncated",
-            file: "results.json",
-            must: [R, R, B, A],
-            apply: |run, a, _| {
-                let p = run.join("results.json");
-                let mut b = std::fs::read(&p).unwrap();
-                let n = b.len();
-                b.truncate(1 + (a as usize % (n - 2)));
-                std::fs::write(&p, b).unwrap();
-            },
+    tamper(
+        Full,
+        "results.json truncated",
+        "results.json",
+        [R, R, B, A],
+        |run, a, _| {
+            edit_bytes(&run.join("results.json"), |b| {
+                b.truncate(1 + (a as usize % (b.len() - 2)))
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json emptied or not an object",
-            file: "results.json",
-            must: [R, R, B, A],
-            apply: |run, a, _| {
-                let t = [
-                    "",
-                    "null",
-                    "[]",
-                    "{}",
-                    "\"results\"",
-                    "{\"format\": \"rendiff-results/1\"}",
-                    "\u{feff}{}",
-                ][(a % 7) as usize];
-                std::fs::write(run.join("results.json"), t).unwrap();
-            },
+    tamper(
+        Full,
+        "results.json emptied or not an object",
+        "results.json",
+        [R, R, B, A],
+        |run, a, _| {
+            let t = [
+                "",
+                "null",
+                "[]",
+                "{}",
+                "\"results\"",
+                "{\"format\": \"rendiff-results/1\"}",
+                "\u{feff}{}",
+            ][(a % 7) as usize];
+            std::fs::write(run.join("results.json"), t).unwrap();
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json not UTF-8",
-            file: "results.json",
-            must: [R, R, B, A],
-            apply: |run, _, _| {
-                let p = run.join("results.json");
-                let mut b = std::fs::read(&p).unwrap();
-                b.insert(1, 0xff);
-                std::fs::write(&p, b).unwrap();
-            },
+    tamper(
+        Full,
+        "results.json not UTF-8",
+        "results.json",
+        [R, R, B, A],
+        |run, _, _| {
+            edit_bytes(&run.join("results.json"), |b| b.insert(1, 0xff));
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json a link to a copy outside the run",
-            file: "results.json",
-            must: [R, R, R, R],
-            apply: |run, _, _| {
-                let p = run.join("results.json");
-                let out = run.parent().unwrap().join("outside-results.json");
-                std::fs::copy(&p, &out).unwrap();
-                replace_with_link(&p, &out);
-            },
+    tamper(
+        Full,
+        "results.json a link to a copy outside the run",
+        "results.json",
+        [R, R, R, R],
+        |run, _, _| {
+            link_out(run, "results.json");
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json a FIFO or a folder",
-            file: "results.json",
-            must: [R, R, B, A],
-            apply: |run, a, _| {
-                let p = run.join("results.json");
-                std::fs::remove_file(&p).unwrap();
-                if a % 2 == 0 {
-                    mkfifo(&p);
-                } else {
-                    std::fs::create_dir(&p).unwrap();
-                }
-            },
+    tamper(
+        Full,
+        "results.json a FIFO or a folder",
+        "results.json",
+        [R, R, B, A],
+        |run, a, _| {
+            fifo_or_dir(&run.join("results.json"), a);
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json deleted",
-            file: "results.json",
-            must: [R, R, B, A],
-            apply: |run, _, _| {
-                std::fs::remove_file(run.join("results.json")).unwrap();
-            },
+    tamper(
+        Full,
+        "results.json deleted",
+        "results.json",
+        [R, R, B, A],
+        |run, _, _| {
+            std::fs::remove_file(run.join("results.json")).unwrap();
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json a random byte changed",
-            file: "results.json",
-            must: [A, A, A, A],
-            apply: |run, a, b| {
-                let p = run.join("results.json");
-                let mut bytes = std::fs::read(&p).unwrap();
+    tamper(
+        Full,
+        "results.json a random byte changed",
+        "results.json",
+        [A, A, A, A],
+        |run, a, b| {
+            edit_bytes(&run.join("results.json"), |bytes| {
                 let n = bytes.len();
                 bytes[a as usize % n] = b as u8;
-                std::fs::write(&p, bytes).unwrap();
-            },
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "a verdict's status made fail",
-            file: "results.json",
-            must: [N, N, A, A],
-            apply: |run, a, _| {
-                edit_json(&run.join("results.json"), |v| {
-                    entry(v, a)["status"] = json!("fail")
-                });
-            },
+    tamper(
+        Full,
+        "a verdict's status made fail",
+        "results.json",
+        [N, N, A, A],
+        |run, a, _| {
+            edit_json(&run.join("results.json"), |v| {
+                entry(v, a)["status"] = json!("fail")
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "a verdict's status unknown or not a string",
-            file: "results.json",
-            must: [R, R, A, A],
-            apply: |run, a, b| {
-                let s = [
-                    json!("passs"),
-                    json!("PASS"),
-                    json!(1),
-                    json!(null),
-                    json!(["pass"]),
-                    json!(""),
-                ][(b % 6) as usize]
-                    .clone();
-                edit_json(&run.join("results.json"), |v| entry(v, a)["status"] = s);
-            },
+    tamper(
+        Full,
+        "a verdict's status unknown or not a string",
+        "results.json",
+        [R, R, A, A],
+        |run, a, b| {
+            let s = [
+                json!("passs"),
+                json!("PASS"),
+                json!(1),
+                json!(null),
+                json!(["pass"]),
+                json!(""),
+            ][(b % 6) as usize]
+                .clone();
+            edit_json(&run.join("results.json"), |v| entry(v, a)["status"] = s);
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "a passing verdict given mismatches",
-            file: "results.json",
-            must: [N, A, A, A],
-            apply: |run, a, b| {
-                let f = COUNT_FIELDS[2 + (b % 5) as usize];
-                edit_json(&run.join("results.json"), |v| {
-                    let e = entry(v, a);
-                    e[f] = json!(7);
-                    e["max_abs_error"] = json!(0.5);
-                });
-            },
+    tamper(
+        Full,
+        "a passing verdict given mismatches",
+        "results.json",
+        [N, A, A, A],
+        |run, a, b| {
+            let f = COUNT_FIELDS[2 + (b % 5) as usize];
+            edit_json(&run.join("results.json"), |v| {
+                let e = entry(v, a);
+                e[f] = json!(7);
+                e["max_abs_error"] = json!(0.5);
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "a count negative, fractional or not a number",
-            file: "results.json",
-            must: [R, R, A, A],
-            apply: |run, a, b| {
-                let f = COUNT_FIELDS[(b % 7) as usize];
-                let x = [
-                    json!(-1),
-                    json!(-9223372036854775808i64),
-                    json!(2.5),
-                    json!("3"),
-                    json!(true),
-                    json!(-0.5),
-                ][(b / 7 % 6) as usize]
-                    .clone();
-                edit_json(&run.join("results.json"), |v| entry(v, a)[f] = x);
-            },
+    tamper(
+        Full,
+        "a count negative, fractional or not a number",
+        "results.json",
+        [R, R, A, A],
+        |run, a, b| {
+            let f = COUNT_FIELDS[(b % 7) as usize];
+            let x = [
+                json!(-1),
+                json!(-9223372036854775808i64),
+                json!(2.5),
+                json!("3"),
+                json!(true),
+                json!(-0.5),
+            ][(b / 7 % 6) as usize]
+                .clone();
+            edit_json(&run.join("results.json"), |v| entry(v, a)[f] = x);
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "an error number negative or not a number",
-            file: "results.json",
-            must: [R, R, A, A],
-            apply: |run, a, b| {
-                let x =
-                    [json!(-1.0), json!(-1e-300), json!("0"), json!([0])][(b % 4) as usize].clone();
-                edit_json(&run.join("results.json"), |v| {
-                    entry(v, a)["max_abs_error"] = x
-                });
-            },
+    tamper(
+        Full,
+        "an error number negative or not a number",
+        "results.json",
+        [R, R, A, A],
+        |run, a, b| {
+            let x = [json!(-1.0), json!(-1e-300), json!("0"), json!([0])][(b % 4) as usize].clone();
+            edit_json(&run.join("results.json"), |v| {
+                entry(v, a)["max_abs_error"] = x
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "a number huge",
-            file: "results.json",
-            must: [N, A, A, A],
-            apply: |run, a, b| {
-                // The gate holds the errors of the Z buffer only (ERROR_BUFFER).
-                edit_json(&run.join("results.json"), |v| {
-                    if b % 2 == 0 {
-                        let list = v["results"].as_array_mut().unwrap();
-                        let z: Vec<usize> = (0..list.len())
-                            .filter(|i| list[*i]["buffer"] == "Z")
-                            .collect();
-                        list[z[(a % z.len() as u64) as usize]]["max_abs_error"] = json!(1e308);
-                    } else {
-                        entry(v, a)["interior_mismatches"] = json!(u64::MAX);
-                    }
-                });
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "an entry removed",
-            file: "would be dropped",
-            must: [N, R, A, A],
-            apply: |run, a, _| {
-                edit_json(&run.join("results.json"), |v| {
+    tamper(
+        Full,
+        "a number huge",
+        "results.json",
+        [N, A, A, A],
+        |run, a, b| {
+            // The gate holds the errors of the Z buffer only (ERROR_BUFFER).
+            edit_json(&run.join("results.json"), |v| {
+                if b % 2 == 0 {
                     let list = v["results"].as_array_mut().unwrap();
-                    let n = list.len() as u64;
-                    list.remove((a % n) as usize);
-                });
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "an entry doubled",
-            file: "results.json",
-            must: [R, R, A, A],
-            apply: |run, a, _| {
-                edit_json(&run.join("results.json"), |v| {
-                    let e = entry(v, a).clone();
-                    v["results"].as_array_mut().unwrap().push(e);
-                });
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "results.json of another format",
-            file: "results.json",
-            must: [R, R, A, A],
-            apply: |run, a, _| {
-                let f = ["rendiff-results/2", "", "rendiff-manifest/1"][(a % 3) as usize];
-                edit_json(&run.join("results.json"), |v| v["format"] = json!(f));
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "control characters and path separators in names",
-            file: "results.json",
-            must: [A, A, A, A],
-            apply: |run, a, b| {
-                let s = [
-                    "\u{1b}[31mred\u{7}",
-                    "../../escaped",
-                    "/etc/x",
-                    "a\nb",
-                    "nul\u{0}x",
-                    "\u{202e}rtl",
-                    "..",
-                    "x/../../y",
-                    "<script>",
-                    "a|b",
-                ][(b % 10) as usize];
-                let f = ["scene", "backend", "buffer", "reason"][(b / 10 % 4) as usize];
-                edit_json(&run.join("results.json"), |v| entry(v, a)[f] = json!(s));
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "an INCOMPLETE marker added",
-            file: "incomplete run",
-            must: [R, R, R, A],
-            apply: |run, _, _| {
-                std::fs::write(run.join("INCOMPLETE"), "check started by process 1\n").unwrap();
-            },
-        },
-    ),
-    (
-        Target::Full,
-        Tamper {
-            name: "manifest.json truncated or garbled",
-            file: "manifest.json",
-            must: [R, R, R, A],
-            apply: |run, a, _| {
-                let p = run.join("manifest.json");
-                let mut b = std::fs::read(&p).unwrap();
-                let n = b.len();
-                match a % 3 {
-                    0 => b.truncate(1 + (a as usize / 3 % (n - 2))),
-                    1 => b = b"null".to_vec(),
-                    _ => b.insert(0, 0xff),
+                    let z: Vec<usize> = (0..list.len())
+                        .filter(|i| list[*i]["buffer"] == "Z")
+                        .collect();
+                    list[z[(a % z.len() as u64) as usize]]["max_abs_error"] = json!(1e308);
+                } else {
+                    entry(v, a)["interior_mismatches"] = json!(u64::MAX);
                 }
-                std::fs::write(&p, b).unwrap();
-            },
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "manifest.json a link out of the run",
-            file: "manifest.json",
-            must: [R, R, R, A],
-            apply: |run, _, _| {
-                let p = run.join("manifest.json");
-                let out = run.parent().unwrap().join("outside-manifest.json");
-                std::fs::copy(&p, &out).unwrap();
-                replace_with_link(&p, &out);
-            },
+    tamper(
+        Full,
+        "an entry removed",
+        "would be dropped",
+        [N, R, A, A],
+        |run, a, _| {
+            edit_json(&run.join("results.json"), |v| {
+                let list = v["results"].as_array_mut().unwrap();
+                let n = list.len() as u64;
+                list.remove((a % n) as usize);
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "manifest.json deleted",
-            file: "manifest.json",
-            must: [A, A, A, A],
-            apply: |run, _, _| {
-                std::fs::remove_file(run.join("manifest.json")).unwrap();
-            },
+    tamper(
+        Full,
+        "an entry doubled",
+        "results.json",
+        [R, R, A, A],
+        |run, a, _| {
+            edit_json(&run.join("results.json"), |v| {
+                let e = entry(v, a).clone();
+                v["results"].as_array_mut().unwrap().push(e);
+            });
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "manifest.json control characters in names and versions",
-            file: "manifest.json",
-            must: [A, A, A, A],
-            apply: |run, a, b| {
-                let s = ["\u{1b}[31mred\u{7}", "a\nb", "nul\u{0}x", "<b>x</b>"][(b % 4) as usize];
-                edit_json(&run.join("manifest.json"), |v| {
-                    let scenes = v["scenes"].as_array_mut().unwrap();
-                    let n = scenes.len() as u64;
-                    let sc = &mut scenes[(a % n) as usize];
-                    match b / 4 % 3 {
-                        0 => sc["renders"][0]["version"] = json!(s),
-                        1 => sc["scene_file"] = json!(s),
-                        _ => sc["renders"][0]["reason"] = json!(s),
-                    }
-                });
-            },
+    tamper(
+        Full,
+        "results.json of another format",
+        "results.json",
+        [R, R, A, A],
+        |run, a, _| {
+            let f = ["rendiff-results/2", "", "rendiff-manifest/1"][(a % 3) as usize];
+            edit_json(&run.join("results.json"), |v| v["format"] = json!(f));
         },
     ),
-    (
-        Target::Full,
-        Tamper {
-            name: "an EXR deleted, truncated or replaced",
-            file: ".exr",
-            must: [A, A, A, A],
-            apply: |run, a, b| {
-                let p = exr(run, a);
-                match b % 5 {
-                    0 => std::fs::remove_file(&p).unwrap(),
-                    1 => {
-                        let bytes = std::fs::read(&p).unwrap();
-                        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
-                    }
-                    2 => {
-                        std::fs::remove_file(&p).unwrap();
-                        mkfifo(&p);
-                    }
-                    3 => replace_with_link(&p, Path::new("/dev/zero")),
-                    _ => {
-                        std::fs::remove_file(&p).unwrap();
-                        std::fs::create_dir(&p).unwrap();
-                    }
+    tamper(
+        Full,
+        "control characters and path separators in names",
+        "results.json",
+        [A, A, A, A],
+        |run, a, b| {
+            let s = [
+                "\u{1b}[31mred\u{7}",
+                "../../escaped",
+                "/etc/x",
+                "a\nb",
+                "nul\u{0}x",
+                "\u{202e}rtl",
+                "..",
+                "x/../../y",
+                "<script>",
+                "a|b",
+            ][(b % 10) as usize];
+            let f = ["scene", "backend", "buffer", "reason"][(b / 10 % 4) as usize];
+            edit_json(&run.join("results.json"), |v| entry(v, a)[f] = json!(s));
+        },
+    ),
+    tamper(
+        Full,
+        "an INCOMPLETE marker added",
+        "incomplete run",
+        [R, R, R, A],
+        |run, _, _| {
+            std::fs::write(run.join("INCOMPLETE"), "check started by process 1\n").unwrap();
+        },
+    ),
+    tamper(
+        Full,
+        "manifest.json truncated or garbled",
+        "manifest.json",
+        [R, R, R, A],
+        |run, a, _| {
+            edit_bytes(&run.join("manifest.json"), |b| match a % 3 {
+                0 => b.truncate(1 + (a as usize / 3 % (b.len() - 2))),
+                1 => *b = b"null".to_vec(),
+                _ => b.insert(0, 0xff),
+            });
+        },
+    ),
+    tamper(
+        Full,
+        "manifest.json a link out of the run",
+        "manifest.json",
+        [R, R, R, A],
+        |run, _, _| {
+            link_out(run, "manifest.json");
+        },
+    ),
+    tamper(
+        Full,
+        "manifest.json deleted",
+        "manifest.json",
+        [A, A, A, A],
+        |run, _, _| {
+            std::fs::remove_file(run.join("manifest.json")).unwrap();
+        },
+    ),
+    tamper(
+        Full,
+        "manifest.json control characters in names and versions",
+        "manifest.json",
+        [A, A, A, A],
+        |run, a, b| {
+            let s = ["\u{1b}[31mred\u{7}", "a\nb", "nul\u{0}x", "<b>x</b>"][(b % 4) as usize];
+            edit_json(&run.join("manifest.json"), |v| {
+                let scenes = v["scenes"].as_array_mut().unwrap();
+                let n = scenes.len() as u64;
+                let sc = &mut scenes[(a % n) as usize];
+                match b / 4 % 3 {
+                    0 => sc["renders"][0]["version"] = json!(s),
+                    1 => sc["scene_file"] = json!(s),
+                    _ => sc["renders"][0]["reason"] = json!(s),
                 }
-            },
+            });
+        },
+    ),
+    tamper(
+        Full,
+        "an EXR deleted, truncated or replaced",
+        ".exr",
+        [A, A, A, A],
+        |run, a, b| {
+            let p = exr(run, a);
+            match b % 5 {
+                4 => fifo_or_dir(&p, 1),
+                k => spoil_exr(&p, k),
+            }
         },
     ),
     // ---- the shard: merge re-judges its renders
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard manifest.json truncated, garbled or deleted",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, a, _| {
-                let p = run.join("manifest.json");
-                let mut b = std::fs::read(&p).unwrap();
-                let n = b.len();
-                match a % 4 {
-                    0 => b.truncate(1 + (a as usize / 4 % (n - 2))),
-                    1 => b = b"{}".to_vec(),
-                    2 => b.insert(0, 0xff),
-                    _ => {
-                        std::fs::remove_file(&p).unwrap();
-                        return;
-                    }
-                }
-                std::fs::write(&p, b).unwrap();
-            },
+    tamper(
+        Shard,
+        "shard manifest.json truncated, garbled or deleted",
+        "manifest.json",
+        [A, A, A, R],
+        |run, a, _| {
+            let p = run.join("manifest.json");
+            match a % 4 {
+                0 => edit_bytes(&p, |b| b.truncate(1 + (a as usize / 4 % (b.len() - 2)))),
+                1 => std::fs::write(&p, b"{}").unwrap(),
+                2 => edit_bytes(&p, |b| b.insert(0, 0xff)),
+                _ => std::fs::remove_file(&p).unwrap(),
+            }
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard manifest.json a link out of the run",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, _, _| {
-                let p = run.join("manifest.json");
-                let out = run.parent().unwrap().join("outside-manifest.json");
-                std::fs::copy(&p, &out).unwrap();
-                replace_with_link(&p, &out);
-            },
+    tamper(
+        Shard,
+        "shard manifest.json a link out of the run",
+        "manifest.json",
+        [A, A, A, R],
+        |run, _, _| {
+            link_out(run, "manifest.json");
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard's recorded resolved scene hash changed",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, a, _| {
-                let h = [
-                    "sha256:0000000000000000000000000000000000000000000000000000000000000000",
-                    "",
-                    "sha256:",
-                    "md5:x",
-                ][(a % 4) as usize];
-                edit_json(&run.join("manifest.json"), |v| {
-                    v["scenes"][0]["resolved_sha256"] = json!(h)
-                });
-            },
+    tamper(
+        Shard,
+        "shard's recorded resolved scene hash changed",
+        "manifest.json",
+        [A, A, A, R],
+        |run, a, _| {
+            let h = [
+                "sha256:0000000000000000000000000000000000000000000000000000000000000000",
+                "",
+                "sha256:",
+                "md5:x",
+            ][(a % 4) as usize];
+            edit_json(&run.join("manifest.json"), |v| {
+                v["scenes"][0]["resolved_sha256"] = json!(h)
+            });
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard's resolved scene changed",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, a, _| {
-                let p = scene_dir(run, 0).join("resolved/triangles.f32");
-                let mut b = std::fs::read(&p).unwrap();
+    tamper(
+        Shard,
+        "shard's resolved scene changed",
+        "manifest.json",
+        [A, A, A, R],
+        |run, a, _| {
+            edit_bytes(&scene_dir(run, 0).join("resolved/triangles.f32"), |b| {
                 let n = b.len();
                 b[a as usize % n] ^= 0x40;
-                std::fs::remove_file(&p).unwrap();
-                std::fs::write(&p, b).unwrap();
-            },
+            });
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard manifest numbers negative or of the wrong type",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, a, _| {
-                edit_json(&run.join("manifest.json"), |v| match a % 4 {
-                    0 => v["created_unix"] = json!(-1),
-                    1 => v["shard"]["index"] = json!(-1),
-                    2 => v["shard"]["total"] = json!("2"),
-                    _ => v["scenes"] = json!({}),
-                });
-            },
+    tamper(
+        Shard,
+        "shard manifest numbers negative or of the wrong type",
+        "manifest.json",
+        [A, A, A, R],
+        |run, a, _| {
+            edit_json(&run.join("manifest.json"), |v| match a % 4 {
+                0 => v["created_unix"] = json!(-1),
+                1 => v["shard"]["index"] = json!(-1),
+                2 => v["shard"]["total"] = json!("2"),
+                _ => v["scenes"] = json!({}),
+            });
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard scene name leaves the run",
-            file: "manifest.json",
-            must: [A, A, A, R],
-            apply: |run, a, _| {
-                let s = ["../x", "/etc", "", "..", "a/b", "\u{1b}[2J"][(a % 6) as usize];
-                edit_json(&run.join("manifest.json"), |v| {
-                    v["scenes"][0]["scene"] = json!(s)
-                });
-            },
+    tamper(
+        Shard,
+        "shard scene name leaves the run",
+        "manifest.json",
+        [A, A, A, R],
+        |run, a, _| {
+            let s = ["../x", "/etc", "", "..", "a/b", "\u{1b}[2J"][(a % 6) as usize];
+            edit_json(&run.join("manifest.json"), |v| {
+                v["scenes"][0]["scene"] = json!(s)
+            });
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard EXR deleted, truncated, garbled or special",
-            file: ".exr",
-            must: [A, A, A, N],
-            apply: |run, a, b| {
-                // The renders' (not the raster reference's, which merge also reads).
-                let p = exr(run, a);
-                match b % 5 {
-                    0 => std::fs::remove_file(&p).unwrap(),
-                    1 => {
-                        let bytes = std::fs::read(&p).unwrap();
-                        std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
+    tamper(
+        Shard,
+        "shard EXR deleted, truncated, garbled or special",
+        ".exr",
+        [A, A, A, N],
+        |run, a, b| {
+            // The renders' (not the raster reference's, which merge also reads).
+            let p = exr(run, a);
+            match b % 5 {
+                4 => edit_bytes(&p, |bytes| {
+                    let n = bytes.len();
+                    for k in (n / 2..n).step_by(7) {
+                        bytes[k] ^= 0x5a;
                     }
-                    2 => {
-                        std::fs::remove_file(&p).unwrap();
-                        mkfifo(&p);
-                    }
-                    3 => replace_with_link(&p, Path::new("/dev/zero")),
-                    _ => {
-                        let mut bytes = std::fs::read(&p).unwrap();
-                        let n = bytes.len();
-                        for k in (n / 2..n).step_by(7) {
-                            bytes[k] ^= 0x5a;
-                        }
-                        std::fs::remove_file(&p).unwrap();
-                        std::fs::write(&p, bytes).unwrap();
-                    }
-                }
-            },
+                }),
+                k => spoil_exr(&p, k),
+            }
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard EXR replaced by another scene's",
-            file: ".exr",
-            must: [A, A, A, N],
-            apply: |run, _, _| {
-                // Shard 1 holds one scene; shard 2's (another size) is beside it.
-                let p = scene_dir(run, 0).join("trace.exr");
-                let other = run.parent().unwrap().join("s2");
-                let q = scene_dir(&other, 0).join("trace.exr");
-                std::fs::remove_file(&p).unwrap();
-                std::fs::copy(q, &p).unwrap();
-            },
+    tamper(
+        Shard,
+        "shard EXR replaced by another scene's",
+        ".exr",
+        [A, A, A, N],
+        |run, _, _| {
+            // Shard 1 holds one scene; shard 2's (another size) is beside it.
+            let p = scene_dir(run, 0).join("trace.exr");
+            let other = run.parent().unwrap().join("s2");
+            let q = scene_dir(&other, 0).join("trace.exr");
+            std::fs::remove_file(&p).unwrap();
+            std::fs::copy(q, &p).unwrap();
         },
     ),
-    (
-        Target::Shard,
-        Tamper {
-            name: "shard INCOMPLETE marker added",
-            file: "incomplete run",
-            must: [A, A, A, R],
-            apply: |run, _, _| {
-                std::fs::write(run.join("INCOMPLETE"), "check \u{1b}[31mstarted\n").unwrap();
-            },
+    tamper(
+        Shard,
+        "shard INCOMPLETE marker added",
+        "incomplete run",
+        [A, A, A, R],
+        |run, _, _| {
+            std::fs::write(run.join("INCOMPLETE"), "check \u{1b}[31mstarted\n").unwrap();
         },
     ),
 ];

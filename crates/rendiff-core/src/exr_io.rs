@@ -213,8 +213,15 @@ pub fn open_exr(path: &Path) -> Result<std::io::BufReader<std::fs::File>> {
     }
 }
 
-/// Reads the docs/DESIGN.md channels of an EXR; IDs must be stored as uint.
-pub fn read_buffers(path: &Path) -> Result<Buffers> {
+/// The channels of an EXR's first layer, as stored.
+pub type ExrLayer = Layer<AnyChannels<FlatSamples>>;
+
+/// The ID channels (docs/DESIGN.md): compared exactly, so stored as uint.
+pub const ID_CHANNELS: [&str; 2] = ["id.prim", "id.object"];
+
+/// Reads every channel and attribute of an EXR's first layer: the one read
+/// chain of every reader of rendiff's EXRs.
+pub fn read_layer(path: &Path) -> Result<ExrLayer> {
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -223,7 +230,28 @@ pub fn read_buffers(path: &Path) -> Result<Buffers> {
         .all_attributes()
         .from_buffered(open_exr(path)?)
         .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let layer = &image.layer_data;
+    Ok(image.layer_data)
+}
+
+/// Refuses a layer (read from `path`) whose ID channel ([`ID_CHANNELS`]) is
+/// not stored as uint: the readers that compare IDs compare them exactly.
+pub fn require_uint_ids(path: &Path, layer: &ExrLayer) -> Result<()> {
+    for ch in &layer.channel_data.list {
+        let name = ch.name.to_string();
+        if ID_CHANNELS.contains(&name.as_str()) && !matches!(ch.sample_data, FlatSamples::U32(_)) {
+            bail!(
+                "{}: channel {name} must be stored as uint to be compared exactly",
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Reads the docs/DESIGN.md channels of an EXR; IDs must be stored as uint.
+pub fn read_buffers(path: &Path) -> Result<Buffers> {
+    let layer = &read_layer(path)?;
+    require_uint_ids(path, layer)?;
     let mut out = Buffers {
         width: layer.size.width(),
         height: layer.size.height(),
@@ -242,10 +270,6 @@ pub fn read_buffers(path: &Path) -> Result<Buffers> {
             ("Z", FlatSamples::F16(v)) => out.z = Some(v.iter().map(|x| x.to_f32()).collect()),
             ("id.prim", FlatSamples::U32(v)) => out.prim = Some(v.clone()),
             ("id.object", FlatSamples::U32(v)) => out.object = Some(v.clone()),
-            ("id.prim" | "id.object", _) => bail!(
-                "{}: channel {name} must be stored as uint to be compared exactly",
-                path.display()
-            ),
             _ => {}
         }
     }
@@ -269,15 +293,7 @@ pub struct RgbImage {
 /// the file has no radiance (visibility-only scenes). The one reader of these
 /// channels, shared by the report and the benchmarks.
 pub fn read_radiance(path: &Path) -> Result<Option<RgbImage>> {
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(open_exr(path)?)
-        .with_context(|| format!("{}: not a readable OpenEXR file", path.display()))?;
-    let layer = &image.layer_data;
+    let layer = &read_layer(path)?;
     let n = layer.size.width() * layer.size.height();
     let mut rgb = vec![[0f32; 3]; n];
     let mut var = vec![[0f32; 3]; n];

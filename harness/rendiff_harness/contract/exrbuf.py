@@ -348,3 +348,14 @@ def read_attrs(path: str | Path) -> dict[str, AttrValue]:
         return result
     finally:
         inp.close()
+
+
+def read_render(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, AttrValue]]:
+    """A render's buffers (`read_buffers`, whose BufferError it raises) and its attributes: none
+    where they cannot be read, since what is judged is the buffers."""
+    buffers = read_buffers(path)
+    try:
+        attrs = read_attrs(path)
+    except BufferError:
+        attrs = {}
+    return buffers, attrs

@@ -152,13 +152,9 @@ def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) ->
         raise EntryError(f"cannot load the resolved scene: {type(exc).__name__}: {exc}") from None
     exr = run_path(run, ref.get("exr"), f"reference {reference} EXR")
     try:
-        buffers = exrbuf.read_buffers(exr)
+        buffers, attrs = exrbuf.read_render(exr)
     except exrbuf.BufferError as exc:
         raise EntryError(f"reference {reference} unreadable: {exc}") from None
-    try:
-        attrs = dict(exrbuf.read_attrs(exr))
-    except exrbuf.BufferError:
-        attrs = {}
     cam = scene.camera
     shape = (cam.height, cam.width)
     for key, arr in buffers.items():
@@ -184,13 +180,9 @@ def read_test_buffers(run: Path, render: Mapping[str, Any], ref: Reference) -> B
     backend = render["backend"]
     exr = run_path(run, render.get("exr"), f"{backend} EXR")
     try:
-        test = exrbuf.read_buffers(exr)
+        test, attrs = exrbuf.read_render(exr)
     except exrbuf.BufferError as exc:
         raise EntryError(f"{backend} buffers unreadable: {exc}") from None
-    try:
-        attrs: Mapping[str, Any] = exrbuf.read_attrs(exr)
-    except exrbuf.BufferError:
-        attrs = {}
     for key, arr in test.items():
         if arr.shape[:2] != ref.shape:
             raise EntryError(

@@ -108,6 +108,16 @@ class Entry:
     flip_note: str = ""
     extra: dict[str, Any] = field(default_factory=dict)  # written last (calibration's measured fields)
 
+    def record_classes(self, edge: int, tie: int, crack: int, interior: int) -> None:
+        """The mismatch counts of the verifier's classes, as a comparison found them."""
+        self.edge_mismatches, self.tie_mismatches = edge, tie
+        self.crack_mismatches, self.interior_mismatches = crack, interior
+
+    def record_errors(self, max_abs: float, mean_abs: float, max_rel: float) -> None:
+        """The error fields, as a comparison measured them (a non-finite one is null)."""
+        self.max_abs_error, self.mean_abs_error = finite(max_abs), finite(mean_abs)
+        self.max_rel_error = finite(max_rel)
+
     @classmethod
     def for_render(
         cls,

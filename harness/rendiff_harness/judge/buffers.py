@@ -63,10 +63,7 @@ def judge_ids(r: BackendRender, e: Entry) -> Judged:
         attrs=r.attrs,
     )
     r.id_result = res
-    e.edge_mismatches = res.edge
-    e.tie_mismatches = res.tie
-    e.crack_mismatches = res.crack
-    e.interior_mismatches = res.interior
+    e.record_classes(res.edge, res.tie, res.crack, res.interior)
     e.tolerance = res.tolerance
     e.explanations = res.explanations
     notes = (
@@ -98,15 +95,10 @@ def judge_depth(r: BackendRender, e: Entry) -> Judged | None:
     except tolerance.ToleranceError as exc:
         e.reason = str(exc)
         return None
-    e.edge_mismatches = res.edge
-    e.tie_mismatches = res.tie
-    e.crack_mismatches = res.crack
-    e.interior_mismatches = res.interior
+    e.record_classes(res.edge, res.tie, res.crack, res.interior)
     e.mask_mismatches = res.mask
     e.compared_pixels = res.compared
-    e.max_abs_error = finite(res.max_abs)
-    e.mean_abs_error = finite(res.mean_abs)
-    e.max_rel_error = finite(res.max_rel)
+    e.record_errors(res.max_abs, res.mean_abs, res.max_rel)
     e.tolerance = res.tolerance
     # Where both hit other prims: judged against the test's own plane (judge/depth.py), or not comparable.
     e.extra["own_plane_pixels"] = res.own_plane

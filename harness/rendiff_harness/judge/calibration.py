@@ -551,14 +551,10 @@ def _run_path(run: Path, rel: Any, what: str) -> Path:
 def _read(run: Path, render: Mapping[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     exr = _run_path(run, render.get("exr"), f"{render.get('backend')} EXR")
     try:
-        buffers = exrbuf.read_buffers(exr)
+        buffers, attrs = exrbuf.read_render(exr)
     except exrbuf.BufferError as exc:
         raise CalibrationError(f"unreadable: {exc}") from None
-    try:
-        attrs: dict[str, Any] = dict(exrbuf.read_attrs(exr))
-    except exrbuf.BufferError:
-        attrs = {}
-    return buffers, attrs
+    return buffers, dict(attrs)
 
 
 def _has_z(render: Mapping[str, Any]) -> bool | None:

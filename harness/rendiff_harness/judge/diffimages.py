@@ -17,7 +17,9 @@ numbers (an image is never worth losing a result).
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -98,6 +100,17 @@ def id_classes(
     return cls
 
 
+@contextlib.contextmanager
+def _one_message(path: Path) -> Iterator[None]:
+    """Anything from OIIO or numpy while writing `path` becomes one DiffImageError naming it."""
+    try:
+        yield
+    except DiffImageError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - anything from OIIO/numpy becomes one message
+        raise DiffImageError(f"{path}: {type(exc).__name__}: {exc}") from exc
+
+
 def write_id_diff(
     path: str | Path,
     ref_prim: np.ndarray,
@@ -108,21 +121,17 @@ def write_id_diff(
 ) -> Path:
     """Write the ID-mismatch map; `edge`/`interior` are (H, W) boolean masks of mismatches."""
     path = Path(path)
-    try:
+    with _one_message(path):
         cls = id_classes(ref_prim, test_prim, edge, interior, background)
         rgb = _color_map_knots(cls.astype(np.float32) / (len(ID_COLORS) - 1), ID_COLORS)
         _write_png(path, rgb)
-    except DiffImageError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - anything from OIIO/numpy becomes one message
-        raise DiffImageError(f"{path}: {type(exc).__name__}: {exc}") from exc
     return path
 
 
 def write_depth_diff(path: str | Path, ref_z: np.ndarray, test_z: np.ndarray, scale: float) -> Path:
     """Write the |dZ| heat map (inferno), normalized by `scale` (> 0; else by 1)."""
     path = Path(path)
-    try:
+    with _one_message(path):
         zr = np.asarray(ref_z, dtype=np.float64)
         zt = np.asarray(test_z, dtype=np.float64)
         hr, ht = exrbuf.depth_hits(zr), exrbuf.depth_hits(zt)
@@ -135,24 +144,16 @@ def write_depth_diff(path: str | Path, ref_z: np.ndarray, test_z: np.ndarray, sc
         rgb[~hr & ~ht] = 0.0
         rgb[hr != ht] = MASK_MISMATCH_COLOR
         _write_png(path, rgb)
-    except DiffImageError:
-        raise
-    except Exception as exc:  # noqa: BLE001
-        raise DiffImageError(f"{path}: {type(exc).__name__}: {exc}") from exc
     return path
 
 
 def write_rgb_diff(path: str | Path, score: np.ndarray, edge: np.ndarray, interior: np.ndarray) -> Path:
     """Write the radiance heat map: `score` (H, W) 1 = at the tolerance; failing pixels colored."""
     path = Path(path)
-    try:
+    with _one_message(path):
         sc = np.nan_to_num(np.asarray(score, dtype=np.float64), nan=1.0, posinf=1.0)
         rgb = _color_map_named(np.clip(sc, 0.0, 1.0), "inferno")
         rgb[edge] = ID_COLORS[EDGE]
         rgb[interior] = ID_COLORS[INTERIOR]
         _write_png(path, rgb)
-    except DiffImageError:
-        raise
-    except Exception as exc:  # noqa: BLE001
-        raise DiffImageError(f"{path}: {type(exc).__name__}: {exc}") from exc
     return path

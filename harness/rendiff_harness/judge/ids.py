@@ -185,22 +185,16 @@ def compare_ids(
             "; tie: both triangles cover the center and their depths agree within the depth tolerance; "
             "crack: a leak through a closed edge (allowed only where the backend declares it)"
         )
-        bad = np.nonzero(cls == verify.INTERIOR)[0][:EXAMPLES]
-        if bad.size:
-            details.append(
-                "interior e.g. "
-                + "; ".join(
-                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in bad
+        for name, cls_value in (("interior", verify.INTERIOR), ("crack", verify.CRACK)):
+            shown = np.nonzero(cls == cls_value)[0][:EXAMPLES]
+            if shown.size:
+                details.append(
+                    f"{name} e.g. "
+                    + "; ".join(
+                        f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}"
+                        for k in shown
+                    )
                 )
-            )
-        cracks = np.nonzero(cls == verify.CRACK)[0][:EXAMPLES]
-        if cracks.size:
-            details.append(
-                "crack e.g. "
-                + "; ".join(
-                    f"({cols[k]},{rows[k]}) ref {_id(r_ids[k])} test {_id(t_ids[k])}: {result.why[k]}" for k in cracks
-                )
-            )
     classes.ravel()[idx] = cls
     edge_mask = (classes == verify.EDGE) | (classes == verify.TIE) | (classes == verify.CRACK)
     interior_mask = classes == verify.INTERIOR

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..contract import lighting
 from ..contract.manifest import Reference, render_info
-from ..contract.results import Entry, finite
+from ..contract.results import Entry
 from ..renderers.spec import BackendSpec
 from . import diffimages, precision, radiance
 from .verdict import Judged
@@ -82,9 +82,7 @@ def record_rgb(e: Entry, res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb:
     e.interior_mismatches = res.interior
     e.failing_pixels = res.failing_pixels
     e.compared_pixels = res.pixels
-    e.max_abs_error = finite(res.max_abs)
-    e.mean_abs_error = finite(res.mean_abs)
-    e.max_rel_error = finite(res.max_rel)
+    e.record_errors(res.max_abs, res.mean_abs, res.max_rel)
     e.tolerance = res.tolerance
     e.min_p = None if res.min_p is None else float(res.min_p)
     e.alpha = res.alpha

@@ -145,29 +145,20 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
                 .to_vec()
         })
     });
+    let scenes = fams
+        .iter()
+        .zip(&files)
+        .filter(|(f, _)| f.judge != Judge::Memory)
+        .flat_map(|(_, v)| v.iter().cloned())
+        .collect();
     let check_opts = CheckOptions {
-        scenes: fams
-            .iter()
-            .zip(&files)
-            .filter(|(f, _)| f.judge != Judge::Memory)
-            .flat_map(|(_, v)| v.iter().cloned())
-            .collect(),
-        run_dir: tmp.path().join("run"),
-        root: opts.common.root.clone(),
         only: only.clone(),
         timeout: Duration::from_secs(opts.common.timeout_s),
         expectations,
-        quiet: true,
-        references: None,
-        core: check::CoreShading::default(),
-        // No calibration probes: the bench looks for where each renderer breaks, and the
-        // probes would only add their renders to a long run.
-        calibration: None,
+        // No calibration probes (the default): the bench looks for where each renderer
+        // breaks, and the probes would only add their renders to a long run.
         jobs: 1,
-        workers: true,
-        renderers: None,
-        renderers_snapshot: None,
-        memory_budget: check::pool::default_memory_budget(),
+        ..CheckOptions::new(scenes, tmp.path().join("run"), opts.common.root.clone())
     };
     // A name in --only that no backend has fails here, not in every check below.
     check::check_only_option(&check_opts)?;
