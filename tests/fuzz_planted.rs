@@ -4,7 +4,7 @@
 //! drops a triangle that lies in front of a near-coplanar neighbour drawn
 //! before it; `subpixel_shift` moves one vertex of every sub-pixel triangle
 //! by 1e-3 px; `far_depth` measures depth from a float32 world-space hit
-//! point. Within 200 generated scenes the fuzzer must report each
+//! point; `coplanar_swap` swaps the IDs of coplanar neighbours. Within 200 generated scenes the fuzzer must report each
 //! and reduce it to at most 8 triangles; for the first, the
 //! reduced scene must also (a) still fail on its own, checked from a fresh
 //! folder with calibration, and (b) come back from a second reduction byte
@@ -298,6 +298,83 @@ fn a_planted_subpixel_vertex_shift_is_found_and_reduced() {
         r["complete"].as_bool().unwrap(),
         "reduction stopped early: {r}"
     );
+}
+
+/// `coplanar_swap` reports each other's IDs for two coplanar triangles that
+/// share an edge and lie on opposite sides of it. Swapping the IDs of
+/// overlapping coplanar triangles would prove nothing: where both cover a
+/// pixel center at one depth the contract lets either win (a tie,
+/// docs/verifier.md). Neighbours never both cover an interior pixel's
+/// center, so their swap is forbidden, and the verifier must call it
+/// `interior`. The grammar builds such neighbours on purpose (the
+/// `pixel_centers` grid's split cells, `dense`, `t_junction`): the fuzz must
+/// find the `id` failure among them, and the largest scene that hit it must
+/// reduce to the pair, 2 triangles (one alone has no neighbour to swap with).
+/// Sizes, not times: whether a reduction reached its fixed point within its
+/// time budget depends on the machine's load, so `complete` is not asserted.
+#[test]
+fn a_planted_coplanar_id_swap_is_found_and_reduced() {
+    need_venv();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let backend = "coplanar_swap";
+    let ledger = fuzz(dir, backend);
+    let found = findings_of(&ledger, backend, Some("id"), &["interior"]);
+    let grid: u64 = found
+        .iter()
+        .filter_map(|f| f["families"]["pixel_centers"].as_u64())
+        .sum();
+    assert!(grid >= 1, "no pixel_centers scene hit it: {ledger}");
+    for f in &found {
+        let tags = f["signature"]["situation"].as_array().unwrap();
+        assert!(
+            tags.contains(&"shared_edge".into()) && tags.contains(&"coplanar".into()),
+            "{f}"
+        );
+        let r = &f["reduced"];
+        if !r.is_null() {
+            assert!(r["error"].is_null(), "reduction failed: {r}");
+            assert!(r["triangles_after"].as_u64().unwrap() <= 8, "{r}");
+        }
+    }
+
+    // The largest scene that hit it, reduced by hand from the fuzz's run.
+    let scene_file = |s: &str| dir.join(format!("fuzz/scenes/{s}.toml"));
+    let largest = found
+        .iter()
+        .flat_map(|f| f["scenes"].as_array().unwrap())
+        .map(|s| s.as_str().unwrap())
+        .max_by_key(|s| std::fs::metadata(scene_file(s)).unwrap().len())
+        .unwrap();
+    let out = output_within(
+        rendiff(dir)
+            .args(["reduce", "fuzz/run", largest, "--backend", backend])
+            .args(["--buffer", "id", "--renderers"])
+            .arg(renderers())
+            .args(["--jobs", "2", "-o", "largest.toml"]),
+        600,
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let triangles = |file: &Path| {
+        let scene = rendiff::scene::Scene::load(file).unwrap();
+        rendiff::scene::resolve::ResolvedScene::resolve(&scene)
+            .unwrap()
+            .triangles
+    };
+    let before = triangles(&scene_file(largest)).len();
+    let after = triangles(&dir.join("largest.toml"));
+    assert!(before > 2, "{largest} has {before} triangles");
+    assert_eq!(after.len(), 2, "{largest}: {}", text(&out));
+    // The pair is a pair of neighbours: one edge in common, bit for bit.
+    let shared = after[0]
+        .iter()
+        .filter(|v| {
+            after[1]
+                .iter()
+                .any(|w| w.to_array().map(f32::to_bits) == v.to_array().map(f32::to_bits))
+        })
+        .count();
+    assert_eq!(shared, 2, "{largest}: {after:?}");
 }
 
 /// The core's two loops and Embree's robust mode on generated scenes:

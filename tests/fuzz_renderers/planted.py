@@ -13,6 +13,13 @@ t rounded to float32 once) with one deliberate fault, chosen by BUG:
 * `subpixel_shift`: a triangle whose image is smaller than a pixel (projected area below
   1 px^2) has its first vertex moved 1e-3 px to the right (along the camera's right axis, at
   the vertex's depth), as a snapping step applied to small triangles only would.
+* `coplanar_swap`: two coplanar triangles that share an edge and lie on opposite sides of it
+  (neighbours in one plane, such as the two halves of a quad) report each other's IDs, as a
+  mesh optimiser that merges coplanar neighbours into one polygon and relabels its halves in
+  the wrong order would. Where two triangles both cover a pixel center at the same depth the
+  contract lets either win (a *tie*, docs/verifier.md), so swapping overlapping or duplicated
+  coplanar triangles is allowed; neighbours never both cover an interior pixel's center, so
+  this swap is one the contract forbids.
 
 Two more are camera-convention faults, for the report's and the calibration's tests
 (tests/report_causes.rs, harness/tests/test_calibration_hypotheses.py):
@@ -22,7 +29,7 @@ Two more are camera-convention faults, for the report's and the calibration's te
 * `radial_depth`: writes the distance from the eye, `t |d|`, in Z instead of the planar depth
   `t` (docs/DESIGN.md "Buffers").
 
-All five are declared with the tiny renderer's honest precision (renderers.toml), so the fault
+All six are declared with the tiny renderer's honest precision (renderers.toml), so the fault
 is all the verifier sees: its pixels are interior (or crack) mismatches.
 """
 
@@ -41,7 +48,11 @@ from rendiff_harness.contract import exrbuf  # noqa: E402
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
 SHIFT_PX = 1e-3
-BUGS = ("coplanar_bias", "subpixel_shift", "far_depth", "corner_sample", "radial_depth")
+# Two triangles are coplanar for `coplanar_swap` when each one's third vertex is within this
+# fraction of its distance from the eye of the other's plane (the `coplanar` situation tag's
+# threshold, docs/fuzzing.md).
+COPLANAR = 2.0**-10
+BUGS = ("coplanar_bias", "subpixel_shift", "far_depth", "coplanar_swap", "corner_sample", "radial_depth")
 
 
 def projected_area_px(
@@ -61,6 +72,56 @@ def projected_area_px(
     px = ((tri - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0
     py = (1.0 - (tri - eye) @ up / depth / tan_half) * h / 2.0
     return float(abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0])) / 2.0)
+
+
+def coplanar_swap(tris: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """The ID each triangle reports under `coplanar_swap`: its own, or its paired neighbour's.
+
+    Triangles are paired in draw order, each with the first unpaired later one that shares an
+    edge with it (two vertices equal bit for bit), lies on the other side of that edge and is
+    coplanar with it (`COPLANAR`). Exact duplicates share three vertices and are never paired.
+    """
+    ids = np.arange(len(tris))
+    by_edge: dict[bytes, list[int]] = {}
+    for i, tri in enumerate(tris):
+        for k in range(3):
+            by_edge.setdefault(_edge_key(tri, k), []).append(i)
+    paired = np.zeros(len(tris), dtype=bool)
+    for i, tri in enumerate(tris):
+        if paired[i]:
+            continue
+        for j in sorted({j for k in range(3) for j in by_edge[_edge_key(tri, k)] if j > i}):
+            if not paired[j] and _neighbours_in_one_plane(tri, tris[j], eye):
+                ids[i], ids[j] = j, i
+                paired[i] = paired[j] = True
+                break
+    return ids
+
+
+def _edge_key(tri: np.ndarray, k: int) -> bytes:
+    """Edge k of a triangle, its two vertices' bytes in a fixed order (either winding)."""
+    first: bytes = tri[k].tobytes()
+    second: bytes = tri[(k + 1) % 3].tobytes()
+    return min(first, second) + max(first, second)
+
+
+def _neighbours_in_one_plane(s: np.ndarray, t: np.ndarray, eye: np.ndarray) -> bool:
+    """Whether two triangles share exactly one edge, are coplanar and lie on opposite sides of it."""
+    in_t = {v.tobytes() for v in t}
+    shared = [v for v in s if v.tobytes() in in_t]
+    if len(shared) != 2:
+        return False
+    p, q = shared
+    r_s = next(v for v in s if v.tobytes() not in in_t)
+    in_s = {v.tobytes() for v in s}
+    r_t = next(v for v in t if v.tobytes() not in in_s)
+    for a, b in ((s, r_t), (t, r_s)):
+        n = np.cross(a[1] - a[0], a[2] - a[0])
+        length = np.linalg.norm(n)
+        if length == 0.0 or abs((b - a[0]) @ n) / length > COPLANAR * np.linalg.norm(b - eye):
+            return False
+    n = np.cross(s[1] - s[0], s[2] - s[0])
+    return float((np.cross(q - p, r_s - p) @ n) * (np.cross(q - p, r_t - p) @ n)) < 0.0
 
 
 def render(bug: str, scene_dir: Path, out: Path) -> None:
@@ -104,6 +165,9 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
         prim = np.where(hit, np.uint32(i), prim)
         normal = np.where(hit[..., None], n / length, normal)
     seen = prim != BACKGROUND
+    if bug == "coplanar_swap":
+        # The planted bug: coplanar neighbours report each other's IDs.
+        prim = np.where(seen, coplanar_swap(tris, eye)[np.where(seen, prim, 0)], prim).astype(np.uint32)
     if bug == "far_depth":
         # The planted bug: the hit point kept in float32 world space, the depth measured from it.
         with np.errstate(invalid="ignore"):
