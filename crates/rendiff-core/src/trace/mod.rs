@@ -721,7 +721,7 @@ mod tests {
         let mut s = crate::scene::Scene::load(&file).unwrap();
         let first = ResolvedScene::resolve(&s).unwrap();
         // Another eye (closer, from the other side), the same triangles.
-        s.camera.eye = Some([-1.9, 0.8, 2.2]);
+        s.file.camera.eye = Some([-1.9, 0.8, 2.2]);
         let second = ResolvedScene::resolve(&s).unwrap();
         assert_eq!(first.triangles, second.triangles);
         assert_ne!(first.camera.eye, second.camera.eye);
