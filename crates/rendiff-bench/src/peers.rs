@@ -598,9 +598,9 @@ fn goals(record: &Value) -> Value {
         .map(|r| json!({"threads": r["threads"],
                         "raster_speedup_over_trace": r["raster_vs_trace_passes"]["raster_speedup_over_trace"]}))
         .collect();
-    let mut issue_39 = peer_tables::goals_of("million", &t);
+    let mut issue_39 = peer_tables::goals_of(&scene_name(&record["config"]["scene"]), &t);
     issue_39.extend(peer_tables::goals_of(
-        "scanned mesh",
+        &scene_name(&record["scanned_mesh"]["scene"]),
         record["scanned_mesh"]["trace_throughput"]
             .as_array()
             .map_or(&[][..], Vec::as_slice),
@@ -630,6 +630,14 @@ fn goals(record: &Value) -> Value {
         "core_raster_vs_llvmpipe_speedup": record["raster_vs_pyrender"]["speedup_core_over_pyrender_pass"],
         "equal_time_error_ratio_mitsuba_over_core": record["path_tracing_equal_time"]["rmse_ratio_mitsuba_over_core"],
     })
+}
+
+/// A scene's short name in goals and headings: its file's stem ("million").
+fn scene_name(path: &Value) -> String {
+    let p = path.as_str().unwrap_or("scene");
+    std::path::Path::new(p)
+        .file_stem()
+        .map_or(p.to_string(), |s| s.to_string_lossy().into_owned())
 }
 
 /// The headline: the main scene's per-frame ratio (the core's new camera
@@ -949,11 +957,15 @@ fn page(record: &Value, svg: &str) -> String {
         super::page::compact(&c["paired_rounds_note"])
     ));
     peer_tables::page_goals(&mut p, &record["goals"]["issue_39"]);
-    peer_tables::page_tables(&mut p, "million", &record["trace_throughput"]);
+    peer_tables::page_tables(
+        &mut p,
+        &scene_name(&c["scene"]),
+        &record["trace_throughput"],
+    );
     if record["scanned_mesh"]["trace_throughput"].is_array() {
         peer_tables::page_tables(
             &mut p,
-            "scanned mesh",
+            &scene_name(&record["scanned_mesh"]["scene"]),
             &record["scanned_mesh"]["trace_throughput"],
         );
     }
