@@ -32,6 +32,7 @@ pub mod native_embree;
 pub mod outputs;
 pub mod page;
 pub mod pareto;
+pub mod peer_tables;
 pub mod peers;
 pub mod plot;
 pub mod radiance;

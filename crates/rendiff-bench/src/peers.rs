@@ -31,6 +31,7 @@ use super::harness::{number_at, Harness};
 use super::knobs::SceneSpec;
 use super::native_embree::{self, Config, NativeScene, PreparedRays, Quality};
 use super::page::{num, Page};
+use super::peer_tables;
 use super::spp::{core_path, mitsuba_path, MitsubaPoint, MitsubaRun};
 use super::{measure, radiance, visibility_error, Common};
 use anyhow::Result;
@@ -130,6 +131,29 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             .unwrap_or_else(|e| json!({"skipped": format!("{e:#}")})),
         Err(why) => json!({"skipped": why}),
     };
+    let two_triangles = opts
+        .threads
+        .iter()
+        .map(|&t| Ok(super::pool(t)?.install(|| peer_tables::two_triangles(t, opts.rounds))))
+        .collect::<Result<Vec<Value>>>()?;
+    let first_image_external = match &harness {
+        Ok(h) => match h.export(&scene, &scratch.path().join("first-image")) {
+            Ok(resolved) => {
+                rendiff::errln!("peers: time to first image, mitsuba (visibility)");
+                json!({
+                    "mitsuba": peer_tables::external(h, "mitsuba", &resolved, runs),
+                    "pyrender": {
+                        "render_call_s_median": pyrender["pyrender"]["harness_time_s_median"],
+                        "subprocess_wall_s_median": pyrender["pyrender"]["subprocess_wall_s_median"],
+                        "includes": "raster_vs_pyrender's runs: the harness's time_s (reading the exported scene, upload, depth + ID passes, read-back, EXR write; Python start-up and imports excluded) and the whole subprocess",
+                        "paired": "no: an external process on all CPUs; no ratio is formed",
+                    },
+                })
+            }
+            Err(why) => json!({"skipped": why}),
+        },
+        Err(why) => json!({"skipped": why}),
+    };
     let mut record = json!({
         "benchmark": "peers",
         "environment": environment,
@@ -145,13 +169,17 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             "embree_best": "highest Mrays/s over every Embree row at that thread count: the binding's (entry point x context flag x scene flags x build quality) and the native driver's (entry point x context flag x build quality)",
             "embree_native": "native/embree_driver.c: Embree's own headers and ray layouts, rays prepared in f32 before timing, FTZ/DAZ set while tracing (docs/embree-fastest-path.md)",
             "paired_rounds": opts.rounds,
+            "paired_rounds_note": if opts.common.quick { "--quick: fewer paired rounds than the 11 of a full run" } else { "a full run's rounds" },
             "agreement": format!("the binding's best must be within {:.0}% of the native driver's best in paired rounds, or the page says so in red", measure::AGREEMENT * 100.0),
         },
         "trace_throughput": per_threads,
         "scanned_mesh": scanned,
         "raster_vs_pyrender": pyrender,
         "path_tracing_equal_time": equal_time,
+        "two_screen_filling_triangles": two_triangles,
+        "time_to_first_image_external": first_image_external,
     });
+    record["headline"] = headline(&record);
     record["goals"] = goals(&record);
     super::finish_environment(&mut record);
     let svg = bars(&record);
@@ -328,7 +356,16 @@ fn throughput(
                 best_json(k, v, core_mrays, single_mrays, paired)
             })
         };
+        rendiff::errln!("peers: {threads} thread(s), per-frame table");
+        let per_frame = {
+            let mut bvh = TraceBvh::build(scene, core_bvh);
+            let native = native_best.as_ref().map(|(c, b, r)| (b, *r, *c, native.prepare_s));
+            peer_tables::per_frame(scene, &mut bvh, core_bvh, native, rounds)
+        };
         drop(native_best);
+        rendiff::errln!("peers: {threads} thread(s), time-to-first-image table");
+        let first_config = peer_tables::least_build_plus_trace(&native.rows).map(|(c, _)| c);
+        let first_image = peer_tables::first_image(scene, threads, first_config, rounds);
         let best_robust = fastest(&embree, Some(EmbreeMode::Robust.name()))
             .map(|(k, v)| best_json(k, v, core_mrays, single_mrays, None));
         let ratio = |k: &str| embree.get(k).and_then(|v| v["core_over_embree"].as_f64());
@@ -354,6 +391,8 @@ fn throughput(
             "embree_check": check,
             "embree_best": best,
             "embree_best_robust": best_robust,
+            "per_frame": per_frame,
+            "time_to_first_image": first_image,
             "ratios": {
                 "core_trace_over_embree_single": ratio("embree single"),
                 "core_trace_over_embree_packet8": ratio("embree packet8"),
@@ -559,7 +598,31 @@ fn goals(record: &Value) -> Value {
         .map(|r| json!({"threads": r["threads"],
                         "raster_speedup_over_trace": r["raster_vs_trace_passes"]["raster_speedup_over_trace"]}))
         .collect();
+    let mut issue_39 = peer_tables::goals_of(&scene_name(&record["config"]["scene"]), &t);
+    issue_39.extend(peer_tables::goals_of(
+        &scene_name(&record["scanned_mesh"]["scene"]),
+        record["scanned_mesh"]["trace_throughput"]
+            .as_array()
+            .map_or(&[][..], Vec::as_slice),
+    ));
+    for r in record["two_screen_filling_triangles"]
+        .as_array()
+        .into_iter()
+        .flatten()
+    {
+        let mut g = peer_tables::goal(
+            &format!(
+                "two screen-filling triangles, {} thread(s), time to first image: raster / trace",
+                r["threads"]
+            ),
+            &r["raster_over_trace"],
+            10.0,
+        );
+        g["table"] = json!("time to first image");
+        issue_39.push(g);
+    }
     json!({
+        "issue_39": issue_39,
         "core_raster_vs_trace_passes": raster_vs_trace,
         "core_trace_vs_embree_single_ray": single,
         "core_trace_vs_embree_best": best,
@@ -567,6 +630,74 @@ fn goals(record: &Value) -> Value {
         "core_raster_vs_llvmpipe_speedup": record["raster_vs_pyrender"]["speedup_core_over_pyrender_pass"],
         "equal_time_error_ratio_mitsuba_over_core": record["path_tracing_equal_time"]["rmse_ratio_mitsuba_over_core"],
     })
+}
+
+/// A scene's short name in goals and headings: its file's stem ("million").
+fn scene_name(path: &Value) -> String {
+    let p = path.as_str().unwrap_or("scene");
+    std::path::Path::new(p)
+        .file_stem()
+        .map_or(p.to_string(), |s| s.to_string_lossy().into_owned())
+}
+
+/// The headline: the main scene's per-frame ratio (the core's new camera
+/// counted) against Embree's best per thread count, and its time-to-first-
+/// image ratio, each naming its table.
+fn headline(record: &Value) -> Value {
+    let rows = record["trace_throughput"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let trace_default = format!("core trace ({} BVH)", BvhQuality::default().name());
+    let per: Vec<Value> = rows
+        .iter()
+        .map(|r| {
+            let first = r["time_to_first_image"]["rows"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .find(|x| x["name"] == trace_default.as_str())
+                .map_or(Value::Null, |x| x["over_embree"].clone());
+            json!({"threads": r["threads"],
+                   "per_frame_table": {"what": "core trace (new camera counted) / Embree's fastest",
+                                       "ratio": r["per_frame"]["core_over_embree_new_camera_counted"]},
+                   "time_to_first_image_table": {"what": format!("{trace_default} / Embree's least build + trace"),
+                                                 "ratio": first}})
+        })
+        .collect();
+    json!({"scene": record["config"]["scene"], "rows": per})
+}
+
+/// The headline as page text, each figure with its table's name.
+fn headline_text(h: &Value) -> String {
+    let r = |v: &Value| {
+        format!(
+            "{} [{}, {}]",
+            num(v["median"].as_f64(), 3),
+            num(v["interval_95"][0].as_f64(), 3),
+            num(v["interval_95"][1].as_f64(), 3)
+        )
+    };
+    let parts: Vec<String> = h["rows"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|x| {
+            format!(
+                "{} thread(s): per frame table, {} = {}; time to first image table, {} = {}",
+                x["threads"],
+                super::page::compact(&x["per_frame_table"]["what"]),
+                r(&x["per_frame_table"]["ratio"]),
+                super::page::compact(&x["time_to_first_image_table"]["what"]),
+                r(&x["time_to_first_image_table"]["ratio"]),
+            )
+        })
+        .collect();
+    format!(
+        "Headline on {} (medians of paired rounds' ratios, 95% bootstrap intervals; above 1 the core is faster): {}.",
+        super::page::compact(&h["scene"]),
+        parts.join("; ")
+    )
 }
 
 /// One thread count's core-vs-Embree-best goal row.
@@ -819,6 +950,26 @@ fn page(record: &Value, svg: &str) -> String {
         c["triangles"]
     ))
     .command("rendiff bench peers");
+    p.para(&headline_text(&record["headline"]));
+    p.para(&format!(
+        "Paired rounds: {} ({}).",
+        c["paired_rounds"],
+        super::page::compact(&c["paired_rounds_note"])
+    ));
+    peer_tables::page_goals(&mut p, &record["goals"]["issue_39"]);
+    peer_tables::page_tables(
+        &mut p,
+        &scene_name(&c["scene"]),
+        &record["trace_throughput"],
+    );
+    if record["scanned_mesh"]["trace_throughput"].is_array() {
+        peer_tables::page_tables(
+            &mut p,
+            &scene_name(&record["scanned_mesh"]["scene"]),
+            &record["scanned_mesh"]["trace_throughput"],
+        );
+    }
+    two_and_external(&mut p, record);
     p.svg(svg, Some("peers-times.svg"));
     p.heading("trace throughput (Mrays/s, primary rays, BVH builds excluded)");
     p.para(&format!(
@@ -944,6 +1095,53 @@ fn page(record: &Value, svg: &str) -> String {
     );
     p.environment(&record["environment"]);
     p.finish()
+}
+
+/// The two-triangle check and the external renderers' first images.
+fn two_and_external(p: &mut Page, record: &Value) {
+    p.heading("time to first image: two screen-filling triangles, and the harness's renderers");
+    for r in record["two_screen_filling_triangles"]
+        .as_array()
+        .into_iter()
+        .flatten()
+    {
+        p.note(&format!(
+            "{} thread(s), {} triangles at {}x{}: raster / trace (BVH build included) = {} [{}, {}] over {} rounds",
+            r["threads"], r["triangles"], r["size"], r["size"],
+            num(r["raster_over_trace"]["median"].as_f64(), 3),
+            num(r["raster_over_trace"]["interval_95"][0].as_f64(), 3),
+            num(r["raster_over_trace"]["interval_95"][1].as_f64(), 3),
+            r["raster_s"].as_array().map_or(0, Vec::len),
+        ));
+    }
+    let e = &record["time_to_first_image_external"];
+    if let Some(why) = e["skipped"].as_str() {
+        p.note(&format!("external renderers not measured: {why}"));
+        return;
+    }
+    let mut rows = Vec::new();
+    for k in ["pyrender", "mitsuba"] {
+        let v = &e[k];
+        rows.push(vec![
+            k.to_string(),
+            num(v["render_call_s_median"].as_f64(), 4),
+            num(v["subprocess_wall_s_median"].as_f64(), 4),
+            super::page::compact(
+                v.get("includes")
+                    .or(v.get("skipped"))
+                    .unwrap_or(&Value::Null),
+            ),
+        ]);
+    }
+    p.table(
+        &[
+            "renderer (all CPUs, not paired)",
+            "render call s",
+            "subprocess s",
+            "includes",
+        ],
+        &rows,
+    );
 }
 
 /// The throughput table of one scene (every Embree row, fastest first, with

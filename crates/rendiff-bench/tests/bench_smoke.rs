@@ -340,7 +340,110 @@ fn peers_writes_throughput_ratios() {
             .as_f64()
             .is_some());
         assert!(record["goals"]["core_trace_vs_embree_best"].is_array());
+        // The per-frame table: the core's new camera counted, per round.
+        let f = &rows[0]["per_frame"];
+        let at = |v: &Value, k: &str| -> Vec<f64> {
+            v[k].as_array()
+                .expect(k)
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        };
+        let (cam, tr, em) = (
+            at(&f["core"], "new_camera_s"),
+            at(&f["core"], "trace_s"),
+            at(&f["embree"], "trace_s"),
+        );
+        assert_eq!((cam.len(), tr.len(), em.len()), (3, 3, 3), "{f}");
+        assert!(
+            cam.iter().all(|&c| c > 0.0),
+            "a new camera costs the core something"
+        );
+        assert_eq!(f["embree"]["new_camera_s_median"], 0.0);
+        let counted = at(&f["core_over_embree_new_camera_counted"], "per_round");
+        for i in 0..3 {
+            let want = em[i] / (cam[i] + tr[i]);
+            assert!((counted[i] - want).abs() <= 1e-12 * want, "{f}");
+        }
+        // Time to first image: Embree's row and every other row's ratio to it.
+        let t = &rows[0]["time_to_first_image"];
+        let trows = t["rows"].as_array().expect("first-image rows");
+        let embree_row = trows
+            .iter()
+            .find(|r| Some(r["name"].as_str().unwrap()) == t["embree"].as_str())
+            .expect("Embree's first-image row");
+        let e = at(embree_row, "seconds");
+        for r in trows.iter().filter(|r| r["name"] != embree_row["name"]) {
+            let s = at(r, "seconds");
+            let per = at(&r["over_embree"], "per_round");
+            for i in 0..3 {
+                assert!((per[i] - e[i] / s[i]).abs() <= 1e-12 * per[i], "{r}");
+            }
+            assert!(r["over_embree"]["interval_95"].is_array(), "{r}");
+        }
     }
+    // Both tables are there with or without Embree, and the goals name them.
+    let t = &rows[0]["time_to_first_image"];
+    let names: Vec<&str> = t["rows"]
+        .as_array()
+        .expect("first-image rows")
+        .iter()
+        .map(|r| r["name"].as_str().unwrap())
+        .collect();
+    for want in [
+        "core raster",
+        "core trace (fastest BVH)",
+        "core trace (fast BVH)",
+        "core trace (medium BVH)",
+        "core trace (slow BVH)",
+    ] {
+        assert!(names.contains(&want), "{want}: {names:?}");
+    }
+    let medium = &t["rows"][names
+        .iter()
+        .position(|&n| n == "core trace (medium BVH)")
+        .unwrap()];
+    assert!(
+        medium["parts_median_s"]["tree_s"]
+            .as_f64()
+            .is_some_and(|x| x > 0.0),
+        "{medium}"
+    );
+    assert!(
+        medium["parts_median_s"]["camera_setup_s"]
+            .as_f64()
+            .is_some_and(|x| x > 0.0),
+        "{medium}"
+    );
+    assert!(
+        names.contains(&t["cost_model_pick"].as_str().unwrap()),
+        "{t}"
+    );
+    let goals = record["goals"]["issue_39"]
+        .as_array()
+        .expect("issue-39 goals");
+    assert!(goals.iter().any(|g| g["table"] == "per frame"));
+    assert!(goals.iter().any(|g| g["table"] == "time to first image"));
+    for g in goals {
+        let verdict = g["verdict"].as_str().unwrap();
+        let met = g["median"]
+            .as_f64()
+            .map(|m| m >= g["target"].as_f64().unwrap());
+        assert_eq!(
+            verdict,
+            match met {
+                Some(true) => "met",
+                Some(false) => "not met",
+                None => "not measured",
+            },
+            "{g}"
+        );
+    }
+    assert!(
+        record["two_screen_filling_triangles"][0]["raster_over_trace"]["median"]
+            .as_f64()
+            .is_some()
+    );
 }
 
 #[test]

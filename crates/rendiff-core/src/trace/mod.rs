@@ -95,8 +95,18 @@ pub struct TraceBvh {
     rects: Vec<rect::PixelRect>,
     /// Every packet's frustum planes ([`frustum`]).
     planes: frustum::PacketPlanes,
-    /// Seconds spent in obvhs's builder plus our refit.
+    /// Each node's f32 box refit from its triangles, before growth: the
+    /// camera-independent tree [`Self::aim`] grows again for a new eye.
+    refit: Vec<[Vec3; 2]>,
+    /// Seconds of the whole build: [`Self::tree_seconds`] plus
+    /// [`Self::camera_seconds`].
     pub build_seconds: f64,
+    /// Seconds of the camera-independent part (obvhs's builder, our refit).
+    pub tree_seconds: f64,
+    /// Seconds of the last camera set-up (eye-relative boxes, per-triangle
+    /// edge data and pixel rectangles, packet frustum planes): what a new
+    /// camera costs with the tree kept ([`Self::aim`]).
+    pub camera_seconds: f64,
 }
 
 impl TraceBvh {
@@ -109,7 +119,10 @@ impl TraceBvh {
             leaves: Vec::new(),
             rects: Vec::new(),
             planes: frustum::PacketPlanes::empty(),
+            refit: Vec::new(),
             build_seconds: 0.0,
+            tree_seconds: 0.0,
+            camera_seconds: 0.0,
         }
     }
 
@@ -127,7 +140,6 @@ impl TraceBvh {
         deadline: Option<Instant>,
     ) -> Option<TraceBvh> {
         let start = Instant::now();
-        let cam = &scene.camera;
         let ids: Vec<u32> = (0..scene.triangles.len() as u32)
             .filter(|&i| !scene.degenerate[i as usize])
             .collect();
@@ -202,27 +214,76 @@ impl TraceBvh {
         let nodes: Vec<Node> = bvh
             .nodes
             .iter()
-            .enumerate()
-            .map(|(i, nd)| Node {
-                bounds: grow_box(cam.eye, lo[i], hi[i]),
+            .map(|nd| Node {
+                bounds: RayBox {
+                    lo: glam::DVec3::ZERO,
+                    hi: glam::DVec3::ZERO,
+                },
                 first: nd.first_index,
                 count: nd.prim_count,
             })
             .collect();
-        let nodes32: Vec<Node32> = nodes
+        let refit: Vec<[Vec3; 2]> = lo.into_iter().zip(hi).map(|(l, h)| [l, h]).collect();
+        let tree_seconds = start.elapsed().as_secs_f64();
+        let mut out = TraceBvh {
+            nodes,
+            prims,
+            nodes32: Nodes32::empty(),
+            leaves: Vec::new(),
+            rects: Vec::new(),
+            planes: frustum::PacketPlanes::empty(),
+            refit,
+            build_seconds: 0.0,
+            tree_seconds,
+            camera_seconds: 0.0,
+        };
+        out.aim_until(scene, deadline)?;
+        out.build_seconds = start.elapsed().as_secs_f64();
+        Some(out)
+    }
+
+    /// Re-aims the tree at `scene.camera`, keeping the camera-independent
+    /// tree: recomputes the eye-relative node boxes (f64 and f32), the
+    /// per-triangle edge data and pixel rectangles and the packet frustum
+    /// planes, exactly as [`Self::build`] makes them, so a render through the
+    /// re-aimed tree is bit for bit the render through a fresh build. Returns
+    /// the seconds it took (also [`Self::camera_seconds`]): the per-camera
+    /// cost `bench peers` counts in its per-frame table. `scene` must hold
+    /// the triangles the tree was built from (only the camera may differ).
+    pub fn aim(&mut self, scene: &ResolvedScene) -> f64 {
+        self.aim_until(scene, None)
+            .expect("a set-up without a deadline finishes");
+        self.camera_seconds
+    }
+
+    /// [`Self::aim`], or None once `deadline` has passed (checked between
+    /// its phases, as in [`Self::build_until`]).
+    fn aim_until(&mut self, scene: &ResolvedScene, deadline: Option<Instant>) -> Option<()> {
+        let start = Instant::now();
+        if self.prims.is_empty() {
+            self.camera_seconds = 0.0;
+            return Some(());
+        }
+        let cam = &scene.camera;
+        debug_assert_eq!(self.refit.len(), self.nodes.len());
+        for (n, [lo, hi]) in self.nodes.iter_mut().zip(&self.refit) {
+            n.bounds = grow_box(cam.eye, *lo, *hi);
+        }
+        let nodes32: Vec<Node32> = self
+            .nodes
             .iter()
             .map(|n| Node32::new(cam.eye, &n.bounds, n.first, n.count))
             .collect();
-        let nodes32 = Nodes32::new(&nodes32);
+        self.nodes32 = Nodes32::new(&nodes32);
         if crate::deadline::past(deadline) {
             return None;
         }
         let slack = rect::RectSlack::new(cam);
         // Leaves and rectangles on huge pages where the OS has them, as
         // the tree's nodes (`crate::huge_pages`).
-        let mut leaves = crate::huge_pages::with_capacity(prims.len());
-        let mut rects = crate::huge_pages::with_capacity(prims.len());
-        prims
+        let mut leaves = crate::huge_pages::with_capacity(self.prims.len());
+        let mut rects = crate::huge_pages::with_capacity(self.prims.len());
+        self.prims
             .par_iter()
             .map(|&p| {
                 let t = &scene.triangles[p as usize];
@@ -232,15 +293,11 @@ impl TraceBvh {
                 )
             })
             .unzip_into_vecs(&mut leaves, &mut rects);
-        Some(TraceBvh {
-            nodes,
-            prims,
-            nodes32,
-            leaves,
-            rects,
-            planes: frustum::PacketPlanes::new(cam),
-            build_seconds: start.elapsed().as_secs_f64(),
-        })
+        self.leaves = leaves;
+        self.rects = rects;
+        self.planes = frustum::PacketPlanes::new(cam);
+        self.camera_seconds = start.elapsed().as_secs_f64();
+        Some(())
     }
 
     /// Nearest hit key for one pixel ray (and optionally every covering triangle's
@@ -651,6 +708,43 @@ impl TraceBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tree built for one camera and re-aimed at another traces exactly
+    /// what a fresh build for the second camera traces (keys and every
+    /// counter, in both kernels), so `bench peers` can time a new camera
+    /// apart from the tree without changing a bit of the output; and the
+    /// build's seconds split into the tree's and the camera's.
+    #[test]
+    fn aim_at_a_new_camera_equals_a_fresh_build() {
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/icosphere.toml");
+        let mut s = crate::scene::Scene::load(&file).unwrap();
+        let first = ResolvedScene::resolve(&s).unwrap();
+        // Another eye (closer, from the other side), the same triangles.
+        s.file.camera.eye = Some([-1.9, 0.8, 2.2]);
+        let second = ResolvedScene::resolve(&s).unwrap();
+        assert_eq!(first.triangles, second.triangles);
+        assert_ne!(first.camera.eye, second.camera.eye);
+        for quality in [BvhQuality::Fastest, BvhQuality::Medium] {
+            let mut aimed = TraceBvh::build(&first, quality);
+            assert!(aimed.tree_seconds > 0.0 && aimed.camera_seconds > 0.0);
+            assert!(aimed.tree_seconds + aimed.camera_seconds <= aimed.build_seconds);
+            let secs = aimed.aim(&second);
+            assert_eq!(secs, aimed.camera_seconds);
+            let fresh = TraceBvh::build(&second, quality);
+            for kernel in [TraceKernel::Packets, TraceKernel::SingleRays] {
+                let opts = TraceOptions {
+                    kernel,
+                    ..TraceOptions::default()
+                };
+                let a = trace_keys(&second, &aimed, opts, &|_| {});
+                let f = trace_keys(&second, &fresh, opts, &|_| {});
+                assert!(f.keys.iter().any(|&k| k != NO_HIT));
+                assert_eq!(a.keys, f.keys, "{quality:?} {kernel:?}");
+                assert_eq!(a.counters, f.counters, "{quality:?} {kernel:?}");
+            }
+        }
+    }
 
     /// The packet loop writes every key of its never-filled buffer: at
     /// sizes where packets overhang the right and bottom edges its keys are
