@@ -393,6 +393,28 @@ def grazing_cosine(scene: ResolvedScene, prim: np.ndarray) -> np.ndarray:
     return np.abs(np.einsum("...k,...k", n, d / np.linalg.norm(d, axis=-1, keepdims=True)))
 
 
+@needs_povray
+def test_renders_below_waits_below_mostly_wait(tmp_path: Path) -> None:
+    """The declaration `rendiff check` schedules by (WAITS_BELOW): a render of a scene just under it
+    keeps a core busy for at most a fifth of its wall time (CPU of this process and its children)."""
+    import resource
+
+    tris = uv_sphere(35, 35)  # 2,380 triangles, a closed mesh like the corpus's scans
+    assert len(tris) < povray.WAITS_BELOW
+    d = fixtures.write_scene(tmp_path / "s", tris, width=160, height=120)
+    scene = resolved.load(d)
+    povray.render(scene, tmp_path / "warm.exr", tmp_path / "work", 120.0)  # page cache, imports
+
+    def cpu_s() -> float:
+        own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+    cpu0, wall0 = cpu_s(), time.monotonic()
+    povray.render(scene, tmp_path / "out.exr", tmp_path / "work", 120.0)
+    cpu, wall = cpu_s() - cpu0, time.monotonic() - wall0
+    assert cpu <= 0.2 * wall, f"{cpu:.3f} CPU s in {wall:.3f} wall s"
+
+
 @pytest.mark.skipif(not os.environ.get("RENDIFF_SLOW"), reason="timing run; set RENDIFF_SLOW=1")
 @needs_povray
 def test_large_mesh_timing(tmp_path: Path) -> None:

@@ -96,6 +96,8 @@ pub struct CheckOptions {
     /// External renders run this many at a time, across scenes (pool.rs);
     /// 1 runs them one after another.
     pub jobs: usize,
+    /// Extra pool slots for renders that mostly wait (pool.rs); 0: none.
+    pub wait_slots: usize,
     /// External renders go to long-lived harness workers (worker.rs), one
     /// per backend and job slot; false starts a process per render.
     pub workers: bool,
@@ -206,6 +208,10 @@ struct HarnessBackend {
     /// declares it (`PEAK_MEMORY` beside it in the harness, else the
     /// harness's `UNMEASURED_MEMORY`); the pool's budget.
     peak_memory: (u64, u64),
+    /// Scenes below this many triangles render mostly waiting (the backend's
+    /// measured `waits_below`; 0: never): the pool's wait slots may take them.
+    #[serde(default)]
+    waits_below: u64,
     reason: Option<String>,
 }
 
@@ -1170,6 +1176,7 @@ mod tests {
             core: CoreShading::default(),
             calibration: Some(probes.clone()),
             jobs: 1,
+            wait_slots: 0,
             workers: true,
             renderers: None,
             renderers_snapshot: None,

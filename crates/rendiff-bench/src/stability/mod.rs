@@ -164,6 +164,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         // probes would only add their renders to a long run.
         calibration: None,
         jobs: 1,
+        wait_slots: 0,
         workers: true,
         renderers: None,
         renderers_snapshot: None,

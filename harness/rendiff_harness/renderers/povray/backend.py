@@ -137,6 +137,14 @@ PEAK_MEMORY = (70 * 2**20, 1800)
 memory budget (check/pool.rs): GNU time's max RSS, 64 MiB on three_triangles and 1.05 GiB on
 `million` (1,310,722 triangles) for one POV-Ray process, counted twice since the ID and depth
 passes run side by side (1,720 B per triangle), rounded up."""
+WAITS_BELOW = 2_500
+"""Triangles below which a render keeps one core busy for at most a fifth of its wall time, the
+rest being POV-Ray's polling sleeps (spec.BackendSpec.waits_below). Measured as (this process's
+and its children's CPU seconds) / wall seconds of `render`, ID and depth passes side by side,
+on a shared 2-core machine: 0.08 at 3 triangles (0.66 s), 0.12 at 1,280, 0.15 at 4,248, 0.18 at
+6,090, 0.20 at 11,712, 0.25 at 16,719, 0.41 at 44,582, 0.65 at 99,938; CPU ~ 0.05 s + 12 us
+per triangle (more where many pixels are covered: 0.21 for a 4,900-triangle sphere at 160x120),
+so 2,500 keeps a render under it near 0.12 (tests/test_povray.py measures it)."""
 EXPOSURE_MARGIN = 1.0 + 2.0**-6
 """Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""
 FADE_REL = 1e-4
@@ -1044,6 +1052,7 @@ SPEC = BackendSpec(
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
     peak_memory=PEAK_MEMORY,
+    waits_below=WAITS_BELOW,
     render=render,
     version=version,
     unavailable_reason=unavailable_reason,
