@@ -94,7 +94,7 @@ pub struct CheckOptions {
     /// backend and recorded with `role: "calibration"`; `None` renders none.
     pub calibration: Option<PathBuf>,
     /// External renders run this many at a time, across scenes (pool.rs);
-    /// 1 runs them one after another.
+    /// 1 (and no wait slots) runs them one after another.
     pub jobs: usize,
     /// Extra pool slots for renders that mostly wait (pool.rs); 0: none.
     pub wait_slots: usize,

@@ -64,7 +64,7 @@ pub struct CheckArgs {
     #[arg(long, requires = "shard")]
     shard_costs: Option<PathBuf>,
     /// External renders run this many at a time, across scenes (default:
-    /// the cores; 1 runs them one after another).
+    /// the cores; 1 with `--wait-slots 0` runs them one after another).
     #[arg(long, value_parser = rendiff::args::parse_threads)]
     jobs: Option<usize>,
     /// Extra slots for renders that mostly wait (POV-Ray's small scenes),
