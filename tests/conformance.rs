@@ -58,6 +58,7 @@ fn main() {
             // leaves is what `rendiff gate` holds against the baseline.
             calibration: Some(root.join("scenes/calibration")),
             jobs: check::default_jobs(),
+            wait_slots: check::default_jobs(),
             workers: true,
             renderers: Some(root.join("renderers/wgpu.toml")),
             renderers_snapshot: None,

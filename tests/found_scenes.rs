@@ -50,6 +50,7 @@ fn trials(root: &Path) -> Vec<Trial> {
         core: check::CoreShading::default(),
         calibration: None,
         jobs: check::default_jobs(),
+        wait_slots: check::default_jobs(),
         workers: true,
         renderers: None,
         renderers_snapshot: None,

@@ -303,6 +303,7 @@ fn run_family(root: &Path, run_dir: &Path) -> Result<Vec<Value>, String> {
         // No calibration probes: each backend is compared with itself, so its camera offset cancels.
         calibration: None,
         jobs: check::default_jobs(),
+        wait_slots: check::default_jobs(),
         workers: true,
         renderers: None,
         renderers_snapshot: None,
