@@ -61,6 +61,7 @@ def _describe(backend: registry.Backend) -> dict[str, Any]:
         "features": sorted(backend.features),
         "buffers": sorted(backend.buffers),
         "peak_memory": list(backend.peak_memory),
+        "waits_below": backend.waits_below,
         "available": reason is None,
         "reason": reason,
         "declared_in": str(backend.declared_in) if backend.declared_in is not None else None,

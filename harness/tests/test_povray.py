@@ -113,6 +113,40 @@ def test_numbers_are_formatted_by_us_and_finite() -> None:
             povray._num(bad)
 
 
+def test_whole_arrays_format_as_num_does() -> None:
+    """The mesh blocks format whole arrays at once; every string must be `_num`'s own."""
+    rng = np.random.default_rng(7)
+    tricky = np.array(
+        [-0.0, 0.0, 1e-45, -1e-45, 1.1754942e-38, 3.4028235e38, -3.4028235e38, 0.1, 1 / 3, 16777217.0],
+        dtype=np.float32,
+    )
+    values = np.concatenate(
+        [tricky, rng.standard_normal(3000).astype(np.float32) * 10.0 ** rng.integers(-30, 30, 3000)]
+    )
+    assert povray._nums(values) == [povray._num(x) for x in values]
+    block = povray._vertex_block(values[: len(values) // 3 * 3].reshape(-1, 3))
+    numbers = re.findall(r"<([^>]*)>", block)
+    assert [float(x) for row in numbers for x in row.split(",")] == values[: len(values) // 3 * 3].tolist()
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(BackendError, match="non-finite"):
+            povray._nums(np.array([[1.0, 2.0, 3.0], [4.0, bad, 5.0]]))
+
+
+def test_face_rows_read_back_as_the_faces_and_tags() -> None:
+    rng = np.random.default_rng(8)
+    faces = rng.integers(0, 2**31 - 1, size=(500, 3))
+    tags = rng.integers(0, 70000, size=500)
+    rows = povray._face_rows(faces, tags).split(",\n")
+    assert [tuple(map(int, re.findall(r"-?\d+", r))) for r in rows] == [
+        (*f, t) for f, t in zip(faces.tolist(), tags.tolist(), strict=True)
+    ]
+    plain = povray._face_rows(faces).split(",\n")
+    assert [tuple(map(int, re.findall(r"-?\d+", r))) for r in plain] == [tuple(f) for f in faces.tolist()]
+    block = povray._face_block(faces, with_texture=True)
+    assert block.startswith("face_indices { 500,\n<") and block.endswith(f",{499}\n}}\n")
+    assert povray._face_block(faces[:0], with_texture=False) == "face_indices { 0,\n\n}\n"
+
+
 HOSTILE = '"; #fopen F "/tmp/pwned" write #write (F, "x") #fclose F // </script><script>alert(1)</script>'
 
 

@@ -117,7 +117,18 @@ def test_info_json(capsys: pytest.CaptureFixture[str]) -> None:
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["backends"]}
     assert set(rows) >= {"povray"}
     for row in rows.values():
-        keys = {"name", "module", "version", "features", "buffers", "peak_memory", "available", "reason", "declared_in"}
+        keys = {
+            "name",
+            "module",
+            "version",
+            "features",
+            "buffers",
+            "peak_memory",
+            "waits_below",
+            "available",
+            "reason",
+            "declared_in",
+        }
         assert set(row) == keys
         # None for the built-in ones; a declared renderer's file (tests/test_command_renderers.py)
         assert row["declared_in"] is None or row["module"].startswith("command:")

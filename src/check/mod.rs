@@ -94,8 +94,10 @@ pub struct CheckOptions {
     /// backend and recorded with `role: "calibration"`; `None` renders none.
     pub calibration: Option<PathBuf>,
     /// External renders run this many at a time, across scenes (pool.rs);
-    /// 1 runs them one after another.
+    /// 1 (and no wait slots) runs them one after another.
     pub jobs: usize,
+    /// Extra pool slots for renders that mostly wait (pool.rs); 0: none.
+    pub wait_slots: usize,
     /// External renders go to long-lived harness workers (worker.rs), one
     /// per backend and job slot; false starts a process per render.
     pub workers: bool,
@@ -114,9 +116,9 @@ impl CheckOptions {
     /// A quiet run of `scenes` into `run_dir` with the checkout or data
     /// folder `root`: every backend, the repository's expectations
     /// (`tests/expectations.toml`), 600 s per external render, no cached
-    /// references, no calibration probes, the default jobs, workers and
-    /// memory budget, no renderers file. Callers change what they need with
-    /// struct update syntax.
+    /// references, no calibration probes, the default jobs, wait slots (as
+    /// many as jobs, like `check`), workers and memory budget, no renderers
+    /// file. Callers change what they need with struct update syntax.
     pub fn new(scenes: Vec<PathBuf>, run_dir: PathBuf, root: PathBuf) -> Self {
         CheckOptions {
             scenes,
@@ -130,6 +132,7 @@ impl CheckOptions {
             core: CoreShading::default(),
             calibration: None,
             jobs: default_jobs(),
+            wait_slots: default_jobs(),
             workers: true,
             renderers: None,
             renderers_snapshot: None,
@@ -234,6 +237,10 @@ struct HarnessBackend {
     /// declares it (`PEAK_MEMORY` beside it in the harness, else the
     /// harness's `UNMEASURED_MEMORY`); the pool's budget.
     peak_memory: (u64, u64),
+    /// Scenes below this many triangles render mostly waiting (the backend's
+    /// measured `waits_below`; 0: never): the pool's wait slots may take them.
+    #[serde(default)]
+    waits_below: u64,
     reason: Option<String>,
 }
 
@@ -1198,6 +1205,7 @@ mod tests {
             core: CoreShading::default(),
             calibration: Some(probes.clone()),
             jobs: 1,
+            wait_slots: 0,
             workers: true,
             renderers: None,
             renderers_snapshot: None,

@@ -9,8 +9,15 @@
 //! biggest first keeps one large scene from finishing alone at the end. The
 //! core's own multi-threaded renders run before the pool starts, so the pool
 //! never competes with them for the cores.
+//!
+//! Wait slots (`--wait-slots`, default `--jobs`): renders that mostly wait
+//! (a backend's measured `waits_below`: POV-Ray under 2,500 triangles keeps a
+//! core busy a fifth of its wall time at most, the rest is its front end's
+//! polling sleeps) also run on extra slots of their own, taken cheapest first
+//! from the far end of the order, so that their sleeping no longer holds a
+//! CPU slot. N wait slots take at most N/5 cores from the CPU slots.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{Condvar, Mutex};
 
 /// Bytes a render is expected to need at its peak.
@@ -83,16 +90,48 @@ impl Drop for Held<'_> {
 /// How the pool runs: slots, memory budget.
 #[derive(Debug, Clone, Copy)]
 pub struct PoolOptions {
-    /// Renders in flight at most.
+    /// Renders in flight at most on the CPU slots.
     pub jobs: usize,
+    /// Extra slots that take only renders that mostly wait (module docs); 0:
+    /// every render holds one of the `jobs` slots.
+    pub wait_slots: usize,
     /// Bytes of estimated peak memory in flight at most (see [`Budget`]).
     pub memory_budget: Bytes,
 }
 
-/// Runs `f` on every item on `jobs` scoped threads, each owning a slot state
-/// made by `new_slot` (its workers); items are taken in decreasing `cost`
-/// (ties in item order) and admitted by `memory`. Results come back in item
-/// order, so records keep the order of a sequential run.
+/// Which item a slot takes next: a CPU slot the costliest not yet taken, a
+/// wait slot the cheapest not yet taken of those that wait.
+struct Queue {
+    /// Positions in the cost order already taken.
+    taken: Vec<bool>,
+    /// Every position before this one is taken.
+    front: usize,
+}
+
+impl Queue {
+    fn take(&mut self, wait_slot: bool, waits: impl Fn(usize) -> bool) -> Option<usize> {
+        if wait_slot {
+            let k = (self.front..self.taken.len())
+                .rev()
+                .find(|&k| !self.taken[k] && waits(k))?;
+            self.taken[k] = true;
+            return Some(k);
+        }
+        while self.taken.get(self.front) == Some(&true) {
+            self.front += 1;
+        }
+        let k = self.front;
+        *self.taken.get_mut(k)? = true;
+        Some(k)
+    }
+}
+
+/// Runs `f` on every item on `jobs` scoped threads plus `wait_slots` threads
+/// that take only items for which `waits` is true, each thread owning a slot
+/// state made by `new_slot` (its workers); CPU slots take items in decreasing
+/// `cost` (ties in item order), wait slots from the other end, all admitted by
+/// `memory`. Results come back in item order, so records keep the order of a
+/// sequential run.
 ///
 /// A panic in `f` is a bug: its memory share is released, no slot starts
 /// another item, the renders in flight finish, and the first panic is then
@@ -102,14 +141,20 @@ pub fn run<T: Sync, R: Send, S>(
     opts: PoolOptions,
     items: &[T],
     cost: impl Fn(&T) -> f64,
+    waits: impl Fn(&T) -> bool + Sync,
     memory: impl Fn(&T) -> Bytes + Sync,
     new_slot: impl Fn(usize) -> S + Sync,
     f: impl Fn(&mut S, &T) -> R + Sync,
 ) -> Vec<R> {
     let jobs = opts.jobs.clamp(1, items.len().max(1));
+    let waiting = items.iter().filter(|t| waits(t)).count();
+    let wait_slots = opts.wait_slots.min(waiting);
     let mut order: Vec<usize> = (0..items.len()).collect();
     order.sort_by(|&a, &b| cost(&items[b]).total_cmp(&cost(&items[a])));
-    let next = AtomicUsize::new(0);
+    let queue = Mutex::new(Queue {
+        taken: vec![false; items.len()],
+        front: 0,
+    });
     let budget = Budget {
         limit: opts.memory_budget,
         in_flight: Mutex::new(0),
@@ -119,15 +164,20 @@ pub fn run<T: Sync, R: Send, S>(
     let panicked: Mutex<Option<Box<dyn std::any::Any + Send>>> = Mutex::new(None);
     let stop = std::sync::atomic::AtomicBool::new(false);
     std::thread::scope(|s| {
-        for slot_index in 0..jobs {
-            let (order, next, budget, out) = (&order, &next, &budget, &out);
-            let (new_slot, f, memory) = (&new_slot, &f, &memory);
+        for slot_index in 0..jobs + wait_slots {
+            let (order, queue, budget, out) = (&order, &queue, &budget, &out);
+            let (new_slot, f, memory, waits) = (&new_slot, &f, &memory, &waits);
             let (panicked, stop) = (&panicked, &stop);
+            let wait_slot = slot_index >= jobs;
             s.spawn(move || {
                 let mut slot = new_slot(slot_index);
                 while !stop.load(Ordering::Acquire) {
-                    let k = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&i) = order.get(k) else { break };
+                    let next = queue
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .take(wait_slot, |k| waits(&items[order[k]]));
+                    let Some(k) = next else { break };
+                    let i = order[k];
                     let need = memory(&items[i]);
                     let held = budget.acquire(need);
                     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -162,6 +212,7 @@ pub fn run<T: Sync, R: Send, S>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::atomic::AtomicUsize;
     use std::time::Duration;
 
     #[test]
@@ -170,12 +221,14 @@ mod tests {
         let items = [1.0, 5.0, 3.0, 4.0];
         let opts = PoolOptions {
             jobs: 1,
+            wait_slots: 0,
             memory_budget: u64::MAX,
         };
         let out = run(
             opts,
             &items,
             |x| *x,
+            |_| false,
             |_| 0,
             |_| (),
             |_, x| {
@@ -194,12 +247,14 @@ mod tests {
         let peak = AtomicUsize::new(0);
         let opts = PoolOptions {
             jobs: 4,
+            wait_slots: 0,
             memory_budget,
         };
         run(
             opts,
             items,
             |_| 1.0,
+            |_| false,
             |m| *m,
             |_| (),
             |_, _| {
@@ -225,9 +280,18 @@ mod tests {
         let items = [100u64, 1];
         let opts = PoolOptions {
             jobs: 2,
+            wait_slots: 0,
             memory_budget: 10,
         };
-        let out = run(opts, &items, |m| *m as f64, |m| *m, |_| (), |_, m| *m);
+        let out = run(
+            opts,
+            &items,
+            |m| *m as f64,
+            |_| false,
+            |m| *m,
+            |_| (),
+            |_, m| *m,
+        );
         assert_eq!(out, vec![100, 1]);
     }
 
@@ -242,12 +306,14 @@ mod tests {
                 let items = [10u64, 10, 10];
                 let opts = PoolOptions {
                     jobs: 2,
+                    wait_slots: 0,
                     memory_budget: 10,
                 };
                 run(
                     opts,
                     &items,
                     |_| 1.0,
+                    |_| false,
                     |m| *m,
                     |_| (),
                     |_, m| {
@@ -277,12 +343,14 @@ mod tests {
         let items: Vec<u32> = (0..20).collect();
         let opts = PoolOptions {
             jobs: 3,
+            wait_slots: 0,
             memory_budget: u64::MAX,
         };
         let out = run(
             opts,
             &items,
             |_| 0.0,
+            |_| false,
             |_| 0,
             |i| (i, 0u32),
             |slot, _| {
@@ -301,5 +369,80 @@ mod tests {
             sorted.sort();
             assert_eq!(sorted, (1..=counts.len() as u32).collect::<Vec<_>>());
         }
+    }
+
+    /// Items (cost, waits) on one CPU slot and two wait slots, each taking
+    /// 40 ms: the most in flight at once, of those that do not wait and of all.
+    fn peaks_with_wait_slots(items: &[(f64, bool)]) -> (usize, usize, Vec<usize>) {
+        let busy = AtomicUsize::new(0);
+        let all = AtomicUsize::new(0);
+        let (peak_busy, peak_all) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let opts = PoolOptions {
+            jobs: 1,
+            wait_slots: 2,
+            memory_budget: u64::MAX,
+        };
+        let out = run(
+            opts,
+            items,
+            |t| t.0,
+            |t| t.1,
+            |_| 0,
+            |i| i,
+            |slot, t| {
+                let counters: &[(&AtomicUsize, &AtomicUsize)] = if t.1 {
+                    &[(&all, &peak_all)]
+                } else {
+                    &[(&busy, &peak_busy), (&all, &peak_all)]
+                };
+                for (now, peak) in counters {
+                    peak.fetch_max(now.fetch_add(1, Ordering::SeqCst) + 1, Ordering::SeqCst);
+                }
+                std::thread::sleep(Duration::from_millis(40));
+                for (now, _) in counters {
+                    now.fetch_sub(1, Ordering::SeqCst);
+                }
+                assert!(
+                    *slot == 0 || t.1,
+                    "a wait slot took a render that does not wait"
+                );
+                *slot
+            },
+        );
+        (peak_busy.into_inner(), peak_all.into_inner(), out)
+    }
+
+    #[test]
+    fn wait_slots_take_only_waiting_renders_and_run_them_beside_the_others() {
+        let items: Vec<(f64, bool)> = (0..12).map(|i| (i as f64, i % 2 == 0)).collect();
+        let (busy, all, slots) = peaks_with_wait_slots(&items);
+        // The renders that do not wait still run one at a time (one CPU slot) ...
+        assert_eq!(busy, 1);
+        // ... while waiting ones run beside them on the wait slots.
+        assert!(all >= 2, "nothing ran beside the CPU slot");
+        assert!(slots.iter().any(|&s| s > 0));
+        // Without waiting renders the wait slots take nothing.
+        let none: Vec<(f64, bool)> = (0..4).map(|i| (i as f64, false)).collect();
+        let (busy, all, slots) = peaks_with_wait_slots(&none);
+        assert_eq!((busy, all), (1, 1));
+        assert!(slots.iter().all(|&s| s == 0));
+    }
+
+    #[test]
+    fn the_queue_gives_cpu_slots_the_front_and_wait_slots_the_cheapest_waiting() {
+        let waits = [false, true, false, true, true, false];
+        let mut q = Queue {
+            taken: vec![false; waits.len()],
+            front: 0,
+        };
+        assert_eq!(q.take(true, |k| waits[k]), Some(4));
+        assert_eq!(q.take(false, |k| waits[k]), Some(0));
+        assert_eq!(q.take(true, |k| waits[k]), Some(3));
+        assert_eq!(q.take(false, |k| waits[k]), Some(1));
+        assert_eq!(q.take(false, |k| waits[k]), Some(2));
+        assert_eq!(q.take(true, |k| waits[k]), None);
+        assert_eq!(q.take(false, |k| waits[k]), Some(5));
+        assert_eq!(q.take(false, |k| waits[k]), None);
+        assert!(q.taken.iter().all(|&t| t));
     }
 }

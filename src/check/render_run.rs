@@ -336,10 +336,20 @@ fn render_externals(
     // Biggest first (the estimate grows with the scene's triangles),
     // so that a large scene does not finish alone at the end.
     let cost = |t: &(usize, &HarnessBackend)| size(t) as f64;
+    let waits = |&(si, b): &(usize, &HarnessBackend)| {
+        pending[si]
+            .as_ref()
+            .is_some_and(|p| p.triangles < b.waits_below)
+    };
     let pool_opts = pool::PoolOptions {
         // A measuring run (`isolate`) renders one at a time, so that
         // each peak is the render's own.
         jobs: if run.isolate.is_some() { 1 } else { opts.jobs },
+        wait_slots: if run.isolate.is_some() {
+            0
+        } else {
+            opts.wait_slots
+        },
         memory_budget: opts.memory_budget,
     };
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -349,6 +359,7 @@ fn render_externals(
         pool_opts,
         &tasks,
         cost,
+        waits,
         size,
         |i| {
             (opts.workers && run.isolate.is_none())

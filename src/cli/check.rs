@@ -64,9 +64,13 @@ pub struct CheckArgs {
     #[arg(long, requires = "shard")]
     shard_costs: Option<PathBuf>,
     /// External renders run this many at a time, across scenes (default:
-    /// the cores; 1 runs them one after another).
+    /// the cores; 1 with `--wait-slots 0` runs them one after another).
     #[arg(long, value_parser = rendiff::args::parse_threads)]
     jobs: Option<usize>,
+    /// Extra slots for renders that mostly wait (POV-Ray's small scenes),
+    /// beside the `--jobs` ones (default: as many as `--jobs`; 0: none).
+    #[arg(long)]
+    wait_slots: Option<usize>,
     /// Your own renderers, declared by command in a TOML file
     /// (docs/your-renderer.md); they run beside the built-in ones.
     #[arg(long)]
@@ -150,6 +154,7 @@ pub fn run(a: CheckArgs) -> Result<ExitCode> {
         },
         calibration: (!a.no_calibration).then_some(calibration),
         jobs,
+        wait_slots: a.wait_slots.unwrap_or(jobs),
         workers: !a.no_workers,
         renderers: renderers_file(a.renderers)?,
         renderers_snapshot: None,
@@ -221,6 +226,7 @@ pub fn merge(a: MergeArgs) -> Result<ExitCode> {
         core: check::CoreShading::default(),
         calibration: None,
         jobs: check::default_jobs(),
+        wait_slots: check::default_jobs(),
         workers: true,
         renderers: renderers_file(a.renderers)?,
         renderers_snapshot: None,
@@ -257,6 +263,7 @@ pub fn template(
         core: check::CoreShading::default(),
         calibration: Some(calibration),
         jobs: jobs.unwrap_or_else(check::default_jobs),
+        wait_slots: jobs.unwrap_or_else(check::default_jobs),
         workers: true,
         renderers: renderers_file(renderers)?,
         renderers_snapshot: None,

@@ -4,7 +4,9 @@
 //!
 //! * a process per render, one render at a time (`--no-workers --jobs 1`):
 //!   how `check` ran before the job pool and the workers;
-//! * the default: long-lived harness workers, `--jobs` = the cores;
+//! * the default: long-lived harness workers, `--jobs` = the cores, as many
+//!   wait slots for renders that mostly wait (check/pool.rs);
+//! * the default without wait slots (`--wait-slots 0`), the path before them;
 //! * N shards (`--shard K/N`, dealt by the default run's recorded costs) run
 //!   one after another, then `merge`: the slowest shard plus the merge is the
 //!   wall time N machines would take at best (each would also pay its own
@@ -111,6 +113,26 @@ fn per_scene(run: &Path) -> Result<Value> {
     Ok(Value::Object(out))
 }
 
+/// Wall seconds per scene of the default run, and each renderer's share of
+/// the render seconds summed over every scene and renderer (what the pool's
+/// slots spend; POV-Ray's is the figure).
+fn shares(per_scene: &Value, default_s: f64) -> Value {
+    let mut by_renderer = std::collections::BTreeMap::<String, f64>::new();
+    let rows = per_scene.as_object().cloned().unwrap_or_default();
+    for row in rows.values() {
+        for (r, t) in row.as_object().into_iter().flatten() {
+            *by_renderer.entry(r.clone()).or_default() += t.as_f64().unwrap_or(0.0);
+        }
+    }
+    let total: f64 = by_renderer.values().sum();
+    json!({
+        "scenes": rows.len(),
+        "wall_s_per_scene": default_s / rows.len().max(1) as f64,
+        "render_s": by_renderer,
+        "render_share": by_renderer.iter().map(|(r, t)| (r.clone(), json!(t / total))).collect::<serde_json::Map<_, _>>(),
+    })
+}
+
 /// Runs the benchmark.
 pub fn run(opts: &ScaleOptions) -> Result<Output> {
     let scratch = Scratch::new("scale")?;
@@ -128,16 +150,21 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     rendiff(&check_args(opts, &main_run, &[]), &logs)?;
 
     let mut configs = Vec::new();
-    let plans: [(&str, &str, &[&str]); 2] = [
+    let plans: [(&str, &str, &[&str]); 3] = [
         (
             "process_per_render_sequential",
-            "a harness process per render, one at a time (--no-workers --jobs 1)",
-            &["--no-workers", "--jobs", "1"],
+            "a harness process per render, one at a time (--no-workers --jobs 1 --wait-slots 0)",
+            &["--no-workers", "--jobs", "1", "--wait-slots", "0"],
         ),
         (
             "default",
-            "long-lived workers, --jobs = the cores (the default)",
+            "long-lived workers, --jobs = the cores, as many wait slots (the default)",
             &[],
+        ),
+        (
+            "no_wait_slots",
+            "the default before wait slots: every render holds a --jobs slot (--wait-slots 0)",
+            &["--wait-slots", "0"],
         ),
     ];
     for (name, what, extra) in plans {
@@ -152,7 +179,10 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     let after = configs[1]["median_s"].as_f64().unwrap_or(f64::NAN);
     record["configurations"] = json!(configs);
     record["speedup_default_over_sequential"] = json!(before / after);
+    let without = configs[2]["median_s"].as_f64().unwrap_or(f64::NAN);
+    record["speedup_default_over_no_wait_slots"] = json!(without / after);
     record["per_scene_s"] = per_scene(&scratch.path().join("default"))?;
+    record["shares"] = shares(&record["per_scene_s"], after);
 
     let mut shard_rows = Vec::new();
     for &n in &opts.shards {
@@ -251,8 +281,16 @@ fn html(r: &Value, svg: &str) -> String {
         .collect();
     p.table(&["configuration", "wall s (median)"], &rows);
     p.para(&format!(
-        "Speed-up of the default over a process per render, one at a time: {}x.",
-        page::num(r["speedup_default_over_sequential"].as_f64(), 2)
+        "Speed-up of the default over a process per render, one at a time: {}x; over the default without wait slots: {}x.",
+        page::num(r["speedup_default_over_sequential"].as_f64(), 2),
+        page::num(r["speedup_default_over_no_wait_slots"].as_f64(), 2)
+    ));
+    let sh = &r["shares"];
+    p.para(&format!(
+        "{} scenes: {} wall s per scene (default); POV-Ray's share of the summed render seconds: {}.",
+        sh["scenes"],
+        page::num(sh["wall_s_per_scene"].as_f64(), 2),
+        page::num(sh["render_share"]["povray"].as_f64(), 2)
     ));
     p.heading("Shards run one after another, then merged");
     let rows: Vec<Vec<String>> = r["shards"]

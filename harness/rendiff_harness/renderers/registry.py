@@ -88,6 +88,11 @@ class Backend:
         declared = self.spec.peak_memory if self.spec is not None else None
         return declared if declared is not None else UNMEASURED_MEMORY
 
+    @property
+    def waits_below(self) -> int:
+        """The spec's `waits_below` (0 for a declared renderer: nothing is known of its CPU use)."""
+        return self.spec.waits_below if self.spec is not None else 0
+
     def unavailable_reason(self) -> str | None:
         """None when the backend can render here, else an actionable reason."""
         if self.spec is None:

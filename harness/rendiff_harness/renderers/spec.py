@@ -68,6 +68,10 @@ class BackendSpec:
     peak_memory: tuple[int, int] | None = None
     """(fixed bytes, bytes per triangle) of a render at its peak, measured; None: not measured
     (the registry then assumes `UNMEASURED_MEMORY`). `rendiff check` budgets memory with it."""
+    waits_below: int = 0
+    """Renders of scenes with fewer triangles than this keep a core busy for at most a fifth of
+    their wall time (they mostly wait: POV-Ray's front end polls), measured; `rendiff check` may
+    run such renders beside its CPU-bound ones (check/pool.rs, wait slots). 0: never."""
     render: RenderFn | None = None
     """None: rendered by rendiff itself (the Rust core), never by the harness."""
     version: Callable[[], str] | None = None

@@ -158,6 +158,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
         // No calibration probes (the default): the bench looks for where each renderer
         // breaks, and the probes would only add their renders to a long run.
         jobs: 1,
+        wait_slots: 0,
         ..CheckOptions::new(scenes, tmp.path().join("run"), opts.common.root.clone())
     };
     // A name in --only that no backend has fails here, not in every check below.

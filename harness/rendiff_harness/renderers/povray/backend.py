@@ -83,7 +83,7 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -137,6 +137,14 @@ PEAK_MEMORY = (70 * 2**20, 1800)
 memory budget (check/pool.rs): GNU time's max RSS, 64 MiB on three_triangles and 1.05 GiB on
 `million` (1,310,722 triangles) for one POV-Ray process, counted twice since the ID and depth
 passes run side by side (1,720 B per triangle), rounded up."""
+WAITS_BELOW = 2_500
+"""Triangles below which a render keeps one core busy for at most a fifth of its wall time, the
+rest being POV-Ray's polling sleeps (spec.BackendSpec.waits_below). Measured as (this process's
+and its children's CPU seconds) / wall seconds of `render`, ID and depth passes side by side,
+on a shared 2-core machine: 0.08 at 3 triangles (0.66 s), 0.12 at 1,280, 0.15 at 4,248, 0.18 at
+6,090, 0.20 at 11,712, 0.25 at 16,719, 0.41 at 44,582, 0.65 at 99,938; CPU ~ 0.05 s + 12 us
+per triangle (more where many pixels are covered: 0.21 for a 4,900-triangle sphere at 160x120),
+so 2,500 keeps a render under it near 0.12 (tests/test_povray.py measures it)."""
 EXPOSURE_MARGIN = 1.0 + 2.0**-6
 """Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""
 FADE_REL = 1e-4
@@ -264,11 +272,35 @@ def _unique_vertices(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flat[order[first]], inverse.reshape(-1, 3)
 
 
+def _nums(values: np.ndarray) -> list[str]:
+    """`_num` of every value in row-major order, in one pass over the array.
+
+    The same strings as `_num` (repr of the Python float), without its per-call checks:
+    finiteness is tested once for the array, and a non-finite value raises `_num`'s own
+    error. A mesh has millions of numbers; this halves the time to format them.
+    """
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    bad = ~np.isfinite(flat)
+    if bad.any():
+        _num(float(flat[bad][0]))  # raises BackendError naming the value
+    return list(map(repr, flat.tolist()))
+
+
+def _rows(values: Sequence[str] | Sequence[int], template: str) -> str:
+    """`template` filled row by row from `values`, the rows joined by ",\\n".
+
+    `values` holds the cells in row-major order (strings from `_nums`, or Python ints); a
+    row has as many cells as `template` has `{}` (one shared iterator feeds every slot).
+    """
+    cells = iter(values)
+    width = template.count("{}")
+    return ",\n".join(map(template.format, *([cells] * width)))
+
+
 def _vertex_block(verts: np.ndarray) -> str:
     # float(np.float32) is exact in float64, and its repr round-trips, so POV-Ray's
     # float32 mesh2 storage gets back the very same f32 vertex.
-    parts = [f"<{_num(x)},{_num(y)},{_num(z)}>" for x, y, z in verts.astype(np.float64).tolist()]
-    return f"vertex_vectors {{ {len(parts)},\n" + ",\n".join(parts) + "\n}\n"
+    return f"vertex_vectors {{ {verts.shape[0]},\n" + _rows(_nums(verts), "<{},{},{}>") + "\n}\n"
 
 
 @dataclass(frozen=True)
@@ -285,12 +317,18 @@ def mesh_for(scene: ResolvedScene) -> MeshSdl:
     return MeshSdl(_vertex_block(verts), faces, int(verts.shape[0]))
 
 
+def _face_rows(faces: np.ndarray, tags: np.ndarray | None = None) -> str:
+    """`<a,b,c>` per face, or `<a,b,c>,tag` (a texture index), joined by ",\\n"; ints only."""
+    if tags is None:
+        return _rows(np.asarray(faces, dtype=np.int64).ravel().tolist(), "<{},{},{}>")
+    cells = np.column_stack([np.asarray(faces, dtype=np.int64), np.asarray(tags, dtype=np.int64)])
+    return _rows(cells.ravel().tolist(), "<{},{},{}>,{}")
+
+
 def _face_block(faces: np.ndarray, with_texture: bool) -> str:
-    if with_texture:
-        parts = [f"<{a},{b},{c}>,{k}" for k, (a, b, c) in enumerate(faces.tolist())]
-    else:
-        parts = [f"<{a},{b},{c}>" for a, b, c in faces.tolist()]
-    return f"face_indices {{ {len(parts)},\n" + ",\n".join(parts) + "\n}\n"
+    n = faces.shape[0]
+    tags = np.arange(n, dtype=np.int64) if with_texture else None
+    return f"face_indices {{ {n},\n" + _face_rows(faces, tags) + "\n}\n"
 
 
 _PRELUDE = (
@@ -308,7 +346,7 @@ def ids_sdl(scene: ResolvedScene, mesh: MeshSdl) -> str:
         raise BackendError(f"{NAME}: {n} triangles do not fit the 32-bit id encoding")
     code = np.arange(1, n + 1, dtype=np.int64)
     lows, highs = (code & 0xFFFF).tolist(), (code >> 16).tolist()
-    textures = [f"texture{{pigment{{rgb<{lo},{hi},0>/65535}}}}" for lo, hi in zip(lows, highs, strict=True)]
+    textures = list(map("texture{{pigment{{rgb<{},{},0>/65535}}}}".format, lows, highs))
     return (
         _PRELUDE
         + camera_sdl(scene.camera)
@@ -597,15 +635,14 @@ def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, fin
     """mesh2 with one texture per material (colours (M, 3), already scaled) and faces tagged by material."""
     mats = scene.prim_materials()
     textures = [f"texture{{pigment{{rgb{_vec(c)}}}{finish}}}" for c in colours]
-    faces = [f"<{a},{b},{c}>,{int(m)}" for (a, b, c), m in zip(mesh.faces.tolist(), mats.tolist(), strict=True)]
     return (
         "mesh2 {\n"
         + mesh.vertex_block
         + f"texture_list {{ {len(textures)},\n"
         + ",\n".join(textures)
         + "\n}\n"
-        + f"face_indices {{ {len(faces)},\n"
-        + ",\n".join(faces)
+        + f"face_indices {{ {mesh.faces.shape[0]},\n"
+        + _face_rows(mesh.faces, mats)
         + "\n}\n"
         + clip_sdl(scene.camera)
         + "}\n"
@@ -1015,6 +1052,7 @@ SPEC = BackendSpec(
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
     peak_memory=PEAK_MEMORY,
+    waits_below=WAITS_BELOW,
     render=render,
     version=version,
     unavailable_reason=unavailable_reason,
