@@ -16,6 +16,10 @@ import numpy as np
 from .resolved import ResolvedScene
 
 
+class MeshFileError(Exception):
+    """A mesh file an independent reading cannot read; the message names the file and the problem."""
+
+
 def file_uses(scene: ResolvedScene) -> list[list[int]]:
     """Indices of the objects read from one scene object's mesh file, one list per use of a file
     (a use starts at part 0; the objects of one use are consecutive, in the file's part order).

@@ -24,63 +24,15 @@ from typing import Any
 
 import numpy as np
 
+from ...contract import gltfgraph
 from . import gltf_spec
 from .parts import DecodeError, Part, empty_part, extend
 
-KNOWN_BUGS: dict[str, str] = {
-    "sparse": "trimesh 5.2.0 ignores `accessor.sparse`: it reads the base values only (SimpleSparseAccessor's "
-    "three lifted vertices stay at y = 1)",
-    "TRIANGLE_FAN": "trimesh 5.2.0 drops TRIANGLE_FAN primitives (MeshPrimitiveModes' fan mesh loads as no geometry)",
-    "normalized": "trimesh 5.2.0 ignores `accessor.normalized`: a KHR_mesh_quantization position is read as the "
-    "raw integer (an unsigned short 65535 stays 65535.0, not 1.0); unnormalized integer positions it reads "
-    "right, and those are compared",
-    "instancing": "trimesh 5.2.0 does not apply EXT_mesh_gpu_instancing: it keeps the extension in the node's "
-    "metadata and draws the node's mesh once at the node's own transform, not once per instance",
-    "scene": "trimesh 5.2.0 loads only the file's default glTF scene (`scene`, else the first): no argument "
-    "chooses another, so a `gltf_scene` choosing another scene is not compared with trimesh",
-}
-"""Feature -> why trimesh's reading of it is not compared (each checked on trimesh 5.2.0)."""
+KNOWN_BUGS = gltfgraph.TRIMESH_GAPS
+"""Feature -> why trimesh's reading of it is not compared (contract/gltfgraph.py, shared with `pyrender_file`)."""
 
-INPUT_REL_PER_LEVEL = 2.0**-21
-"""trimesh reads node numbers in float64, rendiff in float32: each entry of a level's matrix differs
-by at most half a float32 unit (2^-24 relative); a rotation entry is a quadratic form of the
-quaternion, normalized (2^-24 on each component, 2 x that after normalizing, twice that again in
-the product): at most 8 x 2^-24 = 2^-21 relative per level, summed over the levels to first order."""
-
-
-def declared(doc: dict[str, Any], node: int) -> list[str]:
-    """The declared trimesh bugs a mesh node's primitives (and the node itself) meet."""
-    mesh = doc["meshes"][doc["nodes"][node]["mesh"]]
-    found = []
-    if gltf_spec.INSTANCING in (doc["nodes"][node].get("extensions") or {}):
-        found.append("instancing")
-    for prim in mesh.get("primitives", []):
-        pos = prim.get("attributes", {}).get("POSITION")
-        acc = doc.get("accessors", [])
-        mode = prim.get("mode", 4)
-        if mode not in gltf_spec.SURFACE_MODES:
-            continue
-        if isinstance(pos, int) and 0 <= pos < len(acc) and "sparse" in acc[pos]:
-            found.append("sparse")
-        if isinstance(pos, int) and 0 <= pos < len(acc) and acc[pos].get("normalized") is True:
-            found.append("normalized")
-        if mode == 6:
-            found.append("TRIANGLE_FAN")
-    return sorted(set(found))
-
-
-def _geometry_frames(scene: Any, key: str, node_names: set[str]) -> list[str]:
-    """trimesh's geometry frames of the glTF node trimesh names `key`: the frame itself (one
-    primitive), or its per-primitive child frames (`<key>_<6 characters>`, not glTF nodes)."""
-    parents = scene.graph.transforms.parents
-    out = []
-    for name in scene.graph.nodes_geometry:
-        n = str(name)
-        if n == key or (
-            parents.get(name) == key and n.startswith(key + "_") and len(n) == len(key) + 7 and n not in node_names
-        ):
-            out.append(n)
-    return out
+INPUT_REL_PER_LEVEL = gltfgraph.TRIMESH_INPUT_REL_PER_LEVEL
+declared = gltfgraph.trimesh_gaps
 
 
 def decode(path: Path, chosen: int | None = None) -> tuple[list[Part | None], list[str]]:
@@ -88,9 +40,9 @@ def decode(path: Path, chosen: int | None = None) -> tuple[list[Part | None], li
     None where a declared bug makes trimesh's reading not comparable; and the notes saying which."""
     import trimesh  # noqa: PLC0415 - heavy import, only where a glTF is checked
 
-    doc, bin_chunk = gltf_spec.container(path)
+    doc, bin_chunk = gltfgraph.container(path)
     slots = gltf_spec.slots(doc, path, chosen, {}, bin_chunk)
-    if gltf_spec.scene_index(doc, chosen) != gltf_spec.scene_index(doc, None):
+    if gltfgraph.scene_index(doc, chosen) != gltfgraph.scene_index(doc, None):
         return [None] * len(slots), [f"{len(slots)} part(s) not compared with trimesh: {KNOWN_BUGS['scene']}"]
     try:
         scene: Any = trimesh.load(str(path), force="scene", process=False)
@@ -109,7 +61,7 @@ def decode(path: Path, chosen: int | None = None) -> tuple[list[Part | None], li
                 notes.append(f"node {ni} not compared with trimesh: " + "; ".join(KNOWN_BUGS[b] for b in bugs))
             continue
         key = str(doc["nodes"][ni].get("name") or ni)
-        frames = _geometry_frames(scene, key, node_names)
+        frames = gltfgraph.trimesh_frames(scene, key, node_names)
         part = empty_part(
             slot.label, f"node {ni} as trimesh names it ({key!r})", gltf_spec.OPS_PER_LEVEL * slot.depth + 4
         )

@@ -1,0 +1,246 @@
+"""The glTF scene graph of a user's file as rendiff's contract orders it: the container (GLB or JSON),
+the glTF scene shown, its mesh nodes depth first in the file's order with their world matrices, and
+their labels (docs/resolved-scene.md: the objects a glTF file makes, in that order).
+
+One home, because every independent reading of the user's glTF files starts here: the `import`
+verdict's specification decoder (judge/importcheck/gltf_spec.py, which reads the geometry itself),
+its trimesh reading (judge/importcheck/gltf_trimesh.py) and `pyrender_file`, which renders the file
+as trimesh loads it (renderers/pyrender_file/). What trimesh does not read of glTF (`TRIMESH_GAPS`)
+is declared here once for the two that use trimesh.
+
+Node numbers (matrix, translation, rotation, scale) are JSON numbers, read as float32 as rendiff
+reads them (docs/resolved-scene.md), then used in float64.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .meshfile import MeshFileError
+from .userfile import UserFileError, read_regular
+
+MAX_BYTES = 1 << 30
+"""Largest file read (the glTF and each buffer), rendiff's own limit for mesh files."""
+
+
+SURFACE_MODES = (4, 5, 6)
+"""TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN: the modes that make triangles."""
+
+INSTANCING = "EXT_mesh_gpu_instancing"
+
+
+def fail(path: Path, problem: str) -> MeshFileError:
+    """The error naming the file and its problem."""
+    return MeshFileError(f"{path}: {problem}")
+
+
+def item(doc: dict[str, Any], key: str, i: Any, path: Path) -> dict[str, Any]:
+    """`doc[key][i]`, an object, or the error naming what does not exist."""
+    items = doc.get(key)
+    if isinstance(i, bool) or not isinstance(i, int) or not isinstance(items, list) or not 0 <= i < len(items):
+        raise fail(path, f"{key}[{i!r}] does not exist")
+    item = items[i]
+    if not isinstance(item, dict):
+        raise fail(path, f"{key}[{i}] is not an object")
+    return item
+
+
+def read(path: Path) -> bytes:
+    """The file's bytes (a regular file within MAX_BYTES), or the error naming it."""
+    try:
+        return read_regular(path, MAX_BYTES)
+    except FileNotFoundError:
+        raise fail(path, "missing") from None
+    except (UserFileError, OSError) as exc:
+        raise fail(path, f"unreadable: {exc}") from None
+
+
+def container(path: Path) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON document and, for a GLB, its BIN chunk (section 4)."""
+    raw = read(path)
+    bin_chunk = None
+    if raw[:4] == b"glTF":
+        if len(raw) < 20:
+            raise fail(path, "GLB shorter than its header")
+        _, version, length = struct.unpack_from("<III", raw, 0)
+        if version != 2 or length > len(raw):
+            raise fail(path, f"GLB version {version}, length {length} of {len(raw)} bytes")
+        at, chunks = 12, []
+        while at + 8 <= length:
+            size, kind = struct.unpack_from("<II", raw, at)
+            chunks.append((kind, raw[at + 8 : at + 8 + size]))
+            at += 8 + size
+        if not chunks or chunks[0][0] != 0x4E4F534A:
+            raise fail(path, "GLB without a JSON chunk first")
+        text = chunks[0][1]
+        bin_chunk = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == 0x004E4942 else None
+    else:
+        text = raw
+    try:
+        doc = json.loads(text.decode("utf-8").removeprefix("\ufeff"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise fail(path, f"not glTF JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise fail(path, "the JSON is not an object")
+    return doc, bin_chunk
+
+
+def _f32(values: Any, count: int, default: list[float], what: str, path: Path) -> np.ndarray:
+    v = default if values is None else values
+    if (
+        not isinstance(v, list)
+        or len(v) != count
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    ):
+        raise fail(path, f"{what} must be {count} numbers")
+    return np.asarray(v, dtype=np.float32).astype(np.float64)
+
+
+def local_matrix(node: dict[str, Any], ni: int, path: Path) -> np.ndarray:
+    """A node's local 4x4 matrix (float64 from float32 numbers): `matrix` column-major, else T R S."""
+    if "matrix" in node:
+        return _f32(node["matrix"], 16, [], f"nodes[{ni}].matrix", path).reshape(4, 4).T.copy()
+    t = _f32(node.get("translation"), 3, [0.0, 0.0, 0.0], f"nodes[{ni}].translation", path)
+    q = _f32(node.get("rotation"), 4, [0.0, 0.0, 0.0, 1.0], f"nodes[{ni}].rotation", path)
+    s = _f32(node.get("scale"), 3, [1.0, 1.0, 1.0], f"nodes[{ni}].scale", path)
+    return trs(t, q, s, f"nodes[{ni}].rotation", path)
+
+
+def trs(t: np.ndarray, q: np.ndarray, s: np.ndarray, what: str, path: Path) -> np.ndarray:
+    """T * R * S as a 4x4 float64 matrix, the quaternion (x, y, z, w) normalized first."""
+    x, y, z, w = (float(c) for c in q)
+    n = float(np.sqrt(x * x + y * y + z * z + w * w))
+    if not n > 0.0:
+        raise fail(path, f"{what} is a zero quaternion")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    m = np.eye(4)
+    m[:3, :3] = r * s[None, :]
+    m[:3, 3] = t
+    return m
+
+
+def scene_index(doc: dict[str, Any], chosen: int | None) -> Any:
+    """The glTF scene shown: the one the resolved scene recorded (rendiff's `gltf_scene` choice,
+    already resolved to an index), else the file's `scene`, else the first."""
+    return doc.get("scene", 0) if chosen is None else chosen
+
+
+def mesh_nodes(
+    doc: dict[str, Any], path: Path, chosen: int | None = None
+) -> list[tuple[int, np.ndarray, np.ndarray, int]]:
+    """(node index, world matrix, |world| as the product of absolute local matrices, depth) of
+    every node with a mesh in the shown scene (`scene_index`), depth first, pre-order, in the
+    file's order."""
+    scenes = doc.get("scenes") or []
+    si = scene_index(doc, chosen)
+    scene = item(doc, "scenes", si, path) if scenes or chosen is not None else {"nodes": []}
+    out: list[tuple[int, np.ndarray, np.ndarray, int]] = []
+    seen: set[int] = set()
+    stack: list[tuple[int, np.ndarray, np.ndarray, int]] = [
+        (r, np.eye(4), np.eye(4), 1) for r in reversed(scene.get("nodes", []))
+    ]
+    while stack:
+        ni, parent, parent_abs, depth = stack.pop()
+        if ni in seen:
+            raise fail(path, f"node {ni} is reached twice: the node graph is not a tree")
+        seen.add(ni)
+        node = item(doc, "nodes", ni, path)
+        local = local_matrix(node, ni, path)
+        world, world_abs = parent @ local, parent_abs @ np.abs(local)
+        if "mesh" in node:
+            out.append((ni, world, world_abs, depth))
+        for c in reversed(node.get("children", [])):
+            stack.append((c, world, world_abs, depth + 1))
+    return out
+
+
+def labels(doc: dict[str, Any], nodes: list[int]) -> list[str]:
+    """Each mesh node's label (docs/resolved-scene.md): its name, its index when unnamed, and
+    `<name>#<index>` when mesh nodes share the name."""
+    names = [doc["nodes"][ni].get("name") or None for ni in nodes]
+    uses: dict[str, int] = {}
+    for n in names:
+        if isinstance(n, str):
+            uses[n] = uses.get(n, 0) + 1
+    return [
+        (f"{n}#{ni}" if uses[n] > 1 else n) if isinstance(n, str) else str(ni)
+        for n, ni in zip(names, nodes, strict=True)
+    ]
+
+
+def draws_nothing(mesh: dict[str, Any]) -> bool:
+    """True for a mesh whose primitives are all POINTS or LINE*: rendiff skips each with a warning and
+    makes no object of a node showing it (a mesh without primitives is not such a mesh)."""
+    prims = mesh.get("primitives", [])
+    return bool(prims) and all(p.get("mode", 4) not in SURFACE_MODES for p in prims)
+
+
+TRIMESH_GAPS: dict[str, str] = {
+    "sparse": "trimesh 5.2.0 ignores `accessor.sparse`: it reads the base values only (SimpleSparseAccessor's "
+    "three lifted vertices stay at y = 1)",
+    "TRIANGLE_FAN": "trimesh 5.2.0 drops TRIANGLE_FAN primitives (MeshPrimitiveModes' fan mesh loads as no geometry)",
+    "normalized": "trimesh 5.2.0 ignores `accessor.normalized`: a KHR_mesh_quantization position is read as the "
+    "raw integer (an unsigned short 65535 stays 65535.0, not 1.0); unnormalized integer positions it reads "
+    "right, and those are compared",
+    "instancing": "trimesh 5.2.0 does not apply EXT_mesh_gpu_instancing: it keeps the extension in the node's "
+    "metadata and draws the node's mesh once at the node's own transform, not once per instance",
+    "scene": "trimesh 5.2.0 loads only the file's default glTF scene (`scene`, else the first): no argument "
+    "chooses another, so a `gltf_scene` choosing another scene is not compared with trimesh",
+}
+"""Feature -> what trimesh 5.2.0 reads otherwise than the specification (each checked on a hand-written
+file, harness/tests/test_importcheck.py): the import verdict does not compare such a part with trimesh,
+and `pyrender_file` skips a scene that has one."""
+
+TRIMESH_INPUT_REL_PER_LEVEL = 2.0**-21
+"""trimesh reads node numbers in float64, rendiff in float32: each entry of a level's matrix differs
+by at most half a float32 unit (2^-24 relative); a rotation entry is a quadratic form of the
+quaternion, normalized (2^-24 on each component, 2 x that after normalizing, twice that again in
+the product): at most 8 x 2^-24 = 2^-21 relative per level, summed over the levels to first order."""
+
+
+def trimesh_gaps(doc: dict[str, Any], node: int) -> list[str]:
+    """The `TRIMESH_GAPS` a mesh node's primitives (and the node itself) meet."""
+    mesh = doc["meshes"][doc["nodes"][node]["mesh"]]
+    found = []
+    if INSTANCING in (doc["nodes"][node].get("extensions") or {}):
+        found.append("instancing")
+    for prim in mesh.get("primitives", []):
+        pos = prim.get("attributes", {}).get("POSITION")
+        acc = doc.get("accessors", [])
+        mode = prim.get("mode", 4)
+        if mode not in SURFACE_MODES:
+            continue
+        if isinstance(pos, int) and 0 <= pos < len(acc) and "sparse" in acc[pos]:
+            found.append("sparse")
+        if isinstance(pos, int) and 0 <= pos < len(acc) and acc[pos].get("normalized") is True:
+            found.append("normalized")
+        if mode == 6:
+            found.append("TRIANGLE_FAN")
+    return sorted(set(found))
+
+
+def trimesh_frames(scene: Any, key: str, node_names: set[str]) -> list[str]:
+    """trimesh's geometry frames of the glTF node trimesh names `key` (its `name`, else its index): the
+    frame itself (one primitive), or its per-primitive child frames (`<key>_<6 characters>`, not glTF
+    nodes), as trimesh 5.2.0 builds its scene graph."""
+    parents = scene.graph.transforms.parents
+    out = []
+    for name in scene.graph.nodes_geometry:
+        n = str(name)
+        if n == key or (
+            parents.get(name) == key and n.startswith(key + "_") and len(n) == len(key) + 7 and n not in node_names
+        ):
+            out.append(n)
+    return out
