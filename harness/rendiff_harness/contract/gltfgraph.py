@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,11 @@ SURFACE_MODES = (4, 5, 6)
 """TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN: the modes that make triangles."""
 
 INSTANCING = "EXT_mesh_gpu_instancing"
+
+OPS_PER_LEVEL = 20
+"""Roundings one node level can add to a coordinate: quaternion normalization (a 4-term sum of
+squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
+(1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
 
 
 def fail(path: Path, problem: str) -> MeshFileError:
@@ -231,16 +237,92 @@ def trimesh_gaps(doc: dict[str, Any], node: int) -> list[str]:
     return sorted(set(found))
 
 
-def trimesh_frames(scene: Any, key: str, node_names: set[str]) -> list[str]:
-    """trimesh's geometry frames of the glTF node trimesh names `key` (its `name`, else its index): the
-    frame itself (one primitive), or its per-primitive child frames (`<key>_<6 characters>`, not glTF
+TRIMESH_BASE_FRAME = "world"
+"""The root frame of trimesh's scene graph (trimesh.exchange.gltf's DEFAULT_BASE_FRAME)."""
+
+
+def trimesh_node_names(doc: dict[str, Any]) -> dict[int, str]:
+    """The frame name trimesh 5.2.0 gives each glTF node: its `name` (else its index), made unique in
+    node order by trimesh's own `unique_name` (a second "a" is "a_1"), a node named as the base frame
+    renamed (trimesh.exchange.gltf.load_gltf does exactly this)."""
+    from trimesh.util import unique_name  # noqa: PLC0415 - heavy import, only where trimesh reads a file
+
+    index: dict[str, int] = {}
+    counts: dict[str | None, int] = {}
+    for i, node in enumerate(doc.get("nodes", [])):
+        index[unique_name(node.get("name", str(i)), index, counts=counts)] = i
+    names = {i: n for n, i in index.items()}
+    if TRIMESH_BASE_FRAME in index:
+        names[index[TRIMESH_BASE_FRAME]] = unique_name(TRIMESH_BASE_FRAME, set(names.values()))
+    return names
+
+
+def trimesh_frames(scene: Any, names: dict[int, str], node: int) -> list[str]:
+    """trimesh's geometry frames of glTF node `node` (`names`: `trimesh_node_names`): the node's frame
+    itself (one primitive), or its per-primitive child frames (`<name>_<6 characters>`, not glTF
     nodes), as trimesh 5.2.0 builds its scene graph."""
+    key = names[node]
+    taken = set(names.values())
     parents = scene.graph.transforms.parents
     out = []
     for name in scene.graph.nodes_geometry:
         n = str(name)
         if n == key or (
-            parents.get(name) == key and n.startswith(key + "_") and len(n) == len(key) + 7 and n not in node_names
+            parents.get(name) == key and n.startswith(key + "_") and len(n) == len(key) + 7 and n not in taken
         ):
             out.append(n)
     return out
+
+
+def trimesh_load(path: Path) -> Any:
+    """The file as trimesh 5.2.0 loads it: a Scene (its default glTF scene), nothing merged or
+    reordered (`process=False`); MeshFileError naming the file when trimesh cannot read it."""
+    import trimesh  # noqa: PLC0415 - heavy import, only where trimesh reads a file
+
+    try:
+        return trimesh.load(str(path), force="scene", process=False)
+    except Exception as exc:  # noqa: BLE001 - a third-party parser's failure is the file's verdict
+        raise MeshFileError(f"{path}: trimesh cannot read it: {type(exc).__name__}: {exc}") from None
+
+
+@dataclass
+class TrimeshPrimitive:
+    """One primitive of a glTF node as trimesh places it: `tris` (n, 3, 3) float64 in trimesh's world
+    (the frame's float64 world matrix applied by `Trimesh.apply_transform`, which reverses the faces
+    where the matrix mirrors), `local` (n, 3, 3) the same corners before the transform."""
+
+    frame: str
+    geometry: str
+    tris: np.ndarray
+    local: np.ndarray
+
+
+def trimesh_primitives(scene: Any, names: dict[int, str], node: int) -> tuple[list[str], list[TrimeshPrimitive]]:
+    """(the node's geometry frames, its primitives that have faces in primitive order): a POINTS or LINES
+    primitive is a geometry without faces, left out; trimesh adds geometries in primitive order."""
+    frames = trimesh_frames(scene, names, node)
+    order = {str(g): k for k, g in enumerate(scene.geometry)}
+    geoms = [(frame, *scene.graph[frame]) for frame in frames]
+    geoms = sorted((g for g in geoms if hasattr(scene.geometry[g[2]], "faces")), key=lambda g: order[str(g[2])])
+    out = []
+    for frame, transform, name in geoms:
+        mesh = scene.geometry[name].copy()
+        local = np.asarray(mesh.vertices, dtype=np.float64)
+        mesh.apply_transform(transform)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        out.append(TrimeshPrimitive(frame, str(name), np.asarray(mesh.vertices, dtype=np.float64)[faces], local[faces]))
+    return frames, out
+
+
+def trimesh_abs_world(scene: Any, frame: str) -> tuple[np.ndarray, int]:
+    """(|L_1| ... |L_d|, d): the product of the absolute local matrices of trimesh's graph edges from the
+    base frame down to `frame` (float64, as trimesh read them), and the number of edges."""
+    parents = scene.graph.transforms.parents
+    edges = scene.graph.transforms.edge_data
+    out, levels, node = np.eye(4), 0, frame
+    while node in parents:
+        parent = parents[node]
+        out = np.abs(np.asarray(edges[parent, node].get("matrix", np.eye(4)), dtype=np.float64)) @ out
+        levels += 1
+        node = parent
+    return out, levels

@@ -35,6 +35,7 @@ import numpy as np
 
 from ...contract.gltfgraph import (
     INSTANCING,
+    OPS_PER_LEVEL,
     SURFACE_MODES,
     container,
     draws_nothing,
@@ -71,11 +72,6 @@ MODE_NAMES = {
     5: "TRIANGLE_STRIP",
     6: "TRIANGLE_FAN",
 }
-
-OPS_PER_LEVEL = 20
-"""Roundings one node level can add to a coordinate: quaternion normalization (a 4-term sum of
-squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
-(1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
 
 OPS_POINT = 5
 """The point itself: a 3-term product plus the translation (4), and a normalized (quantized)

@@ -20,13 +20,12 @@ is declared, not compared: the parts it meets are left out and the entry says wh
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ...contract import gltfgraph
 from . import gltf_spec
-from .parts import DecodeError, Part, empty_part, extend
+from .parts import Part, empty_part, extend
 
 KNOWN_BUGS = gltfgraph.TRIMESH_GAPS
 """Feature -> why trimesh's reading of it is not compared (contract/gltfgraph.py, shared with `pyrender_file`)."""
@@ -38,18 +37,12 @@ declared = gltfgraph.trimesh_gaps
 def decode(path: Path, chosen: int | None = None) -> tuple[list[Part | None], list[str]]:
     """Per part of the shown scene (gltf_spec's slots: order and labels): trimesh's triangles, or
     None where a declared bug makes trimesh's reading not comparable; and the notes saying which."""
-    import trimesh  # noqa: PLC0415 - heavy import, only where a glTF is checked
-
     doc, bin_chunk = gltfgraph.container(path)
     slots = gltf_spec.slots(doc, path, chosen, {}, bin_chunk)
     if gltfgraph.scene_index(doc, chosen) != gltfgraph.scene_index(doc, None):
         return [None] * len(slots), [f"{len(slots)} part(s) not compared with trimesh: {KNOWN_BUGS['scene']}"]
-    try:
-        scene: Any = trimesh.load(str(path), force="scene", process=False)
-    except Exception as exc:  # noqa: BLE001 - a third-party parser's failure is the file's verdict
-        raise DecodeError(f"{path}: trimesh cannot read it: {type(exc).__name__}: {exc}") from None
-    node_names = {str(n.get("name", i)) for i, n in enumerate(doc.get("nodes", []))}
-    order = {str(g): k for k, g in enumerate(scene.geometry)}
+    scene = gltfgraph.trimesh_load(path)
+    names = gltfgraph.trimesh_node_names(doc)
     out: list[Part | None] = []
     notes = []
     for slot in slots:
@@ -60,31 +53,21 @@ def decode(path: Path, chosen: int | None = None) -> tuple[list[Part | None], li
             if slot.instance is None or slot.instance == 0:
                 notes.append(f"node {ni} not compared with trimesh: " + "; ".join(KNOWN_BUGS[b] for b in bugs))
             continue
-        key = str(doc["nodes"][ni].get("name") or ni)
-        frames = gltfgraph.trimesh_frames(scene, key, node_names)
+        frames, prims = gltfgraph.trimesh_primitives(scene, names, ni)
         part = empty_part(
-            slot.label, f"node {ni} as trimesh names it ({key!r})", gltf_spec.OPS_PER_LEVEL * slot.depth + 4
+            slot.label, f"node {ni} as trimesh names it ({names[ni]!r})", gltfgraph.OPS_PER_LEVEL * slot.depth + 4
         )
         part.input_rel = INPUT_REL_PER_LEVEL * slot.depth
-        geoms = [(frame, *scene.graph[frame]) for frame in frames]
-        # faces only (a POINTS or LINES primitive is a geometry without them), in primitive order
-        geoms = sorted((g for g in geoms if hasattr(scene.geometry[g[2]], "faces")), key=lambda g: order[str(g[2])])
-        if not geoms and frames:
-            out.append(part)  # geometry frames, none with faces: the count tells
-            continue
-        for frame, transform, geom_name in geoms:
-            mesh = scene.geometry[geom_name].copy()
-            mesh.apply_transform(transform)
-            tris = np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces, dtype=np.int64)]
-            # trimesh keeps no per-level matrices: the magnitude bound uses |W| (product of the absolute
-            # local matrices, gltf_spec's) on the largest absolute coordinate of the mesh, per axis.
-            local = np.abs(np.asarray(scene.geometry[geom_name].vertices, dtype=np.float64)).max(axis=0, initial=0.0)
+        for prim in prims:
+            # the magnitude bound uses |W| (product of the absolute local matrices, gltf_spec's) on the
+            # largest absolute coordinate of the primitive, per axis
+            local = np.abs(prim.local).reshape(-1, 3).max(axis=0, initial=0.0)
             mag = slot.world_abs[:3, :3] @ local + np.abs(slot.world_abs[:3, 3])
             extend(
                 part,
-                f"mesh {slot.mesh} geometry {geom_name!r} (frame {frame!r})",
-                tris,
-                np.broadcast_to(mag, tris.shape),
+                f"mesh {slot.mesh} geometry {prim.geometry!r} (frame {prim.frame!r})",
+                prim.tris,
+                np.broadcast_to(mag, prim.tris.shape),
             )
         out.append(part)
     return out, notes
