@@ -34,25 +34,26 @@ shows at the pixel (its ID), from the corners as trimesh placed them, in trimesh
 stored as float32), so a winding rendiff did not reverse under a mirroring node fails it.
 
 Precision (docs/external-renderers.md, "Its glTF path"): per coordinate, the float32 vertex drawn is
-within PLACEMENT_REL(d) m of rendiff's, m = |M_o| (E_1 ... E_d (|v|, 1)) + |t_o| (E below):
+within PLACEMENT_REL(d) m + d_in of rendiff's, with m = |M_o| (max(A_32, A_64) (|v|, 1)) + |t_o|
+(A_32 the product of the absolute local matrices as rendiff reads them, contract/gltfgraph.mesh_nodes;
+A_64 trimesh's, contract/gltfgraph.trimesh_abs_world; u = 2^-24):
 
-* rendiff's value r is its float64 value rounded once to float32 (<= u |r|, u = 2^-24);
-* both sides' float64 arithmetic (node matrices, their product, the point, the object transform):
-  gamma_k each, k = OPS_PER_LEVEL d + OPS_POINT + OPS_OBJECT (the import verdict's counts; trimesh's
-  quaternion matrix, its T R S product and apply_transform stay within a level's 20);
-* rendiff reads node numbers as float32, trimesh as float64: a translation or scale within u of its
-  own size, a rotation entry within 4u of 1 (the gradient of a quadratic form of the unit quaternion
-  has norm <= 4, the normalized quaternion moves by <= u; 5u with the second order), so each level's
-  matrix moves by <= 5u E, E = |L| when its 3x3 block is diagonal, else the all-ones block times
-  diag(its column norms) beside |t| (a rotation entry is at most its column's norm); through d levels
-  ((1 + 5u)^d - 1) E_1 ... E_d;
-* this backend rounds trimesh's float64 result to float32 once (<= u |b|).
+* rendiff's value r is its float64 value a rounded once to float32 (<= u |r|);
+* a lies within gamma_k m of x, the exact value of rendiff's numbers (node numbers read as float32),
+  k = OPS_PER_LEVEL d + OPS_POINT + OPS_OBJECT (the import verdict's counts), and trimesh's float64
+  value b within gamma_k m of x', the exact value of trimesh's numbers (node numbers read as float64;
+  its quaternion matrix, its T R S product and apply_transform stay within a level's 20);
+* x and x' differ because the two read the same decimals at two precisions; that difference is
+  computed here, d_in = |M_o ((W_32 - W_64) (v, 1))| in float64 from both world matrices, and it
+  lies within d_in + 3 gamma_(k+8) m of |x - x'| (each world matrix within gamma_k of its exact
+  product, the difference and the products 8 more roundings);
+* this backend rounds b to float32 once (<= u |b|).
 
-Hence PLACEMENT_REL(d) = (2u + 2 gamma_k + (1 + 5u)^d - 1) (1 + 4u) (the last factor: |r|, |b| <= m
-(1 + 2u)). The render records `vertex_placement`, the largest vector norm of that bound over the
-scene's vertices; the precision model moves every point by it on top of pyrender's own model (edges
-by p / (z pixel) px, depths by p / |cos|, at most the triangle's depth span; normals by the turn such
-a move can give a triangle, judge/normals.placement_angle).
+Hence PLACEMENT_REL(d) = (2u + 6 gamma_(k+8)) (1 + 4u) (the last factor: |r|, |b| <= m (1 + 2u)),
+plus d_in (1 + 4u). The render records `vertex_placement`, the largest vector norm of that bound over
+the scene's vertices; the precision model moves every point by it on top of pyrender's own model
+(edges by p / (z pixel) px, depths by p / |cos|, at most the triangle's depth span; normals by the
+turn such a move can give a triangle, judge/normals.placement_angle).
 """
 
 from __future__ import annotations
@@ -85,9 +86,6 @@ U64 = 2.0**-53
 OPS_POINT = 5
 """The point: a 3-term product plus the translation (4), and one more as the import verdict counts
 it (judge/importcheck/gltf_spec.OPS_POINT)."""
-NODE_INPUT = 5.0 * F32_U
-"""How far one node level's matrix read in float64 (trimesh) lies from the same numbers read as
-float32 (rendiff), relative to the level's E (module docstring)."""
 
 
 def _gamma(k: int, u: float) -> float:
@@ -95,10 +93,9 @@ def _gamma(k: int, u: float) -> float:
 
 
 def placement_rel(levels: int) -> float:
-    """PLACEMENT_REL(d) of the module docstring for a frame `levels` graph edges below the base."""
+    """PLACEMENT_REL(d) of the module docstring for a node `levels` levels deep."""
     k = gltfgraph.OPS_PER_LEVEL * levels + OPS_POINT + OPS_OBJECT
-    node_input = float(np.expm1(levels * np.log1p(NODE_INPUT)))  # (1 + 5u)^d - 1
-    return (2.0 * F32_U + 2.0 * _gamma(k, U64) + node_input) * (1.0 + 4.0 * F32_U)
+    return (2.0 * F32_U + 6.0 * _gamma(k + 8, U64)) * (1.0 + 4.0 * F32_U)
 
 
 # --------------------------------------------------------------------------- what it can read
@@ -149,50 +146,37 @@ def plan_uses(scene: ResolvedScene) -> list[Use]:
     return out
 
 
-def mesh_parts(doc: dict[str, Any], path: Path, chosen: int | None) -> list[tuple[int, str]]:
-    """(node, label) of each part rendiff makes of the file (contract/gltfgraph: the shown scene's mesh
+@dataclass
+class Part:
+    """A part rendiff makes of the file: its mesh node, label, and world matrix (with the product of
+    the absolute local matrices and the depth) as rendiff reads the node numbers."""
+
+    node: int
+    label: str
+    world: np.ndarray
+    world_abs: np.ndarray
+    depth: int
+
+
+def mesh_parts(doc: dict[str, Any], path: Path, chosen: int | None) -> list[Part]:
+    """Each part rendiff makes of the file (contract/gltfgraph: the shown scene's mesh
     nodes in order, none for a node whose mesh draws nothing); BackendSkipped where trimesh departs from
     the specification (contract/gltfgraph.TRIMESH_GAPS)."""
     if gltfgraph.scene_index(doc, chosen) != gltfgraph.scene_index(doc, None):
         raise BackendSkipped(f"{NAME}: {path.name} shows glTF scene {chosen}: {gltfgraph.TRIMESH_GAPS['scene']}")
-    nodes = [n[0] for n in gltfgraph.mesh_nodes(doc, path, chosen)]
+    nodes = gltfgraph.mesh_nodes(doc, path, chosen)
     out = []
-    for ni, label in zip(nodes, gltfgraph.labels(doc, nodes), strict=True):
+    for (ni, world, world_abs, depth), label in zip(nodes, gltfgraph.labels(doc, [n[0] for n in nodes]), strict=True):
         if gltfgraph.draws_nothing(doc["meshes"][doc["nodes"][ni]["mesh"]]):
             continue
         gaps = gltfgraph.trimesh_gaps(doc, ni)
         if gaps:
             raise BackendSkipped(f"{NAME}: {path.name} node {ni} ({label}): {gltfgraph.TRIMESH_GAPS[gaps[0]]}")
-        out.append((ni, label))
+        out.append(Part(ni, label, world, world_abs, depth))
     return out
 
 
 # --------------------------------------------------------------------------- loading
-
-
-def level_bound(matrix: np.ndarray) -> np.ndarray:
-    """E of one level (module docstring): |L| when its 3x3 block is diagonal, else the all-ones block
-    times diag(its column norms), with |t|; the absolute matrix either way bounds |L|."""
-    m = np.asarray(matrix, dtype=np.float64)
-    if np.count_nonzero(m[:3, :3] - np.diag(np.diag(m[:3, :3]))) == 0:
-        return np.abs(m)
-    out = np.eye(4)
-    out[:3, :3] = np.ones((3, 3)) * np.linalg.norm(m[:3, :3], axis=0)[None, :]
-    out[:3, 3] = np.abs(m[:3, 3])
-    return out
-
-
-def frame_bound(scene: Any, frame: str) -> tuple[np.ndarray, int]:
-    """(E_1 ... E_d, d) along trimesh's graph edges from the base frame down to `frame`."""
-    parents = scene.graph.transforms.parents
-    edges = scene.graph.transforms.edge_data
-    out, levels, node = np.eye(4), 0, frame
-    while node in parents:
-        parent = parents[node]
-        out = level_bound(np.asarray(edges[parent, node].get("matrix", np.eye(4)))) @ out
-        levels += 1
-        node = parent
-    return out, levels
 
 
 @dataclass
@@ -226,8 +210,9 @@ def load(scene: ResolvedScene) -> Loaded:
             )
         names = gltfgraph.trimesh_node_names(doc)
         m, t = object_matrix(use.transform)
-        for i, (ni, label) in zip(use.objects, parts, strict=True):
+        for i, part in zip(use.objects, parts, strict=True):
             obj = scene.objects[i]
+            ni, label = part.node, part.label
             first, count = int(obj["first_prim"]), int(obj["prim_count"])
             _, prims = gltfgraph.trimesh_primitives(loaded, names, ni)
             got = sum(p.tris.shape[0] for p in prims)
@@ -240,11 +225,13 @@ def load(scene: ResolvedScene) -> Loaded:
             at = first
             for prim in prims:
                 n = prim.tris.shape[0]
-                chain, levels = frame_bound(loaded, prim.frame)
-                hom = np.concatenate([np.abs(prim.local), np.ones((n, 3, 1))], axis=2)
-                mag = (hom @ chain.T)[..., :3] @ np.abs(m).T + np.abs(t)
+                chain, _ = gltfgraph.trimesh_abs_world(loaded, prim.frame)
+                hom = np.concatenate([prim.local, np.ones((n, 3, 1))], axis=2)
+                mag = (np.abs(hom) @ np.maximum(chain, part.world_abs).T)[..., :3] @ np.abs(m).T + np.abs(t)
+                trimesh_world = np.asarray(loaded.graph[prim.frame][0], dtype=np.float64)
+                d_in = np.abs((hom @ (part.world - trimesh_world).T)[..., :3] @ m.T)
                 tris[at : at + n] = prim.tris @ m.T + t
-                bound[at : at + n] = placement_rel(levels) * mag
+                bound[at : at + n] = placement_rel(part.depth) * mag + d_in * (1.0 + 4.0 * F32_U)
                 at += n
             problem = disagreement(
                 scene.triangles[first : first + count].astype(np.float64),
