@@ -188,6 +188,7 @@ class Loaded:
     drawn: np.ndarray
     bound: np.ndarray
     problems: list[str]
+    files: list[str]
 
 
 def load(scene: ResolvedScene) -> Loaded:
@@ -243,7 +244,7 @@ def load(scene: ResolvedScene) -> Loaded:
             )
             if problem:
                 problems.append(f"object {obj.get('name', '')!r}: {problem}")
-    return Loaded(tris, tris.astype(np.float32), bound, problems)
+    return Loaded(tris, tris.astype(np.float32), bound, problems, sorted({str(u.path) for u in uses}))
 
 
 def face_normals(tris: np.ndarray) -> np.ndarray:
@@ -271,7 +272,7 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
     placed = float(np.max(np.linalg.norm(loaded.bound, axis=2), initial=0.0))
     info.update(
         loader="trimesh.load of the user's glTF files (its scene graph), each object's transform after",
-        files=sorted({str(u.path) for u in plan_uses(scene)}),
+        files=loaded.files,
         trimesh=trimesh_version(),
         normals="face normal of the triangle shown, from trimesh's corners and winding",
     )
