@@ -2,12 +2,13 @@
 with its known departures from the specification declared, each with its reason, like a
 renderer's known bugs: a mesh node whose primitives use a declared feature is not compared with
 trimesh (the entry says which and why); any other difference fails, and the entry says whether
-gltf_spec.py sides with rendiff (then trimesh departs from the specification: declare it here
-after checking) or with trimesh.
+gltf_spec.py sides with rendiff (then trimesh departs from the specification: declare it in
+contract/gltfgraph.TRIMESH_GAPS after checking) or with trimesh.
 
-trimesh keeps its scene graph: each geometry node is named as the glTF node (its `name`, else its
-index; a mesh of several primitives is one child frame per primitive, `<node>_<6 random
-characters>`, in primitive order), its transform the node's world matrix read from the JSON in
+trimesh keeps its scene graph (read through contract/gltfgraph.py, shared with `pyrender_file`):
+each geometry node is named as the glTF node (its `name`, else its index, made unique in node order;
+a mesh of several primitives is one child frame per primitive, `<node>_<6 random characters>`, in
+primitive order), its transform the node's world matrix read from the JSON in
 float64 (rendiff reads node numbers as float32: `input_rel`), and `Trimesh.apply_transform`
 reverses the faces of a mirrored node, as the specification asks. A POINTS or LINES primitive is a
 PointCloud or Path geometry without faces (rendiff skips it: nothing to compare); LINE_LOOP and
