@@ -39,6 +39,10 @@ OPS_PER_LEVEL = 20
 squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
 (1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
 
+OPS_POINT = 5
+"""The point itself: a 3-term product plus the translation (4), and a normalized (quantized)
+coordinate's dequantizing division (1), correctly rounded in float64 on both sides."""
+
 
 def fail(path: Path, problem: str) -> MeshFileError:
     """The error naming the file and its problem."""

@@ -36,6 +36,7 @@ import numpy as np
 from ...contract.gltfgraph import (
     INSTANCING,
     OPS_PER_LEVEL,
+    OPS_POINT,
     SURFACE_MODES,
     container,
     draws_nothing,
@@ -72,10 +73,6 @@ MODE_NAMES = {
     5: "TRIANGLE_STRIP",
     6: "TRIANGLE_FAN",
 }
-
-OPS_POINT = 5
-"""The point itself: a 3-term product plus the translation (4), and a normalized (quantized)
-coordinate's dequantizing division (1), correctly rounded in float64 on both sides."""
 
 
 def _buffer(doc: dict[str, Any], i: int, path: Path, bin_chunk: bytes | None) -> bytes:

@@ -83,9 +83,6 @@ PEAK_MEMORY = (210 * 2**20, 600)
 time's max RSS, 202 MiB on a 2-triangle glTF and 310 MiB on a 199,712-triangle one (568 B per
 triangle more: trimesh's scene and the float64 copies of every triangle), rounded up."""
 U64 = 2.0**-53
-OPS_POINT = 5
-"""The point: a 3-term product plus the translation (4), and one more as the import verdict counts
-it (judge/importcheck/gltf_spec.OPS_POINT)."""
 
 
 def _gamma(k: int, u: float) -> float:
@@ -94,7 +91,7 @@ def _gamma(k: int, u: float) -> float:
 
 def placement_rel(levels: int) -> float:
     """PLACEMENT_REL(d) of the module docstring for a node `levels` levels deep."""
-    k = gltfgraph.OPS_PER_LEVEL * levels + OPS_POINT + OPS_OBJECT
+    k = gltfgraph.OPS_PER_LEVEL * levels + gltfgraph.OPS_POINT + OPS_OBJECT
     return (2.0 * F32_U + 6.0 * _gamma(k + 8, U64)) * (1.0 + 4.0 * F32_U)
 
 
