@@ -17,6 +17,7 @@ fixture used for timings.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,10 @@ import numpy as np
 import numpy.typing as npt
 
 from fixtures import write_scene
+from rendiff_harness import compare
+from rendiff_harness.contract import exrbuf, resolved
 from rendiff_harness.contract.resolved import ResolvedScene
+from rendiff_harness.renderers import registry
 
 BACKGROUND_ID = 0xFFFFFFFF
 
@@ -509,3 +513,51 @@ def cornell(
     meta["integrator"] = {"max_depth": -1, "spp": 64}
     (path / "scene.json").write_text(json.dumps(meta, indent=1))
     return path
+
+
+def judge_renders(directory: Path, backends: tuple[str, ...]) -> dict[tuple[str, str], Any]:
+    """Renders the resolved scene in `directory` (a run's scenes/<name>/resolved) on `backends`, the
+    float64 ray cast (`cast`) as the reference, and returns the comparison's id, Z and N entries by
+    (backend, buffer)."""
+    scene = resolved.load(directory)
+    sdir, run = directory.parent, directory.parents[2]
+    ref = cast(scene)
+    exrbuf.write_buffers(sdir / "raster.exr", Z=ref.z.astype(np.float32), prim=ref.prim, obj=ref.obj)
+    renders: list[dict[str, Any]] = [
+        {"backend": "raster", "status": "ok", "exr": (sdir / "raster.exr").relative_to(run).as_posix(), "info": {}}
+    ]
+    for name in backends:
+        exr = sdir / f"{name}.exr"
+        backend = registry.get(name)
+        info = backend.render(scene, exr, sdir, 60.0)
+        renders.append(
+            {
+                "backend": name,
+                "status": "ok",
+                "exr": exr.relative_to(run).as_posix(),
+                "buffers": [b for b in ("Z", "id", "N") if b in backend.buffers],
+                "info": info,
+                "time_s": 0.1,
+                "version": name,
+                "command": name,
+            }
+        )
+    manifest = {
+        "format": "rendiff-manifest/1",
+        "reference": "raster",
+        "created": "2026-11-29T10:00:00Z",
+        "rendiff_version": "0.1.0",
+        "scenes": [
+            {
+                "scene": sdir.name,
+                "scene_file": "s.toml",
+                "resolved": directory.relative_to(run).as_posix(),
+                "requires": ["depth", "ids"],
+                "renders": renders,
+            }
+        ],
+    }
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    assert compare.main(["--run", str(run), "--no-images"]) in (0, 1)
+    doc = json.loads((run / "results.json").read_text())
+    return {(r["backend"], r["buffer"]): r for r in doc["results"] if r["buffer"] in ("id", "Z", "N")}

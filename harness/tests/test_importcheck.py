@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from fixtures import REPO, rendiff_binary
-from rendiff_harness.contract import resolved
+from rendiff_harness.contract import gltfgraph, resolved
 from rendiff_harness.contract.results import Entry
 from rendiff_harness.judge import importcheck
 from rendiff_harness.judge.importcheck import gltf_spec, gltf_trimesh, match
@@ -492,7 +492,7 @@ def test_the_default_scene_read_instead_of_the_chosen_one_fails_naming_the_primi
     bad = _plant_and_judge(
         tmp_path,
         out,
-        _buggy_gltf(out, lambda mp: mp.setattr(gltf_spec, "scene_index", lambda doc, chosen: doc.get("scene", 0))),
+        _buggy_gltf(out, lambda mp: mp.setattr(gltfgraph, "scene_index", lambda doc, chosen: doc.get("scene", 0))),
     )
     assert bad.status == "fail", bad.reason
     assert (

@@ -20,8 +20,7 @@ import pytest
 
 import backend_cases as cases
 from fixtures import REPO, rendiff_binary, three_triangles
-from rendiff_harness import compare
-from rendiff_harness.contract import exrbuf, meshfile, resolved
+from rendiff_harness.contract import meshfile, resolved
 from rendiff_harness.renderers import registry
 from rendiff_harness.renderers.errors import BackendError, BackendSkipped
 from rendiff_harness.renderers.mitsuba import backend as mb
@@ -61,49 +60,7 @@ def _export(tmp: Path, obj: str | Path, transform: str = TRANSFORM, name: str = 
 
 
 def _judge(directory: Path, backends: tuple[str, ...] = ("mitsuba", "mitsuba_file")) -> dict[tuple[str, str], Any]:
-    """Renders the resolved scene in `directory` (a run's scenes/<name>/resolved) on `backends`, the
-    float64 ray cast as the reference, and returns the comparison's entries by (backend, buffer)."""
-    scene = resolved.load(directory)
-    sdir, run = directory.parent, directory.parents[2]
-    ref = cases.cast(scene)
-    exrbuf.write_buffers(sdir / "raster.exr", Z=ref.z.astype(np.float32), prim=ref.prim, obj=ref.obj)
-    renders: list[dict[str, Any]] = [
-        {"backend": "raster", "status": "ok", "exr": (sdir / "raster.exr").relative_to(run).as_posix(), "info": {}}
-    ]
-    for name in backends:
-        exr = sdir / f"{name}.exr"
-        info = registry.get(name).render(scene, exr, sdir, 60.0)
-        renders.append(
-            {
-                "backend": name,
-                "status": "ok",
-                "exr": exr.relative_to(run).as_posix(),
-                "buffers": ["Z", "id", "N"],
-                "info": info,
-                "time_s": 0.1,
-                "version": name,
-                "command": name,
-            }
-        )
-    manifest = {
-        "format": "rendiff-manifest/1",
-        "reference": "raster",
-        "created": "2026-11-29T10:00:00Z",
-        "rendiff_version": "0.1.0",
-        "scenes": [
-            {
-                "scene": sdir.name,
-                "scene_file": "s.toml",
-                "resolved": directory.relative_to(run).as_posix(),
-                "requires": ["depth", "ids"],
-                "renders": renders,
-            }
-        ],
-    }
-    (run / "manifest.json").write_text(json.dumps(manifest))
-    assert compare.main(["--run", str(run), "--no-images"]) in (0, 1)
-    doc = json.loads((run / "results.json").read_text())
-    return {(r["backend"], r["buffer"]): r for r in doc["results"] if r["buffer"] in ("id", "Z", "N")}
+    return cases.judge_renders(directory, backends)
 
 
 def _rewrite(directory: Path, tris: np.ndarray) -> None:

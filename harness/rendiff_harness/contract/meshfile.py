@@ -15,6 +15,15 @@ import numpy as np
 
 from .resolved import ResolvedScene
 
+OPS_OBJECT = 16
+"""Roundings the scene object's transform adds to a coordinate: degrees to radians (1), sin and cos
+(within one unit each: 2), the products Rz Ry Rx (two 3-term products: 6), the scale (1), the point
+(a 3-term product plus the translation: 4): 14, taken as 16."""
+
+
+class MeshFileError(Exception):
+    """A mesh file an independent reading cannot read; the message names the file and the problem."""
+
 
 def file_uses(scene: ResolvedScene) -> list[list[int]]:
     """Indices of the objects read from one scene object's mesh file, one list per use of a file

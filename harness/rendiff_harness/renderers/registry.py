@@ -38,6 +38,7 @@ BUILT_IN = (
     "pyrender",
     "mitsuba",
     "mitsuba_file",
+    "pyrender_file",
 )
 """The built-in external backends, in the order `info` lists them: renderers/<name>/backend.py's `SPEC`."""
 

@@ -192,7 +192,7 @@ def _who(scene: ResolvedScene, i: int, decoder: str, fmt: str, file: str) -> str
     if _object(scene, i, spec[part], "gltf_spec").ok:
         return (
             "gltf_spec, written from the specification, agrees with rendiff: trimesh departs from it; "
-            "declare it in gltf_trimesh.KNOWN_BUGS with its reason"
+            "declare it in contract/gltfgraph.TRIMESH_GAPS with its reason"
         )
     return "gltf_spec disagrees with rendiff too: rendiff departs from the specification"
 

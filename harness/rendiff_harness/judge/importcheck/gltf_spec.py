@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import base64
 import binascii
-import json
-import struct
 import urllib.parse
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,11 +33,21 @@ from typing import Any
 
 import numpy as np
 
-from ...contract.userfile import UserFileError, read_regular
-from .parts import DecodeError, Part, empty_part, extend
-
-MAX_BYTES = 1 << 30
-"""Largest file read (the glTF and each buffer), rendiff's own limit for mesh files."""
+from ...contract.gltfgraph import (
+    INSTANCING,
+    OPS_PER_LEVEL,
+    OPS_POINT,
+    SURFACE_MODES,
+    container,
+    draws_nothing,
+    labels,
+    mesh_nodes,
+    trs,
+)
+from ...contract.gltfgraph import fail as _fail
+from ...contract.gltfgraph import item as _index
+from ...contract.gltfgraph import read as _read
+from .parts import Part, empty_part, extend
 
 COMPONENTS: dict[int, str] = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 """componentType -> numpy dtype (3.6.2.2)."""
@@ -56,11 +64,6 @@ NORMALIZE: dict[int, tuple[float, float]] = {
 """Normalized integer -> float: max(c / divisor, floor) (3.11, "Animations" table, and 3.6.2.3;
 `KHR_mesh_quantization` refers to the same table)."""
 
-SURFACE_MODES = (4, 5, 6)
-"""TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN: the modes that make triangles."""
-
-INSTANCING = "EXT_mesh_gpu_instancing"
-
 MODE_NAMES = {
     0: "POINTS",
     1: "LINES",
@@ -70,68 +73,6 @@ MODE_NAMES = {
     5: "TRIANGLE_STRIP",
     6: "TRIANGLE_FAN",
 }
-
-OPS_PER_LEVEL = 20
-"""Roundings one node level can add to a coordinate: quaternion normalization (a 4-term sum of
-squares, the square root, the division: 6), a rotation entry (two products, two sums: 4), the scale
-(1), the 4-term product with the parent (4): 15, taken as 20 (docs/verifier.md, "The import verdict")."""
-
-OPS_POINT = 5
-"""The point itself: a 3-term product plus the translation (4), and a normalized (quantized)
-coordinate's dequantizing division (1), correctly rounded in float64 on both sides."""
-
-
-def _fail(path: Path, problem: str) -> DecodeError:
-    return DecodeError(f"{path}: {problem}")
-
-
-def _index(doc: dict[str, Any], key: str, i: Any, path: Path) -> dict[str, Any]:
-    items = doc.get(key)
-    if isinstance(i, bool) or not isinstance(i, int) or not isinstance(items, list) or not 0 <= i < len(items):
-        raise _fail(path, f"{key}[{i!r}] does not exist")
-    item = items[i]
-    if not isinstance(item, dict):
-        raise _fail(path, f"{key}[{i}] is not an object")
-    return item
-
-
-def _read(path: Path) -> bytes:
-    try:
-        return read_regular(path, MAX_BYTES)
-    except FileNotFoundError:
-        raise _fail(path, "missing") from None
-    except (UserFileError, OSError) as exc:
-        raise _fail(path, f"unreadable: {exc}") from None
-
-
-def container(path: Path) -> tuple[dict[str, Any], bytes | None]:
-    """The JSON document and, for a GLB, its BIN chunk (section 4)."""
-    raw = _read(path)
-    bin_chunk = None
-    if raw[:4] == b"glTF":
-        if len(raw) < 20:
-            raise _fail(path, "GLB shorter than its header")
-        _, version, length = struct.unpack_from("<III", raw, 0)
-        if version != 2 or length > len(raw):
-            raise _fail(path, f"GLB version {version}, length {length} of {len(raw)} bytes")
-        at, chunks = 12, []
-        while at + 8 <= length:
-            size, kind = struct.unpack_from("<II", raw, at)
-            chunks.append((kind, raw[at + 8 : at + 8 + size]))
-            at += 8 + size
-        if not chunks or chunks[0][0] != 0x4E4F534A:
-            raise _fail(path, "GLB without a JSON chunk first")
-        text = chunks[0][1]
-        bin_chunk = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == 0x004E4942 else None
-    else:
-        text = raw
-    try:
-        doc = json.loads(text.decode("utf-8").removeprefix("\ufeff"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise _fail(path, f"not glTF JSON: {exc}") from None
-    if not isinstance(doc, dict):
-        raise _fail(path, "the JSON is not an object")
-    return doc, bin_chunk
 
 
 def _buffer(doc: dict[str, Any], i: int, path: Path, bin_chunk: bytes | None) -> bytes:
@@ -288,96 +229,6 @@ def triangles_of(mode: int, idx: np.ndarray) -> np.ndarray:
     return np.zeros((0, 3), dtype=np.int64)
 
 
-def _f32(values: Any, count: int, default: list[float], what: str, path: Path) -> np.ndarray:
-    v = default if values is None else values
-    if (
-        not isinstance(v, list)
-        or len(v) != count
-        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-    ):
-        raise _fail(path, f"{what} must be {count} numbers")
-    return np.asarray(v, dtype=np.float32).astype(np.float64)
-
-
-def local_matrix(node: dict[str, Any], ni: int, path: Path) -> np.ndarray:
-    """A node's local 4x4 matrix (float64 from float32 numbers): `matrix` column-major, else T R S."""
-    if "matrix" in node:
-        return _f32(node["matrix"], 16, [], f"nodes[{ni}].matrix", path).reshape(4, 4).T.copy()
-    t = _f32(node.get("translation"), 3, [0.0, 0.0, 0.0], f"nodes[{ni}].translation", path)
-    q = _f32(node.get("rotation"), 4, [0.0, 0.0, 0.0, 1.0], f"nodes[{ni}].rotation", path)
-    s = _f32(node.get("scale"), 3, [1.0, 1.0, 1.0], f"nodes[{ni}].scale", path)
-    return trs(t, q, s, f"nodes[{ni}].rotation", path)
-
-
-def trs(t: np.ndarray, q: np.ndarray, s: np.ndarray, what: str, path: Path) -> np.ndarray:
-    """T * R * S as a 4x4 float64 matrix, the quaternion (x, y, z, w) normalized first."""
-    x, y, z, w = (float(c) for c in q)
-    n = float(np.sqrt(x * x + y * y + z * z + w * w))
-    if not n > 0.0:
-        raise _fail(path, f"{what} is a zero quaternion")
-    x, y, z, w = x / n, y / n, z / n, w / n
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    m = np.eye(4)
-    m[:3, :3] = r * s[None, :]
-    m[:3, 3] = t
-    return m
-
-
-def scene_index(doc: dict[str, Any], chosen: int | None) -> Any:
-    """The glTF scene shown: the one the resolved scene recorded (rendiff's `gltf_scene` choice,
-    already resolved to an index), else the file's `scene`, else the first."""
-    return doc.get("scene", 0) if chosen is None else chosen
-
-
-def mesh_nodes(
-    doc: dict[str, Any], path: Path, chosen: int | None = None
-) -> list[tuple[int, np.ndarray, np.ndarray, int]]:
-    """(node index, world matrix, |world| as the product of absolute local matrices, depth) of
-    every node with a mesh in the shown scene (`scene_index`), depth first, pre-order, in the
-    file's order."""
-    scenes = doc.get("scenes") or []
-    si = scene_index(doc, chosen)
-    scene = _index(doc, "scenes", si, path) if scenes or chosen is not None else {"nodes": []}
-    out: list[tuple[int, np.ndarray, np.ndarray, int]] = []
-    seen: set[int] = set()
-    stack: list[tuple[int, np.ndarray, np.ndarray, int]] = [
-        (r, np.eye(4), np.eye(4), 1) for r in reversed(scene.get("nodes", []))
-    ]
-    while stack:
-        ni, parent, parent_abs, depth = stack.pop()
-        if ni in seen:
-            raise _fail(path, f"node {ni} is reached twice: the node graph is not a tree")
-        seen.add(ni)
-        node = _index(doc, "nodes", ni, path)
-        local = local_matrix(node, ni, path)
-        world, world_abs = parent @ local, parent_abs @ np.abs(local)
-        if "mesh" in node:
-            out.append((ni, world, world_abs, depth))
-        for c in reversed(node.get("children", [])):
-            stack.append((c, world, world_abs, depth + 1))
-    return out
-
-
-def labels(doc: dict[str, Any], nodes: list[int]) -> list[str]:
-    """Each mesh node's label (docs/resolved-scene.md): its name, its index when unnamed, and
-    `<name>#<index>` when mesh nodes share the name."""
-    names = [doc["nodes"][ni].get("name") or None for ni in nodes]
-    uses: dict[str, int] = {}
-    for n in names:
-        if isinstance(n, str):
-            uses[n] = uses.get(n, 0) + 1
-    return [
-        (f"{n}#{ni}" if uses[n] > 1 else n) if isinstance(n, str) else str(ni)
-        for n, ni in zip(names, nodes, strict=True)
-    ]
-
-
 @dataclass
 class Slot:
     """One part of the shown scene before its geometry is read: a mesh node, or one instance of an
@@ -397,13 +248,6 @@ class Slot:
         """The node and mesh (and instance) in messages."""
         inst = "" if self.instance is None else f", instance {self.instance} of {self.instances}"
         return f"node {self.node}, mesh {self.mesh}{inst}"
-
-
-def draws_nothing(mesh: dict[str, Any]) -> bool:
-    """True for a mesh whose primitives are all POINTS or LINE*: rendiff skips each with a warning and
-    makes no object of a node showing it (a mesh without primitives is not such a mesh)."""
-    prims = mesh.get("primitives", [])
-    return bool(prims) and all(p.get("mode", 4) not in SURFACE_MODES for p in prims)
 
 
 def instance_matrices(

@@ -10,16 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from ...contract.meshfile import object_matrix
+from ...contract.meshfile import OPS_OBJECT, object_matrix
 from .parts import Part
 
 U64 = 2.0**-53
 """float64's unit roundoff."""
-
-OPS_OBJECT = 16
-"""Roundings the scene object's transform adds to a coordinate: degrees to radians (1), sin and cos
-(within one unit each: 2), the products Rz Ry Rx (two 3-term products: 6), the scale (1), the point
-(a 3-term product plus the translation: 4): 14, taken as 16."""
 
 
 def gamma(k: int) -> float:

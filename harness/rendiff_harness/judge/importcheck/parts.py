@@ -8,9 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...contract.meshfile import MeshFileError
 
-class DecodeError(Exception):
-    """A mesh file an independent decoder cannot read; the message names the file and the problem."""
+DecodeError = MeshFileError
+"""A mesh file an independent decoder cannot read (contract/meshfile.py, shared with the glTF graph)."""
 
 
 @dataclass

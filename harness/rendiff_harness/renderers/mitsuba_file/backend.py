@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -74,11 +73,11 @@ from ...judge.tolerance import (
     Model,
     param,
     position_edge,
-    render_param,
     shift_depth,
 )
 from ..errors import BackendError, BackendSkipped
 from ..mitsuba import backend as mb
+from ..original import PLACEMENT_ATTR, disagreement, placement
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
@@ -96,7 +95,6 @@ PEAK_MEMORY = (120 * 2**20, 600)
 """(fixed bytes, bytes per triangle) at a render's peak, for `rendiff check`'s memory budget: max RSS
 114 MiB on obj_mesh (2,048 triangles) and 164 MiB on nefertiti_scan (99,938: 520 B per triangle
 more, each file parsed twice plus the arrays read back), rounded up."""
-PLACEMENT_ATTR = "vertex_placement"
 
 
 def _gamma(k: int, u: float) -> float:
@@ -205,23 +203,6 @@ def placement_bound(local: np.ndarray, transform: Any) -> np.ndarray:
     return bound
 
 
-def disagreement(rendiff: np.ndarray, mitsuba: np.ndarray, bound: np.ndarray, first: int, path: Path) -> str:
-    """'' when every Mitsuba triangle equals rendiff's (one cyclic rotation of its vertices, within the
-    bound per coordinate), else the count and the first that differs."""
-    ok = np.zeros(rendiff.shape[0], dtype=bool)
-    for shift in range(3):
-        rolled = np.roll(mitsuba, shift, axis=1)
-        ok |= np.all(np.abs(rolled - rendiff) <= np.roll(bound, shift, axis=1), axis=(1, 2))
-    bad = np.flatnonzero(~ok)
-    if not bad.size:
-        return ""
-    k = int(bad[0])
-    return (
-        f"{bad.size} of {ok.size} triangles of {path.name} differ beyond the float32 placement bound, first "
-        f"Mitsuba's face {k} {mitsuba[k].tolist()} against rendiff's prim {first + k} {rendiff[k].tolist()}"
-    )
-
-
 # --------------------------------------------------------------------------- render
 
 
@@ -260,7 +241,12 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
         bound = placement_bound(local, transform)
         placement = max(placement, float(np.max(np.linalg.norm(bound, axis=1), initial=0.0)))
         problem = disagreement(
-            scene.triangles[first : first + count].astype(np.float64), world[faces], bound[faces], first, path
+            scene.triangles[first : first + count].astype(np.float64),
+            world[faces],
+            bound[faces],
+            first,
+            path,
+            "Mitsuba",
         )
         if problem:
             problems.append(problem)
@@ -366,12 +352,6 @@ def render(
 
 
 # --------------------------------------------------------------------------- precision
-
-
-def placement(attrs: Mapping[str, Any]) -> float:
-    """The render's recorded vertex placement bound (0 when absent: compared as if exact)."""
-    value = render_param(attrs, {}, PLACEMENT_ATTR)
-    return value if value is not None and value >= 0.0 else 0.0
 
 
 def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:

@@ -256,15 +256,15 @@ def unavailable_reason() -> str | None:
 # --------------------------------------------------------------------------- depth model
 
 
-def vertex_depths(scene: ResolvedScene) -> np.ndarray:
-    """Planar depth (along `forward`) of every vertex, float64, shaped (N*3,)."""
+def vertex_depths(scene: ResolvedScene, triangles: np.ndarray | None = None) -> np.ndarray:
+    """Planar depth (along `forward`) of every vertex (of `triangles`, else the scene's), float64, shaped (N*3,)."""
     cam = scene.camera
-    verts = scene.triangles.reshape(-1, 3).astype(np.float64)
+    verts = (scene.triangles if triangles is None else triangles).reshape(-1, 3).astype(np.float64)
     depths: np.ndarray = (verts - cam.eye) @ cam.forward
     return depths
 
 
-def choose_depth_range(scene: ResolvedScene) -> tuple[float, float]:
+def choose_depth_range(scene: ResolvedScene, triangles: np.ndarray | None = None) -> tuple[float, float]:
     """GL near/far planes for this scene: as tight as the geometry allows.
 
     The 24-bit depth step at depth z is z^2 (f-n)/(f n) 2^-24, i.e. ~z^2/n 2^-24 for
@@ -282,7 +282,7 @@ def choose_depth_range(scene: ResolvedScene) -> tuple[float, float]:
     cam = scene.camera
     if not cam.near > 0.0:
         raise BackendError(f"pyrender needs a positive near plane, the scene has near={cam.near}")
-    depths = vertex_depths(scene)
+    depths = vertex_depths(scene, triangles)
     near = float(cam.near)
     if depths.size:
         near = max(near, NEAR_FRACTION * float(depths.min()))
@@ -378,12 +378,14 @@ def yfov(cam: Camera) -> float:
 # --------------------------------------------------------------------------- rendering
 
 
-def _build_scene(pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float) -> Any:
-    """pyrender.Scene with one unshared-vertex primitive and the rendiff camera."""
+def _build_scene(
+    pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, triangles: np.ndarray
+) -> Any:
+    """pyrender.Scene with one unshared-vertex primitive of `triangles` (prim k coloured k + 1) and the camera."""
     cam = scene.camera
     pscene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.0, 0.0, 0.0])
     if scene.triangle_count:
-        positions = np.ascontiguousarray(scene.triangles.reshape(-1, 3), dtype=np.float32)
+        positions = np.ascontiguousarray(triangles.reshape(-1, 3), dtype=np.float32)
         prim = pyrender.Primitive(positions=positions, color_0=encode_ids(scene.triangle_count), mode=GL.GL_TRIANGLES)
         pscene.add(pyrender.Mesh([prim]))
     camera = pyrender.PerspectiveCamera(yfov=yfov(cam), znear=near, zfar=far, aspectRatio=cam.width / cam.height)
@@ -439,11 +441,11 @@ def linearize_depth(depth24: np.ndarray, near: float, far: float) -> np.ndarray:
 
 
 def _render_pass(
-    pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float
+    pyrender: ModuleType, GL: ModuleType, scene: ResolvedScene, near: float, far: float, triangles: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """One FLAT|SKIP_CULL_FACES render with GL planes near/far: (prim ids, Z float32)."""
+    """One FLAT|SKIP_CULL_FACES render of `triangles` with GL planes near/far: (prim ids, Z float32)."""
     cam = scene.camera
-    pscene = _build_scene(pyrender, GL, scene, near, far)
+    pscene = _build_scene(pyrender, GL, scene, near, far, triangles)
     color, depth24, samples = _draw(pyrender, GL, pscene, cam.width, cam.height)
     if samples != 0:
         raise BackendError(f"OSMesa context has GL_SAMPLES={samples}: MSAA would blend IDs")
@@ -487,8 +489,13 @@ def _precision(near: float, far: float) -> float:
     return (far - near) / (far * near)
 
 
-def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def render_arrays(
+    scene: ResolvedScene, triangles: np.ndarray | None = None
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Render and convert to rendiff buffers: ({'Z','prim','obj'}, info).
+
+    `triangles` (the scene's triangle_count, prim order) replaces the resolved triangles: the
+    positions a loader of the user's original files placed (renderers/pyrender_file), drawn the same way.
 
     Renders once with planes from the vertex depths (`choose_depth_range`); when the
     visible depths allow planes that are over 2x more precise (`refine_depth_range`),
@@ -497,15 +504,18 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
     if scene.triangle_count > MAX_TRIANGLES:
         encode_ids(scene.triangle_count)  # raises with the explanation
     pyrender, GL = _import_gl()
+    tris = scene.triangles if triangles is None else triangles
+    if tris.shape != (scene.triangle_count, 3, 3):
+        raise BackendError(f"pyrender: {tris.shape[0]} triangles given for a scene of {scene.triangle_count}")
     t0 = time.perf_counter()
-    near, far = choose_depth_range(scene)
-    prim, z = _render_pass(pyrender, GL, scene, near, far)
+    near, far = choose_depth_range(scene, tris)
+    prim, z = _render_pass(pyrender, GL, scene, near, far, tris)
     passes = [{"near": near, "far": far, "seconds": time.perf_counter() - t0}]
     refined = refine_depth_range(z, near, far)
     if _precision(*refined) < 0.5 * _precision(near, far):
         t1 = time.perf_counter()
         near, far = refined
-        prim, z = _render_pass(pyrender, GL, scene, near, far)
+        prim, z = _render_pass(pyrender, GL, scene, near, far, tris)
         passes.append({"near": near, "far": far, "seconds": time.perf_counter() - t1})
     t2 = time.perf_counter()
     buffers = {"Z": z, "prim": prim, "obj": object_ids(prim, scene)}

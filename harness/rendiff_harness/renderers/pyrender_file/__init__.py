@@ -1,0 +1,1 @@
+"""pyrender rendering the user's original glTF files through trimesh (backend.py)."""
