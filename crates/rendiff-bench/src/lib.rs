@@ -23,6 +23,7 @@ pub mod cli;
 pub mod core_loops;
 pub mod crossover;
 pub mod direct;
+pub mod equal_time;
 pub mod fuzz;
 pub mod harness;
 pub mod knobs;

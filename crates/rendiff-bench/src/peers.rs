@@ -629,6 +629,7 @@ fn goals(record: &Value) -> Value {
         "core_trace_vs_embree_best_scanned_mesh": scanned,
         "core_raster_vs_llvmpipe_speedup": record["raster_vs_pyrender"]["speedup_core_over_pyrender_pass"],
         "equal_time_error_ratio_mitsuba_over_core": record["path_tracing_equal_time"]["rmse_ratio_mitsuba_over_core"],
+        "equal_time_error_ratio_paired_rounds": super::equal_time::goal(&record["path_tracing_equal_time"]["paired_rounds"]),
     })
 }
 
@@ -839,7 +840,16 @@ fn equal_time(h: &Harness, opts: &PeersOptions, runs: usize) -> Result<Value> {
     let per_spp = calib.median_s / f64::from(calib_spp);
     let spp = ((m.time_s / per_spp).round() as u32).max(1);
     let (t, e) = core_path(&scene, &reference, spp, opts.seed, runs)?;
+    let pairing = super::equal_time::Pairing {
+        variant,
+        mitsuba_spp: opts.mitsuba_spp,
+        core_spp: spp,
+        seed: opts.seed,
+        rounds: opts.rounds,
+    };
+    let paired = super::equal_time::paired(h, &resolved, &scene, &reference, pairing);
     Ok(json!({
+        "paired_rounds": paired,
         "mitsuba": {"spp": opts.mitsuba_spp, "variant": variant, "time_s": m.time_s, "error": m.error, "details": m.details},
         "mitsuba_variants": variants,
         "core": {"spp": spp, "time_s": t.median_s, "timing": t.json(), "error": e,

@@ -3,7 +3,7 @@
 //! Deterministic: one sample at the pixel center, the visibility buffers' hit.
 
 use super::lights::{Delta, LightSet};
-use super::{ray_epsilon, surface, Bias, Radiance, ShadeOptions, Surface};
+use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions, Surface};
 use crate::frame::{Frame, BACKGROUND_ID};
 use crate::scene::resolve::{scene_size, ResolvedScene};
 use crate::trace::TraceBvh;
@@ -16,6 +16,7 @@ pub fn shade_point(
     scene: &ResolvedScene,
     bvh: &TraceBvh,
     lights: &LightSet,
+    features: Features,
     s: &Surface,
     eps: f64,
     bias: Option<Bias>,
@@ -24,7 +25,7 @@ pub fn shade_point(
     if s.albedo == DVec3::ZERO {
         return l;
     }
-    let shadows = scene.requires.contains("shadows");
+    let shadows = features.shadows;
     let origin = s.x + s.n * eps;
     for light in &lights.deltas {
         let (wi, dist, irradiance) = match *light {
@@ -68,6 +69,7 @@ pub fn render(
 ) -> Radiance {
     let cam = &scene.camera;
     let lights = LightSet::new(scene, opts.bias);
+    let features = Features::of(scene);
     let size = scene_size(&scene.triangles);
     let w = cam.width as usize;
     let rgb: Vec<[f32; 3]> = frame
@@ -83,8 +85,9 @@ pub fn render(
             let ng = (b - a).cross(c - a);
             let t = ng.dot(a - cam.eye) / ng.dot(ray.dir);
             let x = cam.eye + ray.dir * t;
-            let s = surface(scene, prim, x, ray.dir, opts.bias);
-            let l = shade_point(scene, bvh, &lights, &s, ray_epsilon(size, x), opts.bias);
+            let s = surface(scene, features, prim, x, ray.dir, opts.bias);
+            let eps = ray_epsilon(size, x);
+            let l = shade_point(scene, bvh, &lights, features, &s, eps, opts.bias);
             [l.x as f32, l.y as f32, l.z as f32]
         })
         .collect();

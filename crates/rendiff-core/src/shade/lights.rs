@@ -34,8 +34,10 @@ pub struct LightSet {
     pub emitters: Vec<u32>,
     cdf: Vec<f64>,
     total: f64,
-    /// Selection probability divided by area, per prim (0 for non-emitters).
-    pdf_area: std::collections::HashMap<u32, f64>,
+    /// Selection probability divided by area, indexed by prim (0 for
+    /// non-emitters; empty without `area_light`). A vector, not a map: it
+    /// is read at every path vertex that hits an emitter.
+    pdf_area: Vec<f64>,
     /// 1, or pi under `Bias::LightTimesPi`.
     pub emission_scale: f64,
 }
@@ -93,10 +95,13 @@ impl LightSet {
                     set.cdf.push(set.total);
                 }
             }
+            if !set.emitters.is_empty() {
+                set.pdf_area = vec![0.0; scene.triangles.len()];
+            }
             for (i, &prim) in set.emitters.iter().enumerate() {
                 let prev = if i == 0 { 0.0 } else { set.cdf[i - 1] };
                 let sel = (set.cdf[i] - prev) / set.total;
-                set.pdf_area.insert(prim, sel / area(scene, prim));
+                set.pdf_area[prim as usize] = sel / area(scene, prim);
             }
         }
         set
@@ -104,7 +109,7 @@ impl LightSet {
 
     /// Probability density (per unit area) of sampling point on `prim` by [`LightSet::sample`].
     pub fn pdf_area(&self, prim: u32) -> f64 {
-        self.pdf_area.get(&prim).copied().unwrap_or(0.0)
+        self.pdf_area.get(prim as usize).copied().unwrap_or(0.0)
     }
 
     /// Picks an emissive triangle in proportion to its power and a uniform point on it.

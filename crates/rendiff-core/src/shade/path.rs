@@ -5,7 +5,7 @@
 
 use super::direct::shade_point;
 use super::lights::LightSet;
-use super::{ray_epsilon, surface, Bias, Radiance, ShadeOptions};
+use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions};
 use crate::scene::resolve::{scene_size, ResolvedScene};
 use crate::trace::TraceBvh;
 use glam::DVec3;
@@ -54,112 +54,118 @@ fn power(a: f64, b: f64) -> f64 {
     }
 }
 
-/// One path through the continuous image point (fx, fy).
-#[allow(clippy::too_many_arguments)]
-fn radiance(
-    scene: &ResolvedScene,
-    bvh: &TraceBvh,
-    lights: &LightSet,
-    fx: f64,
-    fy: f64,
+/// Path vertex from which Russian roulette may end a path (1 = the
+/// primary hit): `depth > RR_DEPTH` below.
+const RR_DEPTH: i32 = 3;
+
+/// What every path of one render reads.
+struct Tracer<'a> {
+    scene: &'a ResolvedScene,
+    bvh: &'a TraceBvh,
+    lights: LightSet,
+    features: Features,
     max_depth: i32,
     eps_scale: f64,
     bias: Option<Bias>,
-    rng: &mut Pcg64Mcg,
-) -> DVec3 {
-    let cam = &scene.camera;
-    let two_sided = scene.requires.contains("two_sided");
-    let mut o = cam.eye;
-    let mut d = cam.direction_at(fx, fy);
-    let mut beta = DVec3::ONE;
-    let mut l = DVec3::ZERO;
-    let mut prev_bsdf_pdf: Option<f64> = None;
-    let mut depth = 1;
-    let mut tmin = 0.0;
-    while let Some(hit) = bvh.closest(scene, o, d, tmin, f64::INFINITY) {
-        let x = o + d * hit.t;
-        let s = surface(scene, hit.prim, x, d, bias);
-        if s.emission != DVec3::ZERO {
-            let w = match prev_bsdf_pdf {
-                None => 1.0,
-                Some(pb) => {
-                    let dist2 = (x - o).length_squared();
-                    let cos_l = s.n.dot(-d.normalize()).abs();
-                    let pl = lights.pdf_area(hit.prim) * dist2 / cos_l.max(1e-300);
-                    power(pb, pl)
-                }
-            };
-            l += beta * s.emission * lights.emission_scale * w;
-        }
-        if (max_depth != -1 && depth >= max_depth) || s.albedo == DVec3::ZERO {
-            break;
-        }
-        let eps = ray_epsilon(eps_scale, x);
-        let origin = s.x + s.n * eps;
-        // Next-event estimation: delta lights, then one emissive triangle.
-        if !lights.deltas.is_empty() {
-            let surf = super::Surface {
-                emission: DVec3::ZERO,
-                ..s
-            };
-            l += beta * shade_point(scene, bvh, lights, &surf, eps, bias);
-        }
-        if let Some((lp, y, nl, pa)) =
-            lights.sample(scene, rng.random(), rng.random(), rng.random())
-        {
-            let v = y - origin;
-            let dist2 = v.length_squared();
-            let wi = v / dist2.sqrt();
-            let cos_x = s.n.dot(wi);
-            let cos_l_signed = nl.dot(-wi);
-            let cos_l = if two_sided {
-                cos_l_signed.abs()
-            } else {
-                cos_l_signed
-            };
-            if cos_x > 0.0
-                && cos_l > 0.0
-                && pa > 0.0
-                && !bvh.occluded(scene, origin, v, 0.0, 1.0 - 1e-7)
-            {
-                let pl = pa * dist2 / cos_l;
-                let pb = cos_x * FRAC_1_PI;
-                let c = if bias == Some(Bias::MissingCosine) {
-                    1.0
-                } else {
-                    cos_x
+}
+
+impl Tracer<'_> {
+    /// One path through the continuous image point (fx, fy).
+    fn radiance(&self, fx: f64, fy: f64, rng: &mut Pcg64Mcg) -> DVec3 {
+        let (scene, bvh, lights, bias) = (self.scene, self.bvh, &self.lights, self.bias);
+        let max_depth = self.max_depth;
+        let two_sided = self.features.two_sided;
+        let cam = &scene.camera;
+        let mut o = cam.eye;
+        let mut d = cam.direction_at(fx, fy);
+        let mut beta = DVec3::ONE;
+        let mut l = DVec3::ZERO;
+        let mut prev_bsdf_pdf: Option<f64> = None;
+        let mut depth = 1;
+        let mut tmin = 0.0;
+        while let Some(hit) = bvh.closest(scene, o, d, tmin, f64::INFINITY) {
+            let x = o + d * hit.t;
+            let s = surface(scene, self.features, hit.prim, x, d, bias);
+            if s.emission != DVec3::ZERO {
+                let w = match prev_bsdf_pdf {
+                    None => 1.0,
+                    Some(pb) => {
+                        let dist2 = (x - o).length_squared();
+                        let cos_l = s.n.dot(-d.normalize()).abs();
+                        let pl = lights.pdf_area(hit.prim) * dist2 / cos_l.max(1e-300);
+                        power(pb, pl)
+                    }
                 };
-                l += beta * s.albedo * FRAC_1_PI * lights.emission(scene, lp) * c / pl
-                    * power(pl, pb);
+                l += beta * s.emission * lights.emission_scale * w;
             }
-        }
-        // Continue the path by sampling the Lambert lobe: f cos / pdf = albedo.
-        let (wi, pb) = cosine_sample(s.n, rng.random(), rng.random());
-        if pb <= 0.0 {
-            break;
-        }
-        beta *= s.albedo;
-        prev_bsdf_pdf = Some(pb);
-        o = origin;
-        d = wi;
-        tmin = 0.0;
-        depth += 1;
-        if depth > 3 {
-            let q = beta.max_element().min(0.95);
-            if rng.random::<f64>() >= q {
+            if (max_depth != -1 && depth >= max_depth) || s.albedo == DVec3::ZERO {
                 break;
             }
-            beta /= q;
+            let eps = ray_epsilon(self.eps_scale, x);
+            let origin = s.x + s.n * eps;
+            // Next-event estimation: delta lights, then one emissive triangle.
+            if !lights.deltas.is_empty() {
+                let surf = super::Surface {
+                    emission: DVec3::ZERO,
+                    ..s
+                };
+                l += beta * shade_point(scene, bvh, lights, self.features, &surf, eps, bias);
+            }
+            if let Some((lp, y, nl, pa)) =
+                lights.sample(scene, rng.random(), rng.random(), rng.random())
+            {
+                let v = y - origin;
+                let dist2 = v.length_squared();
+                let wi = v / dist2.sqrt();
+                let cos_x = s.n.dot(wi);
+                let cos_l_signed = nl.dot(-wi);
+                let cos_l = if two_sided {
+                    cos_l_signed.abs()
+                } else {
+                    cos_l_signed
+                };
+                if cos_x > 0.0
+                    && cos_l > 0.0
+                    && pa > 0.0
+                    && !bvh.occluded(scene, origin, v, 0.0, 1.0 - 1e-7)
+                {
+                    let pl = pa * dist2 / cos_l;
+                    let pb = cos_x * FRAC_1_PI;
+                    let c = if bias == Some(Bias::MissingCosine) {
+                        1.0
+                    } else {
+                        cos_x
+                    };
+                    l += beta * s.albedo * FRAC_1_PI * lights.emission(scene, lp) * c / pl
+                        * power(pl, pb);
+                }
+            }
+            // Continue the path by sampling the Lambert lobe: f cos / pdf = albedo.
+            let (wi, pb) = cosine_sample(s.n, rng.random(), rng.random());
+            if pb <= 0.0 {
+                break;
+            }
+            beta *= s.albedo;
+            prev_bsdf_pdf = Some(pb);
+            o = origin;
+            d = wi;
+            tmin = 0.0;
+            depth += 1;
+            if depth > RR_DEPTH {
+                let q = beta.max_element().min(0.95);
+                if rng.random::<f64>() >= q {
+                    break;
+                }
+                beta /= q;
+            }
         }
+        l
     }
-    l
 }
 
 /// Renders the box-filtered pixel integrals with `opts.spp` samples each.
 pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radiance {
     let cam = &scene.camera;
-    let lights = LightSet::new(scene, opts.bias);
-    let size = scene_size(&scene.triangles);
     let mut max_depth = scene.integrator.max_depth;
     if opts.bias == Some(Bias::OneBounceFewer) {
         max_depth = if max_depth == -1 {
@@ -172,6 +178,15 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
         Some(Bias::VarianceHalved) => 0.5,
         Some(Bias::VarianceDoubled) => 2.0,
         _ => 1.0,
+    };
+    let tracer = Tracer {
+        scene,
+        bvh,
+        lights: LightSet::new(scene, opts.bias),
+        features: Features::of(scene),
+        max_depth,
+        eps_scale: scene_size(&scene.triangles),
+        bias: opts.bias,
     };
     let n = opts.spp.max(1);
     let w = cam.width as usize;
@@ -187,17 +202,7 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
             let mut sum2 = DVec3::ZERO;
             for _ in 0..n {
                 let (u, v): (f64, f64) = (rng.random(), rng.random());
-                let li = radiance(
-                    scene,
-                    bvh,
-                    &lights,
-                    px + u,
-                    py + v,
-                    max_depth,
-                    size,
-                    opts.bias,
-                    &mut rng,
-                );
+                let li = tracer.radiance(px + u, py + v, &mut rng);
                 sum += li;
                 sum2 += li * li;
             }

@@ -604,7 +604,51 @@ pub struct RayHit {
     pub t: f64,
 }
 
-/// Möller–Trumbore in f64, both sides, `t` in `(tmin, tmax)`.
+/// A shading ray's slab test with its per-axis choice of near and far
+/// plane made once per ray, for rays whose every `1/d` is finite and
+/// non-zero. Then no NaN can arise, and plain comparisons give the same
+/// interval as [`crate::visibility::slab_od`] (same products, same
+/// maximum and minimum) without its per-node branches on `d` and its
+/// NaN-aware `max`/`min`: that test was two fifths of the path tracer's
+/// time.
+struct SlabRay {
+    o: glam::DVec3,
+    inv: glam::DVec3,
+    /// Per axis: true when `d` is negative (the near plane is `hi`).
+    neg: glam::BVec3,
+}
+
+impl SlabRay {
+    /// None when some `1/d` is infinite or zero (the general test handles those).
+    fn new(o: glam::DVec3, d: glam::DVec3, inv: glam::DVec3) -> Option<SlabRay> {
+        let ok = (0..3).all(|k| d[k] != 0.0 && inv[k].is_finite() && inv[k] != 0.0);
+        ok.then(|| SlabRay {
+            o,
+            inv,
+            neg: d.cmplt(glam::DVec3::ZERO),
+        })
+    }
+
+    #[inline(always)]
+    fn slab(&self, b: &RayBox) -> (f64, f64) {
+        let near = glam::DVec3::select(self.neg, b.hi, b.lo);
+        let far = glam::DVec3::select(self.neg, b.lo, b.hi);
+        let a = (near - self.o) * self.inv;
+        let z = (far - self.o) * self.inv;
+        let m = |x: f64, y: f64| if x > y { x } else { y };
+        let n = |x: f64, y: f64| if x < y { x } else { y };
+        // -inf and +inf start the fold as in `slab_od` (a -0.0 is kept as is).
+        (
+            m(m(m(f64::NEG_INFINITY, a.x), a.y), a.z),
+            n(n(n(f64::INFINITY, z.x), z.y), z.z),
+        )
+    }
+}
+
+/// Möller–Trumbore in f64, both sides, `t` in `(tmin, tmax)`. The
+/// barycentric tests compare against `|det|` instead of dividing first, so
+/// the division is paid only by rays that pass inside the triangle (most
+/// tests are misses).
 #[inline]
 fn intersect64(
     t: &crate::scene::resolve::Tri,
@@ -621,18 +665,18 @@ fn intersect64(
     if det == 0.0 || !det.is_finite() {
         return None;
     }
-    let inv = 1.0 / det;
+    let (sign, adet) = if det > 0.0 { (1.0, det) } else { (-1.0, -det) };
     let s = o - a;
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
+    let u = s.dot(p) * sign;
+    if !(0.0..=adet).contains(&u) {
         return None;
     }
     let q = s.cross(e1);
-    let v = d.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
+    let v = d.dot(q) * sign;
+    if v < 0.0 || u + v > adet {
         return None;
     }
-    let tt = e2.dot(q) * inv;
+    let tt = e2.dot(q) * sign / adet;
     (tt > tmin && tt < tmax).then_some(tt)
 }
 
@@ -661,13 +705,19 @@ impl TraceBvh {
         self.query(scene, o, d, tmin, tmax, true).is_some()
     }
 
+    /// Front-to-back walk: of an inner node's two children the nearer
+    /// entry is visited first and the farther waits on the stack with its
+    /// entry distance, skipped once a closer hit lies before it. The stack
+    /// lives on the call's frame (shading traces several rays per path, and
+    /// an allocation per ray was a tenth of the path tracer's time); a tree
+    /// deeper than it spills into a `Vec`, so no tree is too deep.
     fn query(
         &self,
         scene: &ResolvedScene,
         o: glam::DVec3,
         d: glam::DVec3,
         tmin: f64,
-        mut tmax: f64,
+        tmax: f64,
         any: bool,
     ) -> Option<RayHit> {
         use crate::visibility::slab_od;
@@ -675,15 +725,40 @@ impl TraceBvh {
             return None;
         }
         let inv = glam::DVec3::ONE / d;
+        match SlabRay::new(o, d, inv) {
+            Some(r) => self.walk(scene, o, d, tmin, tmax, any, |b| r.slab(b)),
+            None => self.walk(scene, o, d, tmin, tmax, any, |b| slab_od(o, d, inv, b)),
+        }
+    }
+
+    /// [`Self::query`]'s walk with the slab test `slab` (specialized per test).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn walk(
+        &self,
+        scene: &ResolvedScene,
+        o: glam::DVec3,
+        d: glam::DVec3,
+        tmin: f64,
+        mut tmax: f64,
+        any: bool,
+        slab: impl Fn(&RayBox) -> (f64, f64),
+    ) -> Option<RayHit> {
+        const STACK: usize = 64;
+        // The box's entry distance, or None when the ray misses it within (tmin, tmax).
+        let enter = |node: &Node, tmax: f64| {
+            let (a, b) = slab(&node.bounds);
+            (!(slab_misses(a, b) || a > tmax || b < tmin)).then_some(a)
+        };
+        enter(&self.nodes[0], tmax)?;
         let mut best: Option<RayHit> = None;
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(ni) = stack.pop() {
+        let mut stack = [(0u32, 0f64); STACK];
+        let mut depth = 0;
+        let mut spill: Vec<(u32, f64)> = Vec::new();
+        let mut ni = 0u32;
+        loop {
             let node = &self.nodes[ni as usize];
-            let (a, b) = slab_od(o, d, inv, &node.bounds);
-            if slab_misses(a, b) || a > tmax || b < tmin {
-                continue;
-            }
+            let mut next = None;
             if node.count > 0 {
                 for k in node.first..node.first + node.count {
                     let prim = self.prims[k as usize];
@@ -697,11 +772,42 @@ impl TraceBvh {
                     }
                 }
             } else {
-                stack.push(node.first);
-                stack.push(node.first + 1);
+                let (c0, c1) = (node.first, node.first + 1);
+                let e0 = enter(&self.nodes[c0 as usize], tmax);
+                let e1 = enter(&self.nodes[c1 as usize], tmax);
+                let (near, far) = match (e0, e1) {
+                    (Some(a0), Some(a1)) if a1 < a0 => (Some(c1), Some((c0, a0))),
+                    (Some(_), Some(a1)) => (Some(c0), Some((c1, a1))),
+                    (Some(_), None) => (Some(c0), None),
+                    (None, Some(_)) => (Some(c1), None),
+                    (None, None) => (None, None),
+                };
+                if let Some(f) = far {
+                    if depth < STACK {
+                        stack[depth] = f;
+                        depth += 1;
+                    } else {
+                        spill.push(f);
+                    }
+                }
+                next = near;
             }
+            while next.is_none() {
+                let (n, a) = match spill.pop() {
+                    Some(f) => f,
+                    None if depth > 0 => {
+                        depth -= 1;
+                        stack[depth]
+                    }
+                    None => return best,
+                };
+                // A hit found since it was pushed may lie before its box.
+                if a <= tmax {
+                    next = Some(n);
+                }
+            }
+            ni = next.unwrap_or_default();
         }
-        best
     }
 }
 
