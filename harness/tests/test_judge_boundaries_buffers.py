@@ -524,6 +524,29 @@ def test_the_tie_tolerance_is_the_models_depth_at_z_and_cos(tmp_path: Path) -> N
     assert const(np.array([2.0, 3.0]), np.array([1.0, 1.0]), np.array([0, 0])).tolist() == [0.25, 0.25]
 
 
+def test_the_depth_models_get_each_pixel_rays_length_and_the_tie_test_the_longest(tmp_path: Path) -> None:
+    """Embree's f32-direction term scales with |d| of the pixel ray: the depth verdict's context
+    carries each compared pixel's, the tie test (not told the pixel) the longest of the image."""
+    d = write_scene(tmp_path / "s", [BIG], eye=(0.1, 0.0, 4.0), vfov_deg=70.0, width=7, height=3)
+    ref = Reference(resolved.load(d), {}, (3, 7))
+    seen: list[tolerance.DepthContext] = []
+
+    def dm(ctx: tolerance.DepthContext) -> tuple[np.ndarray, str]:
+        seen.append(ctx)
+        return np.zeros_like(ctx.z_ref), "D"
+
+    rows, cols = np.array([0, 1, 2, 2]), np.array([0, 3, 4, 1])
+    ctx = depth.depth_context(ref, rows, cols, np.full(4, 4.0), np.zeros(4, dtype=np.int64), {}, {})
+    each = np.linalg.norm(ref.scene.camera.center_directions(rows, cols), axis=1)
+    assert ctx.ray_norm is not None and np.asarray(ctx.ray_norm).tolist() == each.tolist()
+    assert len(set(each.tolist())) == 4  # four different lengths: no pixel stands in for another
+    depth.depth_tolerance_fn(ref, tolerance.Model("m", 0.0, "", dm), {}, {})(
+        np.array([4.0]), np.array([1.0]), np.array([0])
+    )
+    every = np.linalg.norm(ref.scene.camera.pixel_directions(), axis=-1)
+    assert seen[-1].ray_norm == float(every.max()) and every.max() > every.min()
+
+
 def test_the_radial_hint_needs_nine_in_ten(tmp_path: Path) -> None:
     ref = _ref(tmp_path, [BIG], {}, size=(1, 10))
     rows, cols = np.zeros(10, dtype=np.int64), np.arange(10)
