@@ -529,11 +529,21 @@ fn scale_times_the_main_job_and_its_shards() {
     let dir = tempfile::tempdir().unwrap();
     let record = bench("scale", dir.path());
     let configs = record["configurations"].as_array().unwrap();
-    assert_eq!(configs.len(), 2);
+    let names: Vec<&str> = configs
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        ["process_per_render_sequential", "default", "no_wait_slots"]
+    );
     for c in configs {
         assert!(c["median_s"].as_f64().is_some_and(|t| t > 0.0), "{c}");
     }
     assert!(record["speedup_default_over_sequential"].as_f64().is_some());
+    assert!(record["speedup_default_over_no_wait_slots"]
+        .as_f64()
+        .is_some());
     let shards = record["shards"].as_array().unwrap();
     assert_eq!(shards[0]["shards"], 2);
     assert_eq!(shards[0]["shard_s"].as_array().unwrap().len(), 2);
