@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..judge.tolerance import render_param
+from ..judge.tolerance import DepthContext, render_param, shift_depth
 
 PLACEMENT_ATTR = "vertex_placement"
 """The EXR attribute (and info key) holding the render's vertex placement bound, world units."""
@@ -22,6 +22,13 @@ def placement(attrs: Mapping[str, Any]) -> float:
     """The render's recorded vertex placement bound (0 when absent: compared as if exact)."""
     value = render_param(attrs, {}, PLACEMENT_ATTR)
     return value if value is not None and value >= 0.0 else 0.0
+
+
+def placement_depth(ctx: DepthContext) -> tuple[np.ndarray, float]:
+    """The depth term of the render's recorded vertex placement p, and p: every point of the scene
+    may sit p from rendiff's, which moves a depth min(p / |cos|, depth span) (`shift_depth`)."""
+    placed = placement(ctx.attrs)
+    return shift_depth(ctx, np.full(ctx.z_ref.shape, placed)), placed
 
 
 def disagreement(

@@ -71,13 +71,11 @@ from ...judge.tolerance import (
     F32_U,
     DepthContext,
     Model,
-    param,
     position_edge,
-    shift_depth,
 )
 from ..errors import BackendError, BackendSkipped
 from ..mitsuba import backend as mb
-from ..original import PLACEMENT_ATTR, disagreement, placement
+from ..original import PLACEMENT_ATTR, disagreement, placement, placement_depth
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
@@ -357,9 +355,8 @@ def render(
 def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """Mitsuba's depth model plus every point moved by the recorded vertex placement."""
     tol, text = mb.mitsuba_depth(ctx)
-    placed = param(ctx, PLACEMENT_ATTR) or 0.0
-    tol = tol + shift_depth(ctx, np.full(ctx.z_ref.shape, placed))
-    return tol, (
+    term, placed = placement_depth(ctx)
+    return tol + term, (
         f"{text} + min(p / |cos|, depth span), p = {placed:.3g} (vertex placement: Mitsuba's float32 to_world, "
         f"{PLACEMENT_REL / F32_U:.4g} 2^-24 |M||v| per coordinate)"
     )

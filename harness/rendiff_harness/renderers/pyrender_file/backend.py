@@ -69,9 +69,9 @@ from ...contract import exrbuf, gltfgraph
 from ...contract.meshfile import OPS_OBJECT, MeshFileError, file_uses, object_matrix
 from ...contract.resolved import ResolvedScene
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
-from ...judge.tolerance import F32_U, DepthContext, Model, param, shift_depth
+from ...judge.tolerance import F32_U, DepthContext, Model
 from ..errors import BackendError, BackendSkipped
-from ..original import PLACEMENT_ATTR, disagreement, placement
+from ..original import PLACEMENT_ATTR, disagreement, placement, placement_depth
 from ..pyrender import backend as pb
 from ..spec import BackendSpec
 
@@ -321,9 +321,8 @@ def render(
 def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """pyrender's depth model plus every point moved by the recorded vertex placement."""
     tol, text = pb.pyrender_depth(ctx)
-    placed = param(ctx, PLACEMENT_ATTR) or 0.0
-    tol = tol + shift_depth(ctx, np.full(ctx.z_ref.shape, placed))
-    return tol, (
+    term, placed = placement_depth(ctx)
+    return tol + term, (
         f"{text} + min(p / |cos|, depth span), p = {placed:.3g} (vertex placement: trimesh's float64 node "
         "matrices against rendiff's float32 node numbers, both float64 chains, two float32 roundings)"
     )
