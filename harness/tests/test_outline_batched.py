@@ -181,7 +181,7 @@ def test_edge_distances_equal_the_old_side_geometry(tmp_path: Path) -> None:
         batched = outline.edge_distances(scene, tris, rows, cols)
         one = np.stack(
             [
-                verify_before.side_geometry(scene, tris[i : i + 1], rows[i : i + 1], cols[i : i + 1]).edge_d[0]
+                verify_before.edge_distances(scene, tris[i : i + 1], rows[i : i + 1], cols[i : i + 1])[0]
                 for i in range(300)
             ]
         )
@@ -189,7 +189,7 @@ def test_edge_distances_equal_the_old_side_geometry(tmp_path: Path) -> None:
         # side_geometry itself (sharing the code) is unchanged on the whole batch.
         assert np.array_equal(
             verify.side_geometry(scene, tris, rows, cols).edge_d,
-            verify_before.side_geometry(scene, tris, rows, cols).edge_d,
+            verify_before.edge_distances(scene, tris, rows, cols),
         )
 
 

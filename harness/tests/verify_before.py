@@ -1,10 +1,15 @@
 """verify.py's outline search as it was before it was batched (issue 40 item 5): the oracle.
 
 judge/outline.py replaced the walk below, one pixel at a time with numpy calls per edge and
-per neighbor, by one walk per pixel advanced for all pixels together. This is the old code,
-verbatim but for its imports (verify's Side and Topology are unchanged), so
+per neighbor, by one walk per pixel advanced for all pixels together. This is the old code
+that has no unchanged twin in the judge: the walk (`_outline_near`), the single-edge outline
+test (`_silhouette`) and the edge part of the old side_geometry (`edge_distances`: the one
+part the walk read, and the clipping outline.clipped_edge_distances now does for a batch).
+What the rewrite kept as it was is imported, not copied: the exact single-edge side test
+(outline.side, pinned at its boundaries by test_judge_boundaries.py and
+test_outline_boundaries.py), the projection (outline.project), verify's Topology. So
 tests/test_outline_batched.py can require the old walk's answer for every pixel the batched
-search answers. Only the rewritten code is kept: the classing around it is verify.py's alone.
+search answers; the classing around it is verify.py's alone.
 """
 
 from __future__ import annotations
@@ -14,15 +19,8 @@ import numpy as np
 from rendiff_harness.contract.camera import Camera
 from rendiff_harness.contract.resolved import ResolvedScene
 from rendiff_harness.judge import geometry
-from rendiff_harness.judge.verify import (
-    Side,
-    Topology,
-)
-
-
-def _project(cam: Camera, p: np.ndarray) -> np.ndarray:
-    """Camera-space points (..., 3) in front of the eye -> pixel coordinates (..., 2)."""
-    return cam.to_pixel(p[..., 0], p[..., 1], np.where(p[..., 2] > 0.0, p[..., 2], 1.0))
+from rendiff_harness.judge.outline import project, side
+from rendiff_harness.judge.verify import Topology
 
 
 def _near_far(cam: Camera, cam_tris: np.ndarray) -> tuple[float, float]:
@@ -31,23 +29,15 @@ def _near_far(cam: Camera, cam_tris: np.ndarray) -> tuple[float, float]:
     return near, far
 
 
-def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> Side:
-    """Distances, coverage and depth of prims[i] at pixel (cols[i], rows[i])'s center."""
+def edge_distances(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """side_geometry's `edge_d` as it was: (K, 3) distances of pixel (cols[i], rows[i])'s center to
+    the visible part of each edge of prims[i] (valid indices), near and far shared by the batch."""
     cam = scene.camera
-    prims = np.asarray(prims, dtype=np.uint64).ravel()
+    prims = np.asarray(prims, dtype=np.int64).ravel()
     k = prims.size
-    valid = prims < np.uint64(scene.triangle_count)
     edge_d = np.full((k, 3), np.inf)
-    vert_d = np.full((k, 3), np.inf)
-    poly_d = np.full(k, np.inf)
-    inside = np.zeros(k, dtype=bool)
-    z = np.full(k, np.inf)
-    cos = np.zeros(k)
-    idx = np.nonzero(valid)[0]
-    if idx.size == 0:
-        return Side(valid, edge_d, vert_d, poly_d, inside, z, cos)
-    tris = scene.triangles[prims[idx].astype(np.int64)].astype(np.float64)
-    cx, cy = cam.pixel_centers(np.asarray(cols).ravel()[idx], np.asarray(rows).ravel()[idx])
+    tris = scene.triangles[prims].astype(np.float64)
+    cx, cy = cam.pixel_centers(np.asarray(cols).ravel(), np.asarray(rows).ravel())
     with np.errstate(all="ignore"):
         ct = cam.to_camera(tris)
         near, far = _near_far(cam, ct)
@@ -56,8 +46,8 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
             za, zb = a[:, 2], b[:, 2]
             dz = zb - za
             # Parameter range of the segment inside near <= z <= far.
-            t0 = np.zeros(idx.size)
-            t1 = np.ones(idx.size)
+            t0 = np.zeros(k)
+            t1 = np.ones(k)
             safe = np.where(dz != 0.0, dz, 1.0)
             tn = (near - za) / safe
             t0 = np.where(dz > 0, np.maximum(t0, tn), t0)
@@ -68,49 +58,11 @@ def side_geometry(scene: ResolvedScene, prims: np.ndarray, rows: np.ndarray, col
                 t0 = np.where(dz < 0, np.maximum(t0, tf), t0)
             flat_out = (dz == 0) & ((za < near) | (za > far))
             ok = (t0 <= t1) & ~flat_out
-            pa = _project(cam, a + t0[:, None] * (b - a))
-            pb = _project(cam, a + t1[:, None] * (b - a))
+            pa = project(cam, a + t0[:, None] * (b - a))
+            pb = project(cam, a + t1[:, None] * (b - a))
             d = geometry.segment_distance(cx, cy, pa, pb)
-            edge_d[idx, i] = np.where(ok & np.isfinite(d), d, np.inf)
-            vin = (a[:, 2] >= near) & (a[:, 2] <= far)
-            pv = _project(cam, a)
-            vert_d[idx, i] = np.where(vin, np.hypot(pv[:, 0] - cx, pv[:, 1] - cy), np.inf)
-        poly, count = geometry.clip_and_project(cam, tris)
-        poly_d[idx] = geometry.polygon_distance(poly, count, cx, cy)
-        # Inside: the center is on one side of every edge of the (convex) visible polygon.
-        m = idx.size
-        rows_i = np.arange(m)
-        pos = np.ones(m, dtype=bool)
-        neg = np.ones(m, dtype=bool)
-        for j in range(poly.shape[1]):
-            valid_j = j < count
-            nxt = np.where(j + 1 < count, j + 1, 0)
-            p0, p1 = poly[:, j], poly[rows_i, nxt]
-            cr = (p1[:, 0] - p0[:, 0]) * (cy - p0[:, 1]) - (p1[:, 1] - p0[:, 1]) * (cx - p0[:, 0])
-            pos &= ~valid_j | (cr >= 0.0)
-            neg &= ~valid_j | (cr <= 0.0)
-        inside[idx] = (count >= 3) & (pos | neg)
-        # Planar depth of the plane along d = f + sx r + sy u (d.f = 1, so t is Z).
-        d = cam.direction(*cam.screen_at(cx, cy))
-        nrm = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-        nd = np.einsum("ij,ij->i", nrm, d)
-        t = np.einsum("ij,ij->i", nrm, tris[:, 0] - cam.eye[None, :]) / nd
-        zz = np.where((nd != 0.0) & np.isfinite(t) & (t > 0.0), t, np.inf)
-        z[idx] = zz
-        nl = np.linalg.norm(nrm, axis=1) * np.linalg.norm(d, axis=1)
-        cos[idx] = np.where(nl > 0.0, np.clip(np.abs(nd) / np.where(nl > 0, nl, 1.0), 0.0, 1.0), 0.0)
-    return Side(valid, edge_d, vert_d, poly_d, inside, z, cos)
-
-
-def _side(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float) -> int:
-    """Which side of the plane (eye, a, b) c lies on: +1, -1, or 0 when the eye is within
-    `slack` of the plane of (a, b, c), so that the renderer's view of it may be edge-on."""
-    det = float(np.linalg.det(np.stack([a - eye, b - eye, c - eye])))
-    # det = |(b-a) x (c-a)| x (signed distance of the eye from the plane of a, b, c).
-    area2 = float(np.linalg.norm(np.cross(b - a, c - a)))
-    if abs(det) <= slack * area2:
-        return 0
-    return 1 if det > 0.0 else -1
+            edge_d[:, i] = np.where(ok & np.isfinite(d), d, np.inf)
+    return edge_d
 
 
 def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int, slack: float) -> tuple[bool, str]:
@@ -128,11 +80,11 @@ def _silhouette(scene: ResolvedScene, topo: Topology, tri: int, local: int, slac
     eye = scene.camera.eye
     own_tri = np.asarray(t[tri], dtype=np.float64)
     a, b, c = own_tri[local], own_tri[(local + 1) % 3], own_tri[(local + 2) % 3]
-    own = _side(eye, a, b, c, slack)
+    own = side(eye, a, b, c, slack)
     if own == 0:
         return True, "an edge of a triangle this renderer may see edge-on"
     for n_tri, n_local in neigh:
-        other = _side(eye, a, b, np.asarray(t[n_tri, (n_local + 2) % 3], dtype=np.float64), slack)
+        other = side(eye, a, b, np.asarray(t[n_tri, (n_local + 2) % 3], dtype=np.float64), slack)
         if own * other < 0:
             return False, str(n_tri)
     return True, "a silhouette edge (its neighbors fold behind it, or may for this renderer)"
@@ -168,8 +120,8 @@ def _outline_near(
                 if n_tri in seen:
                     continue
                 seen.add(n_tri)
-                g = side_geometry(scene, np.array([n_tri]), np.array([row]), np.array([col]))
-                n_near = [k for k in range(3) if g.edge_d[0, k] <= eps]
+                d = edge_distances(scene, np.array([n_tri]), np.array([row]), np.array([col]))
+                n_near = [k for k in range(3) if d[0, k] <= eps]
                 if n_near:
                     frontier.append((n_tri, n_near))
     return "", first_closed

@@ -598,14 +598,7 @@ class CommandBackend:
         return first if first is not None else "unknown (the version command printed nothing)"
 
     def render(
-        self,
-        scene: ResolvedScene,
-        out_exr: Path,
-        workdir: Path,
-        timeout_s: float,
-        /,
-        *,
-        visibility_only: bool = False,
+        self, scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, /, *, visibility_only: bool = False
     ) -> dict[str, object]:
         """Run the command on `scene`, check its EXR, write the declared buffers to `out_exr` atomically.
 

@@ -1,18 +1,21 @@
 """What the backends that load the user's original mesh files share (renderers/mitsuba_file: OBJ
 through Mitsuba's loader; renderers/pyrender_file: glTF through trimesh): the vertex placement bound
 each records in its render (`vertex_placement`, read back by the precision model's
-`Model.placement`), and the per-triangle check of the loaded triangles against rendiff's.
+`Model.placement`) and its depth term on top of the drawing backend's model, the per-triangle check
+of the loaded triangles against rendiff's, and the EXR their visibility-only render writes.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..judge.tolerance import DepthContext, render_param, shift_depth
+from ..contract import exrbuf
+from ..judge.tolerance import DepthContext, DepthModel, render_param, shift_depth
 
 PLACEMENT_ATTR = "vertex_placement"
 """The EXR attribute (and info key) holding the render's vertex placement bound, world units."""
@@ -29,6 +32,30 @@ def placement_depth(ctx: DepthContext) -> tuple[np.ndarray, float]:
     may sit p from rendiff's, which moves a depth min(p / |cos|, depth span) (`shift_depth`)."""
     placed = placement(ctx.attrs)
     return shift_depth(ctx, np.full(ctx.z_ref.shape, placed)), placed
+
+
+def placed_depth(base: DepthModel, placement_why: str) -> DepthModel:
+    """The drawing backend's depth model `base` plus every point moved by the recorded vertex
+    placement (`placement_depth`); `placement_why` says where that placement comes from."""
+
+    def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
+        tol, text = base(ctx)
+        term, placed = placement_depth(ctx)
+        return tol + term, f"{text} + min(p / |cos|, depth span), p = {placed:.3g} (vertex placement: {placement_why})"
+
+    return depth
+
+
+def write_visibility(
+    out_exr: Path, buffers: Mapping[str, np.ndarray], info: dict[str, Any], attrs: Mapping[str, exrbuf.AttrValue]
+) -> dict[str, object]:
+    """Write a render's Z, id.prim, id.object and N (never RGB) with `attrs` to `out_exr`; `info`
+    gains the write's time and says the render was visibility-only, and is returned."""
+    t0 = time.perf_counter()
+    exrbuf.write_buffers(out_exr, Z=buffers["Z"], prim=buffers["prim"], obj=buffers["obj"], N=buffers["N"], attrs=attrs)
+    info["timings_s"]["write"] = time.perf_counter() - t0
+    info["visibility_only"] = True
+    return info
 
 
 def disagreement(

@@ -62,20 +62,18 @@ from typing import Any
 
 import numpy as np
 
-from ...contract import exrbuf
 from ...contract.meshfile import file_uses, object_matrix
 from ...contract.resolved import ResolvedScene
 from ...contract.userfile import UserFileError, read_regular
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
 from ...judge.tolerance import (
     F32_U,
-    DepthContext,
     Model,
     position_edge,
 )
 from ..errors import BackendError, BackendSkipped
 from ..mitsuba import backend as mb
-from ..original import PLACEMENT_ATTR, disagreement, placement, placement_depth
+from ..original import PLACEMENT_ATTR, disagreement, placed_depth, placement, write_visibility
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
@@ -319,47 +317,28 @@ def global_prims(
 
 
 def render(
-    scene: ResolvedScene,
-    out_exr: Path,
-    workdir: Path,
-    timeout_s: float,
-    *,
-    visibility_only: bool = False,
+    scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, *, visibility_only: bool = False
 ) -> dict[str, object]:
     """Render `scene`'s OBJ files with Mitsuba into `out_exr` (Z, id.prim, id.object, N); never RGB
     (`visibility_only` is accepted, and always what is done). In-process; `workdir` is unused."""
     buffers, info, placement = render_arrays(scene)
-    t0 = time.perf_counter()
-    exrbuf.write_buffers(
-        out_exr,
-        Z=buffers["Z"],
-        prim=buffers["prim"],
-        obj=buffers["obj"],
-        N=buffers["N"],
-        attrs={
-            "backend": NAME,
-            "variant": str(info["variant"]),
-            "near_clip": float(info["near_clip"]),
-            "far_clip": float(info["far_clip"]),
-            PLACEMENT_ATTR: placement,
-        },
-    )
-    info["timings_s"]["write"] = time.perf_counter() - t0
-    info["visibility_only"] = True
-    return info
+    attrs = {
+        "backend": NAME,
+        "variant": str(info["variant"]),
+        "near_clip": float(info["near_clip"]),
+        "far_clip": float(info["far_clip"]),
+        PLACEMENT_ATTR: placement,
+    }
+    return write_visibility(out_exr, buffers, info, attrs)
 
 
 # --------------------------------------------------------------------------- precision
 
 
-def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
-    """Mitsuba's depth model plus every point moved by the recorded vertex placement."""
-    tol, text = mb.mitsuba_depth(ctx)
-    term, placed = placement_depth(ctx)
-    return tol + term, (
-        f"{text} + min(p / |cos|, depth span), p = {placed:.3g} (vertex placement: Mitsuba's float32 to_world, "
-        f"{PLACEMENT_REL / F32_U:.4g} 2^-24 |M||v| per coordinate)"
-    )
+depth = placed_depth(
+    mb.mitsuba_depth, f"Mitsuba's float32 to_world, {PLACEMENT_REL / F32_U:.4g} 2^-24 |M||v| per coordinate"
+)
+"""Mitsuba's depth model plus every point moved by the recorded vertex placement."""
 
 
 PRECISION = Model(

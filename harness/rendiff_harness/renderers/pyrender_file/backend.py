@@ -65,13 +65,13 @@ from typing import Any
 
 import numpy as np
 
-from ...contract import exrbuf, gltfgraph
+from ...contract import gltfgraph
 from ...contract.meshfile import OPS_OBJECT, MeshFileError, file_uses, object_matrix
 from ...contract.resolved import ResolvedScene
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
-from ...judge.tolerance import F32_U, DepthContext, Model
+from ...judge.tolerance import F32_U, Model
 from ..errors import BackendError, BackendSkipped
-from ..original import PLACEMENT_ATTR, disagreement, placement, placement_depth
+from ..original import PLACEMENT_ATTR, disagreement, placed_depth, placement, write_visibility
 from ..pyrender import backend as pb
 from ..spec import BackendSpec
 
@@ -285,47 +285,30 @@ def render_arrays(scene: ResolvedScene) -> tuple[dict[str, np.ndarray], dict[str
 
 
 def render(
-    scene: ResolvedScene,
-    out_exr: Path,
-    workdir: Path,
-    timeout_s: float,
-    *,
-    visibility_only: bool = False,
+    scene: ResolvedScene, out_exr: Path, workdir: Path, timeout_s: float, *, visibility_only: bool = False
 ) -> dict[str, object]:
     """Render `scene`'s glTF files as trimesh loads them into `out_exr` (Z, id.prim, id.object, N); never
     RGB (`visibility_only` is accepted, and always what is done). In-process; `workdir` is unused."""
     buffers, info, placed = render_arrays(scene)
-    t0 = time.perf_counter()
-    exrbuf.write_buffers(
-        out_exr,
-        Z=buffers["Z"],
-        prim=buffers["prim"],
-        obj=buffers["obj"],
-        N=buffers["N"],
-        attrs={
-            "backend": NAME,
-            "znear": float(info["znear"]),
-            "zfar": float(info["zfar"]),
-            "depth_bits": pb.DEPTH_BITS,
-            PLACEMENT_ATTR: placed,
-        },
-    )
-    info["timings_s"]["write"] = time.perf_counter() - t0
-    info["visibility_only"] = True
-    return info
+    attrs = {
+        "backend": NAME,
+        "znear": float(info["znear"]),
+        "zfar": float(info["zfar"]),
+        "depth_bits": pb.DEPTH_BITS,
+        PLACEMENT_ATTR: placed,
+    }
+    return write_visibility(out_exr, buffers, info, attrs)
 
 
 # --------------------------------------------------------------------------- precision
 
 
-def depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
-    """pyrender's depth model plus every point moved by the recorded vertex placement."""
-    tol, text = pb.pyrender_depth(ctx)
-    term, placed = placement_depth(ctx)
-    return tol + term, (
-        f"{text} + min(p / |cos|, depth span), p = {placed:.3g} (vertex placement: trimesh's float64 node "
-        "matrices against rendiff's float32 node numbers, both float64 chains, two float32 roundings)"
-    )
+depth = placed_depth(
+    pb.pyrender_depth,
+    "trimesh's float64 node matrices against rendiff's float32 node numbers, both float64 chains, "
+    "two float32 roundings",
+)
+"""pyrender's depth model plus every point moved by the recorded vertex placement."""
 
 
 PRECISION = Model(
