@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import base64
 import json
-import shutil
 import struct
-import subprocess
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fixtures import REPO, rendiff_binary
+import meshfiles
+from fixtures import REPO
+from meshfiles import Gltf
 from rendiff_harness.contract import gltfgraph, resolved
 from rendiff_harness.contract.results import Entry
 from rendiff_harness.judge import importcheck
@@ -35,22 +35,8 @@ CORPUS = REPO / "scenes" / "corpus"
 
 def _export(tmp: Path, mesh_name: str, mesh: bytes | Path, transform: str = "") -> Path:
     """`rendiff export` of a scene showing `mesh` (bytes written, or a corpus file copied)."""
-    binary = rendiff_binary()
-    if binary is None:
-        pytest.skip("no built rendiff (cargo build first): the import verdict needs its export")
-    src = tmp / "scene"
-    src.mkdir()
-    if isinstance(mesh, Path):
-        shutil.copy(mesh, src / mesh_name)
-    else:
-        (src / mesh_name).write_bytes(mesh)
-    (src / "s.toml").write_text(
-        'requires = ["depth", "ids"]\n[camera]\neye = [0.3, 0.2, 9.0]\nlook_at = [0.0, 0.0, 0.0]\n'
-        f'vfov = 45.0\nwidth = 16\nheight = 16\n[[objects]]\nname = "m"\nmesh = "{mesh_name}"\n{transform}'
-    )
-    out = tmp / "resolved"
-    subprocess.run([str(binary), "export", str(src / "s.toml"), "-o", str(out)], check=True, capture_output=True)
-    return out
+    camera = "eye = [0.3, 0.2, 9.0]\nlook_at = [0.0, 0.0, 0.0]\nvfov = 45.0\nwidth = 16\nheight = 16"
+    return meshfiles.export(tmp, mesh_name, mesh, camera, transform, tmp / "resolved")
 
 
 def _verdict(directory: Path, decoder: str = "gltf_spec") -> Entry:
@@ -283,42 +269,11 @@ def test_a_glb_with_interleaved_attributes_byte_indices_two_primitives_and_a_hie
     assert tm.status == "skipped" and "drops TRIANGLE_FAN" in tm.reason
 
 
-class _Gltf:
-    """A small glTF under construction: each array becomes an accessor of one base64 `data:` buffer."""
-
-    def __init__(self) -> None:
-        self.data = b""
-        self.doc: dict[str, Any] = {"asset": {"version": "2.0"}, "bufferViews": [], "accessors": []}
-
-    def acc(self, values: Any, kind: str, ct: int, dtype: str, normalized: bool = False, stride: int = 0) -> int:
-        """Appends `values` (rows of `kind`) as an accessor of componentType `ct`; its index."""
-        arr = np.ascontiguousarray(np.asarray(values, dtype=dtype).reshape(len(values), -1))
-        self.data += b"\0" * (-len(self.data) % 4)
-        raw = arr.tobytes()
-        if stride:  # vertex attributes padded to a 4-byte stride, as KHR_mesh_quantization requires
-            raw = b"".join(row.tobytes() + b"\0" * (stride - arr.itemsize * arr.shape[1]) for row in arr)
-        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.data), "byteLength": len(raw)}
-        if stride:
-            view["byteStride"] = stride
-        self.doc["bufferViews"].append(view)
-        self.data += raw
-        acc: dict[str, Any] = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": ct}
-        acc |= {"count": len(arr), "type": kind, "normalized": normalized}
-        if kind == "VEC3":
-            acc |= {"min": arr.min(axis=0).tolist(), "max": arr.max(axis=0).tolist()}
-        self.doc["accessors"].append(acc)
-        return len(self.doc["accessors"]) - 1
-
-    def bytes(self, **top: Any) -> bytes:
-        uri = "data:application/octet-stream;base64," + base64.b64encode(self.data).decode()
-        return json.dumps(self.doc | top | {"buffers": [{"uri": uri, "byteLength": len(self.data)}]}).encode()
-
-
 QUAD = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.25]]
 """Four vertices of two triangles (0 1 2, 1 3 2), not in a plane."""
 
 
-def _quad(g: _Gltf) -> dict[str, Any]:
+def _quad(g: Gltf) -> dict[str, Any]:
     """A TRIANGLES primitive of QUAD (float positions, u16 indices)."""
     pos = g.acc(QUAD, "VEC3", 5126, "<f4")
     return {"attributes": {"POSITION": pos}, "indices": g.acc([0, 1, 2, 1, 3, 2], "SCALAR", 5123, "<u2")}
@@ -328,7 +283,7 @@ def _instanced_gltf() -> bytes:
     """Under a rotated, translated parent: node "trees" with three EXT_mesh_gpu_instancing instances
     (float translations, a normalized signed-short rotation, a scale mirroring the last), and a
     plain node "ground" after it."""
-    g = _Gltf()
+    g = Gltf()
     prim = _quad(g)
     t = g.acc([[0, 0, 0], [2, 0.5, -1], [-1.5, 1, 0.25]], "VEC3", 5126, "<f4")
     c, s = round(32767 * np.cos(0.3)), round(32767 * np.sin(0.3))
@@ -394,7 +349,7 @@ def test_an_instance_placed_after_the_node_instead_of_before_fails_naming_it(tmp
 def _quantized_gltf() -> bytes:
     """KHR_mesh_quantization positions under dequantizing node transforms: unsigned shorts and signed
     bytes normalized, unsigned shorts unnormalized, each padded to a 4-byte stride."""
-    g = _Gltf()
+    g = Gltf()
     idx = g.acc([0, 1, 2, 1, 3, 2], "SCALAR", 5123, "<u2")
     u16 = g.acc([[0, 0, 0], [65535, 1234, 0], [17, 65535, 300], [40000, 50000, 65535]], "VEC3", 5123, "<u2", True, 8)
     i8 = g.acc([[-128, 0, 5], [127, -3, 0], [0, 127, -127], [100, 90, 64]], "VEC3", 5120, "<i1", True, 4)
@@ -438,7 +393,7 @@ def test_a_float32_dequantization_would_lie_outside_the_bound(tmp_path: Path) ->
     # Why gltf_spec divides in float64 (docs/verifier.md): 12345/65535 in float32 is up to half a float32
     # unit of 0.19 away from rendiff's float64 value; a node translation that cancels it leaves a world
     # coordinate near 1e-5, whose own half unit (4.5e-13) cannot absorb that difference (here 1.6e-9).
-    g = _Gltf()
+    g = Gltf()
     pos = g.acc([[12345, 0, 0], [65535, 0, 0], [12345, 65535, 0]], "VEC3", 5123, "<u2", True, 8)
     q = np.float32(12345 / 65535)
     g.doc |= {
@@ -462,7 +417,7 @@ def test_a_float32_dequantization_would_lie_outside_the_bound(tmp_path: Path) ->
 def _two_scenes_gltf() -> bytes:
     """Scene 0 (the default, "first") shows node 0, scene 1 ("second") node 1: both named "part",
     so only the geometry tells them apart."""
-    g = _Gltf()
+    g = Gltf()
     a = g.acc([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "VEC3", 5126, "<f4")
     b = g.acc([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]], "VEC3", 5126, "<f4")
     g.doc |= {
@@ -501,7 +456,7 @@ def test_the_default_scene_read_instead_of_the_chosen_one_fails_naming_the_primi
 
 
 def test_points_and_lines_are_skipped_and_a_node_of_nothing_else_is_no_object(tmp_path: Path) -> None:
-    g = _Gltf()
+    g = Gltf()
     prim = _quad(g)
     line = {"attributes": {"POSITION": prim["attributes"]["POSITION"]}, "mode": 1}
     g.doc |= {

@@ -9,7 +9,6 @@ and the unmodified scenes (the torus placed twice, the corpus's n-gon control me
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
+import meshfiles
 from fixtures import REPO, rendiff_binary, three_triangles
 from rendiff_harness.contract import meshfile, resolved
 from rendiff_harness.renderers import registry
@@ -41,31 +41,12 @@ TRANSFORM = "transform = { rotate = [10.0, -20.0, 30.0], scale = [0.9, 1.1, 1.0]
 
 
 def _export(tmp: Path, obj: str | Path, transform: str = TRANSFORM, name: str = "m.obj") -> Path:
-    binary = rendiff_binary()
-    if binary is None:
-        pytest.skip("no built rendiff (cargo build first): the scene comes from its export")
-    src = tmp / "scene"
-    src.mkdir(parents=True)
-    if isinstance(obj, Path):
-        shutil.copy(obj, src / name)
-    else:
-        (src / name).write_text(obj)
-    (src / "s.toml").write_text(
-        'requires = ["depth", "ids"]\n[camera]\neye = [0.2, 0.1, 6.0]\nlook_at = [0.0, 0.0, 0.0]\n'
-        f'vfov = 45.0\nwidth = 48\nheight = 40\n[[objects]]\nname = "m"\nmesh = "{name}"\n{transform}\n'
-    )
-    out = tmp / "run" / "scenes" / "s" / "resolved"
-    subprocess.run([str(binary), "export", str(src / "s.toml"), "-o", str(out)], check=True, capture_output=True)
-    return out
+    camera = "eye = [0.2, 0.1, 6.0]\nlook_at = [0.0, 0.0, 0.0]\nvfov = 45.0\nwidth = 48\nheight = 40"
+    return meshfiles.export(tmp, name, obj, camera, transform, tmp / "run" / "scenes" / "s" / "resolved")
 
 
 def _judge(directory: Path, backends: tuple[str, ...] = ("mitsuba", "mitsuba_file")) -> dict[tuple[str, str], Any]:
     return cases.judge_renders(directory, backends)
-
-
-def _rewrite(directory: Path, tris: np.ndarray) -> None:
-    """The resolved scene as an importer that produced `tris` (same count and objects) would have written it."""
-    tris.astype("<f4").tofile(directory / "triangles.f32")
 
 
 def test_mitsubas_obj_loader_keeps_face_order_ignores_groups_and_fans_ngons(tmp_path: Path) -> None:
@@ -126,13 +107,8 @@ def test_a_planted_import_bug_fails_mitsuba_file_while_the_resolved_export_passe
     out = _export(tmp_path, GRID)
     ok = _judge(out)
     assert ok["mitsuba_file", "id"]["status"] == "pass", ok["mitsuba_file", "id"]["reason"]
-    _rewrite(out, plant(resolved.load(out)))
-    bad = _judge(out)
-    assert bad["mitsuba", "id"]["status"] == "pass" and bad["mitsuba", "Z"]["status"] == "pass"
-    assert bad["mitsuba_file", "id"]["status"] == "fail", bad["mitsuba_file", "id"]["reason"]
-    assert bad["mitsuba_file", "id"]["interior_mismatches"] > 0
-    info = registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
-    assert "importer disagreement" in str(info["import_disagreement"])
+    disagreement = meshfiles.planted_import_bug(out, plant(resolved.load(out)), "mitsuba", tmp_path)
+    assert "importer disagreement" in disagreement
 
 
 def test_a_winding_flipped_under_a_mirroring_transform_fails_mitsuba_files_normals(tmp_path: Path) -> None:
@@ -142,10 +118,7 @@ def test_a_winding_flipped_under_a_mirroring_transform_fails_mitsuba_files_norma
     out = _export(tmp_path, GRID, TRANSFORM.replace("scale = [0.9,", "scale = [-0.9,"))
     ok = _judge(out)
     assert ok["mitsuba_file", "N"]["status"] == "pass", ok["mitsuba_file", "N"]["reason"]
-    _rewrite(out, resolved.load(out).triangles[:, [0, 2, 1]])
-    bad = _judge(out)
-    assert bad["mitsuba", "N"]["status"] == "pass" and bad["mitsuba_file", "id"]["status"] == "pass"
-    assert bad["mitsuba_file", "N"]["status"] == "fail" and "facing the other way" in bad["mitsuba_file", "N"]["reason"]
+    meshfiles.planted_winding_bug(out, resolved.load(out).triangles[:, [0, 2, 1]], "mitsuba")
 
 
 def test_the_torus_placed_twice_maps_both_shapes(tmp_path: Path) -> None:
@@ -184,7 +157,7 @@ def test_a_face_count_rendiff_disagrees_with_is_an_error_naming_the_importers(tm
     meta["triangle_count"] = int(tris.shape[0])
     meta["objects"][-1]["prim_count"] -= 1
     (out / "scene.json").write_text(json.dumps(meta))
-    _rewrite(out, tris)
+    meshfiles.rewrite_triangles(out, tris)
     np.fromfile(out / "object_ids.u32", dtype="<u4")[:-1].tofile(out / "object_ids.u32")
     with pytest.raises(BackendError, match=r"importer disagreement: Mitsuba reads 21 triangles from m.obj, rendiff 20"):
         registry.get("mitsuba_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)

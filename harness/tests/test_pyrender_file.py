@@ -9,9 +9,7 @@ resolved export, passes; the unmodified export passes; and each refusal says why
 
 from __future__ import annotations
 
-import base64
 import json
-import subprocess
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,7 +18,9 @@ import numpy as np
 import pytest
 
 import backend_cases as cases
-from fixtures import REPO, rendiff_binary, three_triangles
+import meshfiles
+from fixtures import REPO, three_triangles
+from meshfiles import Gltf
 from rendiff_harness.contract import gltfgraph, meshfile, resolved
 from rendiff_harness.judge.importcheck import gltf_spec
 from rendiff_harness.renderers import registry
@@ -36,32 +36,7 @@ TRANSFORM = "transform = { rotate = [10.0, -20.0, 15.0], scale = [0.9, 1.1, 1.0]
 STRIP = [[0, 1.1, 0], [1, 1.1, 0.1], [0, 1.6, 0], [1, 1.6, 0.2], [0, 2.1, 0.1], [1, 2.1, 0]]
 
 
-class _Gltf:
-    """A small glTF under construction: each array an accessor of one base64 `data:` buffer."""
-
-    def __init__(self) -> None:
-        self.data = b""
-        self.doc: dict[str, Any] = {"asset": {"version": "2.0"}, "bufferViews": [], "accessors": []}
-
-    def acc(self, values: Any, kind: str, ct: int, dtype: str) -> int:
-        arr = np.ascontiguousarray(np.asarray(values, dtype=dtype).reshape(len(values), -1))
-        self.data += b"\0" * (-len(self.data) % 4)
-        raw = arr.tobytes()
-        self.doc["bufferViews"].append({"buffer": 0, "byteOffset": len(self.data), "byteLength": len(raw)})
-        self.data += raw
-        acc: dict[str, Any] = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": ct}
-        acc |= {"count": len(arr), "type": kind}
-        if kind == "VEC3":
-            acc |= {"min": arr.min(axis=0).tolist(), "max": arr.max(axis=0).tolist()}
-        self.doc["accessors"].append(acc)
-        return len(self.doc["accessors"]) - 1
-
-    def bytes(self, **top: Any) -> bytes:
-        uri = "data:application/octet-stream;base64," + base64.b64encode(self.data).decode()
-        return json.dumps(self.doc | top | {"buffers": [{"uri": uri, "byteLength": len(self.data)}]}).encode()
-
-
-def _quad(g: _Gltf, pos: list[list[float]]) -> dict[str, Any]:
+def _quad(g: Gltf, pos: list[list[float]]) -> dict[str, Any]:
     return {
         "attributes": {"POSITION": g.acc(pos, "VEC3", 5126, "<f4")},
         "indices": g.acc([0, 1, 2, 1, 3, 2], "SCALAR", 5123, "<u2"),
@@ -72,7 +47,7 @@ def _hierarchy_gltf() -> bytes:
     """A rotated, translated root; under it "body" (rotated about x, scaled) showing a mesh of two
     primitives (a quad of TRIANGLES, then a TRIANGLE_STRIP of four), and "mirror" (scale -1 in x)
     showing another quad."""
-    g = _Gltf()
+    g = Gltf()
     quad = _quad(g, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.25]])
     strip = {"attributes": {"POSITION": g.acc(STRIP, "VEC3", 5126, "<f4")}, "mode": 5}
     other = _quad(g, [[0, 0, 0], [1, 0, 0.2], [0, 1, 0], [1, 1, 0]])
@@ -94,28 +69,12 @@ def _hierarchy_gltf() -> bytes:
 
 
 def _export(tmp: Path, mesh: bytes | Path, name: str = "m.gltf", transform: str = TRANSFORM, extra: str = "") -> Path:
-    binary = rendiff_binary()
-    if binary is None:
-        pytest.skip("no built rendiff (cargo build first): the scene comes from its export")
-    src = tmp / "scene"
-    src.mkdir(parents=True)
-    (src / name).write_bytes(mesh.read_bytes() if isinstance(mesh, Path) else mesh)
-    (src / "s.toml").write_text(
-        'requires = ["depth", "ids"]\n[camera]\neye = [-0.3, 0.6, 5.0]\nlook_at = [-0.3, 0.6, 0.0]\n'
-        f'vfov = 45.0\nwidth = 64\nheight = 48\n[[objects]]\nname = "m"\nmesh = "{name}"\n{transform}\n{extra}'
-    )
-    out = tmp / "run" / "scenes" / "s" / "resolved"
-    subprocess.run([str(binary), "export", str(src / "s.toml"), "-o", str(out)], check=True, capture_output=True)
-    return out
+    camera = "eye = [-0.3, 0.6, 5.0]\nlook_at = [-0.3, 0.6, 0.0]\nvfov = 45.0\nwidth = 64\nheight = 48"
+    return meshfiles.export(tmp, name, mesh, camera, f"{transform}\n{extra}", tmp / "run" / "scenes" / "s" / "resolved")
 
 
 def _judge(directory: Path) -> dict[tuple[str, str], Any]:
     return cases.judge_renders(directory, ("pyrender", "pyrender_file"))
-
-
-def _rewrite(directory: Path, tris: np.ndarray) -> None:
-    """The resolved scene as an importer that produced `tris` (same count and objects) would have written it."""
-    tris.astype("<f4").tofile(directory / "triangles.f32")
 
 
 def _cyclic_equal(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
@@ -199,13 +158,8 @@ def test_a_planted_import_bug_fails_pyrender_file_while_the_resolved_export_pass
     tmp_path: Path, plant: Callable[[resolved.ResolvedScene], np.ndarray]
 ) -> None:
     out = _export(tmp_path, _hierarchy_gltf())
-    _rewrite(out, plant(resolved.load(out)))
-    bad = _judge(out)
-    assert bad["pyrender", "id"]["status"] == "pass" and bad["pyrender", "Z"]["status"] == "pass"
-    assert bad["pyrender_file", "id"]["status"] == "fail", bad["pyrender_file", "id"]["reason"]
-    assert bad["pyrender_file", "id"]["interior_mismatches"] > 0
-    info = registry.get("pyrender_file").render(resolved.load(out), tmp_path / "x.exr", tmp_path, 60.0)
-    assert "object 'm/body'" in str(info["import_disagreement"])
+    disagreement = meshfiles.planted_import_bug(out, plant(resolved.load(out)), "pyrender", tmp_path)
+    assert "object 'm/body'" in disagreement
 
 
 def test_a_mirrored_nodes_winding_not_reversed_fails_pyrender_files_normals(tmp_path: Path) -> None:
@@ -214,11 +168,7 @@ def test_a_mirrored_nodes_winding_not_reversed_fails_pyrender_files_normals(tmp_
     out = _export(tmp_path, _hierarchy_gltf())
     tris = resolved.load(out).triangles.copy()
     tris[6:] = tris[6:, [0, 2, 1]]
-    _rewrite(out, tris)
-    bad = _judge(out)
-    assert bad["pyrender", "id"]["status"] == "pass" and bad["pyrender_file", "id"]["status"] == "pass"
-    assert bad["pyrender_file", "N"]["status"] == "fail"
-    assert "facing the other way" in bad["pyrender_file", "N"]["reason"]
+    meshfiles.planted_winding_bug(out, tris, "pyrender")
 
 
 def test_a_triangle_count_rendiff_disagrees_with_is_an_error_naming_both_importers(tmp_path: Path) -> None:
@@ -231,7 +181,7 @@ def test_a_triangle_count_rendiff_disagrees_with_is_an_error_naming_both_importe
     meta["objects"][0]["prim_count"] -= 1
     meta["objects"][1]["first_prim"] -= 1
     (out / "scene.json").write_text(json.dumps(meta))
-    _rewrite(out, tris)
+    meshfiles.rewrite_triangles(out, tris)
     np.delete(np.fromfile(out / "object_ids.u32", dtype="<u4"), 5).tofile(out / "object_ids.u32")
     with pytest.raises(
         BackendError, match=r"importer disagreement: trimesh reads 6 triangles of node 1 \(body\) in m.gltf, rendiff 5"
@@ -240,7 +190,7 @@ def test_a_triangle_count_rendiff_disagrees_with_is_an_error_naming_both_importe
 
 
 def _two_scenes_gltf() -> bytes:
-    g = _Gltf()
+    g = Gltf()
     a = g.acc([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "VEC3", 5126, "<f4")
     g.doc |= {
         "meshes": [{"primitives": [{"attributes": {"POSITION": a}}]}],

@@ -28,21 +28,34 @@ def test_registry_lists_one_folder_per_backend() -> None:
         assert (HARNESS / "rendiff_harness" / "renderers" / name / "backend.py").is_file(), name
     pov = registry.load("povray")
     assert pov.spec is not None and pov.name == "povray"
-    assert pov.features == frozenset(
-        {
-            "depth",
-            "ids",
-            "emission",
-            "lambert",
-            "point_light",
-            "directional_light",
-            "shadows",
-            "shadowless",
-            "two_sided",
-        }
-    )
-    assert pov.buffers == frozenset({"Z", "id", "RGB"})
     assert registry.get("povray").key == "povray"
+
+
+DECLARED = {
+    "povray": ("depth ids emission lambert point_light directional_light shadows shadowless two_sided", "Z id RGB"),
+    "pyrender": ("depth ids emission lambert point_light directional_light shadowless two_sided", "Z id RGB"),
+    # Never shadowless: Mitsuba always traces shadow rays.
+    "mitsuba": (
+        "depth ids emission lambert point_light directional_light shadows area_light global_illumination "
+        "two_sided one_sided",
+        "Z id N RGB",
+    ),
+    "mitsuba_file": ("depth ids normals", "Z id N"),
+    "pyrender_file": ("depth ids normals", "Z id N"),
+}
+"""What each built-in backend declares in its renderers/<name>/backend.py (features, buffers): the
+scenes and buffers it is compared on, so a change to it is a deliberate change here too."""
+
+
+@pytest.mark.parametrize("name", DECLARED)
+def test_each_built_in_backend_declares_its_features_and_buffers(name: str) -> None:
+    backend = registry.load(name)
+    if backend.spec is None:
+        pytest.skip(f"{name} does not load here: {backend.import_error}")
+    features, buffers = DECLARED[name]
+    assert backend.name == name
+    assert backend.features == frozenset(features.split())
+    assert backend.buffers == frozenset(buffers.split())
 
 
 def test_every_registered_module_loads_or_says_why() -> None:
