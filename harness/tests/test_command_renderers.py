@@ -383,20 +383,26 @@ def test_scene_path_with_spaces_and_shell_characters_arrives_as_one_argument(
     assert not list(tmp_path.rglob("pwned")) and not list(work.iterdir())  # no shell; scratch removed
 
 
+def _hanging(tmp_path: Path, pids: Path, then: str = "") -> Path:
+    """A renderer that starts a child sleeping 600 s, writes its pid, the child's and its process
+    group to `pids` (whole: by rename), runs the lines `then`, and sleeps 600 s."""
+    return script(
+        tmp_path,
+        "hang.py",
+        "import os, subprocess, sys, time\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
+        f"open({str(pids)!r} + '.tmp', 'w').write(f'{{os.getpid()}} {{child.pid}} {{os.getpgid(0)}}')\n"
+        f"os.rename({str(pids)!r} + '.tmp', {str(pids)!r})\n" + then + "time.sleep(600)\n",
+    )
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_a_hanging_renderer_is_killed_with_its_whole_group(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
 ) -> None:
     pids = tmp_path / "pids.txt"
-    hang = script(
-        tmp_path,
-        "hang.py",
-        "import os, subprocess, sys, time\n"
-        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
-        f"open({str(pids)!r}, 'w').write(f'{{os.getpid()}} {{child.pid}} {{os.getpgid(0)}}')\n"
-        "print('working', file=sys.stderr, flush=True)\n"
-        "open(sys.argv[1], 'wb').write(b'half an EXR')\n"
-        "time.sleep(600)\n",
+    hang = _hanging(
+        tmp_path, pids, "print('working', file=sys.stderr, flush=True)\nopen(sys.argv[1], 'wb').write(b'half an EXR')\n"
     )
     path = declare(tmp_path, entry("mine", [sys.executable, str(hang), "{out}"], "timeout_s = 1.5"))
     monkeypatch.setenv(ENV_VAR, str(path))
@@ -417,15 +423,7 @@ def test_a_renderer_and_its_children_die_when_the_harness_is_killed(
     tmp_path: Path, scene: tuple[Path, dict[str, np.ndarray]]
 ) -> None:
     pids = tmp_path / "pids.txt"
-    hang = script(
-        tmp_path,
-        "hang.py",
-        "import os, subprocess, sys, time\n"
-        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
-        f"open({str(pids)!r} + '.tmp', 'w').write(f'{{os.getpid()}} {{child.pid}}')\n"
-        f"os.rename({str(pids)!r} + '.tmp', {str(pids)!r})\n"
-        "time.sleep(600)\n",
-    )
+    hang = _hanging(tmp_path, pids)
     path = declare(tmp_path, entry("mine", [sys.executable, str(hang), "{out}"]))
     env = dict(os.environ, PYTHONPATH=str(HARNESS), **{ENV_VAR: str(path)})
     argv = ["render", "--backend", "mine", "--scene", str(scene[0]), "--out", str(tmp_path / "o.exr")]
@@ -438,7 +436,7 @@ def test_a_renderer_and_its_children_die_when_the_harness_is_killed(
     finally:
         harness.kill()  # SIGKILL: no handler of the harness runs
         harness.communicate()
-    renderer, child = (int(v) for v in pids.read_text().split())
+    renderer, child, _ = (int(v) for v in pids.read_text().split())
     assert process_gone(renderer, 5.0) and process_gone(child, 5.0), "the renderer's group outlived the harness"
 
 

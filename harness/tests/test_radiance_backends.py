@@ -121,21 +121,14 @@ def test_povray_sdl_mapping_is_exact_text(tmp_path: Path) -> None:
 
 
 @needs_povray
-def test_povray_shadows_match_float64_shadow_rays(tmp_path: Path) -> None:
-    scene = _occluded(tmp_path, "shadows")
+@pytest.mark.parametrize("shadows", ["shadows", "shadowless"])
+def test_povray_shadows_match_float64_shadow_rays_and_shadowless_ignores_the_occluder(
+    tmp_path: Path, shadows: str
+) -> None:
+    scene = _occluded(tmp_path, shadows)
     out = tmp_path / "o.exr"
     info = povray.render(scene, out, tmp_path / "w", 120.0)
-    bufs = exrbuf.read_buffers(out)
-    _check_occluded("povray", scene, bufs, exrbuf.read_attrs(out), info)
-
-
-@needs_povray
-def test_povray_shadowless_ignores_the_occluder(tmp_path: Path) -> None:
-    scene = _occluded(tmp_path, "shadowless")
-    out = tmp_path / "o.exr"
-    info = povray.render(scene, out, tmp_path / "w", 120.0)
-    bufs = exrbuf.read_buffers(out)
-    _check_occluded("povray", scene, bufs, exrbuf.read_attrs(out), info)
+    _check_occluded("povray", scene, exrbuf.read_buffers(out), exrbuf.read_attrs(out), info)
 
 
 # --------------------------------------------------------------------------- Mitsuba

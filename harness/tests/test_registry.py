@@ -188,6 +188,11 @@ def test_render_unavailable_backend(
     assert "povray unavailable" in err and "apt-get install povray" in err and "Traceback" not in err
 
 
+def _render_povray(scene: Path, out: Path, *extra: str) -> list[str]:
+    """The harness's `render` arguments for POV-Ray on `scene` into `out`."""
+    return ["render", "--backend", "povray", "--scene", str(scene), "--out", str(out), *extra]
+
+
 def test_render_backend_error_exit_2_without_traceback(tmp_path: Path) -> None:
     """Through `python -m`, a crashing renderer gives one stderr message and exit 2."""
     d = fixtures.three_triangles(tmp_path / "s")
@@ -197,20 +202,7 @@ def test_render_backend_error_exit_2_without_traceback(tmp_path: Path) -> None:
     (fake / "povray").chmod(0o755)
     env = {"PATH": f"{fake}:/usr/bin:/bin", "PYTHONPATH": str(HARNESS)}
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "rendiff_harness",
-            "render",
-            "--backend",
-            "povray",
-            "--scene",
-            str(d),
-            "--out",
-            str(tmp_path / "o.exr"),
-            "--timeout",
-            "30",
-        ],
+        [sys.executable, "-m", "rendiff_harness", *_render_povray(d, tmp_path / "o.exr", "--timeout", "30")],
         check=False,
         capture_output=True,
         text=True,
@@ -227,19 +219,7 @@ def test_render_backend_error_exit_2_without_traceback(tmp_path: Path) -> None:
 def test_render_success_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     d = fixtures.three_triangles(tmp_path / "s")
     out = tmp_path / "o.exr"
-    rc = cli.main(
-        [
-            "render",
-            "--backend",
-            "povray",
-            "--scene",
-            str(d),
-            "--out",
-            str(out),
-            "--workdir",
-            str(tmp_path / "w"),
-        ]
-    )
+    rc = cli.main(_render_povray(d, out, "--workdir", str(tmp_path / "w")))
     assert rc == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 1
