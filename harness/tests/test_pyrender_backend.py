@@ -18,7 +18,6 @@ from rendiff_harness.renderers.pyrender import backend as pb
 REASON = pb.unavailable_reason()
 pytestmark = pytest.mark.skipif(REASON is not None, reason=f"pyrender backend unavailable: {REASON}")
 BG = pb.BACKGROUND_ID
-SAFE_EDGE_PX = 0.01  # pixel centers farther than this from every edge must match exactly
 
 Rendered = tuple[ResolvedScene, dict[str, np.ndarray], dict[str, Any]]
 
@@ -62,64 +61,12 @@ def test_tilted_plane_depth_matches_ray_plane_intersection(tmp_path: Path) -> No
     assert np.all(err <= tol), f"max error/tolerance {np.max(err / tol):.3g}"
 
 
-def test_ids_match_float64_ray_cast_away_from_edges(tmp_path: Path) -> None:
-    scene, buf, _ = _render(tmp_path, cases.three_triangles_two_objects)
-    ref = cases.cast(scene)
-    safe = ref.edge_dist > SAFE_EDGE_PX
-    assert safe.mean() > 0.9
-    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
-    assert np.array_equal(buf["obj"][safe], ref.obj[safe])
-    assert {int(v) for v in np.unique(ref.obj)} == {0, 1, BG}, "fixture must show both objects and background"
-    mismatch = buf["prim"] != ref.prim
-    assert np.all(ref.edge_dist[mismatch] <= pb.EDGE_TOLERANCE_PX)
-
-
 def test_depth_matches_ray_cast_where_ids_agree(tmp_path: Path) -> None:
     scene, buf, info = _render(tmp_path, cases.three_triangles_two_objects)
     ref = cases.cast(scene)
     same = (buf["prim"] == ref.prim) & (ref.prim != BG)
     err = np.abs(buf["Z"][same].astype(np.float64) - ref.z[same])
     assert np.all(err <= pb.depth_tolerance(ref.z[same], info["znear"], info["zfar"]))
-
-
-def test_background_maps_to_inf_and_all_ones(tmp_path: Path) -> None:
-    scene, buf, _ = _render(tmp_path, cases.three_triangles_two_objects)
-    bg = cases.cast(scene).prim == BG
-    assert bg[0, 0] and bg.sum() > 100
-    assert np.all(np.isposinf(buf["Z"][bg]))
-    assert np.all(buf["prim"][bg] == BG) and np.all(buf["obj"][bg] == BG)
-    assert np.array_equal(np.isinf(buf["Z"]), buf["prim"] == BG)
-
-
-def test_orientation_left_is_left_and_up_is_top(tmp_path: Path) -> None:
-    scene, buf, _ = _render(tmp_path, cases.orientation_scene)
-    w, h = scene.camera.width, scene.camera.height
-    cols0 = np.nonzero(buf["prim"] == 0)[1]
-    rows1 = np.nonzero(buf["prim"] == 1)[0]
-    assert cols0.size and cols0.max() < w // 2, "a triangle at -x must land in the left columns"
-    assert rows1.size and rows1.max() < h // 2, "a triangle at +y must land in the top rows"
-
-
-def test_back_facing_triangle_is_visible(tmp_path: Path) -> None:
-    scene, buf, _ = _render(tmp_path, cases.back_facing)
-    ref = cases.cast(scene)
-    safe = ref.edge_dist > SAFE_EDGE_PX
-    assert np.count_nonzero(ref.prim == 0) > 20
-    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
-
-
-def test_prim_ids_above_65535_decode(tmp_path: Path) -> None:
-    scene, buf, _ = _render(tmp_path, cases.high_ids)
-    ref = cases.cast(scene)
-    safe = ref.edge_dist > SAFE_EDGE_PX
-    assert {int(v) for v in np.unique(ref.prim)} == {*cases.HIGH_IDS, BG}
-    assert np.array_equal(buf["prim"][safe], ref.prim[safe])
-    assert np.array_equal(buf["obj"][safe], ref.obj[safe])
-
-
-def test_empty_scene_is_all_background(tmp_path: Path) -> None:
-    _, buf, _ = _render(tmp_path, cases.empty_scene)
-    assert np.all(buf["prim"] == BG) and np.all(np.isposinf(buf["Z"]))
 
 
 def test_id_colour_code_round_trips_every_byte() -> None:

@@ -15,10 +15,27 @@ from typing import Any
 import numpy as np
 
 from ..contract import exrbuf
+from ..contract.meshfile import file_uses
+from ..contract.resolved import ResolvedScene
 from ..judge.tolerance import DepthContext, DepthModel, render_param, shift_depth
+from .errors import BackendSkipped
 
 PLACEMENT_ATTR = "vertex_placement"
 """The EXR attribute (and info key) holding the render's vertex placement bound, world units."""
+
+
+def original_file_uses(scene: ResolvedScene, backend: str) -> list[list[int]]:
+    """The scene's file uses (contract/meshfile.file_uses); BackendSkipped with the reason when an
+    object is not read from a mesh file, since `backend` has no original file to load for it."""
+    uses = file_uses(scene)
+    in_use = {i for use in uses for i in use}
+    for i, obj in enumerate(scene.objects):
+        if i not in in_use:
+            raise BackendSkipped(
+                f"{backend}: object {obj.get('name', '')!r} is not read from a mesh file (a generated shape or "
+                "literal triangles): there is no original file to load"
+            )
+    return uses
 
 
 def placement(attrs: Mapping[str, Any]) -> float:

@@ -62,7 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from ...contract.meshfile import file_uses, object_matrix
+from ...contract import exrbuf
+from ...contract.meshfile import object_matrix
 from ...contract.resolved import ResolvedScene
 from ...contract.userfile import UserFileError, read_regular
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
@@ -73,7 +74,7 @@ from ...judge.tolerance import (
 )
 from ..errors import BackendError, BackendSkipped
 from ..mitsuba import backend as mb
-from ..original import PLACEMENT_ATTR, disagreement, placed_depth, placement, write_visibility
+from ..original import PLACEMENT_ATTR, disagreement, original_file_uses, placed_depth, placement, write_visibility
 from ..spec import BackendSpec
 
 NAME = "mitsuba_file"
@@ -132,14 +133,7 @@ def unreadable(path: Path) -> str | None:
 def plan_uses(scene: ResolvedScene) -> list[tuple[Path, int, int, Any]]:
     """(file, first_prim, prim_count, transform) per file use, in prim order; BackendSkipped with the
     reason when the scene has anything Mitsuba cannot load from the user's files."""
-    uses = file_uses(scene)
-    in_use = {i for use in uses for i in use}
-    for i, obj in enumerate(scene.objects):
-        if i not in in_use:
-            raise BackendSkipped(
-                f"{NAME}: object {obj.get('name', '')!r} is not read from a mesh file (a generated shape or "
-                "literal triangles): there is no original file to load"
-            )
+    uses = original_file_uses(scene, NAME)
     out: list[tuple[Path, int, int, Any]] = []
     seen: dict[Path, str | None] = {}
     expected = 0
@@ -322,7 +316,7 @@ def render(
     """Render `scene`'s OBJ files with Mitsuba into `out_exr` (Z, id.prim, id.object, N); never RGB
     (`visibility_only` is accepted, and always what is done). In-process; `workdir` is unused."""
     buffers, info, placement = render_arrays(scene)
-    attrs = {
+    attrs: dict[str, exrbuf.AttrValue] = {
         "backend": NAME,
         "variant": str(info["variant"]),
         "near_clip": float(info["near_clip"]),

@@ -65,13 +65,13 @@ from typing import Any
 
 import numpy as np
 
-from ...contract import gltfgraph
-from ...contract.meshfile import OPS_OBJECT, MeshFileError, file_uses, object_matrix
+from ...contract import exrbuf, gltfgraph
+from ...contract.meshfile import OPS_OBJECT, MeshFileError, object_matrix
 from ...contract.resolved import ResolvedScene
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
 from ...judge.tolerance import F32_U, Model
 from ..errors import BackendError, BackendSkipped
-from ..original import PLACEMENT_ATTR, disagreement, placed_depth, placement, write_visibility
+from ..original import PLACEMENT_ATTR, disagreement, original_file_uses, placed_depth, placement, write_visibility
 from ..pyrender import backend as pb
 from ..spec import BackendSpec
 
@@ -112,14 +112,7 @@ class Use:
 def plan_uses(scene: ResolvedScene) -> list[Use]:
     """The scene's file uses, in prim order; BackendSkipped with the reason when an object has no glTF
     file to load."""
-    uses = file_uses(scene)
-    in_use = {i for use in uses for i in use}
-    for i, obj in enumerate(scene.objects):
-        if i not in in_use:
-            raise BackendSkipped(
-                f"{NAME}: object {obj.get('name', '')!r} is not read from a mesh file (a generated shape or "
-                "literal triangles): there is no original file to load"
-            )
+    uses = original_file_uses(scene, NAME)
     out = []
     expected = 0
     for use in uses:
@@ -290,7 +283,7 @@ def render(
     """Render `scene`'s glTF files as trimesh loads them into `out_exr` (Z, id.prim, id.object, N); never
     RGB (`visibility_only` is accepted, and always what is done). In-process; `workdir` is unused."""
     buffers, info, placed = render_arrays(scene)
-    attrs = {
+    attrs: dict[str, exrbuf.AttrValue] = {
         "backend": NAME,
         "znear": float(info["znear"]),
         "zfar": float(info["zfar"]),
