@@ -63,11 +63,18 @@ def declare(tmp_path: Path, text: str, name: str = "renderers.toml") -> Path:
     return path
 
 
-def entry(name: str, command: list[str], extra: str = "", precision: str = "edge_px = 0.004\ndepth_relative = 1e-6"):
-    """One [[renderer]] entry writing Z and id (depth, ids)."""
+def entry(
+    name: str,
+    command: list[str],
+    extra: str = "",
+    precision: str = "edge_px = 0.004\ndepth_relative = 1e-6",
+    features: tuple[str, ...] = ("depth", "ids"),
+    buffers: tuple[str, ...] = ("Z", "id"),
+) -> str:
+    """One [[renderer]] entry, by default writing Z and id (depth, ids)."""
     return (
         f"[[renderer]]\nname = {json.dumps(name)}\ncommand = {json.dumps(command)}\n"
-        f'features = ["depth", "ids"]\nbuffers = ["Z", "id"]\n{extra}\n'
+        f"features = {json.dumps(list(features))}\nbuffers = {json.dumps(list(buffers))}\n{extra}\n"
         f"[renderer.precision]\n{precision}\n"
     )
 
@@ -94,6 +101,13 @@ def render(scene: Path, out: Path, backend: str = "mine", *extra: str) -> tuple[
 @pytest.fixture()
 def scene(tmp_path: Path) -> tuple[Path, dict[str, np.ndarray]]:
     return quads(tmp_path / "scene")
+
+
+@pytest.fixture()
+def answered(tmp_path: Path, scene: tuple[Path, dict[str, np.ndarray]]) -> tuple[Path, Path]:
+    """The quads scene's folder and its reference written as a renderer's EXR (tmp_path/answer.exr)."""
+    sdir, ref = scene
+    return sdir, write_exr(tmp_path / "answer.exr", ref)
 
 
 # --------------------------------------------------------------------------- the file
@@ -552,13 +566,9 @@ def test_visibility_only_neither_requires_nor_keeps_rgb(tmp_path: Path, monkeypa
     answer = tmp_path / "with_rgb.exr"
     exrbuf.write_buffers(answer, Z=ref.z.astype(np.float32), prim=ref.prim, obj=ref.obj, RGB=rgb)
     copy = script(tmp_path, "copy.py", COPY)
-    path = declare(
-        tmp_path,
-        "[[renderer]]\nname = 'lit'\n"
-        f"command = [{PY}, {json.dumps(str(copy))}, {json.dumps(str(answer))}, '{{out}}']\n"
-        "features = ['depth', 'ids', 'lambert']\nbuffers = ['Z', 'id', 'RGB']\n"
-        "[renderer.precision]\nedge_px = 0\ndepth_relative = 0\nrgb_relative = 1e-6\n",
-    )
+    command = [sys.executable, str(copy), str(answer), "{out}"]
+    exact = "edge_px = 0\ndepth_relative = 0\nrgb_relative = 1e-6"
+    path = declare(tmp_path, entry("lit", command, "", exact, ("depth", "ids", "lambert"), ("Z", "id", "RGB")))
     monkeypatch.setenv(ENV_VAR, str(path))
     out = tmp_path / "out.exr"
     rc, line, _ = render(sdir, out, "lit")
@@ -570,10 +580,9 @@ def test_visibility_only_neither_requires_nor_keeps_rgb(tmp_path: Path, monkeypa
 
 
 def test_programs_relative_to_the_file_and_a_missing_program(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, answered: tuple[Path, Path]
 ) -> None:
-    sdir, ref = scene
-    answer = write_exr(tmp_path / "answer.exr", ref)
+    sdir, answer = answered
     conf = tmp_path / "conf"
     local = script(
         conf, "render.py", f"#!{sys.executable}\nimport shutil, sys\nshutil.copyfile({str(answer)!r}, sys.argv[1])\n"
@@ -596,26 +605,30 @@ def test_programs_relative_to_the_file_and_a_missing_program(
 # --------------------------------------------------------------------------- with the rendiff binary
 
 
+def _icosphere_run(run: Path) -> tuple[Path, Path]:
+    """scenes/icosphere.toml exported into the run folder `run`, and the core's raster render of it:
+    (resolved scene folder, raster EXR)."""
+    root = HARNESS.parent
+    toml = root / "scenes/icosphere.toml"
+    sdir = run / "scenes/icosphere/resolved"
+    ref = run / "scenes/icosphere/raster.exr"
+    assert RENDIFF is not None
+    for argv in (["export", str(toml), "-o", str(sdir)], ["render", "--renderer", "raster", str(toml), "-o", str(ref)]):
+        subprocess.run([str(RENDIFF), *argv], check=True, capture_output=True, cwd=root, timeout=120)
+    return sdir, ref
+
+
 @pytest.mark.skipif(RENDIFF is None, reason=NOT_BUILT)
 def test_the_cores_own_answer_through_a_command_passes_every_buffer(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    root = HARNESS.parent
-    toml = root / "scenes/icosphere.toml"
     run = tmp_path / "run"
-    sdir = run / "scenes/icosphere/resolved"
-    ref = run / "scenes/icosphere/raster.exr"
-    for argv in (["export", str(toml), "-o", str(sdir)], ["render", "--renderer", "raster", str(toml), "-o", str(ref)]):
-        subprocess.run([str(RENDIFF), *argv], check=True, capture_output=True, cwd=root, timeout=120)
+    sdir, ref = _icosphere_run(run)
     copy = script(tmp_path, "copy.py", COPY)
-    path = declare(
-        tmp_path,
-        "[[renderer]]\nname = 'copycat'\n"
-        f"command = [{PY}, {json.dumps(str(copy))}, {json.dumps(str(ref))}, '{{out}}']\n"
-        f"version = [{json.dumps(str(RENDIFF))}, '--version']\n"
-        "features = ['depth', 'ids', 'normals']\nbuffers = ['Z', 'id', 'N']\n"
-        "[renderer.precision]\nedge_px = 0\ndepth_relative = 0\nnormal_relative = 2.4e-7\n",
-    )
+    command = [sys.executable, str(copy), str(ref), "{out}"]
+    version = f"version = {json.dumps([str(RENDIFF), '--version'])}"
+    exact = "edge_px = 0\ndepth_relative = 0\nnormal_relative = 2.4e-7"
+    path = declare(tmp_path, entry("copycat", command, version, exact, ("depth", "ids", "normals"), ("Z", "id", "N")))
     monkeypatch.setenv(ENV_VAR, str(path))
     out = run / "scenes/icosphere/copycat.exr"
     rc, line, err = render(sdir, out, "copycat")
@@ -626,19 +639,15 @@ def test_the_cores_own_answer_through_a_command_passes_every_buffer(
         {"backend": "raster", "status": "ok", "exr": "scenes/icosphere/raster.exr", "buffers": ["Z", "id", "N"]},
         {**line, "exr": "scenes/icosphere/copycat.exr", "command": "copycat", "time_s": 0.1},
     ]
-    write_manifest(run, [manifest_scene("icosphere", renders, requires)])
-    rc, _, err = cli("compare", "--run", str(run), "--no-images")
-    assert rc == 0, err
-    results = [r for r in json.loads((run / "results.json").read_text())["results"] if r["backend"] == "copycat"]
+    results = [r for (backend, _), r in _compare(run, "icosphere", requires, renders).items() if backend == "copycat"]
     assert {r["buffer"] for r in results} >= {"id", "Z", "N"}
     assert all(r["status"] == "pass" for r in results), results
 
 
 def test_the_group_kill_leaves_nothing_after_a_normal_exit(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, answered: tuple[Path, Path]
 ) -> None:
-    sdir, ref = scene
-    answer = write_exr(tmp_path / "answer.exr", ref)
+    sdir, answer = answered
     pids = tmp_path / "pids.txt"
     daemon = script(
         tmp_path,
@@ -703,13 +712,8 @@ def test_the_worked_example_agrees_with_the_core_at_its_declared_precision(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     _use_examples(monkeypatch)
-    root = HARNESS.parent
-    toml = root / "scenes/icosphere.toml"
     run = tmp_path / "run"
-    sdir = run / "scenes/icosphere/resolved"
-    ref = run / "scenes/icosphere/raster.exr"
-    for argv in (["export", str(toml), "-o", str(sdir)], ["render", "--renderer", "raster", str(toml), "-o", str(ref)]):
-        subprocess.run([str(RENDIFF), *argv], check=True, capture_output=True, cwd=root, timeout=120)
+    sdir, ref = _icosphere_run(run)
     rc, line, err = render(sdir, run / "scenes/icosphere/tiny.exr", "tiny")
     assert rc == 0, err
     requires = json.loads((sdir / "scene.json").read_text())["requires"]
@@ -828,11 +832,10 @@ def test_a_precision_beyond_what_can_be_judged_is_refused(tmp_path: Path, key: s
 
 
 def test_a_hanging_version_command_costs_a_short_timeout_and_the_renderer_still_runs(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, answered: tuple[Path, Path]
 ) -> None:
     """A version command that never ends (issue 40, item 6) delays each render by seconds, not 30 s."""
-    sdir, ref = scene
-    answer = write_exr(tmp_path / "answer.exr", ref)
+    sdir, answer = answered
     hang = script(tmp_path, "hang.py", "import time\ntime.sleep(120)\n")
     copy = script(tmp_path, "copy.py", COPY)
     version = f"version = {json.dumps([sys.executable, str(hang)])}"
@@ -872,12 +875,11 @@ def test_depth_absolute_counts_at_most_the_relative_bound_at_each_pixel(
 
 
 def test_a_known_version_is_taken_and_the_version_command_is_not_run(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, scene: tuple[Path, dict[str, np.ndarray]]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, answered: tuple[Path, Path]
 ) -> None:
     """`rendiff check` asks each renderer's version once (`info --json`) and passes it to every
     render (`--known-version`): the version command does not run again (issue 40, item 6)."""
-    sdir, ref = scene
-    answer = write_exr(tmp_path / "answer.exr", ref)
+    sdir, answer = answered
     ran = tmp_path / "version-ran"
     probe = script(tmp_path, "probe.py", f"open({str(ran)!r}, 'a').write('x')\nprint('2.0 from the command')\n")
     copy = script(tmp_path, "copy.py", COPY)
