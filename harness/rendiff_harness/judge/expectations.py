@@ -210,6 +210,13 @@ def _string(entry: Mapping[str, Any], key: str, where: str, required: bool = Tru
     return value
 
 
+def _known_keys(entry: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    """ExpectationsError naming the first key of `entry` (in sorted order) that is not `allowed`."""
+    extra = sorted(set(entry) - allowed)
+    if extra:
+        raise ExpectationsError(f"{where}: unknown key {_show(extra[0])} (allowed: {', '.join(sorted(allowed))})")
+
+
 def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
     """Validate the TOML document `data` (from `path`, for messages) into entries."""
     unknown = sorted(set(data) - TOP_KEYS)
@@ -233,11 +240,7 @@ def parse(data: Mapping[str, Any], path: Path | str) -> list[Expectation]:
         if not isinstance(entry, dict):
             raise ExpectationsError(f"{_where(path, i)}: must be a table")
         where = _where(path, i, entry)
-        extra = sorted(set(entry) - ENTRY_KEYS)
-        if extra:
-            raise ExpectationsError(
-                f"{where}: unknown key {_show(extra[0])} (allowed: {', '.join(sorted(ENTRY_KEYS))})"
-            )
+        _known_keys(entry, ENTRY_KEYS, where)
         scene = _string(entry, "scene", where)
         backend = _string(entry, "backend", where)
         buffer = _string(entry, "buffer", where)
@@ -273,11 +276,7 @@ def parse_declarations(data: Mapping[str, Any], path: Path | str) -> list[Declar
         where = f"{path}: [[declare]] entry {i}"
         if not isinstance(entry, dict):
             raise ExpectationsError(f"{where}: must be a table")
-        extra = sorted(set(entry) - DECLARE_KEYS)
-        if extra:
-            raise ExpectationsError(
-                f"{where}: unknown key {_show(extra[0])} (allowed: {', '.join(sorted(DECLARE_KEYS))})"
-            )
+        _known_keys(entry, DECLARE_KEYS, where)
         backend = _string(entry, "backend", where)
         allows = _string(entry, "allows", where)
         reason = _string(entry, "reason", where)

@@ -565,21 +565,6 @@ def _run_together(runs: list[_Running], scratch: Path, deadline: float, timeout_
     return times
 
 
-def _run(
-    binary: str,
-    scratch: Path,
-    cam: Camera,
-    stem: str,
-    sdl: str,
-    deadline: float,
-    timeout_s: float,
-    settings: Settings = EXACT,
-) -> float:
-    """Write SDL, run POV-Ray with a hard deadline; returns the wall time of the process."""
-    run = _start(binary, scratch, cam, stem, sdl, deadline, timeout_s, settings)
-    return _run_together([run], scratch, deadline, timeout_s)[stem]
-
-
 def read_png16(path: Path, width: int, height: int) -> np.ndarray:
     """(H, W, 3) uint16 exactly as stored (OIIO applies no gamma to integer reads)."""
     import OpenImageIO as oiio
@@ -892,7 +877,8 @@ def _radiance(
             else:
                 sdl = emission_sdl(scene, mesh, scale)
             sdl_s = time.monotonic() - t_sdl
-            run_s = _run(binary, scratch, cam, stem, sdl, deadline, timeout_s, settings)
+            one = _start(binary, scratch, cam, stem, sdl, deadline, timeout_s, settings)
+            run_s = _run_together([one], scratch, deadline, timeout_s)[stem]
             png = read_png16(scratch / f"{stem}.png", w, h)
             passes[stem] = {"sdl_s": sdl_s, "povray_s": run_s, "sdl_bytes": float(len(sdl)), "scale": scale}
             if not np.any(png[checked] == PNG16_MAX):
