@@ -340,16 +340,23 @@ def lit_plane(
     )
 
 
-def occluded_plane(directory: Path, shadows: str, width: int = 64, height: int = 48) -> Path:
+def occluded_plane(
+    directory: Path,
+    shadows: str,
+    width: int = 64,
+    height: int = 48,
+    light: tuple[list[float], list[float]] = ([0.1, 0.05, 2.0], [4.0, 3.0, 2.0]),
+) -> Path:
     """lit_plane plus a small square (prims 2-3) at height 1 between the plane and a point light at height 2.
 
     `shadows` is "shadows" or "shadowless"; with shadows the square casts a visible shadow.
+    `light` is the point light's (position, intensity).
     """
     import json
 
     d = lit_plane(
         directory,
-        [{"kind": "point", "position": [0.1, 0.05, 2.0], "intensity": [4.0, 3.0, 2.0]}],
+        [{"kind": "point", "position": light[0], "intensity": light[1]}],
         requires=("depth", "ids", "lambert", "point_light", shadows, "two_sided"),
         width=width,
         height=height,

@@ -14,6 +14,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -113,37 +114,24 @@ def answered(tmp_path: Path, scene: tuple[Path, dict[str, np.ndarray]]) -> tuple
 # --------------------------------------------------------------------------- the file
 
 
+def _documented_example() -> str:
+    """The renderers file in renderers/command.py's docstring, as a user would copy it."""
+    doc = command_renderers.__doc__ or ""
+    start = doc.index("    [[renderer]]")
+    return textwrap.dedent(doc[start : doc.index("\n\n", start)]) + "\n"
+
+
 def test_the_documented_example_parses(tmp_path: Path) -> None:
-    path = declare(
-        tmp_path,
-        """
-[[renderer]]
-name = "myrender"
-command = ["./bin/myrender", "--scene", "{scene}", "--out", "{out}", "--size", "{width}x{height}", "{{literal}}"]
-version = ["./bin/myrender", "--version"]
-features = ["depth", "ids"]
-buffers = ["Z", "id"]
-timeout_s = 60
-[renderer.precision]
-edge_px = 0.004
-depth_relative = 1e-6
-""",
-    )
+    path = declare(tmp_path, _documented_example())
     (r,) = command_renderers.load(path, registry.RESERVED_NAMES)
     assert r.name == "myrender" and r.source == path and r.index == 0
     assert r.command[0] == "./bin/myrender" and r.version_command == ("./bin/myrender", "--version")
     assert r.features == {"depth", "ids"} and r.buffers == {"Z", "id"} and r.timeout_s == 60.0
     assert r.precision == command_renderers.Precision(edge_px=0.004, depth_relative=1e-6)
     values = {"scene": "/s p", "out": "/o.exr", "width": "96", "height": "72"}
-    assert [command_renderers.expand(a, values) for a in r.command[1:]] == [
-        "--scene",
-        "/s p",
-        "--out",
-        "/o.exr",
-        "--size",
-        "96x72",
-        "{literal}",
-    ]
+    assert [command_renderers.expand(a, values) for a in r.command[1:]] == ["--scene", "/s p", "--out", "/o.exr"]
+    assert command_renderers.expand("{width}x{height}", values) == "96x72"
+    assert command_renderers.expand("{{literal}}", values) == "{literal}"
 
 
 GOOD = entry("good", ["/bin/true", "{out}"])

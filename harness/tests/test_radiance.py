@@ -250,25 +250,8 @@ def _occluder_scene(tmp_path):  # type: ignore[no-untyped-def]
 
     # A floor (z = 0 plane of lit_plane) and a small square occluder at height 1 under a
     # point light at height 2: its shadow is the square scaled by 2, centered below it.
-    d = cases.lit_plane(
-        tmp_path / "occ",
-        [{"kind": "point", "position": [0.0, 0.0, 2.0], "intensity": [4.0, 4.0, 4.0]}],
-        requires=("depth", "ids", "lambert", "point_light", "shadows", "two_sided"),
-        width=48,
-        height=36,
-    )
-    import json
-
-    tris = np.fromfile(d / "triangles.f32", dtype="<f4").reshape(-1, 3, 3)
-    sq = np.array(cases._quad(np.array([0.0, 0.0, 1.0]), np.array([0.25, 0, 0]), np.array([0, 0.25, 0])))
-    tris = np.concatenate([tris, sq.astype(np.float32)])
-    tris.astype("<f4").tofile(d / "triangles.f32")
-    np.array([0, 0, 1, 1], dtype="<u4").tofile(d / "object_ids.u32")
-    meta = json.loads((d / "scene.json").read_text())
-    meta["triangle_count"] = 4
-    meta["objects"].append({"name": "occ", "material": 0, "first_prim": 2, "prim_count": 2})
-    (d / "scene.json").write_text(json.dumps(meta))
-    return resolved.load(d)
+    light = ([0.0, 0.0, 2.0], [4.0, 4.0, 4.0])
+    return resolved.load(cases.occluded_plane(tmp_path / "occ", "shadows", width=48, height=36, light=light))
 
 
 def test_local_radiance_shadows_and_ambiguity(tmp_path) -> None:  # type: ignore[no-untyped-def]
