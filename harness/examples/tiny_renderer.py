@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 try:
     import numpy as np
@@ -42,17 +43,22 @@ from rendiff_harness.contract import exrbuf  # noqa: E402
 BACKGROUND = 0xFFFFFFFF
 
 
-def render(scene_dir: Path, out: Path) -> None:
+def read_scene(scene_dir: Path) -> tuple[tuple[Any, ...], np.ndarray, np.ndarray]:
+    """The camera (width, height, eye, forward, right, up, near, far, tan of half the vertical field
+    of view; vectors in float64, far inf when there is none), the triangles (n, 3, 3) in float64 and
+    each triangle's object ID, as docs/resolved-scene.md defines them."""
     meta = json.loads((scene_dir / "scene.json").read_text())
     cam = meta["camera"]
-    w, h = cam["width"], cam["height"]
     eye, fwd, right, up = (np.array(cam[k], dtype=np.float64) for k in ("eye", "forward", "right", "up_ortho"))
-    near = cam["near"]
     far = np.inf if cam["far"] is None else cam["far"]
-    tan_half = cam["tan_half_vfov"]
+    camera = (cam["width"], cam["height"], eye, fwd, right, up, cam["near"], far, cam["tan_half_vfov"])
     files = meta["files"]
     tris = np.fromfile(scene_dir / files["triangles"], dtype="<f4").reshape(-1, 3, 3).astype(np.float64)
-    objects = np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
+    return camera, tris, np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
+
+
+def render(scene_dir: Path, out: Path) -> None:
+    (w, h, eye, fwd, right, up, near, far, tan_half), tris, objects = read_scene(scene_dir)
 
     # Pixel rays exactly as docs/DESIGN.md defines them: x right, y down, centers at +0.5.
     sx = (2.0 * (np.arange(w) + 0.5) / w - 1.0) * tan_half * w / h

@@ -35,15 +35,17 @@ is all the verifier sees: its pixels are interior (or crack) mismatches.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-# The harness's EXR writer (float32 Z and N, exact uint32 ids).
+# The harness's EXR writer (float32 Z and N, exact uint32 ids), and the tiny renderer's reading
+# of the resolved scene.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness" / "examples"))
 from rendiff_harness.contract import exrbuf  # noqa: E402
+from tiny_renderer import read_scene  # noqa: E402
 
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
@@ -125,16 +127,7 @@ def _neighbours_in_one_plane(s: np.ndarray, t: np.ndarray, eye: np.ndarray) -> b
 
 
 def render(bug: str, scene_dir: Path, out: Path) -> None:
-    meta = json.loads((scene_dir / "scene.json").read_text())
-    cam = meta["camera"]
-    w, h = cam["width"], cam["height"]
-    eye, fwd, right, up = (np.array(cam[k], dtype=np.float64) for k in ("eye", "forward", "right", "up_ortho"))
-    near = cam["near"]
-    far = np.inf if cam["far"] is None else cam["far"]
-    tan_half = cam["tan_half_vfov"]
-    files = meta["files"]
-    tris = np.fromfile(scene_dir / files["triangles"], dtype="<f4").reshape(-1, 3, 3).astype(np.float64)
-    objects = np.fromfile(scene_dir / files["object_ids"], dtype="<u4")
+    (w, h, eye, fwd, right, up, near, far, tan_half), tris, objects = read_scene(scene_dir)
 
     center = 0.0 if bug == "corner_sample" else 0.5  # the corner_sample bug: no half-pixel offset
     sx = (2.0 * (np.arange(w) + center) / w - 1.0) * tan_half * w / h
