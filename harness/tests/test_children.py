@@ -50,9 +50,9 @@ def test_povray_runs_in_the_harness_group_and_dies_with_it(monkeypatch: pytest.M
         raise Stop
 
     monkeypatch.setattr(subprocess, "Popen", fake_popen)  # the module povray calls through
-    cam = cast(Camera, SimpleNamespace(width=4, height=4))  # _run reads only the size
+    cam = cast(Camera, SimpleNamespace(width=4, height=4))  # _start reads only the size
     with pytest.raises(Stop):
-        povray._run("povray", tmp_path, cam, "t", "// sdl", time.monotonic() + 60, 60.0)
+        povray._start("povray", tmp_path, cam, "t", "// sdl", time.monotonic() + 60, 60.0)
     # A new session or group would put POV-Ray out of reach of rendiff's group kill.
     assert not seen.get("start_new_session")
     assert seen.get("process_group") is None
