@@ -467,6 +467,62 @@ mod tests {
         assert!(got && k.ties == 0 && k.coverage_tests == 1 && k.covered == 1);
     }
 
+    /// The tie rule's moves are directions from the eye (`tie_right - eye`,
+    /// `tie_up - eye`), not points: with the eye away from the origin, a
+    /// move taken as `tie + eye` or `tie / eye` tilts the direction by the
+    /// eye's coordinates and flips the decision on some rows and columns.
+    /// The scene of [`ties_go_right_then_down`] moved to eye (-3, -3, 8)
+    /// (every coordinate on a pixel center stays exact in f32 and f64), with
+    /// an edge through every column's and every row's centers: for a
+    /// vertical edge at x (relative to the eye), `tie / eye` gives the move
+    /// (2/3, 1, 1), which decides as right only while 2/3 + x > 0 (column 0,
+    /// x = -7/8, flips); for a horizontal one at y, `tie_up + eye` gives
+    /// (-6, -5, 16) ahead of the plane, deciding as down only while
+    /// -5 + 16 y > 0 wrongly (rows 3 to 7 flip), and `tie_up / eye` gives
+    /// (1, 2/3, 1) (row 7 flips).
+    #[test]
+    fn ties_go_right_then_down_wherever_the_eye_is() {
+        let at = DVec3::new(-3.0, -3.0, 7.0);
+        let c = Camera::new(at + DVec3::Z, at, DVec3::Y, 90.0, 8, 8, 1e-3, f64::INFINITY).unwrap();
+        let v = |x: f64, y: f64| (at + DVec3::new(x, y, 0.0)).as_vec3();
+        let flip = |t: [Vec3; 3]| [t[0], t[2], t[1]];
+        let covered = |t: [Vec3; 3], x: u32, y: u32| {
+            let mut k = Counters::default();
+            let s = TriEdges::new(&c, &t).covers(&c, &c.pixel_ray(x, y), &mut k);
+            (s != 0, k.ties)
+        };
+        // Pixel i's center is at -1 + (2i + 1)/8 across and 1 - (2i + 1)/8 down.
+        let center = |i: u32| (2 * i + 1) as f64 / 8.0;
+        for col in 0..8 {
+            let x = -1.0 + center(col);
+            let left = [v(-2.0, -0.9), v(x, -0.9), v(x, 0.9)];
+            let right = [v(x, -0.9), v(2.0, -0.9), v(x, 0.9)];
+            for row in 2..6 {
+                for (t, want) in [(left, false), (right, true)] {
+                    for t in [t, flip(t)] {
+                        let (got, ties) = covered(t, col, row);
+                        assert_eq!(got, want, "pixel ({col}, {row}) of {t:?}");
+                        assert!(ties >= 1, "an edge through the center is a tie");
+                    }
+                }
+            }
+        }
+        for row in 0..8 {
+            let y = 1.0 - center(row);
+            let below = [v(-0.9, -2.0), v(0.9, y), v(-0.9, y)];
+            let above = [v(-0.9, y), v(0.9, y), v(0.0, 2.0)];
+            for col in 2..6 {
+                for (t, want) in [(below, true), (above, false)] {
+                    for t in [t, flip(t)] {
+                        let (got, ties) = covered(t, col, row);
+                        assert_eq!(got, want, "pixel ({col}, {row}) of {t:?}");
+                        assert!(ties >= 1, "an edge through the center is a tie");
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn coverage_needs_three_equal_nonzero_signs_and_stops_at_the_first_difference() {
         let run = |signs: [i8; 3]| {
@@ -579,6 +635,58 @@ mod tests {
         let ray = c.pixel_ray(4, 4);
         assert_eq!(ray.dir, DVec3::new(0.125, -0.125, -1.0));
         assert_eq!(d.depth(&c, &ray), Some(3.2));
+    }
+
+    /// Depth is `t (D . f)`: the planar distance of the hit `eye + t D` on the
+    /// ray along the *rounded* direction `D = P - eye`. Near the origin
+    /// `D . f` is 1 to the last bit and `t / (D . f)` would give the same
+    /// depth; with the eye at 2^34 each of P's coordinates is rounded to
+    /// 2^-18, so `D . f` moves off 1 by up to about 10^-6, and dividing
+    /// instead of multiplying moves the depth by 2 |D . f - 1| relative,
+    /// several f32 roundings (2^-24 each). The reference takes the other
+    /// route, `((eye + t D) - eye) . f` in f64 (the sum rounds at 2^-18 on a
+    /// distance of 3.7e5: 10^-11 relative), so the f32 depth, rounded once,
+    /// is within one f32 step of it.
+    #[test]
+    fn depth_is_along_the_rounded_direction_far_from_the_origin() {
+        let eye = DVec3::splat(2f64.powi(34)) + DVec3::new(0.3, 0.7, 0.1);
+        let f = DVec3::new(-1.0, -2.0, -3.0).normalize();
+        let c = Camera::new(
+            eye,
+            eye + f * 1e5,
+            DVec3::Y,
+            60.0,
+            16,
+            16,
+            1e-3,
+            f64::INFINITY,
+        )
+        .unwrap();
+        // A plane across the view 3.7e5 ahead; its corners far off-screen.
+        let mid = eye + f * 3.7e5;
+        let u = f.cross(DVec3::Y).normalize();
+        let v = u.cross(f);
+        let t = [mid - (u + v) * 1e7, mid + (u - v) * 1e7, mid + v * 1e7].map(|p| p.as_vec3());
+        let d = TriDepth::new(&c, &t);
+        let mut off_one = 0;
+        for (x, y) in (0..16).flat_map(|y| (0..16).map(move |x| (x, y))) {
+            let ray = c.pixel_ray(x, y);
+            if (ray.planar - 1.0).abs() <= 2f64.powi(-21) {
+                continue;
+            }
+            off_one += 1;
+            let hit = c.eye + ray.dir * (d.num / d.normal.dot(ray.dir));
+            let want = (hit - c.eye).dot(c.forward);
+            let w32 = want as f32;
+            let step = f64::from(f32::from_bits(w32.to_bits() + 1) - w32);
+            let got = f64::from(d.depth(&c, &ray).expect("the plane faces every ray"));
+            assert!(
+                (got - want).abs() <= step,
+                "pixel ({x}, {y}): depth {got}, planar distance {want} (D . f - 1 = {:e})",
+                ray.planar - 1.0
+            );
+        }
+        assert!(off_one > 0, "no pixel's D . f is off 1 by more than 2^-21");
     }
 
     #[test]
