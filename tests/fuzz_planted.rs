@@ -6,9 +6,9 @@
 //! by 1e-3 px; `far_depth` measures depth from a float32 world-space hit
 //! point; `coplanar_swap` swaps the IDs of coplanar neighbours. Within 200 generated scenes the fuzzer must report each
 //! and reduce it to at most 8 triangles; for the first, the
-//! reduced scene must also (a) still fail on its own, checked from a fresh
-//! folder with calibration, and (b) come back from a second reduction byte
-//! for byte unchanged.
+//! reduced scene must also have fewer pixels (the image step's crop), (a)
+//! still fail on its own, checked from a fresh folder with calibration, and
+//! (b) come back from a second reduction byte for byte unchanged.
 
 mod common_cli;
 
