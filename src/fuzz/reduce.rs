@@ -60,7 +60,9 @@ pub const MAX_ROUNDS: usize = 6;
 /// interval searched `n + 1`-fold, so the cost per halving,
 /// `(start + 2n) / log2(n + 1)` candidates' worth, is least near `n = 4`;
 /// the last run, which only confirms that nothing more holds, then asks 8
-/// crops, not 24.
+/// crops, not 24. (seed 1's s1_00007, 128x96 to 10x36: 13 runs of 118
+/// candidates with 12 crops per axis, 15 runs of 89 with 4, 2m21 for the
+/// whole 8-scene fuzz.)
 pub const CROPS_PER_AXIS: u32 = 4;
 
 /// The result of a reduction.
