@@ -163,13 +163,17 @@ fn print_findings(l: &rendiff::fuzz::findings::Ledger, folder: &Path) {
         );
         match &f.reduced {
             Some(r) if r.error.is_empty() => rendiff::outln!(
-                "  reduced {}{}: {} -> {} triangles, {} -> {} bytes: {}\n  reproduce: {}",
+                "  reduced {}{}: {} -> {} triangles, {} -> {} bytes, {}x{} -> {}x{} pixels: {}\n  reproduce: {}",
                 r.from,
                 if r.complete { "" } else { " (budget ran out)" },
                 r.triangles_before,
                 r.triangles_after,
                 r.bytes_before,
                 r.bytes_after,
+                r.image_before[0],
+                r.image_before[1],
+                r.image_after[0],
+                r.image_after[1],
                 folder.join(&r.scene).display(),
                 r.command
             ),
@@ -206,6 +210,9 @@ pub fn reduce(a: ReduceArgs) -> Result<ExitCode> {
         target.class,
         r.sizes("->")
     );
+    if !r.image_note.is_empty() {
+        rendiff::outln!("{}", r.image_note);
+    }
     rendiff::outln!("reduced: {}", out.display());
     rendiff::outln!("reproduce: {}", r.command);
     Ok(ExitCode::SUCCESS)

@@ -105,6 +105,14 @@ pub struct ReducedRecord {
     pub bytes_before: usize,
     /// (see above)
     pub bytes_after: usize,
+    /// Image width and height before and after (the image step's crop).
+    pub image_before: [u32; 2],
+    /// (see above)
+    pub image_after: [u32; 2],
+    /// Why the image was kept, when the image step tried crops and none
+    /// still failed (a crop rounds every ray anew).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub image_note: String,
     /// Check runs the reduction took, and candidate scenes in them.
     pub check_runs: usize,
     /// (see above)
@@ -127,14 +135,18 @@ impl ReducedRecord {
     /// reduction took: the one wording of the CLI's line and the page's.
     pub fn sizes(&self, arrow: &str) -> String {
         format!(
-            "{} {arrow} {} triangles, {} {arrow} {} objects, {} {arrow} {} bytes \
-             ({} check runs, {} candidates{})",
+            "{} {arrow} {} triangles, {} {arrow} {} objects, {} {arrow} {} bytes, \
+             {}x{} {arrow} {}x{} pixels ({} check runs, {} candidates{})",
             self.triangles_before,
             self.triangles_after,
             self.objects_before,
             self.objects_after,
             self.bytes_before,
             self.bytes_after,
+            self.image_before[0],
+            self.image_before[1],
+            self.image_after[0],
+            self.image_after[1],
             self.check_runs,
             self.candidates,
             if self.complete {

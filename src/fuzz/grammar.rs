@@ -356,6 +356,39 @@ fn unit2(rng: &mut Rng) -> (f64, f64) {
 /// 2^-6 px, still at least [`FEATURE_ULPS`] steps (with z = 0 and
 /// coordinates below 2, 2^-20 px is 2^-25 local units... so the nudge is
 /// taken from `min_feature` up).
+/// The two triangles of each cell of an `nx` x `ny` grid whose nodes are
+/// `nodes` (row by row, `nx + 1` to a row), cells row by row: split on the
+/// diagonal from the cell's first node when `first_diagonal()` says so (one
+/// call per cell, in that order: the generator's draws), else on the other.
+/// Shared nodes are the same values, so neighbours share edges bit for bit.
+fn grid_cells(
+    nodes: &[[f64; 3]],
+    nx: i64,
+    ny: i64,
+    first_diagonal: &mut dyn FnMut() -> bool,
+) -> Vec<Tri> {
+    let node = |i: i64, j: i64| nodes[(j * (nx + 1) + i) as usize];
+    let mut tris = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let (a, b, c, d) = (
+                node(i, j),
+                node(i + 1, j),
+                node(i + 1, j + 1),
+                node(i, j + 1),
+            );
+            if first_diagonal() {
+                tris.push([a, b, c]);
+                tris.push([a, c, d]);
+            } else {
+                tris.push([a, b, d]);
+                tris.push([b, c, d]);
+            }
+        }
+    }
+    tris
+}
+
 fn pixel_centers(view: &View, rng: &mut Rng, objects: &mut Vec<LiteralObject>) {
     let nudge = rng.chance(0.25);
     let center = |rng: &mut Rng, i: i64, j: i64| {
@@ -378,25 +411,7 @@ fn pixel_centers(view: &View, rng: &mut Rng, objects: &mut Vec<LiteralObject>) {
             nodes.push(center(rng, i0 + i * cell, j0 + j * cell));
         }
     }
-    let node = |i: i64, j: i64| nodes[(j * (nx + 1) + i) as usize];
-    let mut tris = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            let (a, b, c, d) = (
-                node(i, j),
-                node(i + 1, j),
-                node(i + 1, j + 1),
-                node(i, j + 1),
-            );
-            if rng.chance(0.5) {
-                tris.push([a, b, c]);
-                tris.push([a, c, d]);
-            } else {
-                tris.push([a, b, d]);
-                tris.push([b, c, d]);
-            }
-        }
-    }
+    let tris = grid_cells(&nodes, nx, ny, &mut || rng.chance(0.5));
     push(objects, tris);
     if rng.chance(0.5) {
         let (ci, cj) = (rng.int(0, view.w as i64 - 1), rng.int(0, view.h as i64 - 1));
@@ -642,21 +657,7 @@ fn dense(view: &View, rng: &mut Rng, objects: &mut Vec<LiteralObject>) {
             nodes.push(view.at(x, y, z * (1.0 + tilt * (i + j) as f64)));
         }
     }
-    let node = |i: i64, j: i64| nodes[(j * (nx + 1) + i) as usize];
-    let mut tris = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            let (a, b, c, d) = (
-                node(i, j),
-                node(i + 1, j),
-                node(i + 1, j + 1),
-                node(i, j + 1),
-            );
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
-        }
-    }
-    push(objects, tris);
+    push(objects, grid_cells(&nodes, nx, ny, &mut || true));
 }
 
 /// 8 to 40 triangles of 0.5 to 4 px, each an object of its own, at random depths.

@@ -176,6 +176,38 @@ impl LiteralScene {
     }
 }
 
+/// A scene for unit tests: the eye at (0, 0, 4) looking at the origin,
+/// y up, near 0.01, one object per list of triangles.
+#[cfg(test)]
+pub(crate) fn test_scene(
+    vfov: f64,
+    width: u32,
+    height: u32,
+    objects: Vec<Vec<Tri>>,
+) -> LiteralScene {
+    LiteralScene {
+        description: String::new(),
+        requires: vec!["depth".into(), "ids".into()],
+        camera: LiteralCamera {
+            eye: [0.0, 0.0, 4.0],
+            look_at: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            vfov,
+            width,
+            height,
+            near: 0.01,
+            far: None,
+        },
+        objects: objects
+            .into_iter()
+            .map(|triangles| LiteralObject {
+                triangles,
+                mirror: None,
+            })
+            .collect(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

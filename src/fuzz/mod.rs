@@ -7,7 +7,8 @@
 //! * [`literal`]: standalone scenes of literal triangles, the one format
 //!   both the generator and the reducer write;
 //! * [`reduce`]: ddmin over objects and triangles, then coordinate snapping,
-//!   with `check` as the interestingness test;
+//!   then a centered crop of the image ([`window`]), with `check` as the
+//!   interestingness test;
 //! * [`near`]: that test's "near the same triangles";
 //! * [`findings`]: failure classes, signatures, findings.json;
 //! * [`situation`]: the geometric situation of a finding's scene;
@@ -30,6 +31,7 @@ pub mod reduce;
 pub mod rng;
 pub mod situation;
 pub mod variants;
+pub mod window;
 
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
@@ -529,6 +531,9 @@ pub fn reduce_file(
         objects_after: r.scene.objects.len(),
         bytes_before: before_text.len(),
         bytes_after: text.len(),
+        image_before: [start.camera.width, start.camera.height],
+        image_after: [r.scene.camera.width, r.scene.camera.height],
+        image_note: r.image_note.unwrap_or_default(),
         check_runs: r.check_runs,
         candidates: r.candidates,
         complete: r.complete,

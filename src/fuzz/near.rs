@@ -112,7 +112,7 @@ pub fn near_triangles(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fuzz::literal::{LiteralCamera, LiteralObject, LiteralScene};
+    use crate::fuzz::literal::test_scene;
     use serde_json::json;
     use std::path::Path;
 
@@ -177,27 +177,15 @@ mod tests {
         // Two triangles side by side (x < 0 and x > 0, a 16x16 view): a
         // pixel on the left one, next to the seam, is within a pixel of the
         // right one; a pixel at the far left is not.
-        let s = LiteralScene {
-            description: String::new(),
-            requires: vec!["depth".into(), "ids".into()],
-            camera: LiteralCamera {
-                eye: [0.0, 0.0, 4.0],
-                look_at: [0.0; 3],
-                up: [0.0, 1.0, 0.0],
-                vfov: 90.0,
-                width: 16,
-                height: 16,
-                near: 0.01,
-                far: None,
-            },
-            objects: vec![LiteralObject {
-                triangles: vec![
-                    [[-9.0, -9.0, 0.0], [0.0, -9.0, 0.0], [0.0, 9.0, 0.0]],
-                    [[0.0, -9.0, 0.0], [9.0, -9.0, 0.0], [0.0, 9.0, 0.0]],
-                ],
-                mirror: None,
-            }],
-        };
+        let s = test_scene(
+            90.0,
+            16,
+            16,
+            vec![vec![
+                [[-9.0, -9.0, 0.0], [0.0, -9.0, 0.0], [0.0, 9.0, 0.0]],
+                [[0.0, -9.0, 0.0], [9.0, -9.0, 0.0], [0.0, 9.0, 0.0]],
+            ]],
+        );
         let scene = crate::scene::Scene::parse(Path::new("t.toml"), &s.to_toml()).unwrap();
         let r = ResolvedScene::resolve(&scene).unwrap();
         let at = |x: u32| {

@@ -234,6 +234,9 @@ fn finding_section(
                 html::url(&r.scene),
                 html::escape(&r.scene)
             );
+            if !r.image_note.is_empty() {
+                let _ = writeln!(b, "<p>{}.</p>", html::escape(&r.image_note));
+            }
             if let Some(t) = &r.failure_triangles {
                 let list: Vec<String> = t.iter().map(usize::to_string).collect();
                 let _ = writeln!(
@@ -361,6 +364,9 @@ mod tests {
                 objects_after: 1,
                 bytes_before: 900,
                 bytes_after: 300,
+                image_before: [64, 48],
+                image_after: [20, 12],
+                image_note: String::new(),
                 check_runs: 4,
                 candidates: 20,
                 complete: true,

@@ -2,7 +2,9 @@
 //! delta debugging (Zeller and Hildebrandt's ddmin), first over objects,
 //! then over triangles, then over vertex precision (every coordinate
 //! snapped to a coarser power-of-two grid, the coarsest that still fails),
-//! repeated until a round changes nothing (docs/fuzzing.md).
+//! then over the image (the smallest centered crop that still fails,
+//! [`super::window`]), repeated until a round changes nothing
+//! (docs/fuzzing.md).
 //!
 //! The interestingness test is "the same backend still fails the same
 //! buffer with the same class" ([`super::findings::failure_class`]) "near
@@ -21,6 +23,7 @@ use super::findings::failure_class;
 use super::literal::{LiteralScene, Tri};
 use super::near::{self, Group};
 use super::rng::pow2;
+use super::window;
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
 use crate::scene::Scene;
@@ -50,6 +53,18 @@ pub const BATCH: usize = 12;
 /// fixed point; each round after the first usually changes only the snap.
 pub const MAX_ROUNDS: usize = 6;
 
+/// Crops tried per axis in each `check` run of the image step. Each run
+/// costs its start (about 8 candidates' renders, measured: 13 runs of 118
+/// candidates took 160 s, about 6 s a start and 0.7 s a candidate, on 2
+/// shared cores) plus a render per candidate, and `n` crops cut the
+/// interval searched `n + 1`-fold, so the cost per halving,
+/// `(start + 2n) / log2(n + 1)` candidates' worth, is least near `n = 4`;
+/// the last run, which only confirms that nothing more holds, then asks 8
+/// crops, not 24. (seed 1's s1_00007, 128x96 to 10x36: 13 runs of 118
+/// candidates with 12 crops per axis, 15 runs of 89 with 4, 2m21 for the
+/// whole 8-scene fuzz.)
+pub const CROPS_PER_AXIS: u32 = 4;
+
 /// The result of a reduction.
 #[derive(Debug, Clone)]
 pub struct Reduction {
@@ -66,6 +81,9 @@ pub struct Reduction {
     /// None when the verifier names none (no explanations: a side without
     /// `id.prim`, an error), and the test was the class alone.
     pub failure_triangles: Option<Vec<usize>>,
+    /// Set when the image step tried crops and kept the image as it was:
+    /// why, for the log.
+    pub image_note: Option<String>,
 }
 
 /// A candidate: a scene, and for each of its triangles (in prim order) its
@@ -104,6 +122,8 @@ struct Oracle<'a> {
     footprint: Option<BTreeSet<usize>>,
     check_runs: usize,
     candidates: usize,
+    /// Crops the image step asked about (cached or not).
+    crops_tried: usize,
     deadline: Option<Instant>,
 }
 
@@ -126,43 +146,67 @@ impl Oracle<'_> {
         let texts: Vec<String> = cands.iter().map(Cand::key).collect();
         let mut i = 0;
         while i < cands.len() {
-            if let Some(&known) = self.cache.get(&texts[i]) {
-                if known {
-                    return Ok(Ok(Some(i)));
-                }
-                i += 1;
-                continue;
-            }
-            if self.deadline.is_some_and(|d| Instant::now() >= d) {
-                return Ok(Err(OutOfTime));
-            }
-            // The next batch: uncached, valid candidates from i on.
-            let mut batch = Vec::new();
-            let mut j = i;
-            while j < cands.len() && batch.len() < BATCH {
-                if !self.cache.contains_key(&texts[j]) {
-                    if valid(&cands[j].scene) {
-                        batch.push(j);
-                    } else {
-                        self.cache.insert(texts[j].clone(), false);
+            match self.cache.get(&texts[i]) {
+                Some(true) => return Ok(Ok(Some(i))),
+                Some(false) => i += 1,
+                // Candidate i is in the next batch (or refused): then cached.
+                None => {
+                    if let Err(e) = self.batch(i, BATCH, cands, &texts)? {
+                        return Ok(Err(e));
                     }
                 }
-                j += 1;
-            }
-            let answers = self.test(&batch, cands)?;
-            for (k, groups) in batch.iter().zip(answers) {
-                let interesting = self.near(&cands[*k], groups);
-                self.cache.insert(texts[*k].clone(), interesting);
-            }
-            // Back to i: the cache now answers this batch in order.
-            while i < j {
-                if self.cache.get(&texts[i]) == Some(&true) {
-                    return Ok(Ok(Some(i)));
-                }
-                i += 1;
             }
         }
         Ok(Ok(None))
+    }
+
+    /// Whether each candidate is interesting: every one not yet known is
+    /// asked, all in one `check` run (the image step wants every answer, so
+    /// a larger batch wastes nothing).
+    fn all(&mut self, cands: &[Cand]) -> Result<Result<Vec<bool>, OutOfTime>> {
+        let texts: Vec<String> = cands.iter().map(Cand::key).collect();
+        if let Err(e) = self.batch(0, cands.len(), cands, &texts)? {
+            return Ok(Err(e));
+        }
+        Ok(Ok(texts
+            .iter()
+            .map(|t| self.cache.get(t) == Some(&true))
+            .collect()))
+    }
+
+    /// Asks one `check` run about the next `size` distinct candidates from
+    /// `from` on that the cache does not know, and caches the answers; those
+    /// the core refuses ([`valid`]) are cached as not interesting, unrendered.
+    fn batch(
+        &mut self,
+        from: usize,
+        size: usize,
+        cands: &[Cand],
+        texts: &[String],
+    ) -> Result<Result<(), OutOfTime>> {
+        let mut batch: Vec<usize> = Vec::new();
+        let mut j = from;
+        while j < cands.len() && batch.len() < size {
+            let new =
+                !self.cache.contains_key(&texts[j]) && !batch.iter().any(|&b| texts[b] == texts[j]);
+            if new {
+                if valid(&cands[j].scene) {
+                    batch.push(j);
+                } else {
+                    self.cache.insert(texts[j].clone(), false);
+                }
+            }
+            j += 1;
+        }
+        if !batch.is_empty() && self.deadline.is_some_and(|d| Instant::now() >= d) {
+            return Ok(Err(OutOfTime));
+        }
+        let answers = self.test(&batch, cands)?;
+        for (k, groups) in batch.iter().zip(answers) {
+            let interesting = self.near(&cands[*k], groups);
+            self.cache.insert(texts[*k].clone(), interesting);
+        }
+        Ok(Ok(()))
     }
 
     /// Whether a candidate that failed as the target says (`groups`: None
@@ -418,6 +462,78 @@ fn snap_candidates(s: &LiteralScene) -> Vec<LiteralScene> {
     out
 }
 
+/// The image step: the smallest centered crop ([`window::crop`]) that
+/// still fails. Per axis a search for the largest crop per side that
+/// holds, both axes in each `check` run: [`window::probes`] spaces up to
+/// [`CROPS_PER_AXIS`] crops of an axis between the largest known to hold (none at
+/// first) and the smallest known not to (past the largest possible at
+/// first), the other axis at its current crop; the largest that holds is
+/// taken, and the next run looks between it and the next larger one tried,
+/// until no crop is left between on either axis. When both axes gained in
+/// one run, only the columns' gain is taken (the two together were not
+/// tried) and the rows are searched again from where they were. That finds
+/// the largest crops when holding is monotone in them (one failing region);
+/// where it is not, it finds crops that hold, and every crop kept is one the
+/// interestingness test passed. The verifier's example pixels do not bound
+/// it: each is only the first pixel of its group, not the group's extent.
+/// Triangles stay (the origins are unchanged). `Err` with what it had when
+/// the time ran out.
+fn crop_image(oracle: &mut Oracle, start: Cand) -> Result<Result<Cand, Cand>> {
+    let base = start.clone();
+    let cam = &base.scene.camera;
+    let mut lo = [0u32; 2];
+    let mut hi = [cam.width, cam.height].map(|side| window::max_crop(side) + 1);
+    let mut cur = start;
+    loop {
+        let mut tries: Vec<(usize, u32, Cand)> = Vec::new();
+        for axis in 0..2 {
+            for k in window::probes(lo[axis], hi[axis], CROPS_PER_AXIS) {
+                let mut at = lo;
+                at[axis] = k;
+                if let Some(camera) = window::crop(cam, at[0], at[1]) {
+                    let mut c = base.clone();
+                    c.scene.camera = camera;
+                    tries.push((axis, k, c));
+                }
+            }
+        }
+        if tries.is_empty() {
+            return Ok(Ok(cur));
+        }
+        let cands: Vec<Cand> = tries.iter().map(|t| t.2.clone()).collect();
+        oracle.crops_tried += cands.len();
+        let held = match oracle.all(&cands)? {
+            Ok(h) => h,
+            Err(OutOfTime) => return Ok(Err(cur)),
+        };
+        let mut gained = None;
+        for axis in 0..2 {
+            // This axis' crops, largest first, and whether each held.
+            let mine: Vec<(u32, bool, usize)> = (0..tries.len())
+                .filter(|&i| tries[i].0 == axis)
+                .map(|i| (tries[i].1, held[i], i))
+                .collect();
+            match mine.iter().position(|m| m.1) {
+                Some(p) => {
+                    if p > 0 {
+                        hi[axis] = mine[p - 1].0;
+                    }
+                    if gained.is_none() {
+                        lo[axis] = mine[p].0;
+                        cur = cands[mine[p].2].clone();
+                        gained = Some(axis);
+                    }
+                }
+                None => {
+                    if let Some(m) = mine.last() {
+                        hi[axis] = m.0;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Reduces `start`, which must fail as `target` says. `work` holds the
 /// candidates and the check runs (removed at the end); `template` gives
 /// the check's settings (renderers, expectations, jobs, timeout); its scenes
@@ -440,6 +556,7 @@ pub fn reduce(
         footprint: None,
         check_runs: 0,
         candidates: 0,
+        crops_tried: 0,
         deadline: budget.map(|b| Instant::now() + b),
     };
     let mut cur = start.clone();
@@ -447,12 +564,21 @@ pub fn reduce(
     let result = reduce_with(&mut oracle, cur);
     let _ = std::fs::remove_dir_all(work);
     let (scene, complete) = result?;
+    let (w, h) = (start.camera.width, start.camera.height);
+    let kept = (scene.camera.width, scene.camera.height) == (w, h);
+    let image_note = (kept && oracle.crops_tried > 0).then(|| {
+        format!(
+            "image kept at {w}x{h}: no centered crop (the field of view narrowed to keep \
+             the pixel pitch, which rounds every ray anew) still failed the same way"
+        )
+    });
     Ok(Reduction {
         scene,
         check_runs: oracle.check_runs,
         candidates: oracle.candidates,
         complete,
         failure_triangles: oracle.footprint.map(|f| f.into_iter().collect()),
+        image_note,
     })
 }
 
@@ -500,6 +626,10 @@ fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene
             Ok(None) => {}
             Err(OutOfTime) => return Ok((cur.scene, false)),
         }
+        match crop_image(oracle, cur)? {
+            Ok(c) => cur = c,
+            Err(c) => return Ok((c.scene, false)),
+        }
         if cur.key() == before {
             return Ok((cur.scene, true));
         }
@@ -510,30 +640,10 @@ fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fuzz::literal::{LiteralCamera, LiteralObject};
+    use crate::fuzz::literal::test_scene;
 
     fn scene(objects: Vec<Vec<Tri>>) -> LiteralScene {
-        LiteralScene {
-            description: String::new(),
-            requires: vec!["depth".into(), "ids".into()],
-            camera: LiteralCamera {
-                eye: [0.0, 0.0, 4.0],
-                look_at: [0.0; 3],
-                up: [0.0, 1.0, 0.0],
-                vfov: 45.0,
-                width: 32,
-                height: 32,
-                near: 0.01,
-                far: None,
-            },
-            objects: objects
-                .into_iter()
-                .map(|triangles| LiteralObject {
-                    triangles,
-                    mirror: None,
-                })
-                .collect(),
-        }
+        test_scene(45.0, 32, 32, objects)
     }
 
     fn tri(x: f64) -> Tri {
