@@ -27,7 +27,7 @@
 use super::measure::{bootstrap_median_interval, BOOTSTRAP_SEED};
 use super::page::{self, Page};
 use super::plot;
-use super::{environment, finish_environment, median, Common, Output, Scratch};
+use super::{environment, median, Common, Output, Scratch};
 use anyhow::{bail, Context, Result};
 use rendiff::check::process::run_with_timeout;
 use serde_json::{json, Value};
@@ -429,20 +429,20 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
     });
 
     // Warm-up (untimed, two scenes): caches, and which backends there are.
-    let warm = dir.join("warm");
-    rendiff::errln!("fuzz: warm-up");
-    rendiff(
-        &fuzz_args(
+    // The two-scene run of the warm-up and of calibration's cost, into `out`.
+    let two_scenes = |out: &Path| {
+        fuzz_args(
             opts.seed,
             2,
             opts.only.as_deref(),
             opts.jobs,
             opts.common.timeout_s,
-            &warm,
-        ),
-        &opts.common.root,
-        &logs,
-    )?;
+            out,
+        )
+    };
+    let warm = dir.join("warm");
+    rendiff::errln!("fuzz: warm-up");
+    rendiff(&two_scenes(&warm), &opts.common.root, &logs)?;
     let backends = backends_of(&read_json(&warm.join("run/manifest.json"))?);
     record["backends"] = json!(backends);
 
@@ -515,30 +515,11 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
 
     // Calibration's once-per-run cost: the same two scenes with and without it.
     let cal = dir.join("calibrated");
-    let mut args = fuzz_args(
-        opts.seed,
-        2,
-        opts.only.as_deref(),
-        opts.jobs,
-        opts.common.timeout_s,
-        &cal,
-    );
+    let mut args = two_scenes(&cal);
     args.retain(|a| a != "--no-calibration");
     rendiff::errln!("fuzz: calibration's cost");
     let with = rendiff(&args, &opts.common.root, &logs)?.seconds;
-    let without = rendiff(
-        &fuzz_args(
-            opts.seed,
-            2,
-            opts.only.as_deref(),
-            opts.jobs,
-            opts.common.timeout_s,
-            &warm,
-        ),
-        &opts.common.root,
-        &logs,
-    )?
-    .seconds;
+    let without = rendiff(&two_scenes(&warm), &opts.common.root, &logs)?.seconds;
     record["calibration_s"] = json!(with - without);
 
     let mut planted_rows = Vec::new();
@@ -558,14 +539,7 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
             json!({"median": median(&per_finding), "runs": per_finding})
         },
     });
-    finish_environment(&mut record);
-    let svg = startup_plot(&record);
-    let html = html(&record, &svg);
-    Ok(Output {
-        record,
-        html,
-        svgs: vec![("startup".into(), svg)],
-    })
+    Ok(Output::with_plot(record, "startup", startup_plot, html))
 }
 
 /// Each backend's start-up (the probe's render) against its mean render

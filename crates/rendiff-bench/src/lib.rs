@@ -339,9 +339,29 @@ pub struct Output {
     pub svgs: Vec<(String, String)>,
 }
 
+impl Output {
+    /// A benchmark's output with one plot: `record` closed
+    /// ([`finish_environment`]), the plot `name` drawn by `plot` and the page
+    /// by `page` from the closed record (and the plot).
+    pub fn with_plot(
+        mut record: Value,
+        name: &str,
+        plot: impl FnOnce(&Value) -> String,
+        page: impl FnOnce(&Value, &str) -> String,
+    ) -> Output {
+        finish_environment(&mut record);
+        let svg = plot(&record);
+        let html = page(&record, &svg);
+        Output {
+            record,
+            html,
+            svgs: vec![(name.into(), svg)],
+        }
+    }
+}
+
 /// Writes `STEM.json`, `STEM.html`, each `(name, svg)` as a standalone
-/// file `STEM-NAME.svg`, the folder's refreshed index page and the style
-/// sheet the pages link, as one set
+/// file `STEM-NAME.svg` and the folder's refreshed index page, as one set
 /// ([`outputs::write_set`]: all or nothing, the benchmark's plots of an
 /// earlier run that this one does not write removed); returns the paths
 /// written, index aside.
@@ -372,10 +392,6 @@ pub fn write_outputs(
     files.push((
         "index.html".into(),
         page::index_html(dir, Some(stem)).into_bytes(),
-    ));
-    files.push((
-        rendiff::report::html::STYLE_SHEET.into(),
-        rendiff::report::html::CSS.trim_start().as_bytes().to_vec(),
     ));
     let mut written = outputs::write_set(dir, stem, &files)?;
     written.truncate(n);

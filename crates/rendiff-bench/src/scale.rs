@@ -19,7 +19,7 @@
 
 use super::page::{self, Page};
 use super::plot;
-use super::{environment, finish_environment, median, Common, Output, Scratch};
+use super::{environment, median, Common, Output, Scratch};
 use anyhow::{bail, Context, Result};
 use rendiff::check::process::run_with_timeout;
 use serde_json::{json, Value};
@@ -213,14 +213,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
         }));
     }
     record["shards"] = json!(shard_rows);
-    finish_environment(&mut record);
-    let svg = shards_plot(&record);
-    let html = html(&record, &svg);
-    Ok(Output {
-        record,
-        html,
-        svgs: vec![("shards".into(), svg)],
-    })
+    Ok(Output::with_plot(record, "shards", shards_plot, html))
 }
 
 /// Wall time against the number of shards: the slowest shard plus the merge
