@@ -10,9 +10,9 @@
 //! timed-out trace none); the limit is added, and 10 s of slack for a loaded
 //! machine. The build alone would take several times that.
 
-mod common_cli;
+mod common;
 
-use common_cli::*;
+use common::cli::*;
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};

@@ -6,9 +6,9 @@
 //! file that is not a scene), so they test the mechanism and stay fast (the core
 //! tracer only); the probes' own measurement is tested in harness/tests.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, rendiff, succeeds};
+use common::cli::{need_venv, rendiff, succeeds};
 use serde_json::Value;
 
 /// The repository's near probe (the far one is the same view 2.5e4 away).

@@ -3,9 +3,9 @@
 //! renders its depth and ID buffers there, and they are compared; only RGB is
 //! left out, with the missing features as the reason.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, rendiff};
+use common::cli::{need_venv, rendiff};
 use serde_json::Value;
 
 const SCENE: &str = "scenes/directional_shadows.toml";

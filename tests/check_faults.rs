@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-mod common_cli;
+mod common;
 
 const FAKE_PYTHON: &str = r#"#!/bin/bash
 # Stands in for the venv's python: fakes three broken backends, delegates the rest.
@@ -54,8 +54,8 @@ fn broken_renderers_are_reported_per_renderer_and_do_not_stop_the_run() {
 }
 
 fn broken_renderers(mode: &[&str]) {
-    let root = common_cli::root();
-    common_cli::need_venv();
+    let root = common::cli::root();
+    common::cli::need_venv();
     let real = root.join(".venv/bin/python");
     let dir = tempfile::tempdir().unwrap();
     let fake = dir.path().join("python");
@@ -170,8 +170,8 @@ fn gone_within(pid: i32, limit: Duration) -> bool {
 }
 
 fn fake_python(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let root = common_cli::root();
-    common_cli::need_venv();
+    let root = common::cli::root();
+    common::cli::need_venv();
     let real = root.join(".venv/bin/python");
     let fake = dir.join("python");
     std::fs::write(&fake, FAKE_PYTHON).unwrap();

@@ -9,8 +9,8 @@
 //! Known divergences live in tests/expectations.toml with a reason and a
 //! two-sided bound; doing better than a bound fails as an unexpected pass.
 
-mod common_trials;
-use common_trials::verdict_trial;
+mod common;
+use common::trials::verdict_trial;
 use libtest_mimic::{Arguments, Failed, Trial};
 use rendiff::check::{self, CheckOptions};
 use std::path::PathBuf;

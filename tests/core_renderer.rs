@@ -2,9 +2,9 @@
 //! (`rendiff::loop_cost`) picks renders, says which, and gives the forced
 //! loops' buffers.
 
-mod common_cli;
+mod common;
 
-use common_cli::*;
+use common::cli::*;
 
 /// The pick is printed and its EXR is the raster's and the tracer's, buffer
 /// for buffer (`rendiff diff` exits 0 only on identical buffers).

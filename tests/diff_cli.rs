@@ -8,8 +8,8 @@ use exr::prelude::*;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-mod common_cli;
-use common_cli::{render_ok, rendiff};
+mod common;
+use common::cli::{render_ok, rendiff};
 
 fn render(scene: &str, renderer: &str, out: &Path) {
     render_ok(scene, renderer, &["--spp", "2"], out);

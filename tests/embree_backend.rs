@@ -9,7 +9,7 @@
 //! Measurements (not run by default):
 //! `cargo test --release --test embree_backend -- --ignored --nocapture`
 
-mod common_scenes;
+mod common;
 
 use glam::DVec3;
 use rendiff::backends::embree::{
@@ -55,7 +55,7 @@ fn embree_available() -> bool {
 }
 
 fn scene(name: &str) -> ResolvedScene {
-    common_scenes::load(
+    common::scenes::load(
         &Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("scenes")
             .join(format!("{name}.toml")),
@@ -132,6 +132,26 @@ struct Agreement {
     out_of_range: usize,
 }
 
+/// One line of counts, for the log of every comparison.
+impl std::fmt::Display for Agreement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} px, edge {} (leaks {}, embree miss {}, embree extra hit {}), boundary {}, \
+             interior {}, max Z rel {:.2e}, Z bit diffs {}",
+            self.pixels,
+            self.edge,
+            self.leaks,
+            self.embree_miss,
+            self.embree_extra,
+            self.boundary,
+            self.interior,
+            self.max_z_rel,
+            self.z_bit_diffs
+        )
+    }
+}
+
 fn compare(scene: &ResolvedScene, r: &Frame, e: &Frame) -> Agreement {
     let cam = &scene.camera;
     let mut a = Agreement {
@@ -188,19 +208,7 @@ fn compare(scene: &ResolvedScene, r: &Frame, e: &Frame) -> Agreement {
 }
 
 fn assert_agrees(what: &str, a: &Agreement) {
-    eprintln!(
-        "{what}: {} px, edge {} (leaks {}, embree miss {}, embree extra hit {}), boundary {}, \
-         interior {}, max Z rel {:.2e}, Z bit diffs {}",
-        a.pixels,
-        a.edge,
-        a.leaks,
-        a.embree_miss,
-        a.embree_extra,
-        a.boundary,
-        a.interior,
-        a.max_z_rel,
-        a.z_bit_diffs
-    );
+    eprintln!("{what}: {a}");
     assert_eq!(
         a.interior, 0,
         "{what}: interior ID mismatches: {:?}",
@@ -434,11 +442,11 @@ fn report_agreement() {
         return;
     }
     eprintln!("{}", embree::version().unwrap());
-    let mut cases: Vec<(String, ResolvedScene)> = common_scenes::scene_files()
+    let mut cases: Vec<(String, ResolvedScene)> = common::scenes::scene_files()
         .iter()
         .map(|p| {
             let name = p.file_stem().unwrap().to_string_lossy().into_owned();
-            (name, common_scenes::load(p))
+            (name, common::scenes::load(p))
         })
         .collect();
     let mut big = scene("million");
@@ -456,21 +464,10 @@ fn report_agreement() {
                 let e = run(&s, mode, query);
                 let a = compare(&s, &r, &e);
                 eprintln!(
-                    "{name:16} {:14} {:8} tris {:8} px {:7}: edge {:4} (leaks {:2}, miss {:3}, \
-                     extra {:3}) boundary {} interior {} | max Z rel {:.2e}, Z bits differ at {} \
-                     of matching px",
+                    "{name:16} {:14} {:8} tris {:8}: {a}",
                     mode.name(),
                     format!("{query:?}"),
                     s.triangles.len(),
-                    a.pixels,
-                    a.edge,
-                    a.leaks,
-                    a.embree_miss,
-                    a.embree_extra,
-                    a.boundary,
-                    a.interior,
-                    a.max_z_rel,
-                    a.z_bit_diffs
                 );
                 for ex in &a.interior_examples {
                     eprintln!("    interior: {ex}");

@@ -12,8 +12,8 @@
 //! (The other backends were checked on these scenes by hand and pass; conformance
 //! does not read scenes/found, so the regression baseline is unchanged.)
 
-mod common_trials;
-use common_trials::verdict_trial;
+mod common;
+use common::trials::verdict_trial;
 use libtest_mimic::{Arguments, Failed, Trial};
 use rendiff::check::manifest::ResultEntry;
 use rendiff::check::{self, CheckOptions};

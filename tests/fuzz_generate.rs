@@ -3,9 +3,9 @@
 //! every file is a scene the core accepts; `--minutes` generates in
 //! batches whose scenes are `--count`'s, file for file.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, output_within};
+use common::cli::{need_venv, output_within};
 use std::path::Path;
 
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {

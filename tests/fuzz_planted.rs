@@ -10,9 +10,9 @@
 //! still fail on its own, checked from a fresh folder with calibration, and
 //! (b) come back from a second reduction byte for byte unchanged.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, output_within, root};
+use common::cli::{need_venv, output_within, root};
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;

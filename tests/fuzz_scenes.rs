@@ -44,7 +44,8 @@
 //! (the Python comparison died, the machine shared: cause not found). The
 //! message is one line now; why the comparison died is open.)
 
-mod common_cli;
+mod common;
+use common::cli as common_cli;
 #[path = "fuzz_scenes/gltf.rs"]
 mod gltf;
 #[path = "fuzz_scenes/renderers.rs"]

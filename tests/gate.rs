@@ -7,11 +7,10 @@ use rendiff::gate::{self, ChangeKind, Noise};
 use serde_json::{json, Value};
 use std::path::Path;
 
-mod common_cli;
-mod common_gate;
+mod common;
 mod common_runs;
-use common_cli::{bless_command, gate_command, small_check, succeeds};
-use common_gate::{baseline_of, verdicts as results};
+use common::cli::{bless_command, gate_command, small_check, succeeds};
+use common::gate::{baseline_of, verdicts as results};
 
 fn entry(
     scene: &str,
@@ -35,6 +34,25 @@ fn entry(
     }
 }
 
+/// An entry's status, edge count and largest error.
+type Side<'a> = (&'a str, u64, f64);
+
+/// A baseline's entries and a run's from one table: per row, the entry's
+/// scene, backend and buffer, then its [`Side`] in the baseline and now.
+fn before_now(rows: &[(&str, &str, &str, Side, Side)]) -> (Vec<ResultEntry>, Vec<ResultEntry>) {
+    let mut sides = (Vec::new(), Vec::new());
+    for &(scene, backend, buffer, (s0, e0, m0), (s1, e1, m1)) in rows {
+        sides.0.push(entry(scene, backend, buffer, s0, e0, m0));
+        sides.1.push(entry(scene, backend, buffer, s1, e1, m1));
+    }
+    sides
+}
+
+/// The gate's outcome for run entries `now` against a baseline blessed from `base`.
+fn compare(base: &[ResultEntry], now: Vec<ResultEntry>) -> gate::Outcome {
+    gate::compare(&baseline_of(base), &results(now))
+}
+
 /// The kinds of the changes whose description contains `what`.
 fn kinds(o: &gate::Outcome, what: &str) -> Vec<ChangeKind> {
     kinds_of(o, None, what)
@@ -56,7 +74,7 @@ fn an_unchanged_run_passes() {
         entry("a", "povray", "Z", "expected_fail", 12, 1e-6),
         entry("a", "mitsuba", "Z", "skipped", 0, 0.0),
     ];
-    let o = gate::compare(&baseline_of(&base), &results(base.clone()));
+    let o = compare(&base, base.clone());
     assert_eq!(o.regressions(), 0, "{:?}", o.changes);
     assert_eq!(o.compared, 3);
     assert!(o.changes.is_empty());
@@ -64,23 +82,21 @@ fn an_unchanged_run_passes() {
 
 #[test]
 fn new_failures_fail_the_gate_and_fixes_are_reported() {
-    let base = vec![
-        entry("a", "trace", "id", "pass", 0, 0.0),
-        entry("a", "povray", "id", "expected_fail", 3, 0.0),
-        entry("a", "mitsuba", "id", "skipped", 0, 0.0),
-        entry("a", "embree", "id", "fail", 3, 0.0),
-        entry("b", "embree", "id", "pass", 0, 0.0),
-        entry("c", "embree", "id", "error", 0, 0.0),
-    ];
-    let now = vec![
-        entry("a", "trace", "id", "fail", 0, 0.0),
-        entry("a", "povray", "id", "unexpected_pass", 2, 0.0),
-        entry("a", "mitsuba", "id", "error", 0, 0.0),
-        entry("a", "embree", "id", "fail", 3, 0.0),
-        entry("b", "embree", "id", "skipped", 0, 0.0),
-        entry("c", "embree", "id", "pass", 0, 0.0),
-    ];
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let (base, now) = before_now(&[
+        ("a", "trace", "id", ("pass", 0, 0.0), ("fail", 0, 0.0)),
+        (
+            "a",
+            "povray",
+            "id",
+            ("expected_fail", 3, 0.0),
+            ("unexpected_pass", 2, 0.0),
+        ),
+        ("a", "mitsuba", "id", ("skipped", 0, 0.0), ("error", 0, 0.0)),
+        ("a", "embree", "id", ("fail", 3, 0.0), ("fail", 3, 0.0)),
+        ("b", "embree", "id", ("pass", 0, 0.0), ("skipped", 0, 0.0)),
+        ("c", "embree", "id", ("error", 0, 0.0), ("pass", 0, 0.0)),
+    ]);
+    let o = compare(&base, now);
     assert_eq!(kinds(&o, "new failure").len(), 3, "{:#?}", o.changes);
     assert_eq!(
         kinds(&o, "no longer compared"),
@@ -102,21 +118,14 @@ fn new_failures_fail_the_gate_and_fixes_are_reported() {
 
 #[test]
 fn counts_may_not_grow_and_errors_only_within_their_noise() {
-    let base = vec![
-        entry("a", "povray", "id", "pass", 10, 0.0),
-        entry("a", "povray", "Z", "pass", 0, 1e-6),
-        entry("a", "pyrender", "Z", "pass", 0, 1e-6),
-        entry("a", "trace", "Z", "pass", 0, 0.0),
-        entry("a", "embree", "Z", "pass", 0, 1e-6),
-    ];
-    let now = vec![
-        entry("a", "povray", "id", "pass", 11, 0.0),
-        entry("a", "povray", "Z", "pass", 0, 1.4e-6),
-        entry("a", "pyrender", "Z", "pass", 0, 1e-5),
-        entry("a", "trace", "Z", "pass", 0, 1e-9),
-        entry("a", "embree", "Z", "pass", 0, 1e-9),
-    ];
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let (base, now) = before_now(&[
+        ("a", "povray", "id", ("pass", 10, 0.0), ("pass", 11, 0.0)),
+        ("a", "povray", "Z", ("pass", 0, 1e-6), ("pass", 0, 1.4e-6)),
+        ("a", "pyrender", "Z", ("pass", 0, 1e-6), ("pass", 0, 1e-5)),
+        ("a", "trace", "Z", ("pass", 0, 0.0), ("pass", 0, 1e-9)),
+        ("a", "embree", "Z", ("pass", 0, 1e-6), ("pass", 0, 1e-9)),
+    ]);
+    let o = compare(&base, now);
     let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "edge_mismatches worse"),
@@ -155,7 +164,7 @@ fn entries_on_one_side_only_fail_the_gate() {
         entry("a", "trace", "id", "pass", 0, 0.0),
         entry("new", "trace", "id", "pass", 0, 0.0),
     ];
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let o = compare(&base, now);
     assert_eq!(kinds(&o, "missing result"), vec![ChangeKind::Regression]);
     assert_eq!(
         kinds(&o, "not in the baseline"),
@@ -394,7 +403,7 @@ fn tie_and_crack_counts_are_held_like_edge_counts() {
         classed("embree", Some(0), Some(3)),
         classed("trace", Some(1), Some(1)),
     ];
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let o = compare(&base, now);
     let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
     assert_eq!(
         by("povray", "tie_mismatches worse"),
@@ -430,7 +439,7 @@ fn class_counts_a_side_did_not_record_are_not_compared() {
         classed("embree", None, None),
     ];
     now[1].details.insert("tie_mismatches".into(), Value::Null);
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let o = compare(&base, now);
     assert_eq!(o.regressions(), 0, "{:#?}", o.changes);
     assert!(o.changes.is_empty(), "{:#?}", o.changes);
 }
@@ -453,7 +462,7 @@ fn normals_camera_and_scene_entries_are_gated_by_status_and_presence() {
             ..other("c", "raster", "scene", "error")
         },
     ];
-    let o = gate::compare(&baseline_of(&base), &results(now));
+    let o = compare(&base, now);
     let find = |buffer: &str, what: &str| {
         o.changes
             .iter()

@@ -11,8 +11,8 @@ use rendiff::gate::{self, ChangeKind, Noise, Status};
 use rendiff::vocab::MismatchClass;
 use serde_json::{Map, Value};
 
-mod common_gate;
-use common_gate::{baseline_of, verdicts, Z_FAR};
+mod common;
+use common::gate::{baseline_of, verdicts, Z_FAR};
 
 fn entry(backend: &str, buffer: &str, status: Status, metrics: &[(&str, f64)]) -> ResultEntry {
     let mut details = Map::new();

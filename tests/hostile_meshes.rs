@@ -6,8 +6,8 @@
 //! Each must be refused (or loaded) promptly: exit 2 and one line naming
 //! the file and the problem, never a panic or a hang.
 
-mod common_cli;
-use common_cli::{check_failure, export_refused, output_within, raster_within, rendiff};
+mod common;
+use common::cli::{check_failure, export_refused, output_within, raster_within, rendiff};
 
 const CAMERA: &str = r#"
 [camera]

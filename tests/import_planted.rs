@@ -8,9 +8,9 @@
 //! `python -m rendiff_harness import` must then fail, naming the primitive;
 //! F's own export must pass, so every case can fail both ways.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, output_within, root};
+use common::cli::{need_venv, output_within, root};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -151,32 +151,23 @@ fn position_accessor(sparse: bool) -> Value {
     a
 }
 
+/// F (`f.gltf`) and F' (`g.gltf`): the quad with each one's positions
+/// and node JSON over one accessor, planted as [`planted`] does with the
+/// glTF decoder written from the specification.
+fn planted_quads(f: (Vec<u8>, Value), g: (Vec<u8>, Value), accessor: Value, needles: &[&str]) {
+    let t = tempfile::tempdir().unwrap();
+    gltf(t.path(), "f.gltf", "f.bin", &f.0, f.1, accessor.clone());
+    gltf(t.path(), "g.gltf", "g.bin", &g.0, g.1, accessor);
+    planted(t.path(), "f.gltf", "g.gltf", "gltf_spec", needles);
+}
+
 #[test]
 fn sparse_values_at_the_wrong_index_fail_naming_the_primitive() {
-    let t = tempfile::tempdir().unwrap();
-    let acc = position_accessor(true);
     // Vertex 2 is replaced by (0, 2, 0); the buggy importer writes it over vertex 3.
-    gltf(
-        t.path(),
-        "f.gltf",
-        "f.bin",
-        &quad_buffer(&QUAD, 2),
-        json!({}),
-        acc.clone(),
-    );
-    gltf(
-        t.path(),
-        "g.gltf",
-        "g.bin",
-        &quad_buffer(&QUAD, 3),
-        json!({}),
-        acc,
-    );
-    planted(
-        t.path(),
-        "f.gltf",
-        "g.gltf",
-        "gltf_spec",
+    planted_quads(
+        (quad_buffer(&QUAD, 2), json!({})),
+        (quad_buffer(&QUAD, 3), json!({})),
+        position_accessor(true),
         &[
             "object 'm/quad'",
             "mesh 0 primitive 0 (TRIANGLES sparse POSITION)",
@@ -187,31 +178,12 @@ fn sparse_values_at_the_wrong_index_fail_naming_the_primitive() {
 
 #[test]
 fn a_mirrored_node_whose_winding_is_kept_fails_naming_the_primitive() {
-    let t = tempfile::tempdir().unwrap();
-    let acc = position_accessor(false);
     let mirrored = QUAD.map(|[x, y, z]| [-x, y, z]);
-    gltf(
-        t.path(),
-        "f.gltf",
-        "f.bin",
-        &quad_buffer(&QUAD, 0),
-        json!({"scale": [-1.0, 1.0, 1.0]}),
-        acc.clone(),
-    );
     // The same world positions without the mirror: what an importer that forgot to flip wrote.
-    gltf(
-        t.path(),
-        "g.gltf",
-        "g.bin",
-        &quad_buffer(&mirrored, 0),
-        json!({}),
-        acc,
-    );
-    planted(
-        t.path(),
-        "f.gltf",
-        "g.gltf",
-        "gltf_spec",
+    planted_quads(
+        (quad_buffer(&QUAD, 0), json!({"scale": [-1.0, 1.0, 1.0]})),
+        (quad_buffer(&mirrored, 0), json!({})),
+        position_accessor(false),
         &[
             "object 'm/quad'",
             "(mirrored: winding reversed)",

@@ -4,8 +4,8 @@
 //! empty folder, with no checkout on the way. `rendiff doctor` says what it
 //! found, and a `check` runs an external renderer through that harness.
 
-mod common_cli;
-use common_cli::{need_venv, output_within, root};
+mod common;
+use common::cli::{need_venv, output_within, root};
 use std::path::Path;
 use std::process::Command;
 

@@ -6,9 +6,9 @@
 //! change only at centers within 1e-6 px of an edge and depth by 1e-6 relative.
 //! The same relations on every backend: tests/metamorphic_backends.rs.
 
-mod common_scenes;
+mod common;
 
-use common_scenes::*;
+use common::scenes::*;
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 use rendiff::camera::Camera;

@@ -3,9 +3,9 @@
 //! every backend the machine has; the scene written for editing is the same
 //! scene (docs/resolved-scene.md, "A scene from a model file").
 
-mod common_cli;
+mod common;
 
-use common_cli::{check_failure, need_venv, output_within, rendiff};
+use common::cli::{check_failure, need_venv, output_within, rendiff};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -1,9 +1,9 @@
 //! Projection and visibility basics: known points land on predicted pixels, a
 //! triangle facing away is visible, a zero-area triangle never is.
 
-mod common_scenes;
+mod common;
 
-use common_scenes::*;
+use common::scenes::*;
 use glam::DVec3;
 use rendiff::camera::Camera;
 use rendiff::scene::resolve::ResolvedScene;

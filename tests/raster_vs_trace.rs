@@ -1,9 +1,9 @@
 //! The core's promise: raster and trace compute one visibility. `id.prim` and
 //! `Z` must be byte-identical on every scene and on randomized adversarial ones.
 
-mod common_scenes;
+mod common;
 
-use common_scenes::*;
+use common::scenes::*;
 use proptest::prelude::*;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::trace::TraceKernel;

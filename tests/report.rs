@@ -4,9 +4,9 @@
 //! network), survives runs without radiance, verdicts or renders, and escapes
 //! every name that comes from a scene file.
 
-mod common_cli;
+mod common;
 
-use common_cli::{bless_command, gate_command, need_venv, rendiff, small_check, succeeds};
+use common::cli::{bless_command, gate_command, need_venv, rendiff, small_check, succeeds};
 use std::path::{Path, PathBuf};
 
 fn read(p: &Path) -> String {
@@ -159,13 +159,7 @@ fn check_writes_a_self_contained_report_of_every_scene_and_backend() {
     assert_self_contained(&report);
 
     // `rendiff report` rewrites it in place, leaving no temporary folders.
-    let out = rendiff().arg("report").arg(&run).output().unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    report_of(&run);
     assert!(report.join("index.html").is_file());
     let stray: Vec<_> = std::fs::read_dir(&run)
         .unwrap()
@@ -414,14 +408,7 @@ fn a_synthetic_run_shows_radiance_every_status_and_fallback_diff_maps() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     synthetic_run(&run);
-    let out = rendiff().arg("report").arg(&run).output().unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report = run.join("report");
+    let report = report_of(&run);
     let index = read(&report.join("index.html"));
     // Failures first: the fail and the error come before the skip.
     let (fail, error, skipped) = (
@@ -469,13 +456,7 @@ fn a_synthetic_run_shows_radiance_every_status_and_fallback_diff_maps() {
 
     // Without results.json (the comparison died) the renders are still reported.
     std::fs::remove_file(run.join("results.json")).unwrap();
-    let out = rendiff().arg("report").arg(&run).output().unwrap();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    report_of(&run);
     let index = read(&report.join("index.html"));
     assert!(
         index.contains("No verdicts"),
@@ -552,12 +533,19 @@ fn report_of(run: &Path) -> PathBuf {
     run.join("report")
 }
 
-#[test]
-fn the_overview_shows_failures_apart_from_skips_class_counts_and_calibration() {
+/// The report of [`verifier_run`]'s run, in a folder that lives as long as
+/// the returned guard.
+fn verifier_report() -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     verifier_run(&run, true);
     let report = report_of(&run);
+    (dir, report)
+}
+
+#[test]
+fn the_overview_shows_failures_apart_from_skips_class_counts_and_calibration() {
+    let (_dir, report) = verifier_report();
     let index = read(&report.join("index.html"));
 
     // Needs attention: failures and errors only, the unloadable scene first.
@@ -616,10 +604,7 @@ fn the_overview_shows_failures_apart_from_skips_class_counts_and_calibration() {
 
 #[test]
 fn scene_pages_explain_mismatches_normals_cameras_and_load_errors() {
-    let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
-    verifier_run(&run, true);
-    let report = report_of(&run);
+    let (_dir, report) = verifier_report();
     let page = read(&report.join("syn.html"));
 
     let why = section(&page, "why");

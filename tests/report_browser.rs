@@ -6,9 +6,9 @@
 //! A missing browser fails the test with the fix (`scripts/setup.sh` installs
 //! chromium); only RENDIFF_ALLOW_NO_BROWSER=1 turns that into a skip.
 
-mod common_cli;
+mod common;
 
-use common_cli::small_check;
+use common::cli::small_check;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -150,8 +150,8 @@ fn causes_links_and_the_matrix_in_a_headless_browser() {
         }
         panic!("{CHROMIUM} not found: run scripts/setup.sh (it installs chromium), or set RENDIFF_ALLOW_NO_BROWSER=1 to skip");
     }
-    common_cli::need_venv();
-    let root = common_cli::root();
+    common::cli::need_venv();
+    let root = common::cli::root();
     let keep = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/report-browser");
     let run = keep.join("causes-run");
     let _ = std::fs::remove_dir_all(&run);
@@ -163,7 +163,7 @@ fn causes_links_and_the_matrix_in_a_headless_browser() {
     );
     // A renderer sampling pixel corners fails its calibration and spoils its
     // verdicts; the core's tracer and Embree pass beside it.
-    let out = common_cli::rendiff()
+    let out = common::cli::rendiff()
         .env("PATH", path)
         .args([
             "check",

@@ -12,9 +12,9 @@
 //! - the report's reproduction command runs as printed, to the same verdicts,
 //!   into a new folder.
 
-mod common_cli;
+mod common;
 
-use common_cli::{need_venv, output_within, root};
+use common::cli::{need_venv, output_within, root};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;

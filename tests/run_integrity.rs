@@ -9,9 +9,9 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
-mod common_cli;
+mod common;
 mod common_runs;
-use common_cli::{need_venv, root};
+use common::cli::{need_venv, root};
 
 /// The rendiff binary, run from `dir`; the example renderer runs with
 /// `python3` from PATH and needs numpy: the venv's comes first.
@@ -150,7 +150,7 @@ fn json_run(run: &Path, scenes: &[&str], backends: &[&str]) {
 }
 
 fn bless(run: &Path, baseline: &Path, flags: &[&str]) -> Output {
-    common_cli::bless_command(run, baseline)
+    common::cli::bless_command(run, baseline)
         .args(flags)
         .output()
         .unwrap()
@@ -266,7 +266,7 @@ fn records_linked_out_of_the_run_are_refused_by_gate_bless_and_report() {
             ],
             vec!["report".into(), run.display().to_string()],
         ] {
-            let o = common_cli::rendiff().args(&args).output().unwrap();
+            let o = common::cli::rendiff().args(&args).output().unwrap();
             let err = text(&o.stderr);
             assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
             assert!(
@@ -478,7 +478,7 @@ fn gate_refuses_a_damaged_manifest() {
     let baseline = dir.path().join("baseline.json");
     let o = bless(&run, &baseline, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o.stderr));
-    let gate = || common_cli::gate_command(&run, &baseline).output().unwrap();
+    let gate = || common::cli::gate_command(&run, &baseline).output().unwrap();
     assert_eq!(gate().status.code(), Some(0));
     let manifest = run.join("manifest.json");
     let good = std::fs::read(&manifest).unwrap();

@@ -1,9 +1,9 @@
 //! Radiance in the core: closed-form checks of local shading, a furnace test of
 //! the path tracer, determinism, and that deliberate biases change the answer.
 
-mod common_scenes;
+mod common;
 
-use common_scenes::*;
+use common::scenes::*;
 use glam::DVec3;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;

@@ -1,9 +1,9 @@
 //! Watertightness: counting every covering triangle, not only the winner, in
 //! both loops. A closed mesh has no cracks and no double coverage.
 
-mod common_scenes;
+mod common;
 
-use common_scenes::*;
+use common::scenes::*;
 use std::path::Path;
 
 fn scene(name: &str) -> rendiff::scene::resolve::ResolvedScene {

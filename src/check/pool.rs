@@ -215,15 +215,20 @@ mod tests {
     use std::sync::atomic::AtomicUsize;
     use std::time::Duration;
 
+    /// `jobs` CPU slots, no wait slots, `memory_budget` bytes.
+    fn cpu_slots(jobs: usize, memory_budget: u64) -> PoolOptions {
+        PoolOptions {
+            jobs,
+            wait_slots: 0,
+            memory_budget,
+        }
+    }
+
     #[test]
     fn results_keep_item_order_and_biggest_start_first() {
         let started = Mutex::new(Vec::new());
         let items = [1.0, 5.0, 3.0, 4.0];
-        let opts = PoolOptions {
-            jobs: 1,
-            wait_slots: 0,
-            memory_budget: u64::MAX,
-        };
+        let opts = cpu_slots(1, u64::MAX);
         let out = run(
             opts,
             &items,
@@ -245,11 +250,7 @@ mod tests {
     fn peak_in_flight(items: &[u64], memory_budget: u64, ms: u64) -> usize {
         let in_flight = AtomicUsize::new(0);
         let peak = AtomicUsize::new(0);
-        let opts = PoolOptions {
-            jobs: 4,
-            wait_slots: 0,
-            memory_budget,
-        };
+        let opts = cpu_slots(4, memory_budget);
         run(
             opts,
             items,
@@ -278,11 +279,7 @@ mod tests {
     #[test]
     fn a_render_bigger_than_the_budget_still_runs_alone() {
         let items = [100u64, 1];
-        let opts = PoolOptions {
-            jobs: 2,
-            wait_slots: 0,
-            memory_budget: 10,
-        };
+        let opts = cpu_slots(2, 10);
         let out = run(
             opts,
             &items,
@@ -304,11 +301,7 @@ mod tests {
         std::thread::spawn(move || {
             let got = std::panic::catch_unwind(|| {
                 let items = [10u64, 10, 10];
-                let opts = PoolOptions {
-                    jobs: 2,
-                    wait_slots: 0,
-                    memory_budget: 10,
-                };
+                let opts = cpu_slots(2, 10);
                 run(
                     opts,
                     &items,
@@ -341,11 +334,7 @@ mod tests {
     #[test]
     fn each_slot_keeps_its_own_state() {
         let items: Vec<u32> = (0..20).collect();
-        let opts = PoolOptions {
-            jobs: 3,
-            wait_slots: 0,
-            memory_budget: u64::MAX,
-        };
+        let opts = cpu_slots(3, u64::MAX);
         let out = run(
             opts,
             &items,

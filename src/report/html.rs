@@ -76,34 +76,30 @@ pub fn command_block(cmd: &str) -> String {
 /// by the caller from escaped pieces.
 pub fn page(title: &str, body: &str) -> String {
     let body = format!("{body}\n<script>{JS}</script>");
-    shell(title, &format!("<style>{CSS}</style>"), &body)
+    shell(title, &body)
 }
 
-/// A page like [`page`] whose styles are the sheet [`STYLE_SHEET`] beside it
-/// (its caller writes [`CSS`] there), and without the report's script (it
-/// serves images and flip views, which such pages do not have): for a folder
-/// of many pages written together (the benchmarks'), one sheet instead of a
-/// copy in every page.
-pub fn page_with_sheet(title: &str, body: &str) -> String {
-    let link = format!("<link rel=\"stylesheet\" href=\"{}\">", url(STYLE_SHEET));
-    shell(title, &link, body)
+/// A page like [`page`] without the report's script (it serves images and
+/// flip views, which such pages do not have): the benchmarks' pages.
+pub fn page_without_script(title: &str, body: &str) -> String {
+    shell(title, body)
 }
 
-/// The file name of the sheet [`page_with_sheet`] links to.
-pub const STYLE_SHEET: &str = "style.css";
-
-/// The document around `body`, with `style` (a `<style>` or `<link>`) in its head.
-fn shell(title: &str, style: &str, body: &str) -> String {
+/// The document around `body`: the head on one line with [`CSS`] inlined
+/// (a page needs no file beside it, and pages written together into
+/// several folders share no copied sheet), the body on lines of its own.
+fn shell(title: &str, body: &str) -> String {
+    let css: String = CSS.lines().map(str::trim).collect();
     format!(
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
-         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>{}</title>\n{style}\n</head>\n<body>\n{body}\n</body>\n</html>\n",
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+         <title>{}</title><style>{css}</style></head>\n<body>\n{body}\n</body></html>\n",
         escape(title)
     )
 }
 
-/// Styles: one small sheet, inlined in every report page (no external files
-/// to lose), or written once beside pages that link it ([`page_with_sheet`]).
+/// Styles: one small sheet, inlined in every page (no external files to
+/// lose), one line there; written here a rule or two a line to be read.
 pub const CSS: &str = r#"
 body{font:14px/1.4 system-ui,-apple-system,"Segoe UI",sans-serif;margin:16px 24px;color:#1b1b1b;background:#fafafa}
 h1{font-size:22px;margin:4px 0 8px}h2{font-size:18px;margin:22px 0 8px;border-bottom:1px solid #ddd}

@@ -27,14 +27,11 @@
 use super::measure::{bootstrap_median_interval, BOOTSTRAP_SEED};
 use super::page::{self, Page};
 use super::plot;
-use super::{environment, finish_environment, median, Common, Output, Scratch};
-use anyhow::{bail, Context, Result};
-use rendiff::check::process::run_with_timeout;
+use super::{environment, median, run_rendiff, Common, Output, Scratch};
+use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Duration;
 
 /// Issue 37's goal: small scenes a minute through every built-in renderer.
 pub const GOAL_SCENES_PER_MINUTE: f64 = 30.0;
@@ -65,47 +62,6 @@ pub struct FuzzBenchOptions {
     pub reductions: usize,
     /// Each reduction's `--budget`, seconds.
     pub reduce_budget_s: u64,
-}
-
-/// One timed child command: wall seconds and its exit status.
-struct Timing {
-    seconds: f64,
-    code: Option<i32>,
-    stdout: String,
-}
-
-/// Runs `rendiff ARGS` in its own process group (as `bench scale` does),
-/// with the checkout's venv first on PATH (the planted renderers run as
-/// `python3` scripts needing numpy); exit 0 or 1 (failures found) is a run.
-fn rendiff(args: &[String], root: &Path, logs: &Path) -> Result<Timing> {
-    let exe = super::rendiff_binary()?;
-    let mut cmd = Command::new(&exe);
-    cmd.args(args);
-    let venv = root.join(".venv/bin");
-    if venv.is_dir() {
-        let path = std::env::var_os("PATH").unwrap_or_default();
-        let mut dirs = vec![venv];
-        dirs.extend(std::env::split_paths(&path));
-        cmd.env(
-            "PATH",
-            std::env::join_paths(dirs).context("cannot build PATH")?,
-        );
-    }
-    let o = run_with_timeout(cmd, Duration::from_secs(30 * 24 * 3600), logs)
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    if !matches!(o.code, Some(0) | Some(1)) {
-        bail!(
-            "rendiff {} failed ({}): {}",
-            args.join(" "),
-            o.how(),
-            o.stderr_tail(4).lines().collect::<Vec<_>>().join(" | ")
-        );
-    }
-    Ok(Timing {
-        seconds: o.seconds,
-        code: o.code,
-        stdout: o.stdout,
-    })
 }
 
 /// The arguments of one timed fuzz run into `out`.
@@ -286,7 +242,7 @@ fn planted(opts: &FuzzBenchOptions, backend: &str, dir: &Path, logs: &Path) -> R
         "fuzz: {} scenes through planted {backend}",
         opts.planted_count
     );
-    let fuzz = rendiff(&args, root, logs)?;
+    let fuzz = run_rendiff(&args, Some(root), logs)?;
     let ledger = read_json(&folder.join("findings.json"))?;
     let mut rows = Vec::new();
     for f in ledger["findings"]
@@ -328,7 +284,7 @@ fn planted(opts: &FuzzBenchOptions, backend: &str, dir: &Path, logs: &Path) -> R
             out.display().to_string(),
         ];
         rendiff::errln!("fuzz: reducing {id} ({scene}) of planted {backend}");
-        let t = rendiff(&rargs, root, logs)?;
+        let t = run_rendiff(&rargs, Some(root), logs)?;
         let (runs, candidates) = reduce_counts(&t.stdout);
         rows.push(json!({
             "finding": id,
@@ -379,7 +335,7 @@ fn configuration(
             k + 1,
             opts.common.runs.max(1)
         );
-        let t = rendiff(&args, &opts.common.root, logs)?;
+        let t = run_rendiff(&args, Some(&opts.common.root), logs)?;
         runs_s.push(t.seconds);
         code = t.code;
     }
@@ -429,20 +385,20 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
     });
 
     // Warm-up (untimed, two scenes): caches, and which backends there are.
-    let warm = dir.join("warm");
-    rendiff::errln!("fuzz: warm-up");
-    rendiff(
-        &fuzz_args(
+    // The two-scene run of the warm-up and of calibration's cost, into `out`.
+    let two_scenes = |out: &Path| {
+        fuzz_args(
             opts.seed,
             2,
             opts.only.as_deref(),
             opts.jobs,
             opts.common.timeout_s,
-            &warm,
-        ),
-        &opts.common.root,
-        &logs,
-    )?;
+            out,
+        )
+    };
+    let warm = dir.join("warm");
+    rendiff::errln!("fuzz: warm-up");
+    run_rendiff(&two_scenes(&warm), Some(&opts.common.root), &logs)?;
     let backends = backends_of(&read_json(&warm.join("run/manifest.json"))?);
     record["backends"] = json!(backends);
 
@@ -494,7 +450,7 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
         }
         args.extend(["-o".into(), out.display().to_string()]);
         rendiff::errln!("fuzz: start-up probe");
-        probe_wall.push(rendiff(&args, &opts.common.root, &logs)?.seconds);
+        probe_wall.push(run_rendiff(&args, Some(&opts.common.root), &logs)?.seconds);
         for (b, v) in render_times(&read_json(&out.join("manifest.json"))?) {
             if let Some(t) = v["median_s"].as_f64() {
                 probe_times.entry(b).or_default().push(t);
@@ -515,30 +471,11 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
 
     // Calibration's once-per-run cost: the same two scenes with and without it.
     let cal = dir.join("calibrated");
-    let mut args = fuzz_args(
-        opts.seed,
-        2,
-        opts.only.as_deref(),
-        opts.jobs,
-        opts.common.timeout_s,
-        &cal,
-    );
+    let mut args = two_scenes(&cal);
     args.retain(|a| a != "--no-calibration");
     rendiff::errln!("fuzz: calibration's cost");
-    let with = rendiff(&args, &opts.common.root, &logs)?.seconds;
-    let without = rendiff(
-        &fuzz_args(
-            opts.seed,
-            2,
-            opts.only.as_deref(),
-            opts.jobs,
-            opts.common.timeout_s,
-            &warm,
-        ),
-        &opts.common.root,
-        &logs,
-    )?
-    .seconds;
+    let with = run_rendiff(&args, Some(&opts.common.root), &logs)?.seconds;
+    let without = run_rendiff(&two_scenes(&warm), Some(&opts.common.root), &logs)?.seconds;
     record["calibration_s"] = json!(with - without);
 
     let mut planted_rows = Vec::new();
@@ -558,14 +495,7 @@ pub fn run(opts: &FuzzBenchOptions) -> Result<Output> {
             json!({"median": median(&per_finding), "runs": per_finding})
         },
     });
-    finish_environment(&mut record);
-    let svg = startup_plot(&record);
-    let html = html(&record, &svg);
-    Ok(Output {
-        record,
-        html,
-        svgs: vec![("startup".into(), svg)],
-    })
+    Ok(Output::with_plot(record, "startup", startup_plot, html))
 }
 
 /// Each backend's start-up (the probe's render) against its mean render

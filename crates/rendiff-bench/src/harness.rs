@@ -55,16 +55,10 @@ impl Harness {
         Ok(out)
     }
 
-    /// Renders a resolved scene with one backend into `out` (EXR).
-    pub fn render(
-        &self,
-        backend: &str,
-        resolved: &Path,
-        out: &Path,
-        spp: Option<u32>,
-        seed: Option<u64>,
-    ) -> Result<HarnessRun, String> {
-        self.render_with(backend, resolved, out, spp, seed, &[])
+    /// Renders a resolved scene with one backend into `out` (EXR), at the
+    /// backend's default samples, seed and settings.
+    pub fn render(&self, backend: &str, resolved: &Path, out: &Path) -> Result<HarnessRun, String> {
+        self.render_with(backend, resolved, out, None, None, &[])
     }
 
     /// Like [`Harness::render`], plus the backend's own quality settings as

@@ -68,6 +68,62 @@ pub fn rendiff_binary() -> Result<PathBuf> {
     }
 }
 
+/// One timed `rendiff` command: wall seconds, its exit status (1, a verdict
+/// failed, is measured all the same) and its standard output.
+#[derive(Debug)]
+pub struct RendiffRun {
+    /// Wall seconds.
+    pub seconds: f64,
+    /// Exit status: 0 or 1.
+    pub code: Option<i32>,
+    /// Standard output.
+    pub stdout: String,
+}
+
+/// Runs `rendiff ARGS` as `rendiff check` runs a renderer: in a process
+/// group of its own registered with the shutdown handler (an interrupted
+/// benchmark kills it, instead of leaving it writing into the removed
+/// scratch folder), dying with this process, its output captured under
+/// `logs`, with no limit of its own (each renderer has `--timeout`). With
+/// `venv_of`, that checkout's `.venv/bin` (where it exists) goes first on
+/// PATH: planted renderers run as `python3` scripts needing numpy. Exit 0
+/// or 1 (failures found) is a run, anything else an error.
+pub fn run_rendiff(args: &[String], venv_of: Option<&Path>, logs: &Path) -> Result<RendiffRun> {
+    let exe = rendiff_binary()?;
+    let mut cmd = std::process::Command::new(&exe);
+    cmd.args(args);
+    if let Some(venv) = venv_of.map(|root| root.join(".venv/bin")) {
+        if venv.is_dir() {
+            let path = std::env::var_os("PATH").unwrap_or_default();
+            let mut dirs = vec![venv];
+            dirs.extend(std::env::split_paths(&path));
+            cmd.env(
+                "PATH",
+                std::env::join_paths(dirs).context("cannot build PATH")?,
+            );
+        }
+    }
+    let o = rendiff::check::process::run_with_timeout(
+        cmd,
+        std::time::Duration::from_secs(30 * 24 * 3600),
+        logs,
+    )
+    .with_context(|| format!("cannot run {}", exe.display()))?;
+    if !matches!(o.code, Some(0) | Some(1)) {
+        anyhow::bail!(
+            "rendiff {} failed ({}): {}",
+            args.join(" "),
+            o.how(),
+            o.stderr_tail(4).lines().collect::<Vec<_>>().join(" | ")
+        );
+    }
+    Ok(RendiffRun {
+        seconds: o.seconds,
+        code: o.code,
+        stdout: o.stdout,
+    })
+}
+
 /// Options every subcommand shares.
 #[derive(Debug, Clone)]
 pub struct Common {
@@ -339,9 +395,29 @@ pub struct Output {
     pub svgs: Vec<(String, String)>,
 }
 
+impl Output {
+    /// A benchmark's output with one plot: `record` closed
+    /// ([`finish_environment`]), the plot `name` drawn by `plot` and the page
+    /// by `page` from the closed record (and the plot).
+    pub fn with_plot(
+        mut record: Value,
+        name: &str,
+        plot: impl FnOnce(&Value) -> String,
+        page: impl FnOnce(&Value, &str) -> String,
+    ) -> Output {
+        finish_environment(&mut record);
+        let svg = plot(&record);
+        let html = page(&record, &svg);
+        Output {
+            record,
+            html,
+            svgs: vec![(name.into(), svg)],
+        }
+    }
+}
+
 /// Writes `STEM.json`, `STEM.html`, each `(name, svg)` as a standalone
-/// file `STEM-NAME.svg`, the folder's refreshed index page and the style
-/// sheet the pages link, as one set
+/// file `STEM-NAME.svg` and the folder's refreshed index page, as one set
 /// ([`outputs::write_set`]: all or nothing, the benchmark's plots of an
 /// earlier run that this one does not write removed); returns the paths
 /// written, index aside.
@@ -372,10 +448,6 @@ pub fn write_outputs(
     files.push((
         "index.html".into(),
         page::index_html(dir, Some(stem)).into_bytes(),
-    ));
-    files.push((
-        rendiff::report::html::STYLE_SHEET.into(),
-        rendiff::report::html::CSS.trim_start().as_bytes().to_vec(),
     ));
     let mut written = outputs::write_set(dir, stem, &files)?;
     written.truncate(n);

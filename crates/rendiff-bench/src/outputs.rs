@@ -27,22 +27,31 @@ pub fn owned(stem: &str, name: &str) -> bool {
             .is_some_and(|n| !n.is_empty())
 }
 
-/// The plots of `stem` already in `dir` (names only).
-fn existing_plots(dir: &Path, stem: &str) -> Vec<String> {
+/// The names of the entries in `dir`, sorted; none where it cannot be read,
+/// and no name that is not UTF-8 (no benchmark writes one): what a folder of
+/// results holds, here and in the tests.
+pub fn file_names(dir: &Path) -> Vec<String> {
     let Ok(list) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
     let mut names: Vec<String> = list
         .flatten()
         .filter_map(|e| e.file_name().to_str().map(String::from))
-        .filter(|n| n.ends_with(".svg") && owned(stem, n))
         .collect();
     names.sort();
     names
 }
 
+/// The plots of `stem` already in `dir` (names only).
+fn existing_plots(dir: &Path, stem: &str) -> Vec<String> {
+    file_names(dir)
+        .into_iter()
+        .filter(|n| n.ends_with(".svg") && owned(stem, n))
+        .collect()
+}
+
 /// Refuses an output folder that is not a folder, and any path of the
-/// benchmark's set in it (its JSON, HTML, `index.html`, the style sheet and every existing
+/// benchmark's set in it (its JSON, HTML, `index.html` and every existing
 /// `STEM-*.svg`) that is not a regular file: checked before the benchmark
 /// runs, so that minutes of work are not lost to an unwritable output, and
 /// again with the final names before anything is written. Creates nothing.
@@ -59,7 +68,6 @@ pub fn check_targets(dir: &Path, stem: &str) -> Result<()> {
         format!("{stem}.json"),
         format!("{stem}.html"),
         "index.html".to_string(),
-        rendiff::report::html::STYLE_SHEET.to_string(),
     ];
     names.extend(existing_plots(dir, stem));
     for n in names {
@@ -201,15 +209,6 @@ mod tests {
             .collect()
     }
 
-    fn listing(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-
     #[test]
     fn own_names_only() {
         assert!(owned("knobs", "knobs.json"));
@@ -237,7 +236,7 @@ mod tests {
         let e = write_set(dir, "x", &set(&["x.json", "x.html", "x-a.svg"], "new")).unwrap_err();
         assert!(format!("{e:#}").contains("x.html"), "{e:#}");
         assert_eq!(std::fs::read_to_string(dir.join("x.json")).unwrap(), "old");
-        assert_eq!(listing(dir), ["x.html", "x.json"]);
+        assert_eq!(file_names(dir), ["x.html", "x.json"]);
 
         std::fs::remove_dir(dir.join("x.html")).unwrap();
         let fifo = dir.join("x-a.svg");
@@ -247,7 +246,7 @@ mod tests {
         let e = write_set(dir, "x", &set(&["x.json", "x.html", "x-a.svg"], "new")).unwrap_err();
         assert!(format!("{e:#}").contains("FIFO"), "{e:#}");
         assert_eq!(std::fs::read_to_string(dir.join("x.json")).unwrap(), "old");
-        assert_eq!(listing(dir), ["x-a.svg", "x.json"]);
+        assert_eq!(file_names(dir), ["x-a.svg", "x.json"]);
         // A FIFO among the plots is refused up front even when the new set
         // would not name it.
         assert!(check_targets(dir, "x").is_err());
@@ -264,7 +263,7 @@ mod tests {
         let written = write_set(&dir, "x", &set(&["x.json", "x-a.svg"], "two")).unwrap();
         assert_eq!(written, [dir.join("x.json"), dir.join("x-a.svg")]);
         assert_eq!(
-            listing(&dir),
+            file_names(&dir),
             [
                 "notes.txt",
                 "x-a.svg",

@@ -1,12 +1,12 @@
 //! The benchmark pages: one static HTML file per benchmark (tables, inline SVG
 //! plots, the environment it ran in) and an index of the folder. Built on the
-//! check report's page shell and style sheet so both look alike (the sheet
-//! is one file beside the pages, not a copy in each); every piece of text that can
+//! check report's page shell and styles so both look alike (inlined on one
+//! line, so a page needs no file beside it); every piece of text that can
 //! come from a scene, a renderer or a command line is escaped here, and only
 //! SVG made by [`super::plot`] (itself escaped) is inserted as markup.
 
 use anyhow::Result;
-use rendiff::report::html::{escape, page_with_sheet, url};
+use rendiff::report::html::{escape, page_without_script, url};
 use serde_json::Value;
 use std::fmt::Write;
 use std::path::Path;
@@ -157,10 +157,9 @@ impl Page {
         self.table(&["what", "value"], &rows)
     }
 
-    /// The finished HTML document; its styles are the report's sheet,
-    /// written once beside the pages ([`crate::write_outputs`]).
+    /// The finished HTML document, styled like the report.
     pub fn finish(&self) -> String {
-        page_with_sheet(&self.title, &self.body)
+        page_without_script(&self.title, &self.body)
     }
 }
 
@@ -245,10 +244,10 @@ mod tests {
     }
 
     #[test]
-    fn pages_link_the_one_style_sheet() {
+    fn pages_carry_the_report_styles_and_no_script() {
         let html = Page::new("t").finish();
-        assert!(html.contains("<link rel=\"stylesheet\" href=\"style.css\">"));
-        assert!(!html.contains("<style>") && !html.contains("<script>"));
+        assert!(html.contains("<style>body{font:14px"), "{html}");
+        assert!(!html.contains("<link") && !html.contains("<script>"));
     }
 
     #[test]

@@ -356,7 +356,7 @@ pub fn external(
     let out = h.scratch.join(format!("first-image-{backend}.exr"));
     let (mut wall, mut call) = (Vec::new(), Vec::new());
     for _ in 0..runs.max(1) {
-        match h.render(backend, resolved, &out, None, None) {
+        match h.render(backend, resolved, &out) {
             Ok(r) => {
                 wall.push(r.wall_s);
                 call.push(r.time_s.unwrap_or(f64::NAN));

@@ -181,14 +181,7 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
     });
     record["headline"] = headline(&record);
     record["goals"] = goals(&record);
-    super::finish_environment(&mut record);
-    let svg = bars(&record);
-    let html = page(&record, &svg);
-    Ok(super::Output {
-        record,
-        html,
-        svgs: vec![("times".into(), svg)],
-    })
+    Ok(super::Output::with_plot(record, "times", bars, page))
 }
 
 /// Trace throughput per thread count on one scene: the core's packet and
@@ -730,7 +723,7 @@ fn pyrender(
     let (mut pass, mut total, mut harness_s, mut wall) = (vec![], vec![], vec![], vec![]);
     let mut info = Value::Null;
     for k in 0..=runs.max(1) {
-        let r = match h.render("pyrender", &resolved, &out, None, None) {
+        let r = match h.render("pyrender", &resolved, &out) {
             Ok(r) => r,
             Err(why) => return json!({"skipped": why}),
         };
@@ -750,7 +743,7 @@ fn pyrender(
     let tiny = one_triangle(scene);
     let startup = h
         .export(&tiny, &dir.join("tiny"))
-        .and_then(|r| h.render("pyrender", &r, &dir.join("tiny.exr"), None, None))
+        .and_then(|r| h.render("pyrender", &r, &dir.join("tiny.exr")))
         .map(|r| json!({"subprocess_wall_s": r.wall_s, "harness_time_s": r.time_s}))
         .unwrap_or_else(|why| json!({"skipped": why}));
     let agreement = read_buffers(&out).ok().and_then(|b| b.prim).map(|p| {

@@ -107,6 +107,26 @@ struct LogAxis {
 }
 
 impl LogAxis {
+    /// The x axis over the decades `(e0, e1)`, across the plot area.
+    fn x((e0, e1): (i32, i32)) -> LogAxis {
+        LogAxis {
+            e0,
+            e1,
+            a: LEFT,
+            b: W - RIGHT,
+        }
+    }
+
+    /// The y axis over the decades `(e0, e1)`, from `bottom` up to the plot area's top.
+    fn y((e0, e1): (i32, i32), bottom: f64) -> LogAxis {
+        LogAxis {
+            e0,
+            e1,
+            a: bottom,
+            b: TOP,
+        }
+    }
+
     /// Maps a positive value into [a, b] (pixels; b may be below a for a y axis).
     fn at(&self, v: f64) -> f64 {
         let t = (v.log10() - f64::from(self.e0)) / f64::from(self.e1 - self.e0);
@@ -196,22 +216,10 @@ pub fn scatter(plot_title: &str, x_label: &str, y_label: &str, pts: &[ScatterPoi
         }
     }
     let color = |g: &str| backend_color(groups.iter().position(|x| x == g).unwrap_or(0));
-    let (xe0, xe1) = decades(pts.iter().map(|p| p.x));
-    let (ye0, ye1) = decades(pts.iter().map(|p| p.y));
     let zero_lane = H - BOTTOM - 10.0;
     let y_bottom = H - BOTTOM;
-    let xa = LogAxis {
-        e0: xe0,
-        e1: xe1,
-        a: LEFT,
-        b: W - RIGHT,
-    };
-    let ya = LogAxis {
-        e0: ye0,
-        e1: ye1,
-        a: zero_lane - 22.0,
-        b: TOP,
-    };
+    let xa = LogAxis::x(decades(pts.iter().map(|p| p.x)));
+    let ya = LogAxis::y(decades(pts.iter().map(|p| p.y)), zero_lane - 22.0);
     let py = |y: f64| if y > 0.0 { ya.at(y) } else { zero_lane };
     let mut s = open(W, H, plot_title);
     title(&mut s, plot_title);
@@ -324,25 +332,18 @@ pub fn lines(
     marks: &[(f64, String)],
 ) -> String {
     let pos = |v: &(f64, f64)| v.0 > 0.0 && v.1 > 0.0 && v.0.is_finite() && v.1.is_finite();
-    let (xe0, xe1) = decades(series.iter().flat_map(|s| s.points.iter().map(|p| p.0)));
-    let (ye0, ye1) = decades(
-        series
-            .iter()
-            .flat_map(|s| s.points.iter().filter(|p| pos(p)).map(|p| p.1)),
-    );
     let y_bottom = H - BOTTOM;
-    let xa = LogAxis {
-        e0: xe0,
-        e1: xe1,
-        a: LEFT,
-        b: W - RIGHT,
-    };
-    let ya = LogAxis {
-        e0: ye0,
-        e1: ye1,
-        a: y_bottom,
-        b: TOP,
-    };
+    let xa = LogAxis::x(decades(
+        series.iter().flat_map(|s| s.points.iter().map(|p| p.0)),
+    ));
+    let ya = LogAxis::y(
+        decades(
+            series
+                .iter()
+                .flat_map(|s| s.points.iter().filter(|p| pos(p)).map(|p| p.1)),
+        ),
+        y_bottom,
+    );
     let mut s = open(W, H, plot_title);
     title(&mut s, plot_title);
     axes(&mut s, &xa, &ya, x_label, y_label, TOP, y_bottom);

@@ -19,13 +19,10 @@
 
 use super::page::{self, Page};
 use super::plot;
-use super::{environment, finish_environment, median, Common, Output, Scratch};
-use anyhow::{bail, Context, Result};
-use rendiff::check::process::run_with_timeout;
+use super::{environment, median, run_rendiff, Common, Output, Scratch};
+use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Duration;
 
 /// What `bench scale` runs.
 #[derive(Debug, Clone)]
@@ -36,38 +33,6 @@ pub struct ScaleOptions {
     pub shards: Vec<u32>,
     /// Scene files or folders (default: the main job's, `scenes` and `scenes/corpus`).
     pub scenes: Vec<PathBuf>,
-}
-
-/// One timed `rendiff check` (or `merge`): wall seconds, and the exit status
-/// it gave (1 means a verdict failed, which is measured all the same).
-struct Timing {
-    seconds: f64,
-    code: Option<i32>,
-}
-
-/// Runs `rendiff ARGS` as `rendiff check` runs a renderer: in a process group
-/// of its own registered with the shutdown handler (an interrupted benchmark
-/// kills it, instead of leaving it writing into the removed scratch folder),
-/// dying with this process, its output captured under `logs`.
-fn rendiff(args: &[String], logs: &Path) -> Result<Timing> {
-    let exe = super::rendiff_binary()?;
-    let mut cmd = Command::new(&exe);
-    cmd.args(args);
-    // A whole check has no limit of its own; each renderer has --timeout.
-    let o = run_with_timeout(cmd, Duration::from_secs(30 * 24 * 3600), logs)
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    if !matches!(o.code, Some(0) | Some(1)) {
-        bail!(
-            "rendiff {} failed ({}): {}",
-            args.join(" "),
-            o.how(),
-            o.stderr_tail(4).lines().collect::<Vec<_>>().join(" | ")
-        );
-    }
-    Ok(Timing {
-        seconds: o.seconds,
-        code: o.code,
-    })
 }
 
 fn check_args(opts: &ScaleOptions, out: &Path, extra: &[&str]) -> Vec<String> {
@@ -84,7 +49,7 @@ fn timed(runs: usize, args: &[String], logs: &Path) -> Result<(f64, Vec<f64>, Op
     let mut times = Vec::new();
     let mut code = None;
     for _ in 0..runs.max(1) {
-        let t = rendiff(args, logs)?;
+        let t = run_rendiff(args, None, logs)?;
         times.push(t.seconds);
         code = t.code;
     }
@@ -147,7 +112,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
     let main_run = scratch.path().join("default");
     let logs = scratch.path().join("logs");
     rendiff::errln!("scale: warm-up (one default check run, untimed)");
-    rendiff(&check_args(opts, &main_run, &[]), &logs)?;
+    run_rendiff(&check_args(opts, &main_run, &[]), None, &logs)?;
 
     let mut configs = Vec::new();
     let plans: [(&str, &str, &[&str]); 3] = [
@@ -194,14 +159,14 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
             let costs = main_run.display().to_string();
             let args = check_args(opts, &out, &["--shard", &spec, "--shard-costs", &costs]);
             rendiff::errln!("scale: shard {spec}");
-            times.push(rendiff(&args, &logs)?.seconds);
+            times.push(run_rendiff(&args, None, &logs)?.seconds);
             runs_dirs.push(out);
         }
         let merged = scratch.path().join(format!("merged{n}"));
         let mut margs = vec!["merge".to_string()];
         margs.extend(runs_dirs.iter().map(|d| d.display().to_string()));
         margs.extend(["-o".into(), merged.display().to_string()]);
-        let merge_s = rendiff(&margs, &logs)?.seconds;
+        let merge_s = run_rendiff(&margs, None, &logs)?.seconds;
         let slowest = times.iter().cloned().fold(0.0, f64::max);
         shard_rows.push(json!({
             "shards": n,
@@ -213,14 +178,7 @@ pub fn run(opts: &ScaleOptions) -> Result<Output> {
         }));
     }
     record["shards"] = json!(shard_rows);
-    finish_environment(&mut record);
-    let svg = shards_plot(&record);
-    let html = html(&record, &svg);
-    Ok(Output {
-        record,
-        html,
-        svgs: vec![("shards".into(), svg)],
-    })
+    Ok(Output::with_plot(record, "shards", shards_plot, html))
 }
 
 /// Wall time against the number of shards: the slowest shard plus the merge

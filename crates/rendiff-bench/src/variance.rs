@@ -297,7 +297,7 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
                    "what": "(a - b)^2 against var_a + var_b for two independent references: 1 when the stated variance is right"})
         }
     };
-    let mut record = json!({
+    let record = json!({
         "benchmark": "variance",
         "environment": environment,
         "config": {
@@ -312,14 +312,12 @@ pub fn run(opts: &VarianceOptions) -> Result<super::Output> {
         "reference_check": reference_check,
         "verdicts": verdicts,
     });
-    super::finish_environment(&mut record);
-    let plot = error_plot(&parts);
-    let html = page(&record, &plot);
-    Ok(super::Output {
+    Ok(super::Output::with_plot(
         record,
-        html,
-        svgs: vec![("error-parts".into(), plot)],
-    })
+        "error-parts",
+        |_| error_plot(&parts),
+        page,
+    ))
 }
 
 fn error_plot(parts: &[(u32, Split)]) -> String {

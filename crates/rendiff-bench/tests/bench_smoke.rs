@@ -97,9 +97,15 @@ fn bench_with(what: &str, dir: &Path, extra: &[&str]) -> Value {
         );
     }
     assert!(dir.join("index.html").exists());
-    // The pages' one style sheet, the report's.
-    let sheet = std::fs::read_to_string(dir.join(rendiff::report::html::STYLE_SHEET)).unwrap();
-    assert_eq!(sheet, rendiff::report::html::CSS.trim_start());
+    // The report's styles, inlined: no sheet to copy beside the pages.
+    assert!(
+        html.contains("<style>body{"),
+        "{what}.html: no inline styles"
+    );
+    assert!(
+        !dir.join("style.css").exists(),
+        "a style sheet beside the pages"
+    );
     record
 }
 

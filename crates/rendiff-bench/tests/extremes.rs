@@ -2,7 +2,7 @@
 //! scene families pushed to large offsets and scales, tiny near planes,
 //! sub-pixel and sliver triangles, grazing views and geometry next to the eye.
 
-#[path = "../../../tests/common_scenes.rs"]
+#[path = "../../../tests/common/scenes.rs"]
 mod common_scenes;
 
 use common_scenes::*;

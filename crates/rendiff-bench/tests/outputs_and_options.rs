@@ -4,6 +4,7 @@
 //! options given explicitly are used as given, `--quick` or not; and the
 //! defaults' files are found in rendiff's checkout from any folder.
 
+use rendiff_bench::outputs::file_names;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -35,15 +36,6 @@ fn text(o: &Output) -> String {
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     )
-}
-
-fn listing(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
 }
 
 fn mkfifo(p: &Path) {
@@ -125,9 +117,9 @@ fn interrupted_scale_leaves_no_scratch_and_no_child() {
         !scratch.exists(),
         "{} left: {:?}",
         scratch.display(),
-        listing(&scratch)
+        file_names(&scratch)
     );
-    assert_eq!(listing(tmp.path()), Vec::<String>::new(), "{err}");
+    assert_eq!(file_names(tmp.path()), Vec::<String>::new(), "{err}");
     let left = processes_mentioning(&scratch.to_string_lossy());
     assert!(left.is_empty(), "still running: {left:?}");
 }
@@ -149,7 +141,7 @@ fn an_unwritable_output_writes_no_part_of_the_set() {
         err.lines().next().unwrap().contains("crossover.html"),
         "{err}"
     );
-    assert_eq!(listing(d), ["crossover.html", "crossover.json"]);
+    assert_eq!(file_names(d), ["crossover.html", "crossover.json"]);
     assert_eq!(
         std::fs::read_to_string(d.join("crossover.json")).unwrap(),
         "old"
@@ -160,7 +152,7 @@ fn an_unwritable_output_writes_no_part_of_the_set() {
     let o = run(&[&args[..], &[d.to_str().unwrap()]].concat());
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     assert!(String::from_utf8_lossy(&o.stderr).contains("crossover-times.svg: is a FIFO"));
-    assert_eq!(listing(d), ["crossover-times.svg", "crossover.json"]);
+    assert_eq!(file_names(d), ["crossover-times.svg", "crossover.json"]);
 
     // The output folder itself a file: refused, nothing created.
     let f = d.join("file");
@@ -192,7 +184,7 @@ fn a_rerun_removes_the_benchmarks_stale_plots_only() {
         dir,
     ]);
     assert!(o.status.success(), "{}", text(&o));
-    let files = listing(&d);
+    let files = file_names(&d);
     assert!(
         !files.contains(&"knobs-visibility-icosphere.svg".to_string()),
         "{files:?}"

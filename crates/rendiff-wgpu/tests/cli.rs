@@ -4,10 +4,18 @@
 //! derivation in the code.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
-fn bin() -> Command {
+/// Runs `rendiff-wgpu --scene DIR/SCENE --out DIR/o.exr` with `env` set.
+fn render(dir: &Path, scene: &str, env: &[(&str, &str)]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rendiff-wgpu"))
+        .envs(env.iter().copied())
+        .arg("--scene")
+        .arg(dir.join(scene))
+        .arg("--out")
+        .arg(dir.join("o.exr"))
+        .output()
+        .unwrap()
 }
 
 /// A tiny valid resolved scene (one triangle).
@@ -41,15 +49,14 @@ fn one_line(stderr: &[u8]) -> String {
 fn no_adapter_is_skipped_with_status_3() {
     let tmp = tempfile::tempdir().unwrap();
     write_scene(&tmp.path().join("s"), 36);
-    let out = bin()
-        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
-        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
-        .arg("--scene")
-        .arg(tmp.path().join("s"))
-        .arg("--out")
-        .arg(tmp.path().join("o.exr"))
-        .output()
-        .unwrap();
+    let out = render(
+        tmp.path(),
+        "s",
+        &[
+            ("VK_ICD_FILENAMES", "/nonexistent/icd.json"),
+            ("VK_DRIVER_FILES", "/nonexistent/icd.json"),
+        ],
+    );
     assert_eq!(out.status.code(), Some(3), "{out:?}");
     assert!(one_line(&out.stderr).starts_with("no Vulkan adapter: "));
     assert!(!tmp.path().join("o.exr").exists());
@@ -58,13 +65,7 @@ fn no_adapter_is_skipped_with_status_3() {
 #[test]
 fn missing_scene_names_the_file() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = bin()
-        .arg("--scene")
-        .arg(tmp.path().join("nowhere"))
-        .arg("--out")
-        .arg(tmp.path().join("o.exr"))
-        .output()
-        .unwrap();
+    let out = render(tmp.path(), "nowhere", &[]);
     assert_eq!(out.status.code(), Some(1));
     let line = one_line(&out.stderr);
     assert!(line.contains("nowhere/scene.json"), "{line}");
@@ -74,13 +75,7 @@ fn missing_scene_names_the_file() {
 fn truncated_triangles_name_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     write_scene(&tmp.path().join("s"), 20);
-    let out = bin()
-        .arg("--scene")
-        .arg(tmp.path().join("s"))
-        .arg("--out")
-        .arg(tmp.path().join("o.exr"))
-        .output()
-        .unwrap();
+    let out = render(tmp.path(), "s", &[]);
     assert_eq!(out.status.code(), Some(1));
     let line = one_line(&out.stderr);
     assert!(

@@ -101,6 +101,46 @@ fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
+/// The start of every family's scene: the buffers it is judged on and its
+/// camera (`near` and `far` left to their defaults where `None`), then the
+/// blank line before its objects.
+fn head(
+    eye: [f64; 3],
+    look_at: [f64; 3],
+    vfov: f64,
+    (width, height): (u32, u32),
+    near: Option<f64>,
+    far: Option<f64>,
+) -> String {
+    let mut s = format!(
+        "requires = [\"depth\", \"ids\"]\n[camera]\neye = {}\nlook_at = {}\nvfov = {vfov:?}\n\
+         width = {width}\nheight = {height}\n",
+        v3(eye),
+        v3(look_at)
+    );
+    for (key, v) in [("near", near), ("far", far)] {
+        if let Some(v) = v {
+            let _ = writeln!(s, "{key} = {v:?}");
+        }
+    }
+    s.push('\n');
+    s
+}
+
+/// Two triangles covering the rectangle from `(x0, y0)` to `(x1, y1)`,
+/// vertices placed by `p`, as the text of a `triangles` shape's list.
+fn quad(p: impl Fn(f64, f64) -> String, (x0, y0): (f64, f64), (x1, y1): (f64, f64)) -> String {
+    format!(
+        "{}, {}, {}, {}, {}, {}",
+        p(x0, y0),
+        p(x1, y0),
+        p(x1, y1),
+        p(x0, y0),
+        p(x1, y1),
+        p(x0, y1)
+    )
+}
+
 /// An icosphere over a ground grid, scaled by `s` and moved by `off`, the camera
 /// at a fixed relative position; `near`/`far` as ratios of the eye's distance.
 fn sphere_scene(s: f64, off: [f64; 3], near_ratio: f64, far_ratio: Option<f64>) -> String {
@@ -111,20 +151,8 @@ fn sphere_scene(s: f64, off: [f64; 3], near_ratio: f64, far_ratio: Option<f64>) 
         rel[2] * s + off[2],
     ];
     let dist = (rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2]).sqrt() * s;
-    let far = far_ratio
-        .map(|f| format!("far = {:?}\n", f * dist))
-        .unwrap_or_default();
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = {}
-look_at = {}
-vfov = 45.0
-width = 48
-height = 36
-near = {:?}
-{far}
-[[objects]]
+        r#"{}[[objects]]
 name = "sphere"
 shape = {{ kind = "icosphere", subdivisions = 2, radius = 1.0 }}
 transform = {{ scale = {}, translate = {} }}
@@ -136,9 +164,14 @@ shape = {{ kind = "grid", min = [-3.0, -3.0], max = [3.0, 3.0], nx = 6, ny = 6 }
 transform = {{ scale = {}, rotate = [-90.0, 0.0, 0.0], translate = {} }}
 allow_degenerate = true
 "#,
-        v3(eye),
-        v3(off),
-        near_ratio * dist,
+        head(
+            eye,
+            off,
+            45.0,
+            (48, 36),
+            Some(near_ratio * dist),
+            far_ratio.map(|f| f * dist)
+        ),
         v3([s; 3]),
         v3(off),
         v3([s; 3]),
@@ -161,17 +194,9 @@ fn sliver_scene(aspect: f64) -> String {
             y + h
         );
     }
+    let head = head([0.0, 0.0, 1.0], [0.0; 3], 90.0, (64, 64), Some(0.001), None);
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = [0.0, 0.0, 1.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 90.0
-width = 64
-height = 64
-near = 0.001
-
-[[objects]]
+        r#"{head}[[objects]]
 name = "slivers"
 shape = {{ kind = "triangles", vertices = [{verts}] }}
 allow_degenerate = true
@@ -185,17 +210,16 @@ transform = {{ translate = [0.0, 0.0, -1.0] }}
 }
 
 fn grazing_scene(tilt: f64) -> String {
+    let head = head(
+        [0.0, tilt, 5.0],
+        [0.0; 3],
+        40.0,
+        (48, 36),
+        Some(0.0001),
+        None,
+    );
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = [0.0, {tilt:?}, 5.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 40.0
-width = 48
-height = 36
-near = 0.0001
-
-[[objects]]
+        r#"{head}[[objects]]
 name = "floor"
 shape = {{ kind = "grid", min = [-4.0, -4.0], max = [4.0, 4.0], nx = 16, ny = 16 }}
 transform = {{ rotate = [-90.0, 0.0, 0.0] }}
@@ -253,16 +277,7 @@ pub fn pixel_centers_scene(w: u32, off: [f64; 3]) -> (String, Layout) {
         );
     }
     let toml = format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = {}
-look_at = {}
-vfov = 90.0
-width = {w}
-height = {w}
-near = 0.001
-
-[[objects]]
+        r#"{}[[objects]]
 name = "grid"
 shape = {{ kind = "grid", min = [{:?}, {:?}], max = [{:?}, {:?}], nx = {nx}, ny = {ny} }}
 transform = {{ translate = {} }}
@@ -272,8 +287,14 @@ name = "fan"
 shape = {{ kind = "triangles", vertices = [{fan}] }}
 transform = {{ translate = {} }}
 "#,
-        v3(add(off, [0.0, 0.0, 1.0])),
-        v3(off),
+        head(
+            add(off, [0.0, 0.0, 1.0]),
+            off,
+            90.0,
+            (w, w),
+            Some(0.001),
+            None
+        ),
         px(0),
         py(gy1),
         px(gx1),
@@ -302,29 +323,9 @@ transform = {{ translate = {} }}
 /// depth goes to the lower id (docs/DESIGN.md), so the truth is the lowest covering id.
 pub fn coplanar_scene(off: [f64; 3]) -> String {
     let p = |x: f64, y: f64| v3(add(off, [x, y, x / 4.0 + y / 8.0]));
-    let quad = |x0: f64, y0: f64, x1: f64, y1: f64| {
-        format!(
-            "{}, {}, {}, {}, {}, {}",
-            p(x0, y0),
-            p(x1, y0),
-            p(x1, y1),
-            p(x0, y0),
-            p(x1, y1),
-            p(x0, y1)
-        )
-    };
     let tri = format!("{}, {}, {}", p(-1.25, -1.0), p(2.0, -0.5), p(-0.5, 1.25));
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = {}
-look_at = {}
-vfov = 60.0
-width = 64
-height = 48
-near = 0.001
-
-[[objects]]
+        r#"{}[[objects]]
 name = "base"
 shape = {{ kind = "triangles", vertices = [{}] }}
 
@@ -340,10 +341,16 @@ shape = {{ kind = "triangles", vertices = [{tri}] }}
 name = "twin_b"
 shape = {{ kind = "triangles", vertices = [{tri}] }}
 "#,
-        v3(add(off, [0.5, 0.75, 4.0])),
-        v3(off),
-        quad(-1.5, -1.5, 1.5, 1.5),
-        quad(-0.5, -1.25, 1.75, 0.75),
+        head(
+            add(off, [0.5, 0.75, 4.0]),
+            off,
+            60.0,
+            (64, 48),
+            Some(0.001),
+            None
+        ),
+        quad(p, (-1.5, -1.5), (1.5, 1.5)),
+        quad(p, (-0.5, -1.25), (1.75, 0.75)),
     )
 }
 
@@ -352,29 +359,11 @@ shape = {{ kind = "triangles", vertices = [{tri}] }}
 /// tie rule can never hide a lost depth test: the nearer surface must win.
 pub fn zfight_scene(rel: f64) -> String {
     let sep = 10.0 * rel;
-    let quad = |h: f64, dz: f64| {
-        let p = |x: f64, y: f64| v3([x, y, x / 4.0 + y / 8.0 + dz]);
-        format!(
-            "{}, {}, {}, {}, {}, {}",
-            p(-h, -h),
-            p(h, -h),
-            p(h, h),
-            p(-h, -h),
-            p(h, h),
-            p(-h, h)
-        )
-    };
+    let tilted =
+        |h: f64, dz: f64| quad(|x, y| v3([x, y, x / 4.0 + y / 8.0 + dz]), (-h, -h), (h, h));
+    let head = head([1.0, 2.0, 10.0], [0.0; 3], 40.0, (64, 48), Some(0.01), None);
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = [1.0, 2.0, 10.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 40.0
-width = 64
-height = 48
-near = 0.01
-
-[[objects]]
+        r#"{head}[[objects]]
 name = "far"
 shape = {{ kind = "triangles", vertices = [{}] }}
 
@@ -383,8 +372,8 @@ name = "near"
 shape = {{ kind = "triangles", vertices = [{}] }}
 allow_degenerate = true
 "#,
-        quad(4.0, 0.0),
-        quad(2.5, sep),
+        tilted(4.0, 0.0),
+        tilted(2.5, sep),
     )
 }
 
@@ -395,16 +384,7 @@ pub fn near_eye_scene(d: f64) -> String {
     let eye = [1.0, 0.5, 1.0];
     let p = |x: f64, y: f64, z: f64| v3(add(eye, [x * d, y * d, -z * d]));
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = {}
-look_at = {}
-vfov = 60.0
-width = 48
-height = 36
-near = {:?}
-
-[[objects]]
+        r#"{}[[objects]]
 name = "near"
 shape = {{ kind = "triangles", vertices = [{}, {}, {}] }}
 allow_degenerate = true
@@ -414,9 +394,14 @@ name = "backdrop"
 shape = {{ kind = "quad", size = [4.0, 4.0] }}
 transform = {{ translate = {} }}
 "#,
-        v3(eye),
-        v3(add(eye, [0.0, 0.0, -1.0])),
-        d / 2.0,
+        head(
+            eye,
+            add(eye, [0.0, 0.0, -1.0]),
+            60.0,
+            (48, 36),
+            Some(d / 2.0),
+            None
+        ),
         p(-0.4, -0.35, 1.0),
         p(0.45, -0.3, 1.2),
         p(0.0, 0.4, 0.9),
@@ -427,16 +412,9 @@ transform = {{ translate = {} }}
 /// An `n` x `n` grid (2n^2 triangles, most smaller than a pixel) tilted away
 /// from the camera: the memory family.
 pub fn count_scene(n: u32) -> String {
+    let head = head([0.0, 1.5, 3.5], [0.0; 3], 50.0, (512, 384), None, None);
     format!(
-        r#"requires = ["depth", "ids"]
-[camera]
-eye = [0.0, 1.5, 3.5]
-look_at = [0.0, 0.0, 0.0]
-vfov = 50.0
-width = 512
-height = 384
-
-[[objects]]
+        r#"{head}[[objects]]
 name = "grid"
 shape = {{ kind = "grid", min = [-2.0, -2.0], max = [2.0, 2.0], nx = {n}, ny = {n} }}
 transform = {{ rotate = [-60.0, 0.0, 0.0] }}

@@ -228,14 +228,7 @@ pub fn run(opts: &StabilityOptions) -> Result<super::Output> {
     record["zfight"] = zfight_table(&fams, &judged);
     record["memory"] = memory_table;
     record["raster_equals_trace"] = raster_equals_trace(&fams, &runs);
-    super::finish_environment(&mut record);
-    let svg = chart(&record);
-    let html = page(&record, &svg);
-    Ok(super::Output {
-        record,
-        html,
-        svgs: vec![("matrix".into(), svg)],
-    })
+    Ok(super::Output::with_plot(record, "matrix", chart, page))
 }
 
 fn rule_text(j: &Judge) -> &'static str {

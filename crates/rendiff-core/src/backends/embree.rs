@@ -853,34 +853,37 @@ impl BuiltScene {
         }
     }
 
-    /// Key of one ray traced on a packet or stream path, from Embree's hit.
-    /// A hit in front of `near` after rounding (rare) is redone on the
-    /// single-ray path, which re-traces from beyond it; returns the key and
-    /// the extra rays traced.
+    /// Writes the key of pixel `(x, y0 + dy)`, traced on a packet or stream
+    /// path, into `rows` (the strip starting at row `y0`), from Embree's
+    /// hit `(geom_id, prim_id, tfar)`. A hit in front of `near` after
+    /// rounding (rare) is redone on the single-ray path, which re-traces
+    /// from beyond it; returns the extra rays traced.
     #[allow(clippy::too_many_arguments)]
-    fn resolve(
+    fn store_hit(
         &self,
         gen: &RayGen,
         ctx: &mut ffi::IntersectContext,
-        r: &EmbreeRay,
-        geom_id: u32,
-        prim_id: u32,
-        tfar: f32,
+        (geom_id, prim_id, tfar): (u32, u32, f32),
         x: u32,
-        y: u32,
-    ) -> (u64, u64) {
-        if geom_id == ffi::INVALID_GEOMETRY_ID {
-            return (NO_HIT, 0);
-        }
-        let z = gen.depth(r, tfar);
-        match gen.depth_in_range(z) {
-            std::cmp::Ordering::Equal => (hit_key(z, prim_id), 0),
-            std::cmp::Ordering::Greater => (NO_HIT, 0),
-            std::cmp::Ordering::Less => {
-                let (k, e) = self.trace1(gen, ctx, x, y);
-                (k, e + 1)
+        y0: u32,
+        dy: u32,
+        rows: &mut [u64],
+    ) -> u64 {
+        let (key, extra) = if geom_id == ffi::INVALID_GEOMETRY_ID {
+            (NO_HIT, 0)
+        } else {
+            let z = gen.depth(&gen.ray(x, y0 + dy), tfar);
+            match gen.depth_in_range(z) {
+                std::cmp::Ordering::Equal => (hit_key(z, prim_id), 0),
+                std::cmp::Ordering::Greater => (NO_HIT, 0),
+                std::cmp::Ordering::Less => {
+                    let (k, e) = self.trace1(gen, ctx, x, y0 + dy);
+                    (k, e + 1)
+                }
             }
-        }
+        };
+        rows[(dy * gen.cam.width + x) as usize] = key;
+        extra
     }
 
     /// Fills `packet` with the tile of `tile_w` x `N / tile_w` pixels whose
@@ -933,26 +936,18 @@ impl BuiltScene {
         y0: u32,
         rows: &mut [u64],
     ) -> u64 {
-        let w = gen.cam.width;
         let mut extra = 0;
         for lane in 0..N {
             if valid.0[lane] == 0 {
                 continue;
             }
             let (x, dy) = (x0 + lane as u32 % tile_w, lane as u32 / tile_w);
-            let r = gen.ray(x, y0 + dy);
-            let (key, e) = self.resolve(
-                gen,
-                ctx,
-                &r,
+            let hit = (
                 packet.hit.geom_id[lane],
                 packet.hit.prim_id[lane],
                 packet.ray.tfar[lane],
-                x,
-                y0 + dy,
             );
-            rows[(dy * w + x) as usize] = key;
-            extra += e;
+            extra += self.store_hit(gen, ctx, hit, x, y0, dy, rows);
         }
         extra
     }
@@ -1030,18 +1025,8 @@ impl BuiltScene {
                 )
             };
             for (rh, &(x, dy)) in stream.iter().zip(&pixels) {
-                let (key, e) = self.resolve(
-                    gen,
-                    ctx,
-                    &gen.ray(x, y0 + dy),
-                    rh.hit.geom_id,
-                    rh.hit.prim_id,
-                    rh.ray.tfar,
-                    x,
-                    y0 + dy,
-                );
-                rows[(dy * w + x) as usize] = key;
-                extra += e;
+                let hit = (rh.hit.geom_id, rh.hit.prim_id, rh.ray.tfar);
+                extra += self.store_hit(gen, ctx, hit, x, y0, dy, rows);
             }
         }
         extra

@@ -995,36 +995,21 @@ mod tests {
             let bits = |f: &[f32]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             let want_away: Vec<bool> = tris.iter().map(|t| faces_away(cam, t)).collect();
             let n = tris.len();
-            fn out<'a>(
-                boxes: &'a mut [Option<PixelRect>],
-                faces: &'a mut [f32],
-                away: &'a mut [bool],
-            ) -> BoundsOut<'a> {
-                BoundsOut { boxes, faces, away }
-            }
-            let (mut got, mut faces, mut away) = (vec![None; n], vec![f32::NAN; n], vec![true; n]);
-            bounds_chunk(
-                Portable,
-                cam,
-                &tris,
-                &deg,
-                Some(m),
-                out(&mut got, &mut faces, &mut away),
-            );
-            assert_eq!(got, want);
-            assert_eq!(bits(&faces), want_faces);
-            assert_eq!(away, want_away);
-            let (mut got, mut faces, mut away) = (vec![None; n], vec![f32::NAN; n], vec![true; n]);
-            bounds_into(
-                cam,
-                &tris,
-                &deg,
-                Some(m),
-                out(&mut got, &mut faces, &mut away),
-            );
-            assert_eq!(got, want);
-            assert_eq!(bits(&faces), want_faces);
-            assert_eq!(away, want_away);
+            // Each entry point fills fresh outputs with the scalar answers.
+            let check = |fill: &dyn Fn(BoundsOut<'_>)| {
+                let (mut got, mut faces, mut away) =
+                    (vec![None; n], vec![f32::NAN; n], vec![true; n]);
+                fill(BoundsOut {
+                    boxes: &mut got,
+                    faces: &mut faces,
+                    away: &mut away,
+                });
+                assert_eq!(got, want);
+                assert_eq!(bits(&faces), want_faces);
+                assert_eq!(away, want_away);
+            };
+            check(&|o| bounds_chunk(Portable, cam, &tris, &deg, Some(m), o));
+            check(&|o| bounds_into(cam, &tris, &deg, Some(m), o));
             assert!(want.iter().any(Option::is_some));
         }
     }

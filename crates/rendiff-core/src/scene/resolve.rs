@@ -415,24 +415,18 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("m.obj"), obj).unwrap();
         let scene = dir.join("s.toml");
-        let text = r#"
-requires = ["depth", "ids"]
-[camera]
-eye = [0.0, 0.0, 5.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 45.0
-width = 8
-height = 6
-[[objects]]
+        let text = format!(
+            r#"{HEADER}[[objects]]
 name = "gen"
-shape = { kind = "three_triangles" }
+shape = {{ kind = "three_triangles" }}
 [[objects]]
 name = "file"
 mesh = "m.obj"
 [[objects]]
 name = "after"
-shape = { kind = "three_triangles" }
-"#;
+shape = {{ kind = "three_triangles" }}
+"#
+        );
         std::fs::write(&scene, text).unwrap();
         ResolvedScene::resolve(&super::super::Scene::load(&scene).unwrap()).unwrap()
     }

@@ -1,4 +1,4 @@
-//! Helpers shared by the integration tests (included with `mod`).
+//! Helpers shared by the integration tests (`tests/common/`).
 
 #![allow(dead_code)]
 

@@ -1,4 +1,4 @@
-//! The gate tests' synthetic baselines (included with `mod`): verdicts
+//! The gate tests' synthetic baselines (`tests/common/`): verdicts
 //! blessed the way `bless` blesses them, without a run folder.
 
 #![allow(dead_code)]

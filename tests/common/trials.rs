@@ -1,5 +1,5 @@
 //! Verdicts as tests for the `harness = false` suites that run a whole
-//! check (included with `mod`).
+//! check (`tests/common/`).
 
 #![allow(dead_code)]
 

@@ -1,4 +1,4 @@
-//! Helpers for the tests that drive the `rendiff` binary (included with `mod`).
+//! Helpers for the tests that drive the `rendiff` binary (`tests/common/`).
 
 #![allow(dead_code)]
 
