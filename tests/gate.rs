@@ -8,7 +8,6 @@ use serde_json::{json, Value};
 use std::path::Path;
 
 mod common;
-mod common_runs;
 use common::cli::{bless_command, gate_command, small_check, succeeds};
 use common::gate::{baseline_of, verdicts as results};
 
@@ -528,8 +527,8 @@ fn json_run(run: &Path, scenes: &[&str], extra: Vec<Value>) {
     let tie = json!({"tie_mismatches": 1, "explanations": [{"class": "tie", "ref_prim": 16,
         "test_prim": 20, "pixels": 1, "example": [3, 4],
         "why": "prims 16 and 20 are identical triangles: tie"}]});
-    common_runs::json_run(run, scenes, &["trace"], &["id", "Z", "N"], tie);
-    common_runs::edit_results(run, |r| r["results"].as_array_mut().unwrap().extend(extra));
+    common::runs::json_run(run, scenes, &["trace"], &["id", "Z", "N"], tie);
+    common::runs::edit_results(run, |r| r["results"].as_array_mut().unwrap().extend(extra));
 }
 
 fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, String) {

@@ -10,7 +10,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 mod common;
-mod common_runs;
 use common::cli::{need_venv, root};
 
 /// The rendiff binary, run from `dir`; the example renderer runs with
@@ -146,7 +145,7 @@ fn a_renderer_that_rewrites_its_scene_is_caught_and_changes_no_other_verdict() {
 
 fn json_run(run: &Path, scenes: &[&str], backends: &[&str]) {
     let pixels = json!({"pixels": 3072, "compared_pixels": 3072});
-    common_runs::json_run(run, scenes, backends, &["id", "Z"], pixels);
+    common::runs::json_run(run, scenes, backends, &["id", "Z"], pixels);
 }
 
 fn bless(run: &Path, baseline: &Path, flags: &[&str]) -> Output {

@@ -7,7 +7,7 @@ use super::*;
 use crate::check::manifest::{Manifest, ResultEntry, Results, RESULTS_FORMAT};
 use serde_json::json;
 
-#[path = "../../tests/common_runs.rs"]
+#[path = "../../tests/common/runs.rs"]
 mod common_runs;
 use common_runs::edit_results;
 
