@@ -89,6 +89,10 @@ pub struct TraceBvh {
     /// The same tree as eye-relative f32 boxes, for pixel rays ([`primary`]),
     /// laid out for traversal ([`nodes`]).
     nodes32: Nodes32,
+    /// Where each of `nodes32`'s slots comes from (camera-independent).
+    layout: nodes::Layout,
+    /// `refit` in `layout`'s slot order, so a new camera reads it in order.
+    refit_slots: Vec<[Vec3; 2]>,
     /// Per-prim edge data in `prims` order, for pixel rays.
     leaves: Vec<LeafTri>,
     /// Per-prim pixel rectangles in `prims` order, for packets ([`rect`]).
@@ -116,6 +120,8 @@ impl TraceBvh {
             nodes: Vec::new(),
             prims: Vec::new(),
             nodes32: Nodes32::empty(),
+            layout: nodes::Layout::default(),
+            refit_slots: Vec::new(),
             leaves: Vec::new(),
             rects: Vec::new(),
             planes: frustum::PacketPlanes::empty(),
@@ -224,11 +230,20 @@ impl TraceBvh {
             })
             .collect();
         let refit: Vec<[Vec3; 2]> = lo.into_iter().zip(hi).map(|(l, h)| [l, h]).collect();
+        let shape: Vec<(u32, u32)> = nodes.iter().map(|n| (n.first, n.count)).collect();
+        let layout = nodes::Layout::new(&shape);
+        let refit_slots = layout
+            .slots()
+            .iter()
+            .map(|s| refit[s.src as usize])
+            .collect();
         let tree_seconds = start.elapsed().as_secs_f64();
         let mut out = TraceBvh {
             nodes,
             prims,
             nodes32: Nodes32::empty(),
+            layout,
+            refit_slots,
             leaves: Vec::new(),
             rects: Vec::new(),
             planes: frustum::PacketPlanes::empty(),
@@ -249,7 +264,8 @@ impl TraceBvh {
     /// re-aimed tree is bit for bit the render through a fresh build. Returns
     /// the seconds it took (also [`Self::camera_seconds`]): the per-camera
     /// cost `bench peers` counts in its per-frame table. `scene` must hold
-    /// the triangles the tree was built from (only the camera may differ).
+    /// the triangles the tree was built from (only the camera may differ):
+    /// the leaves keep their own copies, which a new camera reads in order.
     pub fn aim(&mut self, scene: &ResolvedScene) -> f64 {
         self.aim_until(scene, None)
             .expect("a set-up without a deadline finishes");
@@ -265,36 +281,60 @@ impl TraceBvh {
             return Some(());
         }
         let cam = &scene.camera;
+        let eye = cam.eye;
         debug_assert_eq!(self.refit.len(), self.nodes.len());
-        for (n, [lo, hi]) in self.nodes.iter_mut().zip(&self.refit) {
-            n.bounds = grow_box(cam.eye, *lo, *hi);
-        }
-        let nodes32: Vec<Node32> = self
-            .nodes
-            .iter()
-            .map(|n| Node32::new(cam.eye, &n.bounds, n.first, n.count))
-            .collect();
-        self.nodes32 = Nodes32::new(&nodes32);
+        // Both node passes in parallel, each node's boxes written in place.
+        self.nodes
+            .par_iter_mut()
+            .zip(&self.refit)
+            .with_min_len(1024)
+            .for_each(|(n, [lo, hi])| n.bounds = grow_box(eye, *lo, *hi));
+        // Each slot's box grown again from its refit box in slot order: the
+        // same bits as its node's `bounds` above, read without a gather.
+        let boxes = &self.refit_slots;
+        self.nodes32.fill(&self.layout, |k, s| {
+            let [lo, hi] = boxes[k];
+            Node32::new(eye, &grow_box(eye, lo, hi), s.first, s.count)
+        });
         if crate::deadline::past(deadline) {
             return None;
         }
         let slack = rect::RectSlack::new(cam);
-        // Leaves and rectangles on huge pages where the OS has them, as
-        // the tree's nodes (`crate::huge_pages`).
-        let mut leaves = crate::huge_pages::with_capacity(self.prims.len());
-        let mut rects = crate::huge_pages::with_capacity(self.prims.len());
-        self.prims
-            .par_iter()
-            .map(|&p| {
-                let t = &scene.triangles[p as usize];
-                (
-                    LeafTri::new(cam.eye, t, p),
-                    rect::PixelRect::new(cam, &slack, t),
-                )
-            })
-            .unzip_into_vecs(&mut leaves, &mut rects);
-        self.leaves = leaves;
-        self.rects = rects;
+        if self.leaves.len() == self.prims.len() {
+            debug_assert!(self
+                .leaves
+                .iter()
+                .step_by(997)
+                .all(|l| scene.triangles[l.prim as usize] == l.tri));
+            // A new camera on this tree: each leaf keeps its triangle, so
+            // the pass reads the leaves in order and rewrites them in place.
+            self.leaves
+                .par_iter_mut()
+                .zip(&mut self.rects)
+                .with_min_len(1024)
+                .for_each(|(leaf, r)| {
+                    leaf.aim(eye);
+                    *r = rect::PixelRect::new(cam, &slack, &leaf.tri);
+                });
+        } else {
+            // The first camera: the leaves are made from the scene's
+            // triangles (in BVH order), on huge pages where the OS has them,
+            // as the tree's nodes (`crate::huge_pages`).
+            let mut leaves = crate::huge_pages::with_capacity(self.prims.len());
+            let mut rects = crate::huge_pages::with_capacity(self.prims.len());
+            self.prims
+                .par_iter()
+                .map(|&p| {
+                    let t = &scene.triangles[p as usize];
+                    (
+                        LeafTri::new(eye, t, p),
+                        rect::PixelRect::new(cam, &slack, t),
+                    )
+                })
+                .unzip_into_vecs(&mut leaves, &mut rects);
+            self.leaves = leaves;
+            self.rects = rects;
+        }
         self.planes = frustum::PacketPlanes::new(cam);
         self.camera_seconds = start.elapsed().as_secs_f64();
         Some(())
@@ -849,6 +889,15 @@ mod tests {
                 assert_eq!(a.keys, f.keys, "{quality:?} {kernel:?}");
                 assert_eq!(a.counters, f.counters, "{quality:?} {kernel:?}");
             }
+            // Back at the first camera: the leaves and nodes rewritten in
+            // place a second time are a fresh build's again.
+            aimed.aim(&first);
+            let fresh = TraceBvh::build(&first, quality);
+            let opts = TraceOptions::default();
+            let a = trace_keys(&first, &aimed, opts, &|_| {});
+            let f = trace_keys(&first, &fresh, opts, &|_| {});
+            assert_eq!(a.keys, f.keys, "{quality:?} back");
+            assert_eq!(a.counters, f.counters, "{quality:?} back");
         }
     }
 

@@ -36,6 +36,78 @@ pub(crate) struct Nodes32 {
     pairs: Vec<NodePair>,
 }
 
+/// Where each slot of [`Nodes32`] comes from: the layout depends on the
+/// tree's shape alone, not on the camera, so it is made once per tree and
+/// every camera's boxes are written into it in place ([`Nodes32::fill`]).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Layout {
+    /// Per slot: the index of its node in the input tree, and the slot's own
+    /// `first` and `count` (children's slot, or a possibly merged leaf's
+    /// prims). Slot 0 is unused and repeats the input's root as given.
+    slots: Vec<Slot>,
+}
+
+/// One slot of a [`Layout`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Slot {
+    /// Index of the node in the input tree whose box the slot takes.
+    pub src: u32,
+    /// The slot's [`Node32::first`].
+    pub first: u32,
+    /// The slot's [`Node32::count`].
+    pub count: u32,
+}
+
+impl Layout {
+    /// Lays a tree out depth first, siblings paired: `shape[i]` is node
+    /// `i`'s `(first, count)` (children of inner node `i` at `first` and the
+    /// next index, root at 0).
+    pub fn new(shape: &[(u32, u32)]) -> Layout {
+        let Some(&(root_first, root_count)) = shape.first() else {
+            return Layout::default();
+        };
+        let unset = Slot {
+            src: 0,
+            first: root_first,
+            count: root_count,
+        };
+        let mut slots = vec![unset; (shape.len().div_ceil(2) + 1) * 2];
+        let mut next = 2u32;
+        // (old index, new index)
+        let mut stack = vec![(0u32, Nodes32::ROOT)];
+        let span = prim_spans(shape);
+        while let Some((old, new)) = stack.pop() {
+            let (mut first, mut count) = shape[old as usize];
+            // A small subtree whose prims are adjacent becomes one leaf under
+            // its root's box (which contains every box below it).
+            if let Some((f, c)) = span[old as usize] {
+                if c <= MERGE_MAX {
+                    (first, count) = (f, c);
+                }
+            }
+            if count == 0 {
+                let c = first;
+                first = next;
+                stack.push((c + 1, next + 1));
+                stack.push((c, next));
+                next += 2;
+            }
+            slots[new as usize] = Slot {
+                src: old,
+                first,
+                count,
+            };
+        }
+        slots.truncate(next as usize);
+        Layout { slots }
+    }
+
+    /// The slots, in [`Nodes32`]'s order (slot 0 unused).
+    pub fn slots(&self) -> &[Slot] {
+        &self.slots
+    }
+}
+
 impl Nodes32 {
     /// Index of the root node.
     pub const ROOT: u32 = 1;
@@ -47,39 +119,52 @@ impl Nodes32 {
 
     /// Lays `nodes` (children of inner node `i` at `nodes[i].first` and the
     /// next index, root at 0) out depth first, siblings paired.
+    #[cfg(test)]
     pub fn new(nodes: &[Node32]) -> Nodes32 {
-        if nodes.is_empty() {
-            return Nodes32::empty();
+        let shape: Vec<(u32, u32)> = nodes.iter().map(|n| (n.first, n.count)).collect();
+        let mut out = Nodes32::empty();
+        out.fill(&Layout::new(&shape), |_, s| {
+            let mut n = nodes[s.src as usize];
+            (n.first, n.count) = (s.first, s.count);
+            n
+        });
+        out
+    }
+
+    /// Writes every slot of `layout` as `node(k, slot)` (slot `k`: the
+    /// input tree's node `slot.src`'s box with the slot's `first` and
+    /// `count`), in parallel on rayon's current pool, reusing the pairs'
+    /// memory when the tree already has this layout's size (a new camera on
+    /// the same tree).
+    pub fn fill(&mut self, layout: &Layout, node: impl Fn(usize, &Slot) -> Node32 + Sync) {
+        use rayon::prelude::*;
+        let n = layout.slots.len() / 2;
+        if self.pairs.len() != n {
+            // On huge pages where the OS has them (`crate::huge_pages`):
+            // pops land all over the tree. Every pair is written below.
+            let filler = NodePair(
+                [Node32::new(
+                    glam::DVec3::ZERO,
+                    &crate::visibility::RayBox {
+                        lo: glam::DVec3::ZERO,
+                        hi: glam::DVec3::ZERO,
+                    },
+                    0,
+                    0,
+                ); 2],
+            );
+            self.pairs = crate::huge_pages::with_capacity(n);
+            self.pairs.resize(n, filler);
         }
-        // On huge pages where the OS has them (`crate::huge_pages`): pops
-        // land all over the tree.
-        let n = nodes.len().div_ceil(2) + 1;
-        let mut pairs = crate::huge_pages::with_capacity(n);
-        pairs.resize(n, NodePair([nodes[0]; 2]));
-        let mut next = 2u32;
-        // (old index, new index)
-        let mut stack = vec![(0u32, Nodes32::ROOT)];
-        let span = prim_spans(nodes);
-        while let Some((old, new)) = stack.pop() {
-            let mut n = nodes[old as usize];
-            // A small subtree whose prims are adjacent becomes one leaf under
-            // its root's box (which contains every box below it).
-            if let Some((first, count)) = span[old as usize] {
-                if count <= MERGE_MAX {
-                    (n.first, n.count) = (first, count);
-                }
-            }
-            if n.count == 0 {
-                let c = n.first;
-                n.first = next;
-                stack.push((c + 1, next + 1));
-                stack.push((c, next));
-                next += 2;
-            }
-            pairs[new as usize / 2].0[new as usize % 2] = n;
-        }
-        pairs.truncate(next as usize / 2);
-        Nodes32 { pairs }
+        self.pairs
+            .par_iter_mut()
+            .zip(layout.slots.par_chunks_exact(2))
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(i, (pair, slots))| {
+                pair.0[0] = node(2 * i, &slots[0]);
+                pair.0[1] = node(2 * i + 1, &slots[1]);
+            });
     }
 
     /// True when the tree has no nodes.
@@ -105,24 +190,24 @@ impl Nodes32 {
 
 /// Per node, the prims under it as one range `(first, count)`, when they
 /// are adjacent in prim order.
-fn prim_spans(nodes: &[Node32]) -> Vec<Option<(u32, u32)>> {
-    let mut order = Vec::with_capacity(nodes.len());
+fn prim_spans(shape: &[(u32, u32)]) -> Vec<Option<(u32, u32)>> {
+    let mut order = Vec::with_capacity(shape.len());
     let mut stack = vec![0u32];
     while let Some(i) = stack.pop() {
         order.push(i);
-        let n = &nodes[i as usize];
-        if n.count == 0 {
-            stack.push(n.first);
-            stack.push(n.first + 1);
+        let (first, count) = shape[i as usize];
+        if count == 0 {
+            stack.push(first);
+            stack.push(first + 1);
         }
     }
-    let mut span = vec![None; nodes.len()];
+    let mut span = vec![None; shape.len()];
     for &i in order.iter().rev() {
-        let n = &nodes[i as usize];
-        span[i as usize] = if n.count > 0 {
-            Some((n.first, n.count))
+        let (first, count) = shape[i as usize];
+        span[i as usize] = if count > 0 {
+            Some((first, count))
         } else {
-            match (span[n.first as usize], span[n.first as usize + 1]) {
+            match (span[first as usize], span[first as usize + 1]) {
                 (Some((fa, ca)), Some((fb, cb))) if fb == fa + ca => Some((fa, ca + cb)),
                 (Some((fa, ca)), Some((fb, cb))) if fa == fb + cb => Some((fb, ca + cb)),
                 _ => None,

@@ -205,25 +205,40 @@ pub(crate) struct LeafTri {
 impl LeafTri {
     /// Sets up a triangle's edges relative to the eye.
     pub fn new(eye: DVec3, t: &Tri, prim: u32) -> LeafTri {
-        let [a, b, c] = t.map(|v| v.as_dvec3());
-        let mut n = [[0f32; 3]; 3];
-        let mut beta = [f32::INFINITY; 3];
+        let mut leaf = LeafTri {
+            n: [[0f32; 3]; 3],
+            beta: [f32::INFINITY; 3],
+            prim,
+            tri: *t,
+        };
+        leaf.aim(eye);
+        leaf
+    }
+
+    /// Sets the edges up again for another eye, in place: the triangle and
+    /// its id are the camera-independent part, kept with the tree, so a new
+    /// camera reads them from the leaf array in order instead of from the
+    /// scene in BVH order (scattered loads: most of the set-up's time when
+    /// it did). The result is [`LeafTri::new`]'s for the same eye.
+    #[inline]
+    pub fn aim(&mut self, eye: DVec3) {
+        let (a, b, c) = (
+            self.tri[0].as_dvec3(),
+            self.tri[1].as_dvec3(),
+            self.tri[2].as_dvec3(),
+        );
         for (k, (p, q)) in [(a, b), (b, c), (c, a)].into_iter().enumerate() {
             let e = EdgePlane::new(eye, p, q);
-            n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
+            self.n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
             let nn = e.n.length();
             let pn = e.perm.length();
             // Normals in f32's normal range only: subnormal rounding is absolute, not relative.
-            if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
+            self.beta[k] = if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
                 let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * (1.0 + 1e-9);
-                beta[k] = round_up(b);
-            }
-        }
-        LeafTri {
-            n,
-            beta,
-            prim,
-            tri: *t,
+                round_up(b)
+            } else {
+                f32::INFINITY
+            };
         }
     }
 

@@ -69,6 +69,26 @@ fn vertex_slack(qn: f64, cz: f64, sx: f64, sy: f64) -> f64 {
     REL * qn * (1.0 + sx.abs() + sy.abs()) / cz
 }
 
+/// `x.ceil().clamp(l, h) as i32` for a finite `x` and integers `l <= h`
+/// within i32's range, without a call to libm's `ceil` (x86-64's baseline
+/// has no rounding instruction): clamping first changes nothing, as `ceil`
+/// is monotone and fixes integers, and on `[l, h]` the truncation toward
+/// zero is exact and off from the ceiling by at most one.
+#[inline(always)]
+fn ceil_within(x: f64, l: f64, h: f64) -> i32 {
+    let x = x.clamp(l, h);
+    let t = x as i32;
+    t + i32::from(f64::from(t) < x)
+}
+
+/// `x.floor().clamp(l, h) as i32`, as [`ceil_within`].
+#[inline(always)]
+fn floor_within(x: f64, l: f64, h: f64) -> i32 {
+    let x = x.clamp(l, h);
+    let t = x as i32;
+    t - i32::from(f64::from(t) > x)
+}
+
 /// Inclusive column and row ranges of the pixels whose centers a triangle
 /// may cover (empty when `lo > hi`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,9 +144,11 @@ impl PixelRect {
         for k in 0..2 {
             let m = err[k] + slack.ray * slack.scale[k] + REL * size[k] + 1e-9;
             // Pixel `i`'s center is at `i + 0.5`; clamp to just outside the image.
-            let a = (lo[k] - m - 0.5).ceil().clamp(-2.0, size[k] + 1.0);
-            let b = (hi[k] + m - 0.5).floor().clamp(-2.0, size[k] + 1.0);
-            out[k] = [a as i32, b as i32];
+            let (l, h) = (-2.0, size[k] + 1.0);
+            out[k] = [
+                ceil_within(lo[k] - m - 0.5, l, h),
+                floor_within(hi[k] + m - 0.5, l, h),
+            ];
         }
         PixelRect {
             x: out[0],
@@ -273,6 +295,33 @@ mod tests {
     }
 
     /// The lane masks are the rectangle, lane by lane.
+    /// The rounding without libm is std's `ceil`/`floor`, clamped and
+    /// converted, bit for bit: at and between integers, near the bounds,
+    /// far outside them, at infinities and NaN.
+    #[test]
+    fn ceil_and_floor_within_are_std() {
+        let (l, h) = (-2.0, 1921.0);
+        let mut xs = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MAX,
+            -f64::MAX,
+        ];
+        for i in -5..1926 {
+            let x = f64::from(i);
+            xs.extend([x, x.next_up(), x.next_down(), x + 0.5, x - 1e-9, x + 1e-9]);
+        }
+        let mut s = 5u64;
+        for _ in 0..10000 {
+            xs.push((lcg(&mut s) - 0.5) * 1e12);
+        }
+        for x in xs {
+            assert_eq!(ceil_within(x, l, h), x.ceil().clamp(l, h) as i32, "{x}");
+            assert_eq!(floor_within(x, l, h), x.floor().clamp(l, h) as i32, "{x}");
+        }
+    }
+
     #[test]
     fn lanes_are_the_rectangle() {
         let mut s = 3u64;
