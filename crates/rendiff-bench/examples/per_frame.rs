@@ -10,7 +10,9 @@
 //! (defaults: scenes/million.toml@1920x1080, 11, 1,2, slow, the per-frame
 //! table's fastest configuration in docs/benchmarks.md per thread count).
 //! A sixth argument `aim-only` times ROUNDS camera set-ups alone (for a
-//! profile of [`TraceBvh::aim`]).
+//! profile of [`TraceBvh::aim`]). `--json=FILE` (anywhere) also writes each
+//! thread count's table, as `bench peers` records it, with the machine's
+//! load, so a figure quoted from this run links to its record.
 
 use anyhow::{Context, Result};
 use rendiff::names::Named;
@@ -21,7 +23,10 @@ use rendiff_bench::peer_tables;
 use std::time::Instant;
 
 fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (json_out, args): (Vec<String>, Vec<String>) =
+        std::env::args().skip(1).partition(|a| a.starts_with("--json="));
+    let json_out = json_out.last().map(|a| a["--json=".len()..].to_string());
+    let mut record = serde_json::Map::new();
     let arg = |i: usize, d: &str| args.get(i).cloned().unwrap_or_else(|| d.to_string());
     let spec: SceneSpec = arg(0, "scenes/million.toml@1920x1080")
         .parse()
@@ -109,8 +114,30 @@ fn main() -> Result<()> {
                 rendiff_bench::load_average(),
             );
             println!("  new camera per round: {}", c["new_camera_s"]);
+            record.insert(
+                format!("{t}_threads"),
+                serde_json::json!({
+                    "embree_configuration": config.name(),
+                    "bvh": arg(3, "slow"),
+                    "load_average": rendiff_bench::load_average(),
+                    "per_frame": v,
+                }),
+            );
             Ok(())
         })?;
+    }
+    if let Some(path) = json_out {
+        let out = serde_json::json!({
+            "benchmark": "per_frame example (bench peers' per-frame table on one scene)",
+            "scene": format!("{}", spec.path.display()),
+            "rounds": rounds,
+            "tables": record,
+        });
+        let tmp = format!("{path}.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&out)? + "\n")
+            .with_context(|| format!("{tmp}: cannot write"))?;
+        std::fs::rename(&tmp, &path).with_context(|| format!("{path}: cannot write"))?;
+        eprintln!("wrote {path}");
     }
     Ok(())
 }
