@@ -23,8 +23,9 @@ use rendiff_bench::peer_tables;
 use std::time::Instant;
 
 fn main() -> Result<()> {
-    let (json_out, args): (Vec<String>, Vec<String>) =
-        std::env::args().skip(1).partition(|a| a.starts_with("--json="));
+    let (json_out, args): (Vec<String>, Vec<String>) = std::env::args()
+        .skip(1)
+        .partition(|a| a.starts_with("--json="));
     let json_out = json_out.last().map(|a| a["--json=".len()..].to_string());
     let mut record = serde_json::Map::new();
     let arg = |i: usize, d: &str| args.get(i).cloned().unwrap_or_else(|| d.to_string());
