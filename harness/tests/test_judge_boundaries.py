@@ -101,26 +101,35 @@ def test_tie_allows_two_f32_roundings_of_depth_and_no_more(tmp_path: Path) -> No
         assert cls == expect, (lift, why)
 
 
-def test_tie_adds_the_renderers_depth_tolerance(tmp_path: Path) -> None:
-    """The renderer's own depth tolerance widens the tie by exactly its value at (z, cos)."""
+def test_tie_adds_the_renderers_depth_tolerance_on_both_triangles(tmp_path: Path) -> None:
+    """The renderer ranks its own two depths, each off by up to its tolerance on that
+    triangle, so the tie widens by exactly the sum of the two, each asked at its own
+    triangle's (z, cos). Unequal shares catch a verifier that counts one side twice."""
     lift = 1e-3
     lifted = [[v[0], v[1], lift] for v in BIG]
     s = _scene(tmp_path, [BIG, lifted])
     dz = 4.0 - (4.0 - float(np.float32(lift)))
-    seen: list[tuple[float, float]] = []
+    seen: list[tuple[float, float, float]] = []
 
-    def tol(factor: float) -> verify.DepthTolerance:
+    def tol(share_0: float, share_1: float) -> verify.DepthTolerance:
         def f(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
-            seen.append((float(z[0]), float(cos[0]), float(prims[0])))
-            return np.full_like(z, factor * dz)
+            seen.extend((float(a), float(b), float(c)) for a, b, c in zip(z, cos, prims, strict=True))
+            return np.where(prims == 0, share_0 * dz, share_1 * dz)
 
         return f
 
-    assert _one(s, 0, 1, depth_tol=tol(1.0))[0] == "tie"
-    assert _one(s, 0, 1, depth_tol=tol(0.99))[0] == "interior"
-    # Asked at the reference triangle's planar depth and |cos| there (PX's ray is oblique).
-    g = verify.side_geometry(s, np.array([0]), np.array([PX[1]]), np.array([PX[0]]))
-    assert seen[0] == (float(g.z[0]), float(g.cos[0]), 0.0)  # on the reference's triangle
+    # The sum reaches dz: a tie; 1% short of it (more than the 2 roundings, 9.5e-7 of 1e-3): not.
+    assert _one(s, 0, 1, depth_tol=tol(0.3, 0.7))[0] == "tie"
+    assert _one(s, 0, 1, depth_tol=tol(0.3, 0.69))[0] == "interior"
+    assert _one(s, 0, 1, depth_tol=tol(0.69, 0.3))[0] == "interior"
+    # Either side alone, however large its share of the sum, is not enough.
+    assert _one(s, 0, 1, depth_tol=tol(0.0, 0.99))[0] == "interior"
+    assert _one(s, 0, 1, depth_tol=tol(0.99, 0.0))[0] == "interior"
+    # Asked at each triangle's planar depth and |cos| there (PX's ray is oblique).
+    g0 = verify.side_geometry(s, np.array([0]), np.array([PX[1]]), np.array([PX[0]]))
+    g1 = verify.side_geometry(s, np.array([1]), np.array([PX[1]]), np.array([PX[0]]))
+    assert float(g0.z[0]) != float(g1.z[0])
+    assert seen[:2] == [(float(g0.z[0]), float(g0.cos[0]), 0.0), (float(g1.z[0]), float(g1.cos[0]), 1.0)]
 
 
 # --------------------------------------------------------------------------- shared edge and vertex
@@ -544,16 +553,18 @@ def test_topology_identity_isexact_depth_f32() -> None:
 
 
 def test_the_tie_band_is_inclusive(tmp_path: Path) -> None:
-    """Depths 4 and 4 - 2^-10, exact; a renderer tolerance of 2^-10 - 2^-20 plus the two f32
-    roundings 2 * 2^-23 * 4 = 2^-20 is exactly 2^-10: a tie; any less is not."""
+    """Depths 4 and 4 - 2^-10, exact; a renderer tolerance of (2^-10 - 2^-20) / 2 on each
+    triangle plus the two f32 roundings 2 * 2^-23 * 4 = 2^-20 is exactly 2^-10: a tie; any
+    less is not."""
     lifted = [[v[0], v[1], 2.0**-10] for v in BIG]
     s = _scene(tmp_path, [BIG, lifted])
 
     def tol(value: float) -> verify.DepthTolerance:
         return lambda z, cos, prims: np.full_like(z, value)
 
-    assert _one(s, 0, 1, depth_tol=tol(2.0**-10 - 2.0**-20))[0] == "tie"
-    assert _one(s, 0, 1, depth_tol=tol(float(np.nextafter(2.0**-10 - 2.0**-20, 0.0))))[0] == "interior"
+    half = (2.0**-10 - 2.0**-20) / 2.0
+    assert _one(s, 0, 1, depth_tol=tol(half))[0] == "tie"
+    assert _one(s, 0, 1, depth_tol=tol(float(np.nextafter(half, 0.0))))[0] == "interior"
 
 
 def test_the_eye_slack_defaults_to_none(tmp_path: Path) -> None:

@@ -142,8 +142,8 @@ def test_the_verifier_gets_the_renderers_eps_slack_and_depth_tolerance(
     assert seen["position"] == (0.0, 4.0, expect_norm.tolist())
     assert res.tolerance == (
         "edge: pixel center within 0.25 px of a triangle edge (E) + X; tie: both triangles cover the center and "
-        "their depths agree within the depth tolerance; crack: a leak through a closed edge (allowed only where the "
-        "backend declares it); id.object not compared (missing on one side)"
+        "their depths agree within the sum of the depth tolerances on the two; crack: a leak through a closed edge "
+        "(allowed only where the backend declares it); id.object not compared (missing on one side)"
     )
 
 
@@ -223,8 +223,8 @@ def test_object_ids_must_follow_prim_ids(tmp_path: Path) -> None:
     assert res.tolerance.endswith("; id.object must match wherever id.prim does")
     assert res.tolerance == (
         "edge: pixel center within 0 px of a triangle edge (E); tie: both triangles cover the center and their depths "
-        "agree within the depth tolerance; crack: a leak through a closed edge (allowed only where the backend "
-        "declares it); id.object must match wherever id.prim does"
+        "agree within the sum of the depth tolerances on the two; crack: a leak through a closed edge (allowed "
+        "only where the backend declares it); id.object must match wherever id.prim does"
     )
     # Where the prims differ, the objects may too: judged by the prim's class alone; an object
     # mismatch elsewhere adds to it, and its explanation comes first.

@@ -182,8 +182,8 @@ def compare_ids(
         cls = result.cls
         explanations = result.groups
         tol_text += (
-            "; tie: both triangles cover the center and their depths agree within the depth tolerance; "
-            "crack: a leak through a closed edge (allowed only where the backend declares it)"
+            "; tie: both triangles cover the center and their depths agree within the sum of the depth tolerances "
+            "on the two; crack: a leak through a closed edge (allowed only where the backend declares it)"
         )
         for name, cls_value in (("interior", verify.INTERIOR), ("crack", verify.CRACK)):
             shown = np.nonzero(cls == cls_value)[0][:EXAMPLES]

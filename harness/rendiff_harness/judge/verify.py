@@ -6,9 +6,10 @@ whose prim differs between the reference (R) and the test renderer (T), either o
 may be the background:
 
 * `tie`: both triangles cover the center (inside, or within the rounding distance `eps`
-  of their boundary) and their planar depths there agree within the test renderer's
-  depth tolerance (plus two f32 roundings): coplanar or duplicated surfaces. The
-  reference's lower-prim rule is a convention, not a law, so either triangle is allowed.
+  of their boundary) and their planar depths there agree within the sum of the test
+  renderer's depth tolerances on the two triangles (each at its own depth; plus two f32
+  roundings): coplanar or duplicated surfaces, which its arithmetic may rank either way.
+  The reference's lower-prim rule is a convention, not a law, so either is allowed.
 * `edge`: the center lies within `eps` of an edge or vertex that R and T share (same f32
   vertices), or of a *silhouette* edge of the triangle the test renderer missed: a
   mesh boundary, an edge whose neighbors fold to the same side of it as seen from the
@@ -220,10 +221,12 @@ def classify_mismatches(
     both = covers_r & covers_t & np.isfinite(sr.z) & np.isfinite(st.z)
     tol = np.zeros(k)
     if both.any():
+        # The test renderer ranks its own two depths, each off by up to its tolerance on
+        # that triangle: the order can flip whenever the exact gap is within their sum.
         zi = np.nonzero(both)[0]
-        tol[zi] = np.asarray(depth_tol(sr.z[zi], sr.cos[zi], r_ids[zi]), dtype=np.float64) + 2.0 * F32_ULP * np.abs(
-            sr.z[zi]
-        )
+        tol_r = np.asarray(depth_tol(sr.z[zi], sr.cos[zi], r_ids[zi]), dtype=np.float64)
+        tol_t = np.asarray(depth_tol(st.z[zi], st.cos[zi], t_ids[zi]), dtype=np.float64)
+        tol[zi] = tol_r + tol_t + 2.0 * F32_ULP * np.abs(sr.z[zi])
     with np.errstate(invalid="ignore"):
         tie = both & (np.abs(sr.z - st.z) <= tol)
     topo: Topology | None = None
