@@ -529,7 +529,8 @@ def test_relative_models_scale_with_grazing_angle_and_cap() -> None:
     assert edge_on[0] == pytest.approx(10.0 * tolerance.MAX_REL)
     embree = precision.depth_model(registry.spec("embree"), "embree")
     ctx = tolerance.DepthContext(np.array([10.0]), np.array([0.5]), {}, {}, ray_norm=np.array([1.5]))
-    assert embree.depth(ctx)[0][0] == pytest.approx(2e-4 + 2.0**-24 * 1.5 * 10.0 / 0.5, rel=1e-12)
+    # the f32 direction (u |d| Z) and the triangle's f32 copy at the origin (u |d| Z, no extent given)
+    assert embree.depth(ctx)[0][0] == pytest.approx(2e-4 + 2.0 * 2.0**-24 * 1.5 * 10.0 / 0.5, rel=1e-12)
 
 
 def test_povray_depth_step_sources() -> None:

@@ -8,6 +8,7 @@ capped by the depth span, moved / (z pixel) on the image), evaluated here on cho
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -170,17 +171,42 @@ def test_embree_adds_its_f32_ray_direction_as_a_moved_point() -> None:
     rel = tl.relative_grazing(_ctx([z], [cos]), tl.EMBREE_REL)[0]
     big = np.array([10.0])
     tol = tl.embree_depth(_ctx([z], [cos], depth_span=big, ray_norm=np.array([d])))[0][0]
-    assert tol - rel == pytest.approx(U * d * z / cos, rel=1e-12)
+    # u |d| Z for the direction, as much again for the triangle's copy at the origin (its vertex
+    # |v0 - org| <= |d| Z; no extent given, so no edge term)
+    assert tol - rel == pytest.approx(2.0 * U * d * z / cos, rel=1e-12)
     assert tol > abs(5.123518 - z)  # the finding is inside it
-    assert rel < abs(5.123518 - z)  # and was outside it without this term
+    assert rel < abs(5.123518 - z)  # and was outside it without these terms
     # Capped by the triangle's depth span (a hit stays on its triangle), not by 1/|cos|.
     small = tl.embree_depth(_ctx([z], [cos], depth_span=np.array([1e-3]), ray_norm=np.array([d])))[0][0]
     assert small - rel == pytest.approx(1e-3, rel=1e-12)
     # The longer the pixel ray, the larger the move.
     wide = tl.embree_depth(_ctx([z], [cos], depth_span=big, ray_norm=np.array([1.5])))[0][0]
-    assert wide - rel == pytest.approx(U * 1.5 * z / cos, rel=1e-12)
+    assert wide - rel == pytest.approx(2.0 * U * 1.5 * z / cos, rel=1e-12)
     with pytest.raises(tl.ToleranceError, match="ray_norm"):
         tl.embree_depth(_ctx([z], [cos], depth_span=big))
+
+
+def test_embree_counts_its_f32_copy_of_the_triangle_at_the_ray_origin() -> None:
+    """Both Embree tests intersect the triangle moved to the (f32) ray origin in f32: its vertices
+    move by u (|v0 - org| + E), |v0 - org| <= |d| Z + |f32(eye) - eye| + E. A huge triangle near
+    the eye (E = 1e4 at Z = 1) moves its plane by about 2 u E, far beyond the measured 1e-5 Z."""
+    z, e, off = 1.0, 1e4, 1e-6
+    span = np.array([1e6])
+    ctx = _ctx([z], [1.0], depth_span=span, ray_norm=1.0, extent=np.array([e]), origin_offset=off)
+    tol = tl.embree_depth(ctx)[0][0]
+    rel = tl.relative_grazing(ctx, tl.EMBREE_REL)[0]
+    origin = off  # the f32 origin's own shift of the ray (f32_origin), at |cos| = 1
+    assert tol - rel - origin == pytest.approx(U * (2.0 * z + off + 2.0 * e), rel=1e-9)
+    assert tol > 2.0 * U * e > 100.0 * rel
+    # Seen at |cos| = 0.5 the move doubles; a span of 1e-3 caps it.
+    half = tl.embree_depth(replace(ctx, cos=np.array([0.5])))[0][0]
+    assert half - tl.relative_grazing(replace(ctx, cos=np.array([0.5])), tl.EMBREE_REL)[0] == pytest.approx(
+        2.0 * (origin + U * (2.0 * z + off + 2.0 * e)), rel=1e-9
+    )
+    # At |cos| = 0.01 a span of 1e-4 caps it, never below the move itself (shift_depth).
+    grazing = replace(ctx, cos=np.array([0.01]), depth_span=np.array([1e-4]))
+    capped = tl.embree_depth(grazing)[0][0] - tl.relative_grazing(grazing, tl.EMBREE_REL)[0]
+    assert capped == pytest.approx(1e-4 + U * (2.0 * z + off + 2.0 * e), rel=1e-9)  # origin: off / 0.01
 
 
 def test_exact_and_strict_models() -> None:

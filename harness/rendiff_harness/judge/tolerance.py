@@ -247,21 +247,33 @@ EMBREE_REL = 1e-5
 
 
 def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
-    """|dZ| from Embree's f32 ray direction (docs/verifier.md, "Embree's arithmetic"): fl(D) is
-    within u |D| of D (u = 2^-24 per coordinate), so the point at planar depth Z along the rounded
-    ray is within u |D| Z of the exact ray's point, and reaches the plane `shift_depth` of that away
-    (1/|cos|, at most the triangle's depth span). A caller without each pixel's |D| is refused."""
+    """|dZ| from Embree's f32 ray direction and its f32 copy of the triangle (docs/verifier.md,
+    "Embree's arithmetic"), one move of the hit relative to the plane, `shift_depth` of it away
+    (1/|cos|, at most the triangle's depth span):
+
+    * fl(D) is within u |D| of D (u = 2^-24 per coordinate), so the point at planar depth Z along
+      the rounded ray is within u |D| Z of the exact ray's point;
+    * both tests intersect the triangle moved to the ray origin in f32 (Moeller: C = fl(v0 - org)
+      and the stored edges fl(v0 - v1), fl(v2 - v0); ROBUST: fl(v - org) and edges of those), whose
+      vertices, and so its plane at every point of it, are off by <= u (|v0 - org| + longest edge),
+      and |v0 - org| <= |X - eye| + |f32(eye) - eye| + longest edge with |X - eye| = |D| Z.
+
+    A caller without each pixel's |D| is refused; without the triangle's extent (the triangle is
+    unknown, and the models fall back to their 1/|cos| cap) the edges are not counted."""
     if ctx.ray_norm is None:
         raise ToleranceError("the Embree depth model needs each pixel ray's length (DepthContext.ray_norm)")
-    return shift_depth(ctx, F32_U * np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref))
+    along = np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref)
+    edges = 0.0 if ctx.extent is None else 2.0 * np.asarray(ctx.extent, dtype=np.float64)
+    return shift_depth(ctx, F32_U * (along + along + ctx.origin_offset + edges))
 
 
 def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """Embree 3: float32 watertight/Moeller intersection.
 
     Measured t on the same triangle: mean relative difference 2e-8, max 9e-6 at grazing
-    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3; plus the two moves of
-    the ray it is given, derived: its f32 origin and its f32 direction.
+    angles (notes, "Agreement"). Relative 1e-5 / |cos|, capped at 1e-3; plus the moves of the
+    ray it is given and of its copy of the triangle, derived: its f32 origin, its f32 direction
+    and the triangle's vertices moved to that origin in f32.
     """
     tol = (
         relative_grazing(ctx, EMBREE_REL)
@@ -271,7 +283,8 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     return tol, (
         f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
         f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye) "
-        "+ min(2^-24 |d| Z / |cos|, depth span) (f32 ray direction)"
+        "+ min(2^-24 (2 |d| Z + |f32(eye) - eye| + 2 longest edge) / |cos|, depth span) "
+        "(f32 ray direction; the triangle moved to the ray origin in f32)"
     )
 
 
