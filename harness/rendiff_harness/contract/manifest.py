@@ -120,19 +120,33 @@ class Reference:
     def unit_normals(self) -> np.ndarray:
         """(N, 3) float64 unit normals of every triangle (zero for degenerate ones)."""
         if self._normals is None:
-            t = self.scene.triangles.astype(np.float64)
-            n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-            length = np.linalg.norm(n, axis=1)
-            with np.errstate(all="ignore"):
-                self._normals = np.where(length[:, None] > 0, n / np.where(length > 0, length, 1.0)[:, None], 0.0)
+            self._normals = _unit_normals(self.scene.triangles)
         return self._normals
 
     def ray_cos(self, rows: np.ndarray, cols: np.ndarray, prims: np.ndarray) -> np.ndarray:
-        """|cos| between the pixel rays and the triangles' normals, (K,) float64 in [0, 1]."""
+        """|cos| between the pixel rays and the triangles' normals, (K,) float64 in [0, 1].
+
+        Only the K named triangles' normals are computed (row by row the same numbers as
+        `unit_normals`): a 1.31M-triangle scene's whole table cost 0.1-0.3 s a call.
+        """
         d = self.scene.camera.center_directions(rows, cols)
-        n = self.unit_normals()[prims.astype(np.int64)]
+        n = (
+            self._normals[prims.astype(np.int64)]
+            if self._normals is not None
+            else _unit_normals(self.scene.triangles[prims.astype(np.int64)])
+        )
         cos: np.ndarray = np.clip(np.abs(np.einsum("ij,ij->i", d, n)) / np.linalg.norm(d, axis=1), 0.0, 1.0)
         return cos
+
+
+def _unit_normals(tris: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 unit normals of (N, 3, 3) triangles (zero for degenerate ones), row by row."""
+    t = tris.astype(np.float64)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    with np.errstate(all="ignore"):
+        out: np.ndarray = np.where(length[:, None] > 0, n / np.where(length > 0, length, 1.0)[:, None], 0.0)
+    return out
 
 
 def load_reference(run: Path, scene_entry: Mapping[str, Any], reference: str) -> Reference:

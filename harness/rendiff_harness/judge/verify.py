@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..contract import vertex_ids
 from ..contract.camera import Camera
 from ..contract.resolved import ResolvedScene
 from ..contract.vocab import BACKGROUND_ID
@@ -82,10 +83,9 @@ def topology(triangles: np.ndarray) -> Topology:
     """Vertex ids by exact f32 identity (+0 and -0 merged), and the sorted edge table."""
     tris = np.ascontiguousarray(np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)) + np.float32(0.0)
     n = tris.shape[0]
-    flat = tris.reshape(-1, 3).view(np.uint32)
-    packed = np.ascontiguousarray(flat).view(np.dtype((np.void, 12))).ravel()
-    _, inverse = np.unique(packed, return_inverse=True)
-    vid = inverse.astype(np.int64).reshape(n, 3)
+    # Numbered in the rows' byte order, as np.unique on 12-byte rows numbered them (faster).
+    _, inverse = vertex_ids.group(*vertex_ids.keys(tris.reshape(-1, 3).view(np.uint32), bytewise=True))
+    vid = inverse.reshape(n, 3)
     nv = int(vid.max()) + 1 if n else 0
     a = vid
     b = np.roll(vid, -1, axis=1)

@@ -91,7 +91,7 @@ from typing import Any
 
 import numpy as np
 
-from ...contract import exrbuf, vocab
+from ...contract import exrbuf, vertex_ids, vocab
 from ...contract.camera import Camera
 from ...contract.resolved import ResolvedScene
 from ...contract.vocab import BACKGROUND_ID, Buffer, Feature
@@ -261,15 +261,8 @@ def _unique_vertices(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     flat = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
     if flat.shape[0] == 0:
         return flat, np.zeros((0, 3), dtype=np.int64)
-    bits = flat.view(np.uint32).astype(np.uint64)
-    key_hi, key_lo = (bits[:, 0] << np.uint64(32)) | bits[:, 1], bits[:, 2]
-    order = np.lexsort((key_lo, key_hi))
-    kh, kl = key_hi[order], key_lo[order]
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = (kh[1:] != kh[:-1]) | (kl[1:] != kl[:-1])
-    inverse = np.empty(order.size, dtype=np.int64)
-    inverse[order] = np.cumsum(first) - 1
-    return flat[order[first]], inverse.reshape(-1, 3)
+    first, inverse = vertex_ids.group(*vertex_ids.keys(flat.view(np.uint32)))
+    return flat[first], inverse.reshape(-1, 3)
 
 
 def _nums(values: np.ndarray) -> list[str]:
