@@ -8,14 +8,8 @@ use common::cli::{
     check_failure, export_refused, output_within, raster_within, render_lesson, render_ok, rendiff,
 };
 
-const CAMERA: &str = r#"
-[camera]
-eye = [0.0, 0.0, 5.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 45.0
-width = 16
-height = 12
-"#;
+const CAMERA: &str =
+    crate::camera_toml!(eye [0.0, 0.0, 5.0], look_at [0.0, 0.0, 0.0], vfov 45.0, 16 x 12);
 
 const OBJECT: &str = r#"
 [[objects]]
@@ -121,16 +115,6 @@ fn unknown_field_is_named() {
     expect_failure(&s, &[], &["colour"]);
 }
 
-#[test]
-fn missing_mesh_file() {
-    let s = mesh_scene("nope.obj");
-    expect_failure(
-        &s,
-        &[],
-        &["objects[0].mesh", "nope.obj", "cannot be opened"],
-    );
-}
-
 /// A glTF whose one buffer has the given uri (a single triangle, 36 bytes).
 fn gltf_with_buffer(uri: &str) -> String {
     format!(
@@ -164,45 +148,50 @@ fn gltf_buffers_missing_or_outside_the_scene_folder() {
     );
 }
 
+/// Mesh files that are missing, outside the scene's folder or not finite:
+/// (the scene's `mesh`, the files written, what the message must name).
 #[test]
-fn mesh_outside_scene_folder() {
-    let s = mesh_scene("../secret.obj");
-    expect_failure(
-        &s,
-        &[("secret.obj", TRIANGLE_OBJ)],
-        &["objects[0].mesh", "outside the scene's folder"],
-    );
+fn bad_mesh_files_are_named() {
+    let nan_obj = "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n";
+    let cases: [(&str, &[(&str, &str)], &[&str]); 4] = [
+        (
+            "nope.obj",
+            &[],
+            &["objects[0].mesh", "nope.obj", "cannot be opened"],
+        ),
+        (
+            "../secret.obj",
+            &[("secret.obj", TRIANGLE_OBJ)],
+            &["objects[0].mesh", "outside the scene's folder"],
+        ),
+        ("/etc/passwd", &[], &["must be relative"]),
+        (
+            "m.obj",
+            &[("scenes/m.obj", nan_obj)],
+            &["m.obj", "not finite"],
+        ),
+    ];
+    for (mesh, files, must_mention) in cases {
+        expect_failure(&mesh_scene(mesh), files, must_mention);
+    }
 }
 
-#[test]
-fn absolute_mesh_path() {
-    let s = mesh_scene("/etc/passwd");
-    expect_failure(&s, &[], &["must be relative"]);
-}
-
-#[test]
-fn nan_vertex_in_obj() {
-    let s = mesh_scene("m.obj");
-    expect_failure(
-        &s,
-        &[("scenes/m.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")],
-        &["m.obj", "not finite"],
-    );
+/// A scene of one `triangles` shape with the given vertices (TOML).
+fn triangles_scene(vertices: &str) -> String {
+    format!(
+        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = {vertices} }}\n"
+    )
 }
 
 #[test]
 fn inf_vertex_in_scene() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = [[0.0, 0.0, 0.0], [inf, 0.0, 0.0], [0.0, 1.0, 0.0]] }}\n"
-    );
+    let s = triangles_scene("[[0.0, 0.0, 0.0], [inf, 0.0, 0.0], [0.0, 1.0, 0.0]]");
     expect_failure(&s, &[], &["objects[0].shape", "not finite"]);
 }
 
 #[test]
 fn zero_area_triangle_without_permission() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0]] }}\n"
-    );
+    let s = triangles_scene("[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0]]");
     expect_failure(&s, &[], &["zero area", "allow_degenerate"]);
 }
 
