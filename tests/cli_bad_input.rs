@@ -17,6 +17,17 @@ name = "t"
 shape = { kind = "three_triangles" }
 "#;
 
+/// `rendiff check scenes/three_triangles.toml -o OUT EXTRA...`, within 120 s.
+fn check_three_triangles(out: &Path, extra: &[&str]) -> std::process::Output {
+    output_within(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "-o"])
+            .arg(out)
+            .args(extra),
+        120,
+    )
+}
+
 /// `rendiff check scenes/three_triangles.toml -o RUN` with `extra` arguments
 /// must be refused before anything runs: exit 2, no panic, an error line
 /// first that names each of `must_mention` (a value clap refuses is followed
@@ -25,13 +36,7 @@ shape = { kind = "three_triangles" }
 fn check_refused(extra: &[&str], must_mention: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
-    let res = output_within(
-        rendiff()
-            .args(["check", "scenes/three_triangles.toml", "-o"])
-            .arg(&out)
-            .args(extra),
-        120,
-    );
+    let res = check_three_triangles(&out, extra);
     let err = String::from_utf8_lossy(&res.stderr);
     assert_eq!(res.status.code(), Some(2), "{extra:?}: {err}");
     assert!(!err.contains("panicked"), "{extra:?}: {err}");
@@ -202,58 +207,31 @@ fn camera_variant(from: &str, to: &str) -> String {
     )
 }
 
+/// Cameras the scene format refuses: (the text of [`CAMERA`] replaced, its
+/// replacement, what the message must name).
 #[test]
-fn zero_sized_image() {
-    expect_failure(
-        &camera_variant("width = 16", "width = 0"),
-        &[],
-        &["camera.width", "at least 1x1"],
-    );
-}
-
-#[test]
-fn vfov_out_of_range() {
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = 0.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = 180.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = -5.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = nan"),
-        &[],
-        &["camera.vfov"],
-    );
-}
-
-#[test]
-fn look_at_equal_to_eye() {
-    expect_failure(
-        &camera_variant("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, 0.0, 5.0]"),
-        &[],
-        &["camera.look_at", "equals eye"],
-    );
-}
-
-#[test]
-fn up_parallel_to_view() {
-    expect_failure(
-        &format!(
-            "requires = [\"depth\"]\n{}{OBJECT}",
-            CAMERA.replace("vfov", "up = [0.0, 0.0, 2.0]\nvfov")
+fn bad_cameras_are_named() {
+    let vfov: &[&str] = &["camera.vfov"];
+    let cases: [(&str, &str, &[&str]); 7] = [
+        ("width = 16", "width = 0", &["camera.width", "at least 1x1"]),
+        ("vfov = 45.0", "vfov = 0.0", vfov),
+        ("vfov = 45.0", "vfov = 180.0", vfov),
+        ("vfov = 45.0", "vfov = -5.0", vfov),
+        ("vfov = 45.0", "vfov = nan", vfov),
+        (
+            "look_at = [0.0, 0.0, 0.0]",
+            "look_at = [0.0, 0.0, 5.0]",
+            &["camera.look_at", "equals eye"],
         ),
-        &[],
-        &["camera.up", "parallel"],
-    );
+        (
+            "vfov",
+            "up = [0.0, 0.0, 2.0]\nvfov",
+            &["camera.up", "parallel"],
+        ),
+    ];
+    for (from, to, must_mention) in cases {
+        expect_failure(&camera_variant(from, to), &[], must_mention);
+    }
 }
 
 #[test]
@@ -745,14 +723,7 @@ fn unknown_only_backends_are_refused_before_anything_starts() {
         );
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
-    let res = output_within(
-        rendiff()
-            .args(["check", "scenes/three_triangles.toml", "-o"])
-            .arg(&out)
-            .args(["--only", "trace,embree_robust"]),
-        120,
-    );
+    let res = check_three_triangles(&dir.path().join("run"), &["--only", "trace,embree_robust"]);
     assert_eq!(
         res.status.code(),
         Some(0),

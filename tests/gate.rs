@@ -5,7 +5,7 @@
 use rendiff::check::manifest::{ResultEntry, Results};
 use rendiff::gate::{self, ChangeKind, Noise};
 use serde_json::{json, Value};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 mod common;
 use common::cli::{bless_command, gate_command, small_check, succeeds};
@@ -23,6 +23,17 @@ fn entry(
         "edge_mismatches": edge, "interior_mismatches": 0, "mask_mismatches": 0,
         "max_abs_error": max_abs, "max_rel_error": max_abs / 4.0,
     });
+    with_details(scene, backend, buffer, status, details)
+}
+
+/// A verdict with the given details (a JSON object) and a reason naming its status.
+fn with_details(
+    scene: &str,
+    backend: &str,
+    buffer: &str,
+    status: &str,
+    details: Value,
+) -> ResultEntry {
     ResultEntry {
         scene: scene.into(),
         backend: backend.into(),
@@ -365,17 +376,8 @@ fn classed(backend: &str, tie: Option<u64>, crack: Option<u64>) -> ResultEntry {
 }
 
 fn other(scene: &str, backend: &str, buffer: &str, status: &str) -> ResultEntry {
-    ResultEntry {
-        scene: scene.into(),
-        backend: backend.into(),
-        buffer: buffer.into(),
-        status: status.into(),
-        reason: format!("{status} because"),
-        details: json!({"rms_px": 0.01, "max_angle_rad": 1e-4, "interior_mismatches": 0})
-            .as_object()
-            .unwrap()
-            .clone(),
-    }
+    let details = json!({"rms_px": 0.01, "max_angle_rad": 1e-4, "interior_mismatches": 0});
+    with_details(scene, backend, buffer, status, details)
 }
 
 #[test]
@@ -542,6 +544,23 @@ fn bless_refused(code: Option<i32>, err: &str, needles: &[&str], baseline: &Path
     assert!(now == kept, "a refused bless changed the baseline");
 }
 
+/// A run of scenes alpha and beta ([`json_run`]) in `dir/NAME`, blessed into
+/// `dir/baseline.json`, which that first bless (nothing to compare with) must
+/// create: the baseline's path, the run's, and the baseline's bytes.
+fn first_bless(dir: &Path, name: &str) -> (PathBuf, PathBuf, Vec<u8>) {
+    let baseline = dir.join("baseline.json");
+    let run = dir.join(name);
+    json_run(&run, &["alpha", "beta"], vec![]);
+    let (code, err) = bless_cli(&run, &baseline, &[]);
+    assert_eq!(
+        code,
+        Some(0),
+        "the first bless has nothing to compare with: {err}"
+    );
+    let blessed = std::fs::read(&baseline).unwrap();
+    (baseline, run, blessed)
+}
+
 fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, String) {
     let out = bless_command(run, baseline).args(flags).output().unwrap();
     (
@@ -553,15 +572,7 @@ fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, Strin
 #[test]
 fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
     let dir = tempfile::tempdir().unwrap();
-    let baseline = dir.path().join("baseline.json");
-    let first = dir.path().join("first");
-    json_run(&first, &["alpha", "beta"], vec![]);
-    let (code, err) = bless_cli(&first, &baseline, &[]);
-    assert_eq!(
-        code,
-        Some(0),
-        "the first bless has nothing to compare with: {err}"
-    );
+    let (baseline, _, blessed) = first_bless(dir.path(), "first");
     let b = gate::load_baseline(&baseline).unwrap();
     let e = b.entries.iter().find(|e| e.buffer == "N").unwrap();
     assert_eq!(
@@ -570,7 +581,6 @@ fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
         "class counts are blessed"
     );
     assert_eq!(e.metrics["crack_mismatches"], json!(0));
-    let blessed = std::fs::read(&baseline).unwrap();
 
     // A scene that could not be loaded: refused, named, even with the scene set unchanged.
     let broken = dir.path().join("broken");
@@ -643,12 +653,7 @@ fn one_error_line(code: Option<i32>, err: &str, file: &Path, field: &str) {
 #[test]
 fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
-    let baseline = dir.path().join("baseline.json");
-    let run = dir.path().join("run");
-    json_run(&run, &["alpha", "beta"], vec![]);
-    let (code, err) = bless_cli(&run, &baseline, &[]);
-    assert_eq!(code, Some(0), "{err}");
-    let blessed = std::fs::read(&baseline).unwrap();
+    let (baseline, run, blessed) = first_bless(dir.path(), "run");
     let results = run.join("results.json");
     let clean = std::fs::read(&results).unwrap();
     type Case = (&'static str, fn(&mut Value), &'static str);
@@ -717,39 +722,29 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     std::fs::write(&results, &clean).unwrap();
     let (code, out, err) = gate_cli(&run, &baseline);
     assert_eq!(code, Some(0), "{out}{err}");
-    edit_json(&baseline, |v| {
-        v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into()
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[2].metrics.interior_mismatches: -2 is not a count",
-    );
-    std::fs::write(&baseline, &blessed).unwrap();
-    edit_json(&baseline, |v| {
-        let copy = v["entries"][0].clone();
-        v["entries"].as_array_mut().unwrap().push(copy);
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[6]: a second verdict for scene",
-    );
-    std::fs::write(&baseline, &blessed).unwrap();
-    edit_json(&baseline, |v| {
-        v["entries"][0]["status"] = "expected_failure".into()
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[0].status: unknown status \"expected_failure\"",
-    );
+    let baseline_cases: [(fn(&mut Value), &str); 3] = [
+        (
+            |v| v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into(),
+            "entries[2].metrics.interior_mismatches: -2 is not a count",
+        ),
+        (
+            |v| {
+                let copy = v["entries"][0].clone();
+                v["entries"].as_array_mut().unwrap().push(copy);
+            },
+            "entries[6]: a second verdict for scene",
+        ),
+        (
+            |v| v["entries"][0]["status"] = "expected_failure".into(),
+            "entries[0].status: unknown status \"expected_failure\"",
+        ),
+    ];
+    for (edit, field) in baseline_cases {
+        std::fs::write(&baseline, &blessed).unwrap();
+        edit_json(&baseline, edit);
+        let (code, _, err) = gate_cli(&run, &baseline);
+        one_error_line(code, &err, &baseline, field);
+    }
 }
 
 #[test]
