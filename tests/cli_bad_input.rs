@@ -158,7 +158,8 @@ fn gltf_buffers_missing_or_outside_the_scene_folder() {
 #[test]
 fn bad_mesh_files_are_named() {
     let nan_obj = "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n";
-    let cases: [(&str, &[(&str, &str)], &[&str]); 4] = [
+    type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a [&'a str]);
+    let cases: [Case; 4] = [
         (
             "nope.obj",
             &[],

@@ -722,7 +722,8 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     std::fs::write(&results, &clean).unwrap();
     let (code, out, err) = gate_cli(&run, &baseline);
     assert_eq!(code, Some(0), "{out}{err}");
-    let baseline_cases: [(fn(&mut Value), &str); 3] = [
+    type Edit = (fn(&mut Value), &'static str);
+    let baseline_cases: [Edit; 3] = [
         (
             |v| v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into(),
             "entries[2].metrics.interior_mismatches: -2 is not a count",
