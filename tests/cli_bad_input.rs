@@ -8,20 +8,25 @@ use common::cli::{
     check_failure, export_refused, output_within, raster_within, render_lesson, render_ok, rendiff,
 };
 
-const CAMERA: &str = r#"
-[camera]
-eye = [0.0, 0.0, 5.0]
-look_at = [0.0, 0.0, 0.0]
-vfov = 45.0
-width = 16
-height = 12
-"#;
+const CAMERA: &str =
+    crate::camera_toml!(eye [0.0, 0.0, 5.0], look_at [0.0, 0.0, 0.0], vfov 45.0, 16 x 12);
 
 const OBJECT: &str = r#"
 [[objects]]
 name = "t"
 shape = { kind = "three_triangles" }
 "#;
+
+/// `rendiff check scenes/three_triangles.toml -o OUT EXTRA...`, within 120 s.
+fn check_three_triangles(out: &Path, extra: &[&str]) -> std::process::Output {
+    output_within(
+        rendiff()
+            .args(["check", "scenes/three_triangles.toml", "-o"])
+            .arg(out)
+            .args(extra),
+        120,
+    )
+}
 
 /// `rendiff check scenes/three_triangles.toml -o RUN` with `extra` arguments
 /// must be refused before anything runs: exit 2, no panic, an error line
@@ -31,13 +36,7 @@ shape = { kind = "three_triangles" }
 fn check_refused(extra: &[&str], must_mention: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
-    let res = output_within(
-        rendiff()
-            .args(["check", "scenes/three_triangles.toml", "-o"])
-            .arg(&out)
-            .args(extra),
-        120,
-    );
+    let res = check_three_triangles(&out, extra);
     let err = String::from_utf8_lossy(&res.stderr);
     assert_eq!(res.status.code(), Some(2), "{extra:?}: {err}");
     assert!(!err.contains("panicked"), "{extra:?}: {err}");
@@ -121,16 +120,6 @@ fn unknown_field_is_named() {
     expect_failure(&s, &[], &["colour"]);
 }
 
-#[test]
-fn missing_mesh_file() {
-    let s = mesh_scene("nope.obj");
-    expect_failure(
-        &s,
-        &[],
-        &["objects[0].mesh", "nope.obj", "cannot be opened"],
-    );
-}
-
 /// A glTF whose one buffer has the given uri (a single triangle, 36 bytes).
 fn gltf_with_buffer(uri: &str) -> String {
     format!(
@@ -164,45 +153,51 @@ fn gltf_buffers_missing_or_outside_the_scene_folder() {
     );
 }
 
+/// Mesh files that are missing, outside the scene's folder or not finite:
+/// (the scene's `mesh`, the files written, what the message must name).
 #[test]
-fn mesh_outside_scene_folder() {
-    let s = mesh_scene("../secret.obj");
-    expect_failure(
-        &s,
-        &[("secret.obj", TRIANGLE_OBJ)],
-        &["objects[0].mesh", "outside the scene's folder"],
-    );
+fn bad_mesh_files_are_named() {
+    let nan_obj = "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n";
+    type Case<'a> = (&'a str, &'a [(&'a str, &'a str)], &'a [&'a str]);
+    let cases: [Case; 4] = [
+        (
+            "nope.obj",
+            &[],
+            &["objects[0].mesh", "nope.obj", "cannot be opened"],
+        ),
+        (
+            "../secret.obj",
+            &[("secret.obj", TRIANGLE_OBJ)],
+            &["objects[0].mesh", "outside the scene's folder"],
+        ),
+        ("/etc/passwd", &[], &["must be relative"]),
+        (
+            "m.obj",
+            &[("scenes/m.obj", nan_obj)],
+            &["m.obj", "not finite"],
+        ),
+    ];
+    for (mesh, files, must_mention) in cases {
+        expect_failure(&mesh_scene(mesh), files, must_mention);
+    }
 }
 
-#[test]
-fn absolute_mesh_path() {
-    let s = mesh_scene("/etc/passwd");
-    expect_failure(&s, &[], &["must be relative"]);
-}
-
-#[test]
-fn nan_vertex_in_obj() {
-    let s = mesh_scene("m.obj");
-    expect_failure(
-        &s,
-        &[("scenes/m.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")],
-        &["m.obj", "not finite"],
-    );
+/// A scene of one `triangles` shape with the given vertices (TOML).
+fn triangles_scene(vertices: &str) -> String {
+    format!(
+        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = {vertices} }}\n"
+    )
 }
 
 #[test]
 fn inf_vertex_in_scene() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = [[0.0, 0.0, 0.0], [inf, 0.0, 0.0], [0.0, 1.0, 0.0]] }}\n"
-    );
+    let s = triangles_scene("[[0.0, 0.0, 0.0], [inf, 0.0, 0.0], [0.0, 1.0, 0.0]]");
     expect_failure(&s, &[], &["objects[0].shape", "not finite"]);
 }
 
 #[test]
 fn zero_area_triangle_without_permission() {
-    let s = format!(
-        "requires = [\"depth\"]\n{CAMERA}\n[[objects]]\nname = \"m\"\nshape = {{ kind = \"triangles\", vertices = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0]] }}\n"
-    );
+    let s = triangles_scene("[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 2.0, 0.0]]");
     expect_failure(&s, &[], &["zero area", "allow_degenerate"]);
 }
 
@@ -213,58 +208,31 @@ fn camera_variant(from: &str, to: &str) -> String {
     )
 }
 
+/// Cameras the scene format refuses: (the text of [`CAMERA`] replaced, its
+/// replacement, what the message must name).
 #[test]
-fn zero_sized_image() {
-    expect_failure(
-        &camera_variant("width = 16", "width = 0"),
-        &[],
-        &["camera.width", "at least 1x1"],
-    );
-}
-
-#[test]
-fn vfov_out_of_range() {
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = 0.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = 180.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = -5.0"),
-        &[],
-        &["camera.vfov"],
-    );
-    expect_failure(
-        &camera_variant("vfov = 45.0", "vfov = nan"),
-        &[],
-        &["camera.vfov"],
-    );
-}
-
-#[test]
-fn look_at_equal_to_eye() {
-    expect_failure(
-        &camera_variant("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, 0.0, 5.0]"),
-        &[],
-        &["camera.look_at", "equals eye"],
-    );
-}
-
-#[test]
-fn up_parallel_to_view() {
-    expect_failure(
-        &format!(
-            "requires = [\"depth\"]\n{}{OBJECT}",
-            CAMERA.replace("vfov", "up = [0.0, 0.0, 2.0]\nvfov")
+fn bad_cameras_are_named() {
+    let vfov: &[&str] = &["camera.vfov"];
+    let cases: [(&str, &str, &[&str]); 7] = [
+        ("width = 16", "width = 0", &["camera.width", "at least 1x1"]),
+        ("vfov = 45.0", "vfov = 0.0", vfov),
+        ("vfov = 45.0", "vfov = 180.0", vfov),
+        ("vfov = 45.0", "vfov = -5.0", vfov),
+        ("vfov = 45.0", "vfov = nan", vfov),
+        (
+            "look_at = [0.0, 0.0, 0.0]",
+            "look_at = [0.0, 0.0, 5.0]",
+            &["camera.look_at", "equals eye"],
         ),
-        &[],
-        &["camera.up", "parallel"],
-    );
+        (
+            "vfov",
+            "up = [0.0, 0.0, 2.0]\nvfov",
+            &["camera.up", "parallel"],
+        ),
+    ];
+    for (from, to, must_mention) in cases {
+        expect_failure(&camera_variant(from, to), &[], must_mention);
+    }
 }
 
 #[test]
@@ -756,14 +724,7 @@ fn unknown_only_backends_are_refused_before_anything_starts() {
         );
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
-    let res = output_within(
-        rendiff()
-            .args(["check", "scenes/three_triangles.toml", "-o"])
-            .arg(&out)
-            .args(["--only", "trace,embree_robust"]),
-        120,
-    );
+    let res = check_three_triangles(&dir.path().join("run"), &["--only", "trace,embree_robust"]);
     assert_eq!(
         res.status.code(),
         Some(0),

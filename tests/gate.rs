@@ -5,7 +5,7 @@
 use rendiff::check::manifest::{ResultEntry, Results};
 use rendiff::gate::{self, ChangeKind, Noise};
 use serde_json::{json, Value};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 mod common;
 use common::cli::{bless_command, gate_command, small_check, succeeds};
@@ -23,6 +23,17 @@ fn entry(
         "edge_mismatches": edge, "interior_mismatches": 0, "mask_mismatches": 0,
         "max_abs_error": max_abs, "max_rel_error": max_abs / 4.0,
     });
+    with_details(scene, backend, buffer, status, details)
+}
+
+/// A verdict with the given details (a JSON object) and a reason naming its status.
+fn with_details(
+    scene: &str,
+    backend: &str,
+    buffer: &str,
+    status: &str,
+    details: Value,
+) -> ResultEntry {
     ResultEntry {
         scene: scene.into(),
         backend: backend.into(),
@@ -64,6 +75,17 @@ fn kinds_of(o: &gate::Outcome, backend: Option<&str>, what: &str) -> Vec<ChangeK
         .filter(|c| backend.is_none_or(|b| c.backend == b) && c.what.contains(what))
         .map(|c| c.kind)
         .collect()
+}
+
+/// Asserts that `backend`'s changes whose description contains `what` are
+/// exactly `want`, printing `why` and every change otherwise.
+fn expect_kinds(o: &gate::Outcome, backend: &str, what: &str, want: &[ChangeKind], why: &str) {
+    assert_eq!(
+        kinds_of(o, Some(backend), what),
+        want,
+        "{why}: {:#?}",
+        o.changes
+    );
 }
 
 #[test]
@@ -125,29 +147,36 @@ fn counts_may_not_grow_and_errors_only_within_their_noise() {
         ("a", "embree", "Z", ("pass", 0, 1e-6), ("pass", 0, 1e-9)),
     ]);
     let o = compare(&base, now);
-    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
-    assert_eq!(
-        by("povray", "edge_mismatches worse"),
-        vec![ChangeKind::Regression],
-        "{:#?}",
-        o.changes
+    let (regression, improvement) = (&[ChangeKind::Regression], &[ChangeKind::Improvement]);
+    expect_kinds(
+        &o,
+        "povray",
+        "edge_mismatches worse",
+        regression,
+        "a count that grows",
     );
-    assert!(
-        by("povray", "max_abs_error").is_empty(),
-        "×1.4 is within the noise of an external renderer"
+    let noise = "×1.4 is within the noise of an external renderer";
+    expect_kinds(&o, "povray", "max_abs_error", &[], noise);
+    expect_kinds(
+        &o,
+        "pyrender",
+        "max_abs_error worse",
+        regression,
+        "×10 is not",
     );
-    assert_eq!(
-        by("pyrender", "max_abs_error worse"),
-        vec![ChangeKind::Regression]
+    expect_kinds(
+        &o,
+        "trace",
+        "max_abs_error worse",
+        regression,
+        "the core is exact",
     );
-    assert_eq!(
-        by("trace", "max_abs_error worse"),
-        vec![ChangeKind::Regression],
-        "the core is exact"
-    );
-    assert_eq!(
-        by("embree", "max_abs_error better"),
-        vec![ChangeKind::Improvement]
+    expect_kinds(
+        &o,
+        "embree",
+        "max_abs_error better",
+        improvement,
+        "an error that shrinks",
     );
     let c = o.changes.iter().find(|c| c.backend == "povray").unwrap();
     assert_eq!((c.before.as_str(), c.now.as_str()), ("10", "11 (+1)"));
@@ -311,52 +340,24 @@ fn bless_then_gate_passes_and_catches_every_kind_of_change() {
 
     // Bless refuses a failing run unless told to accept its failures, and a
     // run with a new scene unless told to accept scene changes.
-    let out = bless_command(&run, &baseline).output().unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--allow-failures"));
-    assert_eq!(
-        std::fs::read(&baseline).unwrap(),
-        before,
-        "a refused bless changed the baseline"
-    );
-    let out = bless_command(&run, &baseline)
-        .arg("--allow-failures")
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("added 1: \"brand_new\"") && err.contains("--allow-scene-changes"),
-        "{err}"
-    );
-    assert_eq!(std::fs::read(&baseline).unwrap(), before);
+    let (code, err) = bless_cli(&run, &baseline, &[]);
+    bless_refused(code, &err, &["--allow-failures"], &baseline, &before);
+    let (code, err) = bless_cli(&run, &baseline, &["--allow-failures"]);
+    let needles = ["added 1: \"brand_new\"", "--allow-scene-changes"];
+    bless_refused(code, &err, &needles, &baseline, &before);
     // The entry the gate found missing is not dropped silently: bless names
     // it and wants a reason (issue 40: it used to bless it away).
-    let bless_all = |extra: &[&str]| {
-        bless_command(&run, &baseline)
-            .arg("--allow-failures")
-            .arg("--allow-scene-changes")
-            .args(extra)
-            .output()
-            .unwrap()
-    };
-    let out = bless_all(&[]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("1 entry of the baseline's scenes is not in the run")
-            && err.contains("three_triangles::trace::Z")
-            && err.contains("--drop-reason"),
-        "{err}"
-    );
-    assert_eq!(std::fs::read(&baseline).unwrap(), before);
-    let out = bless_all(&["--drop-reason", "trace no longer writes depth"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let allow_all = ["--allow-failures", "--allow-scene-changes"];
+    let (code, err) = bless_cli(&run, &baseline, &allow_all);
+    let needles = [
+        "1 entry of the baseline's scenes is not in the run",
+        "three_triangles::trace::Z",
+        "--drop-reason",
+    ];
+    bless_refused(code, &err, &needles, &baseline, &before);
+    let reason = ["--drop-reason", "trace no longer writes depth"];
+    let (code, err) = bless_cli(&run, &baseline, &[&allow_all[..], &reason].concat());
+    assert_eq!(code, Some(0), "{err}");
     succeeds(&mut gate_command(&run, &baseline));
 }
 
@@ -375,17 +376,8 @@ fn classed(backend: &str, tie: Option<u64>, crack: Option<u64>) -> ResultEntry {
 }
 
 fn other(scene: &str, backend: &str, buffer: &str, status: &str) -> ResultEntry {
-    ResultEntry {
-        scene: scene.into(),
-        backend: backend.into(),
-        buffer: buffer.into(),
-        status: status.into(),
-        reason: format!("{status} because"),
-        details: json!({"rms_px": 0.01, "max_angle_rad": 1e-4, "interior_mismatches": 0})
-            .as_object()
-            .unwrap()
-            .clone(),
-    }
+    let details = json!({"rms_px": 0.01, "max_angle_rad": 1e-4, "interior_mismatches": 0});
+    with_details(scene, backend, buffer, status, details)
 }
 
 #[test]
@@ -403,12 +395,13 @@ fn tie_and_crack_counts_are_held_like_edge_counts() {
         classed("trace", Some(1), Some(1)),
     ];
     let o = compare(&base, now);
-    let by = |backend: &str, what: &str| kinds_of(&o, Some(backend), what);
-    assert_eq!(
-        by("povray", "tie_mismatches worse"),
-        vec![ChangeKind::Regression],
-        "a tie count that grows is a regression: {:#?}",
-        o.changes
+    let grows = "a tie count that grows is a regression";
+    expect_kinds(
+        &o,
+        "povray",
+        "tie_mismatches worse",
+        &[ChangeKind::Regression],
+        grows,
     );
     let c = o
         .changes
@@ -416,12 +409,21 @@ fn tie_and_crack_counts_are_held_like_edge_counts() {
         .find(|c| c.what == "tie_mismatches worse")
         .unwrap();
     assert_eq!((c.before.as_str(), c.now.as_str()), ("4", "5 (+1)"));
-    assert_eq!(
-        by("embree", "crack_mismatches better"),
-        vec![ChangeKind::Improvement],
-        "a crack count that shrinks is an improvement"
+    let shrinks = "a crack count that shrinks is an improvement";
+    expect_kinds(
+        &o,
+        "embree",
+        "crack_mismatches better",
+        &[ChangeKind::Improvement],
+        shrinks,
     );
-    assert!(by("trace", "tie_mismatches worse").is_empty());
+    expect_kinds(
+        &o,
+        "trace",
+        "tie_mismatches worse",
+        &[],
+        "an unchanged count",
+    );
     assert_eq!(o.regressions(), 1);
 }
 
@@ -531,6 +533,34 @@ fn json_run(run: &Path, scenes: &[&str], extra: Vec<Value>) {
     common::runs::edit_results(run, |r| r["results"].as_array_mut().unwrap().extend(extra));
 }
 
+/// A refused bless: exit 2, each of `needles` in `err` (the message, or the
+/// line of it that must say them all), and the baseline file still `kept`.
+fn bless_refused(code: Option<i32>, err: &str, needles: &[&str], baseline: &Path, kept: &[u8]) {
+    assert_eq!(code, Some(2), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "expected {n:?} in: {err}");
+    }
+    let now = std::fs::read(baseline).unwrap();
+    assert!(now == kept, "a refused bless changed the baseline");
+}
+
+/// A run of scenes alpha and beta ([`json_run`]) in `dir/NAME`, blessed into
+/// `dir/baseline.json`, which that first bless (nothing to compare with) must
+/// create: the baseline's path, the run's, and the baseline's bytes.
+fn first_bless(dir: &Path, name: &str) -> (PathBuf, PathBuf, Vec<u8>) {
+    let baseline = dir.join("baseline.json");
+    let run = dir.join(name);
+    json_run(&run, &["alpha", "beta"], vec![]);
+    let (code, err) = bless_cli(&run, &baseline, &[]);
+    assert_eq!(
+        code,
+        Some(0),
+        "the first bless has nothing to compare with: {err}"
+    );
+    let blessed = std::fs::read(&baseline).unwrap();
+    (baseline, run, blessed)
+}
+
 fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, String) {
     let out = bless_command(run, baseline).args(flags).output().unwrap();
     (
@@ -542,15 +572,7 @@ fn bless_cli(run: &Path, baseline: &Path, flags: &[&str]) -> (Option<i32>, Strin
 #[test]
 fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
     let dir = tempfile::tempdir().unwrap();
-    let baseline = dir.path().join("baseline.json");
-    let first = dir.path().join("first");
-    json_run(&first, &["alpha", "beta"], vec![]);
-    let (code, err) = bless_cli(&first, &baseline, &[]);
-    assert_eq!(
-        code,
-        Some(0),
-        "the first bless has nothing to compare with: {err}"
-    );
+    let (baseline, _, blessed) = first_bless(dir.path(), "first");
     let b = gate::load_baseline(&baseline).unwrap();
     let e = b.entries.iter().find(|e| e.buffer == "N").unwrap();
     assert_eq!(
@@ -559,7 +581,6 @@ fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
         "class counts are blessed"
     );
     assert_eq!(e.metrics["crack_mismatches"], json!(0));
-    let blessed = std::fs::read(&baseline).unwrap();
 
     // A scene that could not be loaded: refused, named, even with the scene set unchanged.
     let broken = dir.path().join("broken");
@@ -572,30 +593,26 @@ fn bless_refuses_scene_errors_and_changed_scene_sets_unless_told() {
         ],
     );
     let (code, err) = bless_cli(&broken, &baseline, &[]);
-    assert_eq!(code, Some(2), "{err}");
-    assert!(
-        err.contains("1 scene could not be loaded: beta (cannot load scene: unknown shape kind")
-            && err.contains("--allow-failures"),
-        "{err}"
-    );
-    assert_eq!(std::fs::read(&baseline).unwrap(), blessed);
+    let needles = [
+        "1 scene could not be loaded: beta (cannot load scene: unknown shape kind",
+        "--allow-failures",
+    ];
+    bless_refused(code, &err, &needles, &baseline, &blessed);
 
     // Scenes added and removed: one line naming both, refused until allowed.
     let changed = dir.path().join("changed");
     json_run(&changed, &["alpha", "gamma", "delta"], vec![]);
     let (code, err) = bless_cli(&changed, &baseline, &[]);
-    assert_eq!(code, Some(2), "{err}");
     let line = err
         .lines()
         .find(|l| l.contains("scenes differ"))
         .unwrap_or_else(|| panic!("no scene-change line in {err}"));
-    assert!(
-        line.contains("added 2: \"delta\", \"gamma\"")
-            && line.contains("removed 1: \"beta\"")
-            && line.contains("--allow-scene-changes"),
-        "{line}"
-    );
-    assert_eq!(std::fs::read(&baseline).unwrap(), blessed);
+    let needles = [
+        "added 2: \"delta\", \"gamma\"",
+        "removed 1: \"beta\"",
+        "--allow-scene-changes",
+    ];
+    bless_refused(code, line, &needles, &baseline, &blessed);
     let (code, err) = bless_cli(&changed, &baseline, &["--allow-scene-changes"]);
     assert_eq!(code, Some(0), "{err}");
     let b = gate::load_baseline(&baseline).unwrap();
@@ -636,12 +653,7 @@ fn one_error_line(code: Option<i32>, err: &str, file: &Path, field: &str) {
 #[test]
 fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     let dir = tempfile::tempdir().unwrap();
-    let baseline = dir.path().join("baseline.json");
-    let run = dir.path().join("run");
-    json_run(&run, &["alpha", "beta"], vec![]);
-    let (code, err) = bless_cli(&run, &baseline, &[]);
-    assert_eq!(code, Some(0), "{err}");
-    let blessed = std::fs::read(&baseline).unwrap();
+    let (baseline, run, blessed) = first_bless(dir.path(), "run");
     let results = run.join("results.json");
     let clean = std::fs::read(&results).unwrap();
     type Case = (&'static str, fn(&mut Value), &'static str);
@@ -710,39 +722,30 @@ fn unknown_statuses_and_negative_counts_are_refused_naming_file_and_field() {
     std::fs::write(&results, &clean).unwrap();
     let (code, out, err) = gate_cli(&run, &baseline);
     assert_eq!(code, Some(0), "{out}{err}");
-    edit_json(&baseline, |v| {
-        v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into()
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[2].metrics.interior_mismatches: -2 is not a count",
-    );
-    std::fs::write(&baseline, &blessed).unwrap();
-    edit_json(&baseline, |v| {
-        let copy = v["entries"][0].clone();
-        v["entries"].as_array_mut().unwrap().push(copy);
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[6]: a second verdict for scene",
-    );
-    std::fs::write(&baseline, &blessed).unwrap();
-    edit_json(&baseline, |v| {
-        v["entries"][0]["status"] = "expected_failure".into()
-    });
-    let (code, _, err) = gate_cli(&run, &baseline);
-    one_error_line(
-        code,
-        &err,
-        &baseline,
-        "entries[0].status: unknown status \"expected_failure\"",
-    );
+    type Edit = (fn(&mut Value), &'static str);
+    let baseline_cases: [Edit; 3] = [
+        (
+            |v| v["entries"][2]["metrics"]["interior_mismatches"] = (-2).into(),
+            "entries[2].metrics.interior_mismatches: -2 is not a count",
+        ),
+        (
+            |v| {
+                let copy = v["entries"][0].clone();
+                v["entries"].as_array_mut().unwrap().push(copy);
+            },
+            "entries[6]: a second verdict for scene",
+        ),
+        (
+            |v| v["entries"][0]["status"] = "expected_failure".into(),
+            "entries[0].status: unknown status \"expected_failure\"",
+        ),
+    ];
+    for (edit, field) in baseline_cases {
+        std::fs::write(&baseline, &blessed).unwrap();
+        edit_json(&baseline, edit);
+        let (code, _, err) = gate_cli(&run, &baseline);
+        one_error_line(code, &err, &baseline, field);
+    }
 }
 
 #[test]

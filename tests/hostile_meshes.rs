@@ -9,14 +9,8 @@
 mod common;
 use common::cli::{check_failure, export_refused, output_within, raster_within, rendiff};
 
-const CAMERA: &str = r#"
-[camera]
-eye = [0.3, 0.3, 5.0]
-look_at = [0.3, 0.3, 0.0]
-vfov = 45.0
-width = 32
-height = 24
-"#;
+const CAMERA: &str =
+    crate::camera_toml!(eye [0.3, 0.3, 5.0], look_at [0.3, 0.3, 0.0], vfov 45.0, 32 x 24);
 
 /// One triangle's data for a glTF `data:` URI: positions (36 bytes) then
 /// u16 indices 0 1 2 (6 bytes) and 2 bytes of padding.

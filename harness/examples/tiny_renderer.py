@@ -73,7 +73,8 @@ def render(scene_dir: Path, out: Path) -> None:
         length = np.linalg.norm(n)
         if length == 0.0:
             continue  # zero-area triangles are never visible
-        rows, cols = window(np.array([a, b, c]), eye, fwd, right, up, tan_half, w, h, near)
+        depth, px, py = project(np.array([a, b, c]), eye, fwd, right, up, tan_half, w, h)
+        rows, cols = window(depth, px, py, w, h, near)
         dd = d[rows, cols]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.dot(a - eye, n) / (dd @ n)
@@ -93,7 +94,7 @@ def render(scene_dir: Path, out: Path) -> None:
     )
 
 
-def window(
+def project(
     v: np.ndarray,
     eye: np.ndarray,
     fwd: np.ndarray,
@@ -102,14 +103,23 @@ def window(
     tan_half: float,
     w: int,
     h: int,
-    near: float,
-) -> tuple[slice, slice]:
-    """The pixels a triangle can cover: its projected bounding box plus a pixel, or all of them."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points' planar depths and image positions in pixels, as docs/DESIGN.md defines them: x right,
+    y down, the image's top-left corner at (0, 0), so pixel (x, y)'s center is at (x + 0.5, y + 0.5).
+    The positions mean something only where the depth is > 0."""
     depth = (v - eye) @ fwd
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = ((v - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0
+        py = (1.0 - (v - eye) @ up / depth / tan_half) * h / 2.0
+    return depth, px, py
+
+
+def window(depth: np.ndarray, px: np.ndarray, py: np.ndarray, w: int, h: int, near: float) -> tuple[slice, slice]:
+    """The pixels a triangle can cover, from its vertices' projection (`project`): its projected
+    bounding box plus a pixel, or all of them when a vertex is not beyond the near plane."""
     if depth.min() <= near:
         return slice(0, h), slice(0, w)
-    px = ((v - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0 - 0.5
-    py = (1.0 - (v - eye) @ up / depth / tan_half) * h / 2.0 - 0.5
+    px, py = px - 0.5, py - 0.5  # pixel (x, y)'s center at (x, y)
     x0, x1 = int(np.clip(np.floor(px.min()) - 1, 0, w)), int(np.clip(np.ceil(px.max()) + 2, 0, w))
     y0, y1 = int(np.clip(np.floor(py.min()) - 1, 0, h)), int(np.clip(np.ceil(py.max()) + 2, 0, h))
     return slice(y0, y1), slice(x0, x1)

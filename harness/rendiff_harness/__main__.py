@@ -85,10 +85,6 @@ def cmd_info(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-SETTINGS = ("aa_method", "aa_threshold", "aa_depth", "quality", "max_depth")
-"""Backend-specific speed/quality settings: passed only when given, refused by a backend without them."""
-
-
 def _settings(args: argparse.Namespace) -> dict[str, Any]:
     return {k: getattr(args, k) for k in SETTINGS if getattr(args, k, None) is not None}
 
@@ -295,6 +291,31 @@ def _max_depth(text: str) -> int:
     return value
 
 
+SETTINGS: dict[str, tuple[Callable[[str], Any], str]] = {
+    "aa_method": (
+        _bounded(int, 1, 2),
+        "POV-Ray antialiasing method (+AM1 adaptive, +AM2 recursive) for the radiance passes only; "
+        "IDs and depth are never antialiased (default: off, one sample at the pixel center)",
+    ),
+    "aa_threshold": (
+        _bounded(float, 0.0, 3.0),
+        "POV-Ray antialiasing threshold +A (0..3, default 0.3; needs --aa-method)",
+    ),
+    "aa_depth": (_bounded(int, 1, 9), "POV-Ray antialiasing depth +R (1..9, default 3; needs --aa-method)"),
+    "quality": (
+        _bounded(int, 0, 11),
+        "POV-Ray quality level +Q for the radiance passes (0..11, default POV-Ray's 9)",
+    ),
+    "max_depth": (
+        _max_depth,
+        "Mitsuba path length limit for path-traced scenes (-1 = unlimited, or >= 1; "
+        "default: the scene's integrator.max_depth)",
+    ),
+}
+"""Backend-specific speed/quality settings (render's option `--NAME` with `_` as `-`: its parser and
+help): passed only when given, refused by a backend without them. The one list of them."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m rendiff_harness", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -341,38 +362,8 @@ def build_parser() -> argparse.ArgumentParser:
         "quality settings (speed/accuracy knobs; defaults keep the conformance contract; "
         "a backend refuses a setting it does not have)"
     )
-    q.add_argument(
-        "--aa-method",
-        type=_bounded(int, 1, 2),
-        default=None,
-        help="POV-Ray antialiasing method (+AM1 adaptive, +AM2 recursive) for the radiance passes only; "
-        "IDs and depth are never antialiased (default: off, one sample at the pixel center)",
-    )
-    q.add_argument(
-        "--aa-threshold",
-        type=_bounded(float, 0.0, 3.0),
-        default=None,
-        help="POV-Ray antialiasing threshold +A (0..3, default 0.3; needs --aa-method)",
-    )
-    q.add_argument(
-        "--aa-depth",
-        type=_bounded(int, 1, 9),
-        default=None,
-        help="POV-Ray antialiasing depth +R (1..9, default 3; needs --aa-method)",
-    )
-    q.add_argument(
-        "--quality",
-        type=_bounded(int, 0, 11),
-        default=None,
-        help="POV-Ray quality level +Q for the radiance passes (0..11, default POV-Ray's 9)",
-    )
-    q.add_argument(
-        "--max-depth",
-        type=_max_depth,
-        default=None,
-        help="Mitsuba path length limit for path-traced scenes (-1 = unlimited, or >= 1; "
-        "default: the scene's integrator.max_depth)",
-    )
+    for name, (kind, text) in SETTINGS.items():
+        q.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=text)
     q.add_argument(
         "--variant",
         choices=("scalar_rgb", "llvm_ad_rgb"),

@@ -306,50 +306,24 @@ def _run_with(tmp_path: Path, toml: str) -> dict[tuple[str, str, str], dict[str,
     return _index(_strict_json(run / "results.json"))
 
 
+def _expect(scene: str, backend: str, buffer: str, reason: str, **bounds: list[int]) -> str:
+    """One `[[expect]]` entry of an expectations file: status expected_fail, its count bounds."""
+    keys = {"scene": scene, "backend": backend, "buffer": buffer, "status": "expected_fail", "reason": reason}
+    lines = [f"{k} = {json.dumps(v)}" for k, v in {**keys, **bounds}.items()]
+    return "\n[[expect]]\n" + "\n".join(lines) + "\n"
+
+
 def test_expectations_pass_unexpected_pass_expected_fail_fail(tmp_path: Path) -> None:
-    toml = """
-[[expect]]
-scene = "quads"
-backend = "povray"
-buffer = "id"
-status = "expected_fail"
-interior_mismatches = [1, 1]
-reason = "recorded povray bug"
-
-[[expect]]
-scene = "quads"
-backend = "mitsuba"
-buffer = "Z"
-status = "expected_fail"
-reason = "mitsuba depth bug"
-
-[[expect]]
-scene = "quads"
-backend = "trace"
-buffer = "id"
-status = "expected_fail"
-reason = "was broken"
-
-[[expect]]
-scene = "quads"
-backend = "newthing"
-buffer = "Z"
-status = "expected_fail"
-interior_mismatches = [0, 3]
-reason = "too tight"
-
-[[expect]]
-scene = "gone"
-backend = "povray"
-buffer = "id"
-status = "expected_fail"
-reason = "stale"
-
-[[declare]]
-backend = "mitsuba"
-allows = "crack"
-reason = "not watertight"
-"""
+    toml = "".join(
+        [
+            _expect("quads", "povray", "id", "recorded povray bug", interior_mismatches=[1, 1]),
+            _expect("quads", "mitsuba", "Z", "mitsuba depth bug"),
+            _expect("quads", "trace", "id", "was broken"),
+            _expect("quads", "newthing", "Z", "too tight", interior_mismatches=[0, 3]),
+            _expect("gone", "povray", "id", "stale"),
+            '[[declare]]\nbackend = "mitsuba"\nallows = "crack"\nreason = "not watertight"\n',
+        ]
+    )
     res = _run_with(tmp_path, toml)
     p = res[("quads", "povray", "id")]
     assert p["status"] == "expected_fail" and "recorded povray bug" in p["reason"]
@@ -367,21 +341,9 @@ reason = "not watertight"
 
 def test_unused_expectations_noted_only_for_the_runs_scenes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A stale entry of a scene in the run is shown; one of a scene the run never had is only in results.json."""
-    toml = """
-[[expect]]
-scene = "quads"
-backend = "povray "
-buffer = "id"
-status = "expected_fail"
-reason = "a typo in the backend"
-
-[[expect]]
-scene = "elsewhere"
-backend = "povray"
-buffer = "id"
-status = "expected_fail"
-reason = "a scene of another run"
-"""
+    toml = _expect("quads", "povray ", "id", "a typo in the backend") + _expect(
+        "elsewhere", "povray", "id", "a scene of another run"
+    )
     _run_with(tmp_path, toml)
     err = capsys.readouterr().err
     note = [line for line in err.splitlines() if line.startswith("note: expectations matched by no compared result")]

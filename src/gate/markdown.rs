@@ -8,18 +8,17 @@ use super::*;
 pub fn md(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
     for c in s.chars() {
+        if let Some(entity) = crate::report::html::markup_entity(c) {
+            out.push_str(entity);
+            continue;
+        }
         match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
             '|' => out.push_str("\\|"),
             '\n' | '\r' => out.push(' '),
             // Other control characters (a terminal escape in a scene's file
             // name) and bidi overrides are written as escapes: the summary
             // is printed on the terminal too.
-            c if c.is_control()
-                || matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}') =>
-            {
+            c if c.is_control() || crate::scene::is_bidi_control(c) => {
                 out.extend(c.escape_unicode())
             }
             '\\' | '`' | '*' | '[' | ']' | '~' => {

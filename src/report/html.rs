@@ -12,10 +12,11 @@ use std::fmt::Write;
 pub fn escape(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
     for c in s.chars() {
+        if let Some(entity) = markup_entity(c) {
+            out.push_str(entity);
+            continue;
+        }
         match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
             // Control characters are invisible and can confuse viewers; show them.
@@ -26,6 +27,18 @@ pub fn escape(s: &str) -> String {
         }
     }
     out
+}
+
+/// The entity for a character that opens markup or an entity in HTML text
+/// (`&`, `<`, `>`): the list [`escape`] and the gate's markdown escape (markdown
+/// renders inline HTML) share.
+pub fn markup_entity(c: char) -> Option<&'static str> {
+    match c {
+        '&' => Some("&amp;"),
+        '<' => Some("&lt;"),
+        '>' => Some("&gt;"),
+        _ => None,
+    }
 }
 
 /// Percent-encodes a relative URL path (our own file names are already safe;

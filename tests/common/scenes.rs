@@ -11,6 +11,29 @@ use rendiff::scene::Scene;
 use rendiff::trace::{self, TraceOptions};
 use std::path::{Path, PathBuf};
 
+/// A scene file's `[camera]` table as a `&'static str` (a newline before and
+/// after), so that a test's scene texts stay `const`s read with `{CAMERA}` in
+/// `format!`: `camera_toml!(eye [0.0, 0.0, 5.0], look_at [0.0, 0.0, 0.0],
+/// vfov 45.0, 16 x 12)`.
+#[macro_export]
+macro_rules! camera_toml {
+    (eye $eye:tt, look_at $at:tt, vfov $vfov:literal, $w:literal x $h:literal) => {
+        concat!(
+            "\n[camera]\neye = ",
+            stringify!($eye),
+            "\nlook_at = ",
+            stringify!($at),
+            "\nvfov = ",
+            stringify!($vfov),
+            "\nwidth = ",
+            stringify!($w),
+            "\nheight = ",
+            stringify!($h),
+            "\n"
+        )
+    };
+}
+
 /// Every scene file in scenes/.
 pub fn scene_files() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");

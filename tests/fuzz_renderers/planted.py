@@ -37,15 +37,16 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 # The harness's EXR writer (float32 Z and N, exact uint32 ids), and the tiny renderer's reading
-# of the resolved scene.
+# of the resolved scene and its projection.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness" / "examples"))
 from rendiff_harness.contract import exrbuf  # noqa: E402
-from tiny_renderer import read_scene  # noqa: E402
+from tiny_renderer import project, read_scene  # noqa: E402
 
 BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
@@ -57,22 +58,12 @@ COPLANAR = 2.0**-10
 BUGS = ("coplanar_bias", "subpixel_shift", "far_depth", "coplanar_swap", "corner_sample", "radial_depth")
 
 
-def projected_area_px(
-    tri: np.ndarray,
-    eye: np.ndarray,
-    fwd: np.ndarray,
-    right: np.ndarray,
-    up: np.ndarray,
-    tan_half: float,
-    w: int,
-    h: int,
-) -> float:
+def projected_area_px(tri: np.ndarray, camera: tuple[Any, ...]) -> float:
     """The triangle's image area in square pixels (inf when a vertex is not in front of the eye)."""
-    depth = (tri - eye) @ fwd
+    w, h, eye, fwd, right, up, _near, _far, tan_half = camera
+    depth, px, py = project(tri, eye, fwd, right, up, tan_half, w, h)
     if depth.min() <= 0.0:
         return float("inf")
-    px = ((tri - eye) @ right / depth / (tan_half * w / h) + 1.0) * w / 2.0
-    py = (1.0 - (tri - eye) @ up / depth / tan_half) * h / 2.0
     return float(abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0])) / 2.0)
 
 
@@ -127,7 +118,8 @@ def _neighbours_in_one_plane(s: np.ndarray, t: np.ndarray, eye: np.ndarray) -> b
 
 
 def render(bug: str, scene_dir: Path, out: Path) -> None:
-    (w, h, eye, fwd, right, up, near, far, tan_half), tris, objects = read_scene(scene_dir)
+    camera, tris, objects = read_scene(scene_dir)
+    w, h, eye, fwd, right, up, near, far, tan_half = camera
 
     center = 0.0 if bug == "corner_sample" else 0.5  # the corner_sample bug: no half-pixel offset
     sx = (2.0 * (np.arange(w) + center) / w - 1.0) * tan_half * w / h
@@ -138,7 +130,7 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
     prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
     normal = np.zeros((h, w, 3))
     for i, (a, b, c) in enumerate(tris):
-        if bug == "subpixel_shift" and projected_area_px(tris[i], eye, fwd, right, up, tan_half, w, h) < 1.0:
+        if bug == "subpixel_shift" and projected_area_px(tris[i], camera) < 1.0:
             # The planted bug: one vertex of a sub-pixel triangle moved 1e-3 px right.
             pixel = 2.0 * tan_half * float((a - eye) @ fwd) / h
             a = a + right * (SHIFT_PX * pixel)

@@ -23,6 +23,7 @@
 //! failure contract of [`super::judge`].
 
 use super::*;
+use rendiff::scene::gltf::base64_encode;
 use serde_json::{json, Value};
 
 /// What a mutation does to the file's meaning.
@@ -125,24 +126,6 @@ fn base() -> (Value, Vec<u8>) {
         ]
     });
     (json, bin)
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = c
-            .iter()
-            .enumerate()
-            .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
-        for k in 0..=c.len() {
-            s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-        }
-    }
-    while !s.len().is_multiple_of(4) {
-        s.push('=');
-    }
-    s
 }
 
 /// A GLB container of `json` and (if any) `bin`, each chunk padded to 4
@@ -1075,7 +1058,10 @@ impl GltfCase {
     fn encode_uri(&self, d: &mut Doc) {
         match self.container {
             Container::DataUri => {
-                let uri = format!("data:application/octet-stream;base64,{}", base64(&d.bin));
+                let uri = format!(
+                    "data:application/octet-stream;base64,{}",
+                    base64_encode(&d.bin)
+                );
                 set(d, "/buffers/0/uri", json!(uri));
             }
             Container::External => set(d, "/buffers/0/uri", json!("b.bin")),

@@ -593,59 +593,30 @@ mod tests {
     /// facing plane equal) and oblique, near the origin and far from it
     /// (the eye's offset enters the ray error).
     fn cameras() -> Vec<Camera> {
+        // Up is +y; near and far are the defaults unless given.
+        let cam = |eye, at, vfov, (w, h), (near, far)| {
+            Camera::new(eye, at, DVec3::Y, vfov, w, h, near, far).unwrap()
+        };
+        let open = (1e-3, f64::INFINITY);
         let mut out = Vec::new();
         for off in [0.0, 1e3, 12345.678, 3.1e6] {
             let o = DVec3::new(off, -off, off);
-            out.push(Camera::new(
-                o + DVec3::Z,
-                o,
-                DVec3::Y,
-                90.0,
-                64,
-                64,
-                1e-3,
-                f64::INFINITY,
-            ));
-            out.push(Camera::new(
-                o + DVec3::new(0.3, 0.7, 2.1),
-                o + DVec3::new(0.1, -0.2, 0.0),
-                DVec3::Y,
-                50.0,
-                72,
-                40,
-                1e-3,
-                f64::INFINITY,
-            ));
+            out.push(cam(o + DVec3::Z, o, 90.0, (64, 64), open));
+            let (eye, at) = (DVec3::new(0.3, 0.7, 2.1), DVec3::new(0.1, -0.2, 0.0));
+            out.push(cam(o + eye, o + at, 50.0, (72, 40), open));
         }
         // Pitched down, its right axis exactly the world's x: the
         // horizontal and z-facing planes have interpolants constant along
         // rows (`a = n . r = 0`, `b` not).
         for off in [0.0, 1e3] {
             let o = DVec3::new(off, -off, off);
-            out.push(Camera::new(
-                o + DVec3::new(0.0, 2.0, 3.0),
-                o,
-                DVec3::Y,
-                60.0,
-                64,
-                48,
-                1e-3,
-                f64::INFINITY,
-            ));
+            out.push(cam(o + DVec3::new(0.0, 2.0, 3.0), o, 60.0, (64, 48), open));
         }
         // Near and far planes through the trial planes: blocks whose depths
         // straddle them (not `all_hit`) test each lane's hit.
-        out.push(Camera::new(
-            DVec3::new(0.3, 0.7, 2.1),
-            DVec3::new(0.1, -0.2, 0.0),
-            DVec3::Y,
-            50.0,
-            72,
-            40,
-            2.4,
-            5.5,
-        ));
-        out.into_iter().map(Result::unwrap).collect()
+        let (eye, at) = (DVec3::new(0.3, 0.7, 2.1), DVec3::new(0.1, -0.2, 0.0));
+        out.push(cam(eye, at, 50.0, (72, 40), (2.4, 5.5)));
+        out
     }
 
     /// Triangles for one camera: planes filling the view (facing it,

@@ -219,6 +219,28 @@ fn base64_decode(text: &str) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
+/// Encodes standard base64 with `=` padding, the inverse of [`base64_decode`]:
+/// what the tests that write glTF `data:` URIs use (this module's and
+/// `tests/fuzz_scenes`), so that the encoding has one home, next to the
+/// decoder it must agree with.
+pub fn base64_encode(bytes: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for c in bytes.chunks(3) {
+        let n = c
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
+        for k in 0..=c.len() {
+            s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+        }
+    }
+    while !s.len().is_multiple_of(4) {
+        s.push('=');
+    }
+    s
+}
+
 /// Percent-decodes a URI reference into a relative path (UTF-8), or None when
 /// an escape is malformed or not UTF-8.
 fn percent_decode(uri: &str) -> Option<String> {
@@ -1570,6 +1592,22 @@ mod tests {
     use super::*;
     use std::path::PathBuf;
 
+    #[test]
+    fn base64_encoding_is_the_decoders_inverse() {
+        // Every length modulo 3 (padding of 0, 1 and 2 `=`), every byte value.
+        let bytes: Vec<u8> = (0..=255u8).chain([0, 255, 7]).collect();
+        for n in 0..bytes.len() {
+            let text = base64_encode(&bytes[..n]);
+            assert_eq!(text.len() % 4, 0, "{n} bytes: {text}");
+            assert_eq!(
+                base64_decode(&text).as_deref(),
+                Ok(&bytes[..n]),
+                "{n} bytes"
+            );
+        }
+        assert_eq!(base64_encode(b"glTF"), "Z2xURg==");
+    }
+
     /// A small glTF written by the test: accessor 0 = u16 indices (when
     /// any), accessor 1 = f32 VEC3 positions, mesh 0 = one primitive of
     /// `mode`; `nodes`/`roots`/`cameras` are JSON text.
@@ -1731,25 +1769,6 @@ mod tests {
         }
     }
 
-    /// Standard base64 with padding, for `data:` URIs.
-    fn base64(bytes: &[u8]) -> String {
-        const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-        let mut s = String::new();
-        for c in bytes.chunks(3) {
-            let n = c
-                .iter()
-                .enumerate()
-                .fold(0u32, |n, (i, b)| n | u32::from(*b) << (16 - 8 * i));
-            for k in 0..=c.len() {
-                s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            }
-        }
-        while !s.len().is_multiple_of(4) {
-            s.push('=');
-        }
-        s
-    }
-
     /// A glTF file whose mesh 0 is one indexed triangle (indices 0 1 2) over
     /// a POSITION accessor of `count` vertices without a bufferView (zeros,
     /// the first three replaced by a sparse substitution), used by `nodes`
@@ -1777,7 +1796,7 @@ mod tests {
                                            "values": {{"bufferView": 1}}}}}},
                              {{"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}}]}}"#,
             roots = roots.join(", "),
-            data = base64(&bin),
+            data = base64_encode(&bin),
         )
     }
 
@@ -1873,7 +1892,7 @@ mod tests {
         assert_eq!(f.nodes[0].triangles[0][2], DVec3::Y);
 
         let mut d = Doc::tri();
-        let b64 = base64(&d.bin());
+        let b64 = base64_encode(&d.bin());
         d.uri = Some(format!("data:application/octet-stream;base64,{b64}"));
         let p = dir.path().join("embedded.gltf");
         std::fs::write(&p, d.json()).unwrap();
@@ -2212,7 +2231,7 @@ mod tests {
             &format!(
                 r#""buffers": [{{"byteLength": {}, "uri": "data:application/octet-stream;base64,{}"}}, {{"#,
                 bin.len(),
-                base64(bin)
+                base64_encode(bin)
             ),
             1,
         );
@@ -2370,7 +2389,7 @@ mod tests {
                    "accessors": [{{"bufferView": 0, "componentType": {ct}, "normalized": {normalized},
                                    "count": 3, "type": "VEC3", "min": [{lo}, {lo}, {lo}], "max": [{hi}, {hi}, {hi}]}}]}}"#,
                 len = bin.len(),
-                b64 = base64(&bin),
+                b64 = base64_encode(&bin),
             );
             let p = dir.path().join("q.gltf");
             std::fs::write(&p, json).unwrap();

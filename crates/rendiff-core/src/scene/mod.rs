@@ -67,8 +67,7 @@ pub fn printable(text: &str, max_chars: usize) -> String {
             out.push_str(&format!("... ({left} more characters)"));
             break;
         }
-        let bidi = matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
-        if bidi {
+        if is_bidi_control(c) {
             // escape_debug leaves these (printable but reordering) alone.
             out.extend(c.escape_unicode());
         } else if c.is_control() {
@@ -78,6 +77,14 @@ pub fn printable(text: &str, max_chars: usize) -> String {
         }
     }
     out
+}
+
+/// The bidirectional marks, embeddings, overrides and isolates (U+200E,
+/// U+200F, U+202A..U+202E, U+2066..U+2069): printable characters that reorder
+/// the text around them, so a name can show other than it reads. The one list
+/// that [`printable`] and the gate's markdown escape use.
+pub fn is_bidi_control(c: char) -> bool {
+    matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
 }
 
 impl std::error::Error for SceneError {}
