@@ -416,6 +416,17 @@ impl Output {
     }
 }
 
+/// Writes one example's JSON record to `path` whole or not at all (a
+/// temporary file beside it, then a rename), so a record a figure links to
+/// is never half written.
+pub fn write_json_file(path: &str, record: &Value) -> Result<()> {
+    let tmp = format!("{path}.tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(record)? + "\n")
+        .with_context(|| format!("{tmp}: cannot write"))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("{path}: cannot write"))?;
+    Ok(())
+}
+
 /// Writes `STEM.json`, `STEM.html`, each `(name, svg)` as a standalone
 /// file `STEM-NAME.svg` and the folder's refreshed index page, as one set
 /// ([`outputs::write_set`]: all or nothing, the benchmark's plots of an
