@@ -15,6 +15,7 @@
 //! at the offset's magnitude, which is the point (scenes far from the origin).
 
 use super::literal::{LiteralObject, LiteralScene};
+use crate::scene::LightSpec;
 use anyhow::{bail, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -68,6 +69,11 @@ pub fn permutation(n: usize, seed: u64) -> Vec<usize> {
     order
 }
 
+/// The scene under `f`, a linear map (rotate, mirror) or a translation
+/// (translate): vertices, the camera's eye and look-at, point lights'
+/// positions, and directional lights' directions (through a linear `f`; a
+/// translation leaves them as they are, exactly), so the lighting moves
+/// with the geometry.
 fn map_points(s: &LiteralScene, f: impl Fn([f64; 3]) -> [f64; 3]) -> LiteralScene {
     let mut out = s.clone();
     out.camera.eye = f(s.camera.eye);
@@ -75,6 +81,14 @@ fn map_points(s: &LiteralScene, f: impl Fn([f64; 3]) -> [f64; 3]) -> LiteralScen
     for o in &mut out.objects {
         for t in &mut o.triangles {
             *t = t.map(&f);
+        }
+    }
+    let linear = f([0.0; 3]) == [0.0; 3];
+    for l in &mut out.lights {
+        match l {
+            LightSpec::Point { position, .. } => *position = f(*position),
+            LightSpec::Directional { direction, .. } if linear => *direction = f(*direction),
+            LightSpec::Directional { .. } => {}
         }
     }
     out
@@ -224,18 +238,15 @@ mod tests {
                 far: None,
             },
             objects: vec![
-                LiteralObject {
-                    triangles: vec![
-                        [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
-                        [[1.0, -1.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
-                    ],
-                    mirror: None,
-                },
-                LiteralObject {
-                    triangles: vec![[[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 2.0, -1.0]]],
-                    mirror: None,
-                },
+                LiteralObject::new(vec![
+                    [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
+                    [[1.0, -1.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+                ]),
+                LiteralObject::new(vec![[[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 2.0, -1.0]]]),
             ],
+            materials: Vec::new(),
+            lights: Vec::new(),
+            integrator: None,
         }
     }
 
