@@ -135,7 +135,15 @@ fn check(dir: &Path, scene: &str, extra: &[&str]) -> Vec<(String, Option<String>
 fn reduce(dir: &Path, stem: &str, out: &str) -> String {
     let o = output_within(
         rendiff(dir)
-            .args(["reduce", "run", stem, "--backend", BACKEND, "--buffer", "RGB"])
+            .args([
+                "reduce",
+                "run",
+                stem,
+                "--backend",
+                BACKEND,
+                "--buffer",
+                "RGB",
+            ])
             .arg("--renderers")
             .arg(renderers())
             .args(["--jobs", "2", "-o", out]),

@@ -237,10 +237,7 @@ impl LiteralScene {
     /// left out (no buffer it is judged on reads them).
     pub fn from_resolved(r: &ResolvedScene, description: &str) -> Result<LiteralScene> {
         let visibility = crate::check::visibility_features();
-        let shaded = r
-            .requires
-            .iter()
-            .any(|f| !visibility.contains(&f.as_str()));
+        let shaded = r.requires.iter().any(|f| !visibility.contains(&f.as_str()));
         let c = &r.camera;
         let camera = LiteralCamera {
             eye: c.eye.to_array(),
@@ -340,10 +337,18 @@ mod tests {
                 far: None,
             },
             objects: vec![
-                LiteralObject::new(vec![[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.1, 1.0, -0.0]]]),
+                LiteralObject::new(vec![[
+                    [-1.0, -1.0, 0.0],
+                    [1.0, -1.0, 0.0],
+                    [0.1, 1.0, -0.0],
+                ]]),
                 LiteralObject {
                     mirror: Some(([-1.0, 1.0, 1.0], [0.0, 0.0, 0.0])),
-                    ..LiteralObject::new(vec![[[-1.0, -1.0, 1e-7], [1.0, -1.0, 0.3], [0.0, 1.0, 0.5]]])
+                    ..LiteralObject::new(vec![[
+                        [-1.0, -1.0, 1e-7],
+                        [1.0, -1.0, 0.3],
+                        [0.0, 1.0, 0.5],
+                    ]])
                 },
             ],
             materials: Vec::new(),
@@ -461,7 +466,16 @@ irradiance = [0.5, 0.5, 0.7]
         let (c, c2) = (&r.camera, &r2.camera);
         assert_eq!(
             (c.eye, c.look_at, c.up, c.vfov_deg, c.width, c.height, c.near, c.far),
-            (c2.eye, c2.look_at, c2.up, c2.vfov_deg, c2.width, c2.height, c2.near, c2.far)
+            (
+                c2.eye,
+                c2.look_at,
+                c2.up,
+                c2.vfov_deg,
+                c2.width,
+                c2.height,
+                c2.near,
+                c2.far
+            )
         );
         // A fixed point: the rewrite of the rewrite is the same file.
         assert_eq!(
@@ -500,7 +514,13 @@ irradiance = [0.5, 0.5, 0.7]
         let text = text.split("[[lights]]").next().unwrap().to_string();
         let lit = LiteralScene::from_resolved(&resolve(&text), "").unwrap();
         let out = lit.to_toml();
-        assert!(!out.contains("[[materials]]") && !out.contains("material ="), "{out}");
-        assert!(!out.contains("[integrator]") && !out.contains("[[lights]]"), "{out}");
+        assert!(
+            !out.contains("[[materials]]") && !out.contains("material ="),
+            "{out}"
+        );
+        assert!(
+            !out.contains("[integrator]") && !out.contains("[[lights]]"),
+            "{out}"
+        );
     }
 }

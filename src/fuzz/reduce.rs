@@ -628,7 +628,12 @@ fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene
     for _ in 0..MAX_ROUNDS {
         let before = cur.key();
         let s = cur.clone();
-        match ddmin(s.scene.objects.len(), &|k| cand_objects(&s, k), oracle, false)? {
+        match ddmin(
+            s.scene.objects.len(),
+            &|k| cand_objects(&s, k),
+            oracle,
+            false,
+        )? {
             Ok(k) => cur = cand_objects(&s, &k),
             Err(k) => return Ok((cand_objects(&s, &k).scene, false)),
         }
@@ -639,7 +644,12 @@ fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene
             Err(k) => return Ok((cand_lights(&s, &k).scene, false)),
         }
         let s = cur.clone();
-        match ddmin(s.scene.triangle_count(), &|k| cand_triangles(&s, k), oracle, false)? {
+        match ddmin(
+            s.scene.triangle_count(),
+            &|k| cand_triangles(&s, k),
+            oracle,
+            false,
+        )? {
             Ok(k) => cur = cand_triangles(&s, &k),
             Err(k) => return Ok((cand_triangles(&s, &k).scene, false)),
         }

@@ -242,7 +242,11 @@ mod tests {
                     [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
                     [[1.0, -1.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
                 ]),
-                LiteralObject::new(vec![[[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 2.0, -1.0]]]),
+                LiteralObject::new(vec![[
+                    [-1.0, 0.0, -1.0],
+                    [1.0, 0.0, -1.0],
+                    [0.0, 2.0, -1.0],
+                ]]),
             ],
             materials: Vec::new(),
             lights: Vec::new(),
@@ -301,6 +305,50 @@ mod tests {
         let t = variant(&b, "translate").unwrap();
         assert_eq!(t.camera.eye, [1024.5, -1023.75, 1028.0]);
         assert!(variant(&b, "stretch").is_err());
+    }
+
+    #[test]
+    fn lights_move_with_the_geometry() {
+        let mut b = base();
+        b.lights = vec![
+            LightSpec::Point {
+                position: [1.0, 2.0, 3.0],
+                intensity: [1.0; 3],
+            },
+            LightSpec::Directional {
+                direction: [0.25, -1.0, -0.5],
+                irradiance: [1.0; 3],
+            },
+        ];
+        let lights = |rel: &str| variant(&b, rel).unwrap().lights;
+        let both = |p: [f64; 3], d: [f64; 3]| {
+            vec![
+                LightSpec::Point {
+                    position: p,
+                    intensity: [1.0; 3],
+                },
+                LightSpec::Directional {
+                    direction: d,
+                    irradiance: [1.0; 3],
+                },
+            ]
+        };
+        // (x, y, z) -> (z, y, -x), as the vertices.
+        assert_eq!(
+            lights("rotate"),
+            both([3.0, 2.0, -1.0], [-0.5, -1.0, -0.25])
+        );
+        assert_eq!(
+            lights("mirror"),
+            both([-1.0, 2.0, 3.0], [-0.25, -1.0, -0.5])
+        );
+        // A translation moves positions, never directions (exactly as written).
+        let o = 1024.0;
+        assert_eq!(
+            lights("translate"),
+            both([1.0 + o, 2.0 - o, 3.0 + o], [0.25, -1.0, -0.5])
+        );
+        assert_eq!(lights("permute"), b.lights);
     }
 
     #[test]
