@@ -242,6 +242,20 @@ def test_flip_is_reported_not_gating() -> None:
     assert radiance.flip_mean(a, a)[0] == pytest.approx(0.0, abs=1e-6)
 
 
+@pytest.mark.parametrize("peak", [1.2e-14, 1e-7])
+def test_flip_skips_a_reference_black_to_it(peak: float) -> None:
+    # HDR-FLIP exits the process on a reference darker than its exposure floor (2^-23): a
+    # lone pixel at `peak` on black must come back as a note, not end the comparison.
+    a = np.zeros((16, 16, 3), dtype=np.float32)
+    a[3, 4] = peak
+    flip, note = radiance.flip_mean(a, a * 2.0)
+    assert flip is None and "black to HDR-FLIP" in note
+    # Just above 4x the floor it is computed.
+    a[3, 4] = 8 * radiance.FLIP_MIN_LUMINANCE
+    flip, note = radiance.flip_mean(a, a * 2.0)
+    assert flip is not None and note == ""
+
+
 # --------------------------------------------------------------------------- lighting (closed forms)
 
 

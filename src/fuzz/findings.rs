@@ -101,6 +101,13 @@ pub struct ReducedRecord {
     pub objects_before: usize,
     /// (see above)
     pub objects_after: usize,
+    /// Lights before and after (a shaded scene's; both 0 and not written
+    /// for a visibility scene).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub lights_before: usize,
+    /// (see above)
+    #[serde(skip_serializing_if = "is_zero")]
+    pub lights_after: usize,
     /// (see above)
     pub bytes_before: usize,
     /// (see above)
@@ -130,12 +137,24 @@ pub struct ReducedRecord {
     pub error: String,
 }
 
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 impl ReducedRecord {
     /// Its sizes before and after, with `arrow` between, and what the
     /// reduction took: the one wording of the CLI's line and the page's.
     pub fn sizes(&self, arrow: &str) -> String {
+        let lights = if self.lights_before > 0 {
+            format!(
+                ", {} {arrow} {} lights",
+                self.lights_before, self.lights_after
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "{} {arrow} {} triangles, {} {arrow} {} objects, {} {arrow} {} bytes, \
+            "{} {arrow} {} triangles, {} {arrow} {} objects{lights}, {} {arrow} {} bytes, \
              {}x{} {arrow} {}x{} pixels ({} check runs, {} candidates{})",
             self.triangles_before,
             self.triangles_after,

@@ -287,6 +287,9 @@ pub fn generate(seed: u64, index: u64) -> Generated {
             far: None,
         },
         objects,
+        materials: Vec::new(),
+        lights: Vec::new(),
+        integrator: None,
     };
     debug_assert!(scene.triangle_count() <= MAX_TRIANGLES);
     Generated {
@@ -297,10 +300,7 @@ pub fn generate(seed: u64, index: u64) -> Generated {
 }
 
 fn push(objects: &mut Vec<LiteralObject>, triangles: Vec<Tri>) {
-    objects.push(LiteralObject {
-        triangles,
-        mirror: None,
-    });
+    objects.push(LiteralObject::new(triangles));
 }
 
 /// A screen-space thickness (pixels) at least `min_feature` in local units at depth `z`.

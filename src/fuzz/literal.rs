@@ -6,9 +6,15 @@
 //! any scene back from its resolved triangles, removes and snaps, and writes
 //! the result. The writer is deterministic (fixed key order, Rust's
 //! shortest round-trip float formatting), so equal scenes are equal files.
+//!
+//! A shaded scene (one that requires more than visibility) keeps what its
+//! shading reads: each object's material (albedo, emission), the lights and
+//! the integrator, all written inline, so the rewrite resolves to the same
+//! triangles, materials, lights, camera and `requires`.
 
 use crate::scene::resolve::ResolvedScene;
-use anyhow::{bail, Result};
+use crate::scene::{IntegratorSpec, LightSpec};
+use anyhow::Result;
 use std::fmt::Write;
 
 /// A triangle's three vertices, in world space (or object space, under a
@@ -46,6 +52,36 @@ pub struct LiteralObject {
     /// `transform = { scale = S, translate = T }` with a negative scale
     /// component (a mirrored transform); `None` writes no transform.
     pub mirror: Option<([f64; 3], [f64; 3])>,
+    /// Index into [`LiteralScene::materials`]; `None` is the scene's first
+    /// material, as the scene format says for an object without one.
+    pub material: Option<usize>,
+    /// Writes `allow_degenerate = true`: the object has a zero-area
+    /// triangle the scene it came from allowed.
+    pub allow_degenerate: bool,
+}
+
+impl LiteralObject {
+    /// An object of these triangles, with no transform, the scene's first
+    /// material and no zero-area triangle allowed.
+    pub fn new(triangles: Vec<Tri>) -> LiteralObject {
+        LiteralObject {
+            triangles,
+            mirror: None,
+            material: None,
+            allow_degenerate: false,
+        }
+    }
+}
+
+/// A diffuse material (docs/radiance.md): what shading reads of it. Its
+/// name is not kept (names are untrusted text): the writer names materials
+/// `m0`, `m1`, ... in the order of those the objects use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiteralMaterial {
+    /// Diffuse reflectance per channel.
+    pub albedo: [f64; 3],
+    /// Emitted radiance per channel.
+    pub emission: [f64; 3],
 }
 
 /// A whole standalone scene.
@@ -59,6 +95,13 @@ pub struct LiteralScene {
     pub camera: LiteralCamera,
     /// The objects, in object-ID order.
     pub objects: Vec<LiteralObject>,
+    /// Materials the objects index; empty writes none (the format's default
+    /// grey), as for a visibility scene.
+    pub materials: Vec<LiteralMaterial>,
+    /// The lights, in order; each is one unit the reducer may remove.
+    pub lights: Vec<LightSpec>,
+    /// The Monte Carlo settings; `None` writes none (the defaults).
+    pub integrator: Option<IntegratorSpec>,
 }
 
 /// A float as TOML reads it back to the same f64 (Rust's `{:?}` is the
@@ -104,9 +147,33 @@ impl LiteralScene {
         if let Some(far) = c.far {
             let _ = writeln!(s, "far = {}", num(far));
         }
+        if let Some(i) = &self.integrator {
+            let _ = writeln!(s, "\n[integrator]");
+            let _ = writeln!(s, "max_depth = {}", i.max_depth);
+            let _ = writeln!(s, "spp = {}", i.spp);
+        }
+        // Only the materials some object uses, renumbered densely in index
+        // order: the same scene gives the same file however many materials
+        // the reducer's removals left unused.
+        let used = self.used_materials();
+        for (k, &m) in used.iter().enumerate() {
+            let mat = &self.materials[m];
+            let _ = writeln!(s, "\n[[materials]]");
+            let _ = writeln!(s, "name = \"m{k}\"");
+            let _ = writeln!(s, "albedo = {}", vec3(&mat.albedo));
+            let _ = writeln!(s, "emission = {}", vec3(&mat.emission));
+        }
         for (i, o) in self.objects.iter().enumerate() {
             let _ = writeln!(s, "\n[[objects]]");
             let _ = writeln!(s, "name = \"o{i}\"");
+            if !used.is_empty() {
+                let m = o.material.unwrap_or(0);
+                let k = used.iter().position(|&u| u == m).unwrap_or(0);
+                let _ = writeln!(s, "material = \"m{k}\"");
+            }
+            if o.allow_degenerate {
+                let _ = writeln!(s, "allow_degenerate = true");
+            }
             if let Some((scale, translate)) = &o.mirror {
                 let _ = writeln!(
                     s,
@@ -123,26 +190,54 @@ impl LiteralScene {
             }
             let _ = writeln!(s, "]");
         }
+        for l in &self.lights {
+            let _ = writeln!(s, "\n[[lights]]");
+            match l {
+                LightSpec::Point {
+                    position,
+                    intensity,
+                } => {
+                    let _ = writeln!(s, "kind = \"point\"");
+                    let _ = writeln!(s, "position = {}", vec3(position));
+                    let _ = writeln!(s, "intensity = {}", vec3(intensity));
+                }
+                LightSpec::Directional {
+                    direction,
+                    irradiance,
+                } => {
+                    let _ = writeln!(s, "kind = \"directional\"");
+                    let _ = writeln!(s, "direction = {}", vec3(direction));
+                    let _ = writeln!(s, "irradiance = {}", vec3(irradiance));
+                }
+            }
+        }
         s
+    }
+
+    /// The indices of the materials the objects use (an object without
+    /// one uses the first), ascending; empty when the scene has none.
+    fn used_materials(&self) -> Vec<usize> {
+        if self.materials.is_empty() {
+            return Vec::new();
+        }
+        let used: std::collections::BTreeSet<usize> = self
+            .objects
+            .iter()
+            .map(|o| o.material.unwrap_or(0).min(self.materials.len() - 1))
+            .collect();
+        used.into_iter().collect()
     }
 
     /// The scene a resolved scene is, rewritten standalone: every object's
     /// world-space f32 triangles as literal f64 (exact, so resolving the
     /// rewrite gives the same f32 bits), the camera's pose with its near and
-    /// far written out. Only visibility scenes (depth, ids, normals): a
-    /// shaded scene's materials and lights are not carried over yet, and it
-    /// is refused with that reason rather than reduced into another scene.
+    /// far written out. A shaded scene (one that requires anything beyond
+    /// visibility: depth, ids, normals) also keeps each object's material,
+    /// the lights and the integrator; a visibility scene's materials are
+    /// left out (no buffer it is judged on reads them).
     pub fn from_resolved(r: &ResolvedScene, description: &str) -> Result<LiteralScene> {
         let visibility = crate::check::visibility_features();
-        if let Some(f) = r
-            .requires
-            .iter()
-            .find(|f| !visibility.contains(&f.as_str()))
-        {
-            bail!(
-                "the scene requires {f:?}: only visibility scenes (depth, ids, normals) can be rewritten standalone so far"
-            );
-        }
+        let shaded = r.requires.iter().any(|f| !visibility.contains(&f.as_str()));
         let c = &r.camera;
         let camera = LiteralCamera {
             eye: c.eye.to_array(),
@@ -157,21 +252,37 @@ impl LiteralScene {
         let mut objects: Vec<LiteralObject> = r
             .objects
             .iter()
-            .map(|_| LiteralObject {
-                triangles: Vec::new(),
-                mirror: None,
+            .map(|info| LiteralObject {
+                material: shaded.then_some(info.material as usize),
+                ..LiteralObject::new(Vec::new())
             })
             .collect();
-        for (t, &o) in r.triangles.iter().zip(&r.object_ids) {
+        for ((t, &o), &deg) in r.triangles.iter().zip(&r.object_ids).zip(&r.degenerate) {
             let tri = [0, 1, 2].map(|k| t[k].as_dvec3().to_array());
-            objects[o as usize].triangles.push(tri);
+            let obj = &mut objects[o as usize];
+            obj.triangles.push(tri);
+            obj.allow_degenerate |= deg;
         }
         objects.retain(|o| !o.triangles.is_empty());
+        let materials = if shaded {
+            r.materials
+                .iter()
+                .map(|m| LiteralMaterial {
+                    albedo: m.albedo,
+                    emission: m.emission,
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         Ok(LiteralScene {
             description: description.to_string(),
             requires: r.requires.iter().cloned().collect(),
             camera,
             objects,
+            materials,
+            lights: if shaded { r.lights.clone() } else { Vec::new() },
+            integrator: shaded.then_some(r.integrator),
         })
     }
 }
@@ -198,13 +309,10 @@ pub(crate) fn test_scene(
             near: 0.01,
             far: None,
         },
-        objects: objects
-            .into_iter()
-            .map(|triangles| LiteralObject {
-                triangles,
-                mirror: None,
-            })
-            .collect(),
+        objects: objects.into_iter().map(LiteralObject::new).collect(),
+        materials: Vec::new(),
+        lights: Vec::new(),
+        integrator: None,
     }
 }
 
@@ -229,15 +337,23 @@ mod tests {
                 far: None,
             },
             objects: vec![
+                LiteralObject::new(vec![[
+                    [-1.0, -1.0, 0.0],
+                    [1.0, -1.0, 0.0],
+                    [0.1, 1.0, -0.0],
+                ]]),
                 LiteralObject {
-                    triangles: vec![[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.1, 1.0, -0.0]]],
-                    mirror: None,
-                },
-                LiteralObject {
-                    triangles: vec![[[-1.0, -1.0, 1e-7], [1.0, -1.0, 0.3], [0.0, 1.0, 0.5]]],
                     mirror: Some(([-1.0, 1.0, 1.0], [0.0, 0.0, 0.0])),
+                    ..LiteralObject::new(vec![[
+                        [-1.0, -1.0, 1e-7],
+                        [1.0, -1.0, 0.3],
+                        [0.0, 1.0, 0.5],
+                    ]])
                 },
             ],
+            materials: Vec::new(),
+            lights: Vec::new(),
+            integrator: None,
         }
     }
 
@@ -261,6 +377,150 @@ mod tests {
         assert_eq!(
             back.to_toml(),
             LiteralScene::from_resolved(&r2, "again").unwrap().to_toml()
+        );
+    }
+}
+
+#[cfg(test)]
+mod shaded_tests {
+    use super::*;
+    use crate::scene::Scene;
+    use std::path::Path;
+
+    /// A shaded scene with what the format has: materials (one unused, one
+    /// emissive), point and directional lights, an integrator, shapes under
+    /// transforms, a camera with near and far.
+    const SHADED: &str = r#"
+requires = ["depth", "ids", "lambert", "emission", "point_light", "directional_light", "shadowless", "two_sided"]
+[camera]
+eye = [1.5, 2.5, 4.0]
+look_at = [0.0, 0.2, 0.0]
+vfov = 45.0
+width = 24
+height = 16
+near = 0.01
+far = 100.0
+[integrator]
+max_depth = 3
+spp = 16
+[[materials]]
+name = "unused"
+albedo = [0.1, 0.1, 0.1]
+[[materials]]
+name = "floor"
+albedo = [0.6, 0.5, 0.4]
+[[materials]]
+name = "lamp"
+albedo = [0.0, 0.0, 0.0]
+emission = [2.0, 1.5, 1.0]
+[[objects]]
+name = "floor"
+material = "floor"
+shape = { kind = "quad", size = [6.0, 6.0] }
+transform = { rotate = [-90.0, 0.0, 0.0] }
+[[objects]]
+name = "lamp"
+material = "lamp"
+shape = { kind = "box", min = [-0.4, 0.0, -0.4], max = [0.4, 0.8, 0.4] }
+transform = { rotate = [0.0, 30.0, 0.0], translate = [0.1, 0.0, 0.2] }
+[[lights]]
+kind = "point"
+position = [1.0, 2.0, 1.0]
+intensity = [6.0, 5.0, 4.0]
+[[lights]]
+kind = "directional"
+direction = [0.3, -1.0, 0.2]
+irradiance = [0.5, 0.5, 0.7]
+"#;
+
+    fn resolve(text: &str) -> ResolvedScene {
+        let scene = Scene::parse(Path::new("s.toml"), text).unwrap();
+        ResolvedScene::resolve(&scene).unwrap()
+    }
+
+    /// Each triangle's (albedo, emission).
+    fn shading(r: &ResolvedScene) -> Vec<([f64; 3], [f64; 3])> {
+        r.object_ids
+            .iter()
+            .map(|&o| {
+                let m = &r.materials[r.objects[o as usize].material as usize];
+                (m.albedo, m.emission)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_shaded_scene_round_trips_to_the_same_resolved_scene() {
+        let r = resolve(SHADED);
+        let lit = LiteralScene::from_resolved(&r, "round trip").unwrap();
+        let text = lit.to_toml();
+        let r2 = resolve(&text);
+        assert_eq!(r.triangles, r2.triangles);
+        assert_eq!(r.object_ids, r2.object_ids);
+        assert_eq!(shading(&r), shading(&r2));
+        // Both materials in use kept, the unused one left out.
+        assert_eq!(r2.materials.len(), 2, "{text}");
+        assert_eq!(r.lights, r2.lights);
+        assert_eq!(r.integrator, r2.integrator);
+        assert_eq!(r.requires, r2.requires);
+        let (c, c2) = (&r.camera, &r2.camera);
+        assert_eq!(
+            (c.eye, c.look_at, c.up, c.vfov_deg, c.width, c.height, c.near, c.far),
+            (
+                c2.eye,
+                c2.look_at,
+                c2.up,
+                c2.vfov_deg,
+                c2.width,
+                c2.height,
+                c2.near,
+                c2.far
+            )
+        );
+        // A fixed point: the rewrite of the rewrite is the same file.
+        assert_eq!(
+            text,
+            LiteralScene::from_resolved(&r2, "round trip")
+                .unwrap()
+                .to_toml()
+        );
+    }
+
+    #[test]
+    fn removed_objects_take_their_materials_and_the_rest_keep_theirs() {
+        let r = resolve(SHADED);
+        let mut lit = LiteralScene::from_resolved(&r, "").unwrap();
+        // Keep only the lamp (material 2 of 3): it is written as m0 and
+        // still emits; the floor's material goes with the floor.
+        lit.objects.remove(0);
+        let r2 = resolve(&lit.to_toml());
+        assert_eq!(r2.materials.len(), 1);
+        assert_eq!(r2.materials[0].emission, [2.0, 1.5, 1.0]);
+        assert!(shading(&r2).iter().all(|s| s.1 == [2.0, 1.5, 1.0]));
+        // Lights removed one by one stay a valid scene.
+        lit.lights.truncate(1);
+        let r3 = resolve(&lit.to_toml());
+        assert_eq!(r3.lights.len(), 1);
+        assert!(matches!(r3.lights[0], LightSpec::Point { .. }));
+    }
+
+    #[test]
+    fn a_visibility_scene_is_written_without_materials_or_lights() {
+        let text = SHADED.replace(
+            r#"requires = ["depth", "ids", "lambert", "emission", "point_light", "directional_light", "shadowless", "two_sided"]"#,
+            r#"requires = ["depth", "ids"]"#,
+        );
+        // Lights need their features: a visibility scene has none.
+        let text = text.split("[[lights]]").next().unwrap().to_string();
+        let lit = LiteralScene::from_resolved(&resolve(&text), "").unwrap();
+        let out = lit.to_toml();
+        assert!(
+            !out.contains("[[materials]]") && !out.contains("material ="),
+            "{out}"
+        );
+        assert!(
+            !out.contains("[integrator]") && !out.contains("[[lights]]"),
+            "{out}"
         );
     }
 }

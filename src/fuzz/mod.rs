@@ -529,6 +529,8 @@ pub fn reduce_file(
         triangles_after: r.scene.triangle_count(),
         objects_before: start.objects.len(),
         objects_after: r.scene.objects.len(),
+        lights_before: start.lights.len(),
+        lights_after: r.scene.lights.len(),
         bytes_before: before_text.len(),
         bytes_after: text.len(),
         image_before: [start.camera.width, start.camera.height],

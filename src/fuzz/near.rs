@@ -12,7 +12,7 @@
 //! (`reduce.rs`). Where the failing pixels are comes from the verifier's
 //! `explanations` (docs/run-format.md): its mismatching pixels grouped by
 //! (class, reference prim, test prim), each group with an example pixel
-//! (on `id` and `N`, and on `Z` its interior pixels).
+//! (on `id` and `N`, and on `Z` and `RGB` their interior pixels).
 //! A group names the triangle each side saw (a mismatch always has one on
 //! at least one side); "within a pixel" adds the triangles the core's
 //! raster (the reference) sees in the 3x3 pixels around the example.

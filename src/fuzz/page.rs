@@ -362,6 +362,8 @@ mod tests {
                 triangles_after: 2,
                 objects_before: 3,
                 objects_after: 1,
+                lights_before: 0,
+                lights_after: 0,
                 bytes_before: 900,
                 bytes_after: 300,
                 image_before: [64, 48],

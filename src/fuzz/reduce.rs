@@ -1,6 +1,7 @@
 //! `rendiff reduce`: shrinks a failing scene to a small standalone repro by
 //! delta debugging (Zeller and Hildebrandt's ddmin), first over objects,
-//! then over triangles, then over vertex precision (every coordinate
+//! then over a shaded scene's lights (none at all tried first), then over
+//! triangles (each keeps its object's material), then over vertex precision (every coordinate
 //! snapped to a coarser power-of-two grid, the coarsest that still fails),
 //! then over the image (the smallest centered crop that still fails,
 //! [`super::window`]), repeated until a round changes nothing
@@ -301,25 +302,41 @@ impl Oracle<'_> {
 /// Delta debugging over `n_units` units: `build(keep)` makes the scene
 /// holding the units whose indices are in `keep` (in order). Returns the
 /// 1-minimal subset ddmin reaches (or what it had when time ran out).
+/// ddmin never tries the empty set (a scene needs an object); with
+/// `empty_too` (lights: a scene may have none) the empty set is tried
+/// first, in the first round's batch, and wins if it holds.
 fn ddmin(
     n_units: usize,
     build: &dyn Fn(&[usize]) -> Cand,
     oracle: &mut Oracle,
+    empty_too: bool,
 ) -> Result<Result<Vec<usize>, Vec<usize>>> {
     let mut units: Vec<usize> = (0..n_units).collect();
     let mut n = 2usize;
-    while units.len() >= 2 {
-        let chunks: Vec<Vec<usize>> = split(&units, n);
+    let mut try_empty = empty_too && n_units > 0;
+    while units.len() >= 2 || try_empty {
+        let chunks: Vec<Vec<usize>> = if units.len() >= 2 {
+            split(&units, n)
+        } else {
+            Vec::new()
+        };
         let mut cands: Vec<Vec<usize>> = chunks.clone();
         if n > 2 {
             for c in &chunks {
                 cands.push(units.iter().copied().filter(|u| !c.contains(u)).collect());
             }
         }
+        // The empty set first, so that it wins when it holds.
+        let skip = usize::from(try_empty);
+        if try_empty {
+            cands.insert(0, Vec::new());
+            try_empty = false;
+        }
         let scenes: Vec<Cand> = cands.iter().map(|k| build(k)).collect();
         match oracle.first(&scenes)? {
             Err(OutOfTime) => return Ok(Err(units)),
-            Ok(Some(i)) if i < chunks.len() => {
+            Ok(Some(0)) if skip == 1 => return Ok(Ok(Vec::new())),
+            Ok(Some(i)) if i - skip < chunks.len() => {
                 units = cands[i].clone();
                 n = 2;
             }
@@ -328,7 +345,7 @@ fn ddmin(
                 n = (n - 1).max(2);
             }
             Ok(None) => {
-                if n >= units.len() {
+                if units.len() < 2 || n >= units.len() {
                     break;
                 }
                 n = (2 * n).min(units.len());
@@ -377,6 +394,13 @@ fn cand_objects(c: &Cand, keep: &[usize]) -> Cand {
         scene: keep_objects(&c.scene, keep),
         origin,
     }
+}
+
+/// The candidate with only the lights `keep` (its triangles unchanged).
+fn cand_lights(c: &Cand, keep: &[usize]) -> Cand {
+    let mut out = c.clone();
+    out.scene.lights = keep.iter().map(|&i| c.scene.lights[i].clone()).collect();
+    out
 }
 
 /// [`keep_triangles`] of a candidate, its kept triangles' origins with it.
@@ -604,12 +628,28 @@ fn reduce_with(oracle: &mut Oracle, start: LiteralScene) -> Result<(LiteralScene
     for _ in 0..MAX_ROUNDS {
         let before = cur.key();
         let s = cur.clone();
-        match ddmin(s.scene.objects.len(), &|k| cand_objects(&s, k), oracle)? {
+        match ddmin(
+            s.scene.objects.len(),
+            &|k| cand_objects(&s, k),
+            oracle,
+            false,
+        )? {
             Ok(k) => cur = cand_objects(&s, &k),
             Err(k) => return Ok((cand_objects(&s, &k).scene, false)),
         }
+        // A light is a unit like an object (a visibility scene has none).
         let s = cur.clone();
-        match ddmin(s.scene.triangle_count(), &|k| cand_triangles(&s, k), oracle)? {
+        match ddmin(s.scene.lights.len(), &|k| cand_lights(&s, k), oracle, true)? {
+            Ok(k) => cur = cand_lights(&s, &k),
+            Err(k) => return Ok((cand_lights(&s, &k).scene, false)),
+        }
+        let s = cur.clone();
+        match ddmin(
+            s.scene.triangle_count(),
+            &|k| cand_triangles(&s, k),
+            oracle,
+            false,
+        )? {
             Ok(k) => cur = cand_triangles(&s, &k),
             Err(k) => return Ok((cand_triangles(&s, &k).scene, false)),
         }

@@ -154,10 +154,10 @@ mod tests {
                 near,
                 far: None,
             },
-            objects: vec![LiteralObject {
-                triangles: tris,
-                mirror: None,
-            }],
+            objects: vec![LiteralObject::new(tris)],
+            materials: Vec::new(),
+            lights: Vec::new(),
+            integrator: None,
         };
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("s.toml");

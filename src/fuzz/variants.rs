@@ -15,6 +15,7 @@
 //! at the offset's magnitude, which is the point (scenes far from the origin).
 
 use super::literal::{LiteralObject, LiteralScene};
+use crate::scene::LightSpec;
 use anyhow::{bail, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -68,6 +69,11 @@ pub fn permutation(n: usize, seed: u64) -> Vec<usize> {
     order
 }
 
+/// The scene under `f`, a linear map (rotate, mirror) or a translation
+/// (translate): vertices, the camera's eye and look-at, point lights'
+/// positions, and directional lights' directions (through a linear `f`; a
+/// translation leaves them as they are, exactly), so the lighting moves
+/// with the geometry.
 fn map_points(s: &LiteralScene, f: impl Fn([f64; 3]) -> [f64; 3]) -> LiteralScene {
     let mut out = s.clone();
     out.camera.eye = f(s.camera.eye);
@@ -75,6 +81,14 @@ fn map_points(s: &LiteralScene, f: impl Fn([f64; 3]) -> [f64; 3]) -> LiteralScen
     for o in &mut out.objects {
         for t in &mut o.triangles {
             *t = t.map(&f);
+        }
+    }
+    let linear = f([0.0; 3]) == [0.0; 3];
+    for l in &mut out.lights {
+        match l {
+            LightSpec::Point { position, .. } => *position = f(*position),
+            LightSpec::Directional { direction, .. } if linear => *direction = f(*direction),
+            LightSpec::Directional { .. } => {}
         }
     }
     out
@@ -224,18 +238,19 @@ mod tests {
                 far: None,
             },
             objects: vec![
-                LiteralObject {
-                    triangles: vec![
-                        [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
-                        [[1.0, -1.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
-                    ],
-                    mirror: None,
-                },
-                LiteralObject {
-                    triangles: vec![[[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 2.0, -1.0]]],
-                    mirror: None,
-                },
+                LiteralObject::new(vec![
+                    [[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],
+                    [[1.0, -1.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+                ]),
+                LiteralObject::new(vec![[
+                    [-1.0, 0.0, -1.0],
+                    [1.0, 0.0, -1.0],
+                    [0.0, 2.0, -1.0],
+                ]]),
             ],
+            materials: Vec::new(),
+            lights: Vec::new(),
+            integrator: None,
         }
     }
 
@@ -290,6 +305,50 @@ mod tests {
         let t = variant(&b, "translate").unwrap();
         assert_eq!(t.camera.eye, [1024.5, -1023.75, 1028.0]);
         assert!(variant(&b, "stretch").is_err());
+    }
+
+    #[test]
+    fn lights_move_with_the_geometry() {
+        let mut b = base();
+        b.lights = vec![
+            LightSpec::Point {
+                position: [1.0, 2.0, 3.0],
+                intensity: [1.0; 3],
+            },
+            LightSpec::Directional {
+                direction: [0.25, -1.0, -0.5],
+                irradiance: [1.0; 3],
+            },
+        ];
+        let lights = |rel: &str| variant(&b, rel).unwrap().lights;
+        let both = |p: [f64; 3], d: [f64; 3]| {
+            vec![
+                LightSpec::Point {
+                    position: p,
+                    intensity: [1.0; 3],
+                },
+                LightSpec::Directional {
+                    direction: d,
+                    irradiance: [1.0; 3],
+                },
+            ]
+        };
+        // (x, y, z) -> (z, y, -x), as the vertices.
+        assert_eq!(
+            lights("rotate"),
+            both([3.0, 2.0, -1.0], [-0.5, -1.0, -0.25])
+        );
+        assert_eq!(
+            lights("mirror"),
+            both([-1.0, 2.0, 3.0], [-0.25, -1.0, -0.5])
+        );
+        // A translation moves positions, never directions (exactly as written).
+        let o = 1024.0;
+        assert_eq!(
+            lights("translate"),
+            both([1.0 + o, 2.0 - o, 3.0 + o], [0.25, -1.0, -0.5])
+        );
+        assert_eq!(lights("permute"), b.lights);
     }
 
     #[test]

@@ -20,7 +20,7 @@ from . import diffimages, expectations, radiance, tolerance
 from .depth import compare_depth, depth_tolerance_fn
 from .ids import IdResult, compare_ids
 from .normals import N_FIELDS, judge_normals
-from .rgb import RGB_ENTRY_FIELDS, compare_rgb, record_rgb
+from .rgb import RGB_ENTRY_FIELDS, compare_rgb, explain_rgb, record_rgb
 from .verdict import Judged
 
 
@@ -127,7 +127,11 @@ def judge_rgb(r: BackendRender, e: Entry) -> Judged | None:
     except (tolerance.ToleranceError, radiance.RadianceError) as exc:
         e.reason = str(exc)
         return None
-    return record_rgb(e, res, r.ref.buffers["RGB"], r.test["RGB"])
+    judged = record_rgb(e, res, r.ref.buffers["RGB"], r.test["RGB"])
+    e.explanations = explain_rgb(
+        res.fail_mask & ~res.edge_mask, res.score, r.ref.buffers.get("id.prim"), r.test.get("id.prim")
+    )
+    return judged
 
 
 class When(StrEnum):

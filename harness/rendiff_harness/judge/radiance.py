@@ -400,6 +400,16 @@ def degrees_of_freedom(attrs: Mapping[str, Any]) -> float:
     return math.inf
 
 
+FLIP_MIN_LUMINANCE = 4.0 * 2.0**-23
+"""Below this largest reference luminance FLIP is not computed. HDR-FLIP picks its exposure
+range from the reference, start = log2(k / max Y) and stop = log2(k / max(median Y, 2^-23))
+(the floor measured from flip-evaluator: a median of 0 with max Y = 0.3 gives start 2.8203 and
+stop 24.0833, 0.3 * 2^(2.8203 - 24.0833) = 2^-23), and when start > stop, i.e. max Y < 2^-23,
+the library prints "Start exposure must be smaller than stop exposure!" and exits the whole
+process (a reduced scene whose one triangle is lit at 1e-14 killed the comparison). 4x the
+floor covers a luminance weighting other than Rec. 709's; such an image is black to people."""
+
+
 def flip_mean(ref: np.ndarray, test: np.ndarray) -> tuple[float | None, str]:
     """Mean HDR FLIP of test against ref, or (None, why not). For people only."""
     try:
@@ -410,6 +420,9 @@ def flip_mean(ref: np.ndarray, test: np.ndarray) -> tuple[float | None, str]:
     t = np.ascontiguousarray(np.clip(np.nan_to_num(test, nan=0.0, posinf=0.0), 0.0, None), dtype=np.float32)
     if not r.any() and not t.any():
         return 0.0, ""
+    luminance = float((r @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)).max())
+    if luminance < FLIP_MIN_LUMINANCE:
+        return None, f"FLIP not computed: the reference is black to HDR-FLIP (max luminance {luminance:.3g})"
     try:
         _, mean, _ = flip_evaluator.evaluate(r, t, "HDR")
     except Exception as exc:  # noqa: BLE001

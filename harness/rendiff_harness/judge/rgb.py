@@ -13,12 +13,58 @@ import numpy as np
 from ..contract import lighting
 from ..contract.manifest import Reference, render_info
 from ..contract.results import Entry
+from ..contract.vocab import BACKGROUND_ID
 from ..renderers.spec import BackendSpec
 from . import diffimages, precision, radiance
 from .verdict import Judged
 
-RGB_ENTRY_FIELDS = ("mode", "failing_pixels", "min_p", "alpha", "cluster_failures", "flip_mean", "flip_note")
+RGB_ENTRY_FIELDS = (
+    "mode",
+    "failing_pixels",
+    "min_p",
+    "alpha",
+    "cluster_failures",
+    "flip_mean",
+    "flip_note",
+    "explanations",
+)
 """An RGB entry's own fields (results.Entry.own_fields)."""
+
+MAX_GROUPS = 20
+"""Most explanation groups an RGB entry lists (as id's: docs/run-format.md)."""
+
+
+def explain_rgb(
+    interior: np.ndarray, score: np.ndarray, ref_prim: np.ndarray | None, test_prim: np.ndarray | None
+) -> list[dict[str, Any]] | None:
+    """The interior failing pixels grouped by the prims each side saw there, largest groups
+    first (at most MAX_GROUPS), each with its worst pixel as the example: where an RGB failure
+    is, in the terms of id's `explanations`, so that `rendiff reduce` can hold a reduction near
+    the same triangles. None without interior pixels or without a side's id.prim."""
+    if ref_prim is None or test_prim is None or not interior.any():
+        return None
+    ys, xs = np.nonzero(interior)
+    rp, tp = ref_prim[ys, xs].astype(np.int64), test_prim[ys, xs].astype(np.int64)
+    s = score[ys, xs]
+    groups: dict[tuple[int, int], list[int]] = {}
+    for k in np.argsort(-s, kind="stable"):
+        groups.setdefault((int(rp[k]), int(tp[k])), []).append(int(k))
+    ordered = sorted(groups.items(), key=lambda g: -len(g[1]))[:MAX_GROUPS]
+
+    def prim(p: int) -> int | None:
+        return None if p == BACKGROUND_ID else p
+
+    return [
+        {
+            "class": "interior",
+            "ref_prim": prim(r),
+            "test_prim": prim(t),
+            "pixels": len(ks),
+            "example": [int(xs[ks[0]]), int(ys[ks[0]])],
+            "why": f"RGB beyond tolerance ({float(s[ks[0]]):.3g}x the tolerance at the example)",
+        }
+        for (r, t), ks in ordered
+    ]
 
 
 def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:

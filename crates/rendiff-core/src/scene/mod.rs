@@ -297,7 +297,7 @@ impl Default for Transform {
 }
 
 /// Lights; the shading issue gives them meaning, the core only validates and exports them.
-#[derive(Debug, Clone, Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum LightSpec {
     /// Isotropic point light of radiant intensity I (W/sr per channel).
