@@ -203,14 +203,21 @@ pub(crate) struct LeafTri {
 }
 
 impl LeafTri {
-    /// Sets up a triangle's edges relative to the eye.
-    pub fn new(eye: DVec3, t: &Tri, prim: u32) -> LeafTri {
-        let mut leaf = LeafTri {
+    /// A triangle's leaf before any eye: its bounds are infinite, so the
+    /// f32 filter vouches for no sign until [`LeafTri::aim`] sets it up.
+    pub fn unaimed(t: &Tri, prim: u32) -> LeafTri {
+        LeafTri {
             n: [[0f32; 3]; 3],
             beta: [f32::INFINITY; 3],
             prim,
             tri: *t,
-        };
+        }
+    }
+
+    /// Sets up a triangle's edges relative to the eye.
+    #[cfg(test)]
+    pub fn new(eye: DVec3, t: &Tri, prim: u32) -> LeafTri {
+        let mut leaf = LeafTri::unaimed(t, prim);
         leaf.aim(eye);
         leaf
     }
