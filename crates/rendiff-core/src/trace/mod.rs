@@ -113,9 +113,11 @@ pub struct TraceBvh {
     pub build_seconds: f64,
     /// Seconds of the camera-independent part (obvhs's builder, our refit).
     pub tree_seconds: f64,
-    /// Seconds of the last camera set-up (eye-relative boxes, per-triangle
-    /// edge data and pixel rectangles, packet frustum planes): what a new
-    /// camera costs with the tree kept ([`Self::aim`]).
+    /// Seconds of the last camera set-up (eye-relative node boxes, packet
+    /// frustum planes): what a new camera costs with the tree kept before
+    /// its first frame ([`Self::aim`]); each leaf's edge data and pixel
+    /// rectangles are made by the frame's first ray to reach it ([`lazy`]),
+    /// so that part is in the frame's time.
     pub camera_seconds: f64,
 }
 
@@ -270,14 +272,16 @@ impl TraceBvh {
     }
 
     /// Re-aims the tree at `scene.camera`, keeping the camera-independent
-    /// tree: recomputes the eye-relative node boxes (f64 and f32), the
-    /// per-triangle edge data and pixel rectangles and the packet frustum
-    /// planes, exactly as [`Self::build`] makes them, so a render through the
-    /// re-aimed tree is bit for bit the render through a fresh build. Returns
-    /// the seconds it took (also [`Self::camera_seconds`]): the per-camera
-    /// cost `bench peers` counts in its per-frame table. `scene` must hold
-    /// the triangles the tree was built from (only the camera may differ):
-    /// the leaves keep their own copies, which a new camera reads in order.
+    /// tree: recomputes the eye-relative f32 node boxes and the packet
+    /// frustum planes, and marks every leaf's edge data and pixel rectangles
+    /// (made when a ray first reaches the leaf, [`lazy`]) and the f64 world
+    /// boxes (made for the first general ray) stale, exactly as
+    /// [`Self::build`] leaves them, so a render through the re-aimed tree is
+    /// bit for bit the render through a fresh build. Returns the seconds it
+    /// took (also [`Self::camera_seconds`]): the per-camera cost `bench
+    /// peers` counts in its per-frame table besides the frame. `scene` must
+    /// hold the triangles the tree was built from (only the camera may
+    /// differ): the leaves keep their own copies.
     pub fn aim(&mut self, scene: &ResolvedScene) -> f64 {
         self.aim_until(scene, None)
             .expect("a set-up without a deadline finishes");
