@@ -116,7 +116,7 @@ pub struct TraceBvh {
     /// Seconds of the last camera set-up (eye-relative node boxes, packet
     /// frustum planes): what a new camera costs with the tree kept before
     /// its first frame ([`Self::aim`]); each leaf's edge data and pixel
-    /// rectangles are made by the frame's first ray to reach it ([`lazy`]),
+    /// rectangles are made by the frame's first ray to reach it (`trace/lazy.rs`),
     /// so that part is in the frame's time.
     pub camera_seconds: f64,
 }
@@ -274,7 +274,7 @@ impl TraceBvh {
     /// Re-aims the tree at `scene.camera`, keeping the camera-independent
     /// tree: recomputes the eye-relative f32 node boxes and the packet
     /// frustum planes, and marks every leaf's edge data and pixel rectangles
-    /// (made when a ray first reaches the leaf, [`lazy`]) and the f64 world
+    /// (made when a ray first reaches the leaf, `trace/lazy.rs`) and the f64 world
     /// boxes (made for the first general ray) stale, exactly as
     /// [`Self::build`] leaves them, so a render through the re-aimed tree is
     /// bit for bit the render through a fresh build. Returns the seconds it
