@@ -10,7 +10,11 @@
 //! (defaults: scenes/million.toml@1920x1080, 11, 1,2, slow, the per-frame
 //! table's fastest configuration in docs/benchmarks.md per thread count).
 //! A sixth argument `aim-only` times ROUNDS camera set-ups alone (for a
-//! profile of [`TraceBvh::aim`]). `--json=FILE` (anywhere) also writes each
+//! profile of [`TraceBvh::aim`]); `frame-cpu` times ROUNDS new-camera frames
+//! (set-up, then a frame of pixel rays) in this thread's CPU seconds, each
+//! part apart, with no Embree (on 1 thread the whole frame runs on this
+//! worker, so a machine shared with other jobs disturbs it less than wall
+//! time; a frame now sets up the leaves it reaches inside its trace). `--json=FILE` (anywhere) also writes each
 //! thread count's table, as `bench peers` records it, with the machine's
 //! load, so a figure quoted from this run links to its record.
 
@@ -82,6 +86,34 @@ fn main() -> Result<()> {
                     s[s.len() / 2],
                     s[0],
                     cpu[cpu.len() / 2]
+                );
+                return Ok(());
+            }
+            if arg(5, "") == "frame-cpu" {
+                let (mut aim, mut frame) = (Vec::new(), Vec::new());
+                for _ in 0..rounds {
+                    let c0 = thread_cpu_s();
+                    bvh.aim(&scene);
+                    let c1 = thread_cpu_s();
+                    let keys = rendiff::trace::trace_keys(
+                        &scene,
+                        &bvh,
+                        rendiff::trace::TraceOptions::default(),
+                        &|_| {},
+                    );
+                    std::hint::black_box(keys);
+                    aim.push(c1 - c0);
+                    frame.push(thread_cpu_s() - c1);
+                }
+                let med = |v: &mut Vec<f64>| {
+                    v.sort_by(f64::total_cmp);
+                    v[v.len() / 2]
+                };
+                println!(
+                    "{t} thread(s): this thread's CPU medians: new camera {:.4} s, trace {:.4} s; load {:?}",
+                    med(&mut aim),
+                    med(&mut frame),
+                    rendiff_bench::load_average()
                 );
                 return Ok(());
             }

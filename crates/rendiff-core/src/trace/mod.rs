@@ -8,6 +8,7 @@
 
 mod build;
 pub(crate) mod frustum;
+mod lazy;
 mod nodes;
 mod packet;
 pub(crate) mod primary;
@@ -27,7 +28,7 @@ use crate::visibility::{
 use glam::Vec3;
 use nodes::Nodes32;
 use obvhs::{triangle::Triangle, BvhBuildParams};
-use primary::{LeafTri, Node32, Ray32};
+use primary::{Node32, Ray32};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -74,7 +75,6 @@ impl BvhQuality {
 
 #[derive(Debug, Clone, Copy)]
 struct Node {
-    bounds: RayBox,
     /// Leaf: index of the first prim in `prims`; inner: index of the first child.
     first: u32,
     /// Leaf: number of prims; inner: 0.
@@ -83,8 +83,14 @@ struct Node {
 
 /// A BVH over the scene's non-degenerate triangles, with boxes grown for robust tests.
 pub struct TraceBvh {
-    /// World-space f64 boxes, for shading's general rays.
+    /// The tree's shape, for shading's general rays.
     nodes: Vec<Node>,
+    /// Per node, its world-space f64 box grown for the current eye, made
+    /// the first time a general ray needs it (a frame of pixel rays never
+    /// does): [`Self::world_bounds`].
+    world: std::sync::OnceLock<Vec<RayBox>>,
+    /// The eye the tree is aimed at.
+    eye: glam::DVec3,
     prims: Vec<u32>,
     /// The same tree as eye-relative f32 boxes, for pixel rays ([`primary`]),
     /// laid out for traversal ([`nodes`]).
@@ -93,10 +99,10 @@ pub struct TraceBvh {
     layout: nodes::Layout,
     /// `refit` in `layout`'s slot order, so a new camera reads it in order.
     refit_slots: Vec<[Vec3; 2]>,
-    /// Per-prim edge data in `prims` order, for pixel rays.
-    leaves: Vec<LeafTri>,
-    /// Per-prim pixel rectangles in `prims` order, for packets ([`rect`]).
-    rects: Vec<rect::PixelRect>,
+    /// Per-prim edge data and pixel rectangles ([`rect`]) in `prims`
+    /// order, for pixel rays, each leaf set up when a ray first reaches it
+    /// ([`lazy`]).
+    aimed: lazy::AimedLeaves,
     /// Every packet's frustum planes ([`frustum`]).
     planes: frustum::PacketPlanes,
     /// Each node's f32 box refit from its triangles, before growth: the
@@ -107,9 +113,11 @@ pub struct TraceBvh {
     pub build_seconds: f64,
     /// Seconds of the camera-independent part (obvhs's builder, our refit).
     pub tree_seconds: f64,
-    /// Seconds of the last camera set-up (eye-relative boxes, per-triangle
-    /// edge data and pixel rectangles, packet frustum planes): what a new
-    /// camera costs with the tree kept ([`Self::aim`]).
+    /// Seconds of the last camera set-up (eye-relative node boxes, packet
+    /// frustum planes): what a new camera costs with the tree kept before
+    /// its first frame ([`Self::aim`]); each leaf's edge data and pixel
+    /// rectangles are made by the frame's first ray to reach it (`trace/lazy.rs`),
+    /// so that part is in the frame's time.
     pub camera_seconds: f64,
 }
 
@@ -118,12 +126,13 @@ impl TraceBvh {
     fn empty() -> TraceBvh {
         TraceBvh {
             nodes: Vec::new(),
+            world: std::sync::OnceLock::new(),
+            eye: glam::DVec3::ZERO,
             prims: Vec::new(),
             nodes32: Nodes32::empty(),
             layout: nodes::Layout::default(),
             refit_slots: Vec::new(),
-            leaves: Vec::new(),
-            rects: Vec::new(),
+            aimed: lazy::AimedLeaves::empty(),
             planes: frustum::PacketPlanes::empty(),
             refit: Vec::new(),
             build_seconds: 0.0,
@@ -221,10 +230,6 @@ impl TraceBvh {
             .nodes
             .iter()
             .map(|nd| Node {
-                bounds: RayBox {
-                    lo: glam::DVec3::ZERO,
-                    hi: glam::DVec3::ZERO,
-                },
                 first: nd.first_index,
                 count: nd.prim_count,
             })
@@ -237,15 +242,24 @@ impl TraceBvh {
             .iter()
             .map(|s| refit[s.src as usize])
             .collect();
+        let aimed = lazy::AimedLeaves::new(
+            &scene.triangles,
+            &prims,
+            layout.slots()[1..]
+                .iter()
+                .filter(|s| s.count > 0)
+                .map(|s| (s.first, s.count)),
+        );
         let tree_seconds = start.elapsed().as_secs_f64();
         let mut out = TraceBvh {
             nodes,
+            world: std::sync::OnceLock::new(),
+            eye: glam::DVec3::ZERO,
             prims,
             nodes32: Nodes32::empty(),
             layout,
             refit_slots,
-            leaves: Vec::new(),
-            rects: Vec::new(),
+            aimed,
             planes: frustum::PacketPlanes::empty(),
             refit,
             build_seconds: 0.0,
@@ -258,14 +272,16 @@ impl TraceBvh {
     }
 
     /// Re-aims the tree at `scene.camera`, keeping the camera-independent
-    /// tree: recomputes the eye-relative node boxes (f64 and f32), the
-    /// per-triangle edge data and pixel rectangles and the packet frustum
-    /// planes, exactly as [`Self::build`] makes them, so a render through the
-    /// re-aimed tree is bit for bit the render through a fresh build. Returns
-    /// the seconds it took (also [`Self::camera_seconds`]): the per-camera
-    /// cost `bench peers` counts in its per-frame table. `scene` must hold
-    /// the triangles the tree was built from (only the camera may differ):
-    /// the leaves keep their own copies, which a new camera reads in order.
+    /// tree: recomputes the eye-relative f32 node boxes and the packet
+    /// frustum planes, and marks every leaf's edge data and pixel rectangles
+    /// (made when a ray first reaches the leaf, `trace/lazy.rs`) and the f64 world
+    /// boxes (made for the first general ray) stale, exactly as
+    /// [`Self::build`] leaves them, so a render through the re-aimed tree is
+    /// bit for bit the render through a fresh build. Returns the seconds it
+    /// took (also [`Self::camera_seconds`]): the per-camera cost `bench
+    /// peers` counts in its per-frame table besides the frame. `scene` must
+    /// hold the triangles the tree was built from (only the camera may
+    /// differ): the leaves keep their own copies.
     pub fn aim(&mut self, scene: &ResolvedScene) -> f64 {
         self.aim_until(scene, None)
             .expect("a set-up without a deadline finishes");
@@ -283,14 +299,12 @@ impl TraceBvh {
         let cam = &scene.camera;
         let eye = cam.eye;
         debug_assert_eq!(self.refit.len(), self.nodes.len());
-        // Both node passes in parallel, each node's boxes written in place.
-        self.nodes
-            .par_iter_mut()
-            .zip(&self.refit)
-            .with_min_len(1024)
-            .for_each(|(n, [lo, hi])| n.bounds = grow_box(eye, *lo, *hi));
-        // Each slot's box grown again from its refit box in slot order: the
-        // same bits as its node's `bounds` above, read without a gather.
+        // The world-space boxes wait for the first general ray.
+        self.eye = eye;
+        self.world = std::sync::OnceLock::new();
+        // Each slot's box grown from its refit box in slot order: the same
+        // bits as its node's world box ([`Self::world_bounds`]), read
+        // without a gather.
         let boxes = &self.refit_slots;
         self.nodes32.fill(&self.layout, |k, s| {
             let [lo, hi] = boxes[k];
@@ -299,42 +313,11 @@ impl TraceBvh {
         if crate::deadline::past(deadline) {
             return None;
         }
-        let slack = rect::RectSlack::new(cam);
-        if self.leaves.len() == self.prims.len() {
-            debug_assert!(self
-                .leaves
-                .iter()
-                .step_by(997)
-                .all(|l| scene.triangles[l.prim as usize] == l.tri));
-            // A new camera on this tree: each leaf keeps its triangle, so
-            // the pass reads the leaves in order and rewrites them in place.
-            self.leaves
-                .par_iter_mut()
-                .zip(&mut self.rects)
-                .with_min_len(1024)
-                .for_each(|(leaf, r)| {
-                    leaf.aim(eye);
-                    *r = rect::PixelRect::new(cam, &slack, &leaf.tri);
-                });
-        } else {
-            // The first camera: the leaves are made from the scene's
-            // triangles (in BVH order), on huge pages where the OS has them,
-            // as the tree's nodes (`crate::huge_pages`).
-            let mut leaves = crate::huge_pages::with_capacity(self.prims.len());
-            let mut rects = crate::huge_pages::with_capacity(self.prims.len());
-            self.prims
-                .par_iter()
-                .map(|&p| {
-                    let t = &scene.triangles[p as usize];
-                    (
-                        LeafTri::new(eye, t, p),
-                        rect::PixelRect::new(cam, &slack, t),
-                    )
-                })
-                .unzip_into_vecs(&mut leaves, &mut rects);
-            self.leaves = leaves;
-            self.rects = rects;
-        }
+        debug_assert!((0..self.aimed.len())
+            .step_by(997)
+            .all(|k| *self.aimed.tri(k) == scene.triangles[self.prims[k] as usize]));
+        // The leaves: each set up when a ray first reaches it ([`lazy`]).
+        self.aimed.aim(cam);
         self.planes = frustum::PacketPlanes::new(cam);
         self.camera_seconds = start.elapsed().as_secs_f64();
         Some(())
@@ -374,8 +357,8 @@ impl TraceBvh {
             }
             let node = self.nodes32.get(ni);
             if node.count > 0 {
-                for k in node.first..node.first + node.count {
-                    let leaf = &self.leaves[k as usize];
+                let (leaves, _) = self.aimed.get(node.first, node.count);
+                for leaf in leaves {
                     let t = &leaf.tri;
                     let signs = [0, 1, 2].map(|k| leaf.edge_sign32(k, r.dir, r.dir_norm));
                     let facing = covers(cam, t, signs, ray, c);
@@ -745,6 +728,20 @@ impl TraceBvh {
         self.query(scene, o, d, tmin, tmax, true).is_some()
     }
 
+    /// Every node's world-space box grown for the current eye (the boxes
+    /// general rays test), made on first use after each [`Self::aim`].
+    /// Serially: a parallel loop here could steal a task that asks for the
+    /// same boxes while they are being made, which `OnceLock` forbids.
+    fn world_bounds(&self) -> &[RayBox] {
+        self.world.get_or_init(|| {
+            let eye = self.eye;
+            self.refit
+                .iter()
+                .map(|[lo, hi]| grow_box(eye, *lo, *hi))
+                .collect()
+        })
+    }
+
     /// Front-to-back walk: of an inner node's two children the nearer
     /// entry is visited first and the farther waits on the stack with its
     /// entry distance, skipped once a closer hit lies before it. The stack
@@ -786,11 +783,12 @@ impl TraceBvh {
     ) -> Option<RayHit> {
         const STACK: usize = 64;
         // The box's entry distance, or None when the ray misses it within (tmin, tmax).
-        let enter = |node: &Node, tmax: f64| {
-            let (a, b) = slab(&node.bounds);
+        let bounds = self.world_bounds();
+        let enter = |i: u32, tmax: f64| {
+            let (a, b) = slab(&bounds[i as usize]);
             (!(slab_misses(a, b) || a > tmax || b < tmin)).then_some(a)
         };
-        enter(&self.nodes[0], tmax)?;
+        enter(0, tmax)?;
         let mut best: Option<RayHit> = None;
         let mut stack = [(0u32, 0f64); STACK];
         let mut depth = 0;
@@ -813,8 +811,8 @@ impl TraceBvh {
                 }
             } else {
                 let (c0, c1) = (node.first, node.first + 1);
-                let e0 = enter(&self.nodes[c0 as usize], tmax);
-                let e1 = enter(&self.nodes[c1 as usize], tmax);
+                let e0 = enter(c0, tmax);
+                let e1 = enter(c1, tmax);
                 let (near, far) = match (e0, e1) {
                     (Some(a0), Some(a1)) if a1 < a0 => (Some(c1), Some((c0, a0))),
                     (Some(_), Some(a1)) => (Some(c0), Some((c1, a1))),

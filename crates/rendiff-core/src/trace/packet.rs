@@ -38,13 +38,12 @@
 use super::frustum::Frustum;
 use super::nodes::Nodes32;
 use super::primary::{dir_norm_bound, LeafTri, Node32};
-use super::rect::PixelRect;
 use super::rows::{Rows, ROW, ROW2};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
 use crate::raster::edges::ChunkOps;
 use crate::scene::resolve::ResolvedScene;
-use crate::simd::{prefetch, Portable};
+use crate::simd::Portable;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx2, Avx512};
 use crate::visibility::{hit_key, key_depth, Counters, NO_HIT};
@@ -496,18 +495,8 @@ impl TraceBvh {
     fn prefetch_below(&self, n: &Node32) {
         if n.count == 0 {
             self.nodes32.prefetch_children(n);
-        } else if let Some(r) = self
-            .rects
-            .get(n.first as usize..(n.first + n.count) as usize)
-        {
-            // Rectangles: all lines (they decide which triangles are read).
-            for r in r.iter().step_by(64 / std::mem::size_of::<PixelRect>()) {
-                prefetch(r);
-            }
-            prefetch(&r[r.len() - 1]);
-            for t in &self.leaves[n.first as usize..(n.first + n.count) as usize] {
-                prefetch(t);
-            }
+        } else {
+            self.aimed.prefetch(n.first, n.count);
         }
     }
 
@@ -542,10 +531,11 @@ impl TraceBvh {
                 continue;
             }
             if node.count > 0 {
-                for k in node.first as usize..(node.first + node.count) as usize {
-                    let m = m & self.rects[k].lanes(x0 as i32, y0 as i32);
+                let (leaves, rects) = self.aimed.get(node.first, node.count);
+                for (leaf, rect) in leaves.iter().zip(rects) {
+                    let m = m & rect.lanes(x0 as i32, y0 as i32);
                     if m != 0 {
-                        pk.leaf((s, l), cam, &self.leaves[k], m, c);
+                        pk.leaf((s, l), cam, leaf, m, c);
                     }
                 }
                 continue;

@@ -1,0 +1,217 @@
+//! The per-triangle half of a camera's set-up, done the first time a frame
+//! needs it.
+//!
+//! A new camera needs, per leaf triangle, its edge normals relative to the
+//! eye ([`LeafTri::aim`]) and its pixel rectangle ([`PixelRect::new`]). Done
+//! for every triangle up front this was most of a new camera's cost on the
+//! million-triangle scene, yet a frame reads only the triangles of the leaves
+//! its rays reach: the triangles facing away behind the visible ones, and
+//! those outside the view, are never read. So [`TraceBvh::aim`] only starts a
+//! new epoch here, and each BVH leaf is set up when a traversal first reaches
+//! it ([`AimedLeaves::get`]).
+//!
+//! The values do not depend on who computes them or when: each is a pure
+//! function of the leaf's triangle and the camera, the same function the
+//! eager pass called. So the keys and every counter of a frame are those of
+//! the eager set-up, whatever the threads' timing.
+//!
+//! Thread safety. Each leaf (a range of prims, disjoint from every other
+//! leaf's, checked once per tree in [`AimedLeaves::new`]) has one state word
+//! keyed by its first prim: `2 e` once set up for epoch `e`, `2 e + 1` while
+//! one thread sets it up, anything else when stale. A thread that finds it
+//! stale claims it with a compare-and-swap, writes the range, then publishes
+//! `2 e` with release ordering; every other reader waits for `2 e` with
+//! acquire ordering before it forms a reference to the range. A new epoch
+//! starts only through `&mut self`, when no reference to any range is alive.
+//!
+//! [`TraceBvh::aim`]: super::TraceBvh::aim
+
+use super::primary::LeafTri;
+use super::rect::{PixelRect, RectSlack};
+use crate::camera::Camera;
+use crate::scene::resolve::Tri;
+use crate::simd::prefetch;
+use std::cell::UnsafeCell;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// The leaves' per-camera data in prim (BVH) order, set up lazily.
+pub(crate) struct AimedLeaves {
+    /// Per prim: the triangle, its id, and its edges for the current eye
+    /// once its leaf is set up.
+    leaves: Vec<UnsafeCell<LeafTri>>,
+    /// Per prim: its pixel rectangle for the current camera, likewise.
+    rects: Vec<UnsafeCell<PixelRect>>,
+    /// Per prim, used at each leaf's first prim: the leaf's state (see the
+    /// module comment).
+    state: Vec<AtomicU32>,
+    /// The current epoch (at least 1, below `u32::MAX / 2`).
+    epoch: u32,
+    /// The camera the current epoch sets up for.
+    cam: Option<Camera>,
+    /// Its rectangle allowances.
+    slack: Option<RectSlack>,
+}
+
+// SAFETY: the cells are written only by the one thread that holds their
+// leaf's claim (a successful compare-and-swap of its state to "busy"), and
+// read only after the state was seen "ready" with acquire ordering, which
+// the writer published with release ordering after its last write; leaves'
+// prim ranges are disjoint (checked in `new`), and an epoch changes only
+// through `&mut self`. So no cell is ever read and written concurrently.
+unsafe impl Sync for AimedLeaves {}
+
+impl AimedLeaves {
+    /// No leaves (a tree over no triangles).
+    pub fn empty() -> AimedLeaves {
+        AimedLeaves {
+            leaves: Vec::new(),
+            rects: Vec::new(),
+            state: Vec::new(),
+            epoch: 1,
+            cam: None,
+            slack: None,
+        }
+    }
+
+    /// The leaves of prims `prims` (scene ids in BVH order), no camera yet.
+    /// `leaf_ranges` are the tree's leaves as `(first, count)`: they must be
+    /// disjoint ranges of prim indices (the soundness of the lazy set-up
+    /// rests on it, so this panics otherwise).
+    pub fn new(
+        triangles: &[Tri],
+        prims: &[u32],
+        leaf_ranges: impl Iterator<Item = (u32, u32)>,
+    ) -> AimedLeaves {
+        let mut ranges: Vec<(u32, u32)> = leaf_ranges.collect();
+        ranges.sort_unstable();
+        let mut end = 0u64;
+        for &(f, c) in &ranges {
+            assert!(
+                u64::from(f) >= end && u64::from(f) + u64::from(c) <= prims.len() as u64,
+                "BVH leaves overlap or leave the prim array at {f}+{c}"
+            );
+            end = u64::from(f) + u64::from(c);
+        }
+        let mut leaves = crate::huge_pages::with_capacity(prims.len());
+        leaves.extend(
+            prims
+                .iter()
+                .map(|&p| UnsafeCell::new(LeafTri::unaimed(&triangles[p as usize], p))),
+        );
+        let mut rects = crate::huge_pages::with_capacity(prims.len());
+        rects.extend((0..prims.len()).map(|_| UnsafeCell::new(PixelRect::ALL)));
+        AimedLeaves {
+            leaves,
+            rects,
+            state: (0..prims.len()).map(|_| AtomicU32::new(0)).collect(),
+            epoch: 1,
+            cam: None,
+            slack: None,
+        }
+    }
+
+    /// Starts a new camera: every leaf is stale until a traversal reaches it.
+    pub fn aim(&mut self, cam: &Camera) {
+        self.epoch += 1;
+        if self.epoch >= u32::MAX / 2 {
+            // States from old epochs could read "ready" again: clear them.
+            for s in &mut self.state {
+                *s.get_mut() = 0;
+            }
+            self.epoch = 1;
+        }
+        self.slack = Some(RectSlack::new(cam));
+        self.cam = Some(cam.clone());
+    }
+
+    /// Leaf `(first, count)`'s triangles and pixel rectangles for the
+    /// current camera, set up now if no traversal has yet. `(first, count)`
+    /// must be one of the tree's leaves (as [`Self::new`] was given).
+    #[inline(always)]
+    pub fn get(&self, first: u32, count: u32) -> (&[LeafTri], &[PixelRect]) {
+        let (f, n) = (first as usize, count as usize);
+        if self.state[f].load(Ordering::Acquire) != 2 * self.epoch {
+            self.set_up(f, n);
+        }
+        let (leaves, rects) = (&self.leaves[f..f + n], &self.rects[f..f + n]);
+        // SAFETY: the leaf's state read "ready" for this epoch with acquire
+        // ordering (above or in `set_up`), so its writer's writes happened
+        // before, and no cell of the range is written again before the next
+        // epoch, which needs `&mut self` (see the impl of `Sync`).
+        // `UnsafeCell<T>` has `T`'s layout, so the slices cast.
+        unsafe {
+            (
+                std::slice::from_raw_parts(leaves.as_ptr().cast::<LeafTri>(), n),
+                std::slice::from_raw_parts(rects.as_ptr().cast::<PixelRect>(), n),
+            )
+        }
+    }
+
+    /// Sets leaf `f..f + n` up for the current camera, or waits until the
+    /// thread that claimed it has.
+    #[cold]
+    #[inline(never)]
+    fn set_up(&self, f: usize, n: usize) {
+        let (ready, busy) = (2 * self.epoch, 2 * self.epoch + 1);
+        let state = &self.state[f];
+        let (Some(cam), Some(slack)) = (&self.cam, &self.slack) else {
+            unreachable!("a tree is aimed before it is traced")
+        };
+        loop {
+            let s = state.load(Ordering::Acquire);
+            if s == ready {
+                return;
+            }
+            if s != busy
+                && state
+                    .compare_exchange(s, busy, Ordering::Acquire, Ordering::Relaxed)
+                    .is_ok()
+            {
+                for (leaf, rect) in self.leaves[f..f + n].iter().zip(&self.rects[f..f + n]) {
+                    // SAFETY: this thread holds the leaf's claim: no other
+                    // thread reads or writes these cells until it publishes
+                    // "ready" below (see the impl of `Sync`).
+                    let (leaf, rect) = unsafe { (&mut *leaf.get(), &mut *rect.get()) };
+                    leaf.aim(cam.eye);
+                    *rect = PixelRect::new(cam, slack, &leaf.tri);
+                }
+                state.store(ready, Ordering::Release);
+                return;
+            }
+            std::hint::spin_loop();
+        }
+    }
+
+    /// Prefetches what [`Self::get`] will read for leaf `(first, count)`:
+    /// its state, all its rectangles' lines and its triangles.
+    #[inline(always)]
+    pub fn prefetch(&self, first: u32, count: u32) {
+        let (f, n) = (first as usize, count as usize);
+        if n == 0 {
+            return;
+        }
+        let (Some(r), Some(t)) = (self.rects.get(f..f + n), self.leaves.get(f..f + n)) else {
+            return;
+        };
+        prefetch(&self.state[f]);
+        for r in r.iter().step_by(64 / std::mem::size_of::<PixelRect>()) {
+            prefetch(r);
+        }
+        if let Some(last) = r.last() {
+            prefetch(last);
+        }
+        for t in t {
+            prefetch(t);
+        }
+    }
+
+    /// Prim `k`'s triangle, for checks.
+    pub fn tri(&mut self, k: usize) -> &Tri {
+        &self.leaves[k].get_mut().tri
+    }
+
+    /// The number of prims.
+    pub fn len(&self) -> usize {
+        self.leaves.len()
+    }
+}
