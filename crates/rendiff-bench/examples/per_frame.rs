@@ -166,10 +166,7 @@ fn main() -> Result<()> {
             "rounds": rounds,
             "tables": record,
         });
-        let tmp = format!("{path}.tmp");
-        std::fs::write(&tmp, serde_json::to_string_pretty(&out)? + "\n")
-            .with_context(|| format!("{tmp}: cannot write"))?;
-        std::fs::rename(&tmp, &path).with_context(|| format!("{path}: cannot write"))?;
+        rendiff_bench::write_json_file(&path, &out)?;
         eprintln!("wrote {path}");
     }
     Ok(())
