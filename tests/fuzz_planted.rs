@@ -12,48 +12,22 @@
 
 mod common;
 
-use common::cli::{need_venv, output_within, root};
+use common::cli::{fuzz_renderers, need_venv, output_within, printed, rendiff_with_venv};
 use serde_json::Value;
 use std::path::Path;
-use std::process::Command;
 
 const BACKEND: &str = "coplanar_bias";
 
-/// The binary, with the venv's python3 first on PATH (the planted renderer
-/// runs as `#!/usr/bin/env python3` and needs numpy).
-fn rendiff(dir: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
-    let path = format!(
-        "{}:{}",
-        root().join(".venv/bin").display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
-    c.current_dir(dir)
-        .env("PATH", path)
-        .env("RENDIFF_HOME", root());
-    c
-}
-
+/// The planted renderers of this test.
 fn renderers() -> String {
-    root()
-        .join("tests/fuzz_renderers/renderers.toml")
-        .display()
-        .to_string()
-}
-
-fn text(o: &std::process::Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
+    fuzz_renderers("renderers.toml")
 }
 
 /// `rendiff fuzz --seed 1 --count 200 --only BACKEND` into `dir/fuzz`:
 /// it must exit 1 (failures found); the ledger.
 fn fuzz(dir: &Path, backend: &str) -> Value {
     let out = output_within(
-        rendiff(dir)
+        rendiff_with_venv(dir)
             .args(["fuzz", "--seed", "1", "--count", "200", "--only", backend])
             .arg("--renderers")
             .arg(renderers())
@@ -64,7 +38,7 @@ fn fuzz(dir: &Path, backend: &str) -> Value {
         out.status.code(),
         Some(1),
         "fuzz must report failures: {}",
-        text(&out)
+        printed(&out)
     );
     let ledger: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("fuzz/findings.json")).unwrap())
@@ -121,7 +95,7 @@ fn reduce_by_hand(
     out: &str,
 ) -> String {
     let o = output_within(
-        rendiff(dir)
+        rendiff_with_venv(dir)
             .args([
                 "reduce",
                 run,
@@ -136,8 +110,8 @@ fn reduce_by_hand(
             .args(["--jobs", "2", "-o", out]),
         600,
     );
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    text(&o)
+    assert_eq!(o.status.code(), Some(0), "{}", printed(&o));
+    printed(&o)
 }
 
 /// A scene file, loaded and resolved.
@@ -243,7 +217,7 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
     std::fs::create_dir(&fresh).unwrap();
     std::fs::write(fresh.join("repro.toml"), &reduced).unwrap();
     let check = output_within(
-        rendiff(&fresh)
+        rendiff_with_venv(&fresh)
             .args(["check", "repro.toml", "--only", BACKEND, "--renderers"])
             .arg(renderers())
             .args(["--quiet", "-o", "run"]),
@@ -253,7 +227,7 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
         check.status.code(),
         Some(1),
         "the repro passed: {}",
-        text(&check)
+        printed(&check)
     );
     let results: Value =
         serde_json::from_str(&std::fs::read_to_string(fresh.join("run/results.json")).unwrap())
@@ -375,13 +349,13 @@ fn the_core_and_embree_robust_pass_every_generated_scene() {
     need_venv();
     let tmp = tempfile::tempdir().unwrap();
     let out = output_within(
-        rendiff(tmp.path())
+        rendiff_with_venv(tmp.path())
             .args(["fuzz", "--seed", "1", "--count", "200"])
             .args(["--only", "trace,embree_robust", "--no-calibration"])
             .args(["--jobs", "2", "--quiet", "-o", "fuzz"]),
         600,
     );
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(0), "{}", printed(&out));
     let ledger: Value = serde_json::from_str(
         &std::fs::read_to_string(tmp.path().join("fuzz/findings.json")).unwrap(),
     )
@@ -515,14 +489,14 @@ fn a_failure_moved_to_other_triangles_is_not_the_same_failure() {
     write("moved", &[d, c, e, a_b, a_f]);
     write("left_pair", &[d, c]);
     let out = output_within(
-        rendiff(dir)
+        rendiff_with_venv(dir)
             .args(["check", "moved.toml", "left_pair.toml", "--only", BACKEND])
             .arg("--renderers")
             .arg(renderers())
             .args(["--no-calibration", "--jobs", "2", "--quiet", "-o", "run"]),
         300,
     );
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(1), "{}", printed(&out));
     let results: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("run/results.json")).unwrap())
             .unwrap();

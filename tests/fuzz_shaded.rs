@@ -11,11 +11,10 @@
 
 mod common;
 
-use common::cli::{need_venv, output_within, root};
+use common::cli::{fuzz_renderers, need_venv, output_within, printed, rendiff_with_venv};
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use std::path::Path;
-use std::process::Command;
 
 const BACKEND: &str = "red_albedo";
 const GREEN: [f64; 3] = [0.2, 0.7, 0.3];
@@ -79,48 +78,23 @@ direction = [0.2, -1.0, -0.3]
 irradiance = [0.5, 0.5, 0.5]
 "#;
 
-/// The binary, with the venv's python3 first on PATH (the planted renderer
-/// runs as `#!/usr/bin/env python3` and needs numpy).
-fn rendiff(dir: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
-    let path = format!(
-        "{}:{}",
-        root().join(".venv/bin").display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
-    c.current_dir(dir)
-        .env("PATH", path)
-        .env("RENDIFF_HOME", root());
-    c
-}
-
+/// The planted renderers of this test.
 fn renderers() -> String {
-    root()
-        .join("tests/fuzz_renderers/shaded.toml")
-        .display()
-        .to_string()
-}
-
-fn text(o: &std::process::Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
+    fuzz_renderers("shaded.toml")
 }
 
 /// `rendiff check SCENE.toml --only red_albedo -o run` in `dir` (with
 /// `extra`): it must exit 1; each verdict of the backend as (buffer, class).
 fn check(dir: &Path, scene: &str, extra: &[&str]) -> Vec<(String, Option<String>)> {
     let o = output_within(
-        rendiff(dir)
+        rendiff_with_venv(dir)
             .args(["check", scene, "--only", BACKEND, "--renderers"])
             .arg(renderers())
             .args(extra)
             .args(["--jobs", "2", "--quiet", "-o", "run"]),
         300,
     );
-    assert_eq!(o.status.code(), Some(1), "it must fail: {}", text(&o));
+    assert_eq!(o.status.code(), Some(1), "it must fail: {}", printed(&o));
     let verdicts = rendiff::gate::load_verdicts(&dir.join("run/results.json")).unwrap();
     verdicts
         .iter()
@@ -133,7 +107,7 @@ fn check(dir: &Path, scene: &str, extra: &[&str]) -> Vec<(String, Option<String>
 /// `dir`: it must succeed; what it printed.
 fn reduce(dir: &Path, stem: &str, out: &str) -> String {
     let o = output_within(
-        rendiff(dir)
+        rendiff_with_venv(dir)
             .args([
                 "reduce",
                 "run",
@@ -148,8 +122,8 @@ fn reduce(dir: &Path, stem: &str, out: &str) -> String {
             .args(["--jobs", "2", "-o", out]),
         600,
     );
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    text(&o)
+    assert_eq!(o.status.code(), Some(0), "{}", printed(&o));
+    printed(&o)
 }
 
 fn resolved(file: &Path) -> ResolvedScene {

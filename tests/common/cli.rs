@@ -211,3 +211,38 @@ pub fn gate_command(run: &Path, baseline: &Path) -> Command {
     c.arg("gate").arg("--baseline").arg(baseline).arg(run);
     c
 }
+
+/// The binary run from `dir` with the venv's python3 first on PATH and
+/// RENDIFF_HOME at the repository root: the planted renderers of
+/// tests/fuzz_renderers/ run as `#!/usr/bin/env python3` and need numpy.
+pub fn rendiff_with_venv(dir: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_rendiff"));
+    let path = format!(
+        "{}:{}",
+        root().join(".venv/bin").display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    c.current_dir(dir)
+        .env("PATH", path)
+        .env("RENDIFF_HOME", root());
+    c
+}
+
+/// A declaration file of the planted renderers, `tests/fuzz_renderers/FILE`,
+/// as the argument of `--renderers`.
+pub fn fuzz_renderers(file: &str) -> String {
+    root()
+        .join("tests/fuzz_renderers")
+        .join(file)
+        .display()
+        .to_string()
+}
+
+/// What a finished command printed, stdout then stderr, for a failure message.
+pub fn printed(o: &std::process::Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
