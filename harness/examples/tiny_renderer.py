@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -65,32 +66,73 @@ def render(scene_dir: Path, out: Path) -> None:
     sy = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) * tan_half
     d = fwd + sx[None, :, None] * right + sy[:, None, None] * up  # (H, W, 3)
 
-    z = np.full((h, w), np.inf)
-    prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
-    normal = np.zeros((h, w, 3))
-    for i, (a, b, c) in enumerate(tris):
-        n = np.cross(b - a, c - a)
-        length = np.linalg.norm(n)
-        if length == 0.0:
-            continue  # zero-area triangles are never visible
+    z, prim, normal = blank(w, h)
+    for i, a, b, c, n, length in facets(tris):
         depth, px, py = project(np.array([a, b, c]), eye, fwd, right, up, tan_half, w, h)
         rows, cols = window(depth, px, py, w, h, near)
         dd = d[rows, cols]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.dot(a - eye, n) / (dd @ n)
-        p = eye + t[..., None] * dd
-        e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
-        inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+        t, inside = plane_hits(a, b, c, n, eye, dd)
         zc = z[rows, cols]
         hit = inside & np.isfinite(t) & (t >= near) & (t <= far) & (t < zc)  # equal depth: lower prim wins
         z[rows, cols] = np.where(hit, t, zc)
         prim[rows, cols] = np.where(hit, i, prim[rows, cols])
         normal[rows, cols] = np.where(hit[..., None], n / length, normal[rows, cols])
+    write(out, z, prim, normal, objects, "tiny")
+
+
+def blank(w: int, h: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The buffers before any triangle is drawn: Z at infinity, every prim ID the background, N zero."""
+    return np.full((h, w), np.inf), np.full((h, w), BACKGROUND, dtype=np.uint32), np.zeros((h, w, 3))
+
+
+def facets(tris: np.ndarray) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]]:
+    """Each triangle that has an area, in draw order: its index, vertices a, b, c, its normal
+    (b - a) x (c - a) (not normalized) and that normal's length. Zero-area triangles are never
+    visible, so they are left out."""
+    for i, (a, b, c) in enumerate(tris):
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n)
+        if length != 0.0:
+            yield i, a, b, c, n, float(length)
+
+
+def plane_hits(
+    a: np.ndarray, b: np.ndarray, c: np.ndarray, n: np.ndarray, eye: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For rays eye + t d (d of any shape (..., 3), not normalized): each one's t where it meets
+    the plane of triangle a, b, c (normal n from `facets`), the planar depth (inf or nan where the
+    ray is parallel to the plane), and whether that hit point is inside the triangle, its three
+    float64 edge functions all >= 0 or all <= 0 (closed edges)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.dot(a - eye, n) / (d @ n)
+    p = eye + t[..., None] * d
+    e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
+    inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+    return t, inside
+
+
+def write(
+    out: Path,
+    z: np.ndarray,
+    prim: np.ndarray,
+    normal: np.ndarray,
+    objects: np.ndarray,
+    renderer: str,
+    rgb: np.ndarray | None = None,
+) -> None:
+    """Writes OUT.exr: Z, N (and RGB when given) rounded to float32, id.prim, and id.object looked
+    up from each pixel's prim ID (the background where there is none)."""
     seen = prim != BACKGROUND
-    obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
+    obj = np.full(prim.shape, BACKGROUND, dtype=np.uint32)
     obj[seen] = objects[prim[seen]]
     exrbuf.write_buffers(
-        out, Z=z.astype(np.float32), prim=prim, obj=obj, N=normal.astype(np.float32), attrs={"renderer": "tiny"}
+        out,
+        Z=z.astype(np.float32),
+        prim=prim,
+        obj=obj,
+        N=normal.astype(np.float32),
+        RGB=None if rgb is None else rgb.astype(np.float32),
+        attrs={"renderer": renderer},
     )
 
 

@@ -41,14 +41,11 @@ from typing import Any
 
 import numpy as np
 
-# The harness's EXR writer (float32 Z and N, exact uint32 ids), and the tiny renderer's reading
-# of the resolved scene and its projection.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
+# The tiny renderer's reading of the resolved scene, its projection, its ray casting and its EXR
+# writing (the harness's writer: float32 Z and N, exact uint32 ids).
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness" / "examples"))
-from rendiff_harness.contract import exrbuf  # noqa: E402
-from tiny_renderer import project, read_scene  # noqa: E402
+from tiny_renderer import BACKGROUND, blank, facets, plane_hits, project, read_scene, write  # noqa: E402
 
-BACKGROUND = 0xFFFFFFFF
 BIAS = 2.0**-12
 SHIFT_PX = 1e-3
 # Two triangles are coplanar for `coplanar_swap` when each one's third vertex is within this
@@ -65,6 +62,19 @@ def projected_area_px(tri: np.ndarray, camera: tuple[Any, ...]) -> float:
     if depth.min() <= 0.0:
         return float("inf")
     return float(abs((px[1] - px[0]) * (py[2] - py[0]) - (px[2] - px[0]) * (py[1] - py[0])) / 2.0)
+
+
+def subpixel_shift(tris: np.ndarray, camera: tuple[Any, ...]) -> np.ndarray:
+    """The triangles as `subpixel_shift` draws them: the first vertex of each one whose image is
+    under 1 px^2 (`projected_area_px`) moved 1e-3 px right, along the camera's right axis at the
+    vertex's depth."""
+    _w, h, eye, fwd, right, _up, _near, _far, tan_half = camera
+    shifted = tris.copy()
+    for i, tri in enumerate(tris):
+        if projected_area_px(tri, camera) < 1.0:
+            pixel = 2.0 * tan_half * float((tri[0] - eye) @ fwd) / h
+            shifted[i, 0] = tri[0] + right * (SHIFT_PX * pixel)
+    return shifted
 
 
 def coplanar_swap(tris: np.ndarray, eye: np.ndarray) -> np.ndarray:
@@ -126,23 +136,12 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
     sy = (1.0 - 2.0 * (np.arange(h) + center) / h) * tan_half
     d = fwd + sx[None, :, None] * right + sy[:, None, None] * up
 
-    z = np.full((h, w), np.inf)
-    prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
-    normal = np.zeros((h, w, 3))
-    for i, (a, b, c) in enumerate(tris):
-        if bug == "subpixel_shift" and projected_area_px(tris[i], camera) < 1.0:
-            # The planted bug: one vertex of a sub-pixel triangle moved 1e-3 px right.
-            pixel = 2.0 * tan_half * float((a - eye) @ fwd) / h
-            a = a + right * (SHIFT_PX * pixel)
-        n = np.cross(b - a, c - a)
-        length = np.linalg.norm(n)
-        if length == 0.0:
-            continue
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.dot(a - eye, n) / (d @ n)
-        p = eye + t[..., None] * d
-        e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
-        inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+    if bug == "subpixel_shift":
+        # The planted bug: one vertex of each sub-pixel triangle moved 1e-3 px right.
+        tris = subpixel_shift(tris, camera)
+    z, prim, normal = blank(w, h)
+    for i, a, b, c, n, length in facets(tris):
+        t, inside = plane_hits(a, b, c, n, eye, d)
         # The coplanar_bias bug: a relative depth bias in the depth test.
         nearer = t < z * (1.0 - BIAS) if bug == "coplanar_bias" else t < z
         hit = inside & np.isfinite(t) & (t >= near) & (t <= far) & nearer
@@ -161,16 +160,7 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
     if bug == "radial_depth":
         # The radial_depth bug: distance from the eye instead of planar depth.
         z = np.where(seen, z * np.linalg.norm(d, axis=2), z)
-    obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
-    obj[seen] = objects[prim[seen]]
-    exrbuf.write_buffers(
-        out,
-        Z=z.astype(np.float32),
-        prim=prim,
-        obj=obj,
-        N=normal.astype(np.float32),
-        attrs={"renderer": bug},
-    )
+    write(out, z, prim, normal, objects, bug)
 
 
 if __name__ == "__main__":

@@ -21,10 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+# The harness's resolved scene and shading formula, and the tiny renderer's ray casting and
+# EXR writing.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness"))
-from rendiff_harness.contract import exrbuf, lighting, resolved  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "harness" / "examples"))
+from tiny_renderer import blank, facets, plane_hits, write  # noqa: E402
 
-BACKGROUND = 0xFFFFFFFF
+from rendiff_harness.contract import lighting, resolved  # noqa: E402
+
 BUGS = ("red_albedo",)
 
 
@@ -35,24 +39,13 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
     d = cam.pixel_directions()
     eye = np.asarray(cam.eye, dtype=np.float64)
     tris = scene.triangles.astype(np.float64)
-    z = np.full((h, w), np.inf)
-    prim = np.full((h, w), BACKGROUND, dtype=np.uint32)
-    normal = np.zeros((h, w, 3))
-    for i, (a, b, c) in enumerate(tris):
-        n = np.cross(b - a, c - a)
-        length = np.linalg.norm(n)
-        if length == 0.0:
-            continue
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.dot(a - eye, n) / (d @ n)
-        p = eye + t[..., None] * d
-        e = [np.cross(v1 - v0, p - v0) @ n for v0, v1 in ((a, b), (b, c), (c, a))]
-        inside = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+    z, prim, normal = blank(w, h)
+    for i, a, b, c, n, length in facets(tris):
+        t, inside = plane_hits(a, b, c, n, eye, d)
         hit = inside & np.isfinite(t) & (t >= cam.near) & (t <= cam.far) & (t < z)
         z = np.where(hit, t, z)
         prim = np.where(hit, np.uint32(i), prim)
         normal = np.where(hit[..., None], n / length, normal)
-    seen = prim != BACKGROUND
     # The planted bug: a coloured albedo shaded with its red channel in all three.
     materials = copy.deepcopy(scene.materials)
     for m in materials:
@@ -60,17 +53,7 @@ def render(bug: str, scene_dir: Path, out: Path) -> None:
         if len(set(albedo)) > 1:
             m["albedo"] = [albedo[0]] * 3
     rgb = lighting.local_radiance(dataclasses.replace(scene, materials=materials), prim, z)
-    obj = np.full((h, w), BACKGROUND, dtype=np.uint32)
-    obj[seen] = scene.object_ids[prim[seen]]
-    exrbuf.write_buffers(
-        out,
-        Z=z.astype(np.float32),
-        prim=prim,
-        obj=obj,
-        N=normal.astype(np.float32),
-        RGB=rgb.astype(np.float32),
-        attrs={"renderer": bug},
-    )
+    write(out, z, prim, normal, scene.object_ids, bug, rgb=rgb)
 
 
 if __name__ == "__main__":
