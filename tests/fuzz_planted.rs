@@ -12,7 +12,9 @@
 
 mod common;
 
-use common::cli::{fuzz_renderers, need_venv, output_within, printed, rendiff_with_venv};
+use common::cli::{
+    fuzz_renderers, need_venv, output_within, printed, reduce_planted, rendiff_with_venv,
+};
 use serde_json::Value;
 use std::path::Path;
 
@@ -82,36 +84,6 @@ fn finding<'a>(
     classes: &[&str],
 ) -> &'a Value {
     findings_of(ledger, backend, buffer, classes)[0]
-}
-
-/// `rendiff reduce RUN SCENE --backend B --buffer BUFFER -o OUT` from `dir`,
-/// with the planted renderers: it must succeed; what it printed.
-fn reduce_by_hand(
-    dir: &Path,
-    run: &str,
-    scene: &str,
-    backend: &str,
-    buffer: &str,
-    out: &str,
-) -> String {
-    let o = output_within(
-        rendiff_with_venv(dir)
-            .args([
-                "reduce",
-                run,
-                scene,
-                "--backend",
-                backend,
-                "--buffer",
-                buffer,
-            ])
-            .arg("--renderers")
-            .arg(renderers())
-            .args(["--jobs", "2", "-o", out]),
-        600,
-    );
-    assert_eq!(o.status.code(), Some(0), "{}", printed(&o));
-    printed(&o)
 }
 
 /// A scene file, loaded and resolved.
@@ -206,7 +178,15 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
                 .len()
         })
         .unwrap();
-    let big = reduce_by_hand(dir, "fuzz/run", largest, BACKEND, "id", "big.toml");
+    let big = reduce_planted(
+        dir,
+        &renderers(),
+        "fuzz/run",
+        largest,
+        BACKEND,
+        "id",
+        "big.toml",
+    );
     let triangles = |file: &Path| resolved(file).triangles.len();
     let big_before = triangles(&dir.join(format!("fuzz/scenes/{largest}.toml")));
     assert_eq!(triangles(&dir.join("big.toml")), 2, "{largest}: {big}");
@@ -245,7 +225,15 @@ fn a_planted_coplanar_bug_is_found_reduced_and_reproduced() {
     );
 
     // (b) Reducing the reduced scene changes nothing, byte for byte.
-    reduce_by_hand(&fresh, "run", "repro", BACKEND, "id", "again.toml");
+    reduce_planted(
+        &fresh,
+        &renderers(),
+        "run",
+        "repro",
+        BACKEND,
+        "id",
+        "again.toml",
+    );
     assert_eq!(
         String::from_utf8_lossy(&std::fs::read(fresh.join("again.toml")).unwrap()),
         String::from_utf8_lossy(&reduced),
@@ -321,7 +309,15 @@ fn a_planted_coplanar_id_swap_is_found_and_reduced() {
         .map(|s| s.as_str().unwrap())
         .max_by_key(|s| std::fs::metadata(scene_file(s)).unwrap().len())
         .unwrap();
-    let out = reduce_by_hand(dir, "fuzz/run", largest, backend, "id", "largest.toml");
+    let out = reduce_planted(
+        dir,
+        &renderers(),
+        "fuzz/run",
+        largest,
+        backend,
+        "id",
+        "largest.toml",
+    );
     let before = resolved(&scene_file(largest)).triangles.len();
     let after = resolved(&dir.join("largest.toml")).triangles;
     assert!(before > 2, "{largest} has {before} triangles");
@@ -432,7 +428,15 @@ fn a_planted_far_from_origin_depth_loss_is_found_and_reduced() {
         .iter()
         .min_by_key(|s| std::fs::metadata(scene_file(s)).unwrap().len())
         .unwrap();
-    let out = reduce_by_hand(dir, "fuzz/run", smallest, backend, "Z", "far.toml");
+    let out = reduce_planted(
+        dir,
+        &renderers(),
+        "fuzz/run",
+        smallest,
+        backend,
+        "Z",
+        "far.toml",
+    );
     let far = resolved(&dir.join("far.toml"));
     assert!(
         (1..=8).contains(&far.triangles.len()),
@@ -514,7 +518,15 @@ fn a_failure_moved_to_other_triangles_is_not_the_same_failure() {
     assert!(interior("moved") > 0, "{results}");
     assert!(interior("left_pair") > 0, "{results}");
 
-    let red = reduce_by_hand(dir, "run", "moved", BACKEND, "id", "reduced.toml");
+    let red = reduce_planted(
+        dir,
+        &renderers(),
+        "run",
+        "moved",
+        BACKEND,
+        "id",
+        "reduced.toml",
+    );
     let r = resolved(&dir.join("reduced.toml"));
     assert_eq!(r.triangles.len(), 2, "{red}");
     for t in &r.triangles {

@@ -11,7 +11,9 @@
 
 mod common;
 
-use common::cli::{fuzz_renderers, need_venv, output_within, printed, rendiff_with_venv};
+use common::cli::{
+    fuzz_renderers, need_venv, output_within, printed, reduce_planted, rendiff_with_venv,
+};
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use std::path::Path;
@@ -106,24 +108,7 @@ fn check(dir: &Path, scene: &str, extra: &[&str]) -> Vec<(String, Option<String>
 /// `rendiff reduce run STEM --backend red_albedo --buffer RGB -o OUT` in
 /// `dir`: it must succeed; what it printed.
 fn reduce(dir: &Path, stem: &str, out: &str) -> String {
-    let o = output_within(
-        rendiff_with_venv(dir)
-            .args([
-                "reduce",
-                "run",
-                stem,
-                "--backend",
-                BACKEND,
-                "--buffer",
-                "RGB",
-            ])
-            .arg("--renderers")
-            .arg(renderers())
-            .args(["--jobs", "2", "-o", out]),
-        600,
-    );
-    assert_eq!(o.status.code(), Some(0), "{}", printed(&o));
-    printed(&o)
+    reduce_planted(dir, &renderers(), "run", stem, BACKEND, "RGB", out)
 }
 
 fn resolved(file: &Path) -> ResolvedScene {

@@ -246,3 +246,34 @@ pub fn printed(o: &std::process::Output) -> String {
         String::from_utf8_lossy(&o.stderr)
     )
 }
+
+/// `rendiff reduce RUN SCENE --backend BACKEND --buffer BUFFER -o OUT` from
+/// `dir` with the planted renderers declared in `renderers`: it must succeed
+/// within 600 s; what it printed.
+pub fn reduce_planted(
+    dir: &Path,
+    renderers: &str,
+    run: &str,
+    scene: &str,
+    backend: &str,
+    buffer: &str,
+    out: &str,
+) -> String {
+    let o = output_within(
+        rendiff_with_venv(dir)
+            .args([
+                "reduce",
+                run,
+                scene,
+                "--backend",
+                backend,
+                "--buffer",
+                buffer,
+            ])
+            .args(["--renderers", renderers])
+            .args(["--jobs", "2", "-o", out]),
+        600,
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", printed(&o));
+    printed(&o)
+}
