@@ -112,7 +112,7 @@ PRECISION_KEYS = frozenset({*PRECISION_NUMBERS, "depth_grazing"})
 #   (with depth_grazing a larger number is silently that cap already). At 1e-3 Z a radial
 #   depth (planar / cos of the ray's angle off axis, relative error ~ d^2 / (2 f^2) at d px
 #   from the principal point, f the focal length in px) still fails outside a disc of radius
-#   f * sqrt(2e-3) ~ 0.045 f, and two surfaces 0.2% of Z apart (a tie allows it on each) are still ordered, not a tie.
+#   f * sqrt(2e-3) ~ 0.045 f, and surfaces over 0.2% of Z apart (a tie allows it on each) stay ordered, not a tie.
 # - normal_relative < 1 rad: |N| must be 1 within it; at 1 a zero normal (a buffer never
 #   written) passes that check, and so does a normal 57 degrees off.
 # - rgb_relative < 1 - 1/pi (~0.68): Lambert's 1/pi, the factor most often dropped or applied
