@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from rendiff_harness.contract.vocab import BACKGROUND_ID
-from rendiff_harness.judge.rgb import MAX_GROUPS, explain_rgb
+from rendiff_harness.judge import verify
+from rendiff_harness.judge.rgb import explain_rgb
 
 
 def test_groups_by_prims_largest_first_with_the_worst_pixel_as_example() -> None:
@@ -37,4 +38,4 @@ def test_none_without_interior_pixels_or_ids_and_at_most_max_groups() -> None:
     every = ~none
     assert explain_rgb(every, np.ones((30, 30)), None, prim) is None
     groups = explain_rgb(every, np.ones((30, 30)), prim, prim)
-    assert groups is not None and len(groups) == MAX_GROUPS
+    assert groups is not None and len(groups) == verify.MAX_EXPLANATIONS

@@ -15,7 +15,7 @@ from ..contract.manifest import Reference, render_info
 from ..contract.results import Entry
 from ..contract.vocab import BACKGROUND_ID
 from ..renderers.spec import BackendSpec
-from . import diffimages, precision, radiance
+from . import diffimages, precision, radiance, verify
 from .verdict import Judged
 
 RGB_ENTRY_FIELDS = (
@@ -30,15 +30,12 @@ RGB_ENTRY_FIELDS = (
 )
 """An RGB entry's own fields (results.Entry.own_fields)."""
 
-MAX_GROUPS = 20
-"""Most explanation groups an RGB entry lists (as id's: docs/run-format.md)."""
-
 
 def explain_rgb(
     interior: np.ndarray, score: np.ndarray, ref_prim: np.ndarray | None, test_prim: np.ndarray | None
 ) -> list[dict[str, Any]] | None:
     """The interior failing pixels grouped by the prims each side saw there, largest groups
-    first (at most MAX_GROUPS), each with its worst pixel as the example: where an RGB failure
+    first (at most `verify.MAX_EXPLANATIONS`, as id's), each with its worst pixel as the example: where an RGB failure
     is, in the terms of id's `explanations`, so that `rendiff reduce` can hold a reduction near
     the same triangles. None without interior pixels or without a side's id.prim."""
     if ref_prim is None or test_prim is None or not interior.any():
@@ -49,7 +46,7 @@ def explain_rgb(
     groups: dict[tuple[int, int], list[int]] = {}
     for k in np.argsort(-s, kind="stable"):
         groups.setdefault((int(rp[k]), int(tp[k])), []).append(int(k))
-    ordered = sorted(groups.items(), key=lambda g: -len(g[1]))[:MAX_GROUPS]
+    ordered = sorted(groups.items(), key=lambda g: -len(g[1]))[: verify.MAX_EXPLANATIONS]
 
     def prim(p: int) -> int | None:
         return None if p == BACKGROUND_ID else p
