@@ -132,6 +132,21 @@ def triangle_extent_span(ref: Reference, prims: np.ndarray) -> tuple[np.ndarray,
     return extent, vz.max(axis=1) - vz.min(axis=1)
 
 
+def triangle_corner_cond(ref: Reference, prims: np.ndarray) -> np.ndarray:
+    """Each triangle's largest |e_a| |e_b| / |e_a x e_b| over its three corners (1/sin of its smallest
+    angle; inf for a degenerate one): what an f32 cross product of any two of its edges may lose
+    relative to its length (tolerance.moeller_t_depth)."""
+    t = ref.scene.triangles[prims.astype(np.int64)].astype(np.float64)
+    worst = np.ones(len(t))
+    with np.errstate(all="ignore"):
+        for k in range(3):
+            a = t[:, (k + 1) % 3] - t[:, k]
+            b = t[:, (k + 2) % 3] - t[:, k]
+            c = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1) / np.linalg.norm(np.cross(a, b), axis=1)
+            worst = np.maximum(worst, np.where(np.isnan(c), np.inf, c))
+    return worst
+
+
 def depth_context(
     ref: Reference,
     rows: np.ndarray,
@@ -143,9 +158,11 @@ def depth_context(
 ) -> tolerance.DepthContext:
     """Everything a depth model may look at for the K pixels (rows, cols) seen at z_ref."""
     span = None
+    cond = None
     if prims is not None:
         cos = ref.ray_cos(rows, cols, prims)
         extent, span = triangle_extent_span(ref, prims)
+        cond = triangle_corner_cond(ref, prims)
     else:  # cannot know the triangle: assume the worst angle (models cap at MAX_REL)
         cos = np.zeros(z_ref.size)
         extent = None
@@ -161,6 +178,7 @@ def depth_context(
         eye_norm=eye_norm(ref),
         depth_span=span,
         ray_norm=np.linalg.norm(ref.scene.camera.center_directions(rows, cols), axis=1),
+        corner_cond=cond,
     )
 
 
@@ -194,6 +212,7 @@ def depth_tolerance_fn(
             eye_norm=eye_norm(ref),
             depth_span=span,
             ray_norm=longest_ray,
+            corner_cond=triangle_corner_cond(ref, prims),
         )
         try:
             t, _ = model.depth(ctx)

@@ -60,6 +60,9 @@ class DepthContext:
     # (K,) or a bound for all: |d| of the pixel ray d = (q, 1) in camera axes, sqrt(1 + |q|^2); how far
     # a rounded ray direction moves the point at depth Z is proportional to it (`embree_depth`)
     ray_norm: np.ndarray | float | None = None
+    # (K,) 1/sin of the triangle's smallest angle (the largest |e_a| |e_b| / |e_a x e_b| over its corners):
+    # how much an f32 cross product of two of its edges can be off relative to its length (`moeller_t_depth`)
+    corner_cond: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -267,6 +270,53 @@ def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
     return shift_depth(ctx, F32_U * (along + along + ctx.origin_offset + edges))
 
 
+MOELLER_DOT = 5.0 * F32_U / (1.0 - 5.0 * F32_U) * math.sqrt(2.0)
+"""gamma_5 sqrt(2): an f32 dot product of a vector with an f32 cross product, `dot(cross(a, b), c)`, errs by at
+most this times |a| |b| |c| (the cross product's components <= gamma_2 (|a_y b_z| + |a_z b_y|) each, sqrt(2) |a| |b|
+on the vector, the dot <= gamma_3 of its terms; Embree's common/math/vec3.h, docs/verifier.md)."""
+
+MOELLER_DIVIDE = 4.0 * F32_U
+"""t = T * rcp(den): the reciprocal (refined by a Newton step) and the product, at most 4 u relative."""
+
+
+MOELLER_TEXT = (
+    "(eps Z + gamma5 sqrt(2) cond (|d| Z + |f32(eye) - eye| + longest edge) / |cos|) / (1 - eps) + 4 2^-24 Z, "
+    "eps = gamma5 sqrt(2) cond / |cos|, cond = 1/sin of the triangle's smallest angle (f32 t = T / den, uncapped)"
+)
+"""The tolerance text of `moeller_t_depth`."""
+
+
+def moeller_t_depth(ctx: DepthContext) -> np.ndarray:
+    """|dZ| from the f32 arithmetic of t = T / den in Embree's triangle tests (docs/verifier.md, "Depth"):
+    den = dot(Ng, D) and T = dot(Ng, C), Ng the f32 cross product of two edges of the triangle, C its vertex
+    relative to the ray origin (Moeller; Pluecker's stable normal and moved vertex have the same form).
+
+    * den errs by <= MOELLER_DOT |e_a| |e_b| |D| and |den| = |D| |e_a x e_b| |cos|: relative
+      eps_den = MOELLER_DOT * cond / |cos| (cond = 1/sin of the angle between the two edges, at most
+      `corner_cond`);
+    * T errs by <= MOELLER_DOT |e_a| |e_b| |C|: divided by |den|, a move of t (along D, |D| >= 1, so of Z at
+      most as much) of MOELLER_DOT * cond * |C| / |cos|, with |C| <= |X - org| + E <= |D| Z + offset + E;
+    * so |dZ| <= (eps_den Z + MOELLER_DOT cond (|D| Z + offset + E) / |cos|) / (1 - eps_den) + MOELLER_DIVIDE Z.
+
+    Unlike the measured 1e-5 / |cos| it is not capped: near edge-on the arithmetic itself is off by that much
+    (the fuzzer's `s13_02458`: Mitsuba, whose CPU variants intersect through Embree's default test, was off by
+    1.02 u cond / |cos| of Z, three times the measured cap). Where eps_den >= 1 the sign of den, and so t, is not
+    bounded: the tolerance is infinite there (the ray runs along the plane within rounding). Without the
+    triangle (no `corner_cond` or `extent`) or the pixel's |D|, nothing is added: the models keep their cap."""
+    if ctx.corner_cond is None or ctx.extent is None or ctx.ray_norm is None:
+        return np.zeros_like(np.asarray(ctx.z_ref, dtype=np.float64))
+    z = np.abs(np.asarray(ctx.z_ref, dtype=np.float64))
+    ray = np.asarray(ctx.ray_norm, dtype=np.float64)
+    reach = ray * z + ctx.origin_offset + np.asarray(ctx.extent, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        per_cos = MOELLER_DOT * np.asarray(ctx.corner_cond, dtype=np.float64) / ctx.cos
+        eps_den = per_cos
+        tol = (eps_den * z + per_cos * reach) / (1.0 - eps_den) + MOELLER_DIVIDE * z
+    tol = np.where(np.isfinite(tol) & (eps_den < 1.0), tol, np.inf)
+    result: np.ndarray = tol
+    return result
+
+
 def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """Embree 3: float32 watertight/Moeller intersection.
 
@@ -277,11 +327,12 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """
     tol = (
         relative_grazing(ctx, EMBREE_REL)
+        + moeller_t_depth(ctx)
         + shift_depth(ctx, position_error(ctx, f32_origin))
         + embree_direction_depth(ctx)
     )
     return tol, (
-        f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
+        f"embree: |dZ| <= Z*min({EMBREE_REL:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) + {MOELLER_TEXT} "
         f"+ min(|f32(eye) - eye| ({ctx.origin_offset:.3g}) / |cos|, depth span) (rays start at the f32 eye) "
         "+ min(2^-24 (2 |d| Z + |f32(eye) - eye| + 2 longest edge) / |cos|, depth span) "
         "(f32 ray direction; the triangle moved to the ray origin in f32)"
