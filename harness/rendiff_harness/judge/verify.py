@@ -47,6 +47,13 @@ EDGE, TIE, CRACK, INTERIOR = range(4)
 F32_ULP = 2.0**-23
 MAX_EXPLANATIONS = 20
 
+EdgeTerms = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(triangle indices (M,), rows (M,), cols (M,)) -> (M, 3) px added to `eps` on edge j (corner j to j + 1)
+of that triangle at that pixel (tolerance.Model.edge_products); inf: unbounded, every pixel is near it."""
+TriangleSlack = Callable[[np.ndarray], np.ndarray]
+"""(triangle indices (M,)) -> (M,) world distance added to `eye_slack` for that triangle's plane
+(tolerance.Model.plane_move)."""
+
 DepthTolerance = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 """(planar depth z (K,), |cos| (K,), the triangle seen there (K,)) -> allowed |dZ| (K,) of the
 test renderer on that triangle (its depth model needs the triangle's own depth span and size)."""
@@ -199,9 +206,12 @@ def classify_mismatches(
     topo_cache: dict[str, Topology] | None = None,
     backend: str = "the test renderer",
     eye_slack: float = 0.0,
+    edge_terms: EdgeTerms | None = None,
+    tri_slack: TriangleSlack | None = None,
 ) -> Classified:
-    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px),
-    `eye_slack` how far (world units) its arithmetic may move the eye relative to the geometry."""
+    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px), grown on
+    each edge by `edge_terms`, `eye_slack` how far (world units) its arithmetic may move the eye
+    relative to the geometry, grown per triangle by `tri_slack`."""
     k = int(np.asarray(ref_ids).size)
     cls = np.full(k, INTERIOR, dtype=np.int8)
     why = [""] * k
@@ -216,8 +226,13 @@ def classify_mismatches(
     bg = np.uint64(BACKGROUND_ID)
     invalid_t = (t_ids != bg) & ~st.valid
     invalid_r = (r_ids != bg) & ~sr.valid
-    covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a))
-    covers_t = st.valid & (st.inside | (st.poly_d <= eps_a))
+    xr = _edge_extra(edge_terms, sr, r_ids, rows, cols)
+    xt = _edge_extra(edge_terms, st, t_ids, rows, cols)
+    covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a) | _near(sr.edge_d, eps_a, xr).any(axis=1))
+    covers_t = st.valid & (st.inside | (st.poly_d <= eps_a) | _near(st.edge_d, eps_a, xt).any(axis=1))
+    near_r = _near(sr.edge_d, eps_a, xr)
+    # a vertex is on its two edges: it moves with the larger of their bands
+    near_vr = _near(sr.vert_d, eps_a, np.maximum(xr, np.roll(xr, 1, axis=1)))
     both = covers_r & covers_t & np.isfinite(sr.z) & np.isfinite(st.z)
     tol = np.zeros(k)
     if both.any():
@@ -258,11 +273,11 @@ def classify_mismatches(
             tp = get_topo()
             shared = _shared(tp, r, t)
             if shared:
-                near_v = [j for j in range(3) if sr.vert_d[i, j] <= e and int(tp.corner_vid[r, j]) in shared]
+                near_v = [j for j in range(3) if near_vr[i, j] and int(tp.corner_vid[r, j]) in shared]
                 near_e = [
                     j
                     for j in range(3)
-                    if sr.edge_d[i, j] <= e
+                    if near_r[i, j]
                     and int(tp.corner_vid[r, j]) in shared
                     and int(tp.corner_vid[r, (j + 1) % 3]) in shared
                 ]
@@ -283,13 +298,13 @@ def classify_mismatches(
             continue
         # The side that saw the farther surface missed the nearer triangle.
         if sr.valid[i] and (not st.valid[i] or st.z[i] > sr.z[i]):
-            missed, g, missed_name, seen_name, who = r, sr, rn, tn, backend
+            missed, g, gx, missed_name, seen_name, who = r, sr, xr, rn, tn, backend
         elif st.valid[i]:
-            missed, g, missed_name, seen_name, who = t, st, tn, rn, "the reference"
+            missed, g, gx, missed_name, seen_name, who = t, st, xt, tn, rn, "the reference"
         else:
             why[i] = "both sides name no triangle"
             continue
-        near = [j for j in range(3) if g.edge_d[i, j] <= e]
+        near = [j for j in range(3) if np.isfinite(g.edge_d[i, j]) and g.edge_d[i, j] <= e + gx[i, j]]
         if not near:
             if g.poly_d[i] <= e:
                 cls[i] = EDGE
@@ -307,7 +322,16 @@ def classify_mismatches(
         # Every pixel's outline search at once (outline.py): numpy per round, not per pixel.
         at = np.array([w[0] for w in walk], dtype=np.int64)
         found = outline.search(
-            scene, get_topo(), [w[1] for w in walk], [w[2] for w in walk], rows_a[at], cols_a[at], eps_a[at], eye_slack
+            scene,
+            get_topo(),
+            [w[1] for w in walk],
+            [w[2] for w in walk],
+            rows_a[at],
+            cols_a[at],
+            eps_a[at],
+            eye_slack,
+            edge_terms,
+            tri_slack,
         )
         for (i, _, _, d, missed_name, who, seen_name), (line, closed_by) in zip(walk, found, strict=True):
             if line:
@@ -320,6 +344,24 @@ def classify_mismatches(
                     f"and no outline within {float(eps_a[i]):.2g} px, but {who} saw {seen_name} behind it: crack"
                 )
     return Classified(cls, why, explain(cls, why, r_ids, t_ids, rows, cols))
+
+
+def _edge_extra(
+    terms: EdgeTerms | None, side: Side, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray
+) -> np.ndarray:
+    """(K, 3) `terms` of each side's triangle at each pixel (0 where there are none or no triangle)."""
+    out = np.zeros((prims.size, 3))
+    idx = np.nonzero(side.valid)[0]
+    if terms is not None and idx.size:
+        out[idx] = terms(prims[idx].astype(np.int64), np.asarray(rows).ravel()[idx], np.asarray(cols).ravel()[idx])
+    return out
+
+
+def _near(dist: np.ndarray, eps: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """(K, 3) bool: a visible feature (finite distance) within eps plus its own extra."""
+    with np.errstate(invalid="ignore"):
+        near: np.ndarray = np.isfinite(dist) & (dist <= eps[:, None] + extra)
+    return near
 
 
 def explain(
