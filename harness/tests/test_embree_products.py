@@ -17,7 +17,7 @@ import pytest
 from fixtures import write_scene
 from rendiff_harness.contract import resolved, vocab
 from rendiff_harness.contract.manifest import Reference
-from rendiff_harness.judge import embree_products, ids, tolerance, verify
+from rendiff_harness.judge import embree_products, ids, metamorphic, tolerance, verify
 from rendiff_harness.renderers.core import SPECS
 
 U = 2.0**-24
@@ -199,14 +199,14 @@ def _end_on(tmp_path: Path, d: float) -> tuple[Reference, dict[str, np.ndarray]]
     return Reference(scene, {"id.prim": rid, "Z": zr}, (64, 64)), {"id.prim": tid, "Z": zt}
 
 
-def _bound(ref: Reference, name: str) -> tuple[float, float, float]:
-    """(the center's distance from edge 0, the per-pixel eps, edge 0's product term) at the pixel."""
+def _bound(ref: Reference, name: str) -> tuple[float, float]:
+    """(the center's distance from edge 0, edge 0's product term) at the pixel."""
     rows, cols = np.array([32]), np.array([32])
     g = verify.side_geometry(ref.scene, np.array([0]), rows, cols)
     terms, _ = ids.per_triangle_terms(ref, _model(name))
     assert terms is not None
     x = float(terms(np.array([0]), rows, cols)[0, 0])
-    return float(g.edge_d[0, 0]), x, x
+    return float(g.edge_d[0, 0]), x
 
 
 @pytest.mark.parametrize("name", ["embree", "embree_robust"])
@@ -214,11 +214,11 @@ def test_a_center_just_inside_the_end_on_edge_s_band_is_an_edge_and_just_outside
     tmp_path: Path, name: str
 ) -> None:
     ref0, _ = _end_on(tmp_path / "probe", 0.05)
-    _, _, x = _bound(ref0, name)
+    _, x = _bound(ref0, name)
     assert 0.02 < x < 0.5  # the products dominate: the old constant was 1e-4
     for k, factor in enumerate((0.9, 1.1)):
         ref, test = _end_on(tmp_path / str(k), factor * x)
-        dist, _, here = _bound(ref, name)
+        dist, here = _bound(ref, name)
         res = ids.compare_ids(ref, test, _model(name), backend=name)
         want = "edge" if factor < 1.0 else "interior"
         assert (dist <= here) == (factor < 1.0), (dist, here)
@@ -229,7 +229,7 @@ def test_a_center_just_inside_the_end_on_edge_s_band_is_an_edge_and_just_outside
 @pytest.mark.parametrize("name", ["embree", "embree_robust"])
 def test_the_old_constant_in_place_of_the_per_edge_term_calls_it_interior(tmp_path: Path, name: str) -> None:
     ref0, _ = _end_on(tmp_path / "probe", 0.05)
-    _, _, x = _bound(ref0, name)
+    _, x = _bound(ref0, name)
     ref, test = _end_on(tmp_path / "in", 0.9 * x)
     old = dataclasses.replace(_model(name), edge_px=1e-4, edge_products=None)
     assert ids.compare_ids(ref, test, old, backend=name).interior == 1
@@ -270,3 +270,28 @@ def test_the_per_triangle_slack_opens_a_closed_edge_as_the_scene_wide_one_does(t
     assert cls(4.0, 0.9) == "crack"
     assert cls(4.0, 1.1) == "edge"
     assert cls(0.0, 5.1) == "edge"
+
+
+# --------------------------------------------------------------------------- the metamorphic comparison
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_the_metamorphic_band_grows_by_both_renders_products_on_that_edge(tmp_path: Path, name: str) -> None:
+    """Base and variant both from Embree: each may move the end-on edge by its product term, so a
+    mismatch up to twice it from that edge is an edge, beyond it interior (edge_px alone: 0 px)."""
+    ref0, _ = _end_on(tmp_path / "probe", 0.05)
+    _, x = _bound(ref0, name)
+    model = _model(name)
+    for k, factor in enumerate((1.8, 2.2)):
+        ref, test = _end_on(tmp_path / str(k), factor * x)
+        dist, here = _bound(ref, name)
+        rows, cols = np.array([32]), np.array([32])
+        got = metamorphic.product_distance(ref.scene, np.array([0]), rows, cols, model.edge_products)
+        plain = metamorphic.product_distance(ref.scene, np.array([0]), rows, cols, None)
+        assert plain[0] == pytest.approx(dist, rel=1e-9) and got[0] == pytest.approx(dist - 2.0 * here, rel=1e-9)
+        case = metamorphic.Case("translate", "", "b", "v", np.array([0]), np.array([0]), 1.0)
+        distance = metamorphic.relation_edge_distance(ref.scene, ref.scene, case, test["id.prim"], model.edge_products)
+        res = ids.compare_ids(ref, test, model, edge_distance=distance)
+        assert (res.interior, res.edge) == ((0, 1) if factor < 2.0 else (1, 0)), (dist, here)
+        without = metamorphic.relation_edge_distance(ref.scene, ref.scene, case, test["id.prim"])
+        assert ids.compare_ids(ref, test, model, edge_distance=without).interior == 1
