@@ -295,3 +295,26 @@ def test_the_metamorphic_band_grows_by_both_renders_products_on_that_edge(tmp_pa
         assert (res.interior, res.edge) == ((0, 1) if factor < 2.0 else (1, 0)), (dist, here)
         without = metamorphic.relation_edge_distance(ref.scene, ref.scene, case, test["id.prim"])
         assert ids.compare_ids(ref, test, model, edge_distance=without).interior == 1
+
+
+@pytest.mark.parametrize("name", ["embree", "embree_robust"])
+def test_the_verifier_is_given_each_triangle_s_own_plane_move_at_the_f32_eye(tmp_path: Path, name: str) -> None:
+    """ids.per_triangle_terms hands the verifier the model's plane move of the scene's triangles, taken
+    from the f32 eye (Embree's ray origin), and nothing for a model without one."""
+    eye = (0.1, 1e3 + 1.0 / 3.0, 5.0)
+    tris = [
+        [[0.0, 1e3, 0.0], [1.0, 1e3, 0.0], [0.0, 1e3 + 1.0, 0.0]],
+        [[5e3, 0.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]],
+    ]
+    scene = resolved.load(write_scene(tmp_path / "s", tris, eye=eye, look_at=(0.0, 1e3, 0.0)))
+    ref = Reference(scene, {}, (scene.camera.height, scene.camera.width))
+    _, slack = ids.per_triangle_terms(ref, _model(name))
+    assert slack is not None
+    org = np.asarray(eye).astype(np.float32).astype(np.float64)
+    assert not np.array_equal(org, np.asarray(eye))  # the f32 eye differs from the eye here
+    want = embree_products.plane_move(scene.triangles[[1, 0]].astype(np.float64), org, name == "embree_robust")
+    assert np.array_equal(slack(np.array([1, 0])), want)
+    assert ids.per_triangle_terms(ref, dataclasses.replace(_model(name), plane_move=None, edge_products=None)) == (
+        None,
+        None,
+    )

@@ -149,6 +149,8 @@ class Model:
             # NaN: no term at that pixel; +inf (rounding may carry the point past the eye) stays
             base = base + np.where(np.isnan(extra), 0.0, extra)
             text = f"{text} + {extra_text}"
+        if self.edge_products is not None:
+            text = f"{text} + per edge: the rounding of its edge functions' products (judge/embree_products.py)"
         if self.placement is not None:
             placed = self.placement(ctx.attrs)
             base = base + shift_edge(np.full(ctx.z.shape, placed), ctx)
