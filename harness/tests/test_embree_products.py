@@ -318,3 +318,29 @@ def test_the_verifier_is_given_each_triangle_s_own_plane_move_at_the_f32_eye(tmp
         None,
         None,
     )
+
+
+def test_a_shared_edge_takes_the_larger_of_the_two_triangles_bands_on_it(tmp_path: Path) -> None:
+    """Moeller's band on an edge depends on the triangle's v0, so a shared edge may have two: either
+    triangle's boundary may move by its own. Pixel (7, 7) is 0.707 px from the diagonal two folded
+    triangles share (eye (0, 0, 5), vfov 90, 16 x 16); the reference sees prim 1, the test prim 0."""
+    t0 = [[-5, -5, 0], [5, -5, 0], [5, 5, 0]]
+    t1 = [[-5, -5, 0], [5, 5, 0], [-5, 5, 3]]  # folded: not coplanar, so no tie
+    scene = resolved.load(write_scene(tmp_path / "s", [t0, t1], vfov_deg=90.0, width=16, height=16))
+
+    def exact(z: np.ndarray, cos: np.ndarray, prims: np.ndarray) -> np.ndarray:
+        return np.zeros_like(z)
+
+    def why(band0: float, band1: float) -> str:
+        def terms(prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            return np.repeat(np.where(np.asarray(prims) == 0, band0, band1)[:, None], 3, axis=1)
+
+        one = np.array([1], dtype=np.uint32)
+        res = verify.classify_mismatches(
+            scene, one, one - 1, np.array([7]), np.array([7]), 0.01, exact, edge_terms=terms
+        )
+        return res.why[0]
+
+    assert "prims 1 and 0 share" in why(0.0, 0.72)  # the reference's triangle's band
+    assert "prims 1 and 0 share" in why(0.72, 0.0)  # the test's triangle's band on the same edge
+    assert "share" not in why(0.69, 0.69)

@@ -230,9 +230,6 @@ def classify_mismatches(
     xt = _edge_extra(edge_terms, st, t_ids, rows, cols)
     covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a) | _near(sr.edge_d, eps_a, xr).any(axis=1))
     covers_t = st.valid & (st.inside | (st.poly_d <= eps_a) | _near(st.edge_d, eps_a, xt).any(axis=1))
-    near_r = _near(sr.edge_d, eps_a, xr)
-    # a vertex is on its two edges: it moves with the larger of their bands
-    near_vr = _near(sr.vert_d, eps_a, np.maximum(xr, np.roll(xr, 1, axis=1)))
     both = covers_r & covers_t & np.isfinite(sr.z) & np.isfinite(st.z)
     tol = np.zeros(k)
     if both.any():
@@ -273,13 +270,20 @@ def classify_mismatches(
             tp = get_topo()
             shared = _shared(tp, r, t)
             if shared:
-                near_v = [j for j in range(3) if near_vr[i, j] and int(tp.corner_vid[r, j]) in shared]
+                # A shared feature is on both triangles: either one's band there may flip the pixel.
+                rv, tv = [int(v) for v in tp.corner_vid[r]], [int(v) for v in tp.corner_vid[t]]
+                near_v = [
+                    j
+                    for j in range(3)
+                    if rv[j] in shared
+                    and _within(sr.vert_d[i, j], e, _vertex_band(xr[i], j), _vertex_band(xt[i], tv.index(rv[j])))
+                ]
                 near_e = [
                     j
                     for j in range(3)
-                    if near_r[i, j]
-                    and int(tp.corner_vid[r, j]) in shared
-                    and int(tp.corner_vid[r, (j + 1) % 3]) in shared
+                    if rv[j] in shared
+                    and rv[(j + 1) % 3] in shared
+                    and _within(sr.edge_d[i, j], e, xr[i, j], xt[i, _edge_index(tv, rv[j], rv[(j + 1) % 3])])
                 ]
                 if near_e or near_v:
                     cls[i] = EDGE
@@ -355,6 +359,21 @@ def _edge_extra(
     if terms is not None and idx.size:
         out[idx] = terms(prims[idx].astype(np.int64), np.asarray(rows).ravel()[idx], np.asarray(cols).ravel()[idx])
     return out
+
+
+def _vertex_band(extra: np.ndarray, j: int) -> float:
+    """A vertex is on its two edges (j - 1 and j): it moves with the larger of their bands."""
+    return float(max(extra[j], extra[(j + 2) % 3]))
+
+
+def _edge_index(corners: list[int], a: int, b: int) -> int:
+    """The local edge of a triangle (its corner vertex ids) whose ends are vertices a and b."""
+    return next(k for k in range(3) if {corners[k], corners[(k + 1) % 3]} == {a, b})
+
+
+def _within(dist: float, eps: float, extra_r: float, extra_t: float) -> bool:
+    """A visible feature (finite distance) within eps plus the larger of the two triangles' bands on it."""
+    return bool(np.isfinite(dist)) and dist <= eps + max(extra_r, extra_t)
 
 
 def _near(dist: np.ndarray, eps: np.ndarray, extra: np.ndarray) -> np.ndarray:
