@@ -344,3 +344,111 @@ def test_a_shared_edge_takes_the_larger_of_the_two_triangles_bands_on_it(tmp_pat
     assert "prims 1 and 0 share" in why(0.0, 0.72)  # the reference's triangle's band
     assert "prims 1 and 0 share" in why(0.72, 0.0)  # the test's triangle's band on the same edge
     assert "share" not in why(0.69, 0.69)
+
+
+# --------------------------------------------------------------------------- the whole bound, written out
+
+
+def _v(a: np.ndarray) -> list[float]:
+    return [float(x) for x in a]
+
+
+def _sub(a: list[float], b: list[float]) -> list[float]:
+    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+
+
+def _add(a: list[float], b: list[float]) -> list[float]:
+    return [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+
+
+def _len(a: list[float]) -> float:
+    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+def _crs(a: list[float], b: list[float]) -> float:
+    return _len([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _px(df: float, low: float, dn: float, pixel: float) -> float:
+    """k c^2 (1 + u) |D| / (1 - k c) / pixel with k = df / low, c = 1 / (1 - u |D|); inf unless k c < 1."""
+    if low <= 0.0:
+        return math.inf
+    k, c = df / low, 1.0 / (1.0 - U * dn)
+    return k * c * c * (1.0 + U) * dn / (1.0 - k * c) / pixel if k * c < 1.0 else math.inf
+
+
+def _reference(tri: np.ndarray, d: np.ndarray, pixel: float, robust: bool) -> list[float]:
+    """docs/verifier.md's bound, transcribed from the text in plain floats, edge j = corners j, j + 1."""
+    w = [_v(v) for v in tri]
+    dn = _len(_v(d))
+    g = math.sqrt(2.0) * G5 * (1.0 + U) * dn  # sqrt(2) gamma5 |fl(D)|
+    wn = [_len(x) for x in w]
+    if robust:
+        dfs, lows = [], []
+        for j in range(3):
+            a, b = w[j], w[(j + 1) % 3]
+            m = (1.0 + math.sqrt(2.0) * (1.0 + U)) * U * max(wn[j], wn[(j + 1) % 3])
+            dfs.append(g * (_len(_sub(b, a)) + 2.0 * m) * (_len(_add(a, b)) + 2.0 * m))
+            lows.append(2.0 * (_crs(a, b) - m * (wn[j] + wn[(j + 1) % 3] + m)))
+        return [_px(dfs[j] + 2.0**-21 * sum(dfs), lows[j], dn, pixel) for j in range(3)]
+    e1, e2 = _len(_sub(w[0], w[1])), _len(_sub(w[2], w[0]))
+    m = U * (wn[0] + max(e1, e2, _len(_sub(w[1], w[2]))))
+    c, e1r, e2r = wn[0] + m, (1.0 + U) * e1, (1.0 + U) * e2
+    df_v, df_u, df_den = g * c * e1r, g * c * e2r, g * e1r * e2r
+    df_3 = df_u + df_v + df_den + U * (1.0 + math.sqrt(2.0) * G5) * (1.0 + U) * dn * c * (e1r + e2r)
+
+    def low(a: int, b: int) -> float:
+        return _crs(w[a], w[b]) - m * (wn[a] + wn[b] + m)
+
+    return [_px(df_v, low(0, 1), dn, pixel), _px(df_3, low(1, 2), dn, pixel), _px(df_u, low(2, 0), dn, pixel)]
+
+
+# W (a few units away), a triangle far from the eye (its vertex moves matter at 1e-3 of the bound),
+# and one whose edge 0 is seen 3e-8 rad from end-on (k c past 1: unbounded, never negative).
+CASES = [
+    W,
+    np.array([[3.0e6, -2.0e6, -4.0e6], [3.0e6 + 1.0, -2.0e6 + 2.0, -4.0e6 + 0.5], [3.0e6 - 2.0, -2.0e6, -4.0e6 + 1.0]]),
+    np.array([[0.0, 0.0, -1.0], [3e-8, 0.0, -2.0], [0.0, 0.5, -1.0]]),
+]
+
+
+@pytest.mark.parametrize("robust", [False, True])
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_the_bound_is_the_derivation_written_out(robust: bool, case: int) -> None:
+    tri = CASES[case]
+    got = embree_products.product_px(tri[None], np.zeros(3), D, PX, robust)[0]
+    want = _reference(tri, D[0], PX, robust)
+    for j in range(3):
+        assert got[j] == pytest.approx(want[j], rel=1e-12) if math.isfinite(want[j]) else got[j] == math.inf, j
+    if case == 1:  # relative to an origin: the same triangle 1e3 farther along x, seen from there
+        moved = embree_products.product_px((tri + [1e3, 0.0, 0.0])[None], np.array([1e3, 0.0, 0.0]), D, PX, robust)
+        assert moved[0] == pytest.approx(got, rel=1e-9)
+    if case == 2:
+        assert got[0] == math.inf and np.all(np.isfinite(got[1:]))
+
+
+def test_f32_inputs_are_read_in_f64() -> None:
+    """The scene's triangles come as f32: the bound is the same as for the same values in f64."""
+    tri, d = CASES[1].astype(F32), D.astype(F32)
+    for robust in (False, True):
+        f64 = embree_products.product_px(tri.astype(np.float64)[None], np.zeros(3), d.astype(np.float64), PX, robust)
+        assert np.array_equal(embree_products.product_px(tri[None], np.zeros(3, dtype=F32), d, PX, robust), f64)
+        p64 = embree_products.plane_move(tri.astype(np.float64)[None], np.zeros(3), robust)
+        assert np.array_equal(embree_products.plane_move(tri[None], np.zeros(3, dtype=F32), robust), p64)
+
+
+def test_gamma_is_k_u_over_one_minus_k_u() -> None:
+    assert embree_products.gamma(5) == 5.0 * U / (1.0 - 5.0 * U)
+    assert embree_products.gamma(3) == 3.0 * U / (1.0 - 3.0 * U)
+
+
+def test_plane_move_is_per_triangle() -> None:
+    tris = np.array(
+        [[[3.0, 4.0, 0.0], [3.0, 4.0, 12.0], [0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]]
+    )
+    got = embree_products.plane_move(tris, np.zeros(3), False)
+    assert got[0] == pytest.approx(U * 18.0, rel=1e-12) and got[1] == pytest.approx(
+        U * (1.0 + math.sqrt(2.0)), rel=1e-12
+    )
+    robust = embree_products.plane_move(tris, np.zeros(3), True)
+    assert robust[1] == pytest.approx((1.0 + math.sqrt(2.0) * (1.0 + U)) * U, rel=1e-12)
