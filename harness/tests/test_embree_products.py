@@ -409,6 +409,10 @@ CASES = [
     W,
     np.array([[3.0e6, -2.0e6, -4.0e6], [3.0e6 + 1.0, -2.0e6 + 2.0, -4.0e6 + 0.5], [3.0e6 - 2.0, -2.0e6, -4.0e6 + 1.0]]),
     np.array([[0.0, 0.0, -1.0], [3e-8, 0.0, -2.0], [0.0, 0.5, -1.0]]),
+    # edge 0 seen 1e-6 rad from end-on (ROBUST's k c about 0.56: the 1 / (1 - k c) matters), and 6.5e-7
+    # (k c about 1.48 with |n| bounded away from 0: unbounded, never the negative value the formula gives)
+    np.array([[0.0, 0.0, -1.0], [2e-6, 0.0, -2.0], [0.0, 0.5, -1.0]]),
+    np.array([[0.0, 0.0, -1.0], [1.3e-6, 0.0, -2.0], [0.0, 0.5, -1.0]]),
 ]
 
 
@@ -423,8 +427,37 @@ def test_the_bound_is_the_derivation_written_out(robust: bool, case: int) -> Non
     if case == 1:  # relative to an origin: the same triangle 1e3 farther along x, seen from there
         moved = embree_products.product_px((tri + [1e3, 0.0, 0.0])[None], np.array([1e3, 0.0, 0.0]), D, PX, robust)
         assert moved[0] == pytest.approx(got, rel=1e-9)
-    if case == 2:
+    if case in (2, 4) and robust:
         assert got[0] == math.inf and np.all(np.isfinite(got[1:]))
+    if case == 3 and robust:
+        assert 50.0 < got[0] < math.inf  # 1 - k c well inside (0, 1)
+
+
+def test_each_triangle_gets_its_own_bound() -> None:
+    """Many triangles at once give each one's bound alone (every norm is per row)."""
+    d = np.repeat(D, len(CASES), axis=0)
+    for robust in (False, True):
+        together = embree_products.product_px(np.stack(CASES), np.zeros(3), d, PX, robust)
+        for i, tri in enumerate(CASES):
+            alone = embree_products.product_px(tri[None], np.zeros(3), D, PX, robust)[0]
+            assert np.array_equal(together[i], alone), i
+
+
+# Moeller's den: a triangle in the plane y = -1 with e1 = 3, e2 = 5 at a right angle (|e2 x e1| = 15),
+# rays nearly parallel to it. den = |D . (e2 x e1)| = 15 |D_y|; its sign may flip while den <=
+# sqrt(2) gamma5 |fl(D)| e1 e2 + 4u |fl(D)| e1 e2: t below is den's excess over the first term in u |fl(D)| e1 e2.
+FLAT = np.array([[[0.0, -1.0, -2.0], [3.0, -1.0, -2.0], [0.0, -1.0, -7.0]]])
+
+
+@pytest.mark.parametrize(("t", "unbounded"), [(2.0, True), (3.85, True), (4.5, False)])
+def test_moeller_den_within_its_rounding_is_edge_on_and_beyond_it_not(t: float, unbounded: bool) -> None:
+    dy = 0.0
+    for _ in range(3):  # |D| depends a little on D_y
+        dn32 = (1.0 + U) * math.sqrt(0.3**2 + dy * dy + 1.0)
+        dy = dn32 * (math.sqrt(2.0) * G5 + t * U)
+    d = np.array([[0.3, dy, -1.0]])
+    got = embree_products.product_px(FLAT, np.zeros(3), d, PX, robust=False)[0]
+    assert np.all(got == math.inf) if unbounded else np.all(np.isfinite(got)), got
 
 
 def test_f32_inputs_are_read_in_f64() -> None:
@@ -440,6 +473,17 @@ def test_f32_inputs_are_read_in_f64() -> None:
 def test_gamma_is_k_u_over_one_minus_k_u() -> None:
     assert embree_products.gamma(5) == 5.0 * U / (1.0 - 5.0 * U)
     assert embree_products.gamma(3) == 3.0 * U / (1.0 - 3.0 * U)
+
+
+def test_plane_move_takes_the_longest_edge_whichever_it_is() -> None:
+    """The hypotenuse (hypot(5, 13)) as edge 0 (v0 v1, right angle at v2) and as edge 2 (v2 v0)."""
+    hyp = math.hypot(5.0, 13.0)
+    for tri, v0 in (
+        ([[0.0, 0.0, 13.0], [0.0, 5.0, 0.0], [0.0, 0.0, 0.0]], 13.0),
+        ([[0.0, 5.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 13.0]], 5.0),
+    ):
+        got = embree_products.plane_move(np.array([tri]), np.zeros(3), False)[0]
+        assert got == pytest.approx(U * (v0 + hyp), rel=1e-12), tri
 
 
 def test_plane_move_is_per_triangle() -> None:
