@@ -106,7 +106,8 @@ def _same(scene: resolved.ResolvedScene, ref: np.ndarray, test: np.ndarray, eps:
         )
     finally:
         outline.search = batched  # type: ignore[assignment]
-    for (sc, topo, starts, nears, rs, cs, es, sl), found in asked:
+    for (sc, topo, starts, nears, rs, cs, es, sl, *terms), found in asked:
+        assert terms == [None, None]  # no per-edge or per-triangle terms: the old walk had none
         old = [
             verify_before._outline_near(sc, topo, int(s), list(n), int(r), int(c), float(e), sl)
             for s, n, r, c, e in zip(starts, nears, rs, cs, es, strict=True)

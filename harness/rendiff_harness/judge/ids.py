@@ -104,6 +104,31 @@ def involved_triangles(
     return out
 
 
+def per_triangle_terms(
+    ref: Reference, model: tolerance.Model
+) -> tuple[verify.EdgeTerms | None, verify.TriangleSlack | None]:
+    """The model's per-edge band growth and per-triangle eye uncertainty (`Model.edge_products`,
+    `Model.plane_move`) as the verifier asks for them: by triangle index and pixel, on this scene."""
+    scene = ref.scene
+    cam = scene.camera
+    origin = np.asarray(cam.eye, dtype=np.float64).astype(np.float32).astype(np.float64)
+    products, plane = model.edge_products, model.plane_move
+    edge_terms: verify.EdgeTerms | None = None
+    tri_slack: verify.TriangleSlack | None = None
+    if products is not None:
+
+        def edge_terms(prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            tris = scene.triangles[np.asarray(prims, dtype=np.int64)].astype(np.float64)
+            return products(tris, origin, cam.center_directions(rows, cols), cam.pixel_size())
+
+    if plane is not None:
+
+        def tri_slack(prims: np.ndarray) -> np.ndarray:
+            return plane(scene.triangles[np.asarray(prims, dtype=np.int64)].astype(np.float64), origin)
+
+    return edge_terms, tri_slack
+
+
 def compare_ids(
     ref: Reference,
     test: Mapping[str, np.ndarray],
@@ -177,7 +202,17 @@ def compare_ids(
 
         slack = model.eye_uncertainty(ectx.origin_offset, ectx.eye_norm, ectx.point_norm, ectx.attrs)
         result = verify.classify_mismatches(
-            ref.scene, r_ids, t_ids, rows, cols, eps, depth_tol or exact, ref.topology_cache, backend, slack
+            ref.scene,
+            r_ids,
+            t_ids,
+            rows,
+            cols,
+            eps,
+            depth_tol or exact,
+            ref.topology_cache,
+            backend,
+            slack,
+            *per_triangle_terms(ref, model),
         )
         cls = result.cls
         explanations = result.groups

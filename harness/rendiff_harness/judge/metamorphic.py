@@ -14,7 +14,8 @@ IDs mapped back, within the bound stated for the relation and the backend. RUN i
 The comparison is the judge's own (judge/ids.py, judge/depth.py), with the base render as the reference:
 
 * `id`: variant IDs are mapped to base IDs, then compared exactly. A mismatch is *edge*
-  when the pixel center lies within the backend's `edge_px` (tolerance.py) of an edge of a
+  when the pixel center lies within the backend's `edge_px` (tolerance.py), plus twice its
+  per-edge growth where it has one (Embree's products, `product_distance`), of an edge of a
   triangle involved, in either scene: the base prim, the variant prim, the base
   triangle the variant prim maps to, and the variant triangles that map to the base prim
   (so a split's new edge counts). Anything else is *interior*.
@@ -68,7 +69,7 @@ from ..contract.text import printable
 from ..contract.userfile import JsonFileError, open_regular, read_json
 from ..contract.vocab import BACKGROUND_ID
 from ..renderers.spec import SpecLookup
-from . import expectations, geometry, precision, tolerance
+from . import expectations, geometry, outline, precision, tolerance
 from .depth import compare_depth
 from .ids import EdgeDistance, compare_ids
 
@@ -238,8 +239,9 @@ def stated_bound(relation: str, backend: str, m: tolerance.Model, core: bool, de
         ids = "identical IDs" if b.edge_px == 0 else f"IDs may differ only within {b.edge_px:g} px of an edge"
         z = "bit-identical Z" if b.depth_rel == 0 else f"|Z_v{s} - Z_b| <= {b.depth_rel:g} Z_b"
         return f"{ids}; {z} ({b.why})"
+    products = "" if m.edge_products is None else " plus, on each edge, twice its per-edge growth (both renders)"
     return (
-        f"IDs may differ only within {m.edge_px:.3g} px of an edge of a triangle involved ({backend}'s edge "
+        f"IDs may differ only within {m.edge_px:.3g} px{products} of an edge of a triangle involved ({backend}'s edge "
         f"tolerance); |Z_v{s} - Z_b| <= tol_{backend}(base) + tol_{backend}(variant){s} where both show the same "
         "mapped prim; hit/miss only at ID edge mismatches"
     )
@@ -318,31 +320,62 @@ def preimage(prim_map: np.ndarray, base_count: int) -> np.ndarray:
     return table
 
 
-def _dist(scene: resolved.ResolvedScene, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    prims = np.asarray(prims, dtype=np.int64)
-    safe = np.where(prims >= 0, prims, BACKGROUND_ID).astype(np.uint64)
-    return geometry.prim_edge_distance(scene, safe, rows, cols)
+def product_distance(
+    scene: resolved.ResolvedScene,
+    prims: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    products: tolerance.EdgeProducts | None,
+) -> np.ndarray:
+    """`geometry.prim_edge_distance`, less on each edge twice the model's per-edge growth of the band
+    there (`Model.edge_products`: Embree's edge functions' products): each of the two renders may move
+    that edge by as much. The products depend on the vertices relative to the ray origin and on the
+    ray, which every relation keeps (a translation moves both, a power-of-two scale about the eye scales
+    both, winding and order leave them); a split half's outer edge lies on its parent's line, and the
+    smaller of the two distances (parent's, half's) is at least as lenient as their sum."""
+    d = geometry.prim_edge_distance(scene, prims, rows, cols)
+    p = np.asarray(prims, dtype=np.int64).ravel()
+    idx = np.nonzero((p >= 0) & (p < scene.triangle_count))[0]
+    if products is None or idx.size == 0:
+        return d
+    cam = scene.camera
+    r, c = np.asarray(rows).ravel()[idx], np.asarray(cols).ravel()[idx]
+    edge_d = outline.edge_distances(scene, p[idx], r, c)
+    origin = np.asarray(cam.eye, dtype=np.float64).astype(np.float32).astype(np.float64)
+    grown = 2.0 * products(
+        scene.triangles[p[idx]].astype(np.float64), origin, cam.center_directions(r, c), cam.pixel_size()
+    )
+    with np.errstate(invalid="ignore"):
+        less = np.where(np.isfinite(edge_d), edge_d - grown, np.inf).min(axis=1)
+    d[idx] = np.minimum(d[idx], less)
+    return d
 
 
 def relation_edge_distance(
-    base: resolved.ResolvedScene, variant: resolved.ResolvedScene, case: Case, variant_prims: np.ndarray
+    base: resolved.ResolvedScene,
+    variant: resolved.ResolvedScene,
+    case: Case,
+    variant_prims: np.ndarray,
+    products: tolerance.EdgeProducts | None = None,
 ) -> EdgeDistance:
-    """Distance to the nearest edge of any triangle involved, in either scene (module docstring)."""
+    """Distance to the nearest edge of any triangle involved, in either scene (module docstring), less
+    the per-edge growth of the band where the model has one (`product_distance`)."""
     table = preimage(case.prim_map, base.triangle_count)
 
     def distance(r_ids: np.ndarray, t_ids: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         raw = variant_prims[rows, cols]
         d: np.ndarray = np.minimum(
-            geometry.prim_edge_distance(base, r_ids, rows, cols),
-            geometry.prim_edge_distance(variant, raw, rows, cols),
+            product_distance(base, r_ids, rows, cols, products),
+            product_distance(variant, raw, rows, cols, products),
         )
-        d = np.minimum(d, geometry.prim_edge_distance(base, t_ids, rows, cols))
+        d = np.minimum(d, product_distance(base, t_ids, rows, cols, products))
         r = np.asarray(r_ids, dtype=np.int64)
         known = (r_ids != BACKGROUND_ID) & (r < base.triangle_count)
         for j in range(table.shape[1]):
             pre = np.full(r.size, -1, dtype=np.int64)
             pre[known] = table[r[known], j]
-            d = np.minimum(d, _dist(variant, pre, rows, cols))
+            pre = np.where(pre >= 0, pre, BACKGROUND_ID)
+            d = np.minimum(d, product_distance(variant, pre, rows, cols, products))
         return d
 
     return distance
@@ -447,7 +480,9 @@ def compare_case(
     else:
         model = summed_model(m, backend, renders["base"], base_attrs, renders["variant"], var_attrs, case.depth_scale)
     pixels = ref.shape[0] * ref.shape[1]
-    distance = relation_edge_distance(ref.scene, var_scene, case, test_raw["id.prim"])
+    distance = relation_edge_distance(
+        ref.scene, var_scene, case, test_raw["id.prim"], None if core else m.edge_products
+    )
     ids = compare_ids(ref, test, model, edge_distance=distance)
     e_id.update(pixels=pixels, edge_mismatches=ids.edge, interior_mismatches=ids.interior, tolerance=ids.tolerance)
     _verdict(e_id, exps, ids.details)

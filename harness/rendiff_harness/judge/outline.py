@@ -22,7 +22,7 @@ area's norm) is not decisive the exact single-edge function decides
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -84,20 +84,21 @@ def side(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: fl
     return 1 if det > 0.0 else -1
 
 
-def sides(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float) -> np.ndarray:
-    """`side` of each row of a, b, c ((M, 3) f64 each), as int8."""
+def sides(eye: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, slack: float | np.ndarray) -> np.ndarray:
+    """`side` of each row of a, b, c ((M, 3) f64 each), as int8; `slack` one for all or (M,) per row."""
     out = np.empty(a.shape[0], dtype=np.int8)
+    slack_rows = np.broadcast_to(np.asarray(slack, dtype=np.float64), (a.shape[0],))
     for s in range(0, a.shape[0], CHUNK):
         e = s + CHUNK
-        aa, bb, cc = a[s:e], b[s:e], c[s:e]
+        aa, bb, cc, sl = a[s:e], b[s:e], c[s:e], slack_rows[s:e]
         with np.errstate(all="ignore"):
             det = np.linalg.det(np.stack([aa - eye, bb - eye, cc - eye], axis=1))
             cr = np.cross(bb - aa, cc - aa)
-            thr = slack * np.sqrt(np.einsum("ij,ij->i", cr, cr))
+            thr = sl * np.sqrt(np.einsum("ij,ij->i", cr, cr))
             undecided = ~(np.isfinite(det) & np.isfinite(thr)) | (np.abs(np.abs(det) - thr) <= UNDECIDED_REL * thr)
         part = np.where(np.abs(det) <= thr, 0, np.where(det > 0.0, 1, -1)).astype(np.int8)
         for i in np.nonzero(undecided)[0]:
-            part[i] = side(eye, aa[i], bb[i], cc[i], slack)
+            part[i] = side(eye, aa[i], bb[i], cc[i], float(sl[i]))
         out[s:e] = part
     return out
 
@@ -114,10 +115,21 @@ def silhouettes(
     return [(is_outline, what) for is_outline, what, _ in _edge_answers(scene, topo, edges, slack)]
 
 
+TriangleSlack = Callable[[np.ndarray], np.ndarray]
+"""verify.TriangleSlack: (triangle indices (M,)) -> (M,) world distance added to the slack for each."""
+EdgeTerms = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""verify.EdgeTerms: (triangle indices, rows, cols) (M,) -> (M, 3) px added to eps on each edge."""
+
+
 def _edge_answers(
-    scene: ResolvedScene, topo: EdgeTable, edges: Sequence[tuple[int, int]], slack: float
+    scene: ResolvedScene,
+    topo: EdgeTable,
+    edges: Sequence[tuple[int, int]],
+    slack: float,
+    tri_slack: TriangleSlack | None = None,
 ) -> list[tuple[bool, str, list[int]]]:
-    """`silhouettes`, with each edge's neighbor triangles (the walk's next steps)."""
+    """`silhouettes`, with each edge's neighbor triangles (the walk's next steps); each plane's slack
+    grown by `tri_slack` of its own triangle."""
     if not edges:
         return []
     eye = scene.camera.eye
@@ -128,10 +140,12 @@ def _edge_answers(
     own = np.asarray(t[tri], dtype=np.float64)
     rows = np.arange(tri.size)
     a, b, c = own[rows, loc], own[rows, (loc + 1) % 3], own[rows, (loc + 2) % 3]
-    own_side = sides(eye, a, b, c, slack)
+    own_slack: float | np.ndarray = slack if tri_slack is None else slack + tri_slack(tri)
+    own_side = sides(eye, a, b, c, own_slack)
     owner, n_tri, n_loc = across(topo, tri, loc)
     apex = np.asarray(t[n_tri, (n_loc + 2) % 3], dtype=np.float64).reshape(-1, 3)
-    other = sides(eye, a[owner], b[owner], apex, slack)
+    other_slack: float | np.ndarray = slack if tri_slack is None or n_tri.size == 0 else slack + tri_slack(n_tri)
+    other = sides(eye, a[owner], b[owner], apex, other_slack)
     # The first neighbor on the other side, per edge (-1: none).
     closed = np.nonzero(own_side[owner].astype(np.int64) * other < 0)[0]
     first = np.full(tri.size, -1, dtype=np.int64)
@@ -235,6 +249,8 @@ def search(
     cols: np.ndarray,
     eps: np.ndarray,
     slack: float,
+    edge_terms: EdgeTerms | None = None,
+    tri_slack: TriangleSlack | None = None,
 ) -> list[tuple[str, str]]:
     """For each pixel p: is there an outline within eps[p] of its center? (why, "") or ("", neighbor).
 
@@ -243,7 +259,8 @@ def search(
     walk across closed edges to the neighbors and look at their edges within `eps`: an
     outline means the renderer could have missed the surface legitimately. Only when the
     whole patch under the disc is closed is the miss a leak; the neighbor named is the one
-    across the first closed edge met.
+    across the first closed edge met. `edge_terms` grows eps on each neighbor's edges and
+    `tri_slack` the slack on each triangle's plane (verify.classify_mismatches).
     """
     n = len(starts)
     seen = [{int(s)} for s in starts]
@@ -261,7 +278,7 @@ def search(
             else:
                 result[p] = ("", first_closed[p])
         asked = list(dict.fromkeys((tri, j) for _, tri, edges in popped for j in edges if (tri, j) not in answers))
-        answers.update(zip(asked, _edge_answers(scene, topo, asked, slack), strict=True))
+        answers.update(zip(asked, _edge_answers(scene, topo, asked, slack, tri_slack), strict=True))
         reached_p: list[int] = []
         reached_tri: list[int] = []
         for p, tri, edges in popped:
@@ -281,8 +298,13 @@ def search(
                         reached_tri.append(n_tri)
         if reached_p:
             rp = np.array(reached_p, dtype=np.int64)
-            d = edge_distances(scene, np.array(reached_tri, dtype=np.int64), rows[rp], cols[rp])
-            within = d <= eps[rp][:, None]
+            reached = np.array(reached_tri, dtype=np.int64)
+            d = edge_distances(scene, reached, rows[rp], cols[rp])
+            if edge_terms is None:
+                within = d <= eps[rp][:, None]
+            else:
+                with np.errstate(invalid="ignore"):
+                    within = np.isfinite(d) & (d <= eps[rp][:, None] + edge_terms(reached, rows[rp], cols[rp]))
             rows_within = within.tolist()
             for k in np.nonzero(within.any(axis=1))[0].tolist():
                 w = rows_within[k]

@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from . import embree_products
+
 MAX_REL = 1e-3
 """Cap on every relative depth tolerance (reached only within ~1/1000 of edge-on)."""
 
@@ -91,6 +93,14 @@ EdgeModel = Callable[[EdgeContext], tuple[np.ndarray, str]]
 PositionError = Callable[[float, float, np.ndarray], np.ndarray]
 """(|f32(eye) - eye|, |eye|, |X| (K,)) -> how far the renderer's f32 arithmetic may move the
 point X it renders relative to its camera, world units (K,)."""
+EdgeProducts = Callable[[np.ndarray, np.ndarray, np.ndarray, float], np.ndarray]
+"""(triangles (M, 3, 3) world f64, the f32 ray origin (3,), pixel ray directions (M, 3) in world axes
+with forward component 1, pixel size) -> (M, 3) px that a renderer's per-edge arithmetic adds to
+`Model.edge_eps` on edge j (corner j to j + 1) at that pixel; inf where unbounded. Per edge because it
+grows without bound for an edge that points at the eye (judge/embree_products.py)."""
+PlaneMove = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(triangles (M, 3, 3) world f64, the f32 ray origin (3,)) -> (M,) world distance by which the renderer's
+copy of each triangle may lie off it: the crack test adds it to the eye's uncertainty for that triangle."""
 Placement = Callable[[Mapping[str, Any]], float]
 """A render's EXR attributes -> the world distance by which it placed every vertex away from the
 resolved scene's (`Model.placement`)."""
@@ -108,6 +118,8 @@ class Model:
     known: bool = True  # False: a strict fallback for a backend without a model
     edge_extra: EdgeModel | None = None  # per-pixel growth of edge_px (f32 camera origin, plane offsets)
     position: PositionError | None = None  # how far f32 arithmetic moves a point relative to the camera
+    edge_products: EdgeProducts | None = None  # per-edge growth of the edge band (verify.py takes it per edge)
+    plane_move: PlaneMove | None = None  # per-triangle growth of `eye_uncertainty` (the crack test's)
     placement: Placement | None = None
     """How far the renderer itself placed every vertex from the resolved scene's, read from its
     render: a renderer that loads the user's mesh file and applies the objects' transforms in its
@@ -140,6 +152,8 @@ class Model:
             # NaN: no term at that pixel; +inf (rounding may carry the point past the eye) stays
             base = base + np.where(np.isnan(extra), 0.0, extra)
             text = f"{text} + {extra_text}"
+        if self.edge_products is not None:
+            text = f"{text} + per edge: the rounding of its edge functions' products (judge/embree_products.py)"
         if self.placement is not None:
             placed = self.placement(ctx.attrs)
             base = base + shift_edge(np.full(ctx.z.shape, placed), ctx)
@@ -339,14 +353,11 @@ def embree_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     )
 
 
-EMBREE_ROBUST_EPS = 2.0**-23
+EMBREE_ROBUST_EPS = 2.0**-23 * (1.0 + 2.0**-21)
 """Embree's ROBUST triangle test accepts a ray up to this fraction of U + V + W outside each edge:
-`eps = float(ulp) * abs(UVW)` with `ulp` = FLT_EPSILON (kernels/geometry/triangle_intersector_pluecker.h,
-common/math/constants.h, Embree 3.13.5)."""
-
-EMBREE_EDGE_PX = 1e-4
-"""The Embree edge terms not derived yet: the rounding of the edge functions' own cross and dot products
-(docs/verifier.md, "Embree's arithmetic"), measured within 1e-4 px of shared edges."""
+`eps = float(ulp) * abs(UVW)` with `ulp` = FLT_EPSILON = 2^-23 (kernels/geometry/triangle_intersector_pluecker.h,
+common/math/constants.h, Embree 3.13.5), computed in f32 from the sum: (1 + gamma3) < 1 + 2^-21 of itself
+(the products' own errors in it are embree_products.MARGIN_ROUNDING's)."""
 
 
 def embree_moved(ctx: EdgeContext, robust: bool) -> np.ndarray:
@@ -394,8 +405,10 @@ def embree_direction_px(ctx: EdgeContext) -> np.ndarray:
 
 
 def embree_edge(robust: bool) -> EdgeModel:
-    """Embree's edge rounding distance beyond `EMBREE_EDGE_PX`: `embree_moved` seen from the pixel
-    (`shift_edge`), plus the f32 direction (`embree_direction_px`)."""
+    """Embree's per-pixel edge rounding distance: `embree_moved` seen from the pixel (`shift_edge`), plus
+    the f32 direction (`embree_direction_px`). The edge functions' own products are bounded per edge
+    (`Model.edge_products`, judge/embree_products.py), since they grow without bound for an edge that
+    points at the eye."""
 
     def edge(ctx: EdgeContext) -> tuple[np.ndarray, str]:
         px = shift_edge(embree_moved(ctx, robust), ctx) + embree_direction_px(ctx)
@@ -411,6 +424,24 @@ def embree_edge(robust: bool) -> EdgeModel:
         )
 
     return edge
+
+
+def embree_edge_products(robust: bool) -> EdgeProducts:
+    """Embree's edge functions' own f32 products, per edge (judge/embree_products.py)."""
+
+    def products(tris: np.ndarray, origin: np.ndarray, d: np.ndarray, pixel: float) -> np.ndarray:
+        return embree_products.product_px(tris, origin, d, pixel, robust)
+
+    return products
+
+
+def embree_plane_move(robust: bool) -> PlaneMove:
+    """Embree's copy of each triangle at the ray origin, for the crack test (judge/embree_products.py)."""
+
+    def plane(tris: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        return embree_products.plane_move(tris, origin, robust)
+
+    return plane
 
 
 def strict_model(backend: str) -> Model:

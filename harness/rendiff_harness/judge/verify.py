@@ -47,6 +47,13 @@ EDGE, TIE, CRACK, INTERIOR = range(4)
 F32_ULP = 2.0**-23
 MAX_EXPLANATIONS = 20
 
+EdgeTerms = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(triangle indices (M,), rows (M,), cols (M,)) -> (M, 3) px added to `eps` on edge j (corner j to j + 1)
+of that triangle at that pixel (tolerance.Model.edge_products); inf: unbounded, every pixel is near it."""
+TriangleSlack = Callable[[np.ndarray], np.ndarray]
+"""(triangle indices (M,)) -> (M,) world distance added to `eye_slack` for that triangle's plane
+(tolerance.Model.plane_move)."""
+
 DepthTolerance = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 """(planar depth z (K,), |cos| (K,), the triangle seen there (K,)) -> allowed |dZ| (K,) of the
 test renderer on that triangle (its depth model needs the triangle's own depth span and size)."""
@@ -199,9 +206,12 @@ def classify_mismatches(
     topo_cache: dict[str, Topology] | None = None,
     backend: str = "the test renderer",
     eye_slack: float = 0.0,
+    edge_terms: EdgeTerms | None = None,
+    tri_slack: TriangleSlack | None = None,
 ) -> Classified:
-    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px),
-    `eye_slack` how far (world units) its arithmetic may move the eye relative to the geometry."""
+    """Classify K mismatched pixels; `eps` is the test renderer's rounding distance (px), grown on
+    each edge by `edge_terms`, `eye_slack` how far (world units) its arithmetic may move the eye
+    relative to the geometry, grown per triangle by `tri_slack`."""
     k = int(np.asarray(ref_ids).size)
     cls = np.full(k, INTERIOR, dtype=np.int8)
     why = [""] * k
@@ -216,8 +226,10 @@ def classify_mismatches(
     bg = np.uint64(BACKGROUND_ID)
     invalid_t = (t_ids != bg) & ~st.valid
     invalid_r = (r_ids != bg) & ~sr.valid
-    covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a))
-    covers_t = st.valid & (st.inside | (st.poly_d <= eps_a))
+    xr = _edge_extra(edge_terms, sr, r_ids, rows, cols)
+    xt = _edge_extra(edge_terms, st, t_ids, rows, cols)
+    covers_r = sr.valid & (sr.inside | (sr.poly_d <= eps_a) | _near(sr.edge_d, eps_a, xr).any(axis=1))
+    covers_t = st.valid & (st.inside | (st.poly_d <= eps_a) | _near(st.edge_d, eps_a, xt).any(axis=1))
     both = covers_r & covers_t & np.isfinite(sr.z) & np.isfinite(st.z)
     tol = np.zeros(k)
     if both.any():
@@ -258,13 +270,20 @@ def classify_mismatches(
             tp = get_topo()
             shared = _shared(tp, r, t)
             if shared:
-                near_v = [j for j in range(3) if sr.vert_d[i, j] <= e and int(tp.corner_vid[r, j]) in shared]
+                # A shared feature is on both triangles: either one's band there may flip the pixel.
+                rv, tv = [int(v) for v in tp.corner_vid[r]], [int(v) for v in tp.corner_vid[t]]
+                near_v = [
+                    j
+                    for j in range(3)
+                    if rv[j] in shared
+                    and _within(sr.vert_d[i, j], e, _vertex_band(xr[i], j), _vertex_band(xt[i], tv.index(rv[j])))
+                ]
                 near_e = [
                     j
                     for j in range(3)
-                    if sr.edge_d[i, j] <= e
-                    and int(tp.corner_vid[r, j]) in shared
-                    and int(tp.corner_vid[r, (j + 1) % 3]) in shared
+                    if rv[j] in shared
+                    and rv[(j + 1) % 3] in shared
+                    and _within(sr.edge_d[i, j], e, xr[i, j], xt[i, _edge_index(tv, rv[j], rv[(j + 1) % 3])])
                 ]
                 if near_e or near_v:
                     cls[i] = EDGE
@@ -283,13 +302,13 @@ def classify_mismatches(
             continue
         # The side that saw the farther surface missed the nearer triangle.
         if sr.valid[i] and (not st.valid[i] or st.z[i] > sr.z[i]):
-            missed, g, missed_name, seen_name, who = r, sr, rn, tn, backend
+            missed, g, gx, missed_name, seen_name, who = r, sr, xr, rn, tn, backend
         elif st.valid[i]:
-            missed, g, missed_name, seen_name, who = t, st, tn, rn, "the reference"
+            missed, g, gx, missed_name, seen_name, who = t, st, xt, tn, rn, "the reference"
         else:
             why[i] = "both sides name no triangle"
             continue
-        near = [j for j in range(3) if g.edge_d[i, j] <= e]
+        near = [j for j in range(3) if np.isfinite(g.edge_d[i, j]) and g.edge_d[i, j] <= e + gx[i, j]]
         if not near:
             if g.poly_d[i] <= e:
                 cls[i] = EDGE
@@ -307,7 +326,16 @@ def classify_mismatches(
         # Every pixel's outline search at once (outline.py): numpy per round, not per pixel.
         at = np.array([w[0] for w in walk], dtype=np.int64)
         found = outline.search(
-            scene, get_topo(), [w[1] for w in walk], [w[2] for w in walk], rows_a[at], cols_a[at], eps_a[at], eye_slack
+            scene,
+            get_topo(),
+            [w[1] for w in walk],
+            [w[2] for w in walk],
+            rows_a[at],
+            cols_a[at],
+            eps_a[at],
+            eye_slack,
+            edge_terms,
+            tri_slack,
         )
         for (i, _, _, d, missed_name, who, seen_name), (line, closed_by) in zip(walk, found, strict=True):
             if line:
@@ -320,6 +348,39 @@ def classify_mismatches(
                     f"and no outline within {float(eps_a[i]):.2g} px, but {who} saw {seen_name} behind it: crack"
                 )
     return Classified(cls, why, explain(cls, why, r_ids, t_ids, rows, cols))
+
+
+def _edge_extra(
+    terms: EdgeTerms | None, side: Side, prims: np.ndarray, rows: np.ndarray, cols: np.ndarray
+) -> np.ndarray:
+    """(K, 3) `terms` of each side's triangle at each pixel (0 where there are none or no triangle)."""
+    out = np.zeros((prims.size, 3))
+    idx = np.nonzero(side.valid)[0]
+    if terms is not None and idx.size:
+        out[idx] = terms(prims[idx].astype(np.int64), np.asarray(rows).ravel()[idx], np.asarray(cols).ravel()[idx])
+    return out
+
+
+def _vertex_band(extra: np.ndarray, j: int) -> float:
+    """A vertex is on its two edges (j - 1 and j): it moves with the larger of their bands."""
+    return float(max(extra[j], extra[(j + 2) % 3]))
+
+
+def _edge_index(corners: list[int], a: int, b: int) -> int:
+    """The local edge of a triangle (its corner vertex ids) whose ends are vertices a and b."""
+    return next(k for k in range(3) if {corners[k], corners[(k + 1) % 3]} == {a, b})
+
+
+def _within(dist: float, eps: float, extra_r: float, extra_t: float) -> bool:
+    """A visible feature (finite distance) within eps plus the larger of the two triangles' bands on it."""
+    return bool(np.isfinite(dist)) and dist <= eps + max(extra_r, extra_t)
+
+
+def _near(dist: np.ndarray, eps: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """(K, 3) bool: a visible feature (finite distance) within eps plus its own extra."""
+    with np.errstate(invalid="ignore"):
+        near: np.ndarray = np.isfinite(dist) & (dist <= eps[:, None] + extra)
+    return near
 
 
 def explain(

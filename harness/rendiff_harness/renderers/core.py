@@ -8,11 +8,12 @@ from __future__ import annotations
 from ..contract.vocab import VISIBILITY_FEATURES, Buffer, Feature
 from ..judge.camera_budget import core_camera, embree_camera
 from ..judge.tolerance import (
-    EMBREE_EDGE_PX,
     Model,
     core_normals,
     embree_depth,
     embree_edge,
+    embree_edge_products,
+    embree_plane_move,
     exact_depth,
     exact_rgb,
     f32_origin,
@@ -39,18 +40,23 @@ def _loop(name: str, what: str, other: str) -> BackendSpec:
 
 def _embree(name: str, what: str, robust: bool) -> BackendSpec:
     """Embree (default or ROBUST): float32 ray-triangle tests on rays from the f32 eye; the edge terms
-    of its arithmetic (tolerance.embree_edge) differ between the two tests."""
+    of its arithmetic differ between the two tests: per pixel (tolerance.embree_edge), per edge (its
+    edge functions' products) and per triangle (its copy at the ray origin, for the crack test)
+    (judge/embree_products.py)."""
+
     return BackendSpec(
         name,
         frozenset(VISIBILITY_FEATURES),
         frozenset({Buffer.Z, Buffer.ID, Buffer.N}),
         Model(
             name,
-            EMBREE_EDGE_PX,
-            f"{what}: the edge functions' own f32 products, measured within {EMBREE_EDGE_PX:g} px of shared edges",
+            0.0,
+            f'{what}: every term derived (docs/verifier.md, "Embree\'s arithmetic")',
             embree_depth,
             edge_extra=embree_edge(robust),
             position=f32_origin,
+            edge_products=embree_edge_products(robust),
+            plane_move=embree_plane_move(robust),
         ),
         calibration=embree_camera,
         normals=core_normals,
