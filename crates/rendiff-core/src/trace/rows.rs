@@ -208,6 +208,32 @@ mod tests {
         }
     }
 
+    /// One axis of a drawn box test, box bounds `lo <= hi`: the ray lanes'
+    /// `1/D` in `inv` drawn from `vals`, of both signs (the axis `mixed`,
+    /// bounds in both orders), all positive (`lo` the near bound) or all
+    /// negative (`hi` the near one), as `Packet::node_mask` orders them.
+    fn random_axis<const N: usize>(
+        (lo, hi): (f32, f32),
+        vals: &[f32],
+        next: &mut impl FnMut(usize) -> usize,
+        inv: &mut [f32; N],
+    ) -> (f32, f32, bool) {
+        let sign = next(3);
+        for v in inv.iter_mut() {
+            let x = vals[next(vals.len())];
+            *v = match sign {
+                0 => x,
+                1 => x.abs(),
+                _ => -x.abs(),
+            };
+        }
+        match sign {
+            0 => (lo, hi, true),
+            1 => (lo, hi, false),
+            _ => (hi, lo, false),
+        }
+    }
+
     /// The box test's two forms agree bit for bit, on both axis orders and on
     /// infinities, signed zeros and ties; and the portable form is the
     /// per-lane slab test of `Node32::misses` with the pruning comparison.
@@ -241,20 +267,7 @@ mod tests {
                 } else {
                     (lo, hi)
                 };
-                let sign = next(3);
-                *a = match sign {
-                    0 => (lo, hi, true),
-                    1 => (lo, hi, false),
-                    _ => (hi, lo, false),
-                };
-                for v in inv[k].iter_mut() {
-                    let x = vals[next(vals.len())];
-                    *v = match sign {
-                        0 => x,
-                        1 => x.abs(),
-                        _ => -x.abs(),
-                    };
-                }
+                *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
             }
             let zscale: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
             let best_z: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
@@ -322,20 +335,7 @@ mod tests {
                 for (k, a) in axes.iter_mut().enumerate() {
                     let (x, y) = (vals[next(9)], vals[next(9)]);
                     let (lo, hi) = (x.min(y), x.max(y));
-                    let sign = next(3);
-                    *a = match sign {
-                        0 => (lo, hi, true),
-                        1 => (lo, hi, false),
-                        _ => (hi, lo, false),
-                    };
-                    for v in inv[k].iter_mut() {
-                        let x = vals[next(vals.len())];
-                        *v = match sign {
-                            0 => x,
-                            1 => x.abs(),
-                            _ => -x.abs(),
-                        };
-                    }
+                    *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
                 }
                 let lanes = |next: &mut dyn FnMut(usize) -> usize| -> [f32; ROW2] {
                     std::array::from_fn(|_| vals[next(vals.len())].abs())
