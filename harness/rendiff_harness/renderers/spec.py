@@ -66,8 +66,9 @@ class BackendSpec:
     normals: NormalModel = f32_normals
     """The angle its N may be off the winding convention."""
     peak_memory: tuple[int, int] | None = None
-    """(fixed bytes, bytes per triangle) of a render at its peak, measured; None: not measured
-    (the registry then assumes `UNMEASURED_MEMORY`). `rendiff check` budgets memory with it."""
+    """(fixed bytes, bytes per triangle) of a render at its peak, measured as GNU time's max RSS
+    and rounded up; None: not measured (the registry then assumes `UNMEASURED_MEMORY`).
+    `rendiff check` budgets memory with it (check/pool.rs)."""
     waits_below: int = 0
     """Renders of scenes with fewer triangles than this keep a core busy for at most a fifth of
     their wall time (they mostly wait: POV-Ray's front end polls), measured; `rendiff check` may
@@ -85,6 +86,21 @@ class BackendSpec:
     declared: bool = False
     """True for a renderer declared by command (renderers/declared.py): rendiff exports nothing for it
     (it reads the resolved scene itself), so a convention error is the renderer's, not an exporter's."""
+
+
+DIRECT_LIGHT_FEATURES = frozenset(
+    {
+        Feature.DEPTH,
+        Feature.IDS,
+        Feature.EMISSION,
+        Feature.LAMBERT,
+        Feature.POINT_LIGHT,
+        Feature.DIRECTIONAL_LIGHT,
+    }
+)
+"""What every built-in shading backend (POV-Ray, pyrender, Mitsuba) models: depth and IDs, and
+Lambert and emissive surfaces lit by point and directional lights. Each backend's `FEATURES` is
+this plus what sets it apart (shadows or none, sidedness, area lights, global illumination)."""
 
 
 SpecLookup = Callable[[str], "BackendSpec | None"]

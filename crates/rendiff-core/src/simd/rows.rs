@@ -1,6 +1,7 @@
 //! The packet tracer's row operations ([`Rows`]) in AVX2, and pairs of rows
 //! in AVX-512 (single rows and the frustum test are AVX2's there). The
-//! definitions they must equal bit for bit are [`Portable`](crate::simd::Portable)'s (in `trace::rows`).
+//! definitions they must equal bit for bit are `Rows`' default methods
+//! ([`Portable`](crate::simd::Portable)'s, in `trace::rows`).
 
 use crate::simd::{Avx2, Avx512};
 use crate::trace::frustum::{BOX_ABS, BOX_REL};

@@ -65,16 +65,18 @@ const ROW2_BITS: Mask = (1 << ROW2) - 1;
 // A packet row is a whole number of rows of comparisons, and every lane has a mask bit.
 const _: () = assert!(PW.is_multiple_of(ROW) && LANES <= Mask::BITS as usize);
 
-/// Lanes `r * ROW ..` of a per-lane array.
+/// Lanes `r * ROW ..` of a per-lane array, `W` of them: one row ([`ROW`]) or
+/// two ([`ROW2`]), as the row operation taking them wants.
 #[inline(always)]
-fn row(a: &[f32; LANES], r: usize) -> &[f32; ROW] {
-    a[r * ROW..][..ROW].try_into().unwrap()
+fn row<T, const W: usize>(a: &[T; LANES], r: usize) -> &[T; W] {
+    a[r * ROW..][..W].try_into().unwrap()
 }
 
-/// Lanes `r * ROW ..` of a per-lane array, two rows of them.
+/// [`row`] of each axis of a per-lane vector (`dir`, `inv`, `d64`). (Spelled
+/// out per axis, not an array `map`: see `Rows::edge_signs`.)
 #[inline(always)]
-fn row2(a: &[f32; LANES], r: usize) -> &[f32; ROW2] {
-    a[r * ROW..][..ROW2].try_into().unwrap()
+fn axis_rows<T, const W: usize>(a: &[[T; LANES]; 3], r: usize) -> [&[T; W]; 3] {
+    [row(&a[0], r), row(&a[1], r), row(&a[2], r)]
 }
 
 /// The first and last rows with a lane in `m` (not 0): loops over the rows
@@ -98,12 +100,6 @@ fn or_signs((pos, neg): (&mut [Mask; 3], &mut [Mask; 3]), signs: &[(u32, u32); 3
         pos[k] |= Mask::from(p) << (r * ROW);
         neg[k] |= Mask::from(n) << (r * ROW);
     }
-}
-
-/// Lanes `r * ROW ..` of a per-lane f64 array.
-#[inline(always)]
-fn row64(a: &[f64; LANES], r: usize) -> &[f64; ROW] {
-    a[r * ROW..][..ROW].try_into().unwrap()
 }
 
 /// One bit per lane.
@@ -306,22 +302,14 @@ impl Packet {
         let mut m: Mask = 0;
         if S::PAIRS {
             for r in (0..NROWS).step_by(2) {
-                let inv = [
-                    row2(&self.inv[0], r),
-                    row2(&self.inv[1], r),
-                    row2(&self.inv[2], r),
-                ];
-                let out = s.box_out2(&axes, inv, row2(&self.zscale, r), row2(&self.best_z, r));
+                let inv = axis_rows(&self.inv, r);
+                let out = s.box_out2(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
                 m |= (Mask::from(!out) & ROW2_BITS) << (r * ROW);
             }
             return m & mask;
         }
         for r in 0..NROWS {
-            let inv = [
-                row(&self.inv[0], r),
-                row(&self.inv[1], r),
-                row(&self.inv[2], r),
-            ];
+            let inv = axis_rows(&self.inv, r);
             let out = s.box_out(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
             m |= (Mask::from(!out) & ROW_BITS) << (r * ROW);
         }
@@ -357,12 +345,8 @@ impl Packet {
             let mut r = first;
             while r <= last {
                 let at = r.min(NROWS - 2);
-                let dir = [
-                    row2(&self.dir[0], at),
-                    row2(&self.dir[1], at),
-                    row2(&self.dir[2], at),
-                ];
-                let signs = leaf.edge_rows2(s, dir, row2(&self.dir_norm, at));
+                let dir = axis_rows(&self.dir, at);
+                let signs = leaf.edge_rows2(s, dir, row(&self.dir_norm, at));
                 or_signs((&mut pos, &mut neg), &signs, at);
                 r += 2;
             }
@@ -372,11 +356,7 @@ impl Packet {
                 if (m >> (r * ROW)) & ROW_BITS == 0 {
                     continue;
                 }
-                let dir = [
-                    row(&self.dir[0], r),
-                    row(&self.dir[1], r),
-                    row(&self.dir[2], r),
-                ];
+                let dir = axis_rows(&self.dir, r);
                 let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
                 or_signs((&mut pos, &mut neg), &signs, r);
             }
@@ -411,9 +391,8 @@ impl Packet {
             if need == 0 {
                 continue;
             }
-            let [x, y, z] = &self.d64;
-            let dirs = [row64(x, r), row64(y, r), row64(z, r)];
-            let (z, ok) = d.chunk(l, cam, dirs, row64(&self.planar, r), need, self.subnormal);
+            let dirs = axis_rows(&self.d64, r);
+            let (z, ok) = d.chunk(l, cam, dirs, row(&self.planar, r), need, self.subnormal);
             let mut m = need & ok;
             while m != 0 {
                 let j = m.trailing_zeros() as usize;

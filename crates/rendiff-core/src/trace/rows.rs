@@ -11,8 +11,9 @@
 //! per row, where AVX's `vmovmskps` does it in one. So the AVX2 forms are
 //! spelled out (in [`crate::simd`], for the token [`Avx2`] that exists only
 //! once the CPU is known to have AVX2, so its safe methods can use the
-//! intrinsics); [`Portable`]'s, here, are the same arithmetic in plain Rust
-//! for every other CPU, and the definition the tests hold the AVX2 forms to.
+//! intrinsics); the trait's default methods ([`Portable`]'s), here, are the
+//! same arithmetic in plain Rust for every other CPU, and the definition the
+//! tests hold the AVX2 forms to.
 //! The box test and edge signs also come for two rows at once
 //! ([`Rows::box_out2`], [`Rows::edge_signs2`]), defined as the two single
 //! rows; [`Avx512`] does them in one 512-bit vector.
@@ -41,31 +42,64 @@ fn halves(a: &[f32; ROW2]) -> (&[f32; ROW], &[f32; ROW]) {
     (lo.try_into().unwrap(), hi.try_into().unwrap())
 }
 
-/// The packet kernel's row operations, one implementation per instruction set.
+/// The packet kernel's row operations: the default methods are the
+/// definitions (plain Rust, [`Portable`]'s), which each instruction set's
+/// implementation overrides with the same arithmetic.
 pub(crate) trait Rows: Copy {
     /// The packet box test for one row of lanes: bit `j` set where lane `j`
     /// misses the box (`tmin > tmax (1 + s)`, with `tmin` starting at 0, as
     /// in `Packet::node_mask`), or where its entry depth `tmin zscale` is
     /// beyond `best_z`. `inv` is the row's `1/D` per axis.
+    #[inline(always)]
     fn box_out(
         self,
         axes: &BoxAxes,
         inv: [&[f32; ROW]; 3],
         zscale: &[f32; ROW],
         best_z: &[f32; ROW],
-    ) -> u32;
+    ) -> u32 {
+        let mut m = 0;
+        for j in 0..ROW {
+            let (mut tmin, mut tmax) = (0f32, f32::INFINITY);
+            for (&(near, far, mixed), inv) in axes.iter().zip(inv) {
+                let (t0, t1) = (near * inv[j], far * inv[j]);
+                let (t0, t1) = if mixed {
+                    (min(t0, t1), max(t0, t1))
+                } else {
+                    (t0, t1)
+                };
+                tmin = max(tmin, t0);
+                tmax = min(tmax, t1);
+            }
+            let out = tmin > Node32::slack_tmax(tmax) || tmin * zscale[j] > best_z[j];
+            m |= u32::from(out) << j;
+        }
+        m
+    }
 
     /// A triangle's three f32 edge signs for one row of lanes: per edge `k`
     /// (normal `n[k]`, filter bound `beta[k]`), the bits of the lanes where
     /// [`edge_det32`]'s determinant certainly clears its bound above, and
     /// where it certainly clears it below.
+    #[inline(always)]
     fn edge_signs(
         self,
         n: &[[f32; 3]; 3],
         beta: &[f32; 3],
         dir: [&[f32; ROW]; 3],
         dir_norm: &[f32; ROW],
-    ) -> [(u32, u32); 3];
+    ) -> [(u32, u32); 3] {
+        let mut out = [(0, 0); 3];
+        for ((n, &beta), (pos, neg)) in n.iter().zip(beta).zip(&mut out) {
+            for j in 0..ROW {
+                let d = [dir[0][j], dir[1][j], dir[2][j]];
+                let (det, bound) = edge_det32(n, beta, d, dir_norm[j]);
+                *pos |= u32::from(det > bound) << j;
+                *neg |= u32::from(-det > bound) << j;
+            }
+        }
+        out
+    }
 
     /// The frustum test of two boxes ([`super::frustum`]): lane `j` holds
     /// plane `j % 4`'s normal `n[..][j]` against box `a` (lanes 0-3) or `b`
@@ -74,7 +108,24 @@ pub(crate) trait Rows: Copy {
     /// `s < -(BOX_REL mag + BOX_ABS)`, with `s` the sum of
     /// `max(n lo, n hi)` over the axes in order and `mag` that of their
     /// magnitudes.
-    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32;
+    #[inline(always)]
+    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
+        let mut s = [0f32; ROW];
+        let mut mag = [0f32; ROW];
+        for k in 0..3 {
+            for j in 0..ROW {
+                let (lo, hi) = if j < 4 { a[k] } else { b[k] };
+                let p = max(n[k][j] * lo, n[k][j] * hi);
+                s[j] += p;
+                mag[j] += p.abs();
+            }
+        }
+        let mut m = 0;
+        for j in 0..ROW {
+            m |= u32::from(s[j] < -(BOX_REL * mag[j] + BOX_ABS)) << j;
+        }
+        m
+    }
 
     /// Whether [`Rows::box_out2`] and [`Rows::edge_signs2`] take two rows in
     /// one step (AVX-512's 16 lanes); where not, the kernel keeps to single
@@ -123,74 +174,8 @@ pub(crate) trait Rows: Copy {
     }
 }
 
-/// Plain Rust, for any CPU: the definitions.
-impl Rows for Portable {
-    #[inline(always)]
-    fn box_out(
-        self,
-        axes: &BoxAxes,
-        inv: [&[f32; ROW]; 3],
-        zscale: &[f32; ROW],
-        best_z: &[f32; ROW],
-    ) -> u32 {
-        let mut m = 0;
-        for j in 0..ROW {
-            let (mut tmin, mut tmax) = (0f32, f32::INFINITY);
-            for (&(near, far, mixed), inv) in axes.iter().zip(inv) {
-                let (t0, t1) = (near * inv[j], far * inv[j]);
-                let (t0, t1) = if mixed {
-                    (min(t0, t1), max(t0, t1))
-                } else {
-                    (t0, t1)
-                };
-                tmin = max(tmin, t0);
-                tmax = min(tmax, t1);
-            }
-            let out = tmin > Node32::slack_tmax(tmax) || tmin * zscale[j] > best_z[j];
-            m |= u32::from(out) << j;
-        }
-        m
-    }
-
-    #[inline(always)]
-    fn edge_signs(
-        self,
-        n: &[[f32; 3]; 3],
-        beta: &[f32; 3],
-        dir: [&[f32; ROW]; 3],
-        dir_norm: &[f32; ROW],
-    ) -> [(u32, u32); 3] {
-        let mut out = [(0, 0); 3];
-        for ((n, &beta), (pos, neg)) in n.iter().zip(beta).zip(&mut out) {
-            for j in 0..ROW {
-                let d = [dir[0][j], dir[1][j], dir[2][j]];
-                let (det, bound) = edge_det32(n, beta, d, dir_norm[j]);
-                *pos |= u32::from(det > bound) << j;
-                *neg |= u32::from(-det > bound) << j;
-            }
-        }
-        out
-    }
-
-    #[inline(always)]
-    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
-        let mut s = [0f32; ROW];
-        let mut mag = [0f32; ROW];
-        for k in 0..3 {
-            for j in 0..ROW {
-                let (lo, hi) = if j < 4 { a[k] } else { b[k] };
-                let p = max(n[k][j] * lo, n[k][j] * hi);
-                s[j] += p;
-                mag[j] += p.abs();
-            }
-        }
-        let mut m = 0;
-        for j in 0..ROW {
-            m |= u32::from(s[j] < -(BOX_REL * mag[j] + BOX_ABS)) << j;
-        }
-        m
-    }
-}
+/// Plain Rust, for any CPU: the trait's default methods are the definitions.
+impl Rows for Portable {}
 
 #[cfg(test)]
 mod tests {
@@ -205,6 +190,32 @@ mod tests {
         move |n| {
             s = s.wrapping_mul(1664525).wrapping_add(1013904223);
             (s >> 8) as usize % n
+        }
+    }
+
+    /// One axis of a drawn box test, box bounds `lo <= hi`: the ray lanes'
+    /// `1/D` in `inv` drawn from `vals`, of both signs (the axis `mixed`,
+    /// bounds in both orders), all positive (`lo` the near bound) or all
+    /// negative (`hi` the near one), as `Packet::node_mask` orders them.
+    fn random_axis<const N: usize>(
+        (lo, hi): (f32, f32),
+        vals: &[f32],
+        next: &mut impl FnMut(usize) -> usize,
+        inv: &mut [f32; N],
+    ) -> (f32, f32, bool) {
+        let sign = next(3);
+        for v in inv.iter_mut() {
+            let x = vals[next(vals.len())];
+            *v = match sign {
+                0 => x,
+                1 => x.abs(),
+                _ => -x.abs(),
+            };
+        }
+        match sign {
+            0 => (lo, hi, true),
+            1 => (lo, hi, false),
+            _ => (hi, lo, false),
         }
     }
 
@@ -241,20 +252,7 @@ mod tests {
                 } else {
                     (lo, hi)
                 };
-                let sign = next(3);
-                *a = match sign {
-                    0 => (lo, hi, true),
-                    1 => (lo, hi, false),
-                    _ => (hi, lo, false),
-                };
-                for v in inv[k].iter_mut() {
-                    let x = vals[next(vals.len())];
-                    *v = match sign {
-                        0 => x,
-                        1 => x.abs(),
-                        _ => -x.abs(),
-                    };
-                }
+                *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
             }
             let zscale: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
             let best_z: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
@@ -322,20 +320,7 @@ mod tests {
                 for (k, a) in axes.iter_mut().enumerate() {
                     let (x, y) = (vals[next(9)], vals[next(9)]);
                     let (lo, hi) = (x.min(y), x.max(y));
-                    let sign = next(3);
-                    *a = match sign {
-                        0 => (lo, hi, true),
-                        1 => (lo, hi, false),
-                        _ => (hi, lo, false),
-                    };
-                    for v in inv[k].iter_mut() {
-                        let x = vals[next(vals.len())];
-                        *v = match sign {
-                            0 => x,
-                            1 => x.abs(),
-                            _ => -x.abs(),
-                        };
-                    }
+                    *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
                 }
                 let lanes = |next: &mut dyn FnMut(usize) -> usize| -> [f32; ROW2] {
                     std::array::from_fn(|_| vals[next(vals.len())].abs())

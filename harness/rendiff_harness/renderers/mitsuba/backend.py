@@ -119,29 +119,20 @@ from ...judge.tolerance import (
     shift_depth,
 )
 from ..errors import BackendError, BackendSkipped, BackendUnavailable
-from ..spec import BackendSpec
+from ..spec import DIRECT_LIGHT_FEATURES, BackendSpec
 
 NAME = "mitsuba"
-FEATURES = frozenset(
-    {
-        Feature.DEPTH,
-        Feature.IDS,
-        Feature.EMISSION,
-        Feature.LAMBERT,
-        Feature.POINT_LIGHT,
-        Feature.DIRECTIONAL_LIGHT,
-        Feature.SHADOWS,
-        Feature.AREA_LIGHT,
-        Feature.GLOBAL_ILLUMINATION,
-        Feature.TWO_SIDED,
-        Feature.ONE_SIDED,
-    }
-)
+FEATURES = DIRECT_LIGHT_FEATURES | {
+    Feature.SHADOWS,
+    Feature.AREA_LIGHT,
+    Feature.GLOBAL_ILLUMINATION,
+    Feature.TWO_SIDED,
+    Feature.ONE_SIDED,
+}
 BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N, Buffer.RGB})
 PEAK_MEMORY = (120 * 2**20, 250)
-"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
-memory budget (check/pool.rs): GNU time's max RSS, 108 MiB on three_triangles and 382 MiB on
-`million` (1,310,722 triangles: 219 B per triangle), rounded up."""
+"""`BackendSpec.peak_memory`: 108 MiB on three_triangles and 382 MiB on `million` (1,310,722
+triangles: 219 B per triangle)."""
 VARIANCE_PASSES = 64
 TWO_SIDED_EMITTER_OFFSET_REL = 1e-5
 DEFAULT_SEED = 0

@@ -89,9 +89,8 @@ NEGATIVE_INDEX = re.compile(rb"^[ \t\r]*f[ \t][^\n]*-", re.MULTILINE)
 LONG_LINE = re.compile(rb"[^\n]{%d}" % MITSUBA_LINE_LIMIT)
 U64 = 2.0**-53
 PEAK_MEMORY = (120 * 2**20, 600)
-"""(fixed bytes, bytes per triangle) at a render's peak, for `rendiff check`'s memory budget: max RSS
-114 MiB on obj_mesh (2,048 triangles) and 164 MiB on nefertiti_scan (99,938: 520 B per triangle
-more, each file parsed twice plus the arrays read back), rounded up."""
+"""`BackendSpec.peak_memory`: 114 MiB on obj_mesh (2,048 triangles) and 164 MiB on nefertiti_scan
+(99,938: 520 B per triangle more, each file parsed twice plus the arrays read back)."""
 
 
 def _gamma(k: int, u: float) -> float:

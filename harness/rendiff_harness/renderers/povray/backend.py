@@ -115,28 +115,15 @@ from ...judge.tolerance import (
 )
 from ..children import die_with_parent
 from ..errors import BackendError, BackendUnavailable
-from ..spec import BackendSpec
+from ..spec import DIRECT_LIGHT_FEATURES, BackendSpec
 
 NAME = "povray"
-FEATURES = frozenset(
-    {
-        Feature.DEPTH,
-        Feature.IDS,
-        Feature.EMISSION,
-        Feature.LAMBERT,
-        Feature.POINT_LIGHT,
-        Feature.DIRECTIONAL_LIGHT,
-        Feature.SHADOWS,
-        Feature.SHADOWLESS,
-        Feature.TWO_SIDED,
-    }
-)
+FEATURES = DIRECT_LIGHT_FEATURES | {Feature.SHADOWS, Feature.SHADOWLESS, Feature.TWO_SIDED}
 BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.RGB})
 PEAK_MEMORY = (70 * 2**20, 1800)
-"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
-memory budget (check/pool.rs): GNU time's max RSS, 64 MiB on three_triangles and 1.05 GiB on
-`million` (1,310,722 triangles) for one POV-Ray process, counted twice since the ID and depth
-passes run side by side (1,720 B per triangle), rounded up."""
+"""`BackendSpec.peak_memory`: 64 MiB on three_triangles and 1.05 GiB on `million` (1,310,722
+triangles) for one POV-Ray process, counted twice since the ID and depth passes run side by side
+(1,720 B per triangle)."""
 WAITS_BELOW = 2_500
 """Triangles below which a render keeps one core busy for at most a fifth of its wall time, the
 rest being POV-Ray's polling sleeps (spec.BackendSpec.waits_below). Measured as (this process's

@@ -94,26 +94,14 @@ from ...judge.tolerance import (
     shift_depth,
 )
 from ..errors import BackendError, BackendUnavailable
-from ..spec import BackendSpec
+from ..spec import DIRECT_LIGHT_FEATURES, BackendSpec
 
 NAME = "pyrender"
-FEATURES = frozenset(
-    {
-        Feature.DEPTH,
-        Feature.IDS,
-        Feature.EMISSION,
-        Feature.LAMBERT,
-        Feature.POINT_LIGHT,
-        Feature.DIRECTIONAL_LIGHT,
-        Feature.SHADOWLESS,
-        Feature.TWO_SIDED,
-    }
-)
+FEATURES = DIRECT_LIGHT_FEATURES | {Feature.SHADOWLESS, Feature.TWO_SIDED}
 BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.RGB})
 PEAK_MEMORY = (210 * 2**20, 400)
-"""(fixed bytes, bytes per triangle) a render may reach at its peak, for `rendiff check`'s
-memory budget (check/pool.rs): GNU time's max RSS, 200 MiB on three_triangles and 651 MiB on
-`million` (1,310,722 triangles: 361 B per triangle), rounded up."""
+"""`BackendSpec.peak_memory`: 200 MiB on three_triangles and 651 MiB on `million` (1,310,722
+triangles: 361 B per triangle)."""
 SHADER_DIR = Path(__file__).with_name("shaders")
 RGB_GAMMA = 2.2
 RGB_CODES = 255

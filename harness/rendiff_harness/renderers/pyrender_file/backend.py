@@ -79,9 +79,8 @@ NAME = "pyrender_file"
 FEATURES = frozenset({Feature.DEPTH, Feature.IDS, Feature.NORMALS})
 BUFFERS = frozenset({Buffer.Z, Buffer.ID, Buffer.N})
 PEAK_MEMORY = (210 * 2**20, 600)
-"""(fixed bytes, bytes per triangle) at a render's peak, for `rendiff check`'s memory budget: GNU
-time's max RSS, 202 MiB on a 2-triangle glTF and 310 MiB on a 199,712-triangle one (568 B per
-triangle more: trimesh's scene and the float64 copies of every triangle), rounded up."""
+"""`BackendSpec.peak_memory`: 202 MiB on a 2-triangle glTF and 310 MiB on a 199,712-triangle one
+(568 B per triangle more: trimesh's scene and the float64 copies of every triangle)."""
 U64 = 2.0**-53
 
 
