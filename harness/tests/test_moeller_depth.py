@@ -59,8 +59,12 @@ def test_the_bound_is_infinite_once_den_is_within_its_own_error() -> None:
     assert math.isfinite(tl.moeller_t_depth(_ctx(5.0, at * 1.001, **kw))[0])
 
 
-def test_without_the_triangle_nothing_is_added() -> None:
-    assert tl.moeller_t_depth(_ctx(5.0, 0.5, ray_norm=1.0)).tolist() == [0.0]
+def test_without_the_triangle_or_the_ray_nothing_is_added() -> None:
+    full: dict[str, Any] = {"corner_cond": np.array([2.0]), "extent": np.array([1.0]), "ray_norm": 1.0}
+    assert tl.moeller_t_depth(_ctx(5.0, 0.5, **full))[0] > 0
+    for missing in full:
+        kw = {k: v for k, v in full.items() if k != missing}
+        assert tl.moeller_t_depth(_ctx(5.0, 0.5, **kw)).tolist() == [0.0], missing
 
 
 def test_the_corner_condition_is_one_over_the_sine_of_the_smallest_angle() -> None:
@@ -70,14 +74,15 @@ def test_the_corner_condition_is_one_over_the_sine_of_the_smallest_angle() -> No
             [[0, 0, 0], [1, 0, 0], [0.5, h, 0]],  # equilateral: 1/sin 60
             [[0, 0, 0], [1, 0, 0], [0, 1, 0]],  # right isosceles: 1/sin 45 at the two far corners
             [[0, 0, 0], [10, 0, 0], [5, 0.1, 0]],  # a sliver: its two small angles, atan(0.02)
-            [[0, 0, 0], [1, 0, 0], [2, 0, 0]],  # degenerate
+            [[0, 0, 0], [1, 0, 0], [2, 0, 0]],  # degenerate: collinear
+            [[0, 0, 0], [0, 0, 0], [1, 1, 0]],  # degenerate: two vertices equal (0/0 at them)
         ],
         dtype=np.float32,
     )
     ref = cast(Any, SimpleNamespace(scene=SimpleNamespace(triangles=tris)))
-    got = depth.triangle_corner_cond(ref, np.arange(4))
+    got = depth.triangle_corner_cond(ref, np.arange(5))
     assert got[:3].tolist() == pytest.approx([1 / h, math.sqrt(2.0), 1 / math.sin(math.atan(0.02))], rel=1e-6)
-    assert math.isinf(got[3])
+    assert got[3:].tolist() == [math.inf, math.inf]
 
 
 # The finding: one triangle seen at |cos| 5.2e-5 (scenes/fuzz_grazing_t.toml), pixel (39, 0) of 96x26.

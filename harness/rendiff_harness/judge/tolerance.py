@@ -317,13 +317,12 @@ def moeller_t_depth(ctx: DepthContext) -> np.ndarray:
     1.02 u cond / |cos| of Z, three times the measured cap). Where eps_den >= 1 the sign of den, and so t, is not
     bounded: the tolerance is infinite there (the ray runs along the plane within rounding). Without the
     triangle (no `corner_cond` or `extent`) or the pixel's |D|, nothing is added: the models keep their cap."""
+    z = np.abs(ctx.z_ref)
     if ctx.corner_cond is None or ctx.extent is None or ctx.ray_norm is None:
-        return np.zeros_like(np.asarray(ctx.z_ref, dtype=np.float64))
-    z = np.abs(np.asarray(ctx.z_ref, dtype=np.float64))
-    ray = np.asarray(ctx.ray_norm, dtype=np.float64)
-    reach = ray * z + ctx.origin_offset + np.asarray(ctx.extent, dtype=np.float64)
+        return np.zeros_like(z)
+    reach = ctx.ray_norm * z + ctx.origin_offset + ctx.extent
     with np.errstate(all="ignore"):
-        per_cos = MOELLER_DOT * np.asarray(ctx.corner_cond, dtype=np.float64) / ctx.cos
+        per_cos = MOELLER_DOT * ctx.corner_cond / ctx.cos
         eps_den = per_cos
         tol = (eps_den * z + per_cos * reach) / (1.0 - eps_den) + MOELLER_DIVIDE * z
     tol = np.where(np.isfinite(tol) & (eps_den < 1.0), tol, np.inf)
