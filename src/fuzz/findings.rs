@@ -132,6 +132,11 @@ pub struct ReducedRecord {
     /// without `id.prim`, an error) and the step was held to the class alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure_triangles: Option<Vec<usize>>,
+    /// The failure's size at the start (an RGB failure's largest interior
+    /// error), which every step stayed comparable to (`reduce.rs`,
+    /// `SIZE_FRACTION`); absent when its entry records none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure_size: Option<f64>,
     /// Why there is no reduced scene, when reduction failed.
     #[serde(skip_serializing_if = "String::is_empty")]
     pub error: String,

@@ -540,6 +540,7 @@ pub fn reduce_file(
         candidates: r.candidates,
         complete: r.complete,
         failure_triangles: r.failure_triangles,
+        failure_size: r.failure_size,
         error: String::new(),
     })
 }

@@ -247,6 +247,13 @@ fn finding_section(
                     html::escape(&r.from)
                 );
             }
+            if let Some(size) = r.failure_size {
+                let _ = writeln!(
+                    b,
+                    "<p>Every step failed with an interior error at least {} of the first                      failure's ({size:.3e}).</p>",
+                    html::escape(&format!("1/{}", (1.0 / super::reduce::SIZE_FRACTION).round()))
+                );
+            }
             b.push_str(&html::command_block(&r.command));
             match std::fs::read_to_string(folder.join(&r.scene)) {
                 Ok(text) if text.len() <= MAX_INLINE => {
@@ -373,6 +380,7 @@ mod tests {
                 candidates: 20,
                 complete: true,
                 failure_triangles: Some(vec![0, 1]),
+                failure_size: None,
                 error: String::new(),
             }),
             classification,

@@ -11,7 +11,9 @@
 //! buffer with the same class" ([`super::findings::failure_class`]) "near
 //! the same triangles" ([`super::near`]: its failing pixels on, or within a
 //! pixel of, a triangle the first failure's pixels were on, triangles
-//! followed by their index in the starting scene), asked of `check`
+//! followed by their index in the starting scene) "at a comparable size"
+//! (an RGB failure's largest interior error at least [`SIZE_FRACTION`] of
+//! the first one's, [`holds_size`]), asked of `check`
 //! itself: candidates are written as scene files and checked together, a
 //! batch per `check` run, so the harness's workers, the pool and the
 //! comparison start once per batch, not per candidate. Candidates
@@ -25,6 +27,7 @@ use super::literal::{LiteralScene, Tri};
 use super::near::{self, Group};
 use super::rng::pow2;
 use super::window;
+use crate::check::manifest::ResultEntry;
 use crate::check::CheckOptions;
 use crate::scene::resolve::ResolvedScene;
 use crate::scene::Scene;
@@ -66,6 +69,51 @@ pub const MAX_ROUNDS: usize = 6;
 /// whole 8-scene fuzz.)
 pub const CROPS_PER_AXIS: u32 = 4;
 
+/// How small a candidate's failure may be, as a fraction of the first
+/// failure's size ([`failure_size`]), and still count as the same failure.
+///
+/// What it must keep out: a reduction that drifts to another failure of the
+/// same class on the same triangle. Reducing the POV-Ray RGB failure of
+/// `two_lights_shadowless`'s `translate` variant (an error of 8e-6 at its
+/// worst pixel) ended on a light in the triangle's plane, the reference
+/// 4e-15 and POV-Ray 0: nine orders of magnitude smaller, and an unrelated
+/// rounding. What it must let through: the steps that keep a failure while
+/// changing its size. Objects and triangles that do not shade the failing
+/// pixel leave its error alone; snapping and cropping move a point's
+/// shading by a fraction; removing a light keeps the share of the error it
+/// did not carry: a fault in the shading of each light (an albedo or
+/// cosine bug) is a sum over the lights at the pixel, so keeping the one
+/// that carries the most keeps at least 1/k of it with k lights, 1/8 with up
+/// to 8 lit equally (more lights, and ddmin keeps more of them). The
+/// quantization of an 8- or 16-bit output changes the error by at most the
+/// tolerance's absolute part, below the error of a failure that is beyond
+/// it. So 1/8: an order of magnitude for what a reduction may legitimately
+/// do, far above the drift it stops.
+pub const SIZE_FRACTION: f64 = 0.125;
+
+/// The size of an entry's failure: an `RGB` entry's `interior_max_abs_error`
+/// (the largest |test - reference| at an interior failing pixel,
+/// docs/run-format.md); None when the entry records none (other buffers,
+/// whose classes and triangles already pin a failure down).
+pub fn failure_size(entry: &ResultEntry) -> Option<f64> {
+    entry
+        .details
+        .get("interior_max_abs_error")?
+        .as_f64()
+        .filter(|x| x.is_finite())
+}
+
+/// Whether a candidate's failure (size `cand`) is comparable to the first
+/// failure (size `first`): at least [`SIZE_FRACTION`] of it. Always when the
+/// first has no size; never when it has one and the candidate has none (a
+/// failure of non-finite values only, not the finite one being reduced).
+pub fn holds_size(first: Option<f64>, cand: Option<f64>) -> bool {
+    match first {
+        None => true,
+        Some(f) => cand.is_some_and(|c| c >= SIZE_FRACTION * f),
+    }
+}
+
 /// The result of a reduction.
 #[derive(Debug, Clone)]
 pub struct Reduction {
@@ -82,6 +130,10 @@ pub struct Reduction {
     /// None when the verifier names none (no explanations: a side without
     /// `id.prim`, an error), and the test was the class alone.
     pub failure_triangles: Option<Vec<usize>>,
+    /// The first failure's size ([`failure_size`]), which every accepted
+    /// candidate's stayed comparable to ([`holds_size`]); None when the
+    /// entry records none.
+    pub failure_size: Option<f64>,
     /// Set when the image step tried crops and kept the image as it was:
     /// why, for the log.
     pub image_note: Option<String>,
@@ -104,10 +156,19 @@ impl Cand {
     }
 }
 
+/// A candidate's failure as the target says, as its `check` run recorded it.
+#[derive(Debug, Clone)]
+struct Failure {
+    /// Its failing pixel groups ([`near::failing_groups`]; None when the
+    /// verifier names none).
+    groups: Option<Vec<Group>>,
+    /// Its size ([`failure_size`]).
+    size: Option<f64>,
+}
+
 /// What a `check` run says of one candidate: None when it does not fail as
-/// the target says, else its failing pixel groups (None inside when the
-/// verifier names none).
-type Answer = Option<Option<Vec<Group>>>;
+/// the target says.
+type Answer = Option<Failure>;
 
 /// Ran out of the time budget (the reduction keeps what it has).
 struct OutOfTime;
@@ -121,6 +182,8 @@ struct Oracle<'a> {
     /// The first failure's triangles ([`Reduction::failure_triangles`]);
     /// None until it is known, or when the verifier names none.
     footprint: Option<BTreeSet<usize>>,
+    /// The first failure's size ([`Reduction::failure_size`]).
+    size: Option<f64>,
     check_runs: usize,
     candidates: usize,
     /// Crops the image step asked about (cached or not).
@@ -203,31 +266,16 @@ impl Oracle<'_> {
             return Ok(Err(OutOfTime));
         }
         let answers = self.test(&batch, cands)?;
-        for (k, groups) in batch.iter().zip(answers) {
-            let interesting = self.near(&cands[*k], groups);
+        for (k, answer) in batch.iter().zip(answers) {
+            let interesting = same_failure(
+                self.footprint.as_ref(),
+                self.size,
+                &cands[*k],
+                answer.as_ref(),
+            );
             self.cache.insert(texts[*k].clone(), interesting);
         }
         Ok(Ok(()))
-    }
-
-    /// Whether a candidate that failed as the target says (`groups`: None
-    /// when it did not) failed near the first failure's triangles.
-    fn near(&self, cand: &Cand, groups: Answer) -> bool {
-        let Some(groups) = groups else {
-            return false;
-        };
-        let Some(footprint) = &self.footprint else {
-            return true;
-        };
-        let Some(groups) = groups else {
-            return false;
-        };
-        let resolved = Scene::parse(Path::new("candidate.toml"), &cand.scene.to_toml())
-            .ok()
-            .and_then(|s| ResolvedScene::resolve(&s).ok());
-        resolved.is_some_and(|r| {
-            !near::near_triangles(&groups, &cand.origin, &r).is_disjoint(footprint)
-        })
     }
 
     /// Checks the starting scene alone: whether it fails as the target
@@ -235,17 +283,17 @@ impl Oracle<'_> {
     /// every later candidate is held to).
     fn establish(&mut self, start: &Cand) -> Result<bool> {
         let mut answers = self.test(&[0], std::slice::from_ref(start))?;
-        let Some(groups) = answers.pop().flatten() else {
+        let Some(first) = answers.pop().flatten() else {
             return Ok(false);
         };
-        self.footprint = groups.map(|g| near::on_triangles(&g, &start.origin));
+        self.footprint = first.groups.map(|g| near::on_triangles(&g, &start.origin));
+        self.size = first.size;
         self.cache.insert(start.key(), true);
         Ok(true)
     }
 
     /// One `check` run over the candidates `which`: for each, None when it
-    /// does not fail as the target says, else its failing pixel groups
-    /// ([`near::failing_groups`]; None inside when the verifier names none).
+    /// does not fail as the target says, else its [`Failure`].
     fn test(&mut self, which: &[usize], cands: &[Cand]) -> Result<Vec<Answer>> {
         if which.is_empty() {
             return Ok(Vec::new());
@@ -287,16 +335,46 @@ impl Oracle<'_> {
                         && failure_class(v).as_deref() == Some(t.class.as_str())
                 });
                 fails.then(|| {
-                    outcome
-                        .results
-                        .results
-                        .iter()
-                        .find(|e| e.scene == name && e.backend == t.backend && e.buffer == t.buffer)
-                        .and_then(|e| near::failing_groups(e, &t.class))
+                    let entry = outcome.results.results.iter().find(|e| {
+                        e.scene == name && e.backend == t.backend && e.buffer == t.buffer
+                    });
+                    Failure {
+                        groups: entry.and_then(|e| near::failing_groups(e, &t.class)),
+                        size: entry.and_then(failure_size),
+                    }
                 })
             })
             .collect())
     }
+}
+
+/// Whether a candidate's `check` answer is the first failure again: it
+/// failed as the target says, at a comparable size ([`holds_size`] against
+/// `size`, the first failure's), and near the first failure's triangles
+/// (`footprint`; any triangles when the verifier named none the first time,
+/// none when it names none now).
+fn same_failure(
+    footprint: Option<&BTreeSet<usize>>,
+    size: Option<f64>,
+    cand: &Cand,
+    answer: Option<&Failure>,
+) -> bool {
+    let Some(failure) = answer else {
+        return false;
+    };
+    if !holds_size(size, failure.size) {
+        return false;
+    }
+    let Some(footprint) = footprint else {
+        return true;
+    };
+    let Some(groups) = &failure.groups else {
+        return false;
+    };
+    let resolved = Scene::parse(Path::new("candidate.toml"), &cand.scene.to_toml())
+        .ok()
+        .and_then(|s| ResolvedScene::resolve(&s).ok());
+    resolved.is_some_and(|r| !near::near_triangles(groups, &cand.origin, &r).is_disjoint(footprint))
 }
 
 /// Delta debugging over `n_units` units: `build(keep)` makes the scene
@@ -578,6 +656,7 @@ pub fn reduce(
         target: target.clone(),
         cache: HashMap::new(),
         footprint: None,
+        size: None,
         check_runs: 0,
         candidates: 0,
         crops_tried: 0,
@@ -602,6 +681,7 @@ pub fn reduce(
         candidates: oracle.candidates,
         complete,
         failure_triangles: oracle.footprint.map(|f| f.into_iter().collect()),
+        failure_size: oracle.size,
         image_note,
     })
 }
@@ -704,6 +784,61 @@ mod tests {
         assert_eq!(k.objects[0].triangles, vec![tri(1.0)]);
         assert_eq!(k.objects[1].triangles, vec![tri(3.0)]);
         assert_eq!(keep_objects(&s, &[2]).objects[0].triangles, vec![tri(3.0)]);
+    }
+
+    #[test]
+    fn a_candidate_must_fail_at_a_size_comparable_to_the_first() {
+        let cand = Cand {
+            scene: scene(vec![vec![tri(0.0)]]),
+            origin: vec![0],
+        };
+        let failing = |size: Option<f64>| Failure { groups: None, size };
+        // The POV-Ray reduction's drift: 8e-6 at first, then 4e-15 on a
+        // light in the triangle's plane. Same class, same triangle: refused.
+        let first = Some(8e-6);
+        assert!(!same_failure(
+            None,
+            first,
+            &cand,
+            Some(&failing(Some(4e-15)))
+        ));
+        // Just below and at 1/8 of the first.
+        assert!(!same_failure(
+            None,
+            first,
+            &cand,
+            Some(&failing(Some(0.99e-6)))
+        ));
+        assert!(same_failure(None, first, &cand, Some(&failing(Some(1e-6)))));
+        // Larger is the same failure too (a crop may drop its smaller pixels).
+        assert!(same_failure(None, first, &cand, Some(&failing(Some(1.0)))));
+        // A failure without a finite size is not the finite one.
+        assert!(!same_failure(None, first, &cand, Some(&failing(None))));
+        // No size the first time (a buffer that records none): the class alone.
+        assert!(same_failure(None, None, &cand, Some(&failing(None))));
+        assert!(same_failure(None, None, &cand, Some(&failing(Some(1e-30)))));
+        // Not failing at all.
+        assert!(!same_failure(None, first, &cand, None));
+    }
+
+    #[test]
+    fn the_size_is_rgb_s_largest_interior_error() {
+        let mut details = serde_json::Map::new();
+        details.insert("interior_max_abs_error".into(), serde_json::json!(8.04e-6));
+        let mut e = ResultEntry {
+            scene: "s".into(),
+            backend: "povray".into(),
+            buffer: "RGB".into(),
+            status: "fail".into(),
+            reason: String::new(),
+            details,
+        };
+        assert_eq!(failure_size(&e), Some(8.04e-6));
+        e.details
+            .insert("interior_max_abs_error".into(), serde_json::Value::Null);
+        assert_eq!(failure_size(&e), None);
+        e.details.clear();
+        assert_eq!(failure_size(&e), None);
     }
 
     #[test]

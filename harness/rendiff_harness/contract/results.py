@@ -106,6 +106,7 @@ class Entry:
     cluster_failures: int | None = None
     flip_mean: float | None = None
     flip_note: str = ""
+    interior_max_abs_error: float | None = None  # RGB: largest |test - reference| at an interior failing pixel
     extra: dict[str, Any] = field(default_factory=dict)  # written last (calibration's measured fields)
 
     def record_classes(self, edge: int, tie: int, crack: int, interior: int) -> None:

@@ -16,6 +16,7 @@ from ..contract.results import Entry
 from ..contract.vocab import BACKGROUND_ID
 from ..renderers.spec import BackendSpec
 from . import diffimages, precision, radiance, verify
+from .moved_point import moved_point_tolerance
 from .verdict import Judged
 
 RGB_ENTRY_FIELDS = (
@@ -27,6 +28,7 @@ RGB_ENTRY_FIELDS = (
     "flip_mean",
     "flip_note",
     "explanations",
+    "interior_max_abs_error",
 )
 """An RGB entry's own fields (results.Entry.own_fields)."""
 
@@ -64,6 +66,18 @@ def explain_rgb(
     ]
 
 
+def interior_size(interior: np.ndarray, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> float | None:
+    """The failure's size: the largest |test - reference| (any channel, finite values only) at an
+    interior failing pixel; None without one. `rendiff reduce` holds an RGB reduction to failures of
+    a size comparable to its first one's (src/fuzz/reduce.rs), so that it cannot drift to an
+    unrelated failure of the same class (a cosine near 0 within rounding, 4e-15 against 0)."""
+    if not interior.any():
+        return None
+    err = np.abs(np.asarray(test_rgb, dtype=np.float64)[interior] - np.asarray(ref_rgb, dtype=np.float64)[interior])
+    err = err[np.isfinite(err)]
+    return float(err.max()) if err.size else None
+
+
 def _side_dof(attrs: Mapping[str, Any], info: Mapping[str, Any] | None = None) -> float:
     return radiance.degrees_of_freedom({**(info or {}), **attrs})
 
@@ -97,6 +111,10 @@ def compare_rgb(
             res.notes.append(f"{side} has no var channels: its values count as exact in the statistical test")
         return res
     model = precision.rgb_tolerance(spec, backend, b, attrs, render_info(render))
+    abs_tol, text = model.abs_tol, model.text
+    moved = moved_point_tolerance(ref, spec, render, attrs)
+    if moved is not None:
+        abs_tol, text = abs_tol + moved[0], text + moved[1]
     shadow_edges: radiance.ShadowEdges | None = None
     scene = ref.scene
     if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
@@ -107,7 +125,6 @@ def compare_rgb(
 
         shadow_edges = ambiguous
 
-    text = model.text
     if shadow_edges is not None:
         text += (
             f"; failing pixels at ID edge mismatches, or whose shadow ray passes within "
@@ -115,7 +132,7 @@ def compare_rgb(
         )
     else:
         text += "; failing pixels at ID edge mismatches count as edge"
-    return radiance.compare_deterministic(b, a, model.abs_tol, model.rel, text, id_edge_mask, shadow_edges)
+    return radiance.compare_deterministic(b, a, abs_tol, model.rel, text, id_edge_mask, shadow_edges)
 
 
 def record_rgb(e: Entry, res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb: np.ndarray) -> Judged:
@@ -131,6 +148,7 @@ def record_rgb(e: Entry, res: radiance.RgbResult, ref_rgb: np.ndarray, test_rgb:
     e.alpha = res.alpha
     e.cluster_failures = res.cluster_failures
     e.flip_mean, e.flip_note = radiance.flip_mean(ref_rgb, test_rgb)
+    e.interior_max_abs_error = interior_size(res.fail_mask & ~res.edge_mask, ref_rgb, test_rgb)
 
     def heat_map(path: Path) -> None:
         diffimages.write_rgb_diff(path, res.score, res.edge_mask, res.fail_mask & ~res.edge_mask)

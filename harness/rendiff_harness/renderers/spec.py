@@ -63,6 +63,11 @@ class BackendSpec:
     """The error bounds its arithmetic puts into the camera fit (judge/camera_budget.py)."""
     rgb_tolerance: RgbModel | None = None
     """Its deterministic RGB tolerance; None: it has no RGB model (judge/tolerance.rgb_fallback)."""
+    rgb_moved_point: bool = False
+    """True when the point it shades is the hit its position model (`precision.position`) moves and
+    its lights are placed exactly: its RGB tolerance then also allows the direct light's change at
+    the moved point (judge/moved_point.py). False keeps the RGB tolerance as its model gives it; a
+    backend that rounds its lights or shading point otherwise too (in f32) needs that derived first."""
     normals: NormalModel = f32_normals
     """The angle its N may be off the winding convention."""
     peak_memory: tuple[int, int] | None = None

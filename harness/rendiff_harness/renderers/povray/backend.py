@@ -1017,6 +1017,7 @@ SPEC = BackendSpec(
     PRECISION,
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
+    rgb_moved_point=True,
     peak_memory=PEAK_MEMORY,
     waits_below=WAITS_BELOW,
     render=render,
