@@ -411,4 +411,52 @@ mod tests {
         assert_eq!(o.stdout.trim(), "out");
         assert_eq!(o.stderr_tail(1), "err");
     }
+
+    #[test]
+    fn fed_lines_reach_the_child_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let fed = Fed::spawn(Command::new("cat"), dir.path()).unwrap();
+        for k in 0..1000 {
+            fed.send(format!("line {k}"));
+        }
+        let o = fed.finish(Duration::from_secs(20)).unwrap();
+        assert_eq!(o.code, Some(0));
+        let want: Vec<String> = (0..1000).map(|k| format!("line {k}")).collect();
+        assert_eq!(o.stdout.lines().collect::<Vec<_>>(), want);
+    }
+
+    #[test]
+    fn a_fed_child_that_stops_reading_blocks_no_one_and_is_killed() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cmd = Command::new("sleep");
+        cmd.arg("30");
+        let fed = Fed::spawn(cmd, dir.path()).unwrap();
+        let start = Instant::now();
+        // Far more than a pipe holds: sending must not wait for the child.
+        for _ in 0..64 {
+            fed.send("x".repeat(64 << 10));
+        }
+        assert!(start.elapsed() < Duration::from_secs(2));
+        let o = fed.finish(Duration::from_millis(200)).unwrap();
+        assert!(o.timed_out && o.code.is_none());
+        assert!(start.elapsed() < Duration::from_secs(10));
+    }
+
+    #[test]
+    fn a_fed_child_dropped_unfinished_is_killed() {
+        let dir = tempfile::tempdir().unwrap();
+        let pid_file = dir.path().join("pid");
+        let mut cmd = Command::new("sh");
+        cmd.args(["-c", "echo $$ > \"$0\"; exec sleep 30"])
+            .arg(&pid_file);
+        let fed = Fed::spawn(cmd, dir.path()).unwrap();
+        let start = Instant::now();
+        while !pid_file.exists() && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        drop(fed);
+        let pid = std::fs::read_to_string(&pid_file).unwrap();
+        // Reaped by the drop: no process of that id is left (not even a zombie).
+        assert!(!Path::new(&format!("/proc/{}", pid.trim())).exists());
+    }
 }

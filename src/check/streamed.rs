@@ -34,10 +34,13 @@ pub(super) struct Scenes<'a> {
     fed: &'a Fed,
     /// The records so far (the core's and Embree's), by scene.
     base: &'a [SceneRuns],
-    /// Per scene: external renders still out, and those in with their
-    /// position in the scene's record.
-    pending: Vec<Mutex<(usize, Vec<(usize, RenderRecord)>)>>,
+    /// Per scene, its [`Arrivals`].
+    pending: Vec<Mutex<Arrivals>>,
 }
+
+/// A scene's external renders still out, and those in with their position
+/// in the scene's record.
+type Arrivals = (usize, Vec<(usize, RenderRecord)>);
 
 impl<'a> Scenes<'a> {
     /// `counts[si]`: how many external renders scene `si` waits for (a scene
