@@ -64,21 +64,35 @@ pub(super) fn render_and_compare(
         version: format!("rendiff {}", env!("CARGO_PKG_VERSION")),
         shown_dir,
     };
-    let externals = super::harness_backends(opts, &run.scratch.join("info"));
-    if let Err(e) = &externals {
-        say(opts, format!("warning: {e}"));
-    }
+    // The comparison starts first, so that its start-up overlaps the renders,
+    // and judges each scene once its renders are in (streamed.rs); a
+    // measuring run (`isolate`) keeps the machine to one render at a time.
+    let fed = isolate
+        .is_none()
+        .then(|| streamed::start(opts, &run.scratch))
+        .flatten();
     let mut scenes = Vec::new();
     // Per scene, what its external renders need (folder, size); None when it did not load.
     let mut pending: Vec<Option<ExternalScene>> = Vec::new();
-    for (si, (scene_path, role)) in jobs.iter().enumerate() {
-        let (runs, p) = render_scene(&run, scene_path, role, (si + 1, jobs.len()));
-        scenes.push(runs);
-        pending.push(p);
+    // The harness lists its backends (a Python start-up that mostly waits)
+    // while the core renders every scene.
+    let externals = std::thread::scope(|s| {
+        let listing = s.spawn(|| super::harness_backends(opts, &run.scratch.join("info")));
+        for (si, (scene_path, role)) in jobs.iter().enumerate() {
+            let (runs, p) = render_scene(&run, scene_path, role, (si + 1, jobs.len()));
+            scenes.push(runs);
+            pending.push(p);
+        }
+        listing
+            .join()
+            .unwrap_or_else(|_| Err("the harness's listing of its backends panicked".into()))
+    });
+    if let Err(e) = &externals {
+        say(opts, format!("warning: {e}"));
     }
     // Then every external render of every scene, side by side in the job pool
-    // (pool.rs); the core's renders above had the cores to themselves.
-    let mut fed = None;
+    // (pool.rs); the core's renders above had the cores to themselves (but for
+    // the listing's start-up).
     match &externals {
         Err(e) => {
             for (runs, _) in scenes.iter_mut().zip(&pending).filter(|(_, p)| p.is_some()) {
@@ -90,16 +104,7 @@ pub(super) fn render_and_compare(
                 });
             }
         }
-        Ok(list) => {
-            // The comparison starts now and judges each scene once its
-            // renders are in (streamed.rs); a measuring run (`isolate`)
-            // keeps the machine to one render at a time.
-            fed = isolate
-                .is_none()
-                .then(|| streamed::start(opts, &run.scratch))
-                .flatten();
-            render_externals(&run, list, &mut scenes, &pending, fed.as_ref());
-        }
+        Ok(list) => render_externals(&run, list, &mut scenes, &pending, fed.as_ref()),
     }
     let manifest = write_manifest(opts, scenes, &pending, shard)?;
     let (results, table) = match fed {
