@@ -1,10 +1,11 @@
-"""`python -m rendiff_harness compare --run RUN [--expectations FILE] [--references DIR] [--jobs N]`:
+"""`python -m rendiff_harness compare --run RUN [--expectations FILE] [--references DIR] [--jobs N] [--stream]`:
 a check run's buffers -> RUN/results.json.
 
 Reads RUN/manifest.json (docs/run-format.md, written by `rendiff check`; contract/manifest.py),
 judges every scene (judge/scene.py: every backend's buffers against the reference's, normally
 "raster", buffer by buffer as judge/buffers.py's `BUFFER_TABLE` says), the scenes spread over
-`--jobs` processes, then the camera calibration and its consequences (judge/calibration.py),
+`--jobs` processes (with `--stream`, each scene from the moment `rendiff check` has its last render
+in, while others still render), then the camera calibration and its consequences (judge/calibration.py),
 writes RUN/results.json atomically (contract/results.py) and RUN/scenes/<scene>/diff/*.png, and
 prints a compact table. Each backend is judged with its `BackendSpec` (renderers/registry.py's
 `spec`, the one lookup this module hands the judge).
@@ -25,11 +26,12 @@ read/written, with one line naming the file.
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing
 import sys
 import time
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -69,38 +71,98 @@ def _scene_cost(scene_entry: Mapping[str, Any]) -> float:
     return float(sum(float(r.get("time_s") or 0.0) for r in scene_entry.get("renders", [])))
 
 
+Comparison = Future[tuple[list[Entry], set[int]]]
+"""One scene's comparison: its entries and the expectations it used."""
+
+
+class Comparer:
+    """Scenes judged as they are handed in: in this process when `jobs` <= 1, else in that many
+    processes (fresh interpreters: `spawn`, never a fork of a process holding OpenImageIO's
+    threads). Scenes are independent, so the order they are handed in changes no verdict."""
+
+    def __init__(
+        self,
+        run: Path,
+        expectations_path: str | Path | None,
+        exps: expectations.Expectations,
+        images: bool,
+        references_dir: Path | None,
+        jobs: int,
+    ) -> None:
+        self.run, self.expectations_path, self.exps = run, expectations_path, exps
+        self.images, self.references_dir = images, references_dir
+        context = multiprocessing.get_context("spawn")
+        self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context) if jobs > 1 else None
+
+    def __enter__(self) -> Comparer:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+
+    def submit(self, scene_entry: Mapping[str, Any], reference: str) -> Comparison:
+        """Starts judging one scene (in this process: judges it now, into `exps` itself)."""
+        args = (self.run, scene_entry, reference)
+        if self.pool is not None:
+            opts = (self.expectations_path, self.images, self.references_dir)
+            return self.pool.submit(_scene_task, *args, *opts)
+        done: Comparison = Future()
+        try:
+            entries = scene.compare_scene(*args, self.exps, registry.spec, self.images, self.references_dir)
+            done.set_result((entries, set()))
+        except Exception as exc:  # noqa: BLE001 - raised again by `result()`, as a pool's would be
+            done.set_exception(exc)
+        return done
+
+
 def compare_scenes(
-    run: Path,
     scenes: Sequence[Mapping[str, Any]],
     reference: str,
-    expectations_path: str | Path | None,
-    exps: expectations.Expectations,
-    images: bool,
-    references_dir: Path | None,
-    jobs: int,
+    comparer: Comparer,
+    early: Mapping[str, tuple[str, Mapping[str, Any], Comparison]] | None = None,
 ) -> list[Entry]:
-    """Every scene's entries, in manifest order. Scenes are independent, so with `jobs` > 1
-    they are compared in that many processes (fresh interpreters: `spawn`, never a fork of a
-    process holding OpenImageIO's threads), the costliest first; `exps.used` gathers what
-    each process matched, so unused expectations are reported as in a sequential run."""
-    if jobs <= 1 or len(scenes) <= 1:
-        out: list[Entry] = []
-        for sc in scenes:
-            out += scene.compare_scene(run, sc, reference, exps, registry.spec, images, references_dir)
-        return out
+    """Every scene's entries, in manifest order; the scenes not judged yet are handed in the
+    costliest first. `early` holds comparisons started while the run was still rendering
+    (`read_stream`), by scene name: one is used only when its reference and scene entry are
+    exactly the manifest's, so a verdict always judges what the manifest records. `exps.used`
+    gathers what each comparison matched, so unused expectations are reported as in a
+    sequential run."""
+    early = early or {}
     order = sorted(range(len(scenes)), key=lambda i: -_scene_cost(scenes[i]))
+    futures: dict[int, Comparison] = {}
+    for i in order:
+        got = early.get(scenes[i]["scene"])
+        if got is not None and got[0] == reference and got[1] == scenes[i]:
+            futures[i] = got[2]
+        else:
+            futures[i] = comparer.submit(scenes[i], reference)
     done: dict[int, list[Entry]] = {}
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(scenes)), mp_context=context) as pool:
-        futures = {
-            i: pool.submit(_scene_task, run, scenes[i], reference, expectations_path, images, references_dir)
-            for i in order
-        }
-        for i, future in futures.items():
-            entries, used = future.result()
-            done[i] = entries
-            exps.used |= used
+    for i in range(len(scenes)):
+        entries, used = futures[i].result()
+        done[i] = entries
+        comparer.exps.used |= used
     return [e for i in range(len(scenes)) for e in done[i]]
+
+
+def read_stream(lines: Iterable[str], comparer: Comparer) -> dict[str, tuple[str, Mapping[str, Any], Comparison]]:
+    """Scenes handed in before manifest.json exists, one JSON object a line,
+    `{"reference": NAME, "scene": SCENE_ENTRY}` (`rendiff check` writes one as soon as a scene's
+    last render is in), each judged at once: by scene name, what `compare_scenes` may use."""
+    early: dict[str, tuple[str, Mapping[str, Any], Comparison]] = {}
+    for k, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            item = json.loads(line)
+        except ValueError as exc:
+            raise ManifestError(f"stdin line {k}: not JSON ({exc})") from None
+        ref = item.get("reference") if isinstance(item, dict) else None
+        entry = item.get("scene") if isinstance(item, dict) else None
+        if not isinstance(ref, str) or not isinstance(entry, dict) or not isinstance(entry.get("scene"), str):
+            raise ManifestError(f'stdin line {k}: expected {{"reference": NAME, "scene": {{"scene": NAME, ...}}}}')
+        early[entry["scene"]] = (ref, entry, comparer.submit(entry, ref))
+    return early
 
 
 def run_compare(
@@ -109,16 +171,24 @@ def run_compare(
     images: bool = True,
     references_dir: str | Path | None = None,
     jobs: int = 1,
+    stream: Iterable[str] | None = None,
 ) -> dict[str, Any]:
     """Compare everything in RUN and write results.json; returns the results document.
+    With `stream`, scenes read from it are judged first, before manifest.json is read
+    (`read_stream`).
 
     Raises ManifestError / expectations.ExpectationsError for unusable inputs.
     """
-    manifest = load_manifest(run)
+    manifest = load_manifest(run) if stream is None else None
     exps = expectations.load(expectations_path)
-    reference = manifest.get("reference", "raster")
     refs = Path(references_dir) if references_dir is not None else None
-    entries = compare_scenes(run, manifest["scenes"], reference, expectations_path, exps, images, refs, jobs)
+    # One scene is judged in this process: a fresh interpreter would only add its start-up.
+    jobs = min(jobs, len(manifest["scenes"])) if manifest is not None else jobs
+    with Comparer(run, expectations_path, exps, images, refs, jobs) as comparer:
+        early = read_stream(stream, comparer) if stream is not None else None
+        manifest = load_manifest(run) if manifest is None else manifest
+        reference = manifest.get("reference", "raster")
+        entries = compare_scenes(manifest["scenes"], reference, comparer, early)
     summary, camera = calibration.calibrate_and_blame(run, manifest, entries, registry.spec)
     doc = document(reference, summary, expectations_path, exps.unused(), [e.to_json() for e in entries] + camera)
     write_results(run, doc)
@@ -146,6 +216,13 @@ def build_parser() -> argparse.ArgumentParser:
         "process; `rendiff check` passes its --jobs)",
     )
     p.add_argument(
+        "--stream",
+        action="store_true",
+        help="before reading manifest.json, judge the scenes written to stdin as the run renders, one JSON "
+        'object a line: {"reference": NAME, "scene": SCENE_ENTRY} (`rendiff check` writes them); one is '
+        "used only if exactly the manifest's entry",
+    )
+    p.add_argument(
         "--references",
         default=None,
         help="folder of cached Mitsuba references (<scene>.exr + <scene>.json, e.g. tests/references): "
@@ -166,7 +243,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERROR
     try:
         doc = run_compare(
-            run, args.expectations, images=not args.no_images, references_dir=args.references, jobs=max(args.jobs, 1)
+            run,
+            args.expectations,
+            images=not args.no_images,
+            references_dir=args.references,
+            jobs=max(args.jobs, 1),
+            stream=sys.stdin if args.stream else None,
         )
     except (ManifestError, expectations.ExpectationsError) as exc:
         print(f"rendiff_harness compare: {printable(str(exc))}", file=sys.stderr)

@@ -21,6 +21,7 @@ pub mod process;
 mod render_run;
 pub mod run_folder;
 pub mod shard;
+mod streamed;
 pub mod table;
 pub mod worker;
 
@@ -30,7 +31,7 @@ use crate::render::{Backend, NotRendered, RenderOptions, Rendered};
 use crate::scene::resolve::ResolvedScene;
 use anyhow::{bail, Context, Result};
 use manifest::{Manifest, RenderRecord, Results, SceneRuns};
-use process::{run_with_timeout, shell_line};
+use process::{run_with_timeout, shell_line, Outcome};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -961,8 +962,18 @@ fn external(
 /// path in an error); results.json and the table are rewritten to name
 /// `shown`, the run folder, instead ([`unstage`]).
 fn compare(opts: &CheckOptions, scratch: &Path, shown: &Path) -> Result<(Results, String)> {
-    let results_path = opts.run_dir.join("results.json");
-    let _ = std::fs::remove_file(&results_path);
+    let cmd = compare_command(opts, false);
+    let o = run_with_timeout(cmd, COMPARE_TIMEOUT, &scratch.join("compare"));
+    compared(opts, o, shown)
+}
+
+/// How long the comparison may take once every render is in.
+const COMPARE_TIMEOUT: Duration = Duration::from_secs(1800);
+
+/// The comparison's command; with `stream`, it judges the scenes written to
+/// its stdin before it reads manifest.json (`compare.py`'s `--stream`).
+fn compare_command(opts: &CheckOptions, stream: bool) -> Command {
+    let _ = std::fs::remove_file(opts.run_dir.join("results.json"));
     let mut cmd = harness_command(opts);
     cmd.arg("compare")
         .arg("--run")
@@ -970,11 +981,19 @@ fn compare(opts: &CheckOptions, scratch: &Path, shown: &Path) -> Result<(Results
         .arg("--expectations")
         .arg(&opts.expectations)
         .args(["--jobs", &opts.jobs.to_string()]);
+    if stream {
+        cmd.arg("--stream");
+    }
     if let Some(r) = &opts.references {
         cmd.arg("--references").arg(r);
     }
-    let o = run_with_timeout(cmd, Duration::from_secs(1800), &scratch.join("compare"))
-        .context("cannot run the comparison (python -m rendiff_harness compare)")?;
+    cmd
+}
+
+/// results.json and the verdict table from the comparison's outcome `o`.
+fn compared(opts: &CheckOptions, o: Result<Outcome>, shown: &Path) -> Result<(Results, String)> {
+    let results_path = opts.run_dir.join("results.json");
+    let o = o.context("cannot run the comparison (python -m rendiff_harness compare)")?;
     if o.timed_out || o.code != Some(0) {
         if let Some(refusal) = harness_refusal(&o.stderr).filter(|_| !o.timed_out) {
             bail!("the comparison refused the run: {refusal}");

@@ -106,67 +106,169 @@ pub fn run_measured(
     Ok(o)
 }
 
-fn run(mut cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
-    std::fs::create_dir_all(scratch)
-        .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
-    let out_path = scratch.join("stdout.txt");
-    let err_path = scratch.join("stderr.txt");
-    let out = std::fs::File::create(&out_path)?;
-    let err = std::fs::File::create(&err_path)?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::process::CommandExt;
-        cmd.process_group(0);
+fn run(cmd: Command, timeout: Duration, scratch: &Path) -> Result<Outcome> {
+    let started = Started::spawn(cmd, scratch, Stdio::null())?;
+    let from = started.start;
+    started.wait(timeout, from)
+}
+
+/// A child started in a process group of its own, registered with
+/// [`crate::shutdown`], its output going to files in its scratch folder.
+struct Started {
+    child: std::process::Child,
+    group: crate::shutdown::GroupGuard,
+    start: Instant,
+    out_path: std::path::PathBuf,
+    err_path: std::path::PathBuf,
+}
+
+impl Started {
+    fn spawn(mut cmd: Command, scratch: &Path, stdin: Stdio) -> Result<Self> {
+        std::fs::create_dir_all(scratch)
+            .with_context(|| format!("{}: cannot create scratch folder", scratch.display()))?;
+        let out_path = scratch.join("stdout.txt");
+        let err_path = scratch.join("stderr.txt");
+        let out = std::fs::File::create(&out_path)?;
+        let err = std::fs::File::create(&err_path)?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::process::CommandExt;
+            cmd.process_group(0);
+        }
+        crate::shutdown::die_with_parent(&mut cmd);
+        let start = Instant::now();
+        let child = cmd
+            .stdin(stdin)
+            .stdout(Stdio::from(out))
+            .stderr(Stdio::from(err))
+            .spawn()
+            .with_context(|| format!("cannot start {:?}", cmd.get_program()))?;
+        let group = crate::shutdown::track_group(child.id());
+        Ok(Started {
+            child,
+            group,
+            start,
+            out_path,
+            err_path,
+        })
     }
-    crate::shutdown::die_with_parent(&mut cmd);
-    let start = Instant::now();
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::from(out))
-        .stderr(Stdio::from(err))
-        .spawn()
-        .with_context(|| format!("cannot start {:?}", cmd.get_program()))?;
-    let group = crate::shutdown::track_group(child.id());
-    let mut timed_out = false;
-    let status = loop {
-        if let Some(st) = child.try_wait()? {
-            break Some(st);
+
+    /// Waits until the child exits, or kills its group once `timeout` has
+    /// passed since `from`.
+    fn wait(mut self, timeout: Duration, from: Instant) -> Result<Outcome> {
+        let child = &mut self.child;
+        let mut timed_out = false;
+        let status = loop {
+            if let Some(st) = child.try_wait()? {
+                break Some(st);
+            }
+            if from.elapsed() > timeout {
+                timed_out = true;
+                crate::shutdown::kill_group(child.id() as i32);
+                let _ = child.kill();
+                let _ = child.wait();
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        // The leader is reaped; kill what it may have left in its group (a forked
+        // child that outlived a clean exit) before the group id can be reused.
+        crate::shutdown::kill_group(child.id() as i32);
+        drop(self.group);
+        crate::shutdown::hold_if_interrupted();
+        let read = |p: &Path| {
+            std::fs::read(p)
+                .map(|b| String::from_utf8_lossy(&b).into_owned())
+                .unwrap_or_default()
+        };
+        #[cfg(unix)]
+        let signal = {
+            use std::os::unix::process::ExitStatusExt;
+            status.and_then(|s| s.signal())
+        };
+        #[cfg(not(unix))]
+        let signal = None;
+        Ok(Outcome {
+            code: status.and_then(|s| s.code()),
+            signal,
+            timed_out,
+            stdout: read(&self.out_path),
+            stderr: read(&self.err_path),
+            seconds: self.start.elapsed().as_secs_f64(),
+            max_rss_bytes: None,
+        })
+    }
+}
+
+/// A command fed lines on its stdin while it runs, as [`run_with_timeout`]
+/// runs one otherwise (process group, output to files, killed with rendiff):
+/// `check` hands the comparison each scene as soon as its renders are in, so
+/// judging overlaps rendering. A thread of its own writes the lines, so a
+/// child that stops reading never blocks the sender; dropped unfinished (an
+/// error on the way), the child's group is killed.
+pub struct Fed {
+    started: Option<Started>,
+    lines: Option<std::sync::mpsc::Sender<String>>,
+    writer: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Fed {
+    /// Starts `cmd` with its stdin a pipe; output goes to `scratch`.
+    pub fn spawn(cmd: Command, scratch: &Path) -> Result<Fed> {
+        let mut started = Started::spawn(cmd, scratch, Stdio::piped())?;
+        let mut stdin = started.child.stdin.take().context("no stdin pipe")?;
+        let (tx, rx) = std::sync::mpsc::channel::<String>();
+        let writer = std::thread::spawn(move || {
+            use std::io::Write;
+            for line in rx {
+                // A child that exited or closed its stdin reads no more: what
+                // it did is its outcome, told by `finish`.
+                if stdin.write_all(line.as_bytes()).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Fed {
+            started: Some(started),
+            lines: Some(tx),
+            writer: Some(writer),
+        })
+    }
+
+    /// Queues one line (a newline is added); never blocks.
+    pub fn send(&self, mut line: String) {
+        line.push('\n');
+        if let Some(tx) = &self.lines {
+            let _ = tx.send(line);
         }
-        if start.elapsed() > timeout {
-            timed_out = true;
-            crate::shutdown::kill_group(child.id() as i32);
-            let _ = child.kill();
-            let _ = child.wait();
-            break None;
+    }
+
+    /// Closes the child's stdin once every queued line is written, then
+    /// waits for it; `timeout` counts from here.
+    pub fn finish(mut self, timeout: Duration) -> Result<Outcome> {
+        let from = Instant::now();
+        drop(self.lines.take());
+        let started = self.started.take().context("already finished")?;
+        let outcome = started.wait(timeout, from);
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
         }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    // The leader is reaped; kill what it may have left in its group (a forked
-    // child that outlived a clean exit) before the group id can be reused.
-    crate::shutdown::kill_group(child.id() as i32);
-    drop(group);
-    crate::shutdown::hold_if_interrupted();
-    let read = |p: &Path| {
-        std::fs::read(p)
-            .map(|b| String::from_utf8_lossy(&b).into_owned())
-            .unwrap_or_default()
-    };
-    #[cfg(unix)]
-    let signal = {
-        use std::os::unix::process::ExitStatusExt;
-        status.and_then(|s| s.signal())
-    };
-    #[cfg(not(unix))]
-    let signal = None;
-    Ok(Outcome {
-        code: status.and_then(|s| s.code()),
-        signal,
-        timed_out,
-        stdout: read(&out_path),
-        stderr: read(&err_path),
-        seconds: start.elapsed().as_secs_f64(),
-        max_rss_bytes: None,
-    })
+        outcome
+    }
+}
+
+impl Drop for Fed {
+    fn drop(&mut self) {
+        drop(self.lines.take());
+        if let Some(mut s) = self.started.take() {
+            crate::shutdown::kill_group(s.child.id() as i32);
+            let _ = s.child.kill();
+            let _ = s.child.wait();
+        }
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
+        }
+    }
 }
 
 /// The usual name of a POSIX signal number, or "unknown signal".
@@ -308,5 +410,53 @@ mod tests {
         assert_eq!(o.code, Some(3));
         assert_eq!(o.stdout.trim(), "out");
         assert_eq!(o.stderr_tail(1), "err");
+    }
+
+    #[test]
+    fn fed_lines_reach_the_child_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let fed = Fed::spawn(Command::new("cat"), dir.path()).unwrap();
+        for k in 0..1000 {
+            fed.send(format!("line {k}"));
+        }
+        let o = fed.finish(Duration::from_secs(20)).unwrap();
+        assert_eq!(o.code, Some(0));
+        let want: Vec<String> = (0..1000).map(|k| format!("line {k}")).collect();
+        assert_eq!(o.stdout.lines().collect::<Vec<_>>(), want);
+    }
+
+    #[test]
+    fn a_fed_child_that_stops_reading_blocks_no_one_and_is_killed() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cmd = Command::new("sleep");
+        cmd.arg("30");
+        let fed = Fed::spawn(cmd, dir.path()).unwrap();
+        let start = Instant::now();
+        // Far more than a pipe holds: sending must not wait for the child.
+        for _ in 0..64 {
+            fed.send("x".repeat(64 << 10));
+        }
+        assert!(start.elapsed() < Duration::from_secs(2));
+        let o = fed.finish(Duration::from_millis(200)).unwrap();
+        assert!(o.timed_out && o.code.is_none());
+        assert!(start.elapsed() < Duration::from_secs(10));
+    }
+
+    #[test]
+    fn a_fed_child_dropped_unfinished_is_killed() {
+        let dir = tempfile::tempdir().unwrap();
+        let pid_file = dir.path().join("pid");
+        let mut cmd = Command::new("sh");
+        cmd.args(["-c", "echo $$ > \"$0\"; exec sleep 30"])
+            .arg(&pid_file);
+        let fed = Fed::spawn(cmd, dir.path()).unwrap();
+        let start = Instant::now();
+        while !pid_file.exists() && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        drop(fed);
+        let pid = std::fs::read_to_string(&pid_file).unwrap();
+        // Reaped by the drop: no process of that id is left (not even a zombie).
+        assert!(!Path::new(&format!("/proc/{}", pid.trim())).exists());
     }
 }

@@ -2,14 +2,17 @@
 //! sealed, then rendered by the core's loops and Embree in process
 //! ([`render_scene`]); every external render of every scene in the job pool
 //! ([`render_externals`]); the seals checked and manifest.json written
-//! ([`write_manifest`]); then the comparison ([`super::compare`]).
+//! ([`write_manifest`]); then the comparison ([`super::compare`]), which
+//! has judged each scene whose renders were in already (streamed.rs).
 
 use super::manifest::{Manifest, RenderRecord, SceneRuns, ShardRecord, MANIFEST_FORMAT};
+use super::process::Fed;
 use super::{
     compare, core_features, describe, embree_features, external, in_process, inputs, isolated,
     missing, note_loop_choice, pool, reference_loop, repro_out, rerun_inputs, run_options, say,
-    shell_line, skipped_for_features, stem, unstage, visibility_only, wanted, worker, Capability,
-    CheckOptions, CheckOutcome, ExternalScene, HarnessBackend, CORE_LOOPS, EMBREE_MODES, REFERENCE,
+    shell_line, skipped_for_features, stem, streamed, unstage, visibility_only, wanted, worker,
+    Capability, CheckOptions, CheckOutcome, ExternalScene, HarnessBackend, CORE_LOOPS,
+    EMBREE_MODES, REFERENCE,
 };
 use crate::backends::embree;
 use crate::render::{Backend, RenderOptions};
@@ -61,20 +64,35 @@ pub(super) fn render_and_compare(
         version: format!("rendiff {}", env!("CARGO_PKG_VERSION")),
         shown_dir,
     };
-    let externals = super::harness_backends(opts, &run.scratch.join("info"));
-    if let Err(e) = &externals {
-        say(opts, format!("warning: {e}"));
-    }
+    // The comparison starts first, so that its start-up overlaps the renders,
+    // and judges each scene once its renders are in (streamed.rs); a
+    // measuring run (`isolate`) keeps the machine to one render at a time.
+    let fed = isolate
+        .is_none()
+        .then(|| streamed::start(opts, &run.scratch))
+        .flatten();
     let mut scenes = Vec::new();
     // Per scene, what its external renders need (folder, size); None when it did not load.
     let mut pending: Vec<Option<ExternalScene>> = Vec::new();
-    for (si, (scene_path, role)) in jobs.iter().enumerate() {
-        let (runs, p) = render_scene(&run, scene_path, role, (si + 1, jobs.len()));
-        scenes.push(runs);
-        pending.push(p);
+    // The harness lists its backends (a Python start-up that mostly waits)
+    // while the core renders every scene.
+    let externals = std::thread::scope(|s| {
+        let listing = s.spawn(|| super::harness_backends(opts, &run.scratch.join("info")));
+        for (si, (scene_path, role)) in jobs.iter().enumerate() {
+            let (runs, p) = render_scene(&run, scene_path, role, (si + 1, jobs.len()));
+            scenes.push(runs);
+            pending.push(p);
+        }
+        listing
+            .join()
+            .unwrap_or_else(|_| Err("the harness's listing of its backends panicked".into()))
+    });
+    if let Err(e) = &externals {
+        say(opts, format!("warning: {e}"));
     }
     // Then every external render of every scene, side by side in the job pool
-    // (pool.rs); the core's renders above had the cores to themselves.
+    // (pool.rs); the core's renders above had the cores to themselves (but for
+    // the listing's start-up).
     match &externals {
         Err(e) => {
             for (runs, _) in scenes.iter_mut().zip(&pending).filter(|(_, p)| p.is_some()) {
@@ -86,10 +104,13 @@ pub(super) fn render_and_compare(
                 });
             }
         }
-        Ok(list) => render_externals(&run, list, &mut scenes, &pending),
+        Ok(list) => render_externals(&run, list, &mut scenes, &pending, fed.as_ref()),
     }
     let manifest = write_manifest(opts, scenes, &pending, shard)?;
-    let (results, table) = compare(opts, &run.scratch, shown_dir)?;
+    let (results, table) = match fed {
+        Some(fed) => streamed::finish(opts, fed, shown_dir)?,
+        None => compare(opts, &run.scratch, shown_dir)?,
+    };
     Ok(CheckOutcome {
         manifest,
         results,
@@ -317,6 +338,7 @@ fn render_externals(
     list: &[HarnessBackend],
     scenes: &mut [SceneRuns],
     pending: &[Option<ExternalScene>],
+    fed: Option<&Fed>,
 ) {
     let opts = run.opts;
     let tasks: Vec<(usize, &HarnessBackend)> = pending
@@ -355,6 +377,13 @@ fn render_externals(
     let done = std::sync::atomic::AtomicUsize::new(0);
     let total = tasks.len();
     let shared: &[SceneRuns] = scenes;
+    let mut counts = vec![0; shared.len()];
+    for (si, _) in &tasks {
+        counts[*si] += 1;
+    }
+    let streamed = fed.map(|fed| streamed::Scenes::new(fed, shared, &counts));
+    // A render's place in its scene's record: its backend's place in `list`.
+    let position = |b: &HarnessBackend| list.iter().position(|x| std::ptr::eq(x, b)).unwrap_or(0);
     let recs = pool::run(
         pool_opts,
         &tasks,
@@ -373,6 +402,9 @@ fn render_externals(
             let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             let line = format!("  [{k}/{total}] {} {:<10}", runs.scene, b.name);
             say(opts, format!("{line} {}", describe(&rec)));
+            if let Some(s) = &streamed {
+                s.arrived(si, position(b), &rec);
+            }
             rec
         },
     );
