@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -14,7 +13,8 @@ import backend_cases as cases
 from fixtures import write_scene
 from rendiff_harness.__main__ import main as harness_main
 from rendiff_harness.contract import exrbuf, resolved, vocab
-from rendiff_harness.judge import depth, metamorphic, tolerance
+from rendiff_harness.contract.manifest import Reference
+from rendiff_harness.judge import depth, metamorphic
 from rendiff_harness.renderers import registry
 
 BG = vocab.BACKGROUND_ID
@@ -169,24 +169,12 @@ def test_scale_divides_depth_exactly_for_the_core(run: Run) -> None:
     assert res[("scale_wrong", "trace", "Z")]["status"] == "fail"
 
 
-def _side_tolerance(backend: str, x: int, y: int) -> float:
-    """`backend`'s depth tolerance over Z at pixel (x, y) of BIG (z = 0), seen from (0, 0, 5) as CAMERA."""
-    q = np.array([(2 * (x + 0.5) / 32 - 1), (1 - 2 * (y + 0.5) / 32)])  # tan(45 deg) = 1
-    d = np.array([q[0], q[1], -1.0])
-    tri = np.array(BIG, dtype=np.float32)
-    ref: Any = SimpleNamespace(scene=SimpleNamespace(triangles=tri[None]))
-    ctx = tolerance.DepthContext(
-        z_ref=np.array([5.0]),
-        cos=np.array([1.0 / float(np.linalg.norm(d))]),
-        info={},
-        attrs={},
-        point_norm=np.array([float(np.linalg.norm(np.array([0.0, 0.0, 5.0]) + 5.0 * d))]),
-        extent=np.array([max(float(np.linalg.norm(tri[i] - tri[i - 1])) for i in range(3))]),
-        eye_norm=5.0,
-        depth_span=np.array([0.0]),
-        ray_norm=float(np.linalg.norm(d)),
-        corner_cond=depth.triangle_corner_cond(ref, np.array([0])),
-    )
+def _side_tolerance(run: Run, backend: str, x: int, y: int) -> float:
+    """`backend`'s relative depth tolerance at pixel (x, y) of BIG (prim 0, z = 0, at Z = 5) in the
+    run's base scene: the verifier's own depth context (`depth.depth_context`, every ray from the
+    contract's camera) through the backend's own model."""
+    ref = Reference(resolved.load(run.root / "scenes/base/resolved"), buffers={}, shape=(32, 32))
+    ctx = depth.depth_context(ref, np.array([y]), np.array([x]), np.array([5.0]), np.array([0]), {}, {})
     spec = registry.spec(backend)
     assert spec is not None
     tol, _ = spec.precision.depth(ctx)
@@ -200,7 +188,7 @@ def test_depth_bound_is_the_sum_of_both_sides_tolerances(run: Run) -> None:
     # Each side's relative depth tolerance there, from the backends' own models (the measured 1e-5 / |cos|
     # plus the derived terms: the f32 t = T / den on BIG, its rays and copies), so the two renders below
     # sit between one side and both (Mitsuba) and between both sides and three (Embree).
-    side = {name: _side_tolerance(name, x, y) for name in ("mitsuba", "embree")}
+    side = {name: _side_tolerance(run, name, x, y) for name in ("mitsuba", "embree")}
     within, beyond = ({k: v.copy() for k, v in var.items()} for _ in range(2))
     within["Z"][y, x] *= np.float32(1 + 1.5 * side["mitsuba"])  # beyond one side, within the sum
     beyond["Z"][y, x] *= np.float32(1 + 2.5 * side["embree"])  # beyond the sum, within three sides

@@ -6,12 +6,16 @@ scenes/fuzz_grazing_t.toml) on both sides of it (docs/verifier.md, "Depth")."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
 import numpy as np
 import pytest
 
+from fixtures import write_scene
+from rendiff_harness.contract import resolved
+from rendiff_harness.contract.manifest import Reference
 from rendiff_harness.judge import depth
 from rendiff_harness.judge import tolerance as tl
 from rendiff_harness.renderers.mitsuba.backend import f32_sensor, mitsuba_depth
@@ -97,30 +101,17 @@ TRI = np.array(
 REF_Z, MITSUBA_Z = 8.14498329, 8.16947842  # the reference's and Mitsuba 3.9.1's depth there
 
 
-def _finding_ctx() -> tl.DepthContext:
+def _finding_ctx(tmp_path: Path) -> tl.DepthContext:
+    """The verifier's own depth context at the finding's pixel: the scene written as the exporter
+    resolves it, every ray and norm from the contract's camera (no projection of its own here)."""
     w, h, vfov = 96, 26, 30.308136100625195
-    t = math.tan(math.radians(vfov) / 2)
-    q = np.array([(2 * 39.5 / w - 1) * t * w / h, (1 - 2 * 0.5 / h) * t])
-    d = np.array([q[0], q[1], -1.0])  # camera looks down -z with y up: right = +x
-    n = np.cross(TRI[1] - TRI[0], TRI[2] - TRI[0])
-    cos = abs(d @ n) / np.linalg.norm(d) / np.linalg.norm(n)
-    ref = cast(Any, SimpleNamespace(scene=SimpleNamespace(triangles=TRI[None].astype(np.float32))))
-    extent = max(np.linalg.norm(TRI[i] - TRI[i - 1]) for i in range(3))
-    z = (TRI - EYE)[:, 2] * -1.0
-    return _ctx(
-        REF_Z,
-        float(cos),
-        corner_cond=depth.triangle_corner_cond(ref, np.array([0])),
-        extent=np.array([extent]),
-        ray_norm=float(np.linalg.norm(d)),
-        eye_norm=4.0,
-        depth_span=np.array([z.max() - z.min()]),
-        point_norm=np.array([REF_Z + 4.0]),
-    )
+    scene_dir = write_scene(tmp_path / "grazing", [TRI.tolist()], eye=EYE.tolist(), vfov_deg=vfov, width=w, height=h)
+    ref = Reference(resolved.load(scene_dir), buffers={}, shape=(h, w))
+    return depth.depth_context(ref, np.array([0]), np.array([39]), np.array([REF_Z]), np.array([0]), {}, {})
 
 
-def test_the_grazing_finding_is_within_the_t_bound_and_was_beyond_the_measured_cap() -> None:
-    ctx = _finding_ctx()
+def test_the_grazing_finding_is_within_the_t_bound_and_was_beyond_the_measured_cap(tmp_path: Path) -> None:
+    ctx = _finding_ctx(tmp_path)
     assert ctx.cos[0] == pytest.approx(5.2e-5, rel=0.01)
     err = abs(MITSUBA_Z - REF_Z)
     tol, _ = mitsuba_depth(ctx)
