@@ -48,14 +48,10 @@ def project(scene: ResolvedScene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Shapes (N, 3). Only meaningful for vertices in front of the camera.
     """
     cam = scene.camera
-    rel = scene.triangles.astype(np.float64) - cam.eye
-    depth = rel @ cam.forward
-    sx = (rel @ cam.right) / depth
-    sy = (rel @ cam.up_ortho) / depth
-    aspect = cam.width / cam.height
-    px = (sx / (cam.tan_half_vfov * aspect) + 1.0) * cam.width / 2.0
-    py = (1.0 - sy / cam.tan_half_vfov) * cam.height / 2.0
-    return px, py, depth
+    x, y, depth = np.moveaxis(cam.to_camera(scene.triangles), -1, 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pixel = cam.to_pixel(x, y, depth)
+    return pixel[..., 0], pixel[..., 1], depth
 
 
 def _segment_dist(

@@ -102,10 +102,8 @@ def _brute_force(cam: Camera, poly3d: list[np.ndarray], cx: float, cy: float, n:
     t = np.linspace(0.0, 1.0, n)[:, None]
     for i in range(len(poly3d)):
         a, b = poly3d[i], poly3d[(i + 1) % len(poly3d)]
-        p = a + t * (b - a) - cam.eye
-        z = p @ cam.forward
-        px = ((p @ cam.right) / z / (cam.tan_half_vfov * cam.width / cam.height) + 1.0) * cam.width / 2
-        py = (1.0 - (p @ cam.up_ortho) / z / cam.tan_half_vfov) * cam.height / 2
+        x, y, z = np.moveaxis(cam.to_camera(a + t * (b - a)), -1, 0)
+        px, py = np.moveaxis(cam.to_pixel(x, y, z), -1, 0)
         best = min(best, float(np.hypot(px - cx, py - cy).min()))
     return best
 
