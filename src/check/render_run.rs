@@ -5,14 +5,14 @@
 //! ([`write_manifest`]); then the comparison ([`super::compare`]), which
 //! has judged each scene whose renders were in already (streamed.rs).
 
+use super::external::{external, ExternalScene};
 use super::manifest::{Manifest, RenderRecord, SceneRuns, ShardRecord, MANIFEST_FORMAT};
 use super::process::Fed;
 use super::{
-    compare, core_features, describe, embree_features, external, in_process, inputs, isolated,
-    missing, note_loop_choice, pool, reference_loop, repro_out, rerun_inputs, run_options, say,
-    shell_line, skipped_for_features, stem, streamed, unstage, visibility_only, wanted, worker,
-    Capability, CheckOptions, CheckOutcome, ExternalScene, HarnessBackend, CORE_LOOPS,
-    EMBREE_MODES, REFERENCE,
+    compare, core_features, describe, embree_features, in_process, inputs, isolated, missing,
+    note_loop_choice, pool, reference_loop, repro_out, rerun_inputs, run_options, say, shell_line,
+    skipped_for_features, stem, streamed, unstage, visibility_only, wanted, worker, Capability,
+    CheckOptions, CheckOutcome, HarnessBackend, CORE_LOOPS, EMBREE_MODES, REFERENCE,
 };
 use crate::backends::embree;
 use crate::render::{Backend, RenderOptions};
