@@ -17,7 +17,7 @@
 
 use super::data::{is_scene_error, num, status_rank, RunData, SceneData};
 use crate::check::manifest::ResultEntry;
-use crate::vocab::RenderStatus;
+use crate::vocab::{RenderStatus, Status};
 use serde_json::Value;
 
 /// The results.json field naming what left an entry unjudged
@@ -138,7 +138,7 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
         .calibration
         .iter()
         .flat_map(|c| c.iter())
-        .filter(|(_, v)| v.get("status").and_then(Value::as_str) == Some("fail"))
+        .filter(|(_, v)| v.get("status").and_then(Value::as_str) == Some(Status::Fail.as_str()))
         .map(|(b, _)| b.clone())
         .collect();
     // 1. failed calibrations
@@ -196,7 +196,7 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
     // 3. renderer errors: verdicts in error, and failed renders with no verdict
     let mut errors: Vec<(String, Member<'_>)> = rest
         .iter()
-        .filter(|(_, e)| !is_scene_error(e) && e.status == "error")
+        .filter(|(_, e)| !is_scene_error(e) && e.status == Status::Error.as_str())
         .map(|(s, e)| (e.backend.clone(), member(s, e)))
         .collect();
     for s in &data.scenes {
@@ -231,7 +231,10 @@ pub fn group(data: &RunData) -> Vec<Cause<'_>> {
         }
     }
     // 4. classes of mismatch per renderer and buffer
-    for (s, e) in rest.iter().filter(|(_, e)| e.status != "error") {
+    for (s, e) in rest
+        .iter()
+        .filter(|(_, e)| e.status != Status::Error.as_str())
+    {
         let class = mismatch_class(e);
         let title = format!("{}: {} {class}", e.backend, e.buffer);
         match causes

@@ -68,14 +68,14 @@ pub fn badge(status: &str, title: &str) -> String {
 /// CSS class suffix of a status; unknown statuses get a neutral look instead of
 /// being trusted into a class name.
 pub fn status_class(status: &str) -> &'static str {
-    match status {
-        "pass" => "pass",
-        "fail" => "fail",
-        "error" => "error",
-        "skipped" => "skipped",
-        "expected_fail" => "xfail",
-        "unexpected_pass" => "xpass",
-        "ok" => "pass",
+    use crate::vocab::{RenderStatus, Status};
+    match (Status::parse(status), RenderStatus::parse(status)) {
+        (Some(Status::Pass), _) | (_, Some(RenderStatus::Ok)) => "pass",
+        (Some(Status::Fail), _) => "fail",
+        (Some(Status::Error), _) => "error",
+        (Some(Status::Skipped), _) => "skipped",
+        (Some(Status::ExpectedFail), _) => "xfail",
+        (Some(Status::UnexpectedPass), _) => "xpass",
         _ => "other",
     }
 }
@@ -215,6 +215,29 @@ const JS: &str = r#"
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_status_word_has_its_own_class_and_nothing_else_does() {
+        use crate::vocab::{RenderStatus, Status};
+        for s in Status::ALL {
+            assert_ne!(status_class(s.as_str()), "other", "{s}");
+        }
+        for s in RenderStatus::ALL {
+            assert_ne!(status_class(s.as_str()), "other", "{s}");
+        }
+        let classes: std::collections::BTreeSet<_> = Status::ALL
+            .iter()
+            .map(|s| status_class(s.as_str()))
+            .collect();
+        assert_eq!(
+            classes.len(),
+            Status::ALL.len(),
+            "two statuses share a look"
+        );
+        for unknown in ["", "PASS", "fail ", "\"><script>"] {
+            assert_eq!(status_class(unknown), "other");
+        }
+    }
 
     #[test]
     fn escapes_everything_that_can_open_markup() {

@@ -8,7 +8,7 @@ use super::images::{Kind, SceneImages};
 use super::stats::Histogram;
 use super::svg;
 use crate::check::manifest::{RenderRecord, ResultEntry};
-use crate::vocab::RenderStatus;
+use crate::vocab::{RenderStatus, Status};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -334,7 +334,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         v.sort_by_key(|(s, e)| (s.name.clone(), e.backend.clone(), e.buffer.clone()));
         v
     };
-    let expected = listed("expected_fail");
+    let expected = listed(Status::ExpectedFail.as_str());
     if !expected.is_empty() {
         b.push_str("<h2 id=\"expected\">Known failures (expected)</h2><p class=\"muted\">Failing as the expectations file says, with its reason; they do not turn the run red.</p><table><tr><th>scene</th><th>backend</th><th>buffer</th><th>edge</th><th>tie</th><th>crack</th><th>interior</th><th>expectation</th></tr>");
         for (s, e) in expected {
@@ -350,7 +350,7 @@ pub fn render(data: &RunData, images: &[SceneImages]) -> String {
         }
         b.push_str("</table>");
     }
-    let skipped = listed("skipped");
+    let skipped = listed(Status::Skipped.as_str());
     // Renders skipped with no verdict saying so (results.json missing).
     let render_skips: Vec<(&SceneData, &RenderRecord)> = data
         .scenes

@@ -22,7 +22,7 @@ use rendiff::check::{self, manifest::ResultEntry, manifest::SceneRuns, CheckOpti
 use rendiff::exr_io::read_buffers;
 use rendiff::raster::{self, RasterOptions};
 use rendiff::scene::resolve::ResolvedScene;
-use rendiff::vocab::RenderStatus;
+use rendiff::vocab::{RenderStatus, Status};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -306,7 +306,7 @@ fn judge_one(
         if entries.is_empty() {
             return ("not run".into(), vec![], Value::Null);
         }
-        if entries.iter().all(|e| e.status == "skipped") {
+        if entries.iter().all(|e| e.status == Status::Skipped.as_str()) {
             return (
                 format!("skipped: {}", first_line(&entries[0].reason)),
                 vec![],
