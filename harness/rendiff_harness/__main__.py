@@ -110,7 +110,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             json.dumps(
                 {
                     "backend": backend.name,
-                    "status": "skipped",
+                    "status": vocab.RenderStatus.SKIPPED,
                     "reason": plan.reason,
                     "missing": list(plan.missing),
                 }
@@ -150,7 +150,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         info = backend.render(scene, out, workdir, float(args.timeout), **options, **settings)
         elapsed = time.monotonic() - t0
     except BackendSkipped as exc:  # the renderer declined (a command renderer's exit 3)
-        print(json.dumps({"backend": backend.name, "status": "skipped", "reason": str(exc), "missing": []}))
+        skip = {"backend": backend.name, "status": vocab.RenderStatus.SKIPPED, "reason": str(exc), "missing": []}
+        print(json.dumps(skip))
         return EXIT_SKIPPED
     except BackendError as exc:  # includes BackendUnavailable
         msg = str(exc)
@@ -163,7 +164,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     buffers = backend.buffers & registry.VISIBILITY_BUFFERS if plan.visibility_only else backend.buffers
     result: dict[str, Any] = {
         "backend": backend.name,
-        "status": "ok",
+        "status": vocab.RenderStatus.OK,
         "version": version,
         "time_s": elapsed,
         "info": info,

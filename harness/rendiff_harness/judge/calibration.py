@@ -82,7 +82,7 @@ from ..contract import exrbuf, resolved
 from ..contract.camera import Camera
 from ..contract.manifest import EntryError, render_reason, run_path
 from ..contract.results import Entry
-from ..contract.vocab import BACKGROUND_ID, Buffer, Status
+from ..contract.vocab import BACKGROUND_ID, Buffer, RenderStatus, Status
 from ..renderers.spec import SpecLookup
 from . import hypotheses, precision
 from .camera_budget import CalibrationError, ProbePixels
@@ -369,7 +369,7 @@ def measure(
         return Calibration(
             scene=scene.name,
             backend=backend,
-            status="fail",
+            status=Status.FAIL,
             reason=f"convention error in {owner}: {diag.lead()}; {planar}; {diag.summary()}",
             pixels=k_px,
             width=cam.width,
@@ -413,7 +413,7 @@ def measure(
         scene=scene.name,
         backend=backend,
         owner=precision.camera_owner(spec, backend),
-        status="pass",
+        status=Status.PASS,
         reason="",
         offset_x_px=float(shift[0, 0]),
         offset_y_px=float(shift[0, 1]),
@@ -442,7 +442,7 @@ def measure(
         render=render or {},
     )
     cal = judge(cal)
-    if cal.status != "fail":
+    if cal.status != Status.FAIL:
         return cal
     diag = hypotheses.diagnose(design, h[p] / g, zk, d_norm, cam.near, cam.far, rms_bound, False)
     return _replace(cal, reason=diagnosed(cal, diag), hypotheses=diag.as_json())
@@ -506,7 +506,7 @@ def judge(cal: Calibration) -> Calibration:
         problems.append(f"pixel centers displaced by up to {_num(cal.max_shift_px)} px")
     rms_bad = cal.rms_px is not None and cal.rms_bound_px is not None and cal.rms_px > cal.rms_bound_px
     if not problems and not rms_bad:
-        return _replace(cal, status="pass", reason="")
+        return _replace(cal, status=Status.PASS, reason="")
     parts = []
     if problems:
         parts.append(f"convention error in {cal.owner}: {'; '.join(problems)} (bound {_num(b)} px)")
@@ -515,7 +515,7 @@ def judge(cal: Calibration) -> Calibration:
             f"its samples fit no pinhole camera at its precision: rms residual {_num(cal.rms_px or 0.0)} px > "
             f"{_num(cal.rms_bound_px or 0.0)} px (lens distortion, jittered samples, or a depth that is not planar)"
         )
-    return _replace(cal, status="fail", reason="; ".join(parts))
+    return _replace(cal, status=Status.FAIL, reason="; ".join(parts))
 
 
 def _replace(cal: Calibration, **changes: Any) -> Calibration:
@@ -575,7 +575,8 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str, s
         scene = resolved.load(_run_path(run, scene_entry.get("resolved"), "resolved scene"))
     except (CalibrationError, resolved.SceneError, KeyError, ValueError, TypeError) as exc:
         return [
-            Calibration(name, str(r["backend"]), "error", f"cannot load the probe: {exc}", render=r) for r in renders
+            Calibration(name, str(r["backend"]), Status.ERROR, f"cannot load the probe: {exc}", render=r)
+            for r in renders
         ]
 
     def unmeasured(backend: str, status: str, reason: str, render: Mapping[str, Any]) -> Calibration:
@@ -585,7 +586,7 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str, s
 
     ref_obj: np.ndarray | None = None
     for r in renders:
-        if r["backend"] == reference and r.get("status") == "ok":
+        if r["backend"] == reference and r.get("status") == RenderStatus.OK:
             try:
                 buf, _ = _read(run, r)
                 prim = buf["id.prim"]
@@ -597,16 +598,17 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str, s
     out: list[Calibration] = []
     for r in renders:
         backend = str(r["backend"])
-        if r.get("status") != "ok":
-            out.append(unmeasured(backend, "skipped" if r.get("status") == "skipped" else "error", _reason(r), r))
+        if r.get("status") != RenderStatus.OK:
+            skipped = r.get("status") == RenderStatus.SKIPPED
+            out.append(unmeasured(backend, Status.SKIPPED if skipped else Status.ERROR, _reason(r), r))
             continue
         if _has_z(r) is False:
-            out.append(unmeasured(backend, "skipped", f"{backend} renders no Z buffer", r))
+            out.append(unmeasured(backend, Status.SKIPPED, f"{backend} renders no Z buffer", r))
             continue
         try:
             buf, attrs = _read(run, r)
             if "Z" not in buf:
-                out.append(unmeasured(backend, "skipped", f"{backend} wrote no Z buffer", r))
+                out.append(unmeasured(backend, Status.SKIPPED, f"{backend} wrote no Z buffer", r))
                 continue
             if "id.prim" not in buf:
                 raise CalibrationError("no id.prim buffer: which plane each pixel saw is unknown")
@@ -625,7 +627,7 @@ def calibrate_scene(run: Path, scene_entry: Mapping[str, Any], reference: str, s
                 )
             )
         except CalibrationError as exc:
-            out.append(unmeasured(backend, "error", str(exc), r))
+            out.append(unmeasured(backend, Status.ERROR, str(exc), r))
     return out
 
 
@@ -641,7 +643,7 @@ def entry(cal: Calibration) -> dict[str, Any]:
     return e.blank_if_not_compared().to_json()
 
 
-_STATUS_RANK = {"fail": 0, "error": 1, "pass": 2, "skipped": 3}
+_STATUS_RANK: dict[str, int] = {Status.FAIL: 0, Status.ERROR: 1, Status.PASS: 2, Status.SKIPPED: 3}
 
 
 def summarize(measurements: Sequence[Calibration]) -> dict[str, dict[str, Any]]:
@@ -659,7 +661,7 @@ def summarize(measurements: Sequence[Calibration]) -> dict[str, dict[str, Any]]:
 
         def rank(m: Calibration) -> tuple[int, float]:
             status = _STATUS_RANK.get(m.status, 1)
-            if m.status == "fail":
+            if m.status == Status.FAIL:
                 return status, -m.ratio
             return status, m.bound_px if m.bound_px is not None else math.inf
 

@@ -67,7 +67,7 @@ ENTRY_KEYS = frozenset({"scene", "backend", "buffer", "status", "reason", *COUNT
 DECLARE_KEYS = frozenset({"backend", "allows", "reason"})
 DECLARABLE = ("crack",)
 TOP_KEYS = frozenset({"expect", "declare"})
-STATUSES = ("expected_fail",)
+STATUSES = (Status.EXPECTED_FAIL,)
 MAX_COUNT = 2**63 - 1  # largest bound: TOML's largest integer
 INF = math.inf
 
@@ -339,9 +339,9 @@ def evaluate(counts: Mapping[str, int], expectation: Expectation | None, cracks_
     if expectation is None:
         over = {k: v for k, v in bad.items() if v > 0}
         if not over:
-            return Verdict("pass", "")
+            return Verdict(Status.PASS, "")
         hint = "" if cracks_allowed or not over.get("crack_mismatches") else " (this backend declares no cracks)"
-        return Verdict("fail", f"{_counts_text(over)} mismatches{hint}")
+        return Verdict(Status.FAIL, f"{_counts_text(over)} mismatches{hint}")
 
     e = expectation
     above = [k for k in bad if bad[k] > e.bound(k)[1]]
@@ -349,15 +349,15 @@ def evaluate(counts: Mapping[str, int], expectation: Expectation | None, cracks_
     tag = f"expectation {e.index} ({e.label()}): {e.reason}"
     if above:
         detail = "; ".join(f"{k} {bad[k]} above bound {_fmt_bound(e.bound(k))}" for k in above)
-        return Verdict("fail", f"{detail} (worse than the known failure) [{tag}]")
+        return Verdict(Status.FAIL, f"{detail} (worse than the known failure) [{tag}]")
     if all(v == 0 for v in bad.values()):
         return Verdict(
-            "unexpected_pass", f"no failing mismatches: the known failure is gone, remove the expectation [{tag}]"
+            Status.UNEXPECTED_PASS, f"no failing mismatches: the known failure is gone, remove the expectation [{tag}]"
         )
     if below:
         detail = "; ".join(f"{k} {bad[k]} below bound {_fmt_bound(e.bound(k))}" for k in below)
-        return Verdict("unexpected_pass", f"{detail}: better than recorded, tighten the bound [{tag}]")
-    return Verdict("expected_fail", f"known failure ({_counts_text(bad)}): {tag}")
+        return Verdict(Status.UNEXPECTED_PASS, f"{detail}: better than recorded, tighten the bound [{tag}]")
+    return Verdict(Status.EXPECTED_FAIL, f"known failure ({_counts_text(bad)}): {tag}")
 
 
 def apply_verdict(e: Entry, exps: Expectations, details: list[str]) -> None:

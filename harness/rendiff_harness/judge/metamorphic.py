@@ -67,7 +67,7 @@ from ..contract.manifest import (
 from ..contract.results import finite, write_results
 from ..contract.text import printable
 from ..contract.userfile import JsonFileError, open_regular, read_json
-from ..contract.vocab import BACKGROUND_ID
+from ..contract.vocab import BACKGROUND_ID, RenderStatus, Status
 from ..renderers.spec import SpecLookup
 from . import expectations, geometry, outline, precision, tolerance
 from .depth import compare_depth
@@ -392,7 +392,7 @@ def _entry(case: Case, backend: str, buffer: str, m: tolerance.Model, core: bool
         "variant": case.variant,
         "backend": backend,
         "buffer": buffer,
-        "status": "error",
+        "status": Status.ERROR,
         "reason": "",
         "pixels": None,
         "edge_mismatches": None,
@@ -412,7 +412,7 @@ def _verdict(e: dict[str, Any], exps: expectations.Expectations, details: list[s
     e["status"] = v.status
     e["bound"] = exp.bound_json() if exp is not None else None
     parts = [v.reason] if v.reason else []
-    if v.status != "pass":
+    if v.status != Status.PASS:
         parts += details
     e["reason"] = "; ".join(parts)
 
@@ -446,14 +446,14 @@ def compare_case(
 
     for name in (case.base, case.variant):
         if name not in scenes:
-            return all_as("error", f"scene {name} is not in the run's manifest.json")
+            return all_as(Status.ERROR, f"scene {name} is not in the run's manifest.json")
     renders = {}
     for side, name in (("base", case.base), ("variant", case.variant)):
         r = _render(scenes[name], backend)
         if r is None:
-            return all_as("error", f"{backend} did not render the {side} scene {name}")
-        if r.get("status") != "ok":
-            status = "skipped" if r.get("status") == "skipped" else "error"
+            return all_as(Status.ERROR, f"{backend} did not render the {side} scene {name}")
+        if r.get("status") != RenderStatus.OK:
+            status = Status.SKIPPED if r.get("status") == RenderStatus.SKIPPED else Status.ERROR
             return all_as(status, f"{side} scene {name}: {render_reason(r)}")
         renders[side] = r
     try:
@@ -464,16 +464,16 @@ def compare_case(
         var_attrs: Mapping[str, Any] = exrbuf.read_attrs(exr)
         base_attrs: Mapping[str, Any] = ref.attrs
     except EntryError as exc:
-        return all_as("error", str(exc))
+        return all_as(Status.ERROR, str(exc))
     except (resolved.SceneError, exrbuf.BufferError) as exc:
-        return all_as("error", str(exc))
+        return all_as(Status.ERROR, str(exc))
     problem = _check_maps(case, ref.scene, var_scene)
     if problem is None and any(a.shape[:2] != ref.shape for a in test_raw.values()):
         problem = f"{exr}: buffers are not {ref.shape[1]}x{ref.shape[0]} like the base"
     if problem is None and not {"id.prim", "Z"} <= set(test_raw):
         problem = f"{exr}: needs id.prim and Z channels"
     if problem is not None:
-        return all_as("error", problem)
+        return all_as(Status.ERROR, problem)
     test = map_buffers(test_raw, case, ref.scene.triangle_count)
     if core:
         model = core_model(case.relation, backend)

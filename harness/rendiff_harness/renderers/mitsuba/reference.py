@@ -33,7 +33,7 @@ from ...contract.references import (
     scene_hash,
 )
 from ...contract.userfile import UserFileError
-from ...contract.vocab import CACHED_REFERENCE_BACKEND
+from ...contract.vocab import CACHED_REFERENCE_BACKEND, RenderStatus
 from ..errors import BackendError
 from . import backend as mb
 
@@ -161,7 +161,7 @@ def main(argv: list[str]) -> int:
     print(
         json.dumps(
             {
-                "status": "ok",
+                "status": RenderStatus.OK,
                 "out": str(args.out),
                 "provenance": str(provenance_path(args.out)),
                 "spp": prov["spp"],
