@@ -841,24 +841,23 @@ generated code line by line)."""
 def pyrender_shading_move(ctx: DepthContext, farthest: np.ndarray) -> np.ndarray:
     """How far pyrender's shading point (`frag_position`, rendiff's Lambert shader) may lie from the
     reference's hit (docs/verifier.md, "Radiance: the moved shading point"). The shader gets the exact f32
-    world vertices and llvmpipe interpolates them at the pixel with the barycentrics of the triangle as
-    rasterized, whose vertices GL moved relative to the camera by its f32 view transform
-    (`f32_view_transform` at the farthest vertex) and the 1/256 px snap (PYRENDER_EDGE_PX on the image
-    plane at the vertex's depth <= Z + the triangle's depth span: a lateral move of that depth times
-    it): the pixel ray meets the moved triangle at barycentrics whose point on the unmoved triangle is
-    within that move of the ray and in the triangle's plane, so `in_plane_move` of it; plus the f32
-    interpolation, PYRENDER_INTERPOLATION max|v|. Far from the origin the view transform dominates
-    (0.7 at |X| 9e5: the found `fuzz_povray_far_light` moved by 2^19)."""
-    z_far = np.abs(ctx.z_ref) + (ctx.depth_span if ctx.depth_span is not None else 0.0)
-    lateral = f32_view_transform(ctx.origin_offset, ctx.eye_norm, farthest) + PYRENDER_EDGE_PX * ctx.pixel_size * z_far
+    world vertices and llvmpipe interpolates them at the pixel center with the barycentrics of the
+    triangle as its f32 view transform placed it relative to the camera (`f32_view_transform` at the
+    farthest vertex): the pixel ray meets that moved triangle at barycentrics whose point on the unmoved
+    triangle is within the move of the ray and in the triangle's plane, so `in_plane_move` of it; plus
+    the f32 interpolation, PYRENDER_INTERPOLATION max|v|. llvmpipe sets its interpolation planes up from
+    the float vertex positions (the camera model's measurement: its 1/256 px snap moves coverage, not
+    depth samples), so the snap moves no shading point. Far from the origin the view transform
+    dominates (0.75 at |X| 9.1e5: the found `fuzz_pyrender_far_light`)."""
+    lateral = f32_view_transform(ctx.origin_offset, ctx.eye_norm, farthest)
     moved: np.ndarray = in_plane_move(ctx, lateral) + PYRENDER_INTERPOLATION * farthest
     return moved
 
 
 SHADING_MOVE = ShadingMove(
     pyrender_shading_move,
-    "min((4 sqrt(3) 2^-24 (max|v| + |eye|) + sqrt(2) 2^-9 px (Z + depth span)) / |cos|, longest edge) "
-    "+ 8 2^-24 max|v| (f32 view transform and 1/256 px snap of the vertices; f32 interpolated position)",
+    "min(4 sqrt(3) 2^-24 (max|v| + |eye|) / |cos|, longest edge) + 8 2^-24 max|v| "
+    "(f32 view transform of the vertices; f32 interpolated position)",
     f32_lights=True,
 )
 """`BackendSpec.rgb_moved_point` of pyrender: its point lights reach the shader as f32 uniforms."""
