@@ -133,6 +133,17 @@ def test_mitsuba_move_is_its_ray_over_cos_plus_embrees_barycentrics_plus_the_int
     assert flat == pytest.approx(10.0 * (1.0 + 4.0 * U) + 5.0 * U * (1.0 + 10.0 * U) * 1780.0, rel=1e-12)
 
 
+def test_a_move_along_or_off_the_ray_needs_the_pixels_ray_length() -> None:
+    """|d| >= 1 scales the move along the ray: without it the models refuse rather than guess 1."""
+    ctx = _ctx(ray_norm=None)
+    far = np.array([1780.0])
+    with pytest.raises(tolerance.ToleranceError):
+        tolerance.along_ray_move(ctx, np.array([1e-4]))
+    with pytest.raises(tolerance.ToleranceError):
+        mb.mitsuba_shading_move(ctx, far)
+    assert tolerance.along_ray_move(_ctx(), np.array([1e-4]))[0] == pytest.approx(1.1 * 1e-4 / 0.5, rel=1e-12)
+
+
 def test_pyrender_move_is_its_view_transform_over_cos_plus_the_interpolation() -> None:
     ctx = _ctx()
     far = np.array([1780.0])

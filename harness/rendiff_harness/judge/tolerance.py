@@ -265,15 +265,22 @@ EMBREE_REL = 1e-5
 
 def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
     """|dZ| from Embree's f32 ray direction and its f32 copy of the triangle (docs/verifier.md,
-    "Embree's arithmetic"), one move of the hit relative to the plane, `shift_depth` of it away
-    (1/|cos|, at most the triangle's depth span):
+    "Embree's arithmetic"): `f32_ray_depth` with the direction rounded once, fl(D) within u |D| of D
+    (u = 2^-24 per coordinate), and the ray from f32(eye)."""
+    return f32_ray_depth(ctx, 1.0, ctx.origin_offset)
 
-    * fl(D) is within u |D| of D (u = 2^-24 per coordinate), so the point at planar depth Z along
-      the rounded ray is within u |D| Z of the exact ray's point;
-    * both tests intersect the triangle moved to the ray origin in f32 (Moeller: C = fl(v0 - org)
+
+def f32_ray_depth(ctx: DepthContext, direction_roundings: float, origin: np.ndarray | float) -> np.ndarray:
+    """|dZ| from an f32 ray direction off by `direction_roundings` u |D| and Embree's f32 copy of the
+    triangle at a ray origin `origin` from the eye, one move of the hit relative to the plane,
+    `shift_depth` of it away (1/|cos|, at most the triangle's depth span):
+
+    * the point at planar depth Z along the rounded ray is within direction_roundings u |D| Z of the
+      exact ray's point;
+    * both of Embree's tests intersect the triangle moved to the ray origin in f32 (Moeller: C = fl(v0 - org)
       and the stored edges fl(v0 - v1), fl(v2 - v0); ROBUST: fl(v - org) and edges of those), whose
       vertices, and so its plane at every point of it, are off by <= u (|v0 - org| + longest edge),
-      and |v0 - org| <= |X - eye| + |f32(eye) - eye| + longest edge with |X - eye| = |D| Z.
+      and |v0 - org| <= |X - eye| + origin + longest edge with |X - eye| = |D| Z.
 
     A caller without each pixel's |D| is refused; without the triangle's extent (the triangle is
     unknown, and the models fall back to their 1/|cos| cap) the edges are not counted."""
@@ -281,7 +288,7 @@ def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
         raise ToleranceError("the Embree depth model needs each pixel ray's length (DepthContext.ray_norm)")
     along = np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref)
     edges = 0.0 if ctx.extent is None else 2.0 * np.asarray(ctx.extent, dtype=np.float64)
-    return shift_depth(ctx, F32_U * (along + along + ctx.origin_offset + edges))
+    return shift_depth(ctx, F32_U * (direction_roundings * along + along + origin + edges))
 
 
 MOELLER_DOT = 5.0 * F32_U / (1.0 - 5.0 * F32_U) * math.sqrt(2.0)
@@ -510,9 +517,11 @@ class ShadingMove:
 def along_ray_move(ctx: DepthContext, m: np.ndarray) -> np.ndarray:
     """(K,) the move of a hit that stays on its exact pixel ray while the surface moves by `m` relative
     to it (POV-Ray's f32 plane): `shift_depth` bounds its planar depth's move (m/|cos|, at most the
-    triangle's depth span) and along the ray d (unit planar depth) the point moves |d| times that."""
-    ray = np.asarray(ctx.ray_norm if ctx.ray_norm is not None else 1.0, dtype=np.float64)
-    moved: np.ndarray = ray * shift_depth(ctx, m)
+    triangle's depth span) and along the ray d (unit planar depth) the point moves |d| times that.
+    A caller without each pixel's |d| is refused (|d| >= 1 may not be guessed low)."""
+    if ctx.ray_norm is None:
+        raise ToleranceError("the moved shading point needs each pixel ray's length (DepthContext.ray_norm)")
+    moved: np.ndarray = ctx.ray_norm * shift_depth(ctx, m)
     return moved
 
 

@@ -113,7 +113,9 @@ from ...judge.tolerance import (
     Model,
     RgbTolerance,
     ShadingMove,
+    ToleranceError,
     embree_barycentric_move,
+    f32_ray_depth,
     in_plane_move,
     moeller_t_depth,
     position_edge,
@@ -713,18 +715,28 @@ def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3; plus, uncapped, the bound of
     the f32 t = T / den of Embree's default test, which its CPU variants intersect through
     (`MI_ENABLE_EMBREE`; src/render/scene_embree.inl: RTC_SCENE_FLAG_NONE, rtcIntersect1):
-    `moeller_t_depth`, which the fuzzer's grazing `s13_02458` needed past the cap.
+    `moeller_t_depth`, which the fuzzer's grazing `s13_02458` needed past the cap; and, since it is
+    the same Embree test, the terms Embree's own model has for its ray (`f32_ray_depth`): the f32
+    direction, here Mitsuba's own (sqrt(3) + MITSUBA_RAY_ROUNDINGS) u |d| (the sensor's rotation and its
+    ray set-up, as its camera model counts them), and Embree's f32 copy of the triangle at the ray
+    origin, from Mitsuba's f32 origin (`f32_sensor`). Both were left out while the measured cap
+    covered them; at grazing angles only the triangle's depth span bounds them, as for Embree
+    (the fuzzer's `s7_01212`, scenes/fuzz_eye_near_plane.toml).
     """
+    o = position_error(ctx, f32_sensor)
     tol = (
         relative_grazing(ctx, DEPTH_REL_TOLERANCE)
         + moeller_t_depth(ctx)
-        + shift_depth(ctx, position_error(ctx, f32_sensor))
+        + shift_depth(ctx, o)
+        + f32_ray_depth(ctx, math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS, o)
     )
     return tol, (
         f"mitsuba: |dZ| <= Z*min({DEPTH_REL_TOLERANCE:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
         f"+ {MOELLER_TEXT} (its CPU variants intersect through Embree's default test) "
         f"+ min(o / |cos|, depth span), o = |f32(eye) - eye| ({ctx.origin_offset:.3g}) + 2 sqrt(3) 2^-24 |eye| "
-        "(f32 sensor transform)"
+        "(f32 sensor transform) "
+        f"+ min(2^-24 ((sqrt(3) + {MITSUBA_RAY_ROUNDINGS:g} + 1) |d| Z + o + 2 longest edge) / |cos|, depth span) "
+        "(its f32 ray direction and Embree's f32 triangle at the ray origin)"
     )
 
 
@@ -806,9 +818,10 @@ def mitsuba_shading_move(ctx: DepthContext, farthest: np.ndarray) -> np.ndarray:
     * together at most the triangle's longest edge (both points are in it: `in_plane_move`);
     * the f32 interpolation, MITSUBA_INTERPOLATION max|v| (not in the plane: b0's rounding).
     """
+    if ctx.ray_norm is None:
+        raise ToleranceError("Mitsuba's shading move needs each pixel ray's length (DepthContext.ray_norm)")
     o = f32_sensor(ctx.origin_offset, ctx.eye_norm, farthest)
-    ray = np.asarray(ctx.ray_norm if ctx.ray_norm is not None else 1.0, dtype=np.float64)
-    along = ray * np.abs(ctx.z_ref)
+    along = ctx.ray_norm * np.abs(ctx.z_ref)
     extent = np.asarray(ctx.extent if ctx.extent is not None else 0.0, dtype=np.float64)
     lateral = o + (math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS) * F32_U * along + F32_U * (along + o + extent)
     moved: np.ndarray = in_plane_move(ctx, lateral, embree_barycentric_move(ctx, o)) + MITSUBA_INTERPOLATION * farthest
