@@ -179,6 +179,21 @@ def test_embree_barycentrics_are_unbounded_where_den_is_within_its_own_error() -
     assert np.isfinite(move[0]) and np.isinf(move[1])
 
 
+@pytest.mark.parametrize("missing", ["corner_cond", "extent", "ray_norm"])
+def test_embree_barycentrics_without_the_triangle_or_the_ray_are_unbounded(missing: str) -> None:
+    ctx = _ctx(z_ref=np.array([4.0, 2.0]), cos=np.array([0.5, 0.5]), **{missing: None})
+    move = tolerance.embree_barycentric_move(ctx, np.zeros(2))
+    assert move.shape == (2,) and np.all(np.isinf(move))
+
+
+def test_an_edge_on_ray_with_no_lateral_move_is_unbounded_but_for_the_triangle() -> None:
+    """0 / |cos| = 0 / 0 edge-on: the move is not known, so it is the longest edge, or unbounded."""
+    zero = np.array([0.0])
+    assert tolerance.in_plane_move(_ctx(cos=zero), zero)[0] == pytest.approx(10.0 * (1.0 + 4.0 * U))
+    assert np.isinf(tolerance.in_plane_move(_ctx(cos=zero, extent=None), zero)[0])
+    assert tolerance.in_plane_move(_ctx(extent=None), np.array([1.0]), 0.5)[0] == pytest.approx(2.5)
+
+
 def test_a_light_rounded_to_f32_counts_as_the_point_moved_by_as_much() -> None:
     x = np.array([[0.0, 0.0, 0.0]])
     n = np.array([[0.0, 1.0, 0.0]])

@@ -537,10 +537,10 @@ def in_plane_move(ctx: DepthContext, lateral: np.ndarray, extra: np.ndarray | fl
     triangle (an interior pixel of the same triangle), so no two are farther apart than its longest
     edge. Without the triangle's extent there is no cap."""
     with np.errstate(all="ignore"):
-        move = np.asarray(lateral, dtype=np.float64) / np.maximum(ctx.cos, 0.0) + extra
-    move = np.where(np.isnan(move), np.inf, move)
+        move = lateral / np.maximum(ctx.cos, 0.0) + extra
+    move = np.where(np.isnan(move), np.inf, move)  # 0 / 0 edge-on: unknown, so unbounded
     if ctx.extent is not None:
-        move = np.minimum(move, (1.0 + 4.0 * F32_U) * np.asarray(ctx.extent, dtype=np.float64))
+        move = np.minimum(move, (1.0 + 4.0 * F32_U) * ctx.extent)
     result: np.ndarray = move
     return result
 
@@ -558,7 +558,7 @@ def embree_barycentric_move(ctx: DepthContext, origin: np.ndarray) -> np.ndarray
     z = np.abs(ctx.z_ref)
     if ctx.corner_cond is None or ctx.extent is None or ctx.ray_norm is None:
         return np.full(z.shape, np.inf)
-    e = np.asarray(ctx.extent, dtype=np.float64)
+    e = ctx.extent
     reach = ctx.ray_norm * z + origin + e
     with np.errstate(all="ignore"):
         eps = MOELLER_DOT * ctx.corner_cond / ctx.cos
