@@ -298,7 +298,7 @@ def test_a_mitsuba_pixel_just_inside_and_just_outside_its_moved_point_bound(tmp_
 def test_pyrender_far_from_the_origin_moves_its_point_as_far_as_the_light(tmp_path: Path) -> None:
     """The found F2 (|X| 9.1e5): the view transform alone may move the point 0.75, so the move reaches
     the light 1.8 away and the bound is unbounded there. At the origin the term is below half of one of
-    its 8-bit codes (it grows with |X|: 1024 from the origin, at |cos| 0.07, it is a few codes)."""
+    its 8-bit codes (it grows with |X|: 1024 from the origin, at |cos| 0.07, it is 5.6 codes)."""
     spec = _spec("pyrender")
     assert spec.rgb_moved_point is not None and spec.rgb_tolerance is not None
     far = _side_scene(tmp_path / "far", FAR)
