@@ -6,14 +6,14 @@ only, and allows for its output's quantization and its colour arithmetic. Far fr
 renderer's geometry arithmetic moves the point it shades by far more than that: POV-Ray's f32 mesh
 plane put the point of the `translate` variant of scenes/two_lights_shadowless.toml (|X| = 1774)
 1.1e-4 off along its pixel ray, which changed the light from a point 1.9 away by 9e-5 relative,
-beyond its 1e-5 (scenes/fuzz_povray_far_light.toml keeps it). The move is the backend's own position
-model (`Model.position`, its one home), seen through each pixel's geometry; the term is
+beyond its 1e-5 (scenes/fuzz_povray_far_light.toml keeps it). The move is the backend's own, derived
+from its arithmetic beside its other models and seen through each pixel's geometry; the term is
 proportional to it, so it shrinks with the scene's distance from the origin like the move does.
 
 Which backends: those whose spec gives an `rgb_moved_point` (`tolerance.ShadingMove`): the backend's own
 move of its shading point, derived in its backend module from its arithmetic (POV-Ray: its f32 plane,
 along the ray; Mitsuba: Embree's f32 hit and its f32 barycentric interpolation; pyrender: its f32 view
-transform, vertex snap and interpolated position), and whether it rounds its point lights to f32. A
+transform and interpolated position), and whether it rounds its point lights to f32. A
 scene without point lights gets no term: moving the point changes neither a directional light's n.l
 nor emission.
 """
@@ -98,7 +98,8 @@ def moved_point_tolerance(
 
     Each pixel the reference hits: its point X = eye + Z d from the reference's f32 depth (within
     eps = 2^-24 Z|d| + 4 2^-53 (|eye| + Z|d|) of the point it shaded), its triangle's normal and
-    albedo, the backend's move `moved_distance`, and `point_light_change`. Raises ToleranceError
+    albedo, the backend's move (`spec.rgb_moved_point.point`) and its lights' f32 move, and
+    `point_light_change`. Raises ToleranceError
     when the reference has no Z or id.prim to place the points with.
     """
     if spec is None or spec.rgb_moved_point is None:
