@@ -137,9 +137,12 @@ def test_a_move_along_or_off_the_ray_needs_the_pixels_ray_length() -> None:
     """|d| >= 1 scales the move along the ray: without it the models refuse rather than guess 1."""
     ctx = _ctx(ray_norm=None)
     far = np.array([1780.0])
-    with pytest.raises(tolerance.ToleranceError):
+    with pytest.raises(
+        tolerance.ToleranceError,
+        match=r"^the moved shading point needs each pixel ray's length \(DepthContext\.ray_norm\)$",
+    ):
         tolerance.along_ray_move(ctx, np.array([1e-4]))
-    with pytest.raises(tolerance.ToleranceError):
+    with pytest.raises(tolerance.ToleranceError, match=r"needs each pixel ray's length \(DepthContext.ray_norm\)"):
         mb.mitsuba_shading_move(ctx, far)
     assert tolerance.along_ray_move(_ctx(), np.array([1e-4]))[0] == pytest.approx(1.1 * 1e-4 / 0.5, rel=1e-12)
 

@@ -286,8 +286,8 @@ def f32_ray_depth(ctx: DepthContext, direction_roundings: float, origin: np.ndar
     unknown, and the models fall back to their 1/|cos| cap) the edges are not counted."""
     if ctx.ray_norm is None:
         raise ToleranceError("the Embree depth model needs each pixel ray's length (DepthContext.ray_norm)")
-    along = np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref)
-    edges = 0.0 if ctx.extent is None else 2.0 * np.asarray(ctx.extent, dtype=np.float64)
+    along = ctx.ray_norm * np.abs(ctx.z_ref)
+    edges = 0.0 if ctx.extent is None else 2.0 * ctx.extent
     return shift_depth(ctx, F32_U * (direction_roundings * along + along + origin + edges))
 
 
