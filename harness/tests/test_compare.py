@@ -483,12 +483,29 @@ def _ctx(
 
 def test_relative_models_scale_with_grazing_angle_and_cap() -> None:
     m = precision.depth_model(registry.spec("mitsuba"), "mitsuba")
-    facing, _ = m.depth(_ctx(10.0, 1.0))
-    grazing, _ = m.depth(_ctx(10.0, 0.1))
-    edge_on, _ = m.depth(_ctx(10.0, 0.0))
-    assert facing[0] == pytest.approx(1e-4)
-    assert grazing[0] == pytest.approx(1e-3)
-    assert edge_on[0] == pytest.approx(10.0 * tolerance.MAX_REL)
+
+    def mitsuba(cos: float) -> float:
+        ctx = tolerance.DepthContext(np.array([10.0]), np.array([cos]), {}, {}, ray_norm=np.array([1.0]))
+        return float(m.depth(ctx)[0][0])
+
+    # its f32 ray direction, (sqrt(3) + 6) u |d| Z, and Embree's f32 triangle at the origin, u |d| Z (no extent)
+    ray = 2.0**-24 * (math.sqrt(3.0) + 6.0 + 1.0) * 10.0
+    assert mitsuba(1.0) == pytest.approx(1e-4 + ray, rel=1e-12)
+    assert mitsuba(0.1) == pytest.approx(1e-3 + ray / 0.1, rel=1e-12)
+    # edge-on, without the triangle's depth span: each part at the fallback cap 1e-3 Z
+    assert mitsuba(0.0) == pytest.approx(2.0 * 10.0 * tolerance.MAX_REL, rel=1e-12)
+    with pytest.raises(
+        tolerance.ToleranceError,
+        match=r"^the Embree depth model needs each pixel ray's length \(DepthContext\.ray_norm\)$",
+    ):
+        m.depth(_ctx(10.0, 1.0))  # without the pixel's |d|, like Embree's
+    # 1000 from the origin: the sensor's origin o = offset + 2 sqrt(3) u |eye| moves the hit (o / |cos|) and
+    # is where Embree's triangle copy sits (u o more)
+    far = tolerance.DepthContext(
+        np.array([10.0]), np.array([1.0]), {}, {}, ray_norm=np.array([1.0]), origin_offset=1e-5, eye_norm=1000.0
+    )
+    o = 1e-5 + 2.0 * math.sqrt(3.0) * 2.0**-24 * 1000.0
+    assert float(m.depth(far)[0][0]) == pytest.approx(1e-4 + o + ray + 2.0**-24 * o, rel=1e-12)
     embree = precision.depth_model(registry.spec("embree"), "embree")
     ctx = tolerance.DepthContext(np.array([10.0]), np.array([0.5]), {}, {}, ray_norm=np.array([1.5]))
     # the f32 direction (u |d| Z) and the triangle's f32 copy at the origin (u |d| Z, no extent given)

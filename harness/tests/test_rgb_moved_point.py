@@ -143,13 +143,13 @@ def test_povray_f32_plane_explains_the_finding_and_the_term_bounds_it(tmp_path: 
     prims = ref.buffers["id.prim"][rows, cols].astype(np.int64)
     ctx = depth_context(ref, rows, cols, ref.buffers["Z"][rows, cols].astype(np.float64), prims, {"info": {}}, attrs)
     farthest = np.linalg.norm(scene.triangles[prims].astype(np.float64), axis=2).max(axis=1)
-    assert spec.precision.position is not None
-    delta = moved_point.moved_distance(ctx, spec.precision.position, farthest)
+    assert spec.rgb_moved_point is not None
+    delta = spec.rgb_moved_point.point(ctx, farthest)
     assert np.all(moved[rows, cols] <= delta)
     assert np.all(np.abs(lit - b)[hit] <= extra[hit])
     # As POV-Ray writes it (16-bit codes): the old tolerance fails every pixel, the new one passes.
     seen = _quantized(lit, attrs["rgb_scale"])
-    before = _compare(ref, seen, dataclasses.replace(spec, rgb_moved_point=False), attrs)
+    before = _compare(ref, seen, dataclasses.replace(spec, rgb_moved_point=None), attrs)
     assert before.interior == 2 and "moved shading point" not in before.tolerance
     after = _compare(ref, seen, spec, attrs)
     assert after.interior == 0 and after.failing_pixels == 0 and "moved shading point" in after.tolerance
@@ -206,7 +206,7 @@ def test_a_light_in_the_triangles_plane_is_within_the_moved_point(tmp_path: Path
     attrs = {"rgb_scale": 1.78639e-11, "emission_scale": 0.0, "rgb_encoding": "png16-linear"}
     spec = _povray()
     zero = np.zeros_like(b)
-    assert _compare(ref, zero, dataclasses.replace(spec, rgb_moved_point=False), attrs).interior == int(hit.sum())
+    assert _compare(ref, zero, dataclasses.replace(spec, rgb_moved_point=None), attrs).interior == int(hit.sum())
     assert _compare(ref, zero, spec, attrs).interior == 0
 
 
@@ -250,7 +250,7 @@ def test_point_light_change_bounds_every_move_and_is_not_loose_by_more_than_the_
 def test_no_term_without_the_backends_model_or_a_point_light(tmp_path: Path) -> None:
     ref = _reference(_scene(tmp_path / "found", np.zeros(3)))
     attrs = _attrs(ref)
-    assert moved_point.moved_point_tolerance(ref, registry.spec("pyrender"), {"info": {}}, attrs) is None
+    assert moved_point.moved_point_tolerance(ref, registry.spec("raster"), {"info": {}}, attrs) is None
     assert moved_point.moved_point_tolerance(ref, None, {"info": {}}, attrs) is None
     sun = {"kind": "directional", "direction": [0.0, -1.0, -0.2], "irradiance": [1.0, 1.0, 1.0]}
     req = tuple(f.replace("point_light", "directional_light") for f in REQUIRES)
@@ -291,7 +291,7 @@ def test_the_move_is_the_position_error_at_the_farthest_vertex_over_cos_along_th
         ray_norm=np.array([1.2, 1.2]),
     )
     farthest = np.array([1002.0, 1002.0])
-    delta = moved_point.moved_distance(ctx, lambda offset, eye, p: 3.0 * tolerance.F32_U * p, farthest)
+    delta = pov.povray_shading_move(ctx, farthest)
     m = 3.0 * tolerance.F32_U * 1002.0
     assert delta[0] == pytest.approx(1.2 * m / 0.5, rel=1e-12)
     assert delta[1] == pytest.approx(1.2 * 0.25, rel=1e-12)  # edge-on: at most the depth span

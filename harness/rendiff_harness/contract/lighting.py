@@ -25,6 +25,7 @@ one-sided scene is black)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -234,6 +235,7 @@ def shadow_ambiguity(
     cols: np.ndarray,
     eps: float,
     max_work: float = 2e8,
+    ray_offset: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray | None:
     """(K,) bool: pixel (rows[k], cols[k])'s shadow ray to some light is within ~`eps` of flipping.
 
@@ -249,6 +251,9 @@ def shadow_ambiguity(
     plane, normals parallel) cannot block a ray leaving that plane and are ignored.
     Brute force over all triangles: returns None when 9 K * triangles * lights exceeds
     `max_work` (the caller then classifies nothing as a shadow edge and says so).
+    `ray_offset(x)` (K,): a renderer's own shadow-ray offset at the hit points, which moves its shadow
+    ray that far from the reference's (parallel to it); where it exceeds `eps` the band at that pixel
+    is offset / cos(pi/8), so that an edge within the offset is crossed by one of the 8 shifts.
     """
     k = rows.size
     out = np.zeros(k, dtype=bool)
@@ -264,6 +269,9 @@ def shadow_ambiguity(
         return out
     d = scene.camera.pixel_directions()[rows, cols]
     x = scene.camera.eye[None, :] + np.where(ok, zz, 0.0)[:, None] * d
+    band = np.full(k, float(eps))
+    if ray_offset is not None:
+        band = np.maximum(band, ray_offset(x) / math.cos(math.pi / 8.0))
     tris = scene.triangles.astype(np.float64)
     points, dirs = lights_of(scene)
     far = 4.0 * scene_size(scene) + float(np.abs(tris).max(initial=0.0))
@@ -284,7 +292,7 @@ def shadow_ambiguity(
         t2 = np.cross(u, t1)
         for s0 in range(0, k, step):
             sl = slice(s0, s0 + step)
-            xs, es = x[sl], end[sl]
+            xs, es, bs = x[sl], end[sl], band[sl]
             # (K', M): triangle m lies in pixel k's receiver plane, or is the pixel's own
             blockers = ~(
                 (np.abs(n_own[sl] @ normals.T) > 1.0 - 1e-9)
@@ -292,7 +300,7 @@ def shadow_ambiguity(
                     np.abs(
                         np.einsum("kj,mj->km", n_own[sl], tris[:, 0]) - np.einsum("kj,kj->k", n_own[sl], xs)[:, None]
                     )
-                    < eps
+                    < bs[:, None]
                 )
             )
             blockers[np.arange(xs.shape[0]), own[sl]] = False
@@ -300,10 +308,10 @@ def shadow_ambiguity(
             crossing = inside & (s > 0) & (s < 1) & blockers
             base = crossing.any(axis=1)
             along = s * length[sl, None]
-            close = (crossing & ((along < eps) | (along > length[sl, None] - eps))).any(axis=1)
+            close = (crossing & ((along < bs[:, None]) | (along > length[sl, None] - bs[:, None]))).any(axis=1)
             flips = np.zeros(xs.shape[0], dtype=bool)
             for a in angles:
-                shift = eps * (np.cos(a) * t1[sl] + np.sin(a) * t2[sl])
+                shift = bs[:, None] * (np.cos(a) * t1[sl] + np.sin(a) * t2[sl])
                 s2, in2 = _segment_hits(xs + shift, es + shift, tris)
                 flips |= (in2 & (s2 > 0) & (s2 < 1) & blockers).any(axis=1) != base
             out[sl] |= ok[sl] & (close | flips)

@@ -6,19 +6,22 @@ only, and allows for its output's quantization and its colour arithmetic. Far fr
 renderer's geometry arithmetic moves the point it shades by far more than that: POV-Ray's f32 mesh
 plane put the point of the `translate` variant of scenes/two_lights_shadowless.toml (|X| = 1774)
 1.1e-4 off along its pixel ray, which changed the light from a point 1.9 away by 9e-5 relative,
-beyond its 1e-5 (scenes/fuzz_povray_far_light.toml keeps it). The move is the backend's own position
-model (`Model.position`, its one home), seen through each pixel's geometry; the term is
+beyond its 1e-5 (scenes/fuzz_povray_far_light.toml keeps it). The move is the backend's own, derived
+from its arithmetic beside its other models and seen through each pixel's geometry; the term is
 proportional to it, so it shrinks with the scene's distance from the origin like the move does.
 
-Which backends: those whose spec says `rgb_moved_point` (their lights are placed exactly and their
-shading point is the hit the position model moves). A scene without point lights gets no term:
-moving the point changes neither a directional light's n.l nor emission.
+Which backends: those whose spec gives an `rgb_moved_point` (`tolerance.ShadingMove`): the backend's own
+move of its shading point, derived in its backend module from its arithmetic (POV-Ray: its f32 plane,
+along the ray; Mitsuba: Embree's f32 hit and its f32 barycentric interpolation; pyrender: its f32 view
+transform and interpolated position), and whether it rounds its point lights to f32. A
+scene without point lights gets no term: moving the point changes neither a directional light's n.l
+nor emission.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,21 +36,10 @@ from .depth import depth_context
 F64_U = 2.0**-53
 
 
-def moved_distance(ctx: tolerance.DepthContext, position: tolerance.PositionError, farthest: np.ndarray) -> np.ndarray:
-    """(K,) how far the renderer may move each pixel's shading point, world units.
-
-    The position model m(|P|) bounds how far the renderer moves the surface relative to its ray
-    for a point |P| from the origin, and grows with |P|. It is taken at the triangle's farthest
-    vertex (`farthest`, (K,) max |v|): no point of the triangle is farther (the norm is convex),
-    and POV-Ray's plane error, which also rounds the offset through a vertex P1, is within
-    u (2|X| + |P1|) <= 3u max|v| = its m there. The hit stays on the pixel ray: the depth models'
-    `shift_depth` bounds its planar depth's move by min(m/|cos|, the triangle's depth span), and
-    along the ray d (unit planar depth) the point moves |d| times that.
-    """
-    m = position(ctx.origin_offset, ctx.eye_norm, farthest)
-    ray = np.asarray(ctx.ray_norm if ctx.ray_norm is not None else 1.0, dtype=np.float64)
-    moved: np.ndarray = ray * tolerance.shift_depth(ctx, m)
-    return moved
+def f32_move(position: np.ndarray) -> float:
+    """|f32(L) - L|: how far a renderer that stores a light's position in f32 puts it."""
+    exact = np.asarray(position, dtype=np.float64)
+    return float(np.linalg.norm(exact.astype(np.float32).astype(np.float64) - exact))
 
 
 def point_light_change(
@@ -57,6 +49,7 @@ def point_light_change(
     lights: list[tuple[np.ndarray, np.ndarray]],
     delta: np.ndarray,
     eps: np.ndarray,
+    light_moves: Sequence[float] | None = None,
 ) -> np.ndarray:
     """(K, 3) bound on |L(X') - L(X)| of the point lights' direct term for |X' - X| <= delta.
 
@@ -76,16 +69,20 @@ def point_light_change(
     c + dc <= 0 (the light stays behind the surface: no light before or after). Evaluated at the
     reconstructed point: r is lowered by eps and c raised by eps/r, which only enlarges the bound.
     Where the move may reach the light (r <= delta) the bound is infinite. Summed over the lights.
+    `light_moves`: how far the renderer put each light (|f32(L) - L|); only X - L enters the term, so a
+    light moved by l is the point moved by l more (delta + l for that light).
     """
     out = np.zeros((x.shape[0], 3))
-    for pos, intensity in lights:
+    moves = [0.0] * len(lights) if light_moves is None else list(light_moves)
+    for (pos, intensity), light_move in zip(lights, moves, strict=True):
         to_l = pos[None, :] - x
         r0 = np.linalg.norm(to_l, axis=1)
         r = r0 - eps
         with np.errstate(all="ignore"):
             c = np.einsum("ij,ij->i", n, to_l) / r0 + eps / r
-            near = r - delta
-            dc = delta / near
+            move = delta + light_move
+            near = r - move
+            dc = move / near
             change = dc / near**2 + np.maximum(c, 0.0) * (1.0 / near**2 - 1.0 / r**2)
         change = np.where((r > 0) & (near > 0) & np.isfinite(change), change, np.inf)
         change = np.where((r > 0) & (near > 0) & (c + dc <= 0.0), 0.0, change)
@@ -101,11 +98,13 @@ def moved_point_tolerance(
 
     Each pixel the reference hits: its point X = eye + Z d from the reference's f32 depth (within
     eps = 2^-24 Z|d| + 4 2^-53 (|eye| + Z|d|) of the point it shaded), its triangle's normal and
-    albedo, the backend's move `moved_distance`, and `point_light_change`. Raises ToleranceError
+    albedo, the backend's move (`spec.rgb_moved_point.point`) and its lights' f32 move, and
+    `point_light_change`. Raises ToleranceError
     when the reference has no Z or id.prim to place the points with.
     """
-    if spec is None or not spec.rgb_moved_point or spec.precision.position is None:
+    if spec is None or spec.rgb_moved_point is None:
         return None
+    model = spec.rgb_moved_point
     scene = ref.scene
     if "lambert" not in scene.requires:
         return None
@@ -126,7 +125,7 @@ def moved_point_tolerance(
     z_ref = z[rows, cols].astype(np.float64)
     ctx = depth_context(ref, rows, cols, z_ref, prims, render, attrs)
     tris = scene.triangles[prims].astype(np.float64)
-    delta = moved_distance(ctx, spec.precision.position, np.linalg.norm(tris, axis=2).max(axis=1))
+    delta = model.point(ctx, np.linalg.norm(tris, axis=2).max(axis=1))
     cam = scene.camera
     d = cam.center_directions(rows, cols)
     along = np.abs(z_ref) * np.linalg.norm(d, axis=1)
@@ -140,11 +139,13 @@ def moved_point_tolerance(
         n = np.where(front[:, None], n, 0.0)
     albedo, _ = scene.material_arrays()
     rho = albedo[scene.prim_materials()[prims]]
-    out[rows, cols] = point_light_change(x, n, rho, points, delta, eps)
+    light_moves = [f32_move(pos) if model.f32_lights else 0.0 for pos, _ in points]
+    out[rows, cols] = point_light_change(x, n, rho, points, delta, eps, light_moves)
     text = (
         "; + moved shading point: sum over point lights "
         "rho/pi I [delta/(r-delta)^3 + max(0, n.w) (1/(r-delta)^2 - 1/r^2)], "
-        "delta = |d| min(m/|cos|, depth span), m = its position error at the triangle's farthest vertex "
-        f"(delta <= {float(np.max(delta)):.3g} here)"
+        f"delta = {model.text} (delta <= {float(np.max(delta)):.3g} here)"
     )
+    if model.f32_lights:
+        text += f", + |f32(L) - L| per light (<= {max(light_moves):.3g})"
     return out, text

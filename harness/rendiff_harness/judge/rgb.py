@@ -116,19 +116,26 @@ def compare_rgb(
     if moved is not None:
         abs_tol, text = abs_tol + moved[0], text + moved[1]
     shadow_edges: radiance.ShadowEdges | None = None
+    offset = None
     scene = ref.scene
     if "shadows" in scene.requires and "id.prim" in ref.buffers and "Z" in ref.buffers:
         eps = radiance.SHADOW_EDGE_REL * lighting.scene_size(scene)
 
+        offset = spec.shadow_ray_offset if spec is not None else None
+
         def ambiguous(rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
-            return lighting.shadow_ambiguity(scene, ref.buffers["id.prim"], ref.buffers["Z"], rows, cols, eps)
+            return lighting.shadow_ambiguity(
+                scene, ref.buffers["id.prim"], ref.buffers["Z"], rows, cols, eps, ray_offset=offset
+            )
 
         shadow_edges = ambiguous
 
     if shadow_edges is not None:
         text += (
             f"; failing pixels at ID edge mismatches, or whose shadow ray passes within "
-            f"{radiance.SHADOW_EDGE_REL:g} x scene size of an occluder edge or end, count as edge"
+            f"{radiance.SHADOW_EDGE_REL:g} x scene size"
+            + (" (or the backend's own shadow-ray offset / cos(pi/8), if larger)" if offset is not None else "")
+            + " of an occluder edge or end, count as edge"
         )
     else:
         text += "; failing pixels at ID edge mismatches count as edge"

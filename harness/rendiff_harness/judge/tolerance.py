@@ -265,23 +265,30 @@ EMBREE_REL = 1e-5
 
 def embree_direction_depth(ctx: DepthContext) -> np.ndarray:
     """|dZ| from Embree's f32 ray direction and its f32 copy of the triangle (docs/verifier.md,
-    "Embree's arithmetic"), one move of the hit relative to the plane, `shift_depth` of it away
-    (1/|cos|, at most the triangle's depth span):
+    "Embree's arithmetic"): `f32_ray_depth` with the direction rounded once, fl(D) within u |D| of D
+    (u = 2^-24 per coordinate), and the ray from f32(eye)."""
+    return f32_ray_depth(ctx, 1.0, ctx.origin_offset)
 
-    * fl(D) is within u |D| of D (u = 2^-24 per coordinate), so the point at planar depth Z along
-      the rounded ray is within u |D| Z of the exact ray's point;
-    * both tests intersect the triangle moved to the ray origin in f32 (Moeller: C = fl(v0 - org)
+
+def f32_ray_depth(ctx: DepthContext, direction_roundings: float, origin: np.ndarray | float) -> np.ndarray:
+    """|dZ| from an f32 ray direction off by `direction_roundings` u |D| and Embree's f32 copy of the
+    triangle at a ray origin `origin` from the eye, one move of the hit relative to the plane,
+    `shift_depth` of it away (1/|cos|, at most the triangle's depth span):
+
+    * the point at planar depth Z along the rounded ray is within direction_roundings u |D| Z of the
+      exact ray's point;
+    * both of Embree's tests intersect the triangle moved to the ray origin in f32 (Moeller: C = fl(v0 - org)
       and the stored edges fl(v0 - v1), fl(v2 - v0); ROBUST: fl(v - org) and edges of those), whose
       vertices, and so its plane at every point of it, are off by <= u (|v0 - org| + longest edge),
-      and |v0 - org| <= |X - eye| + |f32(eye) - eye| + longest edge with |X - eye| = |D| Z.
+      and |v0 - org| <= |X - eye| + origin + longest edge with |X - eye| = |D| Z.
 
     A caller without each pixel's |D| is refused; without the triangle's extent (the triangle is
     unknown, and the models fall back to their 1/|cos| cap) the edges are not counted."""
     if ctx.ray_norm is None:
         raise ToleranceError("the Embree depth model needs each pixel ray's length (DepthContext.ray_norm)")
-    along = np.asarray(ctx.ray_norm, dtype=np.float64) * np.abs(ctx.z_ref)
-    edges = 0.0 if ctx.extent is None else 2.0 * np.asarray(ctx.extent, dtype=np.float64)
-    return shift_depth(ctx, F32_U * (along + along + ctx.origin_offset + edges))
+    along = ctx.ray_norm * np.abs(ctx.z_ref)
+    edges = 0.0 if ctx.extent is None else 2.0 * ctx.extent
+    return shift_depth(ctx, F32_U * (direction_roundings * along + along + origin + edges))
 
 
 MOELLER_DOT = 5.0 * F32_U / (1.0 - 5.0 * F32_U) * math.sqrt(2.0)
@@ -485,6 +492,79 @@ def f32_normals(cond: np.ndarray) -> tuple[np.ndarray, str]:
         "angle <= 8 * 2^-24 * |e1||e2|/|e1 x e2| + 6 * 2^-24 (cross product, normalization and storage in f32; "
         "slivers amplify the cross product's rounding)"
     )
+
+
+# --------------------------------------------------------------------------- the shaded point's move (RGB)
+
+
+MovedPoint = Callable[[DepthContext, np.ndarray], np.ndarray]
+"""(the depth context of the pixels the reference hits, each one's triangle's farthest vertex from the
+world origin max |v| (K,)) -> (K,) how far the backend's arithmetic may move the point it shades from the
+reference's hit, world units (judge/moved_point.py adds the direct light's change over that move)."""
+
+
+@dataclass(frozen=True)
+class ShadingMove:
+    """A backend's model of where it shades (`BackendSpec.rgb_moved_point`): its own move of the
+    shading point, derived from its arithmetic in its backend module, and whether it rounds its
+    point lights' positions to f32 (then each light moves by |f32(L) - L|, known exactly)."""
+
+    point: MovedPoint
+    text: str
+    f32_lights: bool = False
+
+
+def along_ray_move(ctx: DepthContext, m: np.ndarray) -> np.ndarray:
+    """(K,) the move of a hit that stays on its exact pixel ray while the surface moves by `m` relative
+    to it (POV-Ray's f32 plane): `shift_depth` bounds its planar depth's move (m/|cos|, at most the
+    triangle's depth span) and along the ray d (unit planar depth) the point moves |d| times that.
+    A caller without each pixel's |d| is refused (|d| >= 1 may not be guessed low)."""
+    if ctx.ray_norm is None:
+        raise ToleranceError("the moved shading point needs each pixel ray's length (DepthContext.ray_norm)")
+    moved: np.ndarray = ctx.ray_norm * shift_depth(ctx, m)
+    return moved
+
+
+def in_plane_move(ctx: DepthContext, lateral: np.ndarray, extra: np.ndarray | float = 0.0) -> np.ndarray:
+    """(K,) the move of a hit that stays in its triangle's plane when the ray (or the triangle) moves
+    sideways by `lateral`, plus `extra` (a move the renderer makes in the plane), at most the triangle's
+    longest edge (4 u over it for barycentrics rounded past 1).
+
+    A ray moved by e = a n + b (n the plane's normal, b in the plane) meets the plane at
+    b - a tan(theta) t from the old hit (t the unit in-plane direction of the ray), so
+    |move| <= |b| + |a| tan <= |e| sqrt(1 + tan^2) = |e| / |cos| (Cauchy-Schwarz); a triangle moved by e
+    against a fixed ray is the same. Both the reference's hit and the renderer's point lie in the
+    triangle (an interior pixel of the same triangle), so no two are farther apart than its longest
+    edge. Without the triangle's extent there is no cap."""
+    with np.errstate(all="ignore"):
+        move = lateral / np.maximum(ctx.cos, 0.0) + extra
+    move = np.where(np.isnan(move), np.inf, move)  # 0 / 0 edge-on: unknown, so unbounded
+    if ctx.extent is not None:
+        move = np.minimum(move, (1.0 + 4.0 * F32_U) * ctx.extent)
+    result: np.ndarray = move
+    return result
+
+
+def embree_barycentric_move(ctx: DepthContext, origin: np.ndarray) -> np.ndarray:
+    """(K,) how far Embree's f32 barycentrics (u, v) of a hit may place the point (1 - u - v) v0 + u v1 + v v2
+    from the exact barycentric point of its own f32 ray (origin off by `origin`), in the triangle's plane
+    (docs/verifier.md, "Radiance: the moved shading point"): Moeller's u = U / den with U = dot(cross(C, D),
+    e_b) errs by <= MOELLER_DOT |C| |D| |e_b| (as T does in `moeller_t_depth`) and den by eps |den|,
+    eps = MOELLER_DOT cond / |cos|, |den| = |D| |e_a x e_b| |cos|. Times the edge |e_a| it multiplies:
+    (MOELLER_DOT cond |C| / |cos| + |u| eps |e_a|) / (1 - eps), and rcp and product 2 u |u| |e_a|; the
+    stored f32 edges e_a, e_b (<= u |e| each) move the point by |u| u |e_a| more. Over u and v, both in
+    [0, 1] for an accepted hit: (2 MOELLER_DOT cond |C| / |cos| + 2 eps E) / (1 - eps) + 6 u E, with
+    |C| <= |D| Z + origin + E. Infinite where eps >= 1; without the triangle, infinite."""
+    z = np.abs(ctx.z_ref)
+    if ctx.corner_cond is None or ctx.extent is None or ctx.ray_norm is None:
+        return np.full(z.shape, np.inf)
+    e = ctx.extent
+    reach = ctx.ray_norm * z + origin + e
+    with np.errstate(all="ignore"):
+        eps = MOELLER_DOT * ctx.corner_cond / ctx.cos
+        move = (2.0 * eps * reach + 2.0 * eps * e) / (1.0 - eps) + 6.0 * F32_U * e
+    result: np.ndarray = np.where(np.isfinite(move) & (eps < 1.0), move, np.inf)
+    return result
 
 
 # --------------------------------------------------------------------------- radiance (RGB)

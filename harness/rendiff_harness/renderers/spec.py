@@ -18,9 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
+import numpy as np
+
 from ..contract.vocab import Buffer, Feature
 from ..judge.camera_budget import CameraModel, core_camera
-from ..judge.tolerance import Model, NormalModel, RgbModel, f32_normals
+from ..judge.tolerance import Model, NormalModel, RgbModel, ShadingMove, f32_normals
 
 if TYPE_CHECKING:
     from ..contract.resolved import ResolvedScene
@@ -63,11 +65,15 @@ class BackendSpec:
     """The error bounds its arithmetic puts into the camera fit (judge/camera_budget.py)."""
     rgb_tolerance: RgbModel | None = None
     """Its deterministic RGB tolerance; None: it has no RGB model (judge/tolerance.rgb_fallback)."""
-    rgb_moved_point: bool = False
-    """True when the point it shades is the hit its position model (`precision.position`) moves and
-    its lights are placed exactly: its RGB tolerance then also allows the direct light's change at
-    the moved point (judge/moved_point.py). False keeps the RGB tolerance as its model gives it; a
-    backend that rounds its lights or shading point otherwise too (in f32) needs that derived first."""
+    rgb_moved_point: ShadingMove | None = None
+    """Where it shades: how far its own arithmetic moves the point it shades from the reference's hit
+    (and whether it rounds its point lights to f32), derived in its backend module; its RGB tolerance
+    then also allows the direct light's change over that move (judge/moved_point.py). None keeps the
+    RGB tolerance as its model gives it."""
+    shadow_ray_offset: Callable[[np.ndarray], np.ndarray] | None = None
+    """Its own shadow-ray origin offset at the shading points (K, 3) -> (K,) world units, when it is larger
+    than the contract's: a failing pixel whose shadow ray passes that close to an occluder's edge or end is
+    a shadow edge (judge/rgb.py, lighting.shadow_ambiguity). None: the contract's band only."""
     normals: NormalModel = f32_normals
     """The angle its N may be off the winding convention."""
     peak_memory: tuple[int, int] | None = None

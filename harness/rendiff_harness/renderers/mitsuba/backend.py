@@ -112,6 +112,11 @@ from ...judge.tolerance import (
     DepthContext,
     Model,
     RgbTolerance,
+    ShadingMove,
+    ToleranceError,
+    embree_barycentric_move,
+    f32_ray_depth,
+    in_plane_move,
     moeller_t_depth,
     position_edge,
     position_error,
@@ -710,18 +715,28 @@ def mitsuba_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     same arithmetic: 9e-6). Relative 1e-5 / |cos|, capped at 1e-3; plus, uncapped, the bound of
     the f32 t = T / den of Embree's default test, which its CPU variants intersect through
     (`MI_ENABLE_EMBREE`; src/render/scene_embree.inl: RTC_SCENE_FLAG_NONE, rtcIntersect1):
-    `moeller_t_depth`, which the fuzzer's grazing `s13_02458` needed past the cap.
+    `moeller_t_depth`, which the fuzzer's grazing `s13_02458` needed past the cap; and, since it is
+    the same Embree test, the terms Embree's own model has for its ray (`f32_ray_depth`): the f32
+    direction, here Mitsuba's own (sqrt(3) + MITSUBA_RAY_ROUNDINGS) u |d| (the sensor's rotation and its
+    ray set-up, as its camera model counts them), and Embree's f32 copy of the triangle at the ray
+    origin, from Mitsuba's f32 origin (`f32_sensor`). Both were left out while the measured cap
+    covered them; at grazing angles only the triangle's depth span bounds them, as for Embree
+    (the fuzzer's `s7_01212`, scenes/fuzz_eye_near_plane.toml).
     """
+    o = position_error(ctx, f32_sensor)
     tol = (
         relative_grazing(ctx, DEPTH_REL_TOLERANCE)
         + moeller_t_depth(ctx)
-        + shift_depth(ctx, position_error(ctx, f32_sensor))
+        + shift_depth(ctx, o)
+        + f32_ray_depth(ctx, math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS, o)
     )
     return tol, (
         f"mitsuba: |dZ| <= Z*min({DEPTH_REL_TOLERANCE:g}/|cos|, {MAX_REL:g}) (float32 ray tracing) "
         f"+ {MOELLER_TEXT} (its CPU variants intersect through Embree's default test) "
         f"+ min(o / |cos|, depth span), o = |f32(eye) - eye| ({ctx.origin_offset:.3g}) + 2 sqrt(3) 2^-24 |eye| "
-        "(f32 sensor transform)"
+        "(f32 sensor transform) "
+        f"+ min(2^-24 ((sqrt(3) + {MITSUBA_RAY_ROUNDINGS:g} + 1) |d| Z + o + 2 longest edge) / |cos|, depth span) "
+        "(its f32 ray direction and Embree's f32 triangle at the ray origin)"
     )
 
 
@@ -782,6 +797,60 @@ def camera_model(px: ProbePixels) -> ErrorBudget:
     )
 
 
+MITSUBA_INTERPOLATION = 5.0 * F32_U * (1.0 + 10.0 * F32_U)
+"""Mitsuba's `si.p = fmadd(p0, b0, fmadd(p1, b1, p2 * b2))` with b0 = 1 - b1 - b2, all f32 (src/render/mesh.cpp,
+`compute_surface_interaction`), times max|v|: b0's two roundings put the weights' sum off 1 by 2 u, which moves
+the point by 2 u |p0| (toward or away from the world origin, not in the plane), and the product and the two
+fmas round once each, by u times |b2 p2|, |b1 p1 + b2 p2| and |p| (weights in [0, 1 + 2 u], summing to 1 + 4 u at
+most): 5 u (1 + 10 u) max|v| in all, the second-order terms rounded up."""
+
+
+def mitsuba_shading_move(ctx: DepthContext, farthest: np.ndarray) -> np.ndarray:
+    """How far Mitsuba's shading point `si.p` may lie from the reference's hit (docs/verifier.md,
+    "Radiance: the moved shading point"). Its CPU variants intersect through Embree (`MI_ENABLE_EMBREE`,
+    rtcIntersect1) and Mitsuba re-interpolates the point from Embree's f32 barycentrics
+    (`compute_surface_interaction`), so the point is not on the ray:
+
+    * its f32 ray is off the exact one by the sensor's origin `f32_sensor` o, its f32 direction
+      (sqrt(3) + MITSUBA_RAY_ROUNDINGS) u |d| per unit of depth (the camera model's), and Embree's f32
+      copy of the vertex at the ray origin u |C| (|C| <= |d| Z + o + E): a lateral move, /|cos| in the plane;
+    * Embree's f32 u, v place the point off that ray's exact hit (`embree_barycentric_move`);
+    * together at most the triangle's longest edge (both points are in it: `in_plane_move`);
+    * the f32 interpolation, MITSUBA_INTERPOLATION max|v| (not in the plane: b0's rounding).
+    """
+    if ctx.ray_norm is None:
+        raise ToleranceError("Mitsuba's shading move needs each pixel ray's length (DepthContext.ray_norm)")
+    o = f32_sensor(ctx.origin_offset, ctx.eye_norm, farthest)
+    along = ctx.ray_norm * np.abs(ctx.z_ref)
+    extent = np.asarray(ctx.extent if ctx.extent is not None else 0.0, dtype=np.float64)
+    lateral = o + (math.sqrt(3.0) + MITSUBA_RAY_ROUNDINGS) * F32_U * along + F32_U * (along + o + extent)
+    moved: np.ndarray = in_plane_move(ctx, lateral, embree_barycentric_move(ctx, o)) + MITSUBA_INTERPOLATION * farthest
+    return moved
+
+
+SHADING_MOVE = ShadingMove(
+    mitsuba_shading_move,
+    "min((o + (sqrt(3) + 6) 2^-24 |d| Z + 2^-24 |C|)/|cos| + Embree's f32 barycentrics, longest edge) "
+    "+ 5 2^-24 max|v| (f32 ray, Embree's u, v, and si.p re-interpolated from them in f32)",
+    f32_lights=True,
+)
+"""`BackendSpec.rgb_moved_point` of Mitsuba: its point lights are `ScalarPoint3f` (f32 in its RGB variants)."""
+
+
+MITSUBA_RAY_EPSILON = 1500.0 * F32_U
+"""`math::RayEpsilon` (include/mitsuba/core/math.h): 1500 times drjit's f32 epsilon 2^-24, 8.94e-5."""
+
+
+def mitsuba_shadow_offset(points: np.ndarray) -> np.ndarray:
+    """Mitsuba's shadow-ray origin offset at the shading points (K, 3): `Interaction::offset_p` moves the
+    origin along the normal, toward the light, by (1 + max_i |p_i|) RayEpsilon (f32: (1 + 4 u) over it), so
+    the shadow ray runs up to that far from the reference's, parallel to it. About 0.09 at a coordinate
+    of 1024 (the fuzzer's `translate`): a shadow edge cast within that of the ray may go either way."""
+    p = np.abs(np.asarray(points, dtype=np.float64))
+    offset: np.ndarray = (1.0 + p.max(axis=-1, initial=0.0)) * MITSUBA_RAY_EPSILON * (1.0 + 4.0 * F32_U)
+    return offset
+
+
 SPEC = BackendSpec(
     NAME,
     FEATURES,
@@ -789,6 +858,8 @@ SPEC = BackendSpec(
     PRECISION,
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
+    rgb_moved_point=SHADING_MOVE,
+    shadow_ray_offset=mitsuba_shadow_offset,
     peak_memory=PEAK_MEMORY,
     render=render,
     version=version,

@@ -107,7 +107,9 @@ from ...judge.tolerance import (
     EdgeContext,
     Model,
     RgbTolerance,
+    ShadingMove,
     ToleranceError,
+    along_ray_move,
     exposure_scale,
     param,
     shift_depth,
@@ -1010,6 +1012,22 @@ def camera_model(px: ProbePixels) -> ErrorBudget:
     )
 
 
+def povray_shading_move(ctx: DepthContext, farthest: np.ndarray) -> np.ndarray:
+    """POV-Ray shades the hit of its exact (f64) pixel ray on its f32 plane, and places its lights in
+    f64: the plane error at the triangle's farthest vertex (`povray_plane_error`, which is no smaller
+    anywhere on the triangle: the norm is convex, and the offset's rounding through P1 is within
+    u (2|X| + |P1|) <= 3 u max|v|) moves it along the ray (docs/verifier.md)."""
+    return along_ray_move(ctx, povray_plane_error(farthest))
+
+
+SHADING_MOVE = ShadingMove(
+    povray_shading_move,
+    "|d| min(m/|cos|, depth span), m = 3 2^-24 max|v| (its f32 mesh2 plane at the triangle's "
+    "farthest vertex; the hit stays on its f64 ray)",
+)
+"""`BackendSpec.rgb_moved_point` of POV-Ray: lights placed exactly (f64)."""
+
+
 SPEC = BackendSpec(
     NAME,
     FEATURES,
@@ -1017,7 +1035,7 @@ SPEC = BackendSpec(
     PRECISION,
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
-    rgb_moved_point=True,
+    rgb_moved_point=SHADING_MOVE,
     peak_memory=PEAK_MEMORY,
     waits_below=WAITS_BELOW,
     render=render,

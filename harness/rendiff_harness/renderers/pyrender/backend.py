@@ -86,8 +86,10 @@ from ...judge.tolerance import (
     DepthContext,
     Model,
     RgbTolerance,
+    ShadingMove,
     ToleranceError,
     exposure_scale,
+    in_plane_move,
     param,
     position_edge,
     position_error,
@@ -828,6 +830,39 @@ def camera_model(px: ProbePixels) -> ErrorBudget:
     )
 
 
+PYRENDER_INTERPOLATION = 8.0 * F32_U
+"""llvmpipe's perspective-correct interpolation of `frag_position` (world f32 vertex values) at a pixel, per
+max|v|: the attribute over w is a plane a0 + dadx x + dady y set up in f32 from the three vertices and
+evaluated in f32 (about three roundings each in the set-up and the evaluation), then multiplied by the
+interpolated w (two): 8 u of values of size max|v|, counted from that structure (not from llvmpipe's
+generated code line by line)."""
+
+
+def pyrender_shading_move(ctx: DepthContext, farthest: np.ndarray) -> np.ndarray:
+    """How far pyrender's shading point (`frag_position`, rendiff's Lambert shader) may lie from the
+    reference's hit (docs/verifier.md, "Radiance: the moved shading point"). The shader gets the exact f32
+    world vertices and llvmpipe interpolates them at the pixel center with the barycentrics of the
+    triangle as its f32 view transform placed it relative to the camera (`f32_view_transform` at the
+    farthest vertex): the pixel ray meets that moved triangle at barycentrics whose point on the unmoved
+    triangle is within the move of the ray and in the triangle's plane, so `in_plane_move` of it; plus
+    the f32 interpolation, PYRENDER_INTERPOLATION max|v|. llvmpipe sets its interpolation planes up from
+    the float vertex positions (the camera model's measurement: its 1/256 px snap moves coverage, not
+    depth samples), so the snap moves no shading point. Far from the origin the view transform
+    dominates (0.75 at |X| 9.1e5: the found `fuzz_pyrender_far_light`)."""
+    lateral = f32_view_transform(ctx.origin_offset, ctx.eye_norm, farthest)
+    moved: np.ndarray = in_plane_move(ctx, lateral) + PYRENDER_INTERPOLATION * farthest
+    return moved
+
+
+SHADING_MOVE = ShadingMove(
+    pyrender_shading_move,
+    "min(4 sqrt(3) 2^-24 (max|v| + |eye|) / |cos|, longest edge) + 8 2^-24 max|v| "
+    "(f32 view transform of the vertices; f32 interpolated position)",
+    f32_lights=True,
+)
+"""`BackendSpec.rgb_moved_point` of pyrender: its point lights reach the shader as f32 uniforms."""
+
+
 SPEC = BackendSpec(
     NAME,
     FEATURES,
@@ -835,6 +870,7 @@ SPEC = BackendSpec(
     PRECISION,
     calibration=camera_model,
     rgb_tolerance=rgb_tolerance,
+    rgb_moved_point=SHADING_MOVE,
     peak_memory=PEAK_MEMORY,
     render=render,
     version=version,
