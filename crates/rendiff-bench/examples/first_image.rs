@@ -15,7 +15,8 @@
 //!
 //! `... --example first_image -- phases QUALITY N [SCENE@WxH]` instead runs
 //! N first images of the tracer at QUALITY on 1 thread, printing each
-//! part's seconds (for a profile under `perf record`).
+//! part's seconds (for a profile under `perf record`); QUALITY `raster`
+//! runs the raster's instead.
 
 use anyhow::{Context, Result};
 use rendiff::names::Named;
@@ -118,6 +119,9 @@ fn main() -> Result<()> {
 /// `n` first images of the tracer at `quality` on one thread, each part's
 /// seconds printed.
 fn phases(quality: &str, n: usize, scene: &str) -> Result<()> {
+    if quality == "raster" {
+        return raster_only(n, scene);
+    }
     let quality = BvhQuality::from_name(quality)
         .ok_or_else(|| anyhow::anyhow!("BVH: fastest, fast, medium or slow"))?;
     let spec: SceneSpec = scene.parse().map_err(anyhow::Error::msg)?;
@@ -139,6 +143,22 @@ fn phases(quality: &str, n: usize, scene: &str) -> Result<()> {
                 all,
                 rendiff_bench::load_average()
             );
+        }
+    });
+    Ok(())
+}
+
+/// `n` first images of the raster on one thread, each one's seconds printed.
+fn raster_only(n: usize, scene: &str) -> Result<()> {
+    let spec: SceneSpec = scene.parse().map_err(anyhow::Error::msg)?;
+    let scene = spec.load()?;
+    rendiff_bench::pool(1)?.install(|| {
+        for _ in 0..n {
+            let t0 = Instant::now();
+            let f = rendiff::raster::render(&scene, Default::default(), &|_| {});
+            let s = t0.elapsed().as_secs_f64();
+            std::hint::black_box(f);
+            println!("raster: first image {s:.4} s");
         }
     });
     Ok(())
