@@ -200,6 +200,7 @@ fn triangles_sharing_a_box_by_the_thousand_render_identically() {
     }
     for quality in [
         rendiff::trace::BvhQuality::Fastest,
+        rendiff::trace::BvhQuality::Medium,
         rendiff::trace::BvhQuality::Slow,
     ] {
         let bvh = rendiff::trace::TraceBvh::build(&scene, quality);

@@ -46,8 +46,9 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores; at most 4 per core).
     #[arg(long, value_parser = rendiff::args::parse_threads)]
     threads: Option<usize>,
-    /// BVH build quality for the tracer.
-    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "medium")]
+    /// BVH build quality for the tracer (default: the least build + trace
+    /// for one frame, measured in docs/benchmarks.md).
+    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "very_fast")]
     bvh: BvhQuality,
     /// How the tracer's pixel rays walk the BVH (same buffers either way).
     #[arg(long, value_parser = rendiff::args::named::<trace::TraceKernel>(), default_value = "packets")]

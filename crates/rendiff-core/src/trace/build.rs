@@ -138,7 +138,8 @@ mod tests {
     /// Phase by phase, the tree obvhs's own builder makes, node for node.
     #[test]
     fn the_phased_build_is_obvhs_build() {
-        for q in [BvhQuality::Fastest, BvhQuality::Medium, BvhQuality::Slow] {
+        use crate::names::Named;
+        for &q in BvhQuality::ALL {
             let tris = scattered(5000);
             let ours = build_bvh2(&tris, q.params(), None).unwrap();
             let theirs = build_bvh2_from_tris(&tris, q.params(), &mut Duration::default());

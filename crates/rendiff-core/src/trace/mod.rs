@@ -39,20 +39,33 @@ use std::time::Instant;
 pub enum BvhQuality {
     /// obvhs fastest_build.
     Fastest,
+    /// obvhs very_fast_build: fastest's PLOC search (the nearest neighbour
+    /// only), one light reinsertion pass sequence and leaves of up to 8.
+    /// The default: a render traces one frame per tree, and this has the
+    /// least build + trace of the five on `million` at 1080p, 1 and 2
+    /// threads (docs/benchmarks.md, "time to first image").
+    #[default]
+    VeryFast,
     /// obvhs fast_build.
     Fast,
-    /// obvhs medium_build (default).
-    #[default]
+    /// obvhs medium_build.
     Medium,
     /// obvhs slow_build.
     Slow,
 }
 
 impl crate::names::Named for BvhQuality {
-    const ALL: &'static [Self] = &[Self::Fastest, Self::Fast, Self::Medium, Self::Slow];
+    const ALL: &'static [Self] = &[
+        Self::Fastest,
+        Self::VeryFast,
+        Self::Fast,
+        Self::Medium,
+        Self::Slow,
+    ];
     fn name(self) -> &'static str {
         match self {
             Self::Fastest => "fastest",
+            Self::VeryFast => "very_fast",
             Self::Fast => "fast",
             Self::Medium => "medium",
             Self::Slow => "slow",
@@ -64,6 +77,7 @@ impl BvhQuality {
     fn params(self) -> BvhBuildParams {
         let mut p = match self {
             BvhQuality::Fastest => BvhBuildParams::fastest_build(),
+            BvhQuality::VeryFast => BvhBuildParams::very_fast_build(),
             BvhQuality::Fast => BvhBuildParams::fast_build(),
             BvhQuality::Medium => BvhBuildParams::medium_build(),
             BvhQuality::Slow => BvhBuildParams::slow_build(),
@@ -198,10 +212,29 @@ impl TraceBvh {
             .iter()
             .map(|&k| ids[k as usize])
             .collect();
+        let nodes: Vec<Node> = bvh
+            .nodes
+            .iter()
+            .map(|nd| Node {
+                first: nd.first_index,
+                count: nd.prim_count,
+            })
+            .collect();
+        let shape: Vec<(u32, u32)> = nodes.iter().map(|n| (n.first, n.count)).collect();
+        let layout = nodes::Layout::new(&shape);
+        let mut aimed = lazy::AimedLeaves::new(
+            &scene.triangles,
+            &prims,
+            layout.slots()[1..]
+                .iter()
+                .filter(|s| s.count > 0)
+                .map(|s| (s.first, s.count)),
+        );
         // Refit every box from the f32 triangles (post-order), then grow it.
+        // The leaves' copies hold the triangles in prim order, so a leaf's
+        // are read together, not gathered from the scene again.
         let n = bvh.nodes.len();
-        let mut lo = vec![Vec3::splat(f32::INFINITY); n];
-        let mut hi = vec![Vec3::splat(f32::NEG_INFINITY); n];
+        let mut refit = vec![[Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)]; n];
         let mut order = Vec::with_capacity(n);
         let mut stack = vec![0usize];
         while let Some(i) = stack.pop() {
@@ -214,42 +247,25 @@ impl TraceBvh {
         }
         for &i in order.iter().rev() {
             let nd = &bvh.nodes[i];
+            let [mut lo, mut hi] = refit[i];
             if nd.prim_count > 0 {
                 for k in nd.first_index..nd.first_index + nd.prim_count {
-                    let t = &scene.triangles[prims[k as usize] as usize];
-                    lo[i] = lo[i].min(t[0]).min(t[1]).min(t[2]);
-                    hi[i] = hi[i].max(t[0]).max(t[1]).max(t[2]);
+                    let t = aimed.tri(k as usize);
+                    lo = lo.min(t[0]).min(t[1]).min(t[2]);
+                    hi = hi.max(t[0]).max(t[1]).max(t[2]);
                 }
             } else {
                 let c = nd.first_index as usize;
-                lo[i] = lo[c].min(lo[c + 1]);
-                hi[i] = hi[c].max(hi[c + 1]);
+                lo = refit[c][0].min(refit[c + 1][0]);
+                hi = refit[c][1].max(refit[c + 1][1]);
             }
+            refit[i] = [lo, hi];
         }
-        let nodes: Vec<Node> = bvh
-            .nodes
-            .iter()
-            .map(|nd| Node {
-                first: nd.first_index,
-                count: nd.prim_count,
-            })
-            .collect();
-        let refit: Vec<[Vec3; 2]> = lo.into_iter().zip(hi).map(|(l, h)| [l, h]).collect();
-        let shape: Vec<(u32, u32)> = nodes.iter().map(|n| (n.first, n.count)).collect();
-        let layout = nodes::Layout::new(&shape);
         let refit_slots = layout
             .slots()
             .iter()
             .map(|s| refit[s.src as usize])
             .collect();
-        let aimed = lazy::AimedLeaves::new(
-            &scene.triangles,
-            &prims,
-            layout.slots()[1..]
-                .iter()
-                .filter(|s| s.count > 0)
-                .map(|s| (s.first, s.count)),
-        );
         let tree_seconds = start.elapsed().as_secs_f64();
         let mut out = TraceBvh {
             nodes,
