@@ -50,7 +50,7 @@
 
 use super::packet::{PH, PW};
 use super::primary::Node32;
-use super::rows::{Rows, ROW};
+use super::rows::{planes_out, Rows, ROW};
 use crate::camera::Camera;
 use glam::DVec3;
 
@@ -86,7 +86,7 @@ impl Frustum {
     #[inline(always)]
     pub fn excludes<S: Rows>(&self, s: S, a: &Node32, b: &Node32) -> [bool; 2] {
         let bounds = |n: &Node32| [n.bounds(0), n.bounds(1), n.bounds(2)];
-        let m = s.planes_out(&self.n, &bounds(a), &bounds(b));
+        let m = planes_out(s.one(), &self.n, &bounds(a), &bounds(b));
         [m & 0xf != 0, m & 0xf0 != 0]
     }
 }

@@ -38,7 +38,7 @@
 use super::frustum::Frustum;
 use super::nodes::Nodes32;
 use super::primary::{dir_norm_bound, LeafTri, Node32};
-use super::rows::{Rows, ROW, ROW2};
+use super::rows::{box_out, Rows, ROW, ROW2};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
 use crate::raster::edges::ChunkOps;
@@ -73,7 +73,7 @@ fn row<T, const W: usize>(a: &[T; LANES], r: usize) -> &[T; W] {
 }
 
 /// [`row`] of each axis of a per-lane vector (`dir`, `inv`, `d64`). (Spelled
-/// out per axis, not an array `map`: see `Rows::edge_signs`.)
+/// out per axis, not an array `map`: see `rows::edge_signs`.)
 #[inline(always)]
 fn axis_rows<T, const W: usize>(a: &[[T; LANES]; 3], r: usize) -> [&[T; W]; 3] {
     [row(&a[0], r), row(&a[1], r), row(&a[2], r)]
@@ -282,7 +282,7 @@ impl Packet {
     ///   depth that passed `z >= near > 0`; `Camera::new` rejects `near <= 0`).
     #[inline(always)]
     fn node_mask<S: Rows>(&self, s: S, node: &Node32, mask: Mask) -> Mask {
-        // Per axis, the bounds in the order `Rows::box_out` takes them: with
+        // Per axis, the bounds in the order `rows::box_out` takes them: with
         // one sign on every lane (lo <= hi and rounding is monotone), min(t0,
         // t1) is always the same one of the two, saving a min and a max per lane.
         let mut axes = [(0f32, 0f32, false); 3];
@@ -303,14 +303,26 @@ impl Packet {
         if S::PAIRS {
             for r in (0..NROWS).step_by(2) {
                 let inv = axis_rows(&self.inv, r);
-                let out = s.box_out2(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
+                let out = box_out(
+                    s.two(),
+                    &axes,
+                    inv,
+                    row(&self.zscale, r),
+                    row(&self.best_z, r),
+                );
                 m |= (Mask::from(!out) & ROW2_BITS) << (r * ROW);
             }
             return m & mask;
         }
         for r in 0..NROWS {
             let inv = axis_rows(&self.inv, r);
-            let out = s.box_out(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
+            let out = box_out(
+                s.one(),
+                &axes,
+                inv,
+                row(&self.zscale, r),
+                row(&self.best_z, r),
+            );
             m |= (Mask::from(!out) & ROW_BITS) << (r * ROW);
         }
         m & mask
@@ -346,7 +358,7 @@ impl Packet {
             while r <= last {
                 let at = r.min(NROWS - 2);
                 let dir = axis_rows(&self.dir, at);
-                let signs = leaf.edge_rows2(s, dir, row(&self.dir_norm, at));
+                let signs = leaf.edge_rows(s.two(), dir, row(&self.dir_norm, at));
                 or_signs((&mut pos, &mut neg), &signs, at);
                 r += 2;
             }
@@ -357,7 +369,7 @@ impl Packet {
                     continue;
                 }
                 let dir = axis_rows(&self.dir, r);
-                let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
+                let signs = leaf.edge_rows(s.one(), dir, row(&self.dir_norm, r));
                 or_signs((&mut pos, &mut neg), &signs, r);
             }
         }
