@@ -16,6 +16,9 @@ use crate::simd::Portable;
 pub trait RowLanes<const N: usize>: Copy {
     /// `N` f32.
     type V: Copy;
+    /// Whether the `N` lanes are one machine vector, so that a pair of the
+    /// tracer's rows in them costs what one row does (`trace::rows::Rows`).
+    const VECTOR: bool;
     /// `v` in every lane.
     fn splat(self, v: f32) -> Self::V;
     /// `lo` in lanes `0..N/2`, `hi` in the others (two boxes side by side).
@@ -62,6 +65,7 @@ fn bits<const N: usize>(a: [f32; N], b: [f32; N], f: impl Fn(f32, f32) -> bool) 
 
 impl<const N: usize> RowLanes<N> for Portable {
     type V = [f32; N];
+    const VECTOR: bool = false;
     #[inline(always)]
     fn splat(self, v: f32) -> [f32; N] {
         [v; N]
@@ -122,6 +126,7 @@ mod avx2_rows {
     // borrowed here (its SAFETY line says so).
     impl RowLanes<8> for Avx2 {
         type V = __m256;
+        const VECTOR: bool = true;
         #[inline(always)]
         fn splat(self, v: f32) -> __m256 {
             // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
@@ -196,6 +201,7 @@ mod avx512_rows {
     // array borrowed here (its SAFETY line says so).
     impl RowLanes<16> for Avx512 {
         type V = __m512;
+        const VECTOR: bool = true;
         #[inline(always)]
         fn splat(self, v: f32) -> __m512 {
             // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.

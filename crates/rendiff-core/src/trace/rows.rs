@@ -10,16 +10,14 @@
 //! and-with-constants plus an or-reduction, about eight instructions per row,
 //! where AVX's `vmovmskps` does it in one. So each test is written once,
 //! width-generic, over the lanes of [`RowLanes`] (in [`crate::simd`]: plain
-//! Rust for every CPU, [`Avx2`] intrinsics for a row, [`Avx512`] for two
-//! rows at once), and [`Rows`] says which lanes an instruction set uses for
-//! one row and for a pair; [`Portable`]'s lanes are the definition the tests
-//! hold the others to.
+//! Rust for every CPU, AVX2 intrinsics for a row, AVX-512 for two rows at
+//! once), and [`Rows`] names the lanes the kernel uses for one row and for
+//! a pair; plain Rust's lanes are the definition the tests hold the others
+//! to.
 
 use super::frustum::{BOX_ABS, BOX_REL};
 use super::primary::Node32;
-#[cfg(target_arch = "x86_64")]
-use crate::simd::{Avx2, Avx512};
-use crate::simd::{Portable, RowLanes};
+use crate::simd::RowLanes;
 
 /// Per axis, a box's bounds in the order a row of lanes meets them: `(near,
 /// far, mixed)`, where `near * 1/D` is the entry parameter when every lane's
@@ -32,67 +30,36 @@ pub(crate) const ROW: usize = 8;
 /// Lanes in two neighbouring rows: one 512-bit vector of f32 ([`Rows::PAIRS`]).
 pub(crate) const ROW2: usize = 2 * ROW;
 
-/// Which lanes an instruction set gives the packet kernel's row tests: one
-/// row ([`Rows::one`]) and two neighbouring rows ([`Rows::two`], lanes 0-7
-/// the first row, 8-15 the second; lane by lane, so the same bits as the
-/// two single rows).
+/// The lanes the packet kernel's row tests run in: `(R, P)`, `R` for one
+/// row and `P` for two neighbouring rows (lanes 0-7 the first row, 8-15 the
+/// second; lane by lane, so the same bits as the two single rows). The
+/// kernel takes pairs only where `P` is one vector (AVX-512's 16 lanes);
+/// elsewhere it keeps to single rows, which skip more work when a triangle
+/// meets one row only.
 pub(crate) trait Rows: Copy {
     /// Lanes for one row.
     type One: RowLanes<ROW>;
     /// Lanes for a pair of rows.
     type Two: RowLanes<ROW2>;
-    /// Whether the kernel takes two rows in one step (AVX-512's 16 lanes);
-    /// where not, it keeps to single rows, which skip more work when a
-    /// triangle meets one row only.
-    const PAIRS: bool = false;
+    /// Whether the kernel takes two rows in one step.
+    const PAIRS: bool;
     /// The lanes for one row.
     fn one(self) -> Self::One;
     /// The lanes for a pair of rows.
     fn two(self) -> Self::Two;
 }
 
-/// Plain Rust, for any CPU: the definitions.
-impl Rows for Portable {
-    type One = Portable;
-    type Two = Portable;
+impl<R: RowLanes<ROW>, P: RowLanes<ROW2>> Rows for (R, P) {
+    type One = R;
+    type Two = P;
+    const PAIRS: bool = P::VECTOR;
     #[inline(always)]
-    fn one(self) -> Portable {
-        self
+    fn one(self) -> R {
+        self.0
     }
     #[inline(always)]
-    fn two(self) -> Portable {
-        self
-    }
-}
-
-/// Rows in AVX2; pairs only in plain Rust, as the kernel takes none.
-#[cfg(target_arch = "x86_64")]
-impl Rows for Avx2 {
-    type One = Avx2;
-    type Two = Portable;
-    #[inline(always)]
-    fn one(self) -> Avx2 {
-        self
-    }
-    #[inline(always)]
-    fn two(self) -> Portable {
-        Portable
-    }
-}
-
-/// Pairs of rows in AVX-512; single rows (and the frustum test) AVX2's.
-#[cfg(target_arch = "x86_64")]
-impl Rows for Avx512 {
-    type One = Avx2;
-    type Two = Avx512;
-    const PAIRS: bool = true;
-    #[inline(always)]
-    fn one(self) -> Avx2 {
-        self.avx2()
-    }
-    #[inline(always)]
-    fn two(self) -> Avx512 {
-        self
+    fn two(self) -> P {
+        self.1
     }
 }
 
@@ -184,6 +151,9 @@ pub(crate) fn planes_out<L: RowLanes<ROW>>(
 mod tests {
     use super::super::primary::{max, min};
     use super::*;
+    use crate::simd::Portable;
+    #[cfg(target_arch = "x86_64")]
+    use crate::simd::{Avx2, Avx512};
 
     /// A small deterministic generator of indices below `n` (an LCG), so
     /// each test draws the same cases on every run.
