@@ -41,7 +41,7 @@ use super::primary::{dir_norm_bound, LeafTri, Node32};
 use super::rows::{box_out, BoxAxes, Rows, ROW};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
-use crate::raster::edges::ChunkOps;
+use crate::raster::edges::{ChunkOps, ChunkRays};
 use crate::scene::resolve::ResolvedScene;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx2, Avx512};
@@ -393,8 +393,12 @@ impl Packet {
             if need == 0 {
                 continue;
             }
-            let dirs = axis_rows(&self.d64, r);
-            let (z, ok) = d.chunk(l, cam, dirs, row(&self.planar, r), need, self.subnormal);
+            let rays = ChunkRays {
+                d: axis_rows(&self.d64, r),
+                planar: row(&self.planar, r),
+                subnormal: self.subnormal,
+            };
+            let (z, ok) = d.depths(l, cam, rays, need);
             let mut m = need & ok;
             while m != 0 {
                 let j = m.trailing_zeros() as usize;
