@@ -191,11 +191,35 @@ mod tests {
         }
     }
 
-    /// The box test's two forms agree bit for bit, on both axis orders and on
-    /// infinities, signed zeros and ties; and the portable form is the
-    /// per-lane slab test of `Node32::misses` with the pruning comparison.
+    /// Every single-row test in each row lanes this CPU has gives plain
+    /// Rust's bits, and plain Rust's are the lane-by-lane definitions.
     #[test]
-    fn box_out_forms_agree() {
+    fn row_forms_agree() {
+        row_tests_agree(Portable);
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx) = Avx2::detect() {
+            row_tests_agree(avx);
+        }
+    }
+
+    /// Values of both signs that round, cancel and overflow in the edge
+    /// and plane tests (their first eight), then `rest`.
+    fn with(rest: &[f32]) -> Vec<f32> {
+        let signed = [0.0, -0.0, 1.0, -1.0, 0.1, -3.3, 1e20, -1e20];
+        signed.iter().chain(rest).copied().collect()
+    }
+
+    /// The three single-row tests in the lanes `l`.
+    fn row_tests_agree<L: RowLanes<ROW>>(l: L) {
+        box_out_agrees(l);
+        edge_signs_agree(l);
+        planes_out_agree(l);
+    }
+
+    /// The box test in `l` agrees with plain Rust bit for bit, on both axis
+    /// orders and on infinities, signed zeros and ties; and plain Rust's is
+    /// the per-lane slab test of `Node32::misses` with the pruning comparison.
+    fn box_out_agrees<L: RowLanes<ROW>>(l: L) {
         let vals = [
             0.5,
             -0.5,
@@ -249,14 +273,8 @@ mod tests {
                     ins += 1;
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(
-                    box_out(avx, &axes, inv_rows, &zscale, &best_z),
-                    want,
-                    "{axes:?}"
-                );
-            }
+            let got = box_out(l, &axes, inv_rows, &zscale, &best_z);
+            assert_eq!(got, want, "{axes:?}");
         }
         // Both answers occur often.
         assert!(outs > 1000 && ins > 1000, "{outs} out, {ins} in");
@@ -343,24 +361,11 @@ mod tests {
         assert!(seen.iter().all(|&k| k > 5000), "{seen:?}");
     }
 
-    /// The edge signs' two forms agree bit for bit, and the portable form is
-    /// `edge_det32`'s sign test lane by lane, on values that round, overflow,
-    /// cancel and tie.
-    #[test]
-    fn edge_signs_forms_agree() {
-        let vals = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            0.1,
-            -3.3,
-            1e20,
-            -1e20,
-            1e-20,
-            f32::INFINITY,
-            f32::MAX,
-        ];
+    /// The edge signs in `l` agree with plain Rust bit for bit, and plain
+    /// Rust's are `edge_det32`'s sign test lane by lane, on values that
+    /// round, overflow, cancel and tie.
+    fn edge_signs_agree<L: RowLanes<ROW>>(l: L) {
+        let vals = with(&[1e-20, f32::INFINITY, f32::MAX]);
         let mut next = picker(5);
         let (mut pos, mut neg, mut unsure) = (0, 0, 0);
         for _ in 0..4000 {
@@ -385,10 +390,7 @@ mod tests {
                     }
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(edge_signs(avx, &n, &beta, rows, &dir_norm), want, "{n:?}");
-            }
+            assert_eq!(edge_signs(l, &n, &beta, rows, &dir_norm), want, "{n:?}");
         }
         // Every outcome occurs often.
         assert!(
@@ -397,24 +399,11 @@ mod tests {
         );
     }
 
-    /// The frustum test's two forms agree bit for bit, on infinities (NaN
-    /// products), signed zeros and values near the bound, and the portable
-    /// form is the plane test lane by lane.
-    #[test]
-    fn planes_out_forms_agree() {
-        let vals = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            0.1,
-            -3.3,
-            1e20,
-            -1e20,
-            1e-30,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-        ];
+    /// The frustum test in `l` agrees with plain Rust bit for bit, on
+    /// infinities (NaN products), signed zeros and values near the bound,
+    /// and plain Rust's is the plane test lane by lane.
+    fn planes_out_agree<L: RowLanes<ROW>>(l: L) {
+        let vals = with(&[1e-30, f32::INFINITY, f32::NEG_INFINITY]);
         let mut next = picker(7);
         let (mut outs, mut ins) = (0, 0);
         for _ in 0..4000 {
@@ -452,14 +441,8 @@ mod tests {
                     ins += 1;
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(
-                    planes_out(avx, &n, &boxes[0], &boxes[1]),
-                    want,
-                    "{n:?} {boxes:?}"
-                );
-            }
+            let got = planes_out(l, &n, &boxes[0], &boxes[1]);
+            assert_eq!(got, want, "{n:?} {boxes:?}");
         }
         // Both answers occur often.
         assert!(outs > 3000 && ins > 3000, "{outs} out, {ins} in");
