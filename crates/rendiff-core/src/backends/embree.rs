@@ -384,19 +384,40 @@ pub fn render_timed_with(
             n
         }),
         EmbreeQuery::Packet4 => strips(spare, w, 2, |y0, rows| {
-            built.trace_packets(&rays, &mut ctx(), api.intersect4, 2, y0, rows)
+            built.trace_tiles(
+                &rays,
+                &mut ctx(),
+                Packets::Each(api.intersect4),
+                2,
+                y0,
+                rows,
+            )
         }),
         EmbreeQuery::Packet8 => strips(spare, w, 2, |y0, rows| {
-            built.trace_packets(&rays, &mut ctx(), api.intersect8, 4, y0, rows)
+            built.trace_tiles(
+                &rays,
+                &mut ctx(),
+                Packets::Each(api.intersect8),
+                4,
+                y0,
+                rows,
+            )
         }),
         EmbreeQuery::Packet16 => strips(spare, w, 4, |y0, rows| {
-            built.trace_packets(&rays, &mut ctx(), api.intersect16, 4, y0, rows)
+            built.trace_tiles(
+                &rays,
+                &mut ctx(),
+                Packets::Each(api.intersect16),
+                4,
+                y0,
+                rows,
+            )
         }),
         EmbreeQuery::Stream1M => strips(spare, w, 4, |y0, rows| {
             built.trace_stream1(&rays, &mut ctx(), y0, rows)
         }),
         EmbreeQuery::StreamNM8 => strips(spare, w, 2, |y0, rows| {
-            built.trace_stream_n::<8>(&rays, &mut ctx(), 4, y0, rows)
+            built.trace_tiles::<8>(&rays, &mut ctx(), Packets::Stream, 4, y0, rows)
         }),
     };
     // SAFETY: `strips` initialized every element of `keys[..n]` (its
@@ -952,36 +973,6 @@ impl BuiltScene {
         extra
     }
 
-    /// Traces the strip `rows` (starting at row `y0`, `N / tile_w` rows or
-    /// fewer at the bottom) in packets of `N` rays on `tile_w`-wide tiles
-    /// with `rtcIntersect4/8/16`, masking lanes outside the image.
-    fn trace_packets<const N: usize>(
-        &self,
-        gen: &RayGen,
-        ctx: &mut ffi::IntersectContext,
-        intersect: ffi::IntersectN<N>,
-        tile_w: u32,
-        y0: u32,
-        rows: &mut [u64],
-    ) -> u64 {
-        let w = gen.cam.width;
-        let nrows = (rows.len() / w as usize) as u32;
-        let mut extra = 0;
-        // One packet for the strip: each tile rewrites its lanes' rays and
-        // hits (`fill_packet`); lanes outside the image are masked.
-        let mut packet = ffi::RayHitN::<N>::empty();
-        for x0 in (0..w).step_by(tile_w as usize) {
-            let valid = Self::fill_packet(gen, &mut packet, tile_w, x0, y0, nrows);
-            // SAFETY: the scene is committed and live; `intersect` is the
-            // rtcIntersect<N> matching `N` (typed by `IntersectN<N>`); `valid`
-            // and `packet` are 64-byte aligned with the RTCRayHit<N> layout
-            // (checked in `ffi::layout`); invalid lanes are masked.
-            unsafe { intersect(&valid, self.raw, ctx, &mut packet) };
-            extra += self.store_packet(gen, ctx, &packet, &valid, tile_w, x0, y0, rows);
-        }
-        extra
-    }
-
     /// Traces the strip `rows` (starting at row `y0`, at most 4 rows) with
     /// `rtcIntersect1M`: streams of up to [`STREAM_RAYS`] `RTCRayHit`, laid
     /// out tile by tile (4x4 pixels, row-major inside a tile) so that the
@@ -1033,52 +1024,84 @@ impl BuiltScene {
     }
 
     /// Traces the strip `rows` (starting at row `y0`, `N / tile_w` rows or
-    /// fewer) with `rtcIntersectNM`: streams of up to [`STREAM_RAYS`] / `N`
-    /// packets of `N` rays on `tile_w`-wide tiles; lanes outside the image are
-    /// inactive (tnear > tfar), as the stream API has no valid mask.
-    fn trace_stream_n<const N: usize>(
+    /// fewer at the bottom) in packets of `N` rays on `tile_w`-wide tiles,
+    /// handed to Embree as `how` says: one packet a call with its mask
+    /// (`rtcIntersect4/8/16`), or up to [`STREAM_RAYS`] / `N` packets a
+    /// call (`rtcIntersectNM`, which has no mask: lanes outside the image
+    /// are inactive, tnear > tfar). Either way every tile's rays and keys
+    /// are the same ([`BuiltScene::fill_packet`], [`BuiltScene::store_packet`]).
+    fn trace_tiles<const N: usize>(
         &self,
         gen: &RayGen,
         ctx: &mut ffi::IntersectContext,
+        how: Packets<N>,
         tile_w: u32,
         y0: u32,
         rows: &mut [u64],
     ) -> u64 {
         let w = gen.cam.width;
         let nrows = (rows.len() / w as usize) as u32;
-        let per_call = (STREAM_RAYS / N).max(1);
+        let per_call = match how {
+            Packets::Each(_) => 1,
+            Packets::Stream => (STREAM_RAYS / N).max(1),
+        };
         let tiles: Vec<u32> = (0..w).step_by(tile_w as usize).collect();
-        let mut packets: Vec<ffi::RayHitN<N>> = Vec::with_capacity(per_call);
-        let mut masks: Vec<ffi::Valid<N>> = Vec::with_capacity(per_call);
+        // The packets are reused from call to call: each tile rewrites its
+        // lanes' rays and hits (`fill_packet`). Only the stream empties a
+        // packet first, as its lanes outside the image must be inactive.
+        let mut packets: Vec<ffi::RayHitN<N>> =
+            (0..per_call).map(|_| ffi::RayHitN::empty()).collect();
+        let mut masks: Vec<ffi::Valid<N>> = (0..per_call).map(|_| ffi::Valid([0; N])).collect();
         let mut extra = 0;
         for chunk in tiles.chunks(per_call) {
-            packets.clear();
-            masks.clear();
-            for &x0 in chunk {
-                let mut p = ffi::RayHitN::<N>::empty();
-                masks.push(Self::fill_packet(gen, &mut p, tile_w, x0, y0, nrows));
-                packets.push(p);
+            for ((p, valid), &x0) in packets.iter_mut().zip(&mut masks).zip(chunk) {
+                if matches!(how, Packets::Stream) {
+                    *p = ffi::RayHitN::empty();
+                }
+                *valid = Self::fill_packet(gen, p, tile_w, x0, y0, nrows);
             }
-            // SAFETY: the scene is committed and live; `packets` holds
-            // `packets.len()` initialized RTCRayHit<N>-layout packets (64-byte
-            // aligned, checked in `ffi::layout`) at a stride of their size;
-            // unused lanes have tnear > tfar, which the stream API skips.
-            unsafe {
-                (self.device.api.intersect_nm)(
-                    self.raw,
-                    ctx,
-                    packets.as_mut_ptr().cast(),
-                    N as u32,
-                    packets.len() as u32,
-                    std::mem::size_of::<ffi::RayHitN<N>>(),
-                )
-            };
+            match how {
+                Packets::Each(intersect) => {
+                    // SAFETY: the scene is committed and live; `intersect` is
+                    // the rtcIntersect<N> matching `N` (typed by
+                    // `IntersectN<N>`); `masks[0]` and `packets[0]` are 64-byte
+                    // aligned with the RTCRayHit<N> layout (checked in
+                    // `ffi::layout`); invalid lanes are masked.
+                    unsafe { intersect(&masks[0], self.raw, ctx, &mut packets[0]) }
+                }
+                Packets::Stream => {
+                    // SAFETY: the scene is committed and live; `packets` holds
+                    // at least `chunk.len()` initialized RTCRayHit<N>-layout
+                    // packets (64-byte aligned, checked in `ffi::layout`) at a
+                    // stride of their size; unused lanes have tnear > tfar,
+                    // which the stream API skips.
+                    unsafe {
+                        (self.device.api.intersect_nm)(
+                            self.raw,
+                            ctx,
+                            packets.as_mut_ptr().cast(),
+                            N as u32,
+                            chunk.len() as u32,
+                            std::mem::size_of::<ffi::RayHitN<N>>(),
+                        )
+                    }
+                }
+            }
             for ((p, valid), &x0) in packets.iter().zip(&masks).zip(chunk) {
                 extra += self.store_packet(gen, ctx, p, valid, tile_w, x0, y0, rows);
             }
         }
         extra
     }
+}
+
+/// How [`BuiltScene::trace_tiles`] hands its packets of `N` rays to Embree.
+#[derive(Clone, Copy)]
+enum Packets<const N: usize> {
+    /// One packet a call, with its valid mask: `rtcIntersect4/8/16`.
+    Each(ffi::IntersectN<N>),
+    /// A stream of packets a call: `rtcIntersectNM`.
+    Stream,
 }
 
 impl Drop for BuiltScene {

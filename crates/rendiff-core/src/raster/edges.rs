@@ -481,6 +481,20 @@ fn dir_lane(e: f64, up: f64, across: f64) -> f64 {
     (e + (across + up)) - e
 }
 
+/// Eight rays side by side, the unit [`ChunkDepth`] takes (a chunk of a
+/// tile row, [`TileRays::rays_at`], or a row of the packet tracer's lanes):
+/// their directions and planar factors, and whether a direction component
+/// among them may be subnormal (then no clamp-free shortcut).
+#[derive(Debug, Clone, Copy)]
+pub struct ChunkRays<'a> {
+    /// The directions `D`, per axis.
+    pub d: [&'a [f64; CHUNK]; 3],
+    /// The planar factors `D . f`.
+    pub planar: &'a [f64; CHUNK],
+    /// Some direction component may be subnormal.
+    pub subnormal: bool,
+}
+
 /// The pixel rays of one tile, by component (structure of arrays with a fixed
 /// row stride, so 8 lanes from any column of a row are one slice), and the largest magnitude of
 /// each direction component over the tile (for the bound). Every value is
@@ -913,21 +927,23 @@ impl TileRays {
         DVec3::new(self.d[0][at], self.d[1][at], self.d[2][at])
     }
 
-    /// The directions and planar factors of the 8 lanes from buffer index
-    /// `at`, written out per component (`[0, 1, 2].map` of a fallible
-    /// conversion compiled to an out-of-line call per chunk, with a
-    /// `vzeroupper`, in the raster's hottest loop).
+    /// The 8 rays from column `col` of tile row `row`, written out per
+    /// component (`[0, 1, 2].map` of a fallible conversion compiled to an
+    /// out-of-line call per chunk, with a `vzeroupper`, in the raster's
+    /// hottest loop).
     #[inline(always)]
-    fn chunk_at(&self, at: usize) -> ([&[f64; CHUNK]; 3], &[f64; CHUNK]) {
+    pub(crate) fn rays_at(&self, row: usize, col: usize) -> ChunkRays<'_> {
         debug_assert!(self.dirs_filled, "tile directions read before ensure_dirs");
         fn lane(a: &[f64], at: usize) -> &[f64; CHUNK] {
             a[at..at + CHUNK].try_into().unwrap()
         }
+        let at = row * self.stride + col;
         let [x, y, z] = &self.d;
-        (
-            [lane(x, at), lane(y, at), lane(z, at)],
-            lane(&self.planar, at),
-        )
+        ChunkRays {
+            d: [lane(x, at), lane(y, at), lane(z, at)],
+            planar: lane(&self.planar, at),
+            subnormal: self.subnormal,
+        }
     }
 
     /// Columns in the tile.
@@ -1083,37 +1099,22 @@ impl ChunkDepth {
         (self.lo, self.hi)
     }
 
-    /// Depths of the 8 lanes from column `col` of tile row `row`, and the
-    /// mask of lanes where [`TriDepth::depth`] is `Some`; exact for the
-    /// lanes in `need` (the others may take the shortcut unproven).
+    /// Depths of the 8 rays `rays`, and the mask of lanes where
+    /// [`TriDepth::depth`] is `Some`; exact for the lanes in `need` (the
+    /// others may take the shortcut unproven).
     #[inline(always)]
     pub fn depths<L: ChunkOps>(
         &self,
         l: L,
         cam: &Camera,
-        rays: &TileRays,
-        row: usize,
-        col: usize,
+        rays: ChunkRays,
         need: u32,
     ) -> ([f32; CHUNK], u32) {
-        let (d, planar) = rays.chunk_at(row * rays.stride + col);
-        self.chunk(l, cam, d, planar, need, rays.subnormal)
-    }
-
-    /// [`ChunkDepth::depths`] for 8 rays given by their directions `d` and
-    /// planar factors (the tracer's packet rows): exact for the lanes in
-    /// `need`; `subnormal`: some direction component among the rays is
-    /// subnormal (no shortcut).
-    #[inline(always)]
-    pub fn chunk<L: ChunkOps>(
-        &self,
-        l: L,
-        cam: &Camera,
-        d: [&[f64; CHUNK]; 3],
-        planar: &[f64; CHUNK],
-        need: u32,
-        subnormal: bool,
-    ) -> ([f32; CHUNK], u32) {
+        let ChunkRays {
+            d,
+            planar,
+            subnormal,
+        } = rays;
         if !subnormal {
             if let Some((z, ok, free)) = l.clamp_free_depths(self, cam, d, planar, need) {
                 if need & !free == 0 {
@@ -1125,22 +1126,19 @@ impl ChunkDepth {
     }
 
     /// The wide shortcut alone ([`ChunkOps::clamp_free_depths`]) over the 8
-    /// lanes from column `col` of tile row `row`: depths, lanes with a
-    /// depth, lanes it settles; `None` where it cannot run.
+    /// rays `rays`: depths, lanes with a depth, lanes it settles; `None`
+    /// where it cannot run.
     #[inline(always)]
     pub fn clamp_free<L: ChunkOps>(
         &self,
         l: L,
         cam: &Camera,
-        rays: &TileRays,
-        row: usize,
-        col: usize,
+        rays: ChunkRays,
     ) -> Option<([f32; CHUNK], u32, u32)> {
         if rays.subnormal {
             return None;
         }
-        let (d, planar) = rays.chunk_at(row * rays.stride + col);
-        l.clamp_free_depths(self, cam, d, planar, 0xff)
+        l.clamp_free_depths(self, cam, rays.d, rays.planar, 0xff)
     }
 
     /// [`TriDepth::depth`] of tile pixel `(lx, ly)` (boxes of a few pixels).
@@ -2159,10 +2157,10 @@ mod tests {
                 for col in (0..tw as usize).step_by(CHUNK) {
                     // One lane at a time, so each lane's path is known.
                     for j in 0..CHUNK.min(tw as usize - col) {
-                        let (z, ok) = d.depths(Portable, cam, &rays, row, col, 1 << j);
+                        let (z, ok) = d.depths(Portable, cam, rays.rays_at(row, col), 1 << j);
                         #[cfg(target_arch = "x86_64")]
                         if let Some(avx) = Avx2::detect() {
-                            let wide = d.depths(avx, cam, &rays, row, col, 1 << j);
+                            let wide = d.depths(avx, cam, rays.rays_at(row, col), 1 << j);
                             // (Only lane `j` was asked for: a half without it may be skipped.)
                             assert_eq!(wide.0[j].to_bits(), z[j].to_bits());
                             assert_eq!(wide.1 & (1 << j), ok & (1 << j));

@@ -924,7 +924,7 @@ fn covered_block<L: ChunkOps>(
     let mut z = [[0f32; CHUNK]; CHUNK];
     let (mut ok, mut free) = ([0u32; CHUNK], 0xffu32);
     for (i, (z, ok)) in z.iter_mut().zip(&mut ok).enumerate() {
-        match d.clamp_free(l, cam, rays, r0 + i, base) {
+        match d.clamp_free(l, cam, rays.rays_at(r0 + i, base)) {
             Some((zi, oki, fi)) => {
                 (*z, *ok) = (zi, oki);
                 free &= fi;
@@ -973,7 +973,7 @@ fn screen_block<L: ChunkOps>(
             (z, ok)
         } else {
             rays.ensure_dirs(l);
-            d.depths(l, cam, rays, r0 + i, base, 0xff)
+            d.depths(l, cam, rays.rays_at(r0 + i, base), 0xff)
         };
         l.min_keys(keys, &z, ok, prim);
     }
@@ -1180,7 +1180,7 @@ fn chunk_hits<L: ChunkOps>(
         None => {
             rays.ensure_dirs(l);
             let d = depth.get_or_insert_with(|| ChunkDepth::new(cam, &TriDepth::new(cam, t)));
-            d.depths(l, cam, rays, ly, base, covered)
+            d.depths(l, cam, rays.rays_at(ly, base), covered)
         }
     };
     let mut m = covered & ok;

@@ -6,7 +6,7 @@ use super::lights::{Delta, LightSet};
 use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions, Surface};
 use crate::frame::{Frame, BACKGROUND_ID};
 use crate::scene::resolve::{scene_size, ResolvedScene};
-use crate::trace::TraceBvh;
+use crate::trace::{Segment, TraceBvh};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_1_PI;
@@ -46,7 +46,15 @@ pub fn shade_point(
             } else {
                 f64::INFINITY
             };
-            if bvh.occluded(scene, origin, wi, 0.0, tmax) {
+            if bvh.occluded(
+                scene,
+                Segment {
+                    o: origin,
+                    d: wi,
+                    tmin: 0.0,
+                    tmax,
+                },
+            ) {
                 continue;
             }
         }

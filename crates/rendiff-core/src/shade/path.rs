@@ -7,7 +7,7 @@ use super::direct::shade_point;
 use super::lights::LightSet;
 use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions};
 use crate::scene::resolve::{scene_size, ResolvedScene};
-use crate::trace::TraceBvh;
+use crate::trace::{Segment, TraceBvh};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -83,7 +83,15 @@ impl Tracer<'_> {
         let mut prev_bsdf_pdf: Option<f64> = None;
         let mut depth = 1;
         let mut tmin = 0.0;
-        while let Some(hit) = bvh.closest(scene, o, d, tmin, f64::INFINITY) {
+        while let Some(hit) = bvh.closest(
+            scene,
+            Segment {
+                o,
+                d,
+                tmin,
+                tmax: f64::INFINITY,
+            },
+        ) {
             let x = o + d * hit.t;
             let s = surface(scene, self.features, hit.prim, x, d, bias);
             if s.emission != DVec3::ZERO {
@@ -127,7 +135,15 @@ impl Tracer<'_> {
                 if cos_x > 0.0
                     && cos_l > 0.0
                     && pa > 0.0
-                    && !bvh.occluded(scene, origin, v, 0.0, 1.0 - 1e-7)
+                    && !bvh.occluded(
+                        scene,
+                        Segment {
+                            o: origin,
+                            d: v,
+                            tmin: 0.0,
+                            tmax: 1.0 - 1e-7,
+                        },
+                    )
                 {
                     let pl = pa * dist2 / cos_l;
                     let pb = cos_x * FRAC_1_PI;

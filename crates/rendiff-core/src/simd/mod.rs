@@ -15,8 +15,9 @@
 //!   eight in AVX-512), for the raster's triangle boxes;
 //! - `chunks`: the raster's 8-pixel chunk operations
 //!   ([`crate::raster::edges::ChunkOps`]) in AVX2;
-//! - `rows`: the packet tracer's 8-lane row operations (`trace::rows::Rows`)
-//!   in AVX2, and pairs of rows in AVX-512.
+//! - [`RowLanes`]: `N` f32 lanes, width-generic (a row of eight in AVX2,
+//!   a pair of rows, sixteen, in AVX-512), for the packet tracer's row
+//!   tests (`trace::rows`).
 //!
 //! No closure and no array `map` wraps an intrinsic here: one that the
 //! compiler left out of line ran without the kernel's target features, each
@@ -28,10 +29,10 @@
 #[cfg(target_arch = "x86_64")]
 mod chunks;
 mod lanes;
-#[cfg(target_arch = "x86_64")]
 mod rows;
 
 pub use lanes::Lanes;
+pub use rows::RowLanes;
 
 /// No instruction set beyond the baseline: every kernel trait's plain Rust
 /// form, which is its definition (the token every CPU has).

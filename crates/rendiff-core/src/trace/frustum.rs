@@ -50,8 +50,9 @@
 
 use super::packet::{PH, PW};
 use super::primary::Node32;
-use super::rows::{Rows, ROW};
+use super::rows::{planes_out, ROW};
 use crate::camera::Camera;
+use crate::simd::RowLanes;
 use glam::DVec3;
 
 /// f64's unit roundoff.
@@ -84,9 +85,9 @@ impl Frustum {
     /// `n_k < 0` (both 0 where `n_k = 0`), with no per-plane selection. An
     /// infinite bound makes an infinite `mag` or a NaN, and neither culls.
     #[inline(always)]
-    pub fn excludes<S: Rows>(&self, s: S, a: &Node32, b: &Node32) -> [bool; 2] {
+    pub fn excludes<L: RowLanes<ROW>>(&self, l: L, a: &Node32, b: &Node32) -> [bool; 2] {
         let bounds = |n: &Node32| [n.bounds(0), n.bounds(1), n.bounds(2)];
-        let m = s.planes_out(&self.n, &bounds(a), &bounds(b));
+        let m = planes_out(l, &self.n, &bounds(a), &bounds(b));
         [m & 0xf != 0, m & 0xf0 != 0]
     }
 }

@@ -719,29 +719,30 @@ fn intersect64(
     (tt > tmin && tt < tmax).then_some(tt)
 }
 
+/// The part `o + t d`, `t` in `(tmin, tmax)`, of a general ray: what
+/// shading asks the tracer about (path and shadow rays), as one value so
+/// every query and its walk take the same four numbers together.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// Origin.
+    pub o: glam::DVec3,
+    /// Direction (not necessarily unit).
+    pub d: glam::DVec3,
+    /// Lower end of the open parameter interval.
+    pub tmin: f64,
+    /// Upper end of the open parameter interval.
+    pub tmax: f64,
+}
+
 impl TraceBvh {
-    /// Closest hit of `o + t d` with `t` in `(tmin, tmax)`; used by shading (shadow and path rays).
-    pub fn closest(
-        &self,
-        scene: &ResolvedScene,
-        o: glam::DVec3,
-        d: glam::DVec3,
-        tmin: f64,
-        tmax: f64,
-    ) -> Option<RayHit> {
-        self.query(scene, o, d, tmin, tmax, false)
+    /// Closest hit on the segment `s`; used by shading (shadow and path rays).
+    pub fn closest(&self, scene: &ResolvedScene, s: Segment) -> Option<RayHit> {
+        self.query(scene, s, false)
     }
 
-    /// True when anything lies on `o + t d` for `t` in `(tmin, tmax)`.
-    pub fn occluded(
-        &self,
-        scene: &ResolvedScene,
-        o: glam::DVec3,
-        d: glam::DVec3,
-        tmin: f64,
-        tmax: f64,
-    ) -> bool {
-        self.query(scene, o, d, tmin, tmax, true).is_some()
+    /// True when anything lies on the segment `s`.
+    pub fn occluded(&self, scene: &ResolvedScene, s: Segment) -> bool {
+        self.query(scene, s, true).is_some()
     }
 
     /// Every node's world-space box grown for the current eye (the boxes
@@ -764,39 +765,34 @@ impl TraceBvh {
     /// lives on the call's frame (shading traces several rays per path, and
     /// an allocation per ray was a tenth of the path tracer's time); a tree
     /// deeper than it spills into a `Vec`, so no tree is too deep.
-    fn query(
-        &self,
-        scene: &ResolvedScene,
-        o: glam::DVec3,
-        d: glam::DVec3,
-        tmin: f64,
-        tmax: f64,
-        any: bool,
-    ) -> Option<RayHit> {
+    fn query(&self, scene: &ResolvedScene, s: Segment, any: bool) -> Option<RayHit> {
         use crate::visibility::slab_od;
         if self.nodes.is_empty() {
             return None;
         }
+        let (o, d) = (s.o, s.d);
         let inv = glam::DVec3::ONE / d;
         match SlabRay::new(o, d, inv) {
-            Some(r) => self.walk(scene, o, d, tmin, tmax, any, |b| r.slab(b)),
-            None => self.walk(scene, o, d, tmin, tmax, any, |b| slab_od(o, d, inv, b)),
+            Some(r) => self.walk(scene, s, any, |b| r.slab(b)),
+            None => self.walk(scene, s, any, |b| slab_od(o, d, inv, b)),
         }
     }
 
     /// [`Self::query`]'s walk with the slab test `slab` (specialized per test).
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn walk(
         &self,
         scene: &ResolvedScene,
-        o: glam::DVec3,
-        d: glam::DVec3,
-        tmin: f64,
-        mut tmax: f64,
+        s: Segment,
         any: bool,
         slab: impl Fn(&RayBox) -> (f64, f64),
     ) -> Option<RayHit> {
+        let Segment {
+            o,
+            d,
+            tmin,
+            mut tmax,
+        } = s;
         const STACK: usize = 64;
         // The box's entry distance, or None when the ray misses it within (tmin, tmax).
         let bounds = self.world_bounds();

@@ -38,14 +38,14 @@
 use super::frustum::Frustum;
 use super::nodes::Nodes32;
 use super::primary::{dir_norm_bound, LeafTri, Node32};
-use super::rows::{Rows, ROW, ROW2};
+use super::rows::{box_out, BoxAxes, Rows, ROW};
 use super::{covers, TraceBvh};
 use crate::camera::{Camera, PixelRay};
-use crate::raster::edges::ChunkOps;
+use crate::raster::edges::{ChunkOps, ChunkRays};
 use crate::scene::resolve::ResolvedScene;
-use crate::simd::Portable;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx2, Avx512};
+use crate::simd::{Portable, RowLanes};
 use crate::visibility::{hit_key, key_depth, Counters, NO_HIT};
 use glam::DVec3;
 
@@ -59,21 +59,19 @@ pub(crate) const LANES: usize = PW * PH;
 const NROWS: usize = LANES / ROW;
 /// The mask bits of one row of comparisons.
 const ROW_BITS: Mask = (1 << ROW) - 1;
-/// The mask bits of two neighbouring rows.
-const ROW2_BITS: Mask = (1 << ROW2) - 1;
 
 // A packet row is a whole number of rows of comparisons, and every lane has a mask bit.
 const _: () = assert!(PW.is_multiple_of(ROW) && LANES <= Mask::BITS as usize);
 
 /// Lanes `r * ROW ..` of a per-lane array, `W` of them: one row ([`ROW`]) or
-/// two ([`ROW2`]), as the row operation taking them wants.
+/// two ([`super::rows::ROW2`]), as the row operation taking them wants.
 #[inline(always)]
 fn row<T, const W: usize>(a: &[T; LANES], r: usize) -> &[T; W] {
     a[r * ROW..][..W].try_into().unwrap()
 }
 
 /// [`row`] of each axis of a per-lane vector (`dir`, `inv`, `d64`). (Spelled
-/// out per axis, not an array `map`: see `Rows::edge_signs`.)
+/// out per axis, not an array `map`: see `rows::edge_signs`.)
 #[inline(always)]
 fn axis_rows<T, const W: usize>(a: &[[T; LANES]; 3], r: usize) -> [&[T; W]; 3] {
     [row(&a[0], r), row(&a[1], r), row(&a[2], r)]
@@ -282,7 +280,7 @@ impl Packet {
     ///   depth that passed `z >= near > 0`; `Camera::new` rejects `near <= 0`).
     #[inline(always)]
     fn node_mask<S: Rows>(&self, s: S, node: &Node32, mask: Mask) -> Mask {
-        // Per axis, the bounds in the order `Rows::box_out` takes them: with
+        // Per axis, the bounds in the order `rows::box_out` takes them: with
         // one sign on every lane (lo <= hi and rounding is monotone), min(t0,
         // t1) is always the same one of the two, saving a min and a max per lane.
         let mut axes = [(0f32, 0f32, false); 3];
@@ -299,21 +297,25 @@ impl Packet {
         // by row, so each row's interval stays in registers (a whole-packet
         // `tmin`/`tmax` array went through the stack, and its cost moved with
         // the compiler's inlining: 2.5x slower kernel in an LTO build).
-        let mut m: Mask = 0;
-        if S::PAIRS {
-            for r in (0..NROWS).step_by(2) {
-                let inv = axis_rows(&self.inv, r);
-                let out = s.box_out2(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
-                m |= (Mask::from(!out) & ROW2_BITS) << (r * ROW);
-            }
-            return m & mask;
-        }
-        for r in 0..NROWS {
-            let inv = axis_rows(&self.inv, r);
-            let out = s.box_out(&axes, inv, row(&self.zscale, r), row(&self.best_z, r));
-            m |= (Mask::from(!out) & ROW_BITS) << (r * ROW);
-        }
+        let m = if S::PAIRS {
+            self.box_rows(s.two(), &axes)
+        } else {
+            self.box_rows(s.one(), &axes)
+        };
         m & mask
+    }
+
+    /// The box test's bits over the whole packet, set where a lane may
+    /// enter, `W` lanes (a row or a pair of rows) at a time.
+    #[inline(always)]
+    fn box_rows<const W: usize, L: RowLanes<W>>(&self, l: L, axes: &BoxAxes) -> Mask {
+        let mut m: Mask = 0;
+        for r in (0..NROWS).step_by(W / ROW) {
+            let (inv, zscale) = (axis_rows(&self.inv, r), row(&self.zscale, r));
+            let out = box_out(l, axes, inv, zscale, row(&self.best_z, r));
+            m |= (Mask::from(!out) & ((1 << W) - 1)) << (r * ROW);
+        }
+        m
     }
 
     /// Tests one triangle against the lanes in `m`, updating their nearest keys.
@@ -346,7 +348,7 @@ impl Packet {
             while r <= last {
                 let at = r.min(NROWS - 2);
                 let dir = axis_rows(&self.dir, at);
-                let signs = leaf.edge_rows2(s, dir, row(&self.dir_norm, at));
+                let signs = leaf.edge_rows(s.two(), dir, row(&self.dir_norm, at));
                 or_signs((&mut pos, &mut neg), &signs, at);
                 r += 2;
             }
@@ -357,7 +359,7 @@ impl Packet {
                     continue;
                 }
                 let dir = axis_rows(&self.dir, r);
-                let signs = leaf.edge_rows(s, dir, row(&self.dir_norm, r));
+                let signs = leaf.edge_rows(s.one(), dir, row(&self.dir_norm, r));
                 or_signs((&mut pos, &mut neg), &signs, r);
             }
         }
@@ -391,8 +393,12 @@ impl Packet {
             if need == 0 {
                 continue;
             }
-            let dirs = axis_rows(&self.d64, r);
-            let (z, ok) = d.chunk(l, cam, dirs, row(&self.planar, r), need, self.subnormal);
+            let rays = ChunkRays {
+                d: axis_rows(&self.d64, r),
+                planar: row(&self.planar, r),
+                subnormal: self.subnormal,
+            };
+            let (z, ok) = d.depths(l, cam, rays, need);
             let mut m = need & ok;
             while m != 0 {
                 let j = m.trailing_zeros() as usize;
@@ -435,7 +441,7 @@ impl TraceBvh {
             // SAFETY: the token proves the CPU supports AVX2 and POPCNT.
             return unsafe { self.trace_packet_avx2(avx2, scene, x0, y0, c, stack) };
         }
-        self.trace_packet_body((Portable, Portable), scene, x0, y0, c, stack)
+        self.trace_packet_body(((Portable, Portable), Portable), scene, x0, y0, c, stack)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -449,7 +455,8 @@ impl TraceBvh {
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
-        self.trace_packet_body((avx2, avx2), scene, x0, y0, c, stack)
+        // Rows in AVX2; no pairs (in plain Rust, never taken).
+        self.trace_packet_body(((avx2, Portable), avx2), scene, x0, y0, c, stack)
     }
 
     /// [`TraceBvh::trace_packet_avx2`] with pairs of rows in 512-bit vectors.
@@ -464,8 +471,10 @@ impl TraceBvh {
         c: &mut Counters,
         stack: &mut Vec<(u32, Mask)>,
     ) -> [u64; LANES] {
-        // Pairs of rows in AVX-512; the depths' f64 chunks stay AVX2's.
-        self.trace_packet_body((avx512, avx512.avx2()), scene, x0, y0, c, stack)
+        // Pairs of rows in AVX-512; single rows (the frustum test, a
+        // triangle meeting one row) and the depths' f64 chunks stay AVX2's.
+        let avx2 = avx512.avx2();
+        self.trace_packet_body(((avx2, avx512), avx2), scene, x0, y0, c, stack)
     }
 
     /// Prefetches what popping `n` will read next: its children, or its
@@ -523,7 +532,7 @@ impl TraceBvh {
             let (na, nb) = (self.nodes32.get(a), self.nodes32.get(b));
             // A child wholly outside the packet's frustum is never pushed
             // (nor what lies below it prefetched).
-            match pk.frustum.excludes(s, na, nb) {
+            match pk.frustum.excludes(s.one(), na, nb) {
                 [true, true] => {}
                 [false, true] => {
                     self.prefetch_below(na);
@@ -619,7 +628,7 @@ mod tests {
                 for x0 in (0..size.0 as usize).step_by(PW) {
                     let mut c = Counters::default();
                     let portable = bvh.trace_packet_body(
-                        (Portable, Portable),
+                        ((Portable, Portable), Portable),
                         &scene,
                         x0,
                         y0,

@@ -16,10 +16,11 @@
 //!   [`crate::visibility::edge_sign`] (f64 filter, exact arithmetic, tie rule),
 //!   so coverage, depth and the operation counts are unchanged bit for bit.
 
-use super::rows::{Rows, ROW, ROW2};
+use super::rows::edge_signs;
 use crate::camera::PixelRay;
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::Tri;
+use crate::simd::RowLanes;
 use crate::visibility::RayBox;
 use glam::DVec3;
 
@@ -280,34 +281,26 @@ impl LeafTri {
         edge_det32(&self.n[k], self.beta[k], d, dir_norm)
     }
 
-    /// All three edges' f32 signs for a row of lanes (the packet kernel's
-    /// form of [`LeafTri::edge_sign32`]): per edge, the bits of the lanes
-    /// whose sign is certainly positive, and of those certainly negative.
+    /// All three edges' f32 signs for a row of lanes, or a pair of rows (the
+    /// packet kernel's form of [`LeafTri::edge_sign32`]): per edge, the bits
+    /// of the lanes whose sign is certainly positive, and of those certainly
+    /// negative.
     #[inline(always)]
-    pub fn edge_rows<S: Rows>(
+    pub fn edge_rows<const N: usize, L: RowLanes<N>>(
         &self,
-        s: S,
-        dir: [&[f32; ROW]; 3],
-        dir_norm: &[f32; ROW],
+        l: L,
+        dir: [&[f32; N]; 3],
+        dir_norm: &[f32; N],
     ) -> [(u32, u32); 3] {
-        s.edge_signs(&self.n, &self.beta, dir, dir_norm)
-    }
-
-    /// [`LeafTri::edge_rows`] for two neighbouring rows of lanes.
-    #[inline(always)]
-    pub fn edge_rows2<S: Rows>(
-        &self,
-        s: S,
-        dir: [&[f32; ROW2]; 3],
-        dir_norm: &[f32; ROW2],
-    ) -> [(u32, u32); 3] {
-        s.edge_signs2(&self.n, &self.beta, dir, dir_norm)
+        edge_signs(l, &self.n, &self.beta, dir, dir_norm)
     }
 }
 
 /// An edge's f32 determinant `n . d` and the bound `beta |d|` its magnitude
 /// must clear for its sign to be exact: the one home of the formula, which
-/// both the per-ray and the row-wise ([`Rows::edge_signs`]) tests evaluate.
+/// the per-ray tests evaluate and the row-wise one
+/// ([`super::rows::edge_signs`]) spells in lane operations, in its order
+/// (its tests hold the two equal).
 #[inline(always)]
 pub(crate) fn edge_det32(n: &[f32; 3], beta: f32, d: [f32; 3], dir_norm: f32) -> (f32, f32) {
     let det = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];

@@ -1,28 +1,23 @@
 //! The packet kernel's row operations: 8 lanes at once, read off as 8 mask bits.
 //!
 //! The packet kernel decides everything per lane with f32 comparisons and then
-//! works with bit masks: the box test ([`Rows::box_out`]), a triangle's
-//! edge signs ([`Rows::edge_signs`]) and the frustum test of a node's two
-//! children ([`Rows::planes_out`]). Written as plain loops over a packet,
-//! their speed depended on the compiler's inlining and vectorizing choices
-//! (the same box test ran 2.5x slower in an LTO build, its intervals spilled
-//! to the stack), and left to itself the compiler turns `m |= (a > b) << i`
-//! into an and-with-constants plus an or-reduction, about eight instructions
-//! per row, where AVX's `vmovmskps` does it in one. So the AVX2 forms are
-//! spelled out (in [`crate::simd`], for the token [`Avx2`] that exists only
-//! once the CPU is known to have AVX2, so its safe methods can use the
-//! intrinsics); the trait's default methods ([`Portable`]'s), here, are the
-//! same arithmetic in plain Rust for every other CPU, and the definition the
-//! tests hold the AVX2 forms to.
-//! The box test and edge signs also come for two rows at once
-//! ([`Rows::box_out2`], [`Rows::edge_signs2`]), defined as the two single
-//! rows; [`Avx512`] does them in one 512-bit vector.
+//! works with bit masks: the box test ([`box_out`]), a triangle's edge signs
+//! ([`edge_signs`]) and the frustum test of a node's two children
+//! ([`planes_out`]). Written as plain loops over a packet, their speed
+//! depended on the compiler's inlining and vectorizing choices (the same box
+//! test ran 2.5x slower in an LTO build, its intervals spilled to the stack),
+//! and left to itself the compiler turns `m |= (a > b) << i` into an
+//! and-with-constants plus an or-reduction, about eight instructions per row,
+//! where AVX's `vmovmskps` does it in one. So each test is written once,
+//! width-generic, over the lanes of [`RowLanes`] (in [`crate::simd`]: plain
+//! Rust for every CPU, AVX2 intrinsics for a row, AVX-512 for two rows at
+//! once), and [`Rows`] names the lanes the kernel uses for one row and for
+//! a pair; plain Rust's lanes are the definition the tests hold the others
+//! to.
 
 use super::frustum::{BOX_ABS, BOX_REL};
-use super::primary::{edge_det32, max, min, Node32};
-use crate::simd::Portable;
-#[cfg(doc)]
-use crate::simd::{Avx2, Avx512};
+use super::primary::Node32;
+use crate::simd::RowLanes;
 
 /// Per axis, a box's bounds in the order a row of lanes meets them: `(near,
 /// far, mixed)`, where `near * 1/D` is the entry parameter when every lane's
@@ -35,151 +30,128 @@ pub(crate) const ROW: usize = 8;
 /// Lanes in two neighbouring rows: one 512-bit vector of f32 ([`Rows::PAIRS`]).
 pub(crate) const ROW2: usize = 2 * ROW;
 
-/// The first and second row of a pair of rows.
-#[inline(always)]
-fn halves(a: &[f32; ROW2]) -> (&[f32; ROW], &[f32; ROW]) {
-    let (lo, hi) = a.split_at(ROW);
-    (lo.try_into().unwrap(), hi.try_into().unwrap())
-}
-
-/// The packet kernel's row operations: the default methods are the
-/// definitions (plain Rust, [`Portable`]'s), which each instruction set's
-/// implementation overrides with the same arithmetic.
+/// The lanes the packet kernel's row tests run in: `(R, P)`, `R` for one
+/// row and `P` for two neighbouring rows (lanes 0-7 the first row, 8-15 the
+/// second; lane by lane, so the same bits as the two single rows). The
+/// kernel takes pairs only where `P` is one vector (AVX-512's 16 lanes);
+/// elsewhere it keeps to single rows, which skip more work when a triangle
+/// meets one row only.
 pub(crate) trait Rows: Copy {
-    /// The packet box test for one row of lanes: bit `j` set where lane `j`
-    /// misses the box (`tmin > tmax (1 + s)`, with `tmin` starting at 0, as
-    /// in `Packet::node_mask`), or where its entry depth `tmin zscale` is
-    /// beyond `best_z`. `inv` is the row's `1/D` per axis.
+    /// Lanes for one row.
+    type One: RowLanes<ROW>;
+    /// Lanes for a pair of rows.
+    type Two: RowLanes<ROW2>;
+    /// Whether the kernel takes two rows in one step.
+    const PAIRS: bool;
+    /// The lanes for one row.
+    fn one(self) -> Self::One;
+    /// The lanes for a pair of rows.
+    fn two(self) -> Self::Two;
+}
+
+impl<R: RowLanes<ROW>, P: RowLanes<ROW2>> Rows for (R, P) {
+    type One = R;
+    type Two = P;
+    const PAIRS: bool = P::VECTOR;
     #[inline(always)]
-    fn box_out(
-        self,
-        axes: &BoxAxes,
-        inv: [&[f32; ROW]; 3],
-        zscale: &[f32; ROW],
-        best_z: &[f32; ROW],
-    ) -> u32 {
-        let mut m = 0;
-        for j in 0..ROW {
-            let (mut tmin, mut tmax) = (0f32, f32::INFINITY);
-            for (&(near, far, mixed), inv) in axes.iter().zip(inv) {
-                let (t0, t1) = (near * inv[j], far * inv[j]);
-                let (t0, t1) = if mixed {
-                    (min(t0, t1), max(t0, t1))
-                } else {
-                    (t0, t1)
-                };
-                tmin = max(tmin, t0);
-                tmax = min(tmax, t1);
-            }
-            let out = tmin > Node32::slack_tmax(tmax) || tmin * zscale[j] > best_z[j];
-            m |= u32::from(out) << j;
-        }
-        m
+    fn one(self) -> R {
+        self.0
     }
-
-    /// A triangle's three f32 edge signs for one row of lanes: per edge `k`
-    /// (normal `n[k]`, filter bound `beta[k]`), the bits of the lanes where
-    /// [`edge_det32`]'s determinant certainly clears its bound above, and
-    /// where it certainly clears it below.
     #[inline(always)]
-    fn edge_signs(
-        self,
-        n: &[[f32; 3]; 3],
-        beta: &[f32; 3],
-        dir: [&[f32; ROW]; 3],
-        dir_norm: &[f32; ROW],
-    ) -> [(u32, u32); 3] {
-        let mut out = [(0, 0); 3];
-        for ((n, &beta), (pos, neg)) in n.iter().zip(beta).zip(&mut out) {
-            for j in 0..ROW {
-                let d = [dir[0][j], dir[1][j], dir[2][j]];
-                let (det, bound) = edge_det32(n, beta, d, dir_norm[j]);
-                *pos |= u32::from(det > bound) << j;
-                *neg |= u32::from(-det > bound) << j;
-            }
-        }
-        out
-    }
-
-    /// The frustum test of two boxes ([`super::frustum`]): lane `j` holds
-    /// plane `j % 4`'s normal `n[..][j]` against box `a` (lanes 0-3) or `b`
-    /// (lanes 4-7), given per axis as `(lo, hi)`; bit `j` is set where the
-    /// box's far corner along the normal is proven below the plane:
-    /// `s < -(BOX_REL mag + BOX_ABS)`, with `s` the sum of
-    /// `max(n lo, n hi)` over the axes in order and `mag` that of their
-    /// magnitudes.
-    #[inline(always)]
-    fn planes_out(self, n: &[[f32; ROW]; 3], a: &[(f32, f32); 3], b: &[(f32, f32); 3]) -> u32 {
-        let mut s = [0f32; ROW];
-        let mut mag = [0f32; ROW];
-        for k in 0..3 {
-            for j in 0..ROW {
-                let (lo, hi) = if j < 4 { a[k] } else { b[k] };
-                let p = max(n[k][j] * lo, n[k][j] * hi);
-                s[j] += p;
-                mag[j] += p.abs();
-            }
-        }
-        let mut m = 0;
-        for j in 0..ROW {
-            m |= u32::from(s[j] < -(BOX_REL * mag[j] + BOX_ABS)) << j;
-        }
-        m
-    }
-
-    /// Whether [`Rows::box_out2`] and [`Rows::edge_signs2`] take two rows in
-    /// one step (AVX-512's 16 lanes); where not, the kernel keeps to single
-    /// rows, which skip more work when a triangle meets one row only.
-    const PAIRS: bool = false;
-
-    /// [`Rows::box_out`] for two neighbouring rows (bits 0-7 the first, 8-15
-    /// the second): the same answers, by definition the two single rows'.
-    #[inline(always)]
-    fn box_out2(
-        self,
-        axes: &BoxAxes,
-        inv: [&[f32; ROW2]; 3],
-        zscale: &[f32; ROW2],
-        best_z: &[f32; ROW2],
-    ) -> u32 {
-        let ([i0, j0], [i1, j1], [i2, j2]) = (
-            <[_; 2]>::from(halves(inv[0])),
-            <[_; 2]>::from(halves(inv[1])),
-            <[_; 2]>::from(halves(inv[2])),
-        );
-        let (z0, z1) = halves(zscale);
-        let (b0, b1) = halves(best_z);
-        self.box_out(axes, [i0, i1, i2], z0, b0) | self.box_out(axes, [j0, j1, j2], z1, b1) << ROW
-    }
-
-    /// [`Rows::edge_signs`] for two neighbouring rows (bits 0-7 the first,
-    /// 8-15 the second): the same answers, by definition the two single rows'.
-    #[inline(always)]
-    fn edge_signs2(
-        self,
-        n: &[[f32; 3]; 3],
-        beta: &[f32; 3],
-        dir: [&[f32; ROW2]; 3],
-        dir_norm: &[f32; ROW2],
-    ) -> [(u32, u32); 3] {
-        let ([d0, e0], [d1, e1], [d2, e2]) = (
-            <[_; 2]>::from(halves(dir[0])),
-            <[_; 2]>::from(halves(dir[1])),
-            <[_; 2]>::from(halves(dir[2])),
-        );
-        let (n0, n1) = halves(dir_norm);
-        let a = self.edge_signs(n, beta, [d0, d1, d2], n0);
-        let b = self.edge_signs(n, beta, [e0, e1, e2], n1);
-        [0, 1, 2].map(|k| (a[k].0 | b[k].0 << ROW, a[k].1 | b[k].1 << ROW))
+    fn two(self) -> P {
+        self.1
     }
 }
 
-/// Plain Rust, for any CPU: the trait's default methods are the definitions.
-impl Rows for Portable {}
+/// The packet box test for `N` lanes (a row or a pair): bit `j` set where
+/// lane `j` misses the box (`tmin > tmax (1 + s)`, with `tmin` starting at
+/// 0, as in `Packet::node_mask`), or where its entry depth `tmin zscale` is
+/// beyond `best_z`. `inv` is the lanes' `1/D` per axis.
+#[inline(always)]
+pub(crate) fn box_out<const N: usize, L: RowLanes<N>>(
+    l: L,
+    axes: &BoxAxes,
+    inv: [&[f32; N]; 3],
+    zscale: &[f32; N],
+    best_z: &[f32; N],
+) -> u32 {
+    let (mut tmin, mut tmax) = (l.splat(0.0), l.splat(f32::INFINITY));
+    for (&(near, far, mixed), inv) in axes.iter().zip(inv) {
+        let inv = l.load(inv);
+        let (t0, t1) = (l.mul(l.splat(near), inv), l.mul(l.splat(far), inv));
+        let (t0, t1) = if mixed {
+            (l.min(t0, t1), l.max(t0, t1))
+        } else {
+            (t0, t1)
+        };
+        tmin = l.max(tmin, t0);
+        tmax = l.min(tmax, t1);
+    }
+    // `Node32::slack_tmax` and the pruning comparison.
+    let slack = l.mul(tmax, l.splat(Node32::TMAX_SLACK));
+    let entry_z = l.mul(tmin, l.load(zscale));
+    l.gt(tmin, slack) | l.gt(entry_z, l.load(best_z))
+}
+
+/// A triangle's three f32 edge signs for `N` lanes: per edge `k` (normal
+/// `n[k]`, filter bound `beta[k]`), the bits of the lanes where
+/// [`super::primary::edge_det32`]'s determinant certainly clears its bound
+/// above, and where it certainly clears it below; its operations in its
+/// order (`(n0 d0 + n1 d1) + n2 d2`).
+#[inline(always)]
+pub(crate) fn edge_signs<const N: usize, L: RowLanes<N>>(
+    l: L,
+    n: &[[f32; 3]; 3],
+    beta: &[f32; 3],
+    dir: [&[f32; N]; 3],
+    dir_norm: &[f32; N],
+) -> [(u32, u32); 3] {
+    // (Not `dir.map`: array `map` compiled to an out-of-line call here.)
+    let d = [l.load(dir[0]), l.load(dir[1]), l.load(dir[2])];
+    let dn = l.load(dir_norm);
+    let mut out = [(0, 0); 3];
+    for ((n, &beta), out) in n.iter().zip(beta).zip(&mut out) {
+        let det = l.add(
+            l.add(l.mul(l.splat(n[0]), d[0]), l.mul(l.splat(n[1]), d[1])),
+            l.mul(l.splat(n[2]), d[2]),
+        );
+        let bound = l.mul(l.splat(beta), dn);
+        *out = (l.gt(det, bound), l.gt(l.neg(det), bound));
+    }
+    out
+}
+
+/// The frustum test of two boxes ([`super::frustum`]): lane `j` holds
+/// plane `j % 4`'s normal `n[..][j]` against box `a` (lanes 0-3) or `b`
+/// (lanes 4-7), given per axis as `(lo, hi)`; bit `j` is set where the
+/// box's far corner along the normal is proven below the plane:
+/// `s < -(BOX_REL mag + BOX_ABS)`, with `s` the sum of
+/// `max(n lo, n hi)` over the axes in order and `mag` that of their
+/// magnitudes.
+#[inline(always)]
+pub(crate) fn planes_out<L: RowLanes<ROW>>(
+    l: L,
+    n: &[[f32; ROW]; 3],
+    a: &[(f32, f32); 3],
+    b: &[(f32, f32); 3],
+) -> u32 {
+    let (mut s, mut mag) = (l.splat(0.0), l.splat(0.0));
+    for k in 0..3 {
+        let (lo, hi) = (l.halves(a[k].0, b[k].0), l.halves(a[k].1, b[k].1));
+        let nk = l.load(&n[k]);
+        let p = l.max(l.mul(nk, lo), l.mul(nk, hi));
+        s = l.add(s, p);
+        mag = l.add(mag, l.abs(p));
+    }
+    let bound = l.add(l.mul(l.splat(BOX_REL), mag), l.splat(BOX_ABS));
+    l.lt(s, l.neg(bound))
+}
 
 #[cfg(test)]
 mod tests {
+    use super::super::primary::{max, min};
     use super::*;
+    use crate::simd::Portable;
     #[cfg(target_arch = "x86_64")]
     use crate::simd::{Avx2, Avx512};
 
@@ -219,11 +191,35 @@ mod tests {
         }
     }
 
-    /// The box test's two forms agree bit for bit, on both axis orders and on
-    /// infinities, signed zeros and ties; and the portable form is the
-    /// per-lane slab test of `Node32::misses` with the pruning comparison.
+    /// Every single-row test in each row lanes this CPU has gives plain
+    /// Rust's bits, and plain Rust's are the lane-by-lane definitions.
     #[test]
-    fn box_out_forms_agree() {
+    fn row_forms_agree() {
+        row_tests_agree(Portable);
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx) = Avx2::detect() {
+            row_tests_agree(avx);
+        }
+    }
+
+    /// Values of both signs that round, cancel and overflow in the edge
+    /// and plane tests (their first eight), then `rest`.
+    fn with(rest: &[f32]) -> Vec<f32> {
+        let signed = [0.0, -0.0, 1.0, -1.0, 0.1, -3.3, 1e20, -1e20];
+        signed.iter().chain(rest).copied().collect()
+    }
+
+    /// The three single-row tests in the lanes `l`.
+    fn row_tests_agree<L: RowLanes<ROW>>(l: L) {
+        box_out_agrees(l);
+        edge_signs_agree(l);
+        planes_out_agree(l);
+    }
+
+    /// The box test in `l` agrees with plain Rust bit for bit, on both axis
+    /// orders and on infinities, signed zeros and ties; and plain Rust's is
+    /// the per-lane slab test of `Node32::misses` with the pruning comparison.
+    fn box_out_agrees<L: RowLanes<ROW>>(l: L) {
         let vals = [
             0.5,
             -0.5,
@@ -257,7 +253,7 @@ mod tests {
             let zscale: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
             let best_z: [f32; ROW] = std::array::from_fn(|_| vals[next(5)].abs());
             let inv_rows = [&inv[0], &inv[1], &inv[2]];
-            let want = Portable.box_out(&axes, inv_rows, &zscale, &best_z);
+            let want = box_out(Portable, &axes, inv_rows, &zscale, &best_z);
             // The portable form, lane by lane, from `Node32::misses`' definition.
             for j in 0..ROW {
                 let (mut tmin, mut tmax) = (0f32, f32::INFINITY);
@@ -277,104 +273,99 @@ mod tests {
                     ins += 1;
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(
-                    avx.box_out(&axes, inv_rows, &zscale, &best_z),
-                    want,
-                    "{axes:?}"
-                );
-            }
+            let got = box_out(l, &axes, inv_rows, &zscale, &best_z);
+            assert_eq!(got, want, "{axes:?}");
         }
         // Both answers occur often.
         assert!(outs > 1000 && ins > 1000, "{outs} out, {ins} in");
     }
 
-    /// The AVX-512 pairs of rows give the two single rows' bits (the
-    /// definition, `Rows`' default pair forms), box test and edge signs, on
-    /// the single-row tests' kinds of values: both axis orders, infinities,
-    /// signed zeros, NaN products, overflow and ties.
-    #[test]
-    fn pair_forms_agree() {
-        #[cfg(target_arch = "x86_64")]
-        if let Some(wide) = Avx512::detect() {
-            let vals = [
-                0.5,
-                -0.5,
-                2.0,
-                -3.0,
-                0.0,
-                -0.0,
-                1e-20,
-                1e20,
-                -1e20,
-                f32::INFINITY,
-                f32::NEG_INFINITY,
-                f32::MAX,
-            ];
-            let mut next = picker(13);
-            let mut seen = [0u32; 3];
-            for _ in 0..4000 {
-                let mut axes: BoxAxes = [(0.0, 0.0, false); 3];
-                let mut inv = [[0f32; ROW2]; 3];
-                for (k, a) in axes.iter_mut().enumerate() {
-                    let (x, y) = (vals[next(9)], vals[next(9)]);
-                    let (lo, hi) = (x.min(y), x.max(y));
-                    *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
-                }
-                let lanes = |next: &mut dyn FnMut(usize) -> usize| -> [f32; ROW2] {
-                    std::array::from_fn(|_| vals[next(vals.len())].abs())
-                };
-                let (zscale, best_z) = (lanes(&mut next), lanes(&mut next));
-                let inv_rows = [&inv[0], &inv[1], &inv[2]];
-                let want = Portable.box_out2(&axes, inv_rows, &zscale, &best_z);
-                assert_eq!(
-                    wide.box_out2(&axes, inv_rows, &zscale, &best_z),
-                    want,
-                    "{axes:?} {inv:?}"
-                );
-                seen[0] += want.count_ones();
-                let n: [[f32; 3]; 3] =
-                    std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
-                let beta: [f32; 3] = std::array::from_fn(|_| vals[next(vals.len())].abs());
-                let dir: [[f32; ROW2]; 3] =
-                    std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
-                let dir_norm = lanes(&mut next);
-                let rows = [&dir[0], &dir[1], &dir[2]];
-                let want = Portable.edge_signs2(&n, &beta, rows, &dir_norm);
-                assert_eq!(
-                    wide.edge_signs2(&n, &beta, rows, &dir_norm),
-                    want,
-                    "{n:?} {beta:?}"
-                );
-                for (p, q) in want {
-                    seen[1] += p.count_ones();
-                    seen[2] += q.count_ones();
-                }
-            }
-            // Both answers of each test occur often.
-            assert!(seen.iter().all(|&k| k > 5000), "{seen:?}");
-        }
+    /// The first and second row of a pair of rows.
+    fn halves(a: &[f32; ROW2]) -> (&[f32; ROW], &[f32; ROW]) {
+        let (lo, hi) = a.split_at(ROW);
+        (lo.try_into().unwrap(), hi.try_into().unwrap())
     }
 
-    /// The edge signs' two forms agree bit for bit, and the portable form is
-    /// `edge_det32`'s sign test lane by lane, on values that round, overflow,
-    /// cancel and tie.
+    /// A pair of rows gives the two single rows' bits (bits 0-7 the first,
+    /// 8-15 the second), box test and edge signs, in plain Rust and in
+    /// AVX-512, on the single-row tests' kinds of values: both axis orders,
+    /// infinities, signed zeros, NaN products, overflow and ties.
     #[test]
-    fn edge_signs_forms_agree() {
+    fn pair_forms_agree() {
         let vals = [
+            0.5,
+            -0.5,
+            2.0,
+            -3.0,
             0.0,
             -0.0,
-            1.0,
-            -1.0,
-            0.1,
-            -3.3,
+            1e-20,
             1e20,
             -1e20,
-            1e-20,
             f32::INFINITY,
+            f32::NEG_INFINITY,
             f32::MAX,
         ];
+        let mut next = picker(13);
+        let mut seen = [0u32; 3];
+        for _ in 0..4000 {
+            let mut axes: BoxAxes = [(0.0, 0.0, false); 3];
+            let mut inv = [[0f32; ROW2]; 3];
+            for (k, a) in axes.iter_mut().enumerate() {
+                let (x, y) = (vals[next(9)], vals[next(9)]);
+                let (lo, hi) = (x.min(y), x.max(y));
+                *a = random_axis((lo, hi), &vals, &mut next, &mut inv[k]);
+            }
+            let lanes = |next: &mut dyn FnMut(usize) -> usize| -> [f32; ROW2] {
+                std::array::from_fn(|_| vals[next(vals.len())].abs())
+            };
+            let (zscale, best_z) = (lanes(&mut next), lanes(&mut next));
+            let [(i0, i1), (j0, j1), (k0, k1)] = [&inv[0], &inv[1], &inv[2]].map(halves);
+            let ((z0, z1), (b0, b1)) = (halves(&zscale), halves(&best_z));
+            let want = box_out(Portable, &axes, [i0, j0, k0], z0, b0)
+                | box_out(Portable, &axes, [i1, j1, k1], z1, b1) << ROW;
+            let inv_rows = [&inv[0], &inv[1], &inv[2]];
+            let pair = box_out(Portable, &axes, inv_rows, &zscale, &best_z);
+            assert_eq!(pair, want, "{axes:?} {inv:?}");
+            #[cfg(target_arch = "x86_64")]
+            if let Some(wide) = Avx512::detect() {
+                let got = box_out(wide, &axes, inv_rows, &zscale, &best_z);
+                assert_eq!(got, want, "{axes:?} {inv:?}");
+            }
+            seen[0] += want.count_ones();
+            let n: [[f32; 3]; 3] =
+                std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
+            let beta: [f32; 3] = std::array::from_fn(|_| vals[next(vals.len())].abs());
+            let dir: [[f32; ROW2]; 3] =
+                std::array::from_fn(|_| std::array::from_fn(|_| vals[next(vals.len())]));
+            let dir_norm = lanes(&mut next);
+            let [(d0, d1), (e0, e1), (f0, f1)] = [&dir[0], &dir[1], &dir[2]].map(halves);
+            let (n0, n1) = halves(&dir_norm);
+            let a = edge_signs(Portable, &n, &beta, [d0, e0, f0], n0);
+            let b = edge_signs(Portable, &n, &beta, [d1, e1, f1], n1);
+            let want = [0, 1, 2].map(|k| (a[k].0 | b[k].0 << ROW, a[k].1 | b[k].1 << ROW));
+            let rows = [&dir[0], &dir[1], &dir[2]];
+            let pair = edge_signs(Portable, &n, &beta, rows, &dir_norm);
+            assert_eq!(pair, want, "{n:?} {beta:?}");
+            #[cfg(target_arch = "x86_64")]
+            if let Some(wide) = Avx512::detect() {
+                let got = edge_signs(wide, &n, &beta, rows, &dir_norm);
+                assert_eq!(got, want, "{n:?} {beta:?}");
+            }
+            for (p, q) in want {
+                seen[1] += p.count_ones();
+                seen[2] += q.count_ones();
+            }
+        }
+        // Both answers of each test occur often.
+        assert!(seen.iter().all(|&k| k > 5000), "{seen:?}");
+    }
+
+    /// The edge signs in `l` agree with plain Rust bit for bit, and plain
+    /// Rust's are `edge_det32`'s sign test lane by lane, on values that
+    /// round, overflow, cancel and tie.
+    fn edge_signs_agree<L: RowLanes<ROW>>(l: L) {
+        let vals = with(&[1e-20, f32::INFINITY, f32::MAX]);
         let mut next = picker(5);
         let (mut pos, mut neg, mut unsure) = (0, 0, 0);
         for _ in 0..4000 {
@@ -384,7 +375,7 @@ mod tests {
                 std::array::from_fn(|_| std::array::from_fn(|_| vals[next(9)]));
             let dir_norm: [f32; ROW] = std::array::from_fn(|_| vals[next(vals.len())].abs());
             let rows = [&dir[0], &dir[1], &dir[2]];
-            let want = Portable.edge_signs(&n, &beta, rows, &dir_norm);
+            let want = edge_signs(Portable, &n, &beta, rows, &dir_norm);
             for (k, &(p, q)) in want.iter().enumerate() {
                 for j in 0..ROW {
                     let d = [dir[0][j], dir[1][j], dir[2][j]];
@@ -399,10 +390,7 @@ mod tests {
                     }
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(avx.edge_signs(&n, &beta, rows, &dir_norm), want, "{n:?}");
-            }
+            assert_eq!(edge_signs(l, &n, &beta, rows, &dir_norm), want, "{n:?}");
         }
         // Every outcome occurs often.
         assert!(
@@ -411,24 +399,11 @@ mod tests {
         );
     }
 
-    /// The frustum test's two forms agree bit for bit, on infinities (NaN
-    /// products), signed zeros and values near the bound, and the portable
-    /// form is the plane test lane by lane.
-    #[test]
-    fn planes_out_forms_agree() {
-        let vals = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            0.1,
-            -3.3,
-            1e20,
-            -1e20,
-            1e-30,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-        ];
+    /// The frustum test in `l` agrees with plain Rust bit for bit, on
+    /// infinities (NaN products), signed zeros and values near the bound,
+    /// and plain Rust's is the plane test lane by lane.
+    fn planes_out_agree<L: RowLanes<ROW>>(l: L) {
+        let vals = with(&[1e-30, f32::INFINITY, f32::NEG_INFINITY]);
         let mut next = picker(7);
         let (mut outs, mut ins) = (0, 0);
         for _ in 0..4000 {
@@ -439,7 +414,7 @@ mod tests {
                 let (x, y) = (vals[next(vals.len())], vals[next(vals.len())]);
                 *b = (x.min(y), x.max(y));
             }
-            let want = Portable.planes_out(&n, &boxes[0], &boxes[1]);
+            let want = planes_out(Portable, &n, &boxes[0], &boxes[1]);
             for j in 0..ROW {
                 let bx = &boxes[j / 4];
                 let (mut s, mut mag) = (0f32, 0f32);
@@ -466,14 +441,8 @@ mod tests {
                     ins += 1;
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            if let Some(avx) = Avx2::detect() {
-                assert_eq!(
-                    avx.planes_out(&n, &boxes[0], &boxes[1]),
-                    want,
-                    "{n:?} {boxes:?}"
-                );
-            }
+            let got = planes_out(l, &n, &boxes[0], &boxes[1]);
+            assert_eq!(got, want, "{n:?} {boxes:?}");
         }
         // Both answers occur often.
         assert!(outs > 3000 && ins > 3000, "{outs} out, {ins} in");
