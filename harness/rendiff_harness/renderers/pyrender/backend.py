@@ -716,7 +716,8 @@ def f32_projection_depth(ctx: DepthContext, znear: float, zfar: float) -> np.nda
     u(|X| + |eye|) (docs/verifier.md, "Depth": pyrender). NDC z = z_c/w_c, so a vertex at
     depth w is off by (e_z + e_w)/w in NDC (|z_c| <= w_c inside the clip volume); screen-space
     interpolation keeps the largest vertex error, at the nearest vertex (depth >= znear,
-    >= Z - span); dZ = Z^2/B dNDC. Not capped by the span: it moves depth, not along the plane."""
+    >= Z - span; GL's clipping interpolates new vertices in f32, 5u more on each coordinate);
+    dZ = Z^2/B dNDC. Not capped by the span: it moves depth, not along the plane."""
     a = (zfar + znear) / (zfar - znear)
     b = 2.0 * zfar * znear / (zfar - znear)
     z = np.abs(ctx.z_ref)
@@ -724,7 +725,7 @@ def f32_projection_depth(ctx: DepthContext, znear: float, zfar: float) -> np.nda
     if ctx.extent is not None:
         point = point + ctx.extent  # the farthest vertex from the origin
     s = point + ctx.eye_norm
-    e = F32_U * (10.0 * (a * s + b) + 6.0 * s)
+    e = F32_U * (15.0 * (a * s + b) + 11.0 * s)
     nearest = np.full(z.shape, znear) if ctx.depth_span is None else np.maximum(znear, z - ctx.depth_span)
     tol: np.ndarray = z * z * e / (b * nearest)
     return tol
@@ -760,7 +761,7 @@ def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
         "(4 steps of the 24-bit GL depth buffer z^2(f-n)/(f n)2^-24 + 1 f32 ulp) "
         f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping) "
         "+ min(4 sqrt(3) 2^-24 (|X| + |eye|) / |cos|, depth span) (f32 view transform of the vertices) "
-        "+ Z^2 2^-24 (10 (A s + B) + 6 s) / (B max(znear, Z - span)), s = |X| + extent + |eye|, "
+        "+ Z^2 2^-24 (15 (A s + B) + 11 s) / (B max(znear, Z - span)), s = |X| + extent + |eye|, "
         "A = (f+n)/(f-n), B = 2fn/(f-n) (f32 clip coordinates from the f32 product P*V)"
     )
     return tol, text
