@@ -709,6 +709,28 @@ def f32_view_transform(offset: float, eye_norm: float, point: np.ndarray) -> np.
     return tol
 
 
+def f32_projection_depth(ctx: DepthContext, znear: float, zfar: float) -> np.ndarray:
+    """|dZ| from pyrender's f32 clip coordinates: its shader computes P * V * M * inst_m * v
+    left to right, so the f32 matrix P·V (rows A·r3, A·t + B for z; -r3, -t for w) turns
+    the vertex into clip z and w with independent roundings of size u·|A|(|X| + |eye|) and
+    u(|X| + |eye|) (docs/verifier.md, "Depth": pyrender). NDC z = z_c/w_c, so a vertex at
+    depth w is off by (e_z + e_w)/w in NDC (|z_c| <= w_c inside the clip volume); screen-space
+    interpolation keeps the largest vertex error, at the nearest vertex (depth >= znear,
+    >= Z - span; GL's clipping interpolates new vertices in f32, 5u more on each coordinate);
+    dZ = Z^2/B dNDC. Not capped by the span: it moves depth, not along the plane."""
+    a = (zfar + znear) / (zfar - znear)
+    b = 2.0 * zfar * znear / (zfar - znear)
+    z = np.abs(ctx.z_ref)
+    point = ctx.point_norm if ctx.point_norm is not None else z + ctx.eye_norm
+    if ctx.extent is not None:
+        point = point + ctx.extent  # the farthest vertex from the origin
+    s = point + ctx.eye_norm
+    e = F32_U * (15.0 * (a * s + b) + 11.0 * s)
+    nearest = np.full(z.shape, znear) if ctx.depth_span is None else np.maximum(znear, z - ctx.depth_span)
+    tol: np.ndarray = z * z * e / (b * nearest)
+    return tol
+
+
 def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     """pyrender: the backend's own 24-bit depth-buffer model at the GL planes it chose.
 
@@ -733,11 +755,14 @@ def pyrender_depth(ctx: DepthContext) -> tuple[np.ndarray, str]:
     snap = np.sqrt(2.0) / 256.0
     slope = np.abs(ctx.z_ref) * np.minimum(ctx.pixel_size * snap / np.maximum(ctx.cos, 1e-300), MAX_REL)
     tol = tol + slope + shift_depth(ctx, position_error(ctx, f32_view_transform))
+    tol = tol + f32_projection_depth(ctx, znear, zfar)
     text = (
         f"pyrender: |dZ| <= pyrender_backend.depth_tolerance(z, znear={znear:.6g}, zfar={zfar:.6g}) "
         "(4 steps of the 24-bit GL depth buffer z^2(f-n)/(f n)2^-24 + 1 f32 ulp) "
         f"+ Z*min(pixel {ctx.pixel_size:.3g} * sqrt(2)/256 / |cos|, {MAX_REL:g}) (1/256 px vertex snapping) "
-        "+ min(4 sqrt(3) 2^-24 (|X| + |eye|) / |cos|, depth span) (f32 view transform of the vertices)"
+        "+ min(4 sqrt(3) 2^-24 (|X| + |eye|) / |cos|, depth span) (f32 view transform of the vertices) "
+        "+ Z^2 2^-24 (15 (A s + B) + 11 s) / (B max(znear, Z - span)), s = |X| + extent + |eye|, "
+        "A = (f+n)/(f-n), B = 2fn/(f-n) (f32 clip coordinates from the f32 product P*V)"
     )
     return tol, text
 
