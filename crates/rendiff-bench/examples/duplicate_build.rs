@@ -30,22 +30,19 @@ use rendiff_bench::measure::{bootstrap_median_interval, BOOTSTRAP_SEED};
 use rendiff_bench::peer_tables::alternate_all;
 use serde_json::{json, Value};
 use std::time::Instant;
+use rendiff_bench::example_args::ExampleArgs;
 
 /// The goal: copies build in under this many times the distinct ones' time.
 const GOAL_RATIO: f64 = 10.0;
 
 fn main() -> Result<()> {
-    let (json_out, args): (Vec<String>, Vec<String>) = std::env::args()
-        .skip(1)
-        .partition(|a| a.starts_with("--json="));
-    let json_out = json_out.last().map(|a| a["--json=".len()..].to_string());
-    let arg = |i: usize, d: &str| args.get(i).cloned().unwrap_or_else(|| d.to_string());
+    let args = ExampleArgs::from_env();
+    let arg = |i: usize, d: &str| args.get(i, d);
     let n: usize = arg(0, "40000").parse().context("N")?;
     let rounds: usize = arg(1, "11").parse().context("ROUNDS")?;
-    let threads: Vec<usize> = list(&arg(2, "1,2")).context("THREADS")?;
-    let quality = BvhQuality::from_name(&arg(3, "medium"))
-        .ok_or_else(|| anyhow::anyhow!("BVH: fastest, fast, medium or slow"))?;
-    let near_sizes: Vec<usize> = list(&arg(4, "5000,10000")).context("NEAR")?;
+    let threads = args.counts(2, "1,2", "THREADS")?;
+    let quality = args.bvh(3, "medium")?;
+    let near_sizes = args.counts(4, "5000,10000", "NEAR")?;
     anyhow::ensure!(
         n >= 2 && rounds >= 1,
         "N must be at least 2 and ROUNDS at least 1"
@@ -102,7 +99,7 @@ fn main() -> Result<()> {
         })?;
         tables.insert(format!("{t}_threads"), table);
     }
-    if let Some(path) = json_out {
+    if let Some(path) = &args.json_out {
         let out = json!({
             "benchmark": "duplicate_build example: the tracer's BVH build (tree and first camera) on N copies of one triangle against N distinct ones, paired alternating rounds",
             "triangles": n,
@@ -118,17 +115,6 @@ fn main() -> Result<()> {
         eprintln!("wrote {path}");
     }
     Ok(())
-}
-
-/// Comma-separated counts.
-fn list(s: &str) -> Result<Vec<usize>> {
-    s.split(',')
-        .filter(|p| !p.is_empty())
-        .map(|p| {
-            p.parse::<usize>()
-                .with_context(|| format!("{p:?} is not a count"))
-        })
-        .collect()
 }
 
 /// Seconds of one whole build (tree and first camera).

@@ -25,15 +25,13 @@ use rendiff_bench::knobs::SceneSpec;
 use rendiff_bench::native_embree::Config;
 use rendiff_bench::{machine_cpu, peer_tables};
 use std::time::Instant;
+use rendiff_bench::example_args::ExampleArgs;
 
 const MILLION: &str = "scenes/million.toml@1920x1080";
 
 fn main() -> Result<()> {
-    let (json_out, args): (Vec<String>, Vec<String>) = std::env::args()
-        .skip(1)
-        .partition(|a| a.starts_with("--json="));
-    let json_out = json_out.last().map(|a| a["--json=".len()..].to_string());
-    let arg = |i: usize, d: &str| args.get(i).cloned().unwrap_or_else(|| d.to_string());
+    let args = ExampleArgs::from_env();
+    let arg = |i: usize, d: &str| args.get(i, d);
     // As `bench peers` does before its tables.
     let allocator = rendiff_bench::keep_freed_memory();
     if arg(0, "") == "phases" {
@@ -45,10 +43,7 @@ fn main() -> Result<()> {
     }
     let spec: SceneSpec = arg(0, MILLION).parse().map_err(anyhow::Error::msg)?;
     let rounds: usize = arg(1, "11").parse().context("ROUNDS")?;
-    let threads: Vec<usize> = arg(2, "1,2")
-        .split(',')
-        .map(|t| t.parse().context("THREADS"))
-        .collect::<Result<_>>()?;
+    let threads = args.counts(2, "1,2", "THREADS")?;
     let scene = spec.load()?;
     let mut record = serde_json::Map::new();
     for &t in &threads {
@@ -58,14 +53,7 @@ fn main() -> Result<()> {
         } else {
             "native streamNM16 coherent low"
         };
-        let want = arg(3, default);
-        let config = Config::all()
-            .into_iter()
-            .find(|c| c.name() == want)
-            .ok_or_else(|| {
-                let names: Vec<String> = Config::all().iter().map(|c| c.name()).collect();
-                anyhow::anyhow!("no configuration {want:?}; one of {names:?}")
-            })?;
+        let config = args.embree(3, default)?;
         let load_before = rendiff_bench::load_average();
         let cpu_before = machine_cpu::read();
         let v = rendiff_bench::pool(t)?
@@ -102,7 +90,7 @@ fn main() -> Result<()> {
             }),
         );
     }
-    if let Some(path) = json_out {
+    if let Some(path) = &args.json_out {
         let out = serde_json::json!({
             "benchmark": "first_image example (bench peers' time-to-first-image table on one scene)",
             "scene": format!("{}", spec.path.display()),
@@ -122,8 +110,7 @@ fn phases(quality: &str, n: usize, scene: &str) -> Result<()> {
     if quality == "raster" {
         return raster_only(n, scene);
     }
-    let quality = BvhQuality::from_name(quality)
-        .ok_or_else(|| anyhow::anyhow!("BVH: fastest, fast, medium or slow"))?;
+    let quality = rendiff_bench::example_args::bvh_quality(quality)?;
     let spec: SceneSpec = scene.parse().map_err(anyhow::Error::msg)?;
     let scene = spec.load()?;
     rendiff_bench::pool(1)?.install(|| {

@@ -25,24 +25,18 @@ use rendiff_bench::knobs::SceneSpec;
 use rendiff_bench::native_embree::{Config, NativeScene, PreparedRays};
 use rendiff_bench::peer_tables;
 use std::time::Instant;
+use rendiff_bench::example_args::ExampleArgs;
 
 fn main() -> Result<()> {
-    let (json_out, args): (Vec<String>, Vec<String>) = std::env::args()
-        .skip(1)
-        .partition(|a| a.starts_with("--json="));
-    let json_out = json_out.last().map(|a| a["--json=".len()..].to_string());
     let mut record = serde_json::Map::new();
-    let arg = |i: usize, d: &str| args.get(i).cloned().unwrap_or_else(|| d.to_string());
+    let args = ExampleArgs::from_env();
+    let arg = |i: usize, d: &str| args.get(i, d);
     let spec: SceneSpec = arg(0, "scenes/million.toml@1920x1080")
         .parse()
         .map_err(anyhow::Error::msg)?;
     let rounds: usize = arg(1, "11").parse().context("ROUNDS")?;
-    let threads: Vec<usize> = arg(2, "1,2")
-        .split(',')
-        .map(|t| t.parse().context("THREADS"))
-        .collect::<Result<_>>()?;
-    let quality = BvhQuality::from_name(&arg(3, "slow"))
-        .ok_or_else(|| anyhow::anyhow!("BVH: fastest, fast, medium or slow"))?;
+    let threads = args.counts(2, "1,2", "THREADS")?;
+    let quality = args.bvh(3, "slow")?;
     let scene = spec.load()?;
     for &t in &threads {
         // The fastest per frame in the Nov 29 record, per thread count.
@@ -51,14 +45,7 @@ fn main() -> Result<()> {
         } else {
             "native stream1M coherent high"
         };
-        let want = arg(4, default);
-        let config = Config::all()
-            .into_iter()
-            .find(|c| c.name() == want)
-            .ok_or_else(|| {
-                let names: Vec<String> = Config::all().iter().map(|c| c.name()).collect();
-                anyhow::anyhow!("no configuration {want:?}; one of {names:?}")
-            })?;
+        let config = args.embree(4, default)?;
         rendiff_bench::pool(t)?.install(|| -> Result<()> {
             let t0 = Instant::now();
             let mut bvh = TraceBvh::build(&scene, quality);
@@ -159,7 +146,7 @@ fn main() -> Result<()> {
             Ok(())
         })?;
     }
-    if let Some(path) = json_out {
+    if let Some(path) = &args.json_out {
         let out = serde_json::json!({
             "benchmark": "per_frame example (bench peers' per-frame table on one scene)",
             "scene": format!("{}", spec.path.display()),

@@ -24,6 +24,7 @@ pub mod core_loops;
 pub mod crossover;
 pub mod direct;
 pub mod equal_time;
+pub mod example_args;
 pub mod fuzz;
 pub mod harness;
 pub mod knobs;
