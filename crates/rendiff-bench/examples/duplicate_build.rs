@@ -26,11 +26,11 @@ use rendiff::names::Named;
 use rendiff::scene::generators::crossover_grid;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::trace::{BvhQuality, TraceBvh};
+use rendiff_bench::example_args::ExampleArgs;
 use rendiff_bench::measure::{bootstrap_median_interval, BOOTSTRAP_SEED};
 use rendiff_bench::peer_tables::alternate_all;
 use serde_json::{json, Value};
 use std::time::Instant;
-use rendiff_bench::example_args::ExampleArgs;
 
 /// The goal: copies build in under this many times the distinct ones' time.
 const GOAL_RATIO: f64 = 10.0;
@@ -111,7 +111,7 @@ fn main() -> Result<()> {
             "environment": rendiff_bench::environment(),
             "tables": tables,
         });
-        rendiff_bench::write_json_file(&path, &out)?;
+        rendiff_bench::write_json_file(path, &out)?;
         eprintln!("wrote {path}");
     }
     Ok(())

@@ -20,12 +20,11 @@
 
 use anyhow::{Context, Result};
 use rendiff::names::Named;
-use rendiff::trace::{self, BvhQuality, TraceBvh, TraceOptions};
+use rendiff::trace::{self, TraceBvh, TraceOptions};
+use rendiff_bench::example_args::ExampleArgs;
 use rendiff_bench::knobs::SceneSpec;
-use rendiff_bench::native_embree::Config;
 use rendiff_bench::{machine_cpu, peer_tables};
 use std::time::Instant;
-use rendiff_bench::example_args::ExampleArgs;
 
 const MILLION: &str = "scenes/million.toml@1920x1080";
 
@@ -98,7 +97,7 @@ fn main() -> Result<()> {
             "allocator": allocator,
             "tables": record,
         });
-        rendiff_bench::write_json_file(&path, &out)?;
+        rendiff_bench::write_json_file(path, &out)?;
         eprintln!("wrote {path}");
     }
     Ok(())

@@ -19,13 +19,12 @@
 //! load, so a figure quoted from this run links to its record.
 
 use anyhow::{Context, Result};
-use rendiff::names::Named;
-use rendiff::trace::{BvhQuality, TraceBvh};
+use rendiff::trace::TraceBvh;
+use rendiff_bench::example_args::ExampleArgs;
 use rendiff_bench::knobs::SceneSpec;
-use rendiff_bench::native_embree::{Config, NativeScene, PreparedRays};
+use rendiff_bench::native_embree::{NativeScene, PreparedRays};
 use rendiff_bench::peer_tables;
 use std::time::Instant;
-use rendiff_bench::example_args::ExampleArgs;
 
 fn main() -> Result<()> {
     let mut record = serde_json::Map::new();
@@ -153,7 +152,7 @@ fn main() -> Result<()> {
             "rounds": rounds,
             "tables": record,
         });
-        rendiff_bench::write_json_file(&path, &out)?;
+        rendiff_bench::write_json_file(path, &out)?;
         eprintln!("wrote {path}");
     }
     Ok(())

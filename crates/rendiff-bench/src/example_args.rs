@@ -107,6 +107,9 @@ mod tests {
         assert!(a.embree(2, "").unwrap_err().to_string().contains("native"));
         assert_eq!(args(&[]).bvh(0, "medium").unwrap(), BvhQuality::Medium);
         let first = Config::all()[0];
-        assert_eq!(args(&[&first.name()]).embree(0, "").unwrap().name(), first.name());
+        assert_eq!(
+            args(&[&first.name()]).embree(0, "").unwrap().name(),
+            first.name()
+        );
     }
 }
