@@ -13,11 +13,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 from rendiff_harness.judge import tolerance as tl
 from rendiff_harness.renderers.pyrender import backend as pb
 
-SCENE = Path(__file__).resolve().parents[2] / "scenes" / "fuzz_pyrender_near_clip.toml"
+# The checkout's root: the nearest folder above with scenes/ (two up here; further under mutmut's
+# mutants/ copy of the tests).
+REPO = next(p for p in Path(__file__).resolve().parents if (p / "scenes").is_dir())
+SCENE = REPO / "scenes" / "fuzz_pyrender_near_clip.toml"
 PIXEL = (41, 33)  # the failing pixel of the reduced scene (prim 0, the triangle facing the camera)
 TEST_Z = 68.6808014  # pyrender's depth there (its EXR), reproduced below from its arithmetic
 
@@ -126,3 +130,80 @@ def test_the_term_grows_with_the_distance_from_the_origin_and_the_nearest_vertex
         span = dataclasses.replace(far_ctx, depth_span=np.array([z - nearest]))
         ratio = float(pb.f32_projection_depth(span, f["near"], f["far"])[0]) / far_term
         assert math.isclose(ratio, z / max(nearest, f["near"]), rel_tol=1e-9)
+
+
+U = 2.0**-24
+
+
+def _plain_ctx(z: float, **kw: Any) -> tl.DepthContext:
+    return tl.DepthContext(z_ref=np.array([z]), cos=np.array([1.0]), info={}, attrs={}, **kw)
+
+
+def test_the_term_is_the_derivation_s_sum_over_the_nearest_vertex() -> None:
+    """docs/verifier.md, "Depth": pyrender, written out again: |dZ| <= Z^2 u (15(A s + B) + 11 s) /
+    (B max(n, Z - span)), s = |X| + extent + |eye|, A = (f+n)/(f-n), B = 2fn/(f-n)."""
+    n, f, z, x, extent, eye, span = 0.7, 300.0, 40.0, 5000.0, 3.0, 4990.0, 12.0
+    a, b = (f + n) / (f - n), 2.0 * f * n / (f - n)
+    s = x + extent + eye
+    want = z * z * U * (15.0 * (a * s + b) + 11.0 * s) / (b * max(n, z - span))
+    ctx = _plain_ctx(z, point_norm=np.array([x]), extent=np.array([extent]), eye_norm=eye, depth_span=np.array([span]))
+    assert float(pb.f32_projection_depth(ctx, n, f)[0]) == pytest.approx(want, rel=1e-12)
+
+
+def test_each_missing_input_takes_its_documented_stand_in() -> None:
+    """Without |X| the hit is taken at Z + |eye| from the origin; without the edge nothing is added
+    to it; without the depth span the nearest vertex is taken at the near plane."""
+    n, f, z, eye = 0.5, 200.0, 30.0, 800.0
+    a, b = (f + n) / (f - n), 2.0 * f * n / (f - n)
+
+    def want(s: float, nearest: float) -> float:
+        return z * z * U * (15.0 * (a * s + b) + 11.0 * s) / (b * nearest)
+
+    bare = float(pb.f32_projection_depth(_plain_ctx(z, eye_norm=eye), n, f)[0])
+    assert bare == pytest.approx(want(z + 2.0 * eye, n), rel=1e-12)
+    with_x = float(pb.f32_projection_depth(_plain_ctx(z, eye_norm=eye, point_norm=np.array([100.0])), n, f)[0])
+    assert with_x == pytest.approx(want(100.0 + eye, n), rel=1e-12)
+    with_span = float(pb.f32_projection_depth(_plain_ctx(z, eye_norm=eye, depth_span=np.array([10.0])), n, f)[0])
+    assert with_span == pytest.approx(want(z + 2.0 * eye, z - 10.0), rel=1e-12)
+
+
+def test_pyrender_s_replayed_depth_stays_within_the_model_far_from_the_origin() -> None:
+    """Soundness on random views: pyrender's own arithmetic (f32 P·V, then the vertex, then the
+    24-bit code) replayed for vertices 1e2 to 1e6 from the origin stays within the 24-bit steps
+    plus this term; V·v-first arithmetic (what the old model assumed) is not what is checked."""
+    rng = np.random.default_rng(37)
+    worst, checked = 0.0, 0
+    for _ in range(300):
+        far = 10.0 ** rng.uniform(2.0, 6.0)
+        eye = rng.normal(size=3) * far
+        fwd = rng.normal(size=3)
+        fwd /= np.linalg.norm(fwd)
+        up = np.cross(fwd, rng.normal(size=3))
+        up /= np.linalg.norm(up)
+        right = np.cross(fwd, up)
+        z = rng.uniform(2.0, 200.0)
+        vertex = eye + z * fwd + rng.uniform(-0.2, 0.2) * z * right
+        near, far_plane = rng.uniform(0.05, 1.0), pb.FAR_FACTOR * z
+        pose = np.eye(4)
+        pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, up, -fwd, eye
+        cam = {"vfov": 60.0, "width": 64, "height": 48}
+        f = {"near": near, "far": far_plane, "cam": cam, "pose": pose}
+        exact = float((vertex - eye) @ fwd)
+        seen = _pyrender_window_z(f, vertex, left_to_right=True)
+        if not math.isfinite(seen):
+            continue  # rounded out of the clip volume: a missing hit, for the ID buffer's verdict
+        ctx = _plain_ctx(
+            exact,
+            point_norm=np.array([np.linalg.norm(vertex)]),
+            extent=np.array([0.0]),
+            eye_norm=float(np.linalg.norm(eye)),
+            depth_span=np.array([0.0]),
+        )
+        bound = float(pb.depth_tolerance(exact, near, far_plane)) + float(
+            pb.f32_projection_depth(ctx, near, far_plane)[0]
+        )
+        assert abs(seen - exact) <= bound, (far, z, seen - exact, bound)
+        worst = max(worst, abs(seen - exact) / bound)
+        checked += 1
+    assert checked >= 250
+    assert worst > 0.01  # the replay does exercise the term, not only the 24-bit steps
