@@ -46,39 +46,41 @@ def _spec(name: str) -> BackendSpec:
     return spec
 
 
-def _floor_scene(directory: Path) -> resolved.ResolvedScene:
+def _lit_triangle(
+    directory: Path, tri: Any, light: dict[str, Any], albedo: list[float], view: dict[str, Any], shadows: str
+) -> resolved.ResolvedScene:
+    """One shaded triangle under one point light, as the reducer leaves a shaded finding: `view`
+    holds the camera's keywords, `shadows` the scene's shadow feature."""
     write_scene(
         directory,
-        [FLOOR_TRI],
-        eye=(1024.0, -1021.0, 1028.0),
-        look_at=(1024.0, -1024.0, 1024.0),
-        vfov_deg=13.298703259196719,
-        width=2,
-        height=12,
-        near=0.001131370849898476,
-        requires=("depth", "ids", "lambert", "point_light", "shadows", "two_sided"),
-        materials=[{"name": "m0", "albedo": [0.5, 0.6, 0.7], "emission": [0.0, 0.0, 0.0]}],
-        lights=[FLOOR_LIGHT],
+        [np.asarray(tri).tolist()],
+        requires=("depth", "ids", "lambert", "point_light", shadows, "two_sided"),
+        materials=[{"name": "m0", "albedo": albedo, "emission": [0.0, 0.0, 0.0]}],
+        lights=[light],
+        **view,
     )
     return resolved.load(directory)
+
+
+def _floor_scene(directory: Path) -> resolved.ResolvedScene:
+    view: dict[str, Any] = {
+        "eye": (1024.0, -1021.0, 1028.0),
+        "look_at": (1024.0, -1024.0, 1024.0),
+        "vfov_deg": 13.298703259196719,
+    }
+    view |= {"width": 2, "height": 12, "near": 0.001131370849898476}
+    return _lit_triangle(directory, FLOOR_TRI, FLOOR_LIGHT, [0.5, 0.6, 0.7], view, "shadows")
 
 
 def _side_scene(directory: Path, shift: float) -> resolved.ResolvedScene:
     s = np.array([shift, -shift, shift])
-    write_scene(
-        directory,
-        [(np.asarray(SIDE_TRI) + s).tolist()],
-        eye=tuple(np.array([1025.5, -1021.5, 1028.0]) + s),
-        look_at=tuple(np.array([1024.0, -1023.8, 1024.0]) + s),
-        vfov_deg=1.977527745565561,
-        width=10,
-        height=2,
-        near=0.0008522910302183962,
-        requires=("depth", "ids", "lambert", "point_light", "shadowless", "two_sided"),
-        materials=[{"name": "m0", "albedo": [0.2, 0.7, 0.3], "emission": [0.0, 0.0, 0.0]}],
-        lights=[{"kind": "point", "position": (np.asarray(SIDE_LIGHT) + s).tolist(), "intensity": [2.0, 3.0, 4.0]}],
-    )
-    return resolved.load(directory)
+    view: dict[str, Any] = {
+        "eye": tuple(np.array([1025.5, -1021.5, 1028.0]) + s),
+        "look_at": tuple(np.array([1024.0, -1023.8, 1024.0]) + s),
+    }
+    view |= {"vfov_deg": 1.977527745565561, "width": 10, "height": 2, "near": 0.0008522910302183962}
+    light = {"kind": "point", "position": (np.asarray(SIDE_LIGHT) + s).tolist(), "intensity": [2.0, 3.0, 4.0]}
+    return _lit_triangle(directory, np.asarray(SIDE_TRI) + s, light, [0.2, 0.7, 0.3], view, "shadowless")
 
 
 def _reference(scene: resolved.ResolvedScene) -> Reference:
