@@ -7,6 +7,14 @@ use rayon::prelude::*;
 /// Background value of the ID buffers.
 pub const BACKGROUND_ID: u32 = u32::MAX;
 
+/// Image rows per task of [`Frame::from_keys`] (its normal table lives for
+/// a task, so a triangle over a few rows is looked up once).
+const FRAME_ROWS: usize = 16;
+
+/// Slots of [`Frame::from_keys`]' table of normals by prim (20 KB: the
+/// first-level cache).
+const NORMAL_SLOTS: usize = 1024;
+
 /// Per-pixel results of a visibility render, row-major, row 0 at the top.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Frame {
@@ -44,37 +52,62 @@ impl Frame {
         seconds: f64,
     ) -> Frame {
         let cam = &scene.camera;
-        // One pass, split by rows across rayon's workers. Neighbouring pixels
-        // often show the same triangle, so the last one's object id and normal
-        // are reused (a normal is an f64 cross product and square root).
+        // One pass, split into bands of rows across rayon's workers. Each
+        // band keeps the object id and normal of the triangles it met in a
+        // small table by prim (a normal is an f64 cross product, square
+        // root and division, and on a dense mesh most triangles span two or
+        // three rows of few pixels each). The four buffers start unwritten,
+        // as the raster's keys do: zeroing 48 MB at 1080p only for the pass
+        // to overwrite every element cost a memset as long as a tenth of
+        // the raster's frame.
         let n = keys.len();
-        let row = (cam.width as usize).max(1);
-        let mut z = vec![0f32; n];
-        let mut prim = vec![0u32; n];
-        let mut object = vec![0u32; n];
-        let mut normal = vec![[0f32; 3]; n];
-        keys.par_chunks(row)
-            .zip(z.par_chunks_mut(row))
-            .zip(prim.par_chunks_mut(row))
-            .zip(object.par_chunks_mut(row))
-            .zip(normal.par_chunks_mut(row))
+        let rows = (cam.width as usize).max(1) * FRAME_ROWS;
+        let mut z: Vec<f32> = Vec::with_capacity(n);
+        let mut prim: Vec<u32> = Vec::with_capacity(n);
+        let mut object: Vec<u32> = Vec::with_capacity(n);
+        let mut normal: Vec<[f32; 3]> = Vec::with_capacity(n);
+        keys.par_chunks(rows)
+            .zip(z.spare_capacity_mut()[..n].par_chunks_mut(rows))
+            .zip(prim.spare_capacity_mut()[..n].par_chunks_mut(rows))
+            .zip(object.spare_capacity_mut()[..n].par_chunks_mut(rows))
+            .zip(normal.spare_capacity_mut()[..n].par_chunks_mut(rows))
             .for_each(|((((keys, z), prim), object), normal)| {
-                let mut last = (u32::MAX, BACKGROUND_ID, [0.0; 3]);
+                // Slot `p % NORMAL_SLOTS` holds prim `p`'s object id and
+                // normal when its tag is `p`. Every slot starts with a tag
+                // that does not map to it (`u32::MAX` maps to the last
+                // slot, whose tag starts at 0), so no prim ever reads a
+                // slot it did not fill.
+                let mut cache = [(u32::MAX, BACKGROUND_ID, [0f32; 3]); NORMAL_SLOTS];
+                cache[NORMAL_SLOTS - 1].0 = 0;
                 for (i, &k) in keys.iter().enumerate() {
-                    z[i] = key_depth(k);
+                    z[i].write(key_depth(k));
                     let p = key_prim(k);
-                    prim[i] = p;
+                    prim[i].write(p);
                     if k == NO_HIT {
-                        (object[i], normal[i]) = (BACKGROUND_ID, [0.0; 3]);
+                        object[i].write(BACKGROUND_ID);
+                        normal[i].write([0.0; 3]);
                         continue;
                     }
-                    if p != last.0 {
+                    let slot = &mut cache[p as usize % NORMAL_SLOTS];
+                    if slot.0 != p {
                         let t = &scene.triangles[p as usize];
-                        last = (p, scene.object_ids[p as usize], geometric_normal(t));
+                        *slot = (p, scene.object_ids[p as usize], geometric_normal(t));
                     }
-                    (object[i], normal[i]) = (last.1, last.2);
+                    object[i].write(slot.1);
+                    normal[i].write(slot.2);
                 }
             });
+        // SAFETY: the bands above are the disjoint chunks of `0..n` of all
+        // five slices, in order, and each band's loop wrote element `i` of
+        // `z`, `prim`, `object` and `normal` for every `i` of its band (the
+        // background branch writes the last two before `continue`); `n` is
+        // within each vector's capacity.
+        unsafe {
+            z.set_len(n);
+            prim.set_len(n);
+            object.set_len(n);
+            normal.set_len(n);
+        }
         Frame {
             width: cam.width,
             height: cam.height,
