@@ -3,6 +3,7 @@
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{geometric_normal, key_depth, key_prim, Counters, NO_HIT};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Background value of the ID buffers.
 pub const BACKGROUND_ID: u32 = u32::MAX;
@@ -14,6 +15,130 @@ const FRAME_ROWS: usize = 16;
 /// Slots of [`Frame::from_keys`]' table of normals by prim (20 KB: the
 /// first-level cache).
 const NORMAL_SLOTS: usize = 1024;
+
+/// A frame's four buffers while bands of pixels fill them, unwritten until
+/// then: zeroing 48 MB at 1080p only for the bands to overwrite every
+/// element cost a memset as long as a tenth of the raster's frame. The
+/// raster fills each band of tiles right after drawing it (its triangles
+/// still in cache), the other loops through [`Frame::from_keys`]; both
+/// through [`BandBuffers::fill`], so the buffers are the same function of
+/// the keys.
+pub(crate) struct FrameBuffers {
+    /// Pixels.
+    n: usize,
+    /// Depth.
+    z: Vec<f32>,
+    /// Triangle ids.
+    prim: Vec<u32>,
+    /// Object ids.
+    object: Vec<u32>,
+    /// Normals.
+    normal: Vec<[f32; 3]>,
+}
+
+/// One band of a [`FrameBuffers`], to fill.
+pub(crate) struct BandBuffers<'a> {
+    /// Depth.
+    z: &'a mut [MaybeUninit<f32>],
+    /// Triangle ids.
+    prim: &'a mut [MaybeUninit<u32>],
+    /// Object ids.
+    object: &'a mut [MaybeUninit<u32>],
+    /// Normals.
+    normal: &'a mut [MaybeUninit<[f32; 3]>],
+}
+
+impl FrameBuffers {
+    /// Room for `n` pixels, none written.
+    pub(crate) fn with_capacity(n: usize) -> FrameBuffers {
+        FrameBuffers {
+            n,
+            z: Vec::with_capacity(n),
+            prim: Vec::with_capacity(n),
+            object: Vec::with_capacity(n),
+            normal: Vec::with_capacity(n),
+        }
+    }
+
+    /// The pixels in bands of `len` (the last one shorter), in order.
+    pub(crate) fn bands(&mut self, len: usize) -> Vec<BandBuffers<'_>> {
+        let n = self.n;
+        let z = self.z.spare_capacity_mut()[..n].chunks_mut(len);
+        let prim = self.prim.spare_capacity_mut()[..n].chunks_mut(len);
+        let object = self.object.spare_capacity_mut()[..n].chunks_mut(len);
+        let normal = self.normal.spare_capacity_mut()[..n].chunks_mut(len);
+        z.zip(prim)
+            .zip(object.zip(normal))
+            .map(|((z, prim), (object, normal))| BandBuffers {
+                z,
+                prim,
+                object,
+                normal,
+            })
+            .collect()
+    }
+
+    /// The four buffers, every pixel's.
+    ///
+    /// # Safety
+    /// Every band of one call of [`FrameBuffers::bands`] was filled
+    /// ([`BandBuffers::fill`]).
+    pub(crate) unsafe fn assume_filled(mut self) -> (Vec<f32>, Vec<u32>, Vec<u32>, Vec<[f32; 3]>) {
+        let n = self.n;
+        // SAFETY: the caller's contract: the bands partition `0..n` of each
+        // vector (`n` within each one's capacity) and `fill` wrote every
+        // element of its band.
+        unsafe {
+            self.z.set_len(n);
+            self.prim.set_len(n);
+            self.object.set_len(n);
+            self.normal.set_len(n);
+        }
+        (self.z, self.prim, self.object, self.normal)
+    }
+}
+
+impl BandBuffers<'_> {
+    /// Writes every pixel of the band from its `keys` (as many): depth and
+    /// prim from the key, object id and normal looked up from the prim.
+    /// A small table by prim keeps the object ids and normals of the
+    /// triangles the band met (a normal is an f64 cross product, square
+    /// root and division; on a dense mesh a triangle spans a few pixels
+    /// over two or three rows).
+    pub(crate) fn fill(self, scene: &ResolvedScene, keys: &[u64]) {
+        let BandBuffers {
+            z,
+            prim,
+            object,
+            normal,
+        } = self;
+        let m = keys.len();
+        assert!(z.len() == m && prim.len() == m && object.len() == m && normal.len() == m);
+        // Slot `p % NORMAL_SLOTS` holds prim `p`'s object id and normal
+        // when its tag is `p`. Every slot starts with a tag that does not
+        // map to it (`u32::MAX` maps to the last slot, whose tag starts at
+        // 0), so no prim reads a slot it did not fill.
+        let mut cache = [(u32::MAX, BACKGROUND_ID, [0f32; 3]); NORMAL_SLOTS];
+        cache[NORMAL_SLOTS - 1].0 = 0;
+        for (i, &k) in keys.iter().enumerate() {
+            z[i].write(key_depth(k));
+            let p = key_prim(k);
+            prim[i].write(p);
+            if k == NO_HIT {
+                object[i].write(BACKGROUND_ID);
+                normal[i].write([0.0; 3]);
+                continue;
+            }
+            let slot = &mut cache[p as usize % NORMAL_SLOTS];
+            if slot.0 != p {
+                let t = &scene.triangles[p as usize];
+                *slot = (p, scene.object_ids[p as usize], geometric_normal(t));
+            }
+            object[i].write(slot.1);
+            normal[i].write(slot.2);
+        }
+    }
+}
 
 /// Per-pixel results of a visibility render, row-major, row 0 at the top.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,65 +177,43 @@ impl Frame {
         seconds: f64,
     ) -> Frame {
         let cam = &scene.camera;
-        // One pass, split into bands of rows across rayon's workers. Each
-        // band keeps the object id and normal of the triangles it met in a
-        // small table by prim (a normal is an f64 cross product, square
-        // root and division, and on a dense mesh most triangles span two or
-        // three rows of few pixels each). The four buffers start unwritten,
-        // as the raster's keys do: zeroing 48 MB at 1080p only for the pass
-        // to overwrite every element cost a memset as long as a tenth of
-        // the raster's frame.
+        // Bands of rows across rayon's workers ([`BandBuffers::fill`]).
         let n = keys.len();
         let rows = (cam.width as usize).max(1) * FRAME_ROWS;
-        let mut z: Vec<f32> = Vec::with_capacity(n);
-        let mut prim: Vec<u32> = Vec::with_capacity(n);
-        let mut object: Vec<u32> = Vec::with_capacity(n);
-        let mut normal: Vec<[f32; 3]> = Vec::with_capacity(n);
+        let mut buffers = FrameBuffers::with_capacity(n);
         keys.par_chunks(rows)
-            .zip(z.spare_capacity_mut()[..n].par_chunks_mut(rows))
-            .zip(prim.spare_capacity_mut()[..n].par_chunks_mut(rows))
-            .zip(object.spare_capacity_mut()[..n].par_chunks_mut(rows))
-            .zip(normal.spare_capacity_mut()[..n].par_chunks_mut(rows))
-            .for_each(|((((keys, z), prim), object), normal)| {
-                // Slot `p % NORMAL_SLOTS` holds prim `p`'s object id and
-                // normal when its tag is `p`. Every slot starts with a tag
-                // that does not map to it (`u32::MAX` maps to the last
-                // slot, whose tag starts at 0), so no prim ever reads a
-                // slot it did not fill.
-                let mut cache = [(u32::MAX, BACKGROUND_ID, [0f32; 3]); NORMAL_SLOTS];
-                cache[NORMAL_SLOTS - 1].0 = 0;
-                for (i, &k) in keys.iter().enumerate() {
-                    z[i].write(key_depth(k));
-                    let p = key_prim(k);
-                    prim[i].write(p);
-                    if k == NO_HIT {
-                        object[i].write(BACKGROUND_ID);
-                        normal[i].write([0.0; 3]);
-                        continue;
-                    }
-                    let slot = &mut cache[p as usize % NORMAL_SLOTS];
-                    if slot.0 != p {
-                        let t = &scene.triangles[p as usize];
-                        *slot = (p, scene.object_ids[p as usize], geometric_normal(t));
-                    }
-                    object[i].write(slot.1);
-                    normal[i].write(slot.2);
-                }
-            });
-        // SAFETY: the bands above are the disjoint chunks of `0..n` of all
-        // five slices, in order, and each band's loop wrote element `i` of
-        // `z`, `prim`, `object` and `normal` for every `i` of its band (the
-        // background branch writes the last two before `continue`); `n` is
-        // within each vector's capacity.
-        unsafe {
-            z.set_len(n);
-            prim.set_len(n);
-            object.set_len(n);
-            normal.set_len(n);
-        }
+            .zip(buffers.bands(rows))
+            .for_each(|(keys, band)| band.fill(scene, keys));
+        // SAFETY: every band of `bands(rows)` was zipped with the keys'
+        // chunk of the same length (both chunk `0..n` by `rows`) and filled.
+        let (z, prim, object, normal) = unsafe { buffers.assume_filled() };
         Frame {
             width: cam.width,
             height: cam.height,
+            z,
+            prim,
+            object,
+            normal,
+            coverage,
+            counters,
+            renderer: renderer.to_string(),
+            seconds,
+        }
+    }
+
+    /// The frame of buffers a loop filled band by band (the raster's).
+    pub(crate) fn from_buffers(
+        scene: &ResolvedScene,
+        buffers: (Vec<f32>, Vec<u32>, Vec<u32>, Vec<[f32; 3]>),
+        coverage: Option<Vec<[u16; 2]>>,
+        counters: Counters,
+        renderer: &str,
+        seconds: f64,
+    ) -> Frame {
+        let (z, prim, object, normal) = buffers;
+        Frame {
+            width: scene.camera.width,
+            height: scene.camera.height,
             z,
             prim,
             object,

@@ -27,7 +27,7 @@ pub mod screen_depth;
 pub(crate) mod timing;
 
 use crate::camera::{Camera, PixelRay};
-use crate::frame::{Frame, PixelKeys};
+use crate::frame::{BandBuffers, Frame, FrameBuffers, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::raster::bins::{Binned, Bins};
 use crate::raster::bounds::BoxMargin;
@@ -87,8 +87,25 @@ pub fn render(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
-    let k = render_keys(scene, opts, progress);
-    k.into_frame(scene, start.elapsed().as_secs_f64())
+    let mut buffers = FrameBuffers::with_capacity(scene.camera.pixel_count());
+    let k = keys_impl(
+        scene,
+        opts,
+        Mode::new(&scene.camera, true),
+        progress,
+        Some(&mut buffers),
+    );
+    // SAFETY: `keys_impl` filled every band of one `bands` call (it asserts
+    // each band's keys were all written before filling its buffers).
+    let buffers = unsafe { buffers.assume_filled() };
+    Frame::from_buffers(
+        scene,
+        buffers,
+        k.coverage,
+        k.counters,
+        k.renderer,
+        start.elapsed().as_secs_f64(),
+    )
 }
 
 /// [`render`] without the edge-function fast path: every bounding-box pixel
@@ -101,7 +118,7 @@ pub fn render_exact(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
-    let k = keys_impl(scene, opts, Mode::new(&scene.camera, false), progress);
+    let k = keys_impl(scene, opts, Mode::new(&scene.camera, false), progress, None);
     k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
@@ -112,7 +129,7 @@ pub fn render_keys(
     opts: RasterOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> PixelKeys {
-    keys_impl(scene, opts, Mode::new(&scene.camera, true), progress)
+    keys_impl(scene, opts, Mode::new(&scene.camera, true), progress, None)
 }
 
 /// How [`keys_impl`] works: the fast path or the pure predicate, box
@@ -143,12 +160,16 @@ impl Mode {
     }
 }
 
-/// The visibility pass.
+/// The visibility pass; with `frame`, each band of tiles also fills its
+/// rows of the frame's buffers ([`crate::frame::BandBuffers::fill`]) right
+/// after drawing them, while the band's triangles are still in cache
+/// (every band of one `frame.bands` call).
 fn keys_impl(
     scene: &ResolvedScene,
     opts: RasterOptions,
     mode: Mode,
     progress: &(dyn Fn(u64) + Sync),
+    frame: Option<&mut FrameBuffers>,
 ) -> PixelKeys {
     let margin = mode.margin;
     let mode = Mode {
@@ -182,11 +203,19 @@ fn keys_impl(
     } else {
         (0..tiles_y).map(|_| &mut [][..]).collect()
     };
+    // One frame band per key band (each `fill` asserts its band's length
+    // is its keys', so the frame has the keys' `n` pixels).
+    let frame_bands: Vec<Option<BandBuffers>> = match frame {
+        Some(f) => f.bands(band).into_iter().map(Some).collect(),
+        None => (0..tiles_y).map(|_| None).collect(),
+    };
+    assert_eq!(frame_bands.len(), tiles_y as usize);
     let (counters, filled) = keys.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .zip(cov_bands.par_iter_mut())
+        .zip(frame_bands)
         .enumerate()
-        .map(|(ty, (kband, cband))| {
+        .map(|(ty, ((kband, cband), fband))| {
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
@@ -220,6 +249,15 @@ fn keys_impl(
                 }
                 out.fill();
                 written += out.tw * out.th;
+            }
+            if let Some(fband) = fband {
+                assert_eq!(written, kband.len(), "raster tiles left keys unwritten");
+                // SAFETY: the band's tiles partition it and each wrote its
+                // whole rectangle (`TileOut::fill`), `written` keys in all,
+                // as many as the band holds; `MaybeUninit<u64>` and `u64`
+                // share a layout.
+                let kband = unsafe { &*(&kband[..] as *const [MaybeUninit<u64>] as *const [u64]) };
+                fband.fill(scene, kband);
             }
             progress(u64::from(tiles_x));
             (c, written)
@@ -1508,6 +1546,7 @@ mod tests {
                     ..exact
                 },
                 &|_| {},
+                None,
             );
             let tight = render_keys(&scene, opts, &|_| {});
             assert!(
@@ -1523,6 +1562,7 @@ mod tests {
                     ..exact
                 },
                 &|_| {},
+                None,
             );
             lost_without_margin += usize::from(!same_keys(&whole, &bare));
             assert!(
@@ -1615,8 +1655,8 @@ mod tests {
         for (what, scene) in layered_scenes() {
             for fast in [true, false] {
                 let on = Mode::new(&scene.camera, fast);
-                let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {});
-                let with = keys_impl(&scene, opts, on, &|_| {});
+                let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {}, None);
+                let with = keys_impl(&scene, opts, on, &|_| {}, None);
                 assert!(same_keys(&off, &with), "{what}: skipping changed a key");
                 // The counter says exactly what was skipped.
                 assert_eq!(off.counters.hidden_skipped, 0, "{what}");
@@ -1630,7 +1670,7 @@ mod tests {
                     hiz_factor: 1.01,
                     ..on
                 };
-                let wrong = keys_impl(&scene, opts, high, &|_| {});
+                let wrong = keys_impl(&scene, opts, high, &|_| {}, None);
                 broken += usize::from(!same_keys(&off, &wrong));
             }
             fast_equals_exact(&what, &scene);
