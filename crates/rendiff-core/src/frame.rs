@@ -236,29 +236,44 @@ mod tests {
     use super::*;
     use crate::visibility::hit_key;
 
-    /// Every pixel's buffers are its own key's: runs of one prim (where the
-    /// last lookup is reused), alternating prims and background all match a
-    /// per-pixel lookup, across row boundaries too.
+    /// Every pixel's buffers are its own key's: runs of one prim (where a
+    /// band's table reuses a lookup), alternating prims, prims that share a
+    /// slot of the table (the icosphere's 1280 triangles, prims 1024 apart)
+    /// and background all match a per-pixel lookup, across row and band
+    /// boundaries too.
     #[test]
     fn buffers_follow_each_pixels_key() {
+        for (name, spread) in [("three_triangles", 1), ("icosphere", NORMAL_SLOTS as u32)] {
+            buffers_follow_keys(name, spread);
+        }
+    }
+
+    fn buffers_follow_keys(name: &str, spread: u32) {
         let s = crate::scene::Scene::load(
             &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../../scenes/three_triangles.toml"),
+                .join(format!("../../scenes/{name}.toml")),
         )
         .unwrap();
         let scene = ResolvedScene::resolve(&s).unwrap();
         let cam = &scene.camera;
         let tris = scene.triangles.len() as u32;
+        // Runs of 7 pixels alternate prims `j + spread` and `j`: on the
+        // icosphere two prims of one slot.
+        assert!(tris > spread, "{name}: too few triangles");
         let keys: Vec<u64> = (0..cam.pixel_count() as u32)
             .map(|i| match (i / 7) % 5 {
                 0 => NO_HIT,
-                r => hit_key(1.0 + i as f32, (r + i / 97) % tris),
+                r => hit_key(1.0 + i as f32, r % 2 * spread + i / 97 % (tris - spread)),
             })
             .collect();
         let f = Frame::from_keys(&scene, &keys, None, Counters::default(), "t", 0.0);
         for (i, &k) in keys.iter().enumerate() {
-            assert_eq!(f.z[i].to_bits(), key_depth(k).to_bits(), "pixel {i}");
-            assert_eq!(f.prim[i], key_prim(k), "pixel {i}");
+            assert_eq!(
+                f.z[i].to_bits(),
+                key_depth(k).to_bits(),
+                "{name}: pixel {i}"
+            );
+            assert_eq!(f.prim[i], key_prim(k), "{name}: pixel {i}");
             if k == NO_HIT {
                 assert_eq!(
                     (f.object[i], f.normal[i]),
