@@ -296,7 +296,9 @@ pub fn key_prim(k: u64) -> u32 {
 
 /// Unit geometric normal of a triangle in world space (its winding's orientation).
 pub fn geometric_normal(t: &Tri) -> [f32; 3] {
-    let [a, b, c] = t.map(|v| v.as_dvec3());
+    // Not `t.map(..)`: an array `map` stays a call on the frame's hot path
+    // (ARCHITECTURE.md, "what the compiler").
+    let [a, b, c] = [t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3()];
     let n = (b - a).cross(c - a).normalize_or_zero();
     [n.x as f32, n.y as f32, n.z as f32]
 }

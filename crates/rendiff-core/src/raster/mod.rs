@@ -27,7 +27,7 @@ pub mod screen_depth;
 pub(crate) mod timing;
 
 use crate::camera::{Camera, PixelRay};
-use crate::frame::{Frame, PixelKeys};
+use crate::frame::{BandBuffers, Frame, FrameBuffers, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::raster::bins::{Binned, Bins};
 use crate::raster::bounds::BoxMargin;
@@ -87,8 +87,25 @@ pub fn render(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
-    let k = render_keys(scene, opts, progress);
-    k.into_frame(scene, start.elapsed().as_secs_f64())
+    let mut buffers = FrameBuffers::with_capacity(scene.camera.pixel_count());
+    let k = keys_impl(
+        scene,
+        opts,
+        Mode::new(&scene.camera, true),
+        progress,
+        Some(&mut buffers),
+    );
+    // SAFETY: `keys_impl` filled every band of one `bands` call (it asserts
+    // each band's keys were all written before filling its buffers).
+    let buffers = unsafe { buffers.assume_filled() };
+    Frame::from_buffers(
+        scene,
+        buffers,
+        k.coverage,
+        k.counters,
+        k.renderer,
+        start.elapsed().as_secs_f64(),
+    )
 }
 
 /// [`render`] without the edge-function fast path: every bounding-box pixel
@@ -101,7 +118,7 @@ pub fn render_exact(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Frame {
     let start = Instant::now();
-    let k = keys_impl(scene, opts, Mode::new(&scene.camera, false), progress);
+    let k = keys_impl(scene, opts, Mode::new(&scene.camera, false), progress, None);
     k.into_frame(scene, start.elapsed().as_secs_f64())
 }
 
@@ -112,7 +129,7 @@ pub fn render_keys(
     opts: RasterOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> PixelKeys {
-    keys_impl(scene, opts, Mode::new(&scene.camera, true), progress)
+    keys_impl(scene, opts, Mode::new(&scene.camera, true), progress, None)
 }
 
 /// How [`keys_impl`] works: the fast path or the pure predicate, box
@@ -143,12 +160,17 @@ impl Mode {
     }
 }
 
-/// The visibility pass.
+/// The visibility pass; with `frame`, each band of tiles also fills its
+/// rows of the frame's buffers ([`crate::frame::BandBuffers::fill`]) right
+/// after drawing them, while the band's triangles are still in cache
+/// (every band of one `frame.bands` call); the keys returned are then
+/// empty (each band's were kept only until its rows were filled).
 fn keys_impl(
     scene: &ResolvedScene,
     opts: RasterOptions,
     mode: Mode,
     progress: &(dyn Fn(u64) + Sync),
+    frame: Option<&mut FrameBuffers>,
 ) -> PixelKeys {
     let margin = mode.margin;
     let mode = Mode {
@@ -174,19 +196,47 @@ fn keys_impl(
     // before it reads any (`TileOut::fill`, or its first triangle's keys
     // where that covers it whole), as the tracer's packet loop writes all
     // of its own.
+    // With `frame`, the image's keys are not kept: each band's go to a
+    // scratch band per worker, read back by the band's frame rows while
+    // they are in cache (16 MB fewer at 1080p).
     let n = cam.pixel_count();
-    let mut keys: Vec<u64> = Vec::with_capacity(n);
+    let with_frame = frame.is_some();
+    let mut keys: Vec<u64> = Vec::with_capacity(if with_frame { 0 } else { n });
+    let key_bands: Vec<Option<&mut [MaybeUninit<u64>]>> = if with_frame {
+        (0..tiles_y).map(|_| None).collect()
+    } else {
+        keys.spare_capacity_mut()[..n]
+            .chunks_mut(band)
+            .map(Some)
+            .collect()
+    };
     let mut coverage = vec![[0u16; 2]; if opts.count_coverage { n } else { 0 }];
     let mut cov_bands: Vec<&mut [[u16; 2]]> = if opts.count_coverage {
         coverage.chunks_mut(band).collect()
     } else {
         (0..tiles_y).map(|_| &mut [][..]).collect()
     };
-    let (counters, filled) = keys.spare_capacity_mut()[..n]
-        .par_chunks_mut(band)
+    // One frame band per key band (each `fill` asserts its band's length
+    // is its keys', so the frame has the keys' `n` pixels).
+    let frame_bands: Vec<Option<BandBuffers>> = match frame {
+        Some(f) => f.bands(band).into_iter().map(Some).collect(),
+        None => (0..tiles_y).map(|_| None).collect(),
+    };
+    assert_eq!(frame_bands.len(), tiles_y as usize);
+    let (counters, filled) = key_bands
+        .into_par_iter()
         .zip(cov_bands.par_iter_mut())
+        .zip(frame_bands)
         .enumerate()
-        .map(|(ty, (kband, cband))| {
+        .map_init(Vec::new, |scratch, (ty, ((kband, cband), fband))| {
+            let kband = match kband {
+                Some(k) => k,
+                None => {
+                    let len = band.min(n - ty * band);
+                    scratch.resize(len, MaybeUninit::uninit());
+                    &mut scratch[..len]
+                }
+            };
             let mut c = Counters::default();
             let mut bin = Vec::new();
             let mut rays = TileRays::default();
@@ -221,6 +271,15 @@ fn keys_impl(
                 out.fill();
                 written += out.tw * out.th;
             }
+            if let Some(fband) = fband {
+                assert_eq!(written, kband.len(), "raster tiles left keys unwritten");
+                // SAFETY: the band's tiles partition it and each wrote its
+                // whole rectangle (`TileOut::fill`), `written` keys in all,
+                // as many as the band holds; `MaybeUninit<u64>` and `u64`
+                // share a layout.
+                let kband = unsafe { &*(&kband[..] as *const [MaybeUninit<u64>] as *const [u64]) };
+                fband.fill(scene, kband);
+            }
             progress(u64::from(tiles_x));
             (c, written)
         })
@@ -234,10 +293,13 @@ fn keys_impl(
     // Every band was zipped with a coverage band, and each of its tiles
     // wrote all of its keys (else no key may be read).
     assert_eq!(filled, n, "raster tiles left keys unwritten");
-    // SAFETY: the tiles wrote `n` keys: each wrote its `tw x th` rectangle
-    // whole (`TileOut::fill`), the tiles of a band partition it, and the
-    // bands are the disjoint chunks of `0..n`, in order; `n <= capacity`.
-    unsafe { keys.set_len(n) };
+    if !with_frame {
+        // SAFETY: the tiles wrote `n` keys: each wrote its `tw x th`
+        // rectangle whole (`TileOut::fill`), the tiles of a band partition
+        // it, and the bands are the disjoint chunks of `0..n`, in order;
+        // `n <= capacity`.
+        unsafe { keys.set_len(n) };
+    }
     PixelKeys {
         keys,
         coverage: opts.count_coverage.then_some(coverage),
@@ -1508,6 +1570,7 @@ mod tests {
                     ..exact
                 },
                 &|_| {},
+                None,
             );
             let tight = render_keys(&scene, opts, &|_| {});
             assert!(
@@ -1523,6 +1586,7 @@ mod tests {
                     ..exact
                 },
                 &|_| {},
+                None,
             );
             lost_without_margin += usize::from(!same_keys(&whole, &bare));
             assert!(
@@ -1615,8 +1679,8 @@ mod tests {
         for (what, scene) in layered_scenes() {
             for fast in [true, false] {
                 let on = Mode::new(&scene.camera, fast);
-                let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {});
-                let with = keys_impl(&scene, opts, on, &|_| {});
+                let off = keys_impl(&scene, opts, Mode { hiz: false, ..on }, &|_| {}, None);
+                let with = keys_impl(&scene, opts, on, &|_| {}, None);
                 assert!(same_keys(&off, &with), "{what}: skipping changed a key");
                 // The counter says exactly what was skipped.
                 assert_eq!(off.counters.hidden_skipped, 0, "{what}");
@@ -1630,7 +1694,7 @@ mod tests {
                     hiz_factor: 1.01,
                     ..on
                 };
-                let wrong = keys_impl(&scene, opts, high, &|_| {});
+                let wrong = keys_impl(&scene, opts, high, &|_| {}, None);
                 broken += usize::from(!same_keys(&off, &wrong));
             }
             fast_equals_exact(&what, &scene);
