@@ -186,19 +186,8 @@ impl Frame {
             .for_each(|(keys, band)| band.fill(scene, keys));
         // SAFETY: every band of `bands(rows)` was zipped with the keys'
         // chunk of the same length (both chunk `0..n` by `rows`) and filled.
-        let (z, prim, object, normal) = unsafe { buffers.assume_filled() };
-        Frame {
-            width: cam.width,
-            height: cam.height,
-            z,
-            prim,
-            object,
-            normal,
-            coverage,
-            counters,
-            renderer: renderer.to_string(),
-            seconds,
-        }
+        let buffers = unsafe { buffers.assume_filled() };
+        Frame::from_buffers(scene, buffers, coverage, counters, renderer, seconds)
     }
 
     /// The frame of buffers a loop filled band by band (the raster's).
