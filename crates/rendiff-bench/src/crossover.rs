@@ -403,7 +403,7 @@ fn table(p: &mut Page, rows: &Value) {
             "px/triangle",
             "raster pass s",
             "trace pass s",
-            "raster speed-up, paired: median (rounds; range)",
+            "raster speed-up, paired: median [95% interval] (rounds; range)",
             "assembly s (shared)",
             "raster frame s",
             "trace frame s",
@@ -422,7 +422,7 @@ fn table(p: &mut Page, rows: &Value) {
     );
 }
 
-/// The paired rounds' median speed-up, their count and their range.
+/// The paired rounds' median speed-up, its 95% interval, their count and their range.
 fn paired_cell(p: &Value) -> String {
     let per_round: Vec<f64> = p["trace_over_raster_per_round"]
         .as_array()
@@ -435,10 +435,13 @@ fn paired_cell(p: &Value) -> String {
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
+    let ci = &p["raster_speedup_over_trace_interval_95"];
     match p["raster_speedup_over_trace"].as_f64() {
         Some(m) if !per_round.is_empty() => format!(
-            "{} ({}; {}-{})",
+            "{} [{}, {}] ({}; {}-{})",
             num(Some(m), 3),
+            num(ci[0].as_f64(), 3),
+            num(ci[1].as_f64(), 3),
             per_round.len(),
             num(Some(lo), 3),
             num(Some(hi), 3)

@@ -464,6 +464,7 @@ fn passes_json(raster_s: Vec<f64>, trace_s: Vec<f64>) -> Value {
         "trace_keys_s": trace_s,
         "trace_over_raster_per_round": speedups,
         "raster_speedup_over_trace": super::median(&speedups),
+        "raster_speedup_over_trace_interval_95": bootstrap_median_interval(&speedups, BOOTSTRAP_SEED),
     })
 }
 
@@ -531,6 +532,17 @@ mod tests {
         assert_eq!(v["trace_over_raster_per_round"], json!([8.0, 1.0, 2.0]));
         assert_eq!(v["raster_speedup_over_trace"], 2.0);
         assert_eq!(v["rounds"], 3);
+        // The interval resamples the same rounds: it holds the median and
+        // stays within the rounds' range.
+        let [lo, hi] = [0, 1].map(|i| {
+            v["raster_speedup_over_trace_interval_95"][i]
+                .as_f64()
+                .unwrap()
+        });
+        assert!(
+            lo <= 2.0 && 2.0 <= hi && lo >= 1.0 && hi <= 8.0,
+            "{lo} {hi}"
+        );
     }
 
     /// Each round's ratio is the two speeds in that round; the answer is
