@@ -72,3 +72,40 @@ def test_serve_process_answers_in_order_and_native_stdout_goes_to_stderr(tmp_pat
     replies = [json.loads(line) for line in proc.stdout.splitlines()]
     assert [r["stdout"] for r in replies] == [f"reply for {i}\n" for i in range(3)]
     assert proc.stderr.count("native noise") == 3
+
+
+def test_serve_collects_each_requests_cycles_and_freezes_what_lives_on() -> None:
+    # Automatic collection is off, so only `settle_heap` can free the request's cycle:
+    # freezing without collecting first would keep it (frozen objects are never collected).
+    # What the worker keeps (the `kept` list) ends up frozen, so a later request's
+    # `gc.collect()` (pyrender runs one per pass) does not scan it again.
+    script = (
+        "import gc, json, sys, weakref\n"
+        "from rendiff_harness.renderers import worker\n"
+        "gc.disable()\n"
+        "class Node:\n"
+        "    pass\n"
+        "refs, kept = [], []\n"
+        "def run(argv):\n"
+        "    a, b = Node(), Node()\n"
+        "    a.other, b.other = b, a\n"
+        "    refs.append(weakref.ref(a))\n"
+        "    kept.extend(Node() for _ in range(5000))\n"
+        "    return 0\n"
+        "worker.serve(run)\n"
+        "print(json.dumps({'alive': sum(r() is not None for r in refs),\n"
+        "                  'frozen': gc.get_freeze_count()}), file=sys.stderr)\n"
+    )
+    requests = "".join(json.dumps({"argv": ["render", str(i)]}) + "\n" for i in range(2))
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        input=requests,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(HARNESS)},
+        timeout=60,
+        check=True,
+    )
+    state = json.loads(proc.stderr.strip().splitlines()[-1])
+    assert state["alive"] == 0, state
+    assert state["frozen"] >= 10000, state

@@ -25,6 +25,7 @@ isolation as one process per render, paid only when something goes wrong.
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import json
 import os
@@ -73,4 +74,20 @@ def serve(run: Callable[[Sequence[str]], int], requests: IO[str] | None = None) 
                 continue
             replies.write(json.dumps(answer(line, run)) + "\n")
             replies.flush()
+            settle_heap()
     return 0
+
+
+def settle_heap() -> None:
+    """Collect the request's garbage, then freeze what survives out of later collections.
+
+    Why: pyrender's `OffscreenRenderer.delete` runs a full `gc.collect()` after every pass,
+    and in a process holding numpy, trimesh and pyrender that scans some 125,000 objects:
+    50 ms of CPU per pass, several passes per scene. Objects alive between requests are the
+    worker's own (modules, imports, caches), so after this request's garbage is collected
+    they are frozen (`gc.freeze`), and the next request's collections scan only what it
+    creates (2-3 ms). What a render computes does not change; cyclic garbage of a request is
+    still collected, here if not before.
+    """
+    gc.collect()
+    gc.freeze()
