@@ -1,21 +1,25 @@
-//! The shading rays' copy of the tree (path and shadow rays:
-//! [`super::TraceBvh::closest`] and [`super::TraceBvh::occluded`]), laid
-//! out for their walk: each inner node holds both children's grown world
-//! boxes side by side, so one slab test does the pair, and each leaf's
-//! triangles are in f64 with their edges already taken, in the tree's prim
-//! order.
+//! The shading rays' tree (path and shadow rays:
+//! [`super::TraceBvh::closest`] and [`super::TraceBvh::occluded`]), built
+//! for them on their first query and laid out for their walk.
 //!
-//! It is the same tree, the same boxes (`grow_box` of the refit f32 boxes
-//! for the current eye), the same pruning rule, the same visiting order and
-//! the same Möller–Trumbore arithmetic as the walk over the node array it
-//! replaced, so every query returns the same hit bit for bit; only the
-//! memory it reads and the work per node changed. Before it, the walk read
-//! a node, then each child's box from another array, then each triangle's
-//! f32 corners through the prim index, and converted and subtracted them
-//! again for every ray: the shading rays' walk was four fifths of the path
-//! tracer's time (docs/radiance.md, "Equal time against Mitsuba").
+//! Its shape is its own: a binned SAH build over the triangles' boxes with
+//! leaves of up to [`MAX_LEAF`]. The visibility tree's shape (obvhs, built
+//! for pixel rays from one eye) served shading rays badly on closed rooms:
+//! on `cornell_gi` it was a chain of room-sized boxes peeling off one wall
+//! at a time, ending in a room-sized leaf of eight wall triangles, so a
+//! path ray tested 12 triangles and a shadow ray 10; here 3.3 and 0.6
+//! (docs/radiance.md, "Equal time against Mitsuba"). Boxes are the f32
+//! boxes of their triangles grown for the current eye by `grow_box`, as
+//! the visibility tree's are, so pruning stays conservative and a query's
+//! answer does not depend on the tree (only which of two triangles hit at
+//! exactly the same distance is found first may).
+//!
+//! Each inner node holds both children's boxes side by side, so one slab
+//! test does the pair, and each leaf's triangles are in f64 with their
+//! edges taken once, in leaf order, so a walk reads neither the prim index
+//! nor the scene's f32 corners.
 
-use super::{Node, RayHit, Segment};
+use super::{RayHit, Segment};
 use crate::scene::resolve::Tri;
 use crate::visibility::{grow_box, slab_misses, slab_od, RayBox};
 use glam::{DVec3, Vec3};
@@ -174,61 +178,205 @@ fn min(x: f64, y: f64) -> f64 {
 /// Deep enough for any tree obvhs builds here; a deeper one spills into a `Vec`.
 const STACK: usize = 64;
 
+/// Most triangles a leaf may hold.
+const MAX_LEAF: usize = 4;
+
+/// Bins per axis of the SAH build.
+const BINS: usize = 32;
+
+/// The SAH cost of testing one pair of boxes, in triangle tests.
+const PAIR_COST: f64 = 1.0;
+
+/// One triangle during the build: its f32 box (exact in f64) and centroid.
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    lo: Vec3,
+    hi: Vec3,
+    c: DVec3,
+    prim: u32,
+}
+
+/// Half the surface area of the box `[lo, hi]`.
+fn half_area(lo: Vec3, hi: Vec3) -> f64 {
+    let e = (hi - lo).as_dvec3().max(DVec3::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
+/// The f32 box of `items`.
+fn bounds(items: &[Item]) -> (Vec3, Vec3) {
+    items.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), it| (lo.min(it.lo), hi.max(it.hi)),
+    )
+}
+
+/// A split plane of the binned SAH build: centroids in bins below `bin`
+/// along `axis` go left.
+#[derive(Debug, Clone, Copy)]
+struct Split {
+    axis: usize,
+    cmin: f64,
+    scale: f64,
+    bin: usize,
+}
+
+impl Split {
+    /// The bin of centroid coordinate `c` on `axis`.
+    fn bin_of(&self, c: f64) -> usize {
+        bin(c, self.cmin, self.scale)
+    }
+}
+
+/// The bin of `c` for bins starting at `cmin`, `scale` bins per unit.
+fn bin(c: f64, cmin: f64, scale: f64) -> usize {
+    // `as` saturates (and maps NaN to 0), so every value lands in a bin.
+    (((c - cmin) * scale) as usize).min(BINS - 1)
+}
+
+/// Where to split `items` (box `lo..hi`): the axis and bin with the least
+/// binned SAH cost, or None when a leaf costs no more and may hold them,
+/// or when no plane separates their centroids.
+fn split_plane(items: &[Item], lo: Vec3, hi: Vec3) -> Option<Split> {
+    let (cmin, cmax) = items.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(a, b), it| (a.min(it.c), b.max(it.c)),
+    );
+    let parent = half_area(lo, hi);
+    let mut best: Option<(f64, Split)> = None;
+    for axis in 0..3 {
+        let extent = cmax[axis] - cmin[axis];
+        if !(extent > 0.0 && extent.is_finite()) {
+            continue;
+        }
+        let scale = BINS as f64 / extent;
+        let mut count = [0usize; BINS];
+        let mut blo = [Vec3::splat(f32::INFINITY); BINS];
+        let mut bhi = [Vec3::splat(f32::NEG_INFINITY); BINS];
+        for it in items {
+            let b = bin(it.c[axis], cmin[axis], scale);
+            count[b] += 1;
+            blo[b] = blo[b].min(it.lo);
+            bhi[b] = bhi[b].max(it.hi);
+        }
+        // The right side's area and count for a split below bin i.
+        let mut right = [(0.0, 0usize); BINS];
+        let (mut rlo, mut rhi, mut rn) = (blo[BINS - 1], bhi[BINS - 1], 0);
+        for i in (1..BINS).rev() {
+            rlo = rlo.min(blo[i]);
+            rhi = rhi.max(bhi[i]);
+            rn += count[i];
+            right[i] = (half_area(rlo, rhi), rn);
+        }
+        let (mut llo, mut lhi, mut ln) = (blo[0], bhi[0], 0);
+        for i in 1..BINS {
+            llo = llo.min(blo[i - 1]);
+            lhi = lhi.max(bhi[i - 1]);
+            ln += count[i - 1];
+            let (ra, rn) = right[i];
+            if ln == 0 || rn == 0 {
+                continue;
+            }
+            let cost = PAIR_COST + (half_area(llo, lhi) * ln as f64 + ra * rn as f64) / parent;
+            if best.is_none_or(|(b, _)| cost < b) {
+                let cmin = cmin[axis];
+                best = Some((
+                    cost,
+                    Split {
+                        axis,
+                        cmin,
+                        scale,
+                        bin: i,
+                    },
+                ));
+            }
+        }
+    }
+    let (cost, split) = best?;
+    (items.len() > MAX_LEAF || cost < items.len() as f64).then_some(split)
+}
+
+/// Moves the items of `split`'s left side to the front; returns how many.
+fn partition(items: &mut [Item], split: &Split) -> usize {
+    let mut left = 0;
+    for i in 0..items.len() {
+        if split.bin_of(items[i].c[split.axis]) < split.bin {
+            items.swap(i, left);
+            left += 1;
+        }
+    }
+    left
+}
+
 impl GeneralTree {
-    /// Lays out the tree `nodes` (children of an inner node at `first` and
-    /// `first + 1`, leaves over `prims[first..first + count]`) with each
-    /// node's box `grow_box(eye, refit[i])` and each prim's triangle from
-    /// `triangles`.
-    pub(super) fn new(
-        nodes: &[Node],
-        refit: &[[Vec3; 2]],
-        prims: &[u32],
-        triangles: &[Tri],
-        eye: DVec3,
-    ) -> GeneralTree {
-        let world = |i: usize| grow_box(eye, refit[i][0], refit[i][1]);
-        let tris = prims
+    /// A binned SAH tree over `prims` (their triangles from `triangles`),
+    /// each node's box the f32 box of its triangles grown for `eye`.
+    pub(super) fn new(prims: &[u32], triangles: &[Tri], eye: DVec3) -> GeneralTree {
+        let mut items: Vec<Item> = prims
             .iter()
-            .map(|&p| Tri64::new(&triangles[p as usize], p))
+            .map(|&prim| {
+                let t = &triangles[prim as usize];
+                let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+                let c = (lo.as_dvec3() + hi.as_dvec3()) * 0.5;
+                Item { lo, hi, c, prim }
+            })
             .collect();
-        let mut pairs: Vec<Pair> = Vec::with_capacity(nodes.len() / 2);
-        // Pairs in depth-first order (a node's nearer-built child next to
-        // it); `todo` holds (node, the pair slot its reference goes into).
-        let mut todo: Vec<(usize, Option<(usize, usize)>)> = vec![(0, None)];
+        debug_assert!(!items.is_empty(), "an empty tree has no general walk");
+        let (lo, hi) = bounds(&items);
+        let mut pairs: Vec<Pair> = Vec::with_capacity(items.len() / MAX_LEAF * 2);
         let mut root = Child::default();
-        while let Some((i, slot)) = todo.pop() {
-            let nd = nodes[i];
-            let me = if nd.count > 0 {
+        // Ranges of `items` to make a node of, and the pair slot (pair,
+        // side) its reference goes into (None: the root); left before
+        // right, so pairs are in depth-first order.
+        type Slot = Option<(usize, usize)>;
+        let mut todo: Vec<(usize, usize, Slot)> = vec![(0, items.len(), None)];
+        while let Some((start, end, slot)) = todo.pop() {
+            let range = &mut items[start..end];
+            let (lo, hi) = bounds(range);
+            let split = split_plane(range, lo, hi);
+            // No plane separates too many centroids: halve them as they lie.
+            let left = match split {
+                Some(sp) => partition(range, &sp),
+                None if range.len() > MAX_LEAF => range.len() / 2,
+                None => 0,
+            };
+            let me = if left == 0 {
                 Child {
-                    first: nd.first,
-                    count: nd.count,
+                    first: start as u32,
+                    count: range.len() as u32,
                 }
             } else {
-                let c = nd.first as usize;
-                let (w0, w1) = (world(c), world(c + 1));
-                let b = [
-                    [0, 1, 2].map(|k| [w0.lo[k], w1.lo[k]]),
-                    [0, 1, 2].map(|k| [w0.hi[k], w1.hi[k]]),
-                ];
                 pairs.push(Pair {
-                    b,
+                    b: [[[0.0; 2]; 3]; 2],
                     child: [Child::default(); 2],
                 });
                 let at = pairs.len() - 1;
-                todo.push((c + 1, Some((at, 1))));
-                todo.push((c, Some((at, 0))));
+                todo.push((start + left, end, Some((at, 1))));
+                todo.push((start, start + left, Some((at, 0))));
                 Child {
                     first: at as u32,
                     count: 0,
                 }
             };
             match slot {
-                Some((at, k)) => pairs[at].child[k] = me,
+                Some((at, side)) => {
+                    let w = grow_box(eye, lo, hi);
+                    let p = &mut pairs[at];
+                    p.child[side] = me;
+                    for (k, (l, h)) in w.lo.to_array().into_iter().zip(w.hi.to_array()).enumerate()
+                    {
+                        p.b[0][k][side] = l;
+                        p.b[1][k][side] = h;
+                    }
+                }
                 None => root = me,
             }
         }
+        let tris = items
+            .iter()
+            .map(|it| Tri64::new(&triangles[it.prim as usize], it.prim))
+            .collect();
         GeneralTree {
-            root_box: world(0),
+            root_box: grow_box(eye, lo, hi),
             root,
             pairs,
             tris,
@@ -344,6 +492,82 @@ impl GeneralTree {
                 }
             }
             cur = next.unwrap_or_default();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{BvhQuality, TraceBvh};
+    use super::*;
+    use crate::scene::resolve::ResolvedScene;
+    use rand::{Rng, SeedableRng};
+
+    /// Brute force over every triangle: the nearest hit's distance on `s`.
+    fn nearest(scene: &ResolvedScene, s: Segment) -> Option<f64> {
+        (0..scene.triangles.len())
+            .filter(|&i| !scene.degenerate[i])
+            .filter_map(|i| {
+                Tri64::new(&scene.triangles[i], i as u32).intersect(s.o, s.d, s.tmin, s.tmax)
+            })
+            .min_by(f64::total_cmp)
+    }
+
+    /// Random path and shadow rays (from inside the room and from outside,
+    /// some along axes, for the slab test's general case) find what a test
+    /// of every triangle finds: the same nearest distance, a triangle hit
+    /// there, and an occlusion answer that agrees.
+    #[test]
+    fn queries_agree_with_every_triangle() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        for name in ["cornell_gi.toml", "icosphere.toml"] {
+            let s = crate::scene::Scene::load(&root.join(name)).unwrap();
+            let scene = ResolvedScene::resolve(&s).unwrap();
+            let bvh = TraceBvh::build(&scene, BvhQuality::Medium);
+            let (mut hits, mut blocked) = (0, 0);
+            for i in 0..20_000 {
+                let o = DVec3::new(
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-0.5..2.5),
+                    rng.random_range(-1.5..3.0),
+                );
+                let mut d = DVec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                if i % 10 == 0 {
+                    d[i % 3] = 0.0;
+                }
+                if i % 50 == 0 {
+                    d = DVec3::ZERO;
+                    d[(i / 50) % 3] = 1.0;
+                }
+                let far = Segment {
+                    o,
+                    d,
+                    tmin: 0.0,
+                    tmax: f64::INFINITY,
+                };
+                let want = nearest(&scene, far);
+                let got = bvh.closest(&scene, far);
+                assert_eq!(got.map(|h| h.t), want, "{name} ray {i}: {far:?}");
+                if let Some(h) = got {
+                    hits += 1;
+                    let t = &scene.triangles[h.prim as usize];
+                    let again = Tri64::new(t, h.prim).intersect(o, d, 0.0, f64::INFINITY);
+                    assert_eq!(again, Some(h.t), "{name} ray {i}");
+                }
+                let short = Segment {
+                    tmax: rng.random_range(0.0..3.0),
+                    ..far
+                };
+                let occluded = bvh.occluded(&scene, short);
+                assert_eq!(occluded, nearest(&scene, short).is_some(), "{name} ray {i}");
+                blocked += usize::from(occluded);
+            }
+            assert!(hits > 2_000 && blocked > 1_000, "{name}: {hits} {blocked}");
         }
     }
 }

@@ -674,15 +674,8 @@ impl TraceBvh {
     /// Serially: a parallel loop here could steal a task that asks for the
     /// same tree while it is being made, which `OnceLock` forbids.
     fn general(&self, scene: &ResolvedScene) -> &general::GeneralTree {
-        self.general.get_or_init(|| {
-            general::GeneralTree::new(
-                &self.nodes,
-                &self.refit,
-                &self.prims,
-                &scene.triangles,
-                self.eye,
-            )
-        })
+        self.general
+            .get_or_init(|| general::GeneralTree::new(&self.prims, &scene.triangles, self.eye))
     }
 
     /// A shading ray's walk ([`general::GeneralTree::query`]).
