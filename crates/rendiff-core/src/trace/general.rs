@@ -140,7 +140,60 @@ impl SlabRay {
         (a, z)
     }
 
+    /// The entry distances of both boxes of `p`, and whether the ray
+    /// meets each within `(tmin, tmax)` ([`meets`]): [`Self::slab2`]
+    /// and [`met2`] two lanes at a time. SSE2 is part of every x86-64,
+    /// and its `maxpd`/`minpd` are `x > y ? x : y` and `x < y ? x : y`
+    /// lane by lane, the folds the scalar code does, so the results are
+    /// the same bits (a test compares them).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn enter2(&self, p: &Pair, tmin: f64, tmax: f64) -> ([f64; 2], [bool; 2]) {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86-64 baseline (every x86_64 target
+        // enables it), and none of these intrinsics reads or writes memory.
+        unsafe {
+            let mut a = _mm_set1_pd(f64::NEG_INFINITY);
+            let mut z = _mm_set1_pd(f64::INFINITY);
+            for k in 0..3 {
+                let (near, far) = (&p.b[self.near[k]][k], &p.b[1 - self.near[k]][k]);
+                let (o, inv) = (_mm_set1_pd(self.o[k]), _mm_set1_pd(self.inv[k]));
+                let n = _mm_mul_pd(_mm_sub_pd(_mm_setr_pd(near[0], near[1]), o), inv);
+                let f = _mm_mul_pd(_mm_sub_pd(_mm_setr_pd(far[0], far[1]), o), inv);
+                a = _mm_max_pd(a, n);
+                z = _mm_min_pd(z, f);
+            }
+            // `meets`: tol = (|a| min MAX + |z| min MAX) * 4e-16.
+            let sign = _mm_set1_pd(-0.0);
+            let big = _mm_set1_pd(f64::MAX);
+            let abs = |x| _mm_min_pd(_mm_andnot_pd(sign, x), big);
+            let tol = _mm_mul_pd(_mm_add_pd(abs(a), abs(z)), _mm_set1_pd(4e-16));
+            let miss = _mm_or_pd(
+                _mm_or_pd(
+                    _mm_cmpgt_pd(a, _mm_add_pd(z, tol)),
+                    _mm_cmplt_pd(z, _mm_xor_pd(tol, sign)),
+                ),
+                _mm_or_pd(
+                    _mm_cmpgt_pd(a, _mm_set1_pd(tmax)),
+                    _mm_cmplt_pd(z, _mm_set1_pd(tmin)),
+                ),
+            );
+            let bits = _mm_movemask_pd(miss);
+            let lanes = [_mm_cvtsd_f64(a), _mm_cvtsd_f64(_mm_unpackhi_pd(a, a))];
+            (lanes, [bits & 1 == 0, bits & 2 == 0])
+        }
+    }
+
+    /// [`Self::enter2`] on other targets.
+    #[cfg(not(target_arch = "x86_64"))]
+    #[inline(always)]
+    fn enter2(&self, p: &Pair, tmin: f64, tmax: f64) -> ([f64; 2], [bool; 2]) {
+        let (a, z) = self.slab2(p);
+        met2(a, z, tmin, tmax)
+    }
+
     /// The entry and exit distances of both boxes of `p`.
+    #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
     #[inline(always)]
     fn slab2(&self, p: &Pair) -> ([f64; 2], [f64; 2]) {
         let mut a = [f64::NEG_INFINITY; 2];
@@ -184,6 +237,13 @@ fn min(x: f64, y: f64) -> f64 {
 fn meets(a: f64, z: f64, tmin: f64, tmax: f64) -> bool {
     let tol = (a.abs().min(f64::MAX) + z.abs().min(f64::MAX)) * 4e-16;
     !((a > z + tol) | (z < -tol) | (a > tmax) | (z < tmin))
+}
+
+/// The entry distances `a` and [`meets`] for both lanes.
+#[inline(always)]
+fn met2(a: [f64; 2], z: [f64; 2], tmin: f64, tmax: f64) -> ([f64; 2], [bool; 2]) {
+    let m = |c: usize| meets(a[c], z[c], tmin, tmax);
+    (a, [m(0), m(1)])
 }
 
 /// Deep enough for any tree obvhs builds here; a deeper one spills into a `Vec`.
@@ -399,19 +459,19 @@ impl GeneralTree {
         let (o, d) = (s.o, s.d);
         let inv = DVec3::ONE / d;
         match SlabRay::new(o, d, inv) {
-            Some(r) => self.walk(s, any, |b| r.slab(b), |p| r.slab2(p)),
+            Some(r) => self.walk(s, any, |b| r.slab(b), |p, t0, t1| r.enter2(p, t0, t1)),
             None => self.walk(
                 s,
                 any,
                 |b| slab_od(o, d, inv, b),
-                |p| {
+                |p, tmin, tmax| {
                     let one = |c: usize| {
                         let lo = DVec3::new(p.b[0][0][c], p.b[0][1][c], p.b[0][2][c]);
                         let hi = DVec3::new(p.b[1][0][c], p.b[1][1][c], p.b[1][2][c]);
                         slab_od(o, d, inv, &RayBox { lo, hi })
                     };
                     let ((a0, z0), (a1, z1)) = (one(0), one(1));
-                    ([a0, a1], [z0, z1])
+                    met2([a0, a1], [z0, z1], tmin, tmax)
                 },
             ),
         }
@@ -430,7 +490,7 @@ impl GeneralTree {
         s: Segment,
         any: bool,
         slab: impl Fn(&RayBox) -> (f64, f64),
-        slab2: impl Fn(&Pair) -> ([f64; 2], [f64; 2]),
+        enter2: impl Fn(&Pair, f64, f64) -> ([f64; 2], [bool; 2]),
     ) -> Option<RayHit> {
         let Segment {
             o,
@@ -467,9 +527,7 @@ impl GeneralTree {
                 }
             } else {
                 let p = &self.pairs[cur.first as usize];
-                let (a, z) = slab2(p);
-                let h0 = meets(a[0], z[0], tmin, tmax);
-                let h1 = meets(a[1], z[1], tmin, tmax);
+                let (a, [h0, h1]) = enter2(p, tmin, tmax);
                 let [c0, c1] = p.child;
                 let (near, far) = match (h0, h1) {
                     (true, true) if a[1] < a[0] => (Some(c1), Some((c0, a[0]))),
@@ -555,6 +613,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// On x86-64 the SSE2 pair test gives the scalar test's bits: the same
+    /// entry distances and the same verdicts, for random rays against
+    /// every pair of `cornell_gi`'s tree and segments that end inside,
+    /// before and after the boxes.
+    #[test]
+    fn pair_test_is_the_scalar_test() {
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell_gi.toml");
+        let scene = ResolvedScene::resolve(&crate::scene::Scene::load(&file).unwrap()).unwrap();
+        let prims: Vec<u32> = (0..scene.triangles.len() as u32).collect();
+        let tree = GeneralTree::new(&prims, &scene.triangles, scene.camera.eye);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        let mut met = 0;
+        for _ in 0..2_000 {
+            let o = DVec3::new(
+                rng.random_range(-1.5..1.5),
+                rng.random_range(-0.5..2.5),
+                rng.random_range(-1.5..3.0),
+            );
+            let d = DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let Some(r) = SlabRay::new(o, d, DVec3::ONE / d) else {
+                continue;
+            };
+            for p in &tree.pairs {
+                for (tmin, tmax) in [(0.0, f64::INFINITY), (0.0, 0.5), (1.0, 2.0)] {
+                    let (a, z) = r.slab2(p);
+                    let (want_a, want) = met2(a, z, tmin, tmax);
+                    let (got_a, got) = r.enter2(p, tmin, tmax);
+                    assert_eq!(got, want);
+                    assert_eq!(got_a.map(f64::to_bits), want_a.map(f64::to_bits));
+                    met += want.iter().filter(|&&m| m).count();
+                }
+            }
+        }
+        assert!(met > 10_000, "{met}");
     }
 
     /// Random path and shadow rays (from inside the room and from outside,
