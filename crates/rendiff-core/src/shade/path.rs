@@ -5,7 +5,7 @@
 
 use super::direct::shade_point;
 use super::lights::LightSet;
-use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions};
+use super::{ray_epsilon, Bias, Features, Radiance, ShadeOptions, Surfaces};
 use crate::scene::resolve::{scene_size, ResolvedScene};
 use crate::trace::{Segment, TraceBvh};
 use glam::DVec3;
@@ -64,6 +64,7 @@ struct Tracer<'a> {
     bvh: &'a TraceBvh,
     lights: LightSet,
     features: Features,
+    surfaces: Surfaces,
     max_depth: i32,
     eps_scale: f64,
     bias: Option<Bias>,
@@ -93,7 +94,7 @@ impl Tracer<'_> {
             },
         ) {
             let x = o + d * hit.t;
-            let s = surface(scene, self.features, hit.prim, x, d, bias);
+            let s = self.surfaces.at(hit.prim, x, d);
             if s.emission != DVec3::ZERO {
                 let w = match prev_bsdf_pdf {
                     None => 1.0,
@@ -200,6 +201,7 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
         bvh,
         lights: LightSet::new(scene, opts.bias),
         features: Features::of(scene),
+        surfaces: Surfaces::new(scene, Features::of(scene), opts.bias),
         max_depth,
         eps_scale: scene_size(&scene.triangles),
         bias: opts.bias,
