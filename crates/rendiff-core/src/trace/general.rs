@@ -1,25 +1,29 @@
-//! The shading rays' tree (path and shadow rays:
-//! [`super::TraceBvh::closest`] and [`super::TraceBvh::occluded`]), built
-//! for them on their first query and laid out for their walk.
+//! The shading rays' trees (path and shadow rays: [`super::Rays`]), laid
+//! out for their walk, in one of two shapes:
 //!
-//! Its shape is its own: a binned SAH build over the triangles' boxes with
-//! leaves of up to [`MAX_LEAF`]. The visibility tree's shape (obvhs, built
-//! for pixel rays from one eye) served shading rays badly on closed rooms:
-//! on `cornell_gi` it was a chain of room-sized boxes peeling off one wall
-//! at a time, ending in a room-sized leaf of eight wall triangles, so a
-//! path ray tested 12 triangles and a shadow ray 10; here 3.3 and 0.6
-//! (docs/radiance.md, "Equal time against Mitsuba"). Boxes are the f32
-//! boxes of their triangles grown for the current eye by `grow_box`, as
-//! the visibility tree's are, so pruning stays conservative and a query's
-//! answer does not depend on the tree (only which of two triangles hit at
-//! exactly the same distance is found first may).
+//! * [`GeneralTree::from_tree`]: the visibility tree's own shape (obvhs,
+//!   built for pixel rays from one eye), made in one pass, for renders
+//!   with a few rays per pixel (direct lighting's shadow rays).
+//! * [`GeneralTree::sah`]: a binned SAH build with leaves of up to
+//!   [`MAX_LEAF`], for path tracing. The obvhs shape served shading rays
+//!   badly on closed rooms: on `cornell_gi` it was a chain of room-sized
+//!   boxes peeling off one wall at a time, ending in a room-sized leaf of
+//!   eight wall triangles, so a path ray tested 12 triangles and a shadow
+//!   ray 10; here 3.3 and 0.6 (docs/radiance.md, "Equal time against
+//!   Mitsuba"). Its build (about 1.5 µs a triangle) is paid back only by
+//!   many rays per pixel.
+//!
+//! Boxes are the f32 boxes of their triangles grown for the current eye by
+//! `grow_box`, as the visibility tree's are, so pruning stays conservative
+//! and a query's answer does not depend on the tree (only which of two
+//! triangles hit at exactly the same distance is found first may).
 //!
 //! Each inner node holds both children's boxes side by side, so one slab
-//! test does the pair, and each leaf's triangles are in f64 with their
-//! edges taken once, in leaf order, so a walk reads neither the prim index
-//! nor the scene's f32 corners.
+//! test (SSE2 on x86-64) does the pair, and each leaf's triangles are in
+//! f64 with their edges taken once, in leaf order, so a walk reads neither
+//! the prim index nor the scene's f32 corners.
 
-use super::{RayHit, Segment};
+use super::{Node, RayHit, Segment};
 use crate::scene::resolve::Tri;
 use crate::visibility::{grow_box, slab_od, RayBox};
 use glam::{DVec3, Vec3};
@@ -380,8 +384,10 @@ fn partition(items: &mut [Item], split: &Split) -> usize {
 
 impl GeneralTree {
     /// A binned SAH tree over `prims` (their triangles from `triangles`),
-    /// each node's box the f32 box of its triangles grown for `eye`.
-    pub(super) fn new(prims: &[u32], triangles: &[Tri], eye: DVec3) -> GeneralTree {
+    /// each node's box the f32 box of its triangles grown for `eye`: for
+    /// renders that trace many rays per pixel (its build takes about 1.5 µs
+    /// per triangle, 2 s for `million`'s 1.3M).
+    pub(super) fn sah(prims: &[u32], triangles: &[Tri], eye: DVec3) -> GeneralTree {
         let mut items: Vec<Item> = prims
             .iter()
             .map(|&prim| {
@@ -448,6 +454,66 @@ impl GeneralTree {
             .collect();
         GeneralTree {
             root_box: grow_box(eye, lo, hi),
+            root,
+            pairs,
+            tris,
+        }
+    }
+
+    /// The tree `nodes` as it is (children of an inner node at `first`
+    /// and `first + 1`, leaves over `prims[first..first + count]`), each
+    /// node's box `grow_box(eye, refit[i])`: made in one pass, for renders
+    /// that trace few rays per pixel.
+    pub(super) fn from_tree(
+        nodes: &[Node],
+        refit: &[[Vec3; 2]],
+        prims: &[u32],
+        triangles: &[Tri],
+        eye: DVec3,
+    ) -> GeneralTree {
+        let world = |i: usize| grow_box(eye, refit[i][0], refit[i][1]);
+        let tris = prims
+            .iter()
+            .map(|&p| Tri64::new(&triangles[p as usize], p))
+            .collect();
+        let mut pairs: Vec<Pair> = Vec::with_capacity(nodes.len() / 2);
+        // Pairs in depth-first order; `todo` holds (node, the pair slot its
+        // reference goes into).
+        let mut todo: Vec<(usize, Option<(usize, usize)>)> = vec![(0, None)];
+        let mut root = Child::default();
+        while let Some((i, slot)) = todo.pop() {
+            let nd = nodes[i];
+            let me = if nd.count > 0 {
+                Child {
+                    first: nd.first,
+                    count: nd.count,
+                }
+            } else {
+                let c = nd.first as usize;
+                let (w0, w1) = (world(c), world(c + 1));
+                let b = [
+                    [0, 1, 2].map(|k| [w0.lo[k], w1.lo[k]]),
+                    [0, 1, 2].map(|k| [w0.hi[k], w1.hi[k]]),
+                ];
+                pairs.push(Pair {
+                    b,
+                    child: [Child::default(); 2],
+                });
+                let at = pairs.len() - 1;
+                todo.push((c + 1, Some((at, 1))));
+                todo.push((c, Some((at, 0))));
+                Child {
+                    first: at as u32,
+                    count: 0,
+                }
+            };
+            match slot {
+                Some((at, k)) => pairs[at].child[k] = me,
+                None => root = me,
+            }
+        }
+        GeneralTree {
+            root_box: world(0),
             root,
             pairs,
             tris,
@@ -625,7 +691,7 @@ mod tests {
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell_gi.toml");
         let scene = ResolvedScene::resolve(&crate::scene::Scene::load(&file).unwrap()).unwrap();
         let prims: Vec<u32> = (0..scene.triangles.len() as u32).collect();
-        let tree = GeneralTree::new(&prims, &scene.triangles, scene.camera.eye);
+        let tree = GeneralTree::sah(&prims, &scene.triangles, scene.camera.eye);
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
         let mut met = 0;
         for _ in 0..2_000 {
@@ -657,8 +723,8 @@ mod tests {
     }
 
     /// Random path and shadow rays (from inside the room and from outside,
-    /// some along axes, for the slab test's general case) find what a test
-    /// of every triangle finds: the same nearest distance, a triangle hit
+    /// some along axes, for the slab test's general case), through either
+    /// shading tree, find what a test of every triangle finds: the same nearest distance, a triangle hit
     /// there, and an occlusion answer that agrees.
     #[test]
     fn queries_agree_with_every_triangle() {
@@ -693,22 +759,25 @@ mod tests {
                     tmin: 0.0,
                     tmax: f64::INFINITY,
                 };
-                let want = nearest(&scene, far);
-                let got = bvh.closest(&scene, far);
-                assert_eq!(got.map(|h| h.t), want, "{name} ray {i}: {far:?}");
-                if let Some(h) = got {
-                    hits += 1;
-                    let t = &scene.triangles[h.prim as usize];
-                    let again = Tri64::new(t, h.prim).intersect(o, d, 0.0, f64::INFINITY);
-                    assert_eq!(again, Some(h.t), "{name} ray {i}");
-                }
                 let short = Segment {
                     tmax: rng.random_range(0.0..3.0),
                     ..far
                 };
-                let occluded = bvh.occluded(&scene, short);
-                assert_eq!(occluded, nearest(&scene, short).is_some(), "{name} ray {i}");
-                blocked += usize::from(occluded);
+                let (want, want_short) = (nearest(&scene, far), nearest(&scene, short));
+                for (tree, rays) in [("own", bvh.rays(&scene)), ("sah", bvh.path_rays(&scene))] {
+                    let got = rays.closest(far);
+                    assert_eq!(got.map(|h| h.t), want, "{name} {tree} ray {i}: {far:?}");
+                    if let Some(h) = got {
+                        hits += 1;
+                        let t = &scene.triangles[h.prim as usize];
+                        let again = Tri64::new(t, h.prim).intersect(o, d, 0.0, f64::INFINITY);
+                        assert_eq!(again, Some(h.t), "{name} {tree} ray {i}");
+                    }
+                    let occluded = rays.occluded(short);
+                    assert_eq!(occluded, want_short.is_some(), "{name} {tree} ray {i}");
+                    blocked += usize::from(occluded);
+                }
+                assert_eq!(bvh.closest(&scene, far), bvh.rays(&scene).closest(far));
             }
             assert!(hits > 2_000 && blocked > 1_000, "{name}: {hits} {blocked}");
         }

@@ -99,10 +99,13 @@ struct Node {
 pub struct TraceBvh {
     /// The tree's shape, for shading's general rays.
     nodes: Vec<Node>,
-    /// The tree as shading rays walk it (world-space f64 boxes grown for
+    /// This tree as shading rays walk it (world-space f64 boxes grown for
     /// the current eye, f64 triangles), made the first time a general ray
-    /// needs it (a frame of pixel rays never does): [`Self::general`].
+    /// needs it (a frame of pixel rays never does): [`Self::rays`].
     general: std::sync::OnceLock<general::GeneralTree>,
+    /// The shading rays' SAH tree for path tracing, made on first use:
+    /// [`Self::path_rays`].
+    sah: std::sync::OnceLock<general::GeneralTree>,
     /// The eye the tree is aimed at.
     eye: glam::DVec3,
     prims: Vec<u32>,
@@ -141,6 +144,7 @@ impl TraceBvh {
         TraceBvh {
             nodes: Vec::new(),
             general: std::sync::OnceLock::new(),
+            sah: std::sync::OnceLock::new(),
             eye: glam::DVec3::ZERO,
             prims: Vec::new(),
             nodes32: Nodes32::empty(),
@@ -270,6 +274,7 @@ impl TraceBvh {
         let mut out = TraceBvh {
             nodes,
             general: std::sync::OnceLock::new(),
+            sah: std::sync::OnceLock::new(),
             eye: glam::DVec3::ZERO,
             prims,
             nodes32: Nodes32::empty(),
@@ -291,7 +296,7 @@ impl TraceBvh {
     /// tree: recomputes the eye-relative f32 node boxes and the packet
     /// frustum planes, and marks every leaf's edge data and pixel rectangles
     /// (made when a ray first reaches the leaf, `trace/lazy.rs`) and the shading
-    /// rays' tree (made for the first general ray) stale, exactly as
+    /// rays' trees (made for the first general ray) stale, exactly as
     /// [`Self::build`] leaves them, so a render through the re-aimed tree is
     /// bit for bit the render through a fresh build. Returns the seconds it
     /// took (also [`Self::camera_seconds`]): the per-camera cost `bench
@@ -315,9 +320,10 @@ impl TraceBvh {
         let cam = &scene.camera;
         let eye = cam.eye;
         debug_assert_eq!(self.refit.len(), self.nodes.len());
-        // The shading rays' tree waits for the first general ray.
+        // The shading rays' trees wait for the first general ray.
         self.eye = eye;
         self.general = std::sync::OnceLock::new();
+        self.sah = std::sync::OnceLock::new();
         // Each slot's box grown from its refit box in slot order: the same
         // bits as its node's world box ([`general`]), read
         // without a gather.
@@ -659,31 +665,72 @@ pub struct Segment {
 }
 
 impl TraceBvh {
-    /// Closest hit on the segment `s`; used by shading (shadow and path rays).
+    /// Closest hit on the segment `s` ([`Self::rays`]).
     pub fn closest(&self, scene: &ResolvedScene, s: Segment) -> Option<RayHit> {
-        self.query(scene, s, false)
+        self.rays(scene).closest(s)
+    }
+
+    /// True when anything lies on the segment `s` ([`Self::rays`]).
+    pub fn occluded(&self, scene: &ResolvedScene, s: Segment) -> bool {
+        self.rays(scene).occluded(s)
+    }
+
+    /// Shading rays through this tree's own shape, laid out for them
+    /// ([`general::GeneralTree::from_tree`]; made in one pass on first use
+    /// after each [`Self::aim`]): for renders that trace a few rays per
+    /// pixel (direct lighting's shadow rays).
+    pub fn rays(&self, scene: &ResolvedScene) -> Rays<'_> {
+        if self.nodes.is_empty() {
+            return Rays { tree: None };
+        }
+        // Serially: a parallel loop here could steal a task that asks for
+        // the same tree while it is being made, which `OnceLock` forbids.
+        let tree = self.general.get_or_init(|| {
+            general::GeneralTree::from_tree(
+                &self.nodes,
+                &self.refit,
+                &self.prims,
+                &scene.triangles,
+                self.eye,
+            )
+        });
+        Rays { tree: Some(tree) }
+    }
+
+    /// Shading rays through a tree of their own, built by SAH on first use
+    /// after each [`Self::aim`] ([`general`]): for renders that trace many
+    /// rays per pixel (path tracing), whose rays it serves several times
+    /// faster on closed rooms than the visibility tree's shape, while its
+    /// build costs more than a few rays per pixel save on large meshes.
+    /// Same answers as [`Self::rays`].
+    pub fn path_rays(&self, scene: &ResolvedScene) -> Rays<'_> {
+        if self.nodes.is_empty() {
+            return Rays { tree: None };
+        }
+        let tree = self
+            .sah
+            .get_or_init(|| general::GeneralTree::sah(&self.prims, &scene.triangles, self.eye));
+        Rays { tree: Some(tree) }
+    }
+}
+
+/// Shading rays' queries through one of a [`TraceBvh`]'s shading trees
+/// ([`TraceBvh::rays`], [`TraceBvh::path_rays`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Rays<'a> {
+    /// None for a tree over no triangles.
+    tree: Option<&'a general::GeneralTree>,
+}
+
+impl Rays<'_> {
+    /// Closest hit on the segment `s`; used by shading (shadow and path rays).
+    pub fn closest(self, s: Segment) -> Option<RayHit> {
+        self.tree?.query(s, false)
     }
 
     /// True when anything lies on the segment `s`.
-    pub fn occluded(&self, scene: &ResolvedScene, s: Segment) -> bool {
-        self.query(scene, s, true).is_some()
-    }
-
-    /// The shading rays' copy of the tree for the current eye
-    /// ([`general`]), made on first use after each [`Self::aim`].
-    /// Serially: a parallel loop here could steal a task that asks for the
-    /// same tree while it is being made, which `OnceLock` forbids.
-    fn general(&self, scene: &ResolvedScene) -> &general::GeneralTree {
-        self.general
-            .get_or_init(|| general::GeneralTree::new(&self.prims, &scene.triangles, self.eye))
-    }
-
-    /// A shading ray's walk ([`general::GeneralTree::query`]).
-    fn query(&self, scene: &ResolvedScene, s: Segment, any: bool) -> Option<RayHit> {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        self.general(scene).query(s, any)
+    pub fn occluded(self, s: Segment) -> bool {
+        self.tree.is_some_and(|t| t.query(s, true).is_some())
     }
 }
 
