@@ -146,46 +146,16 @@ impl SlabRay {
 
     /// The entry distances of both boxes of `p`, and whether the ray
     /// meets each within `(tmin, tmax)` ([`meets`]): [`Self::slab2`]
-    /// and [`met2`] two lanes at a time. SSE2 is part of every x86-64,
-    /// and its `maxpd`/`minpd` are `x > y ? x : y` and `x < y ? x : y`
-    /// lane by lane, the folds the scalar code does, so the results are
-    /// the same bits (a test compares them).
+    /// and [`met2`] two lanes at a time in SSE2 (`simd::enter_pair`, the
+    /// same bits: a test compares them).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn enter2(&self, p: &Pair, tmin: f64, tmax: f64) -> ([f64; 2], [bool; 2]) {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 is part of the x86-64 baseline (every x86_64 target
-        // enables it), and none of these intrinsics reads or writes memory.
-        unsafe {
-            let mut a = _mm_set1_pd(f64::NEG_INFINITY);
-            let mut z = _mm_set1_pd(f64::INFINITY);
-            for k in 0..3 {
-                let (near, far) = (&p.b[self.near[k]][k], &p.b[1 - self.near[k]][k]);
-                let (o, inv) = (_mm_set1_pd(self.o[k]), _mm_set1_pd(self.inv[k]));
-                let n = _mm_mul_pd(_mm_sub_pd(_mm_setr_pd(near[0], near[1]), o), inv);
-                let f = _mm_mul_pd(_mm_sub_pd(_mm_setr_pd(far[0], far[1]), o), inv);
-                a = _mm_max_pd(a, n);
-                z = _mm_min_pd(z, f);
-            }
-            // `meets`: tol = (|a| min MAX + |z| min MAX) * 4e-16.
-            let sign = _mm_set1_pd(-0.0);
-            let big = _mm_set1_pd(f64::MAX);
-            let abs = |x| _mm_min_pd(_mm_andnot_pd(sign, x), big);
-            let tol = _mm_mul_pd(_mm_add_pd(abs(a), abs(z)), _mm_set1_pd(4e-16));
-            let miss = _mm_or_pd(
-                _mm_or_pd(
-                    _mm_cmpgt_pd(a, _mm_add_pd(z, tol)),
-                    _mm_cmplt_pd(z, _mm_xor_pd(tol, sign)),
-                ),
-                _mm_or_pd(
-                    _mm_cmpgt_pd(a, _mm_set1_pd(tmax)),
-                    _mm_cmplt_pd(z, _mm_set1_pd(tmin)),
-                ),
-            );
-            let bits = _mm_movemask_pd(miss);
-            let lanes = [_mm_cvtsd_f64(a), _mm_cvtsd_f64(_mm_unpackhi_pd(a, a))];
-            (lanes, [bits & 1 == 0, bits & 2 == 0])
-        }
+        // Written out: an array `map` here was left out of line.
+        let [n0, n1, n2] = self.near;
+        let near = [&p.b[n0][0], &p.b[n1][1], &p.b[n2][2]];
+        let far = [&p.b[1 - n0][0], &p.b[1 - n1][1], &p.b[1 - n2][2]];
+        crate::simd::enter_pair(near, far, self.o, self.inv, tmin, tmax)
     }
 
     /// [`Self::enter2`] on other targets.
