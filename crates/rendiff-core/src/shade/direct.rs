@@ -6,15 +6,14 @@ use super::lights::{Delta, LightSet};
 use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions, Surface};
 use crate::frame::{Frame, BACKGROUND_ID};
 use crate::scene::resolve::{scene_size, ResolvedScene};
-use crate::trace::{Segment, TraceBvh};
+use crate::trace::{Rays, Segment, TraceBvh};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_1_PI;
 
 /// Radiance reflected toward the viewer from the delta lights (plus emission).
 pub fn shade_point(
-    scene: &ResolvedScene,
-    bvh: &TraceBvh,
+    rays: Rays<'_>,
     lights: &LightSet,
     features: Features,
     s: &Surface,
@@ -46,15 +45,12 @@ pub fn shade_point(
             } else {
                 f64::INFINITY
             };
-            if bvh.occluded(
-                scene,
-                Segment {
-                    o: origin,
-                    d: wi,
-                    tmin: 0.0,
-                    tmax,
-                },
-            ) {
+            if rays.occluded(Segment {
+                o: origin,
+                d: wi,
+                tmin: 0.0,
+                tmax,
+            }) {
                 continue;
             }
         }
@@ -80,6 +76,7 @@ pub fn render(
     let features = Features::of(scene);
     let size = scene_size(&scene.triangles);
     let w = cam.width as usize;
+    let rays = bvh.rays(scene);
     let rgb: Vec<[f32; 3]> = frame
         .prim
         .par_iter()
@@ -95,7 +92,7 @@ pub fn render(
             let x = cam.eye + ray.dir * t;
             let s = surface(scene, features, prim, x, ray.dir, opts.bias);
             let eps = ray_epsilon(size, x);
-            let l = shade_point(scene, bvh, &lights, features, &s, eps, opts.bias);
+            let l = shade_point(rays, &lights, features, &s, eps, opts.bias);
             [l.x as f32, l.y as f32, l.z as f32]
         })
         .collect();

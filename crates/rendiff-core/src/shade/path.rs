@@ -5,9 +5,9 @@
 
 use super::direct::shade_point;
 use super::lights::LightSet;
-use super::{ray_epsilon, surface, Bias, Features, Radiance, ShadeOptions};
+use super::{ray_epsilon, Bias, Features, Radiance, ShadeOptions, Surfaces};
 use crate::scene::resolve::{scene_size, ResolvedScene};
-use crate::trace::{Segment, TraceBvh};
+use crate::trace::{Rays, Segment, TraceBvh};
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -61,9 +61,11 @@ const RR_DEPTH: i32 = 3;
 /// What every path of one render reads.
 struct Tracer<'a> {
     scene: &'a ResolvedScene,
-    bvh: &'a TraceBvh,
+    /// The shading rays' SAH tree ([`TraceBvh::path_rays`]).
+    rays: Rays<'a>,
     lights: LightSet,
     features: Features,
+    surfaces: Surfaces,
     max_depth: i32,
     eps_scale: f64,
     bias: Option<Bias>,
@@ -72,7 +74,7 @@ struct Tracer<'a> {
 impl Tracer<'_> {
     /// One path through the continuous image point (fx, fy).
     fn radiance(&self, fx: f64, fy: f64, rng: &mut Pcg64Mcg) -> DVec3 {
-        let (scene, bvh, lights, bias) = (self.scene, self.bvh, &self.lights, self.bias);
+        let (scene, rays, lights, bias) = (self.scene, self.rays, &self.lights, self.bias);
         let max_depth = self.max_depth;
         let two_sided = self.features.two_sided;
         let cam = &scene.camera;
@@ -83,17 +85,14 @@ impl Tracer<'_> {
         let mut prev_bsdf_pdf: Option<f64> = None;
         let mut depth = 1;
         let mut tmin = 0.0;
-        while let Some(hit) = bvh.closest(
-            scene,
-            Segment {
-                o,
-                d,
-                tmin,
-                tmax: f64::INFINITY,
-            },
-        ) {
+        while let Some(hit) = rays.closest(Segment {
+            o,
+            d,
+            tmin,
+            tmax: f64::INFINITY,
+        }) {
             let x = o + d * hit.t;
-            let s = surface(scene, self.features, hit.prim, x, d, bias);
+            let s = self.surfaces.at(hit.prim, x, d);
             if s.emission != DVec3::ZERO {
                 let w = match prev_bsdf_pdf {
                     None => 1.0,
@@ -117,7 +116,7 @@ impl Tracer<'_> {
                     emission: DVec3::ZERO,
                     ..s
                 };
-                l += beta * shade_point(scene, bvh, lights, self.features, &surf, eps, bias);
+                l += beta * shade_point(rays, lights, self.features, &surf, eps, bias);
             }
             if let Some((lp, y, nl, pa)) =
                 lights.sample(scene, rng.random(), rng.random(), rng.random())
@@ -135,15 +134,12 @@ impl Tracer<'_> {
                 if cos_x > 0.0
                     && cos_l > 0.0
                     && pa > 0.0
-                    && !bvh.occluded(
-                        scene,
-                        Segment {
-                            o: origin,
-                            d: v,
-                            tmin: 0.0,
-                            tmax: 1.0 - 1e-7,
-                        },
-                    )
+                    && !rays.occluded(Segment {
+                        o: origin,
+                        d: v,
+                        tmin: 0.0,
+                        tmax: 1.0 - 1e-7,
+                    })
                 {
                     let pl = pa * dist2 / cos_l;
                     let pb = cos_x * FRAC_1_PI;
@@ -197,9 +193,10 @@ pub fn render(scene: &ResolvedScene, bvh: &TraceBvh, opts: ShadeOptions) -> Radi
     };
     let tracer = Tracer {
         scene,
-        bvh,
+        rays: bvh.path_rays(scene),
         lights: LightSet::new(scene, opts.bias),
         features: Features::of(scene),
+        surfaces: Surfaces::new(scene, Features::of(scene), opts.bias),
         max_depth,
         eps_scale: scene_size(&scene.triangles),
         bias: opts.bias,

@@ -17,7 +17,9 @@
 //!   ([`crate::raster::edges::ChunkOps`]) in AVX2;
 //! - [`RowLanes`]: `N` f32 lanes, width-generic (a row of eight in AVX2,
 //!   a pair of rows, sixteen, in AVX-512), for the packet tracer's row
-//!   tests (`trace::rows`).
+//!   tests (`trace::rows`);
+//! - `enter_pair`: the shading rays' test of both boxes of a node in SSE2
+//!   (the x86-64 baseline, so no token), for `trace::general`.
 //!
 //! No closure and no array `map` wraps an intrinsic here: one that the
 //! compiler left out of line ran without the kernel's target features, each
@@ -29,7 +31,12 @@
 #[cfg(target_arch = "x86_64")]
 mod chunks;
 mod lanes;
+#[cfg(target_arch = "x86_64")]
+mod pair;
 mod rows;
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use pair::enter_pair;
 
 pub use lanes::Lanes;
 pub use rows::RowLanes;

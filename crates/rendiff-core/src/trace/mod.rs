@@ -8,6 +8,7 @@
 
 mod build;
 pub(crate) mod frustum;
+mod general;
 mod lazy;
 mod nodes;
 mod packet;
@@ -22,8 +23,7 @@ use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::ResolvedScene;
 use crate::visibility::{
-    covers_by, edge_sign, fill_no_hit, grow_box, hit_key, slab_misses, Counters, RayBox, TriDepth,
-    NO_HIT,
+    covers_by, edge_sign, fill_no_hit, grow_box, hit_key, Counters, TriDepth, NO_HIT,
 };
 use glam::Vec3;
 use nodes::Nodes32;
@@ -99,10 +99,13 @@ struct Node {
 pub struct TraceBvh {
     /// The tree's shape, for shading's general rays.
     nodes: Vec<Node>,
-    /// Per node, its world-space f64 box grown for the current eye, made
-    /// the first time a general ray needs it (a frame of pixel rays never
-    /// does): [`Self::world_bounds`].
-    world: std::sync::OnceLock<Vec<RayBox>>,
+    /// This tree as shading rays walk it (world-space f64 boxes grown for
+    /// the current eye, f64 triangles), made the first time a general ray
+    /// needs it (a frame of pixel rays never does): [`Self::rays`].
+    general: std::sync::OnceLock<general::GeneralTree>,
+    /// The shading rays' SAH tree for path tracing, made on first use:
+    /// [`Self::path_rays`].
+    sah: std::sync::OnceLock<general::GeneralTree>,
     /// The eye the tree is aimed at.
     eye: glam::DVec3,
     prims: Vec<u32>,
@@ -140,7 +143,8 @@ impl TraceBvh {
     fn empty() -> TraceBvh {
         TraceBvh {
             nodes: Vec::new(),
-            world: std::sync::OnceLock::new(),
+            general: std::sync::OnceLock::new(),
+            sah: std::sync::OnceLock::new(),
             eye: glam::DVec3::ZERO,
             prims: Vec::new(),
             nodes32: Nodes32::empty(),
@@ -269,7 +273,8 @@ impl TraceBvh {
         let tree_seconds = start.elapsed().as_secs_f64();
         let mut out = TraceBvh {
             nodes,
-            world: std::sync::OnceLock::new(),
+            general: std::sync::OnceLock::new(),
+            sah: std::sync::OnceLock::new(),
             eye: glam::DVec3::ZERO,
             prims,
             nodes32: Nodes32::empty(),
@@ -290,8 +295,8 @@ impl TraceBvh {
     /// Re-aims the tree at `scene.camera`, keeping the camera-independent
     /// tree: recomputes the eye-relative f32 node boxes and the packet
     /// frustum planes, and marks every leaf's edge data and pixel rectangles
-    /// (made when a ray first reaches the leaf, `trace/lazy.rs`) and the f64 world
-    /// boxes (made for the first general ray) stale, exactly as
+    /// (made when a ray first reaches the leaf, `trace/lazy.rs`) and the shading
+    /// rays' trees (made for the first general ray) stale, exactly as
     /// [`Self::build`] leaves them, so a render through the re-aimed tree is
     /// bit for bit the render through a fresh build. Returns the seconds it
     /// took (also [`Self::camera_seconds`]): the per-camera cost `bench
@@ -315,11 +320,12 @@ impl TraceBvh {
         let cam = &scene.camera;
         let eye = cam.eye;
         debug_assert_eq!(self.refit.len(), self.nodes.len());
-        // The world-space boxes wait for the first general ray.
+        // The shading rays' trees wait for the first general ray.
         self.eye = eye;
-        self.world = std::sync::OnceLock::new();
+        self.general = std::sync::OnceLock::new();
+        self.sah = std::sync::OnceLock::new();
         // Each slot's box grown from its refit box in slot order: the same
-        // bits as its node's world box ([`Self::world_bounds`]), read
+        // bits as its node's world box ([`general`]), read
         // without a gather.
         let boxes = &self.refit_slots;
         self.nodes32.fill(&self.layout, |k, s| {
@@ -643,82 +649,6 @@ pub struct RayHit {
     pub t: f64,
 }
 
-/// A shading ray's slab test with its per-axis choice of near and far
-/// plane made once per ray, for rays whose every `1/d` is finite and
-/// non-zero. Then no NaN can arise, and plain comparisons give the same
-/// interval as [`crate::visibility::slab_od`] (same products, same
-/// maximum and minimum) without its per-node branches on `d` and its
-/// NaN-aware `max`/`min`: that test was two fifths of the path tracer's
-/// time.
-struct SlabRay {
-    o: glam::DVec3,
-    inv: glam::DVec3,
-    /// Per axis: true when `d` is negative (the near plane is `hi`).
-    neg: glam::BVec3,
-}
-
-impl SlabRay {
-    /// None when some `1/d` is infinite or zero (the general test handles those).
-    fn new(o: glam::DVec3, d: glam::DVec3, inv: glam::DVec3) -> Option<SlabRay> {
-        let ok = (0..3).all(|k| d[k] != 0.0 && inv[k].is_finite() && inv[k] != 0.0);
-        ok.then(|| SlabRay {
-            o,
-            inv,
-            neg: d.cmplt(glam::DVec3::ZERO),
-        })
-    }
-
-    #[inline(always)]
-    fn slab(&self, b: &RayBox) -> (f64, f64) {
-        let near = glam::DVec3::select(self.neg, b.hi, b.lo);
-        let far = glam::DVec3::select(self.neg, b.lo, b.hi);
-        let a = (near - self.o) * self.inv;
-        let z = (far - self.o) * self.inv;
-        let m = |x: f64, y: f64| if x > y { x } else { y };
-        let n = |x: f64, y: f64| if x < y { x } else { y };
-        // -inf and +inf start the fold as in `slab_od` (a -0.0 is kept as is).
-        (
-            m(m(m(f64::NEG_INFINITY, a.x), a.y), a.z),
-            n(n(n(f64::INFINITY, z.x), z.y), z.z),
-        )
-    }
-}
-
-/// Möller–Trumbore in f64, both sides, `t` in `(tmin, tmax)`. The
-/// barycentric tests compare against `|det|` instead of dividing first, so
-/// the division is paid only by rays that pass inside the triangle (most
-/// tests are misses).
-#[inline]
-fn intersect64(
-    t: &crate::scene::resolve::Tri,
-    o: glam::DVec3,
-    d: glam::DVec3,
-    tmin: f64,
-    tmax: f64,
-) -> Option<f64> {
-    let [a, b, c] = t.map(|v| v.as_dvec3());
-    let e1 = b - a;
-    let e2 = c - a;
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    let (sign, adet) = if det > 0.0 { (1.0, det) } else { (-1.0, -det) };
-    let s = o - a;
-    let u = s.dot(p) * sign;
-    if !(0.0..=adet).contains(&u) {
-        return None;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * sign;
-    if v < 0.0 || u + v > adet {
-        return None;
-    }
-    let tt = e2.dot(q) * sign / adet;
-    (tt > tmin && tt < tmax).then_some(tt)
-}
-
 /// The part `o + t d`, `t` in `(tmin, tmax)`, of a general ray: what
 /// shading asks the tracer about (path and shadow rays), as one value so
 /// every query and its walk take the same four numbers together.
@@ -735,129 +665,72 @@ pub struct Segment {
 }
 
 impl TraceBvh {
-    /// Closest hit on the segment `s`; used by shading (shadow and path rays).
+    /// Closest hit on the segment `s` ([`Self::rays`]).
     pub fn closest(&self, scene: &ResolvedScene, s: Segment) -> Option<RayHit> {
-        self.query(scene, s, false)
+        self.rays(scene).closest(s)
+    }
+
+    /// True when anything lies on the segment `s` ([`Self::rays`]).
+    pub fn occluded(&self, scene: &ResolvedScene, s: Segment) -> bool {
+        self.rays(scene).occluded(s)
+    }
+
+    /// Shading rays through this tree's own shape, laid out for them
+    /// ([`general::GeneralTree::from_tree`]; made in one pass on first use
+    /// after each [`Self::aim`]): for renders that trace a few rays per
+    /// pixel (direct lighting's shadow rays).
+    pub fn rays(&self, scene: &ResolvedScene) -> Rays<'_> {
+        if self.nodes.is_empty() {
+            return Rays { tree: None };
+        }
+        // Serially: a parallel loop here could steal a task that asks for
+        // the same tree while it is being made, which `OnceLock` forbids.
+        let tree = self.general.get_or_init(|| {
+            general::GeneralTree::from_tree(
+                &self.nodes,
+                &self.refit,
+                &self.prims,
+                &scene.triangles,
+                self.eye,
+            )
+        });
+        Rays { tree: Some(tree) }
+    }
+
+    /// Shading rays through a tree of their own, built by SAH on first use
+    /// after each [`Self::aim`] ([`general`]): for renders that trace many
+    /// rays per pixel (path tracing), whose rays it serves several times
+    /// faster on closed rooms than the visibility tree's shape, while its
+    /// build costs more than a few rays per pixel save on large meshes.
+    /// Same answers as [`Self::rays`].
+    pub fn path_rays(&self, scene: &ResolvedScene) -> Rays<'_> {
+        if self.nodes.is_empty() {
+            return Rays { tree: None };
+        }
+        let tree = self
+            .sah
+            .get_or_init(|| general::GeneralTree::sah(&self.prims, &scene.triangles, self.eye));
+        Rays { tree: Some(tree) }
+    }
+}
+
+/// Shading rays' queries through one of a [`TraceBvh`]'s shading trees
+/// ([`TraceBvh::rays`], [`TraceBvh::path_rays`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Rays<'a> {
+    /// None for a tree over no triangles.
+    tree: Option<&'a general::GeneralTree>,
+}
+
+impl Rays<'_> {
+    /// Closest hit on the segment `s`; used by shading (shadow and path rays).
+    pub fn closest(self, s: Segment) -> Option<RayHit> {
+        self.tree?.query(s, false)
     }
 
     /// True when anything lies on the segment `s`.
-    pub fn occluded(&self, scene: &ResolvedScene, s: Segment) -> bool {
-        self.query(scene, s, true).is_some()
-    }
-
-    /// Every node's world-space box grown for the current eye (the boxes
-    /// general rays test), made on first use after each [`Self::aim`].
-    /// Serially: a parallel loop here could steal a task that asks for the
-    /// same boxes while they are being made, which `OnceLock` forbids.
-    fn world_bounds(&self) -> &[RayBox] {
-        self.world.get_or_init(|| {
-            let eye = self.eye;
-            self.refit
-                .iter()
-                .map(|[lo, hi]| grow_box(eye, *lo, *hi))
-                .collect()
-        })
-    }
-
-    /// Front-to-back walk: of an inner node's two children the nearer
-    /// entry is visited first and the farther waits on the stack with its
-    /// entry distance, skipped once a closer hit lies before it. The stack
-    /// lives on the call's frame (shading traces several rays per path, and
-    /// an allocation per ray was a tenth of the path tracer's time); a tree
-    /// deeper than it spills into a `Vec`, so no tree is too deep.
-    fn query(&self, scene: &ResolvedScene, s: Segment, any: bool) -> Option<RayHit> {
-        use crate::visibility::slab_od;
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let (o, d) = (s.o, s.d);
-        let inv = glam::DVec3::ONE / d;
-        match SlabRay::new(o, d, inv) {
-            Some(r) => self.walk(scene, s, any, |b| r.slab(b)),
-            None => self.walk(scene, s, any, |b| slab_od(o, d, inv, b)),
-        }
-    }
-
-    /// [`Self::query`]'s walk with the slab test `slab` (specialized per test).
-    #[inline(always)]
-    fn walk(
-        &self,
-        scene: &ResolvedScene,
-        s: Segment,
-        any: bool,
-        slab: impl Fn(&RayBox) -> (f64, f64),
-    ) -> Option<RayHit> {
-        let Segment {
-            o,
-            d,
-            tmin,
-            mut tmax,
-        } = s;
-        const STACK: usize = 64;
-        // The box's entry distance, or None when the ray misses it within (tmin, tmax).
-        let bounds = self.world_bounds();
-        let enter = |i: u32, tmax: f64| {
-            let (a, b) = slab(&bounds[i as usize]);
-            (!(slab_misses(a, b) || a > tmax || b < tmin)).then_some(a)
-        };
-        enter(0, tmax)?;
-        let mut best: Option<RayHit> = None;
-        let mut stack = [(0u32, 0f64); STACK];
-        let mut depth = 0;
-        let mut spill: Vec<(u32, f64)> = Vec::new();
-        let mut ni = 0u32;
-        loop {
-            let node = &self.nodes[ni as usize];
-            let mut next = None;
-            if node.count > 0 {
-                for k in node.first..node.first + node.count {
-                    let prim = self.prims[k as usize];
-                    if let Some(t) = intersect64(&scene.triangles[prim as usize], o, d, tmin, tmax)
-                    {
-                        best = Some(RayHit { prim, t });
-                        if any {
-                            return best;
-                        }
-                        tmax = t;
-                    }
-                }
-            } else {
-                let (c0, c1) = (node.first, node.first + 1);
-                let e0 = enter(c0, tmax);
-                let e1 = enter(c1, tmax);
-                let (near, far) = match (e0, e1) {
-                    (Some(a0), Some(a1)) if a1 < a0 => (Some(c1), Some((c0, a0))),
-                    (Some(_), Some(a1)) => (Some(c0), Some((c1, a1))),
-                    (Some(_), None) => (Some(c0), None),
-                    (None, Some(_)) => (Some(c1), None),
-                    (None, None) => (None, None),
-                };
-                if let Some(f) = far {
-                    if depth < STACK {
-                        stack[depth] = f;
-                        depth += 1;
-                    } else {
-                        spill.push(f);
-                    }
-                }
-                next = near;
-            }
-            while next.is_none() {
-                let (n, a) = match spill.pop() {
-                    Some(f) => f,
-                    None if depth > 0 => {
-                        depth -= 1;
-                        stack[depth]
-                    }
-                    None => return best,
-                };
-                // A hit found since it was pushed may lie before its box.
-                if a <= tmax {
-                    next = Some(n);
-                }
-            }
-            ni = next.unwrap_or_default();
-        }
+    pub fn occluded(self, s: Segment) -> bool {
+        self.tree.is_some_and(|t| t.query(s, true).is_some())
     }
 }
 
