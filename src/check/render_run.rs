@@ -288,6 +288,9 @@ fn core_renders(run: &Run, job: &SceneJob, runs: &mut SceneRuns) {
                 opts.timeout,
             );
             note_loop_choice(&mut rec, choice);
+            // The reference keeps its name whichever loop rendered it (the
+            // loops' buffers are bit-identical); `info.loop_choice` says which.
+            rec.backend = name.to_string();
             rec
         };
         record(run, runs, name, rec);
