@@ -21,6 +21,21 @@ def _echo(argv: Sequence[str]) -> int:
     return 3
 
 
+def _serve(script: str, requests: int) -> subprocess.CompletedProcess[str]:
+    """Runs `script` (which calls `worker.serve`) in a process of its own, sending it
+    `requests` render requests numbered from 0; what it printed."""
+    lines = "".join(json.dumps({"argv": ["render", str(i)]}) + "\n" for i in range(requests))
+    return subprocess.run(
+        [sys.executable, "-c", script],
+        input=lines,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(HARNESS)},
+        timeout=60,
+        check=True,
+    )
+
+
 def test_answer_captures_what_the_command_prints_and_its_code() -> None:
     reply = worker.answer(json.dumps({"argv": ["render", "--x", "a b"]}), _echo)
     assert reply == {"code": 3, "stdout": "out:render --x a b\n", "stderr": "err line\n"}
@@ -59,16 +74,7 @@ def test_serve_process_answers_in_order_and_native_stdout_goes_to_stderr(tmp_pat
         "    return 0\n"
         "sys.exit(worker.serve(run))\n"
     )
-    requests = "".join(json.dumps({"argv": ["render", str(i)]}) + "\n" for i in range(3))
-    proc = subprocess.run(
-        [sys.executable, "-c", script],
-        input=requests,
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(HARNESS)},
-        timeout=60,
-        check=True,
-    )
+    proc = _serve(script, 3)
     replies = [json.loads(line) for line in proc.stdout.splitlines()]
     assert [r["stdout"] for r in replies] == [f"reply for {i}\n" for i in range(3)]
     assert proc.stderr.count("native noise") == 3
@@ -96,16 +102,7 @@ def test_serve_collects_each_requests_cycles_and_freezes_what_lives_on() -> None
         "print(json.dumps({'alive': sum(r() is not None for r in refs),\n"
         "                  'frozen': gc.get_freeze_count()}), file=sys.stderr)\n"
     )
-    requests = "".join(json.dumps({"argv": ["render", str(i)]}) + "\n" for i in range(2))
-    proc = subprocess.run(
-        [sys.executable, "-c", script],
-        input=requests,
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(HARNESS)},
-        timeout=60,
-        check=True,
-    )
+    proc = _serve(script, 2)
     state = json.loads(proc.stderr.strip().splitlines()[-1])
     assert state["alive"] == 0, state
     assert state["frozen"] >= 10000, state

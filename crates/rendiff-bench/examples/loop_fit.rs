@@ -254,26 +254,15 @@ fn main() -> Result<()> {
         vec!["scenes".into(), "scenes/corpus".into()]
     };
     rendiff_bench::pool(threads)?.install(|| -> Result<()> {
-        for d in &folders {
-            let mut files: Vec<PathBuf> = std::fs::read_dir(d)
-                .with_context(|| format!("{}: cannot list", d.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-                .collect();
-            files.sort();
-            for p in files {
-                let name = p.file_stem().unwrap_or_default().to_string_lossy();
-                let Ok(s) = rendiff_bench::load_scene(&p) else {
-                    eprintln!("{}: skipped (does not load)", p.display());
-                    continue;
-                };
-                eprintln!("{name}");
-                row(&name, &s, threads, rounds);
-                let (w, h) = (s.camera.width * 2, s.camera.height * 2);
-                if let Ok(big) = rendiff_bench::resized(&s, w, h) {
-                    row(&format!("{name}@{w}x{h}"), &big, threads, rounds);
-                }
-            }
+        // The same scene list `bench crossover` checks the model on.
+        for p in rendiff_bench::which_loop::corpus_files(&folders)? {
+            let name = p.file_stem().unwrap_or_default().to_string_lossy();
+            let s = rendiff_bench::load_scene(&p)?;
+            eprintln!("{name}");
+            row(&name, &s, threads, rounds);
+            let (w, h) = (s.camera.width * 2, s.camera.height * 2);
+            let big = rendiff_bench::resized(&s, w, h)?;
+            row(&format!("{name}@{w}x{h}"), &big, threads, rounds);
         }
         for size in [256u32, 512] {
             for nx in [4u32, 32, 128, 512] {

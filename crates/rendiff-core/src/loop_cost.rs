@@ -334,8 +334,10 @@ mod tests {
 
     /// What the fit data showed, on their own workloads: the raster leads on
     /// a few large triangles (two screen-filling ones, 512x512: measured
-    /// 11-13x, outside the fit data, whose fewest, 32, measured 3.6-4.4x; the
-    /// model gives 4.8x on 2 threads, 6.5x on 1), the tracer on a dense mesh over a small image
+    /// 11-13x, outside the fit data; fewer triangles lead by more, so the
+    /// estimate must be at least the lead of the fit data's fewest, 32
+    /// triangles on 512x512, measured 3.6x at the least), the tracer on a
+    /// dense mesh over a small image
     /// (`nefertiti_scan`, 99,938 triangles on 9,481 of 160x120 pixels:
     /// measured 0.60-0.81x) and on `million` at 240x240 (0.67-0.71x); on
     /// `million` at 1920x1080 the raster's pass leads again (`bench peers`:
@@ -344,7 +346,7 @@ mod tests {
     fn the_ratio_orders_the_fit_datas_clear_cases() {
         for threads in [1, 2] {
             let two = grid(2, threads);
-            assert!(trace_over_raster(&two) > 4.0, "{threads}");
+            assert!(trace_over_raster(&two) > 3.6, "{threads}");
             let scan = Workload {
                 triangles: 99938,
                 pixels: 19200,
