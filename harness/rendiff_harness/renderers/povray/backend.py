@@ -118,6 +118,7 @@ from ...judge.tolerance import (
 from ..children import die_with_parent
 from ..errors import BackendError, BackendUnavailable
 from ..spec import DIRECT_LIGHT_FEATURES, BackendSpec
+from .int_rows import int_rows
 
 NAME = "povray"
 FEATURES = DIRECT_LIGHT_FEATURES | {Feature.SHADOWS, Feature.SHADOWLESS, Feature.TWO_SIDED}
@@ -282,7 +283,7 @@ def _rows(values: Sequence[str] | Sequence[int], template: str) -> str:
 def _vertex_block(verts: np.ndarray) -> str:
     # float(np.float32) is exact in float64, and its repr round-trips, so POV-Ray's
     # float32 mesh2 storage gets back the very same f32 vertex.
-    return f"vertex_vectors {{ {verts.shape[0]},\n" + _rows(_nums(verts), "<{},{},{}>") + "\n}\n"
+    return "".join((f"vertex_vectors {{ {verts.shape[0]},\n", _rows(_nums(verts), "<{},{},{}>"), "\n}\n"))
 
 
 @dataclass(frozen=True)
@@ -302,15 +303,15 @@ def mesh_for(scene: ResolvedScene) -> MeshSdl:
 def _face_rows(faces: np.ndarray, tags: np.ndarray | None = None) -> str:
     """`<a,b,c>` per face, or `<a,b,c>,tag` (a texture index), joined by ",\\n"; ints only."""
     if tags is None:
-        return _rows(np.asarray(faces, dtype=np.int64).ravel().tolist(), "<{},{},{}>")
+        return int_rows(np.asarray(faces, dtype=np.int64), "<{},{},{}>")
     cells = np.column_stack([np.asarray(faces, dtype=np.int64), np.asarray(tags, dtype=np.int64)])
-    return _rows(cells.ravel().tolist(), "<{},{},{}>,{}")
+    return int_rows(cells, "<{},{},{}>,{}")
 
 
 def _face_block(faces: np.ndarray, with_texture: bool) -> str:
     n = faces.shape[0]
     tags = np.arange(n, dtype=np.int64) if with_texture else None
-    return f"face_indices {{ {n},\n" + _face_rows(faces, tags) + "\n}\n"
+    return "".join((f"face_indices {{ {n},\n", _face_rows(faces, tags), "\n}\n"))
 
 
 _PRELUDE = (
@@ -327,19 +328,21 @@ def ids_sdl(scene: ResolvedScene, mesh: MeshSdl) -> str:
     if n >= BACKGROUND_ID:
         raise BackendError(f"{NAME}: {n} triangles do not fit the 32-bit id encoding")
     code = np.arange(1, n + 1, dtype=np.int64)
-    lows, highs = (code & 0xFFFF).tolist(), (code >> 16).tolist()
-    textures = list(map("texture{{pigment{{rgb<{},{},0>/65535}}}}".format, lows, highs))
-    return (
-        _PRELUDE
-        + camera_sdl(scene.camera)
-        + "mesh2 {\n"
-        + mesh.vertex_block
-        + f"texture_list {{ {n},\n"
-        + ",\n".join(textures)
-        + "\n}\n"
-        + _face_block(mesh.faces, with_texture=True)
-        + clip_sdl(scene.camera)
-        + "}\n"
+    textures = int_rows(np.column_stack([code & 0xFFFF, code >> 16]), "texture{pigment{rgb<{},{},0>/65535}}")
+    # One join, not a chain of `+` (each would copy the whole text so far: 134 MB on `million`).
+    return "".join(
+        (
+            _PRELUDE,
+            camera_sdl(scene.camera),
+            "mesh2 {\n",
+            mesh.vertex_block,
+            f"texture_list {{ {n},\n",
+            textures,
+            "\n}\n",
+            _face_block(mesh.faces, with_texture=True),
+            clip_sdl(scene.camera),
+            "}\n",
+        )
     )
 
 
@@ -365,19 +368,21 @@ def depth_sdl(scene: ResolvedScene, mesh: MeshSdl, r: float) -> str:
     cam = scene.camera
     ex, ey, ez = (_num(c) for c in cam.eye)
     fx, fy, fz = (_num(c) for c in cam.forward)
-    return (
-        _PRELUDE
-        + camera_sdl(cam)
-        + f"#declare DF = function {{ (x-({ex}))*({fx})+(y-({ey}))*({fy})+(z-({ez}))*({fz}) }}\n"
-        + f"#declare QF = function {{ DF(x,y,z)/({_num(r)})*65536 }}\n"
-        + "#declare PH = pigment { function { floor(QF(x,y,z))/65535 } color_map {[0 rgb 0][1 rgb <2,0,0>]} }\n"
-        + "#declare PL = pigment { function { QF(x,y,z)-floor(QF(x,y,z)) } color_map {[0 rgb 0][1 rgb <0,2,0>]} }\n"
-        + "mesh2 {\n"
-        + mesh.vertex_block
-        + _face_block(mesh.faces, with_texture=False)
-        + "texture { pigment { average pigment_map {[1 PH][1 PL]} } }\n"
-        + clip_sdl(cam)
-        + "}\n"
+    return "".join(
+        (
+            _PRELUDE,
+            camera_sdl(cam),
+            f"#declare DF = function {{ (x-({ex}))*({fx})+(y-({ey}))*({fy})+(z-({ez}))*({fz}) }}\n",
+            f"#declare QF = function {{ DF(x,y,z)/({_num(r)})*65536 }}\n",
+            "#declare PH = pigment { function { floor(QF(x,y,z))/65535 } color_map {[0 rgb 0][1 rgb <2,0,0>]} }\n",
+            "#declare PL = pigment { function { QF(x,y,z)-floor(QF(x,y,z)) } color_map {[0 rgb 0][1 rgb <0,2,0>]} }\n",
+            "mesh2 {\n",
+            mesh.vertex_block,
+            _face_block(mesh.faces, with_texture=False),
+            "texture { pigment { average pigment_map {[1 PH][1 PL]} } }\n",
+            clip_sdl(cam),
+            "}\n",
+        )
     )
 
 
@@ -602,17 +607,19 @@ def _material_mesh(scene: ResolvedScene, mesh: MeshSdl, colours: np.ndarray, fin
     """mesh2 with one texture per material (colours (M, 3), already scaled) and faces tagged by material."""
     mats = scene.prim_materials()
     textures = [f"texture{{pigment{{rgb{_vec(c)}}}{finish}}}" for c in colours]
-    return (
-        "mesh2 {\n"
-        + mesh.vertex_block
-        + f"texture_list {{ {len(textures)},\n"
-        + ",\n".join(textures)
-        + "\n}\n"
-        + f"face_indices {{ {mesh.faces.shape[0]},\n"
-        + _face_rows(mesh.faces, mats)
-        + "\n}\n"
-        + clip_sdl(scene.camera)
-        + "}\n"
+    return "".join(
+        (
+            "mesh2 {\n",
+            mesh.vertex_block,
+            f"texture_list {{ {len(textures)},\n",
+            ",\n".join(textures),
+            "\n}\n",
+            f"face_indices {{ {mesh.faces.shape[0]},\n",
+            _face_rows(mesh.faces, mats),
+            "\n}\n",
+            clip_sdl(scene.camera),
+            "}\n",
+        )
     )
 
 
