@@ -48,7 +48,7 @@ pub struct RenderArgs {
     threads: Option<usize>,
     /// BVH build quality for the tracer (default: the least build + trace
     /// for one frame, measured in docs/benchmarks.md).
-    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "very_fast")]
+    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "linear")]
     bvh: BvhQuality,
     /// How the tracer's pixel rays walk the BVH (same buffers either way).
     #[arg(long, value_parser = rendiff::args::named::<trace::TraceKernel>(), default_value = "packets")]
