@@ -20,7 +20,7 @@ use std::process::ExitCode;
 pub enum Renderer {
     /// Outer loop over triangles, z-buffer, tiles in parallel.
     Raster,
-    /// Outer loop over pixels, BVH (obvhs), rows in parallel.
+    /// Outer loop over pixels, BVH (see --bvh), rows in parallel.
     Trace,
     /// Raster or trace, whichever the cost model expects to finish sooner
     /// (the same buffers either way; docs/benchmarks.md, "Which loop").

@@ -1,5 +1,6 @@
 //! Ray tracing: the outer loop runs over pixels, the inner over the triangles a
-//! BVH (built by obvhs) says the pixel ray may hit.
+//! BVH (our linear one by default, `linear.rs`, or obvhs's) says the pixel ray
+//! may hit.
 //!
 //! The BVH only prunes; every candidate is decided by [`crate::visibility`],
 //! exactly as in the rasterizer. Node boxes are recomputed here from the f32
@@ -143,7 +144,7 @@ pub struct TraceBvh {
     /// Seconds of the whole build: [`Self::tree_seconds`] plus
     /// [`Self::camera_seconds`].
     pub build_seconds: f64,
-    /// Seconds of the camera-independent part (obvhs's builder, our refit).
+    /// Seconds of the camera-independent part (the builder, the refit).
     pub tree_seconds: f64,
     /// Seconds of the last camera set-up (eye-relative node boxes, packet
     /// frustum planes): what a new camera costs with the tree kept before
