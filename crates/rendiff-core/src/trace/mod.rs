@@ -884,7 +884,11 @@ mod tests {
                     .map(|[l, h]| [l.x, l.y, l.z, h.x, h.y, h.z].map(f32::to_bits))
                     .collect()
             };
-            assert_eq!(bits(&bvh.refit), bits(&canon));
+            let (ours, refit) = (bits(&bvh.refit), bits(&canon));
+            assert_eq!(ours.len(), refit.len());
+            for (i, (a, b)) in ours.iter().zip(&refit).enumerate() {
+                assert_eq!(a, b, "node {i}'s box bits");
+            }
             let raster = crate::raster::render_keys(&scene, Default::default(), &|_| {});
             assert!(raster.keys.iter().any(|&k| k != NO_HIT));
             for kernel in [TraceKernel::Packets, TraceKernel::SingleRays] {
