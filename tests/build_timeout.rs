@@ -1,11 +1,15 @@
 //! `--timeout` bounds the tracer's BVH build too. The scene: 180,000
 //! near-duplicate triangles (one triangle shifted by i * 1e-6, so no two share
 //! an f32 box and `same_box` leaves them to obvhs's PLOC build, which is
-//! quadratic in them). With the default `very_fast` BVH (its nearest-neighbour
+//! quadratic in them). With the `very_fast` BVH (its nearest-neighbour
 //! search at its minimum) a release build took 3.6 s for 60,000 and 27 s for
 //! 180,000 on the 2-CPU VM (Nov 30, AMD): 60,000, this test's count while the
 //! default was `medium` (45 s), no longer outlasted `check`'s 5 s limit, so the
-//! count was tripled. The camera is 1,000 times farther than the triangles'
+//! count was tripled. The default BVH is now the linear one, which builds
+//! them in a fraction of a second (it sorts, so near duplicates cost it
+//! nothing): `render --timeout` is tested with `--bvh very_fast`, and
+//! `check`, which always uses the default, now finishes the same scene
+//! inside its limit. The camera is 1,000 times farther than the triangles'
 //! size, so each covers a fraction of a pixel: the raster, which `check` also
 //! runs under the limit, then loads and draws them in 0.23 s in the dev
 //! profile (4 s with the camera close, where every triangle covers the image
@@ -74,18 +78,21 @@ fn render(
 ) -> (std::process::Output, Duration) {
     let start = Instant::now();
     let mut cmd = rendiff();
-    cmd.arg("render")
-        .arg(scene)
-        .args([
-            "--renderer",
-            renderer,
-            "--timeout",
-            timeout_s,
-            "--quiet",
-            "--no-preview",
-            "-o",
-        ])
-        .arg(out);
+    cmd.arg("render").arg(scene);
+    if renderer == "trace" {
+        // obvhs's build: the linear default is not slow here.
+        cmd.args(["--bvh", "very_fast"]);
+    }
+    cmd.args([
+        "--renderer",
+        renderer,
+        "--timeout",
+        timeout_s,
+        "--quiet",
+        "--no-preview",
+        "-o",
+    ])
+    .arg(out);
     // A hang guard only: the assertion below is the bound.
     let o = output_within(&mut cmd, 600);
     (o, start.elapsed())
@@ -113,14 +120,17 @@ fn render_timeout_stops_a_slow_bvh_build() {
     );
 }
 
-/// `check --timeout` records the tracer's render as timed out, its buffers
-/// discarded, while the reference (the raster) renders. The limit applies to
-/// every render of the check, the raster's too, so it is 5 s, not 1 s: on a
-/// cold, loaded CI machine the raster's load and pass of 60,000 screen-filling
-/// triangles once took 1.65 s and was itself stopped at 1 s. 5 s is a fifth
-/// of the build's 27 s.
+/// `check` traces with the default BVH, the linear one, whose build is not
+/// quadratic in near duplicates: the scene whose `very_fast` build took 27 s
+/// (and which `check --timeout 5` recorded as timed out while that was the
+/// default) now renders inside the limit, the trace equal to the raster.
+/// The limit applies to every render of the check, the raster's too, so it
+/// is 5 s, not 1 s: on a cold, loaded CI machine the raster's load and pass
+/// of 60,000 screen-filling triangles once took 1.65 s and was itself
+/// stopped at 1 s. (`check --timeout` stopping the core's own renders is
+/// tested in `tests/check_faults.rs`.)
 #[test]
-fn check_timeout_stops_a_slow_bvh_build() {
+fn check_renders_near_duplicates_inside_its_timeout() {
     need_venv();
     let dir = tempfile::tempdir().unwrap();
     let scene = near_duplicate_scene(dir.path());
@@ -141,24 +151,13 @@ fn check_timeout_stops_a_slow_bvh_build() {
         .arg(&run);
     let out = output_within(&mut cmd, 600);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("manifest.json")).unwrap()).unwrap();
     let renders = manifest["scenes"][0]["renders"].as_array().unwrap();
-    let trace = renders.iter().find(|r| r["backend"] == "trace").unwrap();
-    assert_eq!(trace["status"], "error");
-    let msg = trace["message"].as_str().unwrap();
-    assert!(msg.contains("timed out"), "{msg}");
-    // It stopped at the limit: its own time is the limit plus what the
-    // scheduler adds on a loaded machine (the same 10 s of slack as above),
-    // against the build's 27 s.
-    let t = trace["time_s"].as_f64().unwrap();
-    let limit = CHECK_LIMIT_S as f64;
-    assert!(
-        (limit..limit + 10.0).contains(&t),
-        "trace took {t} s of a {limit} s limit"
-    );
-    let raster = renders.iter().find(|r| r["backend"] == "raster").unwrap();
-    assert_eq!(raster["status"], "ok", "{raster}");
-    assert!(!run.join("scenes/near/trace.exr").exists());
+    for backend in ["trace", "raster"] {
+        let r = renders.iter().find(|r| r["backend"] == backend).unwrap();
+        assert_eq!(r["status"], "ok", "{r}");
+    }
+    assert!(run.join("scenes/near/trace.exr").exists());
 }

@@ -199,6 +199,7 @@ fn triangles_sharing_a_box_by_the_thousand_render_identically() {
         assert_identical("shared boxes", &r, &trace_kernel(&scene, kernel));
     }
     for quality in [
+        rendiff::trace::BvhQuality::Linear,
         rendiff::trace::BvhQuality::Fastest,
         rendiff::trace::BvhQuality::Medium,
         rendiff::trace::BvhQuality::Slow,

@@ -20,7 +20,7 @@ use std::process::ExitCode;
 pub enum Renderer {
     /// Outer loop over triangles, z-buffer, tiles in parallel.
     Raster,
-    /// Outer loop over pixels, BVH (obvhs), rows in parallel.
+    /// Outer loop over pixels, BVH (see --bvh), rows in parallel.
     Trace,
     /// Raster or trace, whichever the cost model expects to finish sooner
     /// (the same buffers either way; docs/benchmarks.md, "Which loop").
@@ -48,7 +48,7 @@ pub struct RenderArgs {
     threads: Option<usize>,
     /// BVH build quality for the tracer (default: the least build + trace
     /// for one frame, measured in docs/benchmarks.md).
-    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "very_fast")]
+    #[arg(long, value_parser = rendiff::args::named::<BvhQuality>(), default_value = "linear")]
     bvh: BvhQuality,
     /// How the tracer's pixel rays walk the BVH (same buffers either way).
     #[arg(long, value_parser = rendiff::args::named::<trace::TraceKernel>(), default_value = "packets")]

@@ -13,10 +13,10 @@
 //! count's table as `bench peers` records it, with the machine's load and
 //! the other processes' share of the CPU during it.
 //!
-//! `... --example first_image -- phases QUALITY N [SCENE@WxH]` instead runs
-//! N first images of the tracer at QUALITY on 1 thread, printing each
-//! part's seconds (for a profile under `perf record`); QUALITY `raster`
-//! runs the raster's instead.
+//! `... --example first_image -- phases QUALITY N [SCENE@WxH] [THREADS]`
+//! instead runs N first images of the tracer at QUALITY on THREADS threads
+//! (default 1), printing each part's seconds (for a profile under `perf
+//! record`); QUALITY `raster` runs the raster's instead.
 
 use anyhow::{Context, Result};
 use rendiff::names::Named;
@@ -38,6 +38,7 @@ fn main() -> Result<()> {
             &arg(1, "medium"),
             arg(2, "5").parse().context("N")?,
             &arg(3, MILLION),
+            arg(4, "1").parse().context("THREADS")?,
         );
     }
     let spec: SceneSpec = arg(0, MILLION).parse().map_err(anyhow::Error::msg)?;
@@ -103,16 +104,16 @@ fn main() -> Result<()> {
     Ok(())
 }
 
-/// `n` first images of the tracer at `quality` on one thread, each part's
-/// seconds printed.
-fn phases(quality: &str, n: usize, scene: &str) -> Result<()> {
+/// `n` first images of the tracer at `quality` on `threads` threads, each
+/// part's seconds printed.
+fn phases(quality: &str, n: usize, scene: &str, threads: usize) -> Result<()> {
     if quality == "raster" {
-        return raster_only(n, scene);
+        return raster_only(n, scene, threads);
     }
     let quality = rendiff_bench::example_args::bvh_quality(quality)?;
     let spec: SceneSpec = scene.parse().map_err(anyhow::Error::msg)?;
     let scene = spec.load()?;
-    rendiff_bench::pool(1)?.install(|| {
+    rendiff_bench::pool(threads)?.install(|| {
         for _ in 0..n {
             let t0 = Instant::now();
             let bvh = TraceBvh::build(&scene, quality);
@@ -134,11 +135,12 @@ fn phases(quality: &str, n: usize, scene: &str) -> Result<()> {
     Ok(())
 }
 
-/// `n` first images of the raster on one thread, each one's seconds printed.
-fn raster_only(n: usize, scene: &str) -> Result<()> {
+/// `n` first images of the raster on `threads` threads, each one's seconds
+/// printed.
+fn raster_only(n: usize, scene: &str, threads: usize) -> Result<()> {
     let spec: SceneSpec = scene.parse().map_err(anyhow::Error::msg)?;
     let scene = spec.load()?;
-    rendiff_bench::pool(1)?.install(|| {
+    rendiff_bench::pool(threads)?.install(|| {
         for _ in 0..n {
             let t0 = Instant::now();
             let f = rendiff::raster::render(&scene, Default::default(), &|_| {});

@@ -357,6 +357,7 @@ fn visibility_group(spec: &SceneSpec, scene: &ResolvedScene, runs: usize) -> Gro
     let mut medium: Option<TraceBvh> = None;
     let mut medium_build_s = f64::NAN;
     for q in [
+        BvhQuality::Linear,
         BvhQuality::Fastest,
         BvhQuality::Fast,
         BvhQuality::Medium,

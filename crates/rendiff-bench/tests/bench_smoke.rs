@@ -398,6 +398,7 @@ fn peers_writes_throughput_ratios() {
         .collect();
     for want in [
         "core raster",
+        "core trace (linear BVH)",
         "core trace (fastest BVH)",
         "core trace (fast BVH)",
         "core trace (medium BVH)",

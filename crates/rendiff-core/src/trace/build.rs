@@ -140,9 +140,12 @@ mod tests {
     fn the_phased_build_is_obvhs_build() {
         use crate::names::Named;
         for &q in BvhQuality::ALL {
+            let Some(params) = q.params() else {
+                continue; // the linear BVH, not obvhs's builder
+            };
             let tris = scattered(5000);
-            let ours = build_bvh2(&tris, q.params(), None).unwrap();
-            let theirs = build_bvh2_from_tris(&tris, q.params(), &mut Duration::default());
+            let ours = build_bvh2(&tris, params, None).unwrap();
+            let theirs = build_bvh2_from_tris(&tris, params, &mut Duration::default());
             assert_eq!(ours.primitive_indices, theirs.primitive_indices, "{q:?}");
             assert_eq!(ours.nodes.len(), theirs.nodes.len(), "{q:?}");
             for (a, b) in ours.nodes.iter().zip(&theirs.nodes) {
@@ -160,7 +163,7 @@ mod tests {
     #[test]
     fn a_past_deadline_stops_the_build() {
         let tris = scattered(2000);
-        let p = BvhQuality::Medium.params();
+        let p = BvhQuality::Medium.params().unwrap();
         assert!(build_bvh2(&tris, p, Some(Instant::now())).is_none());
         assert!(phases(&tris, p, Some(Instant::now())).is_none());
         let later = build_bvh2(&tris, p, Some(Instant::now() + Duration::from_secs(3600))).unwrap();
