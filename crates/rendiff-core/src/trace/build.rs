@@ -113,24 +113,14 @@ mod tests {
     use obvhs::bvh2::builder::build_bvh2_from_tris;
     use std::time::Duration;
 
+    /// The shared test scatter as obvhs's triangles.
     fn scattered(n: usize) -> Vec<Triangle> {
-        // A deterministic scatter of small and large triangles.
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut f = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        (0..n)
-            .map(|i| {
-                let c = glam::Vec3A::new(f(), f(), f()) * 10.0;
-                let size = if i % 7 == 0 { 3.0 } else { 0.05 };
-                Triangle {
-                    v0: c,
-                    v1: c + glam::Vec3A::new(f(), f(), 0.0) * size,
-                    v2: c + glam::Vec3A::new(0.0, f(), f()) * size,
-                }
+        crate::trace::test_tris::scattered(n, 0x9E37_79B9_7F4A_7C15)
+            .iter()
+            .map(|t| Triangle {
+                v0: t[0].into(),
+                v1: t[1].into(),
+                v2: t[2].into(),
             })
             .collect()
     }

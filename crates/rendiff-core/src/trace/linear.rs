@@ -339,29 +339,9 @@ pub(super) fn build(tris: &[Tri], ids: &[u32], deadline: Option<Instant>) -> Opt
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_tris::scattered;
     use super::*;
     use obvhs::triangle::Triangle;
-
-    fn scattered(n: usize, seed: u64) -> Vec<Tri> {
-        let mut s = seed | 1;
-        let mut f = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        (0..n)
-            .map(|i| {
-                let c = Vec3::new(f(), f(), f()) * 10.0;
-                let size = if i % 7 == 0 { 3.0 } else { 0.05 };
-                [
-                    c,
-                    c + Vec3::new(f(), f(), 0.0) * size,
-                    c + Vec3::new(0.0, f(), f()) * size,
-                ]
-            })
-            .collect()
-    }
 
     fn all(tris: &[Tri]) -> Vec<u32> {
         (0..tris.len() as u32).collect()

@@ -18,6 +18,8 @@ pub(crate) mod primary;
 mod rect;
 pub(crate) mod rows;
 mod same_box;
+#[cfg(test)]
+mod test_tris;
 mod timing;
 
 use crate::camera::{Camera, PixelRay};
