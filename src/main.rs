@@ -56,7 +56,7 @@ enum Command {
     Export {
         /// Scene file (TOML), or a model (.obj, .gltf, .glb).
         scene: PathBuf,
-        /// Output folder (scene.json, triangles.f32, object_ids.u32).
+        /// Output folder (scene.json, triangles.f32, object_ids.u32, vertex_ids.u32).
         #[arg(short, long)]
         output: PathBuf,
     },

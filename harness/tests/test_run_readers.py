@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fixtures import write_scene
@@ -58,6 +59,27 @@ def test_data_files_of_the_wrong_size_or_outside_the_folder_are_refused(tmp_path
         (sdir / "scene.json").write_text(json.dumps({**meta, "files": {"triangles": bad}}))
         with pytest.raises(resolved.SceneError, match=r"files.triangles must be a file name"):
             resolved.load(sdir)
+
+
+def test_a_vertex_ids_file_of_the_wrong_size_or_kind_or_place_is_refused(tmp_path: Path) -> None:
+    """vertex_ids.u32 is read on demand (only the verifier needs it), with the same checks as the
+    other data files: a name outside the folder at load, a wrong size or a FIFO when read."""
+    sdir = write_scene(tmp_path / "s", TRI, [0])
+    meta = json.loads((sdir / "scene.json").read_text())
+    files = {**meta["files"], "vertex_ids": "vertex_ids.u32"}
+    (sdir / "scene.json").write_text(json.dumps({**meta, "files": files}))
+    np.array([0, 1], dtype="<u4").tofile(sdir / "vertex_ids.u32")
+    with pytest.raises(resolved.SceneError, match=r"vertex_ids.u32: is 8 bytes, expected 12"):
+        resolved.load(sdir).corner_vertex_ids()
+    (sdir / "vertex_ids.u32").unlink()
+    os.mkfifo(sdir / "vertex_ids.u32")
+    with pytest.raises(resolved.SceneError, match=r"vertex_ids.u32: is not a regular file"):
+        resolved.load(sdir).corner_vertex_ids()
+    (sdir / "scene.json").write_text(json.dumps({**meta, "files": {**files, "vertex_ids": "../v.u32"}}))
+    with pytest.raises(resolved.SceneError, match=r"files.vertex_ids must be a file name"):
+        resolved.load(sdir)
+    (sdir / "scene.json").write_text(json.dumps(meta))
+    assert resolved.load(sdir).corner_vertex_ids() is None  # none written: the verifier numbers them
 
 
 def test_a_special_manifest_is_refused(tmp_path: Path) -> None:

@@ -1,11 +1,17 @@
-"""contract/vertex_ids.py numbers vertices exactly as the np.unique / np.lexsort code it replaced."""
+"""contract/vertex_ids.py numbers vertices exactly as the np.unique / np.lexsort code it replaced,
+and proves the export's numbering (vertex_ids.u32) is that numbering before the verifier uses it."""
 
 from __future__ import annotations
+
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rendiff_harness.contract import vertex_ids
+from fixtures import REPO, rendiff_binary
+from rendiff_harness.contract import resolved, vertex_ids
+from rendiff_harness.judge import verify
 
 
 def _old_unique_bytes(bits: np.ndarray) -> np.ndarray:
@@ -60,3 +66,76 @@ def test_numeric_numbering_and_representatives_equal_lexsort(seed: int) -> None:
 def test_empty() -> None:
     first, inverse = vertex_ids.group(*vertex_ids.keys(np.zeros((0, 3), dtype=np.uint32)))
     assert first.size == 0 and inverse.size == 0
+
+
+# --------------------------------------------------------------------------- the export's numbers
+
+
+def _checked(bits: np.ndarray, numbers: np.ndarray) -> np.ndarray:
+    return vertex_ids.checked(*vertex_ids.keys(bits, bytewise=True), numbers)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_checked_accepts_the_numbering_group_gives(seed: int) -> None:
+    bits = _rows(seed)
+    _, inverse = vertex_ids.group(*vertex_ids.keys(bits, bytewise=True))
+    assert np.array_equal(_checked(bits, inverse.astype(np.uint32)), inverse)
+    assert _checked(bits[:0], np.zeros(0, np.uint32)).size == 0
+
+
+def _wrong_numberings(bits: np.ndarray) -> dict[str, tuple[np.ndarray, str]]:
+    """Each way a numbering can differ from `group`'s, with the words its refusal must say."""
+    _, good = vertex_ids.group(*vertex_ids.keys(bits, bytewise=True))
+    v = int(good.max()) + 1
+    swapped = good.copy()
+    swapped[good == 0], swapped[good == 1] = 1, 0  # two vertices' numbers exchanged: order broken
+    merged = np.where(good == 1, 0, good)  # two different vertices under one number...
+    merged = np.where(merged > 1, merged - 1, merged)  # ...and the numbers kept dense
+    split = good.copy()
+    split[np.flatnonzero(good == 0)[0]] = v  # one vertex under two numbers
+    gap = np.where(good > 0, good + 1, good)  # number 1 names no corner
+    return {
+        "swapped": (swapped, "increasing byte order"),
+        "merged": (merged, "differs from another corner"),
+        "split": (split, "increasing byte order"),
+        "gap": (gap, "names no corner"),
+        "short": (good[:-1], "numbers for"),
+        "beyond": (np.full(good.size, good.size), "above the"),
+    }
+
+
+@pytest.mark.parametrize("case", ["swapped", "merged", "split", "gap", "short", "beyond"])
+def test_checked_refuses_every_other_numbering(case: str) -> None:
+    """Each class of wrong numbering is refused, by the check meant for it: so a check that
+    stops looking (order, equality, density or size) fails its own case here."""
+    bits = _rows(0)
+    numbers, words = _wrong_numberings(bits)[case]
+    with pytest.raises(ValueError, match=words):
+        _checked(bits, numbers.astype(np.uint32))
+
+
+def test_the_export_writes_the_verifiers_numbering(tmp_path: Path) -> None:
+    """`rendiff export`'s vertex_ids.u32 (the core's scene/vertex_ids.rs) is `group`'s bytewise
+    numbering of triangles.f32, on a mesh with shared vertices, and the verifier's topology is
+    the same with it as without it."""
+    binary = rendiff_binary()
+    if binary is None:
+        pytest.skip("no built rendiff (cargo build first): the file comes from its export")
+    out = tmp_path / "out"
+    subprocess.run([str(binary), "export", str(REPO / "scenes/obj_mesh.toml"), "-o", str(out)], check=True)
+    scene = resolved.load(out)
+    numbers = scene.corner_vertex_ids()
+    assert numbers is not None and numbers.shape == (scene.triangle_count, 3)
+    tris = np.ascontiguousarray(scene.triangles.reshape(-1, 3)) + np.float32(0.0)
+    _, want = vertex_ids.group(*vertex_ids.keys(tris.view(np.uint32), bytewise=True))
+    assert int(want.max()) + 1 < want.size  # the mesh shares vertices
+    assert np.array_equal(numbers.ravel(), want)
+    with_file, without = verify.scene_topology(scene), verify.topology(scene.triangles)
+    for name in ("corner_vid", "keys", "key_tri", "key_local", "vertices"):
+        assert np.array_equal(getattr(with_file, name), getattr(without, name)), name
+    # A tampered file is the scene's error, naming the file, not a verdict.
+    bad = numbers.ravel().copy()
+    bad[[0, 1]] = bad[[1, 0]] if bad[0] != bad[1] else (bad[0], bad[0] + 1)
+    bad.astype("<u4").tofile(out / "vertex_ids.u32")
+    with pytest.raises(resolved.SceneError, match="vertex_ids.u32"):
+        verify.scene_topology(resolved.load(out))

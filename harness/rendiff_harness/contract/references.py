@@ -28,9 +28,11 @@ Scene hash (`scene_hash`): sha256 over, in this order, for each of scene.json,
 triangles.f32 and object_ids.u32: the file name, a NUL byte, the content length as 8
 little-endian bytes, the content. scene.json enters in canonical form: parsed, with its
 `source` key removed (the path the scene was exported from, which differs between
-checkouts and run folders but changes no pixel), re-serialized with sorted keys and no
-whitespace. Everything that changes the rendered image (camera, triangles, ids,
-materials, lights, integrator, requires) changes the hash.
+checkouts and run folders but changes no pixel) and `files.vertex_ids` (the name of
+vertex_ids.u32, which is a function of triangles.f32: a reference made before exports wrote
+it stays valid), re-serialized with sorted keys and no whitespace. Everything that changes
+the rendered image (camera, triangles, ids, materials, lights, integrator, requires) changes
+the hash.
 
 `load` refuses, with one ReferenceError whose message says how to regenerate:
 a missing EXR or JSON ("missing"), an unreadable or inconsistent pair ("corrupt":
@@ -101,6 +103,8 @@ def _canonical_scene_json(data: bytes, where: Path) -> bytes:
         raise ReferenceError(f"{where}: not valid JSON: nested too deeply") from None
     if isinstance(meta, dict):
         meta.pop("source", None)
+        if isinstance(meta.get("files"), dict):
+            meta["files"].pop("vertex_ids", None)
     return json.dumps(meta, sort_keys=True, separators=(",", ":")).encode("utf-8")
 
 

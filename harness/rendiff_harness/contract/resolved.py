@@ -39,6 +39,7 @@ class ResolvedScene:
     materials: list[dict[str, Any]] = field(default_factory=list)
     lights: list[dict[str, Any]] = field(default_factory=list)
     integrator: dict[str, Any] = field(default_factory=dict)  # {"max_depth": int, "spp": int} (path tracing)
+    vertex_ids_file: Path | None = None  # files.vertex_ids, if the export wrote one (read on demand)
 
     @property
     def triangle_count(self) -> int:
@@ -77,6 +78,14 @@ class ResolvedScene:
                 if not np.all(np.isfinite(arr[i])) or np.any(arr[i] < 0):
                     raise SceneError(f"{self.directory}/scene.json: materials[{i}].{key} must be finite and >= 0")
         return alb, emi
+
+    def corner_vertex_ids(self) -> np.ndarray | None:
+        """(N, 3) uint32: the export's vertex number of every corner (`vertex_ids.u32`), or None
+        where the export wrote none (a hand-written or older folder). Read on demand: only the
+        verifier needs it, and `contract/vertex_ids.checked` checks it before use."""
+        if self.vertex_ids_file is None:
+            return None
+        return _read_array(self.vertex_ids_file, "<u4", self.triangle_count, 3).reshape(-1, 3)
 
     @property
     def spp(self) -> int:
@@ -163,6 +172,8 @@ def load(directory: str | Path) -> ResolvedScene:
     files = meta.get("files", {})
     tri_path = _data_file(directory, files, "triangles", "triangles.f32", meta_path)
     ids_path = _data_file(directory, files, "object_ids", "object_ids.u32", meta_path)
+    has_vids = isinstance(files, dict) and "vertex_ids" in files
+    vids_path = _data_file(directory, files, "vertex_ids", "vertex_ids.u32", meta_path) if has_vids else None
     tris = _read_array(tri_path, "<f4", count, 9)
     oids = _read_array(ids_path, "<u4", count, 1)
     if tris.size != count * 9:
@@ -183,4 +194,5 @@ def load(directory: str | Path) -> ResolvedScene:
         materials=list(meta.get("materials", [])),
         lights=list(meta.get("lights", [])),
         integrator=dict(meta["integrator"]) if isinstance(meta.get("integrator"), dict) else {},
+        vertex_ids_file=vids_path,
     )

@@ -6,6 +6,12 @@ A scene is a triangle soup; the POV-Ray backend writes each distinct vertex once
 `np.lexsort` on two keys gave them their order before; this module gives the very same
 numbering from two unstable argsorts of one 64-bit key each (`group`), faster than both
 (at 1.31M triangles, warm, on a shared 2-core machine: lexsort 0.40 s, np.unique 1.6-2.6 s).
+
+The export writes the verifier's numbering (signed zeros merged, byte order) beside the
+triangles (`vertex_ids.u32`, the core's `scene/vertex_ids.rs`): in a fresh comparison process
+`group` took 2-3 s of CPU on `million`'s 3.9M corners, the export's parallel sort about 0.1 s.
+`checked` proves a given numbering is `group`'s in a few linear passes (no sort) before the
+verifier trusts it, so a wrong or tampered file is an error, never a wrong verdict.
 """
 
 from __future__ import annotations
@@ -52,3 +58,38 @@ def keys(bits: np.ndarray, *, bytewise: bool = False) -> tuple[np.ndarray, np.nd
         b = b.byteswap()
     wide = b.astype(np.uint64)
     return (wide[:, 0] << np.uint64(32)) | wide[:, 1], wide[:, 2]
+
+
+def checked(hi: np.ndarray, lo: np.ndarray, numbers: np.ndarray) -> np.ndarray:
+    """`numbers` (one per row keyed by (hi, lo), as `keys` makes them) as int64, after proving
+    they are `group(hi, lo)[1]`; raises ValueError saying what is wrong otherwise.
+
+    Three linear checks: every number 0..V-1 names some row; every row equals the row standing
+    for its number (so equal numbers mean equal rows); the standing rows' keys strictly increase
+    with their numbers (so different numbers mean different rows, numbered in key order).
+    """
+    n = hi.size
+    num = np.asarray(numbers).astype(np.int64).ravel()
+    if num.size != n:
+        raise ValueError(f"holds {num.size} numbers for {n} corners")
+    if n == 0:
+        return num
+    if int(num.min()) < 0:
+        raise ValueError("holds a negative number")
+    count = int(num.max()) + 1
+    if count > n:
+        raise ValueError(f"numbers reach {count - 1}, above the {n} corners")
+    stand = np.full(count, -1, dtype=np.int64)
+    stand[num] = np.arange(n, dtype=np.int64)
+    missing = np.flatnonzero(stand < 0)
+    if missing.size:
+        raise ValueError(f"number {int(missing[0])} names no corner (numbers must run 0..V-1)")
+    sh, sl = hi[stand], lo[stand]
+    differs = np.flatnonzero((hi != sh[num]) | (lo != sl[num]))
+    if differs.size:
+        raise ValueError(f"corner {int(differs[0])} differs from another corner numbered {int(num[differs[0]])}")
+    up = (sh[1:] > sh[:-1]) | ((sh[1:] == sh[:-1]) & (sl[1:] > sl[:-1]))
+    if not bool(up.all()):
+        k = int(np.flatnonzero(~up)[0])
+        raise ValueError(f"vertices {k} and {k + 1} are not in increasing byte order (or are one vertex twice)")
+    return num

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..contract import vertex_ids
 from ..contract.camera import Camera
-from ..contract.resolved import ResolvedScene
+from ..contract.resolved import ResolvedScene, SceneError
 from ..contract.vocab import BACKGROUND_ID
 from . import geometry, outline
 
@@ -86,12 +86,17 @@ class Topology:
         return [(int(self.key_tri[i]), int(self.key_local[i])) for i in range(lo, hi) if int(self.key_tri[i]) != tri]
 
 
-def topology(triangles: np.ndarray) -> Topology:
-    """Vertex ids by exact f32 identity (+0 and -0 merged), and the sorted edge table."""
+def topology(triangles: np.ndarray, numbers: np.ndarray | None = None) -> Topology:
+    """Vertex ids by exact f32 identity (+0 and -0 merged), and the sorted edge table.
+
+    `numbers`: the export's vertex number of every corner (`vertex_ids.u32`), used once
+    `vertex_ids.checked` has proved them this very numbering (ValueError otherwise); None:
+    numbered here."""
     tris = np.ascontiguousarray(np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)) + np.float32(0.0)
     n = tris.shape[0]
     # Numbered in the rows' byte order, as np.unique on 12-byte rows numbered them (faster).
-    _, inverse = vertex_ids.group(*vertex_ids.keys(tris.reshape(-1, 3).view(np.uint32), bytewise=True))
+    hi, lo = vertex_ids.keys(tris.reshape(-1, 3).view(np.uint32), bytewise=True)
+    inverse = vertex_ids.group(hi, lo)[1] if numbers is None else vertex_ids.checked(hi, lo, numbers)
     vid = inverse.reshape(n, 3)
     nv = int(vid.max()) + 1 if n else 0
     a = vid
@@ -102,6 +107,16 @@ def topology(triangles: np.ndarray) -> Topology:
     tri_of = np.repeat(np.arange(n, dtype=np.int64), 3)
     local = np.tile(np.arange(3, dtype=np.int64), n)
     return Topology(vid, keys[order], tri_of[order], local[order], nv)
+
+
+def scene_topology(scene: ResolvedScene) -> Topology:
+    """`topology` of the scene's triangles, with the export's vertex numbers where it wrote
+    them; a wrong vertex_ids.u32 raises SceneError naming it."""
+    numbers = scene.corner_vertex_ids()
+    try:
+        return topology(scene.triangles, numbers)
+    except ValueError as exc:
+        raise SceneError(f"{scene.vertex_ids_file}: {exc}") from None
 
 
 # --------------------------------------------------------------------------- per-side geometry
@@ -249,7 +264,7 @@ def classify_mismatches(
             if topo_cache is not None and "topo" in topo_cache:
                 topo = topo_cache["topo"]
             else:
-                topo = topology(scene.triangles)
+                topo = scene_topology(scene)
                 if topo_cache is not None:
                     topo_cache["topo"] = topo
         return topo

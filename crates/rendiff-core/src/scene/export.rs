@@ -33,16 +33,24 @@ pub fn metadata(scene: &ResolvedScene) -> serde_json::Value {
         "materials": scene.materials,
         "lights": scene.lights,
         "integrator": scene.integrator,
-        "files": {"triangles": FILES[0], "object_ids": FILES[1]},
+        "files": {"triangles": FILES[0], "object_ids": FILES[1], "vertex_ids": FILES[2]},
     })
 }
 
 /// The files of an export, in the order they are written: `scene.json`
-/// last, as its presence says the other two are complete.
-const FILES: [&str; 3] = ["triangles.f32", "object_ids.u32", "scene.json"];
+/// last, as its presence says the others are complete.
+const FILES: [&str; 4] = [
+    "triangles.f32",
+    "object_ids.u32",
+    "vertex_ids.u32",
+    "scene.json",
+];
 
-/// Writes `scene.json`, `triangles.f32` and `object_ids.u32` into `dir` (each
-/// atomically). Every path is checked before anything is written (a FIFO or
+/// Index of `scene.json` in [`FILES`].
+const META: usize = FILES.len() - 1;
+
+/// Writes `scene.json`, `triangles.f32`, `object_ids.u32` and
+/// `vertex_ids.u32` (vertex_ids.rs) into `dir` (each atomically). Every path is checked before anything is written (a FIFO or
 /// folder in place of the last file left the new triangles beside the old
 /// scene), and an earlier export's `scene.json` is removed first: an export
 /// into a folder holding another scene's files that fails or is interrupted
@@ -53,10 +61,12 @@ pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
         crate::exr_io::check_output(&dir.join(f))?;
     }
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    // One export's three files at a time: two exports to one folder at once
+    // One export's files at a time: two exports to one folder at once
     // left one scene's triangles beside the other's object IDs.
     let _lock = crate::exr_io::lock_folder(dir)?;
-    let meta_path = dir.join(FILES[2]);
+    let vertex_ids = super::vertex_ids::vertex_ids(&scene.triangles)
+        .with_context(|| format!("{}: cannot export", dir.display()))?;
+    let meta_path = dir.join(FILES[META]);
     match std::fs::remove_file(&meta_path) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
             return Err(e).with_context(|| {
@@ -87,6 +97,11 @@ pub fn export(scene: &ResolvedScene, dir: &Path) -> Result<()> {
             .iter()
             .flat_map(|i| i.to_le_bytes())
             .collect();
+        std::fs::write(tmp, bytes)?;
+        Ok(())
+    })?;
+    write_atomically(&dir.join(FILES[2]), |tmp| {
+        let bytes: Vec<u8> = vertex_ids.iter().flat_map(|i| i.to_le_bytes()).collect();
         std::fs::write(tmp, bytes)?;
         Ok(())
     })?;
@@ -121,7 +136,7 @@ mod tests {
         std::fs::create_dir(dir.join(FILES[1])).unwrap();
         let e = export(&b, &dir).unwrap_err().to_string();
         assert!(e.contains("object_ids.u32") && e.contains("folder"), "{e}");
-        for i in [0, 2] {
+        for i in [0, 2, META] {
             assert_eq!(
                 std::fs::read(dir.join(FILES[i])).unwrap(),
                 before[i],
@@ -143,12 +158,12 @@ mod tests {
             "triangles were replaced"
         );
         assert!(
-            !dir.join(FILES[2]).exists(),
+            !dir.join(FILES[META]).exists(),
             "the old scene.json describes other triangles"
         );
         std::fs::remove_dir(&tmp).unwrap();
         export(&b, &dir).unwrap();
-        assert!(dir.join(FILES[2]).is_file());
+        assert!(dir.join(FILES[META]).is_file());
     }
 
     #[test]
@@ -168,6 +183,6 @@ mod tests {
         );
         drop(lock);
         writer.join().unwrap().unwrap();
-        assert!(dir.join(FILES[2]).is_file());
+        assert!(dir.join(FILES[META]).is_file());
     }
 }

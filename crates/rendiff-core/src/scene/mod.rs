@@ -10,6 +10,7 @@ pub mod gltf;
 pub mod model;
 pub mod obj;
 pub mod resolve;
+pub mod vertex_ids;
 
 use serde::Deserialize;
 use std::collections::BTreeSet;

@@ -19,7 +19,7 @@ mod rect;
 pub(crate) mod rows;
 mod same_box;
 #[cfg(test)]
-mod test_tris;
+pub(crate) mod test_tris;
 mod timing;
 
 use crate::camera::{Camera, PixelRay};

@@ -1,4 +1,5 @@
-//! Test triangles shared by the builders' unit tests (`build.rs`, `linear.rs`).
+//! Test triangles shared by unit tests (the builders' `build.rs`, `linear.rs`;
+//! `scene/vertex_ids.rs`).
 
 use crate::scene::resolve::Tri;
 use glam::Vec3;
@@ -6,7 +7,7 @@ use glam::Vec3;
 /// `n` triangles scattered in a 10-unit cube by an xorshift from `seed`:
 /// every seventh large (3 units), the rest small (0.05), so the builders
 /// meet overlapping boxes of two sizes. Deterministic for a seed.
-pub(super) fn scattered(n: usize, seed: u64) -> Vec<Tri> {
+pub(crate) fn scattered(n: usize, seed: u64) -> Vec<Tri> {
     let mut s = seed | 1;
     let mut f = move || {
         s ^= s << 13;
