@@ -100,7 +100,7 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize, quick: bool) -> V
     let r = measure::raster(scene, runs);
     let rk = measure::raster_keys(scene, runs);
     let asm = measure::assembly(scene, &rk.last, runs);
-    let t = measure::trace(scene, BvhQuality::Medium, runs);
+    let t = measure::trace(scene, BvhQuality::default(), runs);
     let tk = measure::trace_queries(scene, &t.build.last, TraceKernel::Packets, runs);
     let rounds = paired_rounds(runs, rk.median_s + tk.median_s, quick);
     let paired = measure::raster_vs_trace(scene, &t.build.last, rounds);
@@ -201,7 +201,7 @@ pub fn run(opts: &CrossoverOptions) -> Result<super::Output> {
         "config": {
             "scene": "grid at z=0 seen from (0,0,1), vfov 90, overhanging the image by small non-dyadic margins: screen-filling at every nx, few ties",
             "size": [opts.size, opts.size], "nx": opts.nx, "threads": opts.threads,
-            "runs": runs, "quick": opts.common.quick, "bvh": "medium",
+            "runs": runs, "quick": opts.common.quick, "bvh": rendiff::names::Named::name(BvhQuality::default()),
             "timing": "median of `runs` timed runs after one untimed warm-up; `paired`: the two visibility passes again in alternation, one of each per round after a warm-up of each, `runs` rounds or as many more as fill PAIRED_SECONDS (at most PAIRED_MAX_ROUNDS), the raster's speed-up being the median of the rounds' trace / raster ratios",
             "paired_seconds": if opts.common.quick { 0.0 } else { PAIRED_SECONDS },
             "paired_max_rounds": PAIRED_MAX_ROUNDS,

@@ -89,7 +89,7 @@ pub fn corpus_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 /// One scene's row: its workload, both passes in paired rounds, the build,
 /// and the verdicts.
 pub fn scene_row(name: &str, scene: &ResolvedScene, threads: usize, runs: usize) -> Value {
-    let build = super::timed(runs, || TraceBvh::build(scene, BvhQuality::Medium));
+    let build = super::timed(runs, || TraceBvh::build(scene, BvhQuality::default()));
     let paired = measure::raster_vs_trace(scene, &build.last, runs.max(5));
     let raster_pass_s = super::median(
         &paired["raster_keys_s"]

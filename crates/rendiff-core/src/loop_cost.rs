@@ -135,11 +135,14 @@ const BUILD_TRIANGLES: [f64; 10] = [
     2.0, 8.0, 32.0, 512.0, 2048.0, 32768.0, 131072.0, 524288.0, 2097152.0, 8388608.0,
 ];
 
-/// Build seconds (obvhs medium plus the camera set-up, `TraceBvh::build`) at
-/// each [`BUILD_TRIANGLES`], 2 threads, from the same record. One thread
-/// measured within 1.0-1.3x of it on `million`, so one table serves both.
+/// Build seconds of the default BVH (`BvhQuality::Linear`, plus the camera
+/// set-up: `TraceBvh::build`) at each [`BUILD_TRIANGLES`], 2 threads: the
+/// medians of `bench crossover --threads 2` on the which-loop grid sizes,
+/// Nov 30 15:27, AMD EPYC, quiet (other processes 0.4% of the CPU). One
+/// thread built `million` in 1.27x the time of two (0.095 s against 0.075),
+/// so one table serves both. (Until then: obvhs medium's, 2.5-19x slower.)
 const BUILD_S: [f64; 10] = [
-    1.83e-5, 2.19e-5, 3.43e-5, 3.24e-4, 1.01e-3, 2.08e-2, 9.58e-2, 0.465, 2.25, 8.88,
+    7.25e-6, 7.40e-6, 8.65e-6, 2.38e-5, 6.83e-5, 8.56e-4, 3.65e-3, 1.99e-2, 9.74e-2, 0.472,
 ];
 
 /// `y(x)` interpolated linearly in log-log space through `(xs, ys)`, and
