@@ -75,18 +75,10 @@ Comparison = Future[tuple[list[Entry], set[int]]]
 """One scene's comparison: its entries and the expectations it used."""
 
 
-POOL_PRELOAD = ("rendiff_harness.judge.scene", "trimesh")
-"""What the comparison processes' fork server imports once before it forks them (`Comparer`):
-the judge, and trimesh, the import check's second decoder (0.5 s alone, 1-2 s of CPU on a busy
-machine), which each `spawn`ed process imported again for itself."""
-
-
 class Comparer:
     """Scenes judged as they are handed in: in this process when `jobs` <= 1, else in that many
-    processes, forked from a fork server (`forkserver`: a fresh interpreter that imports
-    `POOL_PRELOAD` once and starts no threads, so no process is ever a fork of one holding
-    OpenImageIO's threads). Scenes are independent, so the order they are handed in changes no
-    verdict."""
+    processes (fresh interpreters: `spawn`, never a fork of a process holding OpenImageIO's
+    threads). Scenes are independent, so the order they are handed in changes no verdict."""
 
     def __init__(
         self,
@@ -99,8 +91,7 @@ class Comparer:
     ) -> None:
         self.run, self.expectations_path, self.exps = run, expectations_path, exps
         self.images, self.references_dir = images, references_dir
-        context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(list(POOL_PRELOAD))
+        context = multiprocessing.get_context("spawn")
         self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context) if jobs > 1 else None
 
     def __enter__(self) -> Comparer:

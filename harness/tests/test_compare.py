@@ -633,7 +633,7 @@ def test_a_scene_that_failed_to_load_is_an_error_entry(tmp_path: Path) -> None:
 
 
 def test_scenes_compared_in_processes_give_the_same_results(tmp_path: Path) -> None:
-    # Two scenes: `--jobs 2` compares them in two forked processes; the document, the
+    # Two scenes: `--jobs 2` compares them in two spawned processes; the document, the
     # unused-expectation list included, must be what one process writes.
     run, _ = build_run(tmp_path)
     exps = tmp_path / "exps.toml"
