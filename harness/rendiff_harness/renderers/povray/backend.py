@@ -134,7 +134,8 @@ and its children's CPU seconds) / wall seconds of `render`, ID and depth passes 
 on a shared 2-core machine: 0.08 at 3 triangles (0.66 s), 0.12 at 1,280, 0.15 at 4,248, 0.18 at
 6,090, 0.20 at 11,712, 0.25 at 16,719, 0.41 at 44,582, 0.65 at 99,938; CPU ~ 0.05 s + 12 us
 per triangle (more where many pixels are covered: 0.21 for a 4,900-triangle sphere at 160x120),
-so 2,500 keeps a render under it near 0.12 (tests/test_povray.py measures it)."""
+so 2,500 keeps a render under it near 0.12. Measured by hand, not in a test (a timing); 12,000 was
+tried on the main job and dropped (docs/benchmarks.md, "Scale")."""
 EXPOSURE_MARGIN = 1.0 + 2.0**-6
 """Exposure scale = largest upper bound * this, so the brightest pixel stays below code 65535."""
 FADE_REL = 1e-4
