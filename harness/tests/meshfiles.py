@@ -18,7 +18,7 @@ import pytest
 
 import backend_cases as cases
 from fixtures import rendiff_binary
-from rendiff_harness.contract import resolved
+from rendiff_harness.contract import resolved, vertex_ids
 from rendiff_harness.renderers import registry
 
 
@@ -76,8 +76,13 @@ def export(tmp: Path, name: str, mesh: bytes | str | Path, camera: str, after: s
 
 
 def rewrite_triangles(directory: Path, tris: np.ndarray) -> None:
-    """The resolved scene as an importer that produced `tris` (same count and objects) would have written it."""
+    """The resolved scene as an importer that produced `tris` (same count and objects) would have written it:
+    the triangles and, where the export wrote them, their corners' vertex numbers (vertex_ids.u32)."""
     tris.astype("<f4").tofile(directory / "triangles.f32")
+    if (directory / "vertex_ids.u32").exists():
+        rows = np.ascontiguousarray(tris.astype("<f4").reshape(-1, 3)) + np.float32(0.0)
+        _, numbers = vertex_ids.group(*vertex_ids.keys(rows.view(np.uint32), bytewise=True))
+        numbers.astype("<u4").tofile(directory / "vertex_ids.u32")
 
 
 def _planted(out: Path, tris: np.ndarray, backend: str) -> dict[tuple[str, str], Any]:

@@ -54,7 +54,7 @@ def _rewrite(directory: Path, per_object: list[np.ndarray]) -> None:
         first += int(tris.shape[0])
     meta["triangle_count"] = first
     (directory / "scene.json").write_text(json.dumps(meta))
-    np.concatenate(per_object).astype("<f4").tofile(directory / "triangles.f32")
+    meshfiles.rewrite_triangles(directory, np.concatenate(per_object))
     ids = np.concatenate([np.full(t.shape[0], i, dtype="<u4") for i, t in enumerate(per_object)])
     ids.tofile(directory / "object_ids.u32")
 
