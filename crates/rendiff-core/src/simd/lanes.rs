@@ -5,7 +5,8 @@
 use crate::scene::resolve::Tri;
 use crate::simd::Portable;
 
-/// `N`-lane f64 arithmetic (the raster's boxes, `BoxMargin::bounds_wide`): each operation is
+/// `N`-lane f64 arithmetic (the raster's boxes, `BoxMargin::bounds_wide`; the tracer's leaf
+/// set-up, `LeafTri::aim_lanes` and `PixelRect::new_lanes`): each operation is
 /// the scalar IEEE one lane by lane (no fused operations), in plain Rust
 /// ([`Portable`]), AVX2 (`Avx2`, four lanes) or AVX-512 intrinsics (`Avx512`,
 /// eight); a test checks each against [`BoxMargin::bounds`]. Lane `j`
@@ -32,6 +33,8 @@ pub trait Lanes<const N: usize>: Copy {
     fn min(self, a: Self::V, b: Self::V) -> Self::V;
     /// `f64::abs`.
     fn abs(self, a: Self::V) -> Self::V;
+    /// `f64::sqrt` (correctly rounded, as IEEE's square root).
+    fn sqrt(self, a: Self::V) -> Self::V;
     /// `f64::ceil`.
     fn ceil(self, a: Self::V) -> Self::V;
     /// `f64::floor`.
@@ -44,6 +47,8 @@ pub trait Lanes<const N: usize>: Copy {
     fn gt(self, a: Self::V, b: Self::V) -> u32;
     /// The lanes.
     fn array(self, a: Self::V) -> [f64; N];
+    /// The lanes rounded to f32 (to nearest, ties to even: `as f32`).
+    fn to_f32(self, a: Self::V) -> [f32; N];
     /// `a as u32` for the lanes that hold whole numbers in `[0, 2^31)`; any
     /// value in the others. (A box's ends are such numbers wherever they are
     /// read: clamped to the image, whose side is below 2^31, and a box
@@ -106,6 +111,10 @@ impl Lanes<4> for Portable {
         zip4(a, a, |a, _| a.abs())
     }
     #[inline(always)]
+    fn sqrt(self, a: [f64; 4]) -> [f64; 4] {
+        zip4(a, a, |a, _| a.sqrt())
+    }
+    #[inline(always)]
     fn ceil(self, a: [f64; 4]) -> [f64; 4] {
         zip4(a, a, |a, _| a.ceil())
     }
@@ -124,6 +133,10 @@ impl Lanes<4> for Portable {
     #[inline(always)]
     fn gt(self, a: [f64; 4], b: [f64; 4]) -> u32 {
         bits4(a, b, |a, b| a > b)
+    }
+    #[inline(always)]
+    fn to_f32(self, a: [f64; 4]) -> [f32; 4] {
+        [a[0] as f32, a[1] as f32, a[2] as f32, a[3] as f32]
     }
     #[inline(always)]
     fn array(self, a: [f64; 4]) -> [f64; 4] {
@@ -197,6 +210,11 @@ mod avx2_lanes {
             unsafe { _mm256_and_pd(a, _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX))) }
         }
         #[inline(always)]
+        fn sqrt(self, a: __m256d) -> __m256d {
+            // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
+            unsafe { _mm256_sqrt_pd(a) }
+        }
+        #[inline(always)]
         fn ceil(self, a: __m256d) -> __m256d {
             // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
@@ -227,6 +245,15 @@ mod avx2_lanes {
             // SAFETY: `self` proves AVX2;
             // the store writes 32 bytes into `out`, a `[f64; 4]` borrowed here.
             unsafe { _mm256_storeu_pd(out.as_mut_ptr(), a) };
+            out
+        }
+        #[inline(always)]
+        fn to_f32(self, a: __m256d) -> [f32; 4] {
+            let mut out = [0.0; 4];
+            // `cvtpd2ps` rounds by MXCSR's mode, to nearest (Rust never
+            // changes it), as `as f32`. SAFETY: `self` proves AVX2; the
+            // store writes 16 bytes into `out`, a `[f32; 4]` borrowed here.
+            unsafe { _mm_storeu_ps(out.as_mut_ptr(), _mm256_cvtpd_ps(a)) };
             out
         }
         #[inline(always)]
@@ -310,6 +337,11 @@ mod avx512_lanes {
             unsafe { _mm512_abs_pd(a) }
         }
         #[inline(always)]
+        fn sqrt(self, a: __m512d) -> __m512d {
+            // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
+            unsafe { _mm512_sqrt_pd(a) }
+        }
+        #[inline(always)]
         fn ceil(self, a: __m512d) -> __m512d {
             // SAFETY: `self` proves AVX-512F (`Avx512::detect`); no memory access.
             unsafe { _mm512_roundscale_pd::<{ _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC }>(a) }
@@ -340,6 +372,14 @@ mod avx512_lanes {
             // SAFETY: `self` proves AVX-512F;
             // the store writes 64 bytes into `out`, a `[f64; 8]` borrowed here.
             unsafe { _mm512_storeu_pd(out.as_mut_ptr(), a) };
+            out
+        }
+        #[inline(always)]
+        fn to_f32(self, a: __m512d) -> [f32; 8] {
+            let mut out = [0.0; 8];
+            // As AVX2's, to nearest by MXCSR. SAFETY: `self` proves
+            // AVX-512F; the store writes 32 bytes into `out`, a `[f32; 8]`.
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), _mm512_cvtpd_ps(a)) };
             out
         }
         #[inline(always)]

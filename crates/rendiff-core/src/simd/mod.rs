@@ -12,7 +12,8 @@
 //! definition bit for bit:
 //!
 //! - [`Lanes`]: `N` f64 lanes, width-generic (four in plain Rust or AVX2,
-//!   eight in AVX-512), for the raster's triangle boxes;
+//!   eight in AVX-512), for the raster's triangle boxes and the tracer's
+//!   per-leaf camera set-up (`trace::lazy`, four triangles at a time);
 //! - `chunks`: the raster's 8-pixel chunk operations
 //!   ([`crate::raster::edges::ChunkOps`]) in AVX2;
 //! - [`RowLanes`]: `N` f32 lanes, width-generic (a row of eight in AVX2,

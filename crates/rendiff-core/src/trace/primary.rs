@@ -20,7 +20,7 @@ use super::rows::edge_signs;
 use crate::camera::PixelRay;
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::Tri;
-use crate::simd::RowLanes;
+use crate::simd::{Lanes, RowLanes};
 use crate::visibility::RayBox;
 use glam::DVec3;
 
@@ -89,6 +89,28 @@ pub(crate) fn round_down(x: f64) -> f32 {
         0x8000_0001
     };
     f32::from_bits(if f64::from(f) > x { below } else { b })
+}
+
+/// `DVec3::length` in lanes: the square root of `(x x + y y) + z z`.
+#[inline(always)]
+fn length3<L: Lanes<N>, const N: usize>(l: L, v: &[L::V; 3]) -> L::V {
+    l.sqrt(l.add(
+        l.add(l.mul(v[0], v[0]), l.mul(v[1], v[1])),
+        l.mul(v[2], v[2]),
+    ))
+}
+
+/// An edge's filter bound from its normal's length `nn`, its permanent's
+/// length `pn` and the unrounded bound `b` made of them: `b` rounded up, or
+/// +inf where the f32 path cannot vouch for a sign (normals in f32's normal
+/// range only: subnormal rounding is absolute, not relative).
+#[inline(always)]
+fn edge_bound(nn: f64, pn: f64, b: f64) -> f32 {
+    if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
+        round_up(b)
+    } else {
+        f32::INFINITY
+    }
 }
 
 /// Smallest f32 not below `x` (NaN for NaN), as [`round_down`] mirrored.
@@ -255,14 +277,79 @@ impl LeafTri {
             self.n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
             let nn = e.n.length();
             let pn = e.perm.length();
-            // Normals in f32's normal range only: subnormal rounding is absolute, not relative.
-            self.beta[k] = if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
-                let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * (1.0 + 1e-9);
-                round_up(b)
-            } else {
-                f32::INFINITY
-            };
+            let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * (1.0 + 1e-9);
+            self.beta[k] = edge_bound(nn, pn, b);
         }
+    }
+
+    /// [`LeafTri::aim`] of `N` triangles at once in the f64 lanes `l` (lane
+    /// `j`: `tris[j]`): the same IEEE operations in the same order, lane by
+    /// lane, so the same bits (a test holds it to `aim` on every lane type).
+    /// Returns each lane's edge normals and bounds, for [`LeafTri::set_aimed`].
+    #[inline(always)]
+    pub fn aim_lanes<L: Lanes<N>, const N: usize>(
+        l: L,
+        tris: &[Tri; N],
+        eye: DVec3,
+    ) -> ([[[f32; 3]; 3]; N], [[f32; 3]; N]) {
+        let e = [l.splat(eye.x), l.splat(eye.y), l.splat(eye.z)];
+        let mut n_out = [[[0f32; 3]; 3]; N];
+        let mut beta_out = [[f32::INFINITY; 3]; N];
+        for (k, (p, q)) in [(0, 1), (1, 2), (2, 0)].into_iter().enumerate() {
+            // `EdgePlane::new(eye, p, q)`: `ad = p - eye`, `bd = q - eye`.
+            let ad = [
+                l.sub(l.load(tris, p, 0), e[0]),
+                l.sub(l.load(tris, p, 1), e[1]),
+                l.sub(l.load(tris, p, 2), e[2]),
+            ];
+            let bd = [
+                l.sub(l.load(tris, q, 0), e[0]),
+                l.sub(l.load(tris, q, 1), e[1]),
+                l.sub(l.load(tris, q, 2), e[2]),
+            ];
+            // The three components' products, each normal component their
+            // difference and each permanent the sum of their magnitudes.
+            let prods = [
+                (l.mul(ad[1], bd[2]), l.mul(ad[2], bd[1])),
+                (l.mul(ad[2], bd[0]), l.mul(ad[0], bd[2])),
+                (l.mul(ad[0], bd[1]), l.mul(ad[1], bd[0])),
+            ];
+            let mut n = [l.splat(0.0); 3];
+            let mut perm = [l.splat(0.0); 3];
+            for c in 0..3 {
+                n[c] = l.sub(prods[c].0, prods[c].1);
+                perm[c] = l.add(l.abs(prods[c].0), l.abs(prods[c].1));
+            }
+            let (nn, pn) = (length3(l, &n), length3(l, &perm));
+            let b = l.mul(
+                l.add(
+                    l.mul(nn, l.splat(EDGE_FILTER)),
+                    l.mul(pn, l.splat(EDGE_FILTER_F64)),
+                ),
+                l.splat(1.0 + 1e-9),
+            );
+            let n = [l.to_f32(n[0]), l.to_f32(n[1]), l.to_f32(n[2])];
+            let (nn, pn, b) = (l.array(nn), l.array(pn), l.array(b));
+            for j in 0..N {
+                n_out[j][k] = [n[0][j], n[1][j], n[2][j]];
+                beta_out[j][k] = edge_bound(nn[j], pn[j], b[j]);
+            }
+        }
+        (n_out, beta_out)
+    }
+
+    /// The edge normals and bounds, bit for bit comparable (tests).
+    #[cfg(test)]
+    pub fn edge_bits(&self) -> [u32; 12] {
+        let n = self.n.as_flattened();
+        std::array::from_fn(|i| if i < 9 { n[i] } else { self.beta[i - 9] }.to_bits())
+    }
+
+    /// Installs what [`LeafTri::aim_lanes`] computed for this triangle.
+    #[inline(always)]
+    pub fn set_aimed(&mut self, n: [[f32; 3]; 3], beta: [f32; 3]) {
+        self.n = n;
+        self.beta = beta;
     }
 
     /// The f32 sign of edge `k` for a ray direction `d` with `|d|` rounded up

@@ -28,6 +28,7 @@
 use super::packet::{Mask, PH, PW};
 use crate::camera::Camera;
 use crate::scene::resolve::Tri;
+use crate::simd::Lanes;
 use glam::DVec3;
 
 /// The relative error allowance of every rounding step (2^13 times f64's
@@ -67,6 +68,15 @@ impl RectSlack {
 /// dividing by `c.z` scales that by `(1 + |proj|) / c.z`.
 fn vertex_slack(qn: f64, cz: f64, sx: f64, sy: f64) -> f64 {
     REL * qn * (1.0 + sx.abs() + sy.abs()) / cz
+}
+
+/// `q . v` in lanes, as `DVec3::dot`: `(q.x v.x + q.y v.y) + q.z v.z`.
+#[inline(always)]
+fn dot3<L: Lanes<N>, const N: usize>(l: L, q: &[L::V; 3], v: DVec3) -> L::V {
+    l.add(
+        l.add(l.mul(q[0], l.splat(v.x)), l.mul(q[1], l.splat(v.y))),
+        l.mul(q[2], l.splat(v.z)),
+    )
 }
 
 /// `x.ceil().clamp(l, h) as i32` for a finite `x` and integers `l <= h`
@@ -154,6 +164,91 @@ impl PixelRect {
             x: out[0],
             y: out[1],
         }
+    }
+
+    /// [`PixelRect::new`] of `N` triangles at once in the f64 lanes `l`
+    /// (lane `j`: `t[j]`): the same IEEE operations in the same order, lane
+    /// by lane, every vertex of every lane computed and a lane that fails a
+    /// test given the whole image, as `new` returns it at the first
+    /// failure; a test holds it to `new` on every lane type.
+    #[inline(always)]
+    pub fn new_lanes<L: Lanes<N>, const N: usize>(
+        l: L,
+        cam: &Camera,
+        slack: &RectSlack,
+        t: &[Tri; N],
+    ) -> [PixelRect; N] {
+        let inf = l.splat(f64::INFINITY);
+        let mut lo = [inf; 2];
+        let mut hi = [l.splat(f64::NEG_INFINITY); 2];
+        let mut err = [l.splat(0.0); 2];
+        let half = [f64::from(cam.width) * 0.5, f64::from(cam.height) * 0.5];
+        let eye = [l.splat(cam.eye.x), l.splat(cam.eye.y), l.splat(cam.eye.z)];
+        let mut all = 0u32;
+        for i in 0..3 {
+            let q = [
+                l.sub(l.load(t, i, 0), eye[0]),
+                l.sub(l.load(t, i, 1), eye[1]),
+                l.sub(l.load(t, i, 2), eye[2]),
+            ];
+            let c = [
+                dot3(l, &q, cam.right),
+                dot3(l, &q, cam.up_ortho),
+                dot3(l, &q, cam.forward),
+            ];
+            let qn = l.max(l.abs(q[0]), l.max(l.abs(q[1]), l.abs(q[2])));
+            let in_front = l.gt(c[2], l.mul(qn, l.splat(1.0 / (1u64 << 20) as f64)));
+            let finite = l.lt(qn, inf);
+            let (sx, sy) = (l.div(c[0], c[2]), l.div(c[1], c[2]));
+            let p = [
+                l.add(l.mul(sx, l.splat(slack.scale[0])), l.splat(half[0])),
+                l.sub(l.splat(half[1]), l.mul(sy, l.splat(slack.scale[1]))),
+            ];
+            let p_finite = l.lt(l.abs(p[0]), inf) & l.lt(l.abs(p[1]), inf);
+            all |= !(in_front & finite & p_finite);
+            // `vertex_slack(qn, c.z, sx, sy)`.
+            let one_plus = l.add(l.add(l.splat(1.0), l.abs(sx)), l.abs(sy));
+            let s = l.div(l.mul(l.mul(l.splat(REL), qn), one_plus), c[2]);
+            for k in 0..2 {
+                lo[k] = l.min(lo[k], p[k]);
+                hi[k] = l.max(hi[k], p[k]);
+                let e = l.add(
+                    l.mul(s, l.splat(slack.scale[k])),
+                    l.mul(l.splat(REL), l.abs(p[k])),
+                );
+                err[k] = l.max(err[k], e);
+            }
+        }
+        let size = [f64::from(cam.width), f64::from(cam.height)];
+        let mut ends = [[[0f64; N]; 2]; 2];
+        for k in 0..2 {
+            let m = l.add(
+                l.add(
+                    l.add(err[k], l.splat(slack.ray * slack.scale[k])),
+                    l.splat(REL * size[k]),
+                ),
+                l.splat(1e-9),
+            );
+            let half_px = l.splat(0.5);
+            // `ceil_within` / `floor_within`: clamp, then round (exact).
+            let (lw, hw) = (l.splat(-2.0), l.splat(size[k] + 1.0));
+            let first = l.sub(l.sub(lo[k], m), half_px);
+            let last = l.sub(l.add(hi[k], m), half_px);
+            ends[k] = [
+                l.array(l.ceil(l.min(l.max(first, lw), hw))),
+                l.array(l.floor(l.min(l.max(last, lw), hw))),
+            ];
+        }
+        let mut out = [PixelRect::ALL; N];
+        for (j, o) in out.iter_mut().enumerate() {
+            if all & (1 << j) == 0 {
+                *o = PixelRect {
+                    x: [ends[0][0][j] as i32, ends[0][1][j] as i32],
+                    y: [ends[1][0][j] as i32, ends[1][1][j] as i32],
+                };
+            }
+        }
+        out
     }
 
     /// The lanes of the packet whose top-left pixel is `(x0, y0)` inside the
