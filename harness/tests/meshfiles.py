@@ -80,8 +80,7 @@ def rewrite_triangles(directory: Path, tris: np.ndarray) -> None:
     the triangles and, where the export wrote them, their corners' vertex numbers (vertex_ids.u32)."""
     tris.astype("<f4").tofile(directory / "triangles.f32")
     if (directory / "vertex_ids.u32").exists():
-        rows = np.ascontiguousarray(tris.astype("<f4").reshape(-1, 3)) + np.float32(0.0)
-        _, numbers = vertex_ids.group(*vertex_ids.keys(rows.view(np.uint32), bytewise=True))
+        _, numbers = vertex_ids.group(*vertex_ids.corner_keys(tris))
         numbers.astype("<u4").tofile(directory / "vertex_ids.u32")
 
 

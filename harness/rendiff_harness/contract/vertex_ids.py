@@ -60,6 +60,14 @@ def keys(bits: np.ndarray, *, bytewise: bool = False) -> tuple[np.ndarray, np.nd
     return (wide[:, 0] << np.uint64(32)) | wide[:, 1], wide[:, 2]
 
 
+def corner_keys(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The verifier's keys of every corner of `triangles` ((N, 3, 3) or (3N, 3) f32 values):
+    `-0.0` made `+0.0`, then `keys(..., bytewise=True)` (so `group` numbers them as `np.unique`
+    numbers 12-byte rows, and as the export's `vertex_ids.u32` does)."""
+    rows = np.ascontiguousarray(np.asarray(triangles, dtype=np.float32).reshape(-1, 3)) + np.float32(0.0)
+    return keys(rows.view(np.uint32), bytewise=True)
+
+
 def checked(hi: np.ndarray, lo: np.ndarray, numbers: np.ndarray) -> np.ndarray:
     """`numbers` (one per row keyed by (hi, lo), as `keys` makes them) as int64, after proving
     they are `group(hi, lo)[1]`; raises ValueError saying what is wrong otherwise.

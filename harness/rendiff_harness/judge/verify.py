@@ -92,10 +92,9 @@ def topology(triangles: np.ndarray, numbers: np.ndarray | None = None) -> Topolo
     `numbers`: the export's vertex number of every corner (`vertex_ids.u32`), used once
     `vertex_ids.checked` has proved them this very numbering (ValueError otherwise); None:
     numbered here."""
-    tris = np.ascontiguousarray(np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)) + np.float32(0.0)
-    n = tris.shape[0]
+    n = np.asarray(triangles).reshape(-1, 3, 3).shape[0]
     # Numbered in the rows' byte order, as np.unique on 12-byte rows numbered them (faster).
-    hi, lo = vertex_ids.keys(tris.reshape(-1, 3).view(np.uint32), bytewise=True)
+    hi, lo = vertex_ids.corner_keys(triangles)
     inverse = vertex_ids.group(hi, lo)[1] if numbers is None else vertex_ids.checked(hi, lo, numbers)
     vid = inverse.reshape(n, 3)
     nv = int(vid.max()) + 1 if n else 0

@@ -50,8 +50,8 @@ const FILES: [&str; 4] = [
 const META: usize = FILES.len() - 1;
 
 /// Writes `scene.json`, `triangles.f32`, `object_ids.u32` and
-/// `vertex_ids.u32` (vertex_ids.rs) into `dir` (each atomically). Every path is checked before anything is written (a FIFO or
-/// folder in place of the last file left the new triangles beside the old
+/// `vertex_ids.u32` (vertex_ids.rs) into `dir` (each atomically). Every
+/// path is checked before anything is written (a FIFO or folder in place of the last file left the new triangles beside the old
 /// scene), and an earlier export's `scene.json` is removed first: an export
 /// into a folder holding another scene's files that fails or is interrupted
 /// leaves no scene.json, so the folder reads as incomplete, never as the old

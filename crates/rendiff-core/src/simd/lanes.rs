@@ -250,9 +250,10 @@ mod avx2_lanes {
         #[inline(always)]
         fn to_f32(self, a: __m256d) -> [f32; 4] {
             let mut out = [0.0; 4];
-            // `cvtpd2ps` rounds by MXCSR's mode, to nearest (Rust never
-            // changes it), as `as f32`. SAFETY: `self` proves AVX2; the
-            // store writes 16 bytes into `out`, a `[f32; 4]` borrowed here.
+            // `cvtpd2ps` rounds by MXCSR's mode, as `as f32`'s `cvtsd2ss`
+            // does (to nearest unless a caller changed MXCSR, for both).
+            // SAFETY: `self` proves AVX2; the store writes 16 bytes into
+            // `out`, a `[f32; 4]` borrowed here.
             unsafe { _mm_storeu_ps(out.as_mut_ptr(), _mm256_cvtpd_ps(a)) };
             out
         }

@@ -91,6 +91,10 @@ pub(crate) fn round_down(x: f64) -> f32 {
     f32::from_bits(if f64::from(f) > x { below } else { b })
 }
 
+/// The factor an edge's filter bound is grown by before its rounding up
+/// (room for the roundings of the bound's own arithmetic).
+const BOUND_GROWTH: f64 = 1.0 + 1e-9;
+
 /// `DVec3::length` in lanes: the square root of `(x x + y y) + z z`.
 #[inline(always)]
 fn length3<L: Lanes<N>, const N: usize>(l: L, v: &[L::V; 3]) -> L::V {
@@ -277,7 +281,7 @@ impl LeafTri {
             self.n[k] = [e.n.x as f32, e.n.y as f32, e.n.z as f32];
             let nn = e.n.length();
             let pn = e.perm.length();
-            let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * (1.0 + 1e-9);
+            let b = (nn * EDGE_FILTER + pn * EDGE_FILTER_F64) * BOUND_GROWTH;
             self.beta[k] = edge_bound(nn, pn, b);
         }
     }
@@ -326,7 +330,7 @@ impl LeafTri {
                     l.mul(nn, l.splat(EDGE_FILTER)),
                     l.mul(pn, l.splat(EDGE_FILTER_F64)),
                 ),
-                l.splat(1.0 + 1e-9),
+                l.splat(BOUND_GROWTH),
             );
             let n = [l.to_f32(n[0]), l.to_f32(n[1]), l.to_f32(n[2])];
             let (nn, pn, b) = (l.array(nn), l.array(pn), l.array(b));

@@ -35,6 +35,21 @@ use glam::DVec3;
 /// unit roundoff, covering the few roundings of each step with room to spare).
 const REL: f64 = 1.0 / (1u64 << 40) as f64;
 
+/// A vertex closer to the eye plane than this fraction of its distance
+/// from the eye (or behind it) gives its triangle the whole image: too
+/// close for the projection's rounding bound.
+const NEAR_EYE_PLANE: f64 = 1.0 / (1u64 << 20) as f64;
+
+/// The absolute part of a rectangle's margin, in pixels, on top of the
+/// rounding bounds.
+const MARGIN_FLOOR: f64 = 1e-9;
+
+/// Rectangle ends are clamped to `[CLAMP_BEFORE, size + CLAMP_PAST]`: just
+/// outside the image, so the packets' spans cannot overflow.
+const CLAMP_BEFORE: f64 = -2.0;
+/// See [`CLAMP_BEFORE`].
+const CLAMP_PAST: f64 = 1.0;
+
 /// Per-camera rounding allowances for [`PixelRect::new`].
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RectSlack {
@@ -128,7 +143,7 @@ impl PixelRect {
             let c = DVec3::new(q.dot(cam.right), q.dot(cam.up_ortho), q.dot(cam.forward));
             let qn = q.abs().max_element();
             // Too close to the eye plane (or behind it) for the bound: all pixels.
-            let in_front = c.z > qn * (1.0 / (1u64 << 20) as f64);
+            let in_front = c.z > qn * NEAR_EYE_PLANE;
             if !in_front || !qn.is_finite() {
                 return PixelRect::ALL;
             }
@@ -152,9 +167,9 @@ impl PixelRect {
         let size = [f64::from(cam.width), f64::from(cam.height)];
         let mut out = [[0i32; 2]; 2];
         for k in 0..2 {
-            let m = err[k] + slack.ray * slack.scale[k] + REL * size[k] + 1e-9;
+            let m = err[k] + slack.ray * slack.scale[k] + REL * size[k] + MARGIN_FLOOR;
             // Pixel `i`'s center is at `i + 0.5`; clamp to just outside the image.
-            let (l, h) = (-2.0, size[k] + 1.0);
+            let (l, h) = (CLAMP_BEFORE, size[k] + CLAMP_PAST);
             out[k] = [
                 ceil_within(lo[k] - m - 0.5, l, h),
                 floor_within(hi[k] + m - 0.5, l, h),
@@ -197,7 +212,7 @@ impl PixelRect {
                 dot3(l, &q, cam.forward),
             ];
             let qn = l.max(l.abs(q[0]), l.max(l.abs(q[1]), l.abs(q[2])));
-            let in_front = l.gt(c[2], l.mul(qn, l.splat(1.0 / (1u64 << 20) as f64)));
+            let in_front = l.gt(c[2], l.mul(qn, l.splat(NEAR_EYE_PLANE)));
             let finite = l.lt(qn, inf);
             let (sx, sy) = (l.div(c[0], c[2]), l.div(c[1], c[2]));
             let p = [
@@ -227,11 +242,11 @@ impl PixelRect {
                     l.add(err[k], l.splat(slack.ray * slack.scale[k])),
                     l.splat(REL * size[k]),
                 ),
-                l.splat(1e-9),
+                l.splat(MARGIN_FLOOR),
             );
             let half_px = l.splat(0.5);
             // `ceil_within` / `floor_within`: clamp, then round (exact).
-            let (lw, hw) = (l.splat(-2.0), l.splat(size[k] + 1.0));
+            let (lw, hw) = (l.splat(CLAMP_BEFORE), l.splat(size[k] + CLAMP_PAST));
             let first = l.sub(l.sub(lo[k], m), half_px);
             let last = l.sub(l.add(hi[k], m), half_px);
             ends[k] = [
@@ -373,7 +388,7 @@ mod tests {
                 .as_dvec3();
             let c = cam.to_camera(v);
             let qn = (v - eye).abs().max_element();
-            if c.z <= qn * (1.0 / (1u64 << 20) as f64) {
+            if c.z <= qn * NEAR_EYE_PLANE {
                 continue;
             }
             let got = [c.x / c.z, c.y / c.z];
