@@ -39,7 +39,7 @@ mod rows;
 #[cfg(target_arch = "x86_64")]
 pub(crate) use pair::enter_pair;
 
-pub use lanes::Lanes;
+pub use lanes::{load_tris, Lanes};
 pub use rows::RowLanes;
 
 /// No instruction set beyond the baseline: every kernel trait's plain Rust

@@ -104,13 +104,20 @@ fn length3<L: Lanes<N>, const N: usize>(l: L, v: &[L::V; 3]) -> L::V {
     ))
 }
 
+/// The least `|n|` whose edge the f32 filter vouches for: below it the
+/// normal's f32 components may be subnormal, whose rounding is absolute.
+const NORMAL_FLOOR: f64 = 1e-25;
+/// The greatest `|perm|` whose edge the f32 filter vouches for: above it the
+/// bound's products could leave f32's range.
+const PERM_CEILING: f64 = 1e30;
+
 /// An edge's filter bound from its normal's length `nn`, its permanent's
 /// length `pn` and the unrounded bound `b` made of them: `b` rounded up, or
 /// +inf where the f32 path cannot vouch for a sign (normals in f32's normal
 /// range only: subnormal rounding is absolute, not relative).
 #[inline(always)]
 fn edge_bound(nn: f64, pn: f64, b: f64) -> f32 {
-    if nn.is_finite() && pn.is_finite() && nn >= 1e-25 && pn <= 1e30 {
+    if nn.is_finite() && pn.is_finite() && nn >= NORMAL_FLOOR && pn <= PERM_CEILING {
         round_up(b)
     } else {
         f32::INFINITY
@@ -287,13 +294,17 @@ impl LeafTri {
     }
 
     /// [`LeafTri::aim`] of `N` triangles at once in the f64 lanes `l` (lane
-    /// `j`: `tris[j]`): the same IEEE operations in the same order, lane by
-    /// lane, so the same bits (a test holds it to `aim` on every lane type).
-    /// Returns each lane's edge normals and bounds, for [`LeafTri::set_aimed`].
+    /// `j`: triangle `j`, its vertices `v[vertex][axis]` as
+    /// [`crate::simd::load_tris`] loads them): the same IEEE operations in
+    /// the same order, lane by lane, so the same bits (a test holds it to
+    /// `aim` on every lane type). The bound's checks and its rounding up are
+    /// lane operations too ([`edge_bound`]'s, for the positive bounds it
+    /// meets). Returns each lane's edge normals and bounds, for
+    /// [`LeafTri::set_aimed`].
     #[inline(always)]
     pub fn aim_lanes<L: Lanes<N>, const N: usize>(
         l: L,
-        tris: &[Tri; N],
+        v: &[[L::V; 3]; 3],
         eye: DVec3,
     ) -> ([[[f32; 3]; 3]; N], [[f32; 3]; N]) {
         let e = [l.splat(eye.x), l.splat(eye.y), l.splat(eye.z)];
@@ -302,14 +313,14 @@ impl LeafTri {
         for (k, (p, q)) in [(0, 1), (1, 2), (2, 0)].into_iter().enumerate() {
             // `EdgePlane::new(eye, p, q)`: `ad = p - eye`, `bd = q - eye`.
             let ad = [
-                l.sub(l.load(tris, p, 0), e[0]),
-                l.sub(l.load(tris, p, 1), e[1]),
-                l.sub(l.load(tris, p, 2), e[2]),
+                l.sub(v[p][0], e[0]),
+                l.sub(v[p][1], e[1]),
+                l.sub(v[p][2], e[2]),
             ];
             let bd = [
-                l.sub(l.load(tris, q, 0), e[0]),
-                l.sub(l.load(tris, q, 1), e[1]),
-                l.sub(l.load(tris, q, 2), e[2]),
+                l.sub(v[q][0], e[0]),
+                l.sub(v[q][1], e[1]),
+                l.sub(v[q][2], e[2]),
             ];
             // The three components' products, each normal component their
             // difference and each permanent the sum of their magnitudes.
@@ -333,10 +344,21 @@ impl LeafTri {
                 l.splat(BOUND_GROWTH),
             );
             let n = [l.to_f32(n[0]), l.to_f32(n[1]), l.to_f32(n[2])];
-            let (nn, pn, b) = (l.array(nn), l.array(pn), l.array(b));
+            // `edge_bound`: its range checks (false for NaN, as
+            // `is_finite` is), then `round_up(b)` of a positive `b` (at
+            // least `NORMAL_FLOOR` times the filter, so its f32 is positive
+            // and normal): the next f32 up where rounding went down.
+            let inf = l.splat(f64::INFINITY);
+            let kept =
+                l.ge(nn, l.splat(NORMAL_FLOOR)) & l.lt(nn, inf) & l.ge(l.splat(PERM_CEILING), pn);
+            let (f, below) = l.to_f32_below(b);
             for j in 0..N {
                 n_out[j][k] = [n[0][j], n[1][j], n[2][j]];
-                beta_out[j][k] = edge_bound(nn[j], pn[j], b[j]);
+                beta_out[j][k] = if kept >> j & 1 == 1 {
+                    f32::from_bits(f[j].to_bits() + (below >> j & 1))
+                } else {
+                    f32::INFINITY
+                };
             }
         }
         (n_out, beta_out)

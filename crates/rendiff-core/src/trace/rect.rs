@@ -191,7 +191,7 @@ impl PixelRect {
         l: L,
         cam: &Camera,
         slack: &RectSlack,
-        t: &[Tri; N],
+        v: &[[L::V; 3]; 3],
     ) -> [PixelRect; N] {
         let inf = l.splat(f64::INFINITY);
         let mut lo = [inf; 2];
@@ -202,9 +202,9 @@ impl PixelRect {
         let mut all = 0u32;
         for i in 0..3 {
             let q = [
-                l.sub(l.load(t, i, 0), eye[0]),
-                l.sub(l.load(t, i, 1), eye[1]),
-                l.sub(l.load(t, i, 2), eye[2]),
+                l.sub(v[i][0], eye[0]),
+                l.sub(v[i][1], eye[1]),
+                l.sub(v[i][2], eye[2]),
             ];
             let c = [
                 dot3(l, &q, cam.right),
@@ -235,7 +235,7 @@ impl PixelRect {
             }
         }
         let size = [f64::from(cam.width), f64::from(cam.height)];
-        let mut ends = [[[0f64; N]; 2]; 2];
+        let mut ends = [[[0i32; N]; 2]; 2];
         for k in 0..2 {
             let m = l.add(
                 l.add(
@@ -249,17 +249,19 @@ impl PixelRect {
             let (lw, hw) = (l.splat(CLAMP_BEFORE), l.splat(size[k] + CLAMP_PAST));
             let first = l.sub(l.sub(lo[k], m), half_px);
             let last = l.sub(l.add(hi[k], m), half_px);
+            // The rounded ends are whole numbers in `[CLAMP_BEFORE, size +
+            // CLAMP_PAST]`, which `ints` converts exactly.
             ends[k] = [
-                l.array(l.ceil(l.min(l.max(first, lw), hw))),
-                l.array(l.floor(l.min(l.max(last, lw), hw))),
+                l.ints(l.ceil(l.min(l.max(first, lw), hw))),
+                l.ints(l.floor(l.min(l.max(last, lw), hw))),
             ];
         }
         let mut out = [PixelRect::ALL; N];
         for (j, o) in out.iter_mut().enumerate() {
             if all & (1 << j) == 0 {
                 *o = PixelRect {
-                    x: [ends[0][0][j] as i32, ends[0][1][j] as i32],
-                    y: [ends[1][0][j] as i32, ends[1][1][j] as i32],
+                    x: [ends[0][0][j], ends[0][1][j]],
+                    y: [ends[1][0][j], ends[1][1][j]],
                 };
             }
         }
