@@ -200,11 +200,11 @@ impl PixelRect {
         let half = [f64::from(cam.width) * 0.5, f64::from(cam.height) * 0.5];
         let eye = [l.splat(cam.eye.x), l.splat(cam.eye.y), l.splat(cam.eye.z)];
         let mut all = 0u32;
-        for i in 0..3 {
+        for vi in v {
             let q = [
-                l.sub(v[i][0], eye[0]),
-                l.sub(v[i][1], eye[1]),
-                l.sub(v[i][2], eye[2]),
+                l.sub(vi[0], eye[0]),
+                l.sub(vi[1], eye[1]),
+                l.sub(vi[2], eye[2]),
             ];
             let c = [
                 dot3(l, &q, cam.right),
