@@ -77,12 +77,16 @@ impl RectSlack {
 }
 
 /// Bound on the rounding error of `proj(v) = (c.x / c.z, c.y / c.z)` in
-/// screen units, for `c` = [`Camera::to_camera`]`(v)`, `(sx, sy) = (c.x / c.z,
-/// c.y / c.z)` and `qn = |v - eye|_inf`:
+/// screen units, for `c` = [`Camera::to_camera`]`(v)`, `(sx, sy) = (c.x r,
+/// c.y r)` with `r = inv_cz`, `1 / c.z` rounded, and `qn = |v - eye|_inf`:
 /// `v - eye` and the three dot products each round by about `3 u |q|`, and
-/// dividing by `c.z` scales that by `(1 + |proj|) / c.z`.
-fn vertex_slack(qn: f64, cz: f64, sx: f64, sy: f64) -> f64 {
-    REL * qn * (1.0 + sx.abs() + sy.abs()) / cz
+/// dividing by `c.z` scales that by `(1 + |proj|) / c.z`. Multiplying by the
+/// rounded reciprocal instead of dividing (one division per vertex, not
+/// three) adds at most `2 u |sx|` to `sx` (likewise `sy`), while the bound
+/// is at least `REL |sx| qn / c.z >= REL |sx| / sqrt(3)` (`c.z <= |q| <=
+/// sqrt(3) qn`): `REL` is `2^13 u`, so the allowance covers it many times.
+fn vertex_slack(qn: f64, inv_cz: f64, sx: f64, sy: f64) -> f64 {
+    REL * qn * (1.0 + sx.abs() + sy.abs()) * inv_cz
 }
 
 /// `q . v` in lanes, as `DVec3::dot`: `(q.x v.x + q.y v.y) + q.z v.z`.
@@ -147,7 +151,9 @@ impl PixelRect {
             if !in_front || !qn.is_finite() {
                 return PixelRect::ALL;
             }
-            let (sx, sy) = (c.x / c.z, c.y / c.z);
+            // One division per vertex (see `vertex_slack` for its rounding).
+            let inv_cz = 1.0 / c.z;
+            let (sx, sy) = (c.x * inv_cz, c.y * inv_cz);
             // Pixel coordinates `(sx / aspect_tan + 1) W / 2` and
             // `(1 - sy / tan) H / 2`, as a product and a sum each (their
             // rounding, and that of `scale`, is within `REL (|p| + size)`).
@@ -157,7 +163,7 @@ impl PixelRect {
             }
             // Rounding of proj(v) in screen units, then pixels, plus the
             // rounding of the pixel mapping itself.
-            let s = vertex_slack(qn, c.z, sx, sy);
+            let s = vertex_slack(qn, inv_cz, sx, sy);
             for (k, p) in [px, py].into_iter().enumerate() {
                 lo[k] = lo[k].min(p);
                 hi[k] = hi[k].max(p);
@@ -214,7 +220,8 @@ impl PixelRect {
             let qn = l.max(l.abs(q[0]), l.max(l.abs(q[1]), l.abs(q[2])));
             let in_front = l.gt(c[2], l.mul(qn, l.splat(NEAR_EYE_PLANE)));
             let finite = l.lt(qn, inf);
-            let (sx, sy) = (l.div(c[0], c[2]), l.div(c[1], c[2]));
+            let inv_cz = l.div(l.splat(1.0), c[2]);
+            let (sx, sy) = (l.mul(c[0], inv_cz), l.mul(c[1], inv_cz));
             let p = [
                 l.add(l.mul(sx, l.splat(slack.scale[0])), l.splat(half[0])),
                 l.sub(l.splat(half[1]), l.mul(sy, l.splat(slack.scale[1]))),
@@ -223,7 +230,7 @@ impl PixelRect {
             all |= !(in_front & finite & p_finite);
             // `vertex_slack(qn, c.z, sx, sy)`.
             let one_plus = l.add(l.add(l.splat(1.0), l.abs(sx)), l.abs(sy));
-            let s = l.div(l.mul(l.mul(l.splat(REL), qn), one_plus), c[2]);
+            let s = l.mul(l.mul(l.mul(l.splat(REL), qn), one_plus), inv_cz);
             for k in 0..2 {
                 lo[k] = l.min(lo[k], p[k]);
                 hi[k] = l.max(hi[k], p[k]);
@@ -393,11 +400,13 @@ mod tests {
             if c.z <= qn * NEAR_EYE_PLANE {
                 continue;
             }
-            let got = [c.x / c.z, c.y / c.z];
+            // As `PixelRect::new` computes it: times the rounded reciprocal.
+            let inv_cz = 1.0 / c.z;
+            let got = [c.x * inv_cz, c.y * inv_cz];
             let want = proj_dd(&cam, v);
             for k in 0..2 {
                 let e = (got[k] - want[k]).abs();
-                let allow = vertex_slack(qn, c.z, got[0], got[1]);
+                let allow = vertex_slack(qn, inv_cz, got[0], got[1]);
                 assert!(e <= allow, "case {i}: vertex error {e} > {allow}");
                 worst[1] = worst[1].max(e / allow);
             }
