@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 BIN="${1:-${CARGO_TARGET_DIR:-target}/release/rendiff}"
-KERNELS=(render_tile_avx2 trace_packet_avx2 trace_packet_avx512 bounds_avx2 bounds_avx512 aim_leaf_avx2 aim_leaf_avx512 GeneralTree::query)
+KERNELS=(render_tile_avx2 trace_packet_avx2 trace_packet_avx512 bounds_avx2 bounds_avx512 aim_leaf_avx2 aim_leaf_avx512 fill_grown_avx2 fill_grown_avx512 GeneralTree::query)
 command -v objdump >/dev/null || { echo "check-kernels: objdump not found (Debian package binutils)" >&2; exit 2; }
 [[ -f "$BIN" ]] || { echo "check-kernels: $BIN: no such binary (cargo build --release first)" >&2; exit 2; }
 pattern="$(IFS='|'; echo "${KERNELS[*]}")"

@@ -18,6 +18,8 @@ pub trait Lanes<const N: usize>: Copy {
     fn splat(self, v: f64) -> Self::V;
     /// Component `c` of vertex `i` of each triangle, widened to f64.
     fn load(self, t: &[Tri; N], i: usize, c: usize) -> Self::V;
+    /// `N` f32 widened to f64 (exact).
+    fn widen(self, v: [f32; N]) -> Self::V;
     /// `a + b`.
     fn add(self, a: Self::V, b: Self::V) -> Self::V;
     /// `a - b`.
@@ -100,6 +102,10 @@ impl Lanes<4> for Portable {
     #[inline(always)]
     fn load(self, t: &[Tri; 4], i: usize, c: usize) -> [f64; 4] {
         [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]].map(f64::from)
+    }
+    #[inline(always)]
+    fn widen(self, v: [f32; 4]) -> [f64; 4] {
+        v.map(f64::from)
     }
     #[inline(always)]
     fn add(self, a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
@@ -199,6 +205,12 @@ mod avx2_lanes {
             let v = [t[0][i][c], t[1][i][c], t[2][i][c], t[3][i][c]];
             // SAFETY: `self` proves AVX2 (`Avx2::detect`); no memory access.
             unsafe { _mm256_cvtps_pd(_mm_set_ps(v[3], v[2], v[1], v[0])) }
+        }
+        #[inline(always)]
+        fn widen(self, v: [f32; 4]) -> __m256d {
+            // SAFETY: `self` proves AVX2; the load reads 16 bytes of `v`, a
+            // `[f32; 4]` borrowed here.
+            unsafe { _mm256_cvtps_pd(_mm_loadu_ps(v.as_ptr())) }
         }
         #[inline(always)]
         fn add(self, a: __m256d, b: __m256d) -> __m256d {
@@ -348,6 +360,12 @@ mod avx512_lanes {
             ];
             // SAFETY: `self` proves AVX-512F;
             // the load reads 32 bytes from `v`, a `[f32; 8]` borrowed here.
+            unsafe { _mm512_cvtps_pd(_mm256_loadu_ps(v.as_ptr())) }
+        }
+        #[inline(always)]
+        fn widen(self, v: [f32; 8]) -> __m512d {
+            // SAFETY: `self` proves AVX-512F; the load reads 32 bytes of
+            // `v`, a `[f32; 8]` borrowed here.
             unsafe { _mm512_cvtps_pd(_mm256_loadu_ps(v.as_ptr())) }
         }
         #[inline(always)]

@@ -26,13 +26,11 @@ use crate::camera::{Camera, PixelRay};
 use crate::frame::{Frame, PixelKeys};
 use crate::predicate::EdgePlane;
 use crate::scene::resolve::{ResolvedScene, Tri};
-use crate::visibility::{
-    covers_by, edge_sign, fill_no_hit, grow_box, hit_key, Counters, TriDepth, NO_HIT,
-};
+use crate::visibility::{covers_by, edge_sign, fill_no_hit, hit_key, Counters, TriDepth, NO_HIT};
 use glam::Vec3;
 use nodes::Nodes32;
 use obvhs::{triangle::Triangle, BvhBuildParams};
-use primary::{Node32, Ray32};
+use primary::Ray32;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -391,11 +389,8 @@ impl TraceBvh {
         // Each slot's box grown from its refit box in slot order: the same
         // bits as its node's world box ([`general`]), read
         // without a gather.
-        let boxes = &self.refit_slots;
-        self.nodes32.fill(&self.layout, |k, s| {
-            let [lo, hi] = boxes[k];
-            Node32::new(eye, &grow_box(eye, lo, hi), s.first, s.count)
-        });
+        self.nodes32
+            .fill_grown(&self.layout, &self.refit_slots, eye);
         if crate::deadline::past(deadline) {
             return None;
         }

@@ -18,6 +18,8 @@
 
 use super::primary::Node32;
 use crate::simd::prefetch;
+use crate::visibility::grow_box;
+use glam::{DVec3, Vec3};
 
 /// Largest leaf made by merging a subtree: testing a few more triangles'
 /// pixel rectangles costs less than the box tests and stack traffic of the
@@ -133,11 +135,50 @@ impl Nodes32 {
 
     /// Writes every slot of `layout` as `node(k, slot)` (slot `k`: the
     /// input tree's node `slot.src`'s box with the slot's `first` and
-    /// `count`), in parallel on rayon's current pool, reusing the pairs'
-    /// memory when the tree already has this layout's size (a new camera on
-    /// the same tree).
+    /// `count`), in parallel on rayon's current pool (the tests' trees; a
+    /// camera's nodes are [`Self::fill_grown`]'s).
+    #[cfg(test)]
     pub fn fill(&mut self, layout: &Layout, node: impl Fn(usize, &Slot) -> Node32 + Sync) {
         use rayon::prelude::*;
+        self.size_for(layout);
+        self.pairs
+            .par_iter_mut()
+            .zip(layout.slots.par_chunks_exact(2))
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(i, (pair, slots))| {
+                pair.0[0] = node(2 * i, &slots[0]);
+                pair.0[1] = node(2 * i + 1, &slots[1]);
+            });
+    }
+
+    /// Writes every slot of `layout` with its node made from its world box
+    /// (`boxes`, one per slot: its f32 corners) for the eye `eye`:
+    /// `Node32::new(eye, &grow_box(eye, lo, hi), ..)`, eight slots at a
+    /// time in AVX-512 f64 lanes or four in AVX2's where the CPU has them
+    /// ([`Node32::grown_lanes`], the same bits), the rest one at a time. On
+    /// `million`'s `slow` tree one slot at a time took about 6 ms of a new
+    /// camera on one thread (docs/benchmarks.md). In parallel on rayon's
+    /// current pool, reusing the pairs' memory when the tree already has
+    /// this layout's size (a new camera on the same tree).
+    pub fn fill_grown(&mut self, layout: &Layout, boxes: &[[Vec3; 2]], eye: DVec3) {
+        use rayon::prelude::*;
+        assert_eq!(boxes.len(), layout.slots.len(), "one box per slot");
+        self.size_for(layout);
+        let pairs: &mut [NodePair] = &mut self.pairs;
+        // A whole number of eight-slot groups per task.
+        const TASK: usize = 512;
+        pairs
+            .par_chunks_mut(TASK)
+            .zip(layout.slots.par_chunks(2 * TASK))
+            .zip(boxes.par_chunks(2 * TASK))
+            .for_each(|((pairs, slots), boxes)| {
+                fill_grown_range(pairs, slots, boxes, eye);
+            });
+    }
+
+    /// Sizes the pairs for `layout` (contents to be written by the caller).
+    fn size_for(&mut self, layout: &Layout) {
         let n = layout.slots.len() / 2;
         if self.pairs.len() != n {
             // On huge pages where the OS has them (`crate::huge_pages`):
@@ -156,15 +197,6 @@ impl Nodes32 {
             self.pairs = crate::huge_pages::with_capacity(n);
             self.pairs.resize(n, filler);
         }
-        self.pairs
-            .par_iter_mut()
-            .zip(layout.slots.par_chunks_exact(2))
-            .enumerate()
-            .with_min_len(1024)
-            .for_each(|(i, (pair, slots))| {
-                pair.0[0] = node(2 * i, &slots[0]);
-                pair.0[1] = node(2 * i + 1, &slots[1]);
-            });
     }
 
     /// True when the tree has no nodes.
@@ -217,9 +249,191 @@ fn prim_spans(shape: &[(u32, u32)]) -> Vec<Option<(u32, u32)>> {
     span
 }
 
+/// [`Nodes32::fill_grown`] over one task's pairs, their slots and boxes, in
+/// the widest lanes the CPU has.
+fn fill_grown_range(pairs: &mut [NodePair], slots: &[Slot], boxes: &[[Vec3; 2]], eye: DVec3) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(wide) = crate::simd::Avx512::detect() {
+        // SAFETY: the CPU has AVX-512F (just detected).
+        unsafe { fill_grown_avx512(wide, pairs, slots, boxes, eye) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let Some(avx2) = crate::simd::Avx2::detect() {
+        // SAFETY: the CPU has AVX2 (just detected).
+        unsafe { fill_grown_avx2(avx2, pairs, slots, boxes, eye) };
+        return;
+    }
+    fill_grown_lanes(crate::simd::Portable, pairs, slots, boxes, eye);
+}
+
+/// [`fill_grown_lanes`] compiled for AVX-512F.
+///
+/// # Safety
+/// The CPU must have AVX-512F (`l` proves it).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+unsafe fn fill_grown_avx512(
+    l: crate::simd::Avx512,
+    pairs: &mut [NodePair],
+    slots: &[Slot],
+    boxes: &[[Vec3; 2]],
+    eye: DVec3,
+) {
+    fill_grown_lanes(l, pairs, slots, boxes, eye);
+}
+
+/// [`fill_grown_lanes`] compiled for AVX2.
+///
+/// # Safety
+/// The CPU must have AVX2 (`l` proves it).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn fill_grown_avx2(
+    l: crate::simd::Avx2,
+    pairs: &mut [NodePair],
+    slots: &[Slot],
+    boxes: &[[Vec3; 2]],
+    eye: DVec3,
+) {
+    fill_grown_lanes(l, pairs, slots, boxes, eye);
+}
+
+/// Each slot's node from its box, `N` slots at a time in the lanes `l`, the
+/// last few (fewer than `N`) one at a time.
+#[inline(always)]
+fn fill_grown_lanes<L: crate::simd::Lanes<N>, const N: usize>(
+    l: L,
+    pairs: &mut [NodePair],
+    slots: &[Slot],
+    boxes: &[[Vec3; 2]],
+    eye: DVec3,
+) {
+    let len = 2 * pairs.len();
+    let whole = len / N * N;
+    for g in (0..whole).step_by(N) {
+        let (mut lo, mut hi) = ([[0f32; N]; 3], [[0f32; N]; 3]);
+        for j in 0..N {
+            let [a, b] = boxes[g + j];
+            for k in 0..3 {
+                lo[k][j] = a[k];
+                hi[k][j] = b[k];
+            }
+        }
+        let (glo, ghi) = Node32::grown_lanes(l, eye, &lo, &hi);
+        for j in 0..N {
+            let s = &slots[g + j];
+            pairs[(g + j) / 2].0[(g + j) % 2] = Node32::from_corners(
+                [glo[0][j], glo[1][j], glo[2][j]],
+                [ghi[0][j], ghi[1][j], ghi[2][j]],
+                s.first,
+                s.count,
+            );
+        }
+    }
+    for i in whole..len {
+        let [a, b] = boxes[i];
+        let s = &slots[i];
+        pairs[i / 2].0[i % 2] = Node32::new(eye, &grow_box(eye, a, b), s.first, s.count);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::predicate::tests::lcg;
+
+    /// The nodes made in lanes are the scalar `Node32::new(eye,
+    /// &grow_box(..))` bit for bit, on every lane type this CPU runs, for
+    /// boxes near and far from eyes near and far from the origin: boxes
+    /// with a face through the eye (the growth's floor, corners of about
+    /// 1e-35), tiny, huge, flat and single points, and a count that leaves
+    /// a scalar rest. Compared are the corners' bits and the slot's numbers
+    /// (a wrong rounding direction or margin fails; both tried).
+    #[test]
+    fn nodes_in_lanes_are_the_scalar_nodes() {
+        let mut s = 11u64;
+        let mut floor_corners = 0;
+        for (i, off) in [0.0, 1e3, -3e7].into_iter().enumerate() {
+            // An eye on f32 values, so a box's face can pass through it.
+            let eye = (DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 3.0 + off)
+                .as_vec3()
+                .as_dvec3();
+            // Even (whole pairs), and not all whole groups of lanes (the
+            // scalar rest is taken too).
+            let count = [4000, 4002, 4006][i];
+            let boxes: Vec<[Vec3; 2]> = (0..count)
+                .map(|k| {
+                    let size = [1.0, 1e-3, 1e-30, 1e6, 0.0][k % 5];
+                    let c = eye + DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 10.0;
+                    let mut lo = (c - DVec3::splat(lcg(&mut s).abs() * size)).as_vec3();
+                    let mut hi = (c + DVec3::splat(lcg(&mut s).abs() * size)).as_vec3();
+                    if k % 7 == 3 {
+                        // A face through the eye: that corner's distance is
+                        // 0 and only the growth's floor moves it.
+                        lo.x = eye.x as f32;
+                        hi.x = lo.x;
+                    }
+                    [lo.min(hi), lo.max(hi)]
+                })
+                .collect();
+            let slots: Vec<Slot> = (0..count as u32)
+                .map(|k| Slot {
+                    src: k,
+                    first: 3 * k,
+                    count: k % 9,
+                })
+                .collect();
+            let want: Vec<Node32> = boxes
+                .iter()
+                .zip(&slots)
+                .map(|(&[a, b], sl)| Node32::new(eye, &grow_box(eye, a, b), sl.first, sl.count))
+                .collect();
+            floor_corners += want
+                .iter()
+                .filter(|n| {
+                    n.corner_bits()
+                        .iter()
+                        .any(|&b| f32::from_bits(b).abs() < 1e-30)
+                })
+                .count();
+            let blank = NodePair([want[0]; 2]);
+            let check = |kernel: &str, got: &[NodePair]| {
+                for (k, w) in want.iter().enumerate() {
+                    let g = &got[k / 2].0[k % 2];
+                    assert_eq!(
+                        g.corner_bits(),
+                        w.corner_bits(),
+                        "{kernel}: box {k} {:?}",
+                        boxes[k]
+                    );
+                    assert_eq!((g.first, g.count), (w.first, w.count), "{kernel}: box {k}");
+                }
+            };
+            let (b, sl) = (&boxes[..], &slots[..]);
+            let mut pairs = vec![blank; count / 2];
+            fill_grown_lanes(crate::simd::Portable, &mut pairs, sl, b, eye);
+            check("portable", &pairs);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(avx2) = crate::simd::Avx2::detect() {
+                let mut p = vec![blank; count / 2];
+                // SAFETY: the CPU has AVX2 (just detected).
+                unsafe { fill_grown_avx2(avx2, &mut p, sl, b, eye) };
+                check("avx2", &p);
+            }
+            #[cfg(target_arch = "x86_64")]
+            if let Some(wide) = crate::simd::Avx512::detect() {
+                let mut p = vec![blank; count / 2];
+                // SAFETY: the CPU has AVX-512F (just detected).
+                unsafe { fill_grown_avx512(wide, &mut p, sl, b, eye) };
+                check("avx512", &p);
+            }
+        }
+        assert!(
+            floor_corners > 10,
+            "the cases reach the growth's floor: {floor_corners}"
+        );
+    }
 
     /// Every node keeps its box, and every node reaches the same prims (a
     /// merged leaf holds exactly its old subtree's), with siblings in one
