@@ -91,6 +91,27 @@ pub fn trace(scene: &ResolvedScene, q: BvhQuality, runs: usize) -> TraceTimes {
     TraceTimes { build, trace }
 }
 
+/// The leaf set-up a new camera's first frame pays inside its trace (the
+/// leaves are set up by the first traversal that reaches them,
+/// `rendiff::trace::TraceBvh::aim`): per run, the camera set up again (its
+/// node boxes, which [`TraceBvh::build`] already times, untimed here), then
+/// the first pass and a second one timed back to back; the median of their
+/// differences. What a one-frame budget pays on top of the build and a
+/// steady pass (which paired passes measure: every pass after the first
+/// reuses the set-up leaves).
+pub fn leaf_set_up(scene: &ResolvedScene, bvh: &mut TraceBvh, runs: usize) -> f64 {
+    let opts = trace::TraceOptions::default();
+    let diffs: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            bvh.aim(scene);
+            let (first, _) = seconds(|| trace::trace_keys(scene, bvh, opts, &|_| {}));
+            let (steady, _) = seconds(|| trace::trace_keys(scene, bvh, opts, &|_| {}));
+            first - steady
+        })
+        .collect();
+    super::median(&diffs).max(0.0)
+}
+
 /// Times tracing through an existing BVH (the default kernel: packets), the
 /// frame's buffers included.
 pub fn trace_with(scene: &ResolvedScene, bvh: &TraceBvh, runs: usize) -> Timed<Frame> {
@@ -374,7 +395,7 @@ pub fn binding_vs_native(
 pub const AGREEMENT: f64 = 0.05;
 
 /// Wall-clock seconds of `f`, and what it returned.
-fn seconds<T>(f: impl FnOnce() -> T) -> (f64, T) {
+pub fn seconds<T>(f: impl FnOnce() -> T) -> (f64, T) {
     let t = std::time::Instant::now();
     let out = f();
     (t.elapsed().as_secs_f64(), out)

@@ -4,8 +4,9 @@
 //! (its time over the faster one's), for two budgets:
 //!
 //! - *one frame*: what `render --renderer core` and `check`'s reference pay:
-//!   the raster's pass against the tracer's pass plus its BVH build (unless
-//!   the scene is shaded, when the BVH is built either way and the passes
+//!   the raster's pass against the tracer's pass plus its BVH build and the
+//!   leaf set-up of its first pass ([`measure::leaf_set_up`]; unless the
+//!   scene is shaded, when the BVH is built either way and the passes
 //!   decide);
 //! - *BVH shared*: the build already paid (many frames, or shading): the
 //!   two passes alone.
@@ -47,7 +48,9 @@ pub fn verdict(w: &Workload, raster_s: f64, trace_s: f64) -> Value {
 }
 
 /// Both budgets' verdicts from measured passes (`paired`: the median of the
-/// rounds' trace / raster ratios) and the build.
+/// rounds' trace / raster ratios) and what a first frame pays beyond a
+/// steady pass (`build_s`: the BVH build with its camera set-up, and the
+/// leaf set-up of the first pass).
 pub fn verdicts(w: &Workload, raster_pass_s: f64, trace_over_raster: f64, build_s: f64) -> Value {
     let trace_pass_s = raster_pass_s * trace_over_raster;
     let one = if w.bvh_needed_anyway {
@@ -88,9 +91,25 @@ pub fn corpus_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 
 /// One scene's row: its workload, both passes in paired rounds, the build,
 /// and the verdicts.
-pub fn scene_row(name: &str, scene: &ResolvedScene, threads: usize, runs: usize) -> Value {
-    let build = super::timed(runs, || TraceBvh::build(scene, BvhQuality::default()));
-    let paired = measure::raster_vs_trace(scene, &build.last, runs.max(5));
+pub fn scene_row(
+    name: &str,
+    scene: &ResolvedScene,
+    threads: usize,
+    runs: usize,
+    quick: bool,
+) -> Value {
+    let mut build = super::timed(runs, || TraceBvh::build(scene, BvhQuality::default()));
+    // As many paired rounds as the grid's rows get (`paired_rounds`): five
+    // rounds of passes of 10-50 µs left the faster loop of the small scenes
+    // to the machine's state (on 2 threads nine wrong picks in one run, five
+    // in the next, Nov 30 19:38 and 19:40).
+    let opts = rendiff::trace::TraceOptions::default();
+    let round_s =
+        measure::seconds(|| rendiff::raster::render_keys(scene, Default::default(), &|_| {})).0
+            + measure::seconds(|| rendiff::trace::trace_keys(scene, &build.last, opts, &|_| {})).0;
+    let rounds = super::crossover::paired_rounds(runs.max(5), round_s, quick);
+    let paired = measure::raster_vs_trace(scene, &build.last, rounds);
+    let leaf_set_up_s = measure::leaf_set_up(scene, &mut build.last, runs.max(5));
     let raster_pass_s = super::median(
         &paired["raster_keys_s"]
             .as_array()
@@ -103,15 +122,16 @@ pub fn scene_row(name: &str, scene: &ResolvedScene, threads: usize, runs: usize)
         .as_f64()
         .unwrap_or(f64::NAN);
     let w = loop_cost::workload(scene, threads);
-    let mut row = verdicts(&w, raster_pass_s, ratio, build.median_s);
+    let mut row = verdicts(&w, raster_pass_s, ratio, build.median_s + leaf_set_up_s);
     row["scene"] = json!(name);
     row["bvh_build_s"] = json!(build.median_s);
+    row["leaf_set_up_s"] = json!(leaf_set_up_s);
     row["paired"] = paired;
     row
 }
 
 /// The corpus rows, each scene loaded, timed and dropped in turn.
-pub fn corpus_rows(files: &[PathBuf], threads: usize, runs: usize) -> Vec<Value> {
+pub fn corpus_rows(files: &[PathBuf], threads: usize, runs: usize, quick: bool) -> Vec<Value> {
     files
         .iter()
         .map(|p| {
@@ -121,7 +141,7 @@ pub fn corpus_rows(files: &[PathBuf], threads: usize, runs: usize) -> Vec<Value>
                 .unwrap_or_default();
             rendiff::errln!("crossover: model check on {}", p.display());
             match super::load_scene(p) {
-                Ok(s) => scene_row(&name, &s, threads, runs),
+                Ok(s) => scene_row(&name, &s, threads, runs, quick),
                 Err(e) => json!({"scene": name, "error": format!("{e:#}")}),
             }
         })
