@@ -255,6 +255,39 @@ mod tests {
         }
     }
 
+    /// A corpus row counts the leaf set-up in its one-frame budget (its
+    /// verdict's build is the build's median plus `leaf_set_up_s`) and gets
+    /// the grid's paired rounds: more than five on a scene whose passes take
+    /// microseconds, exactly `runs` with `--quick`. And the measurement
+    /// leaves the tree aimed and tracing the keys a fresh tree gives.
+    #[test]
+    fn corpus_rows_count_the_leaf_set_up_and_fill_their_rounds() {
+        let scene = crate::crossover::grid_scene(8, 64, false).unwrap();
+        let row = scene_row("grid", &scene, 1, 3, false);
+        let leaf = row["leaf_set_up_s"].as_f64().unwrap();
+        assert!(leaf.is_finite() && leaf >= 0.0, "{leaf}");
+        let build = row["bvh_build_s"].as_f64().unwrap();
+        let est = row["one_frame"]["trace_s"].as_f64().unwrap();
+        let pass = row["bvh_shared"]["trace_s"].as_f64().unwrap();
+        assert!(
+            ((est - pass) - (build + leaf)).abs() <= 1e-12 * est.max(1.0),
+            "{row}"
+        );
+        assert!(
+            row["paired"]["rounds"].as_u64().unwrap() > 5,
+            "{}",
+            row["paired"]
+        );
+        let quick = scene_row("grid", &scene, 1, 3, true);
+        assert_eq!(quick["paired"]["rounds"].as_u64(), Some(5));
+        let mut bvh = TraceBvh::build(&scene, BvhQuality::default());
+        let opts = rendiff::trace::TraceOptions::default();
+        let want = rendiff::trace::trace_keys(&scene, &bvh, opts, &|_| {}).keys;
+        measure::leaf_set_up(&scene, &mut bvh, 3);
+        let got = rendiff::trace::trace_keys(&scene, &bvh, opts, &|_| {}).keys;
+        assert_eq!(got, want);
+    }
+
     /// A right pick has ratio 1; a wrong one its time over the faster's, and
     /// the summary counts it.
     #[test]
