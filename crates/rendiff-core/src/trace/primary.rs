@@ -150,7 +150,8 @@ fn round_up(x: f64) -> f32 {
     f32::from_bits(if f64::from(f) < x { above } else { b })
 }
 
-/// [`round_up`] lane by lane: the nearest f32, stepped up where it rounded
+/// [`round_up`] lane by lane (the leaves' bounds and the nodes' upper
+/// corners; the lower ones as `-round_up(-x)`): the nearest f32, stepped up where it rounded
 /// down (`f32::next_up`'s steps: away from zero above it, toward zero below
 /// it, and from a zero to the least positive subnormal). Branch-free: the
 /// direction of rounding is as good as random per lane, and a branch on it
@@ -436,17 +437,16 @@ impl LeafTri {
             );
             let n = [l.to_f32(n[0]), l.to_f32(n[1]), l.to_f32(n[2])];
             // `edge_bound`: its range checks (false for NaN, as
-            // `is_finite` is), then `round_up(b)` of a positive `b` (at
-            // least `NORMAL_FLOOR` times the filter, so its f32 is positive
-            // and normal): the next f32 up where rounding went down.
+            // `is_finite` is), then `round_up(b)` in lanes (the nodes' one,
+            // `round_up_lanes`).
             let inf = l.splat(f64::INFINITY);
             let kept =
                 l.ge(nn, l.splat(NORMAL_FLOOR)) & l.lt(nn, inf) & l.ge(l.splat(PERM_CEILING), pn);
-            let (f, below) = l.to_f32_below(b);
+            let f = round_up_lanes(l, b);
             for j in 0..N {
                 n_out[j][k] = [n[0][j], n[1][j], n[2][j]];
                 beta_out[j][k] = if kept >> j & 1 == 1 {
-                    f32::from_bits(f[j].to_bits() + (below >> j & 1))
+                    f[j]
                 } else {
                     f32::INFINITY
                 };
