@@ -603,15 +603,17 @@ fn goals(record: &Value) -> Value {
         .into_iter()
         .flatten()
     {
+        // The goal is the passes' ratio (the README's and `bench
+        // crossover`'s); the first image's is on the page beside it.
         let mut g = peer_tables::goal(
             &format!(
-                "two screen-filling triangles, {} thread(s), time to first image: raster / trace",
+                "two screen-filling triangles, {} thread(s), visibility pass: raster / trace",
                 r["threads"]
             ),
-            &r["raster_over_trace"],
+            &r["pass"]["raster_over_trace"],
             10.0,
         );
-        g["table"] = json!("time to first image");
+        g["table"] = json!("visibility pass");
         issue_39.push(g);
     }
     json!({
@@ -1108,12 +1110,19 @@ fn two_and_external(p: &mut Page, record: &Value) {
         .into_iter()
         .flatten()
     {
+        let ratio = |v: &Value| {
+            format!(
+                "{} [{}, {}]",
+                num(v["median"].as_f64(), 3),
+                num(v["interval_95"][0].as_f64(), 3),
+                num(v["interval_95"][1].as_f64(), 3)
+            )
+        };
         p.note(&format!(
-            "{} thread(s), {} triangles at {}x{}: raster / trace (BVH build included) = {} [{}, {}] over {} rounds",
+            "{} thread(s), {} triangles at {}x{}: raster / trace, first image (BVH build included) = {}; visibility pass (the goal's ratio) = {}; over {} rounds",
             r["threads"], r["triangles"], r["size"], r["size"],
-            num(r["raster_over_trace"]["median"].as_f64(), 3),
-            num(r["raster_over_trace"]["interval_95"][0].as_f64(), 3),
-            num(r["raster_over_trace"]["interval_95"][1].as_f64(), 3),
+            ratio(&r["raster_over_trace"]),
+            ratio(&r["pass"]["raster_over_trace"]),
             r["raster_s"].as_array().map_or(0, Vec::len),
         ));
     }
