@@ -27,9 +27,10 @@ use rendiff_bench::measure;
 use serde_json::json;
 use std::path::PathBuf;
 
-/// One line: the scene's name, the model's inputs and the paired passes.
+/// One line: the scene's name, the model's inputs and the paired passes,
+/// through the default BVH (the tree `render` and `check` build).
 fn row(name: &str, scene: &ResolvedScene, threads: usize, rounds: usize) {
-    let bvh = TraceBvh::build(scene, BvhQuality::Medium);
+    let bvh = TraceBvh::build(scene, BvhQuality::default());
     let paired = measure::raster_vs_trace(scene, &bvh, rounds);
     let med = |k: &str| {
         rendiff_bench::median(

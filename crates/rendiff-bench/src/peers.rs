@@ -89,6 +89,17 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
         cam.height,
         scene.triangles.len()
     );
+    // The two-triangle check first, before the heavy tables, the Embree
+    // builds and the harness's subprocesses: run last (Nov 30 22:20), both of
+    // its passes took 1.4-1.9x their time in a fresh process (the raster's
+    // 0.90 ms against 0.47-0.51 ms on 2 threads, 11 rounds), which moved its
+    // ratio from 11.7-12.3x to 8.7x; a fresh process that first built and
+    // traced `million` and ran Embree's per-frame rounds still gave 11.8x.
+    let two_triangles = opts
+        .threads
+        .iter()
+        .map(|&t| Ok(super::pool(t)?.install(|| peer_tables::two_triangles(t, opts.rounds))))
+        .collect::<Result<Vec<Value>>>()?;
     let per_threads = throughput(&scene, &opts.threads, runs, opts.rounds)?;
     let scanned = match &opts.scanned_scene {
         Some(spec) => {
@@ -131,11 +142,6 @@ pub fn run(opts: &PeersOptions) -> Result<super::Output> {
             .unwrap_or_else(|e| json!({"skipped": format!("{e:#}")})),
         Err(why) => json!({"skipped": why}),
     };
-    let two_triangles = opts
-        .threads
-        .iter()
-        .map(|&t| Ok(super::pool(t)?.install(|| peer_tables::two_triangles(t, opts.rounds))))
-        .collect::<Result<Vec<Value>>>()?;
     let first_image_external = match &harness {
         Ok(h) => match h.export(&scene, &scratch.path().join("first-image")) {
             Ok(resolved) => {

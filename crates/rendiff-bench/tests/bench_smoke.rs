@@ -478,6 +478,24 @@ fn crossover_writes_rows_with_operation_counts() {
     }
     assert!(record["crossover_triangles"]["raster_vs_trace_paired"].is_array());
     assert_eq!(record["raster_equals_trace_everywhere"], true);
+    // The corpus is measured in two sweeps: each verdict carries the
+    // second's faster loop and whether the two agree, and the summary
+    // counts the decided rows.
+    let corpus = record["which_loop"]["corpus"].as_array().expect("corpus");
+    assert!(!corpus.is_empty());
+    for r in corpus {
+        for budget in ["one_frame", "bvh_shared"] {
+            let v = &r[budget];
+            let agree = v["reproducible"].as_bool().expect("reproducible");
+            assert_eq!(agree, v["faster"] == v["second_sweep"]["faster"], "{v}");
+        }
+    }
+    let s = &record["which_loop"]["summary"]["one_frame"];
+    assert_eq!(
+        s["decided"]["of"].as_u64().unwrap() + s["undecided"].as_u64().unwrap(),
+        s["of"].as_u64().unwrap(),
+        "{s}"
+    );
 }
 
 #[test]

@@ -109,7 +109,13 @@ const RASTER_PASS_2T: [f64; 10] = [
 /// its own size and at 4x its pixels, and the crossover grid flat, tilted,
 /// folded and stacked 2, 4 and 8 deep at 4 to 512 cells a side on 256² and
 /// 512²: 126 rows), Nov 30, AMD EPYC, the data in
-/// reports/bench/which-loop/fit/ (`loop_fit fit` recomputes these).
+/// reports/bench/which-loop/fit/ (`loop_fit fit` recomputes these). The
+/// passes were timed through obvhs medium's tree, the default until Nov 30
+/// 15:27; a refit through today's default (`linear`, 22:38-22:40,
+/// `fit/default-bvh-*`) picked better on small scenes but moved the flat
+/// grid's crossover with the BVH shared from 2.1M down to 131,072 triangles,
+/// where the raster's pass still leads by 1.3x, so it was not taken
+/// (docs/benchmarks.md, "Which loop").
 const RATIO_1T: [f64; 4] = [-1.3933, 0.2698, -0.1466, 0.0048];
 
 /// The same at 2 threads (the median of three runs' paired ratios per row).
