@@ -474,7 +474,7 @@ pub fn goals_of(scene: &str, rows: &[Value]) -> Vec<Value> {
 }
 
 /// "x [lo, hi]" of a recorded ratio (median and interval).
-fn ratio_text(r: &Value) -> String {
+pub fn ratio_text(r: &Value) -> String {
     let iv = &r["interval_95"];
     match (iv[0].as_f64(), iv[1].as_f64()) {
         (Some(lo), Some(hi)) => format!(

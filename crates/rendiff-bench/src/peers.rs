@@ -672,14 +672,7 @@ fn headline(record: &Value) -> Value {
 
 /// The headline as page text, each figure with its table's name.
 fn headline_text(h: &Value) -> String {
-    let r = |v: &Value| {
-        format!(
-            "{} [{}, {}]",
-            num(v["median"].as_f64(), 3),
-            num(v["interval_95"][0].as_f64(), 3),
-            num(v["interval_95"][1].as_f64(), 3)
-        )
-    };
+    let r = peer_tables::ratio_text;
     let parts: Vec<String> = h["rows"]
         .as_array()
         .into_iter()
@@ -1116,14 +1109,7 @@ fn two_and_external(p: &mut Page, record: &Value) {
         .into_iter()
         .flatten()
     {
-        let ratio = |v: &Value| {
-            format!(
-                "{} [{}, {}]",
-                num(v["median"].as_f64(), 3),
-                num(v["interval_95"][0].as_f64(), 3),
-                num(v["interval_95"][1].as_f64(), 3)
-            )
-        };
+        let ratio = peer_tables::ratio_text;
         p.note(&format!(
             "{} thread(s), {} triangles at {}x{}: raster / trace, first image (BVH build included) = {}; visibility pass (the goal's ratio) = {}; over {} rounds",
             r["threads"], r["triangles"], r["size"], r["size"],
