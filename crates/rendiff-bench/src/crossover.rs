@@ -107,13 +107,14 @@ fn row(scene: &ResolvedScene, nx: u32, size: u32, runs: usize, quick: bool) -> V
     let leaf_set_up_s = measure::leaf_set_up(scene, &mut t.build.last, runs.max(5));
     let tris = scene.triangles.len() as f64;
     let px = f64::from(size) * f64::from(size);
-    let which_loop = super::which_loop::verdicts(
+    let ratio = paired["raster_speedup_over_trace"]
+        .as_f64()
+        .unwrap_or(f64::NAN);
+    let which_loop = super::which_loop::measured_row(
         &rendiff::loop_cost::workload(scene, threads),
-        rk.median_s,
-        paired["raster_speedup_over_trace"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
-        t.build.median_s + leaf_set_up_s,
+        (rk.median_s, ratio),
+        t.build.median_s,
+        leaf_set_up_s,
     );
     json!({
         "which_loop": which_loop,

@@ -109,7 +109,8 @@ const RASTER_PASS_2T: [f64; 10] = [
 /// its own size and at 4x its pixels, and the crossover grid flat, tilted,
 /// folded and stacked 2, 4 and 8 deep at 4 to 512 cells a side on 256² and
 /// 512²: 126 rows), Nov 30, AMD EPYC, the data in
-/// reports/bench/which-loop/fit/ (`loop_fit fit` recomputes these). The
+/// reports/bench/which-loop/fit/ (`loop_fit fit 1-thread.jsonl` and
+/// `loop_fit fit 2-threads-{a,b,c}.jsonl` recompute these). The
 /// passes were timed through obvhs medium's tree, the default until Nov 30
 /// 15:27; a refit through today's default (`linear`, 22:38-22:40,
 /// `fit/default-bvh-*`) picked better on small scenes but moved the flat
