@@ -119,12 +119,14 @@ fn main() -> Result<()> {
             let r = &v["core_over_embree_new_camera_counted"];
             let s = &v["core_over_embree_same_camera"];
             println!(
-                "{t} thread(s), {}: new camera {:.4} s, trace {:.4} s, Embree {:.4} s ({}); \
+                "{t} thread(s), {}: new camera {:.4} s, trace {:.4} s, Embree {:.4} s \
+                 (on rays prepared outside: {:.4} s) ({}); \
                  new camera counted {:.3}x {}, same camera {:.3}x {}; load {:?}",
                 spec.path.display(),
                 c["new_camera_s_median"].as_f64().unwrap_or(f64::NAN),
                 c["trace_s_median"].as_f64().unwrap_or(f64::NAN),
                 v["embree"]["trace_s_median"].as_f64().unwrap_or(f64::NAN),
+                v["embree"]["trace_alone_s_median"].as_f64().unwrap_or(f64::NAN),
                 config.name(),
                 r["median"].as_f64().unwrap_or(f64::NAN),
                 r["interval_95"],

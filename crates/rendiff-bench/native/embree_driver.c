@@ -163,7 +163,7 @@ static inline void rd_store(float *t_out, uint32_t *prim_out, size_t p, unsigned
         for (int i = 0; i < (N); i++) {                                                      \
           uint32_t x = tx + i % (TW), y = ty + i / (TW);                                     \
           int in = x < w && y < y0 + rows;                                                   \
-          size_t p = in ? (size_t)y * w + x : 0;                                             \
+          size_t p = (size_t)(in ? y : y0) * w + (in ? x : 0);                                             \
           valid[i] = in ? -1 : 0;                                                            \
           rh.ray.org_x[i] = r->org[0];                                                       \
           rh.ray.org_y[i] = r->org[1];                                                       \
@@ -212,7 +212,7 @@ RD_PACKETS(16, 4)
         for (int i = 0; i < (N); i++) {                                                        \
           uint32_t x = tx + i % (TW), y = ty + i / (TW);                                       \
           int in = x < w && y < y0 + rows;                                                     \
-          size_t p = in ? (size_t)y * w + x : 0;                                               \
+          size_t p = (size_t)(in ? y : y0) * w + (in ? x : 0);                                               \
           q->ray.org_x[i] = r->org[0];                                                         \
           q->ray.org_y[i] = r->org[1];                                                         \
           q->ray.org_z[i] = r->org[2];                                                         \
@@ -315,7 +315,10 @@ static void rd_stream1(RTCScene scene, struct RTCIntersectContext *ctx, const rd
 
 /* Traces the image rows [y0, y0 + rows) of `r` through `s` with entry point
  * `entry` (RD_*) and the coherent (1) or incoherent (0) context flag, writing
- * `t_out[p]` and `prim_out[p]` for every pixel p of those rows. `rows` must
+ * `t_out[p]` and `prim_out[p]` for every pixel p of those rows. Reads the
+ * rays of those rows only (a packet's lanes outside them read the rows'
+ * first ray, masked), so `r` may hold just them (the caller's strip of rays
+ * made for these rows, its pointers moved back y0 rows). `rows` must
  * be a multiple of 4 except at the bottom of the image. Thread-safe for
  * disjoint row ranges. Returns 0, or -1 for an unknown entry point. */
 int rd_trace_strip(const rd_scene *s, const rd_rays *r, int entry, int coherent, uint32_t y0,

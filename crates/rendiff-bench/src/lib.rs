@@ -23,6 +23,7 @@ pub mod cli;
 pub mod core_loops;
 pub mod crossover;
 pub mod direct;
+pub mod embree_rays;
 pub mod equal_time;
 pub mod example_args;
 pub mod fuzz;

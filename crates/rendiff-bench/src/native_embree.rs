@@ -4,13 +4,17 @@
 //! Embree is never reported below its best without the bench saying so
 //! (docs/embree-fastest-path.md).
 //!
-//! What it does is what an Embree application does for primary rays: every
-//! ray is prepared once in f32 ([`PreparedRays`], outside every timed
-//! region), each frame copies them into Embree's own layout for the entry
-//! point measured (`RTCRayHit`, `RTCRayHit4/8/16`, streams of either) and
-//! traces them with flush-to-zero and denormals-are-zero set, as Embree's
-//! documentation recommends; the hit distance and primitive ID of each pixel
-//! come back ([`Hits`]) and become the core's hit keys afterwards, untimed.
+//! What it does is what an Embree application does for primary rays: the
+//! rays, in f32 ([`crate::embree_rays`]), go into Embree's own layout for
+//! the entry point measured (`RTCRayHit`, `RTCRayHit4/8/16`, streams of
+//! either) and are traced with flush-to-zero and denormals-are-zero set, as
+//! Embree's documentation recommends; the hit distance and primitive ID of
+//! each pixel come back ([`Hits`]) and become the core's hit keys
+//! afterwards, untimed. The rays are either prepared once for the whole
+//! image outside timing ([`NativeScene::trace`]: the trace alone) or made
+//! strip by strip inside the timed call ([`NativeScene::trace_made`]: what
+//! a frame costs an application, the core's rays being made inside its
+//! timed queries too).
 //! Rows of 4 pixels are traced in parallel on rayon's current pool, the
 //! scheduler the core's tracer uses.
 //!
@@ -22,8 +26,9 @@
 //! after rounding; [`Hits::keys`] counts such pixels, and the bench records
 //! them.
 
+pub use crate::embree_rays::{CameraRays, PreparedRays};
+use crate::embree_rays::{RayDepth, StripRays};
 use rayon::prelude::*;
-use rendiff::camera::Camera;
 use rendiff::frame::Frame;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::visibility::{hit_key, Counters, NO_HIT};
@@ -205,89 +210,35 @@ pub fn version() -> Result<String, String> {
     ))
 }
 
-/// Every pixel's ray in f32, prepared once per camera, outside timing.
-pub struct PreparedRays {
-    width: u32,
-    height: u32,
-    org: [f32; 3],
-    dx: Vec<f32>,
-    dy: Vec<f32>,
-    dz: Vec<f32>,
-    tnear: Vec<f32>,
-    tfar: Vec<f32>,
-    /// `D32·forward` per pixel: planar depth per unit of `t`.
-    planar: Vec<f64>,
-    /// `(org32 - eye)·forward`: planar depth of the f32 origin.
-    offset: f64,
-    near: f64,
-    far: f64,
-}
-
-impl PreparedRays {
-    /// The camera's pixel rays in Embree's precision (the binding's convention).
-    pub fn new(cam: &Camera) -> PreparedRays {
-        let org = cam.eye.as_vec3();
-        let offset = (org.as_dvec3() - cam.eye).dot(cam.forward);
-        let n = cam.pixel_count();
-        let w = cam.width as usize;
-        let per_pixel: Vec<([f32; 5], f64)> = (0..n)
-            .into_par_iter()
-            .map(|p| {
-                let pr = cam.pixel_ray((p % w) as u32, (p / w) as u32);
-                let d = pr.dir.as_vec3();
-                let planar = d.as_dvec3().dot(cam.forward);
-                let tnear = ((cam.near - offset) / planar * (1.0 - 1e-6)).max(0.0) as f32;
-                let tfar = if cam.far.is_finite() {
-                    ((cam.far - offset) / planar * (1.0 + 1e-6)) as f32
-                } else {
-                    f32::INFINITY
-                };
-                ([d.x, d.y, d.z, tnear, tfar], planar)
-            })
-            .collect();
-        let column = |i: usize| per_pixel.iter().map(|(r, _)| r[i]).collect::<Vec<f32>>();
-        PreparedRays {
-            width: cam.width,
-            height: cam.height,
-            org: org.to_array(),
-            dx: column(0),
-            dy: column(1),
-            dz: column(2),
-            tnear: column(3),
-            tfar: column(4),
-            planar: per_pixel.iter().map(|&(_, p)| p).collect(),
-            offset,
-            near: cam.near,
-            far: cam.far,
-        }
-    }
-
-    /// Rays per frame (one per pixel).
-    pub fn len(&self) -> usize {
-        self.dx.len()
-    }
-
-    /// True for an image without pixels.
-    pub fn is_empty(&self) -> bool {
-        self.dx.is_empty()
-    }
-}
-
 /// What one traced frame gave: per pixel, Embree's hit distance (`+inf` on
-/// a miss) and primitive ID (`u32::MAX` on a miss).
+/// a miss) and primitive ID (`u32::MAX` on a miss), and, for rays made
+/// inside the trace ([`NativeScene::trace_made`]), each ray's planar depth
+/// per unit of `t`.
 pub struct Hits {
     /// `tfar` after the query.
     pub t: Vec<f32>,
     /// `primID`, the index in [`ResolvedScene::triangles`].
     pub prim: Vec<u32>,
+    /// `D32·forward` of each pixel's ray, when the trace made the rays.
+    planar: Vec<f64>,
 }
 
 impl Hits {
     /// Buffers for `rays`' frame (written in full by every trace).
     pub fn new(rays: &PreparedRays) -> Hits {
+        Hits::with_len(rays.len())
+    }
+
+    /// Buffers for a frame of `rays`, made inside the trace.
+    pub fn for_camera(rays: &CameraRays) -> Hits {
+        Hits::with_len(rays.len())
+    }
+
+    fn with_len(n: usize) -> Hits {
         Hits {
-            t: vec![f32::INFINITY; rays.len()],
-            prim: vec![u32::MAX; rays.len()],
+            t: vec![f32::INFINITY; n],
+            prim: vec![u32::MAX; n],
+            planar: vec![0.0; n],
         }
     }
 
@@ -296,22 +247,32 @@ impl Hits {
     /// front of `near` after rounding (the binding re-traces those; here
     /// they are counted and left as misses).
     pub fn keys(&self, rays: &PreparedRays) -> (Vec<u64>, usize) {
+        self.keys_with(&rays.planar, rays.depth)
+    }
+
+    /// [`Hits::keys`] of a trace that made `rays` itself.
+    pub fn keys_made(&self, rays: &CameraRays) -> (Vec<u64>, usize) {
+        self.keys_with(&self.planar, rays.depth())
+    }
+
+    fn keys_with(&self, planar: &[f64], depth: RayDepth) -> (Vec<u64>, usize) {
+        assert_eq!(planar.len(), self.t.len(), "hits of another frame");
         let mut in_front = 0;
         let keys = self
             .t
             .iter()
             .zip(&self.prim)
-            .zip(&rays.planar)
+            .zip(planar)
             .map(|((&t, &prim), &planar)| {
                 if prim == u32::MAX {
                     return NO_HIT;
                 }
-                let z = (rays.offset + f64::from(t) * planar) as f32;
+                let z = (depth.offset + f64::from(t) * planar) as f32;
                 let zf = f64::from(z);
-                if zf < rays.near {
+                if zf < depth.near {
                     in_front += 1;
                     NO_HIT
-                } else if zf > rays.far {
+                } else if zf > depth.far {
                     NO_HIT
                 } else {
                     hit_key(z, prim)
@@ -323,7 +284,15 @@ impl Hits {
 
     /// The frame these hits make (depth, IDs, normals), for agreement checks.
     pub fn frame(&self, scene: &ResolvedScene, rays: &PreparedRays) -> (Frame, usize) {
-        let (keys, in_front) = self.keys(rays);
+        Hits::frame_of(scene, self.keys(rays))
+    }
+
+    /// [`Hits::frame`] of a trace that made `rays` itself.
+    pub fn frame_made(&self, scene: &ResolvedScene, rays: &CameraRays) -> (Frame, usize) {
+        Hits::frame_of(scene, self.keys_made(rays))
+    }
+
+    fn frame_of(scene: &ResolvedScene, (keys, in_front): (Vec<u64>, usize)) -> (Frame, usize) {
         let f = Frame::from_keys(
             scene,
             &keys,
@@ -393,6 +362,37 @@ impl NativeScene {
         }
         start.elapsed().as_secs_f64()
     }
+
+    /// [`NativeScene::trace`] with the rays made inside it: each 4-row
+    /// strip's rays are made ([`CameraRays::fill`]) right before the strip
+    /// is traced, as an application makes its rays every frame, and as the
+    /// core's tracer makes its own inside its timed queries. Returns the
+    /// wall-clock seconds of making and tracing.
+    pub fn trace_made(
+        &self,
+        rays: &CameraRays,
+        entry: Entry,
+        coherent: bool,
+        hits: &mut Hits,
+    ) -> f64 {
+        let w = rays.width();
+        assert_eq!(hits.t.len(), rays.len(), "hits sized for another frame");
+        let start = Instant::now();
+        if w > 0 {
+            hits.t
+                .par_chunks_mut(STRIP_ROWS * w)
+                .zip(hits.prim.par_chunks_mut(STRIP_ROWS * w))
+                .zip(hits.planar.par_chunks_mut(STRIP_ROWS * w))
+                .enumerate()
+                .for_each_init(StripRays::default, |strip, (i, ((t, prim), planar))| {
+                    let y0 = i * STRIP_ROWS;
+                    rays.fill(y0, t.len() / w, strip, planar);
+                    let view = ffi::Rays::strip(rays, strip, y0);
+                    ffi::trace_strip(&self.raw, &view, entry.code(), coherent, y0, w, t, prim);
+                });
+        }
+        start.elapsed().as_secs_f64()
+    }
 }
 
 impl Drop for NativeScene {
@@ -404,7 +404,7 @@ impl Drop for NativeScene {
 /// The driver's C interface, or its absence.
 #[cfg(rendiff_native_embree)]
 mod ffi {
-    use super::PreparedRays;
+    use super::{CameraRays, PreparedRays, StripRays};
     use std::ffi::{c_char, c_int, c_long, c_uint, c_void};
 
     #[repr(C)]
@@ -419,21 +419,42 @@ mod ffi {
         tfar: *const f32,
     }
 
-    // SAFETY: read-only pointers into a `PreparedRays` the caller borrows
-    // for as long as the view lives (`trace` holds both).
+    // SAFETY: read-only pointers into rays the caller borrows for as long
+    // as the view lives (`trace` and `trace_made` hold both).
     unsafe impl Sync for Rays {}
 
     impl Rays {
+        /// A view of every pixel's prepared ray.
         pub fn new(r: &PreparedRays) -> Rays {
+            let s = &r.rays;
             Rays {
                 width: r.width,
                 height: r.height,
                 org: r.org,
-                dx: r.dx.as_ptr(),
-                dy: r.dy.as_ptr(),
-                dz: r.dz.as_ptr(),
-                tnear: r.tnear.as_ptr(),
-                tfar: r.tfar.as_ptr(),
+                dx: s.dx.as_ptr(),
+                dy: s.dy.as_ptr(),
+                dz: s.dz.as_ptr(),
+                tnear: s.tnear.as_ptr(),
+                tfar: s.tfar.as_ptr(),
+            }
+        }
+
+        /// A view of one strip's rays, made for the rows from `y0`: the
+        /// pointers are the strip's start moved back `y0` rows, so the
+        /// driver's pixel index `y * width + x` lands in the strip for the
+        /// strip's rows, the only ones it reads (embree_driver.c,
+        /// `rd_trace_strip`). Never dereferenced here.
+        pub fn strip(r: &CameraRays, s: &StripRays, y0: usize) -> Rays {
+            let back = y0 * r.width();
+            Rays {
+                width: r.width() as u32,
+                height: r.height() as u32,
+                org: r.org,
+                dx: s.dx.as_ptr().wrapping_sub(back),
+                dy: s.dy.as_ptr().wrapping_sub(back),
+                dz: s.dz.as_ptr().wrapping_sub(back),
+                tnear: s.tnear.as_ptr().wrapping_sub(back),
+                tfar: s.tfar.as_ptr().wrapping_sub(back),
             }
         }
     }
@@ -523,10 +544,12 @@ mod ffi {
         // pointers are the frame's start, so it writes only this strip's rows.
         let t0 = t.as_mut_ptr().wrapping_sub(y0 * w);
         let p0 = prim.as_mut_ptr().wrapping_sub(y0 * w);
-        // SAFETY: the scene is committed and live; `r` points at arrays of
-        // width*height rays, alive for the call; the driver writes exactly
-        // the pixels of rows [y0, y0+rows), which are `t` and `prim`
-        // (exclusive borrows), at `t0 + y*w + x`, inside those slices.
+        // SAFETY: the scene is committed and live; the driver reads the rays
+        // of rows [y0, y0+rows) only, at `r.d* + y*w + x`, which `r` holds
+        // for the call (a whole image's arrays, or a strip's of these rows
+        // by `Rays::strip`); it writes exactly the pixels of those rows,
+        // which are `t` and `prim` (exclusive borrows), at `t0 + y*w + x`,
+        // inside those slices.
         let rc = unsafe {
             rd_trace_strip(
                 h.0,
@@ -547,13 +570,17 @@ mod ffi {
 /// so none of these is reached.
 #[cfg(not(rendiff_native_embree))]
 mod ffi {
-    use super::PreparedRays;
+    use super::{CameraRays, PreparedRays, StripRays};
 
     pub struct Rays;
     pub struct Handle;
 
     impl Rays {
         pub fn new(_: &PreparedRays) -> Rays {
+            Rays
+        }
+
+        pub fn strip(_: &CameraRays, _: &StripRays, _: usize) -> Rays {
             Rays
         }
     }

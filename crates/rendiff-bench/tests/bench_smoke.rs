@@ -366,6 +366,16 @@ fn peers_writes_throughput_ratios() {
             "a new camera costs the core something"
         );
         assert_eq!(f["embree"]["new_camera_s_median"], 0.0);
+        // Embree makes its rays inside its timed frame, as the core does;
+        // its trace alone, on prepared rays, is timed beside in the rounds.
+        assert!(
+            f["embree"]["rays"]
+                .as_str()
+                .unwrap()
+                .starts_with("made inside"),
+            "{f}"
+        );
+        assert_eq!(at(&f["embree"], "trace_alone_s").len(), 3, "{f}");
         let counted = at(&f["core_over_embree_new_camera_counted"], "per_round");
         for i in 0..3 {
             let want = em[i] / (cam[i] + tr[i]);
@@ -379,6 +389,13 @@ fn peers_writes_throughput_ratios() {
             .find(|r| Some(r["name"].as_str().unwrap()) == t["embree"].as_str())
             .expect("Embree's first-image row");
         let e = at(embree_row, "seconds");
+        // Its rays are made inside its trace, not prepared apart.
+        let parts = &embree_row["parts_median_s"];
+        assert!(
+            parts["rays_and_trace_s"].as_f64().is_some_and(|x| x > 0.0)
+                && parts["rays_s"].is_null(),
+            "{embree_row}"
+        );
         for r in trows.iter().filter(|r| r["name"] != embree_row["name"]) {
             let s = at(r, "seconds");
             let per = at(&r["over_embree"], "per_round");

@@ -1,7 +1,8 @@
 //! The native Embree driver (native/embree_driver.c through
 //! `rendiff_bench::native_embree`) traces what the core's binding traces:
 //! for every entry point, context flag and build quality its hits make the
-//! binding's keys bit for bit, and the core's triangle IDs and depths.
+//! binding's keys bit for bit, with its rays prepared before the trace or
+//! made inside it, and the core's triangle IDs and depths.
 //!
 //! Where Embree is absent these tests FAIL with the reason, unless
 //! `RENDIFF_ALLOW_NO_EMBREE=1` is set, in which case they print a skip
@@ -13,7 +14,7 @@ use rendiff::camera::Camera;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::scene::Scene;
 use rendiff::trace::{self, TraceOptions};
-use rendiff_bench::native_embree::{self, Config, Hits, NativeScene, PreparedRays};
+use rendiff_bench::native_embree::{self, CameraRays, Config, Hits, NativeScene, PreparedRays};
 use std::path::Path;
 
 /// True when the driver and the library are usable; panics (test failure)
@@ -97,6 +98,20 @@ fn every_configuration_gives_the_bindings_keys() {
                 .filter(|&i| f.z[i].to_bits() != want.z[i].to_bits())
                 .count();
             assert_eq!((prim, z), (0, 0), "{what}: (prim, Z bits) differ at px");
+            // The same with the rays made strip by strip inside the trace:
+            // the same keys, every pixel written again.
+            let made = CameraRays::new(&s.camera);
+            let mut made_hits = Hits::for_camera(&made);
+            made_hits.t.fill(-1.0);
+            made_hits.prim.fill(7);
+            assert!(sc.trace_made(&made, config.entry, config.coherent, &mut made_hits) >= 0.0);
+            assert_eq!(made_hits.t, hits.t, "{what}: made rays, t");
+            assert_eq!(made_hits.prim, hits.prim, "{what}: made rays, prim");
+            assert_eq!(
+                made_hits.keys_made(&made),
+                hits.keys(&rays),
+                "{what}: made rays, keys"
+            );
         }
     }
 }
