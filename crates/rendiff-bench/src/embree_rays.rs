@@ -84,6 +84,7 @@ impl CameraRays {
         self.len() == 0
     }
 
+    /// What turns these rays' hit distances into planar depths.
     pub(crate) fn depth(&self) -> RayDepth {
         self.depth
     }
