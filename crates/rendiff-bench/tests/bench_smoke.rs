@@ -346,6 +346,24 @@ fn peers_writes_throughput_ratios() {
             .as_f64()
             .is_some());
         assert!(record["goals"]["core_trace_vs_embree_best"].is_array());
+        // The driver's best is the runoff's least median among the sweep's
+        // fastest rows, and the check and the per-frame table use it.
+        let runoff = &rows[0]["embree_native"]["runoff"];
+        let cands = runoff["candidates"].as_array().expect("runoff candidates");
+        assert!(!cands.is_empty() && cands.len() <= 6, "{runoff}");
+        let least = cands
+            .iter()
+            .min_by(|a, b| {
+                let m = |v: &Value| v["trace_s_median"].as_f64().unwrap();
+                m(a).total_cmp(&m(b))
+            })
+            .unwrap();
+        assert_eq!(runoff["winner"], least["name"], "{runoff}");
+        assert!(cands
+            .iter()
+            .all(|c| c["trace_s"].as_array().unwrap().len() == 3));
+        assert_eq!(rows[0]["embree_check"]["native_best"], runoff["winner"]);
+        assert_eq!(rows[0]["per_frame"]["embree"]["config"], runoff["winner"]);
         // The per-frame table: the core's new camera counted, per round.
         let f = &rows[0]["per_frame"];
         let at = |v: &Value, k: &str| -> Vec<f64> {
