@@ -1,8 +1,7 @@
 //! The primary rays the native Embree driver traces ([`crate::native_embree`]),
-//! in f32, in the core binding's convention (backends/embree.rs, module doc):
-//! origin the eye rounded to f32, direction the core's pixel ray rounded to
-//! f32, `tnear`/`tfar` from the camera's `near`/`far`, widened by 1e-6
-//! relative.
+//! in f32, by the core binding's own definition ([`EmbreeRay`]: origin the
+//! eye rounded to f32, direction the core's pixel ray rounded to f32,
+//! `tnear`/`tfar` from the camera's `near`/`far`, widened by 1e-6 relative).
 //!
 //! One definition, [`CameraRays::fill`], makes them for a strip of rows. It
 //! serves both ways the bench uses them: made strip by strip inside a timed
@@ -14,6 +13,7 @@
 //! points, the check of the bench's binding against the driver).
 
 use rayon::prelude::*;
+use rendiff::backends::embree::EmbreeRay;
 use rendiff::camera::Camera;
 
 /// What turns a hit distance along a ray into the core's planar depth, and
@@ -52,12 +52,12 @@ pub struct StripRays {
 impl CameraRays {
     /// The camera's constants (nothing per pixel yet).
     pub fn new(cam: &Camera) -> CameraRays {
-        let org = cam.eye.as_vec3();
+        let (org, offset) = EmbreeRay::origin(cam);
         CameraRays {
             cam: cam.clone(),
-            org: org.to_array(),
+            org,
             depth: RayDepth {
-                offset: (org.as_dvec3() - cam.eye).dot(cam.forward),
+                offset,
                 near: cam.near,
                 far: cam.far,
             },
@@ -91,8 +91,7 @@ impl CameraRays {
 
     /// The rays of rows `y0 .. y0 + rows` into `out` (row-major, `rows x
     /// width`), and each ray's `D32·forward` (planar depth per unit of `t`)
-    /// into `planar` (as long). Each direction is [`Camera::screen_ray`]'s,
-    /// so [`Camera::pixel_ray`]'s bit for bit, rounded to f32.
+    /// into `planar` (as long): [`EmbreeRay::at`] for each pixel center.
     pub fn fill(&self, y0: usize, rows: usize, out: &mut StripRays, planar: &mut [f64]) {
         let cam = &self.cam;
         let w = self.width();
@@ -109,24 +108,17 @@ impl CameraRays {
         ] {
             v.resize(n, 0.0);
         }
-        let RayDepth { offset, near, far } = self.depth;
+        let offset = self.depth.offset;
         for r in 0..rows {
             let sy = cam.screen_y((y0 + r) as u32);
             let at = r * w;
             for (x, &sx) in out.sx.iter().enumerate() {
                 let p = at + x;
-                let d = cam.screen_ray(sx, sy).dir.as_vec3();
-                let pl = d.as_dvec3().dot(cam.forward);
-                out.dx[p] = d.x;
-                out.dy[p] = d.y;
-                out.dz[p] = d.z;
-                out.tnear[p] = ((near - offset) / pl * (1.0 - 1e-6)).max(0.0) as f32;
-                out.tfar[p] = if far.is_finite() {
-                    ((far - offset) / pl * (1.0 + 1e-6)) as f32
-                } else {
-                    f32::INFINITY
-                };
-                planar[p] = pl;
+                let ray = EmbreeRay::at(cam, offset, sx, sy);
+                [out.dx[p], out.dy[p], out.dz[p]] = ray.dir;
+                out.tnear[p] = ray.tnear;
+                out.tfar[p] = ray.tfar;
+                planar[p] = ray.planar;
             }
         }
     }

@@ -29,6 +29,7 @@
 pub use crate::embree_rays::{CameraRays, PreparedRays};
 use crate::embree_rays::{RayDepth, StripRays};
 use rayon::prelude::*;
+use rendiff::backends::embree::EmbreeRay;
 use rendiff::frame::Frame;
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::visibility::{hit_key, Counters, NO_HIT};
@@ -267,7 +268,7 @@ impl Hits {
                 if prim == u32::MAX {
                     return NO_HIT;
                 }
-                let z = (depth.offset + f64::from(t) * planar) as f32;
+                let z = EmbreeRay::depth(depth.offset, planar, t);
                 let zf = f64::from(z);
                 if zf < depth.near {
                     in_front += 1;

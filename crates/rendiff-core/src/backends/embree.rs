@@ -474,23 +474,67 @@ struct RayGen<'a> {
     prepared: Vec<EmbreeRay>,
 }
 
-/// One pixel's ray in Embree's precision, with its depth conversion.
-#[derive(Clone, Copy)]
-struct EmbreeRay {
-    dir: [f32; 3],
+/// One pixel's ray in Embree's precision, with its depth conversion: the
+/// one definition of the convention, which the bench's native Embree driver
+/// uses too (`rendiff-bench`'s `embree_rays`), so its hits are this
+/// binding's bit for bit.
+#[derive(Debug, Clone, Copy)]
+pub struct EmbreeRay {
+    /// The core's pixel ray direction rounded to f32.
+    pub dir: [f32; 3],
     /// `D32·forward`: planar depth per unit of `t`.
-    planar: f64,
-    tnear: f32,
-    tfar: f32,
+    pub planar: f64,
+    /// Where the hit interval starts (the near plane, widened).
+    pub tnear: f32,
+    /// Where it ends (the far plane, widened; +inf when the far plane is).
+    pub tfar: f32,
+}
+
+impl EmbreeRay {
+    /// The origin every ray of `cam` starts from (the eye rounded to f32)
+    /// and its planar depth offset `(org - eye)·forward`.
+    pub fn origin(cam: &Camera) -> ([f32; 3], f64) {
+        let org = cam.eye.as_vec3();
+        (org.to_array(), (org.as_dvec3() - cam.eye).dot(cam.forward))
+    }
+
+    /// The ray through screen point `(sx, sy)` ([`Camera::screen`]) for a
+    /// camera whose origin offset is `offset` ([`EmbreeRay::origin`]).
+    #[inline]
+    pub fn at(cam: &Camera, offset: f64, sx: f64, sy: f64) -> EmbreeRay {
+        let pr: PixelRay = cam.screen_ray(sx, sy);
+        let d = pr.dir.as_vec3();
+        let planar = d.as_dvec3().dot(cam.forward);
+        // Widened by 1e-6 relative so rounding never hides a hit inside [near, far];
+        // `depth_in_range` then applies the exact rule on the rounded depth.
+        let tnear = ((cam.near - offset) / planar * (1.0 - 1e-6)).max(0.0) as f32;
+        let tfar = if cam.far.is_finite() {
+            ((cam.far - offset) / planar * (1.0 + 1e-6)) as f32
+        } else {
+            f32::INFINITY
+        };
+        EmbreeRay {
+            dir: d.to_array(),
+            planar,
+            tnear,
+            tfar,
+        }
+    }
+
+    /// Planar depth of a hit at ray parameter `t`, rounded once to f32.
+    #[inline]
+    pub fn depth(offset: f64, planar: f64, t: f32) -> f32 {
+        (offset + f64::from(t) * planar) as f32
+    }
 }
 
 impl<'a> RayGen<'a> {
     fn new(cam: &'a Camera) -> Self {
-        let org = cam.eye.as_vec3();
+        let (org, offset) = EmbreeRay::origin(cam);
         let mut gen = RayGen {
             cam,
-            org: org.to_array(),
-            offset: (org.as_dvec3() - cam.eye).dot(cam.forward),
+            org,
+            offset,
             prepared: Vec::new(),
         };
         let w = cam.width as usize;
@@ -508,29 +552,14 @@ impl<'a> RayGen<'a> {
     }
 
     fn prepare(&self, x: u32, y: u32) -> EmbreeRay {
-        let pr: PixelRay = self.cam.pixel_ray(x, y);
-        let d = pr.dir.as_vec3();
-        let planar = d.as_dvec3().dot(self.cam.forward);
-        // Widened by 1e-6 relative so rounding never hides a hit inside [near, far];
-        // `depth_in_range` then applies the exact rule on the rounded depth.
-        let tnear = ((self.cam.near - self.offset) / planar * (1.0 - 1e-6)).max(0.0) as f32;
-        let tfar = if self.cam.far.is_finite() {
-            ((self.cam.far - self.offset) / planar * (1.0 + 1e-6)) as f32
-        } else {
-            f32::INFINITY
-        };
-        EmbreeRay {
-            dir: d.to_array(),
-            planar,
-            tnear,
-            tfar,
-        }
+        let (sx, sy) = self.cam.screen(x, y);
+        EmbreeRay::at(self.cam, self.offset, sx, sy)
     }
 
     /// Planar depth of a hit at ray parameter `t`, rounded once to f32.
     #[inline]
     fn depth(&self, r: &EmbreeRay, t: f32) -> f32 {
-        (self.offset + f64::from(t) * r.planar) as f32
+        EmbreeRay::depth(self.offset, r.planar, t)
     }
 
     /// The core's visibility interval, applied to the rounded depth.
