@@ -128,7 +128,11 @@ impl CameraRays {
 /// image's [`CameraRays::fill`], made in parallel strips.
 pub struct PreparedRays {
     pub(crate) width: u32,
+    /// Read by the native driver only (absent without Embree's headers).
+    #[cfg_attr(not(rendiff_native_embree), allow(dead_code))]
     pub(crate) height: u32,
+    /// Read by the native driver only (absent without Embree's headers).
+    #[cfg_attr(not(rendiff_native_embree), allow(dead_code))]
     pub(crate) org: [f32; 3],
     pub(crate) rays: StripRays,
     /// `D32·forward` per pixel.
