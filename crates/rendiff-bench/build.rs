@@ -20,6 +20,14 @@ fn main() {
         .unwrap_or_else(|| PathBuf::from("/usr/include"));
     let header = include.join("embree3/rtcore.h");
     println!("cargo:rerun-if-changed={}", header.display());
+    // Package managers install headers with their release's mtime, older
+    // than a build that ran before them (scripts/setup.sh runs after
+    // .ci/run's clippy), so the header alone would not re-run this script;
+    // the directory holding it is created at install time.
+    println!(
+        "cargo:rerun-if-changed={}",
+        include.join("embree3").display()
+    );
     let out = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     let why = match build(&include, &header, &out) {
         Ok(()) => {
