@@ -471,6 +471,29 @@ fn peers_writes_throughput_ratios() {
         names.contains(&t["cost_model_pick"].as_str().unwrap()),
         "{t}"
     );
+    // The goal's row times `render --renderer core` whole: the decision is
+    // one of its parts, and it ran the loop the model names.
+    let pick = &t["rows"][names
+        .iter()
+        .position(|&n| n == t["cost_model_pick"])
+        .unwrap()];
+    assert!(
+        pick["parts_median_s"]["decide_s"]
+            .as_f64()
+            .is_some_and(|x| x > 0.0 && x < pick["median_s"].as_f64().unwrap()),
+        "{pick}"
+    );
+    let ran = pick["parts_s"]["loop"][0].as_str().unwrap();
+    assert_eq!(
+        format!("core {ran}"),
+        t["cost_model_loop"]
+            .as_str()
+            .unwrap()
+            .split(" (")
+            .next()
+            .unwrap(),
+        "{t}"
+    );
     let goals = record["goals"]["issue_39"]
         .as_array()
         .expect("issue-39 goals");

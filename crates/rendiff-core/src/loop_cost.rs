@@ -232,19 +232,9 @@ pub fn choose(w: &Workload) -> Choice {
 pub fn covered_pixels(scene: &ResolvedScene) -> u64 {
     let cam = &scene.camera;
     let pixels = u64::from(cam.width) * u64::from(cam.height);
-    let mut lo = glam::DVec3::splat(f64::INFINITY);
-    let mut hi = glam::DVec3::splat(f64::NEG_INFINITY);
-    for (t, &degenerate) in scene.triangles.iter().zip(&scene.degenerate) {
-        if !degenerate {
-            for v in t {
-                lo = lo.min(v.as_dvec3());
-                hi = hi.max(v.as_dvec3());
-            }
-        }
-    }
-    if lo.x > hi.x {
+    let Some((lo, hi)) = triangle_bounds(scene) else {
         return 0;
-    }
+    };
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -276,6 +266,38 @@ pub fn covered_pixels(scene: &ResolvedScene) -> u64 {
     (area.ceil() as u64).min(pixels)
 }
 
+/// The bounding box of the scene's non-degenerate triangles (`None` when
+/// there are none), in parallel chunks on rayon's current pool. The model's
+/// one pass over the scene: it is part of every `render --renderer core`
+/// (about 4 ms on a million triangles on one thread, reading 47 MB).
+fn triangle_bounds(scene: &ResolvedScene) -> Option<(glam::DVec3, glam::DVec3)> {
+    use rayon::prelude::*;
+    /// Triangles per task.
+    const GRAIN: usize = 1 << 15;
+    let empty = (
+        glam::DVec3::splat(f64::INFINITY),
+        glam::DVec3::splat(f64::NEG_INFINITY),
+    );
+    let (lo, hi) = scene
+        .triangles
+        .par_chunks(GRAIN)
+        .zip(scene.degenerate.par_chunks(GRAIN))
+        .map(|(tris, deg)| {
+            let (mut lo, mut hi) = empty;
+            for (t, &degenerate) in tris.iter().zip(deg) {
+                if !degenerate {
+                    for v in t {
+                        lo = lo.min(v.as_dvec3());
+                        hi = hi.max(v.as_dvec3());
+                    }
+                }
+            }
+            (lo, hi)
+        })
+        .reduce(|| empty, |(a, b), (c, d)| (a.min(c), b.max(d)));
+    (lo.x <= hi.x).then_some((lo, hi))
+}
+
 /// The model's inputs for rendering `scene` once on `threads` threads.
 pub fn workload(scene: &ResolvedScene, threads: usize) -> Workload {
     let cam = &scene.camera;
@@ -302,6 +324,57 @@ mod tests {
             frames: 1,
             bvh_needed_anyway: false,
         }
+    }
+
+    /// The covered pixels come from the box of the non-degenerate triangles
+    /// only, wherever in the scene they lie (the box is made in parallel
+    /// chunks): a far triangle in the last chunk widens it, a degenerate one
+    /// at the image's corner does not, nothing is 0, and a box reaching
+    /// behind the eye covers the image.
+    #[test]
+    fn covered_pixels_bound_the_non_degenerate_triangles() {
+        use crate::scene::resolve::Tri;
+        use glam::{DVec3, Vec3};
+        let cam = crate::camera::Camera::new(
+            DVec3::new(0.0, 0.0, 10.0),
+            DVec3::ZERO,
+            DVec3::Y,
+            90.0,
+            100,
+            100,
+            0.1,
+            f64::INFINITY,
+        )
+        .unwrap();
+        let tri = |x: f32, y: f32, r: f32| -> Tri {
+            [
+                Vec3::new(x - r, y - r, 0.0),
+                Vec3::new(x + r, y - r, 0.0),
+                Vec3::new(x, y + r, 0.0),
+            ]
+        };
+        let covered =
+            |tris: Vec<Tri>| covered_pixels(&ResolvedScene::from_triangles(cam.clone(), tris));
+        // At z = 0 the 90-degree view spans [-10, 10]: 5 pixels a unit. The
+        // area is rounded up, so a rounding error above it adds one pixel.
+        let near = |got: u64, want: u64| got == want || got == want + 1;
+        let mut tris = vec![tri(0.0, 0.0, 1.0); 3 * (1 << 15) + 7];
+        assert!(near(covered(tris.clone()), 100));
+        let zero_area: Tri = [
+            Vec3::splat(-9.0),
+            Vec3::splat(-9.0),
+            Vec3::new(-9.0, -9.0, 0.0),
+        ];
+        tris.insert(5, zero_area);
+        assert!(
+            near(covered(tris.clone()), 100),
+            "a degenerate triangle widened the box"
+        );
+        tris.push(tri(5.0, 5.0, 1.0));
+        assert!(near(covered(tris.clone()), 35 * 35));
+        assert_eq!(covered(Vec::new()), 0);
+        tris.push(tri(0.0, 0.0, 20.0).map(|v| v + Vec3::Z * 15.0));
+        assert_eq!(covered(tris), 100 * 100);
     }
 
     /// At the measured sizes the raster's estimate returns the measurements
