@@ -24,10 +24,9 @@
 use super::measure::{self, BOOTSTRAP_SEED};
 use super::native_embree::{CameraRays, Config, Hits, NativeScene, PreparedRays};
 use super::page::{compact, num, Page};
-use rendiff::loop_cost;
 use rendiff::names::Named;
 use rendiff::raster::{self, RasterOptions};
-use rendiff::render::RenderOptions;
+use rendiff::render::{Backend, RenderOptions};
 use rendiff::scene::resolve::ResolvedScene;
 use rendiff::trace::{self, BvhQuality, TraceBvh, TraceOptions};
 use serde_json::{json, Map, Value};
@@ -320,10 +319,12 @@ pub fn first_image_summary(
     }
     // The loop `render --renderer core` runs here, by the cost model (its
     // row alone, without the decision, is `cost_model_loop`).
-    let choice = loop_cost::choose(&loop_cost::workload(scene, threads));
-    let picked_loop = match choice.pick {
-        loop_cost::Loop::Raster => "core raster".to_string(),
-        loop_cost::Loop::Trace => format!("core trace ({} BVH)", BvhQuality::default().name()),
+    // The same call as the row's, so the decision has one spelling here.
+    let (backend, choice) = rendiff::render::core_loop(scene, threads);
+    let picked_loop = match backend {
+        Backend::Raster => "core raster".to_string(),
+        Backend::Trace => format!("core trace ({} BVH)", BvhQuality::default().name()),
+        Backend::Embree(_) => unreachable!("core_loop picks one of the core's loops"),
     };
     json!({
         "threads": threads,
